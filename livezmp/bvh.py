@@ -1,0 +1,248 @@
+"""BVH motion files: parse (hierarchy + motion), write back, and split out channels.
+
+Conventions follow the common BVH reading: a joint's local translation is its OFFSET,
+except that position channels, where a joint has them, replace the offset's components
+(that is how exporters such as MotionBuilder write them, and how the Bandai data
+carries its root translation). Rotation channels apply in the order they are listed,
+intrinsically: R = R_c1 · R_c2 · R_c3. Values stay in the file's units (degrees and
+file length units) here; the body model converts to SI.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.errors import InputError
+
+CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+
+
+@dataclass
+class BvhJoint:
+    """One joint of the hierarchy; ``offset`` in file units, ``end_site`` the End Site offset if any."""
+
+    name: str
+    parent: int
+    offset: np.ndarray
+    channels: list[str]
+    end_site: np.ndarray | None = None
+    children: list[int] = field(default_factory=list)
+    first_channel: int = 0
+
+
+@dataclass
+class BvhMotion:
+    """A parsed BVH: joints in file order, ``frames`` (F, C) in file units/degrees."""
+
+    joints: list[BvhJoint]
+    frame_time: float
+    frames: np.ndarray
+    source: str = "<memory>"
+
+    @property
+    def n_channels(self) -> int:
+        return sum(len(j.channels) for j in self.joints)
+
+    @property
+    def fps(self) -> float:
+        return 1.0 / self.frame_time
+
+    def joint_index(self, name: str) -> int:
+        for i, j in enumerate(self.joints):
+            if j.name == name:
+                return i
+        raise KeyError(name)
+
+    def channel_labels(self) -> list[str]:
+        """``Joint.Channel`` for every column of ``frames``."""
+        return [f"{j.name}.{c}" for j in self.joints for c in j.channels]
+
+
+class _Lines:
+    """Line cursor that remembers line numbers for error messages."""
+
+    def __init__(self, text: str, source: str):
+        self.lines = text.splitlines()
+        self.i = 0
+        self.source = source
+
+    def error(self, msg: str, line: int | None = None) -> InputError:
+        n = self.i if line is None else line
+        return InputError(f"{self.source}:{n}: {msg}")
+
+    def next_tokens(self) -> list[str]:
+        while self.i < len(self.lines):
+            self.i += 1
+            toks = self.lines[self.i - 1].split()
+            if toks:
+                return toks
+        raise self.error("unexpected end of file (truncated BVH?)")
+
+
+def _floats(cur: _Lines, toks: list[str], what: str) -> np.ndarray:
+    try:
+        vals = np.array([float(t) for t in toks], dtype=float)
+    except ValueError:
+        raise cur.error(f"non-numeric value in {what}: {' '.join(toks)!r}") from None
+    if not np.all(np.isfinite(vals)):
+        raise cur.error(f"non-finite value in {what}")
+    return vals
+
+
+def _parse_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, first_channel: int) -> int:
+    toks = cur.next_tokens()
+    if toks != ["{"]:
+        raise cur.error(f"expected '{{' after joint {name}, got {' '.join(toks)!r}")
+    toks = cur.next_tokens()
+    if toks[0] != "OFFSET" or len(toks) != 4:
+        raise cur.error(f"joint {name}: expected 'OFFSET x y z'")
+    offset = _floats(cur, toks[1:], f"OFFSET of {name}")
+    toks = cur.next_tokens()
+    if toks[0] != "CHANNELS":
+        raise cur.error(f"joint {name}: expected CHANNELS")
+    try:
+        count = int(toks[1])
+    except (IndexError, ValueError):
+        raise cur.error(f"joint {name}: bad channel count") from None
+    channels = toks[2:]
+    if count != len(channels):
+        raise cur.error(f"joint {name}: CHANNELS says {count} but lists {len(channels)}")
+    for c in channels:
+        if c not in CHANNEL_NAMES:
+            raise cur.error(f"joint {name}: unknown channel {c!r}")
+    idx = len(joints)
+    joint = BvhJoint(name, parent, offset, channels, first_channel=first_channel)
+    joints.append(joint)
+    if parent >= 0:
+        joints[parent].children.append(idx)
+    nxt = first_channel + count
+    while True:
+        toks = cur.next_tokens()
+        if toks[0] == "}":
+            return nxt
+        if toks[0] == "JOINT" and len(toks) >= 2:
+            nxt = _parse_joint(cur, joints, " ".join(toks[1:]), idx, nxt)
+        elif toks[0] == "End":
+            if cur.next_tokens() != ["{"]:
+                raise cur.error(f"joint {name}: expected '{{' after End Site")
+            toks = cur.next_tokens()
+            if toks[0] != "OFFSET" or len(toks) != 4:
+                raise cur.error(f"End Site of {name}: expected 'OFFSET x y z'")
+            joint.end_site = _floats(cur, toks[1:], f"End Site of {name}")
+            if cur.next_tokens() != ["}"]:
+                raise cur.error(f"End Site of {name}: expected '}}'")
+        else:
+            raise cur.error(f"joint {name}: unexpected {' '.join(toks)!r}")
+
+
+def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint], _Lines]:
+    """Parse the HIERARCHY section; returns the joints and the cursor after it."""
+    cur = _Lines(text, source)
+    try:
+        toks = cur.next_tokens()
+    except InputError:
+        raise InputError(f"{source}:1: empty file, not a BVH") from None
+    if toks != ["HIERARCHY"]:
+        raise cur.error("not a BVH file: first line must be HIERARCHY")
+    toks = cur.next_tokens()
+    if toks[0] != "ROOT" or len(toks) < 2:
+        raise cur.error("expected 'ROOT name'")
+    joints: list[BvhJoint] = []
+    _parse_joint(cur, joints, " ".join(toks[1:]), -1, 0)
+    names = [j.name for j in joints]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise cur.error(f"duplicate joint name(s): {', '.join(sorted(dup))}")
+    return joints, cur
+
+
+def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
+    """Parse a whole BVH text. Raises :class:`InputError` naming file and line."""
+    joints, cur = parse_hierarchy(text, source)
+    toks = cur.next_tokens()
+    if toks != ["MOTION"]:
+        raise cur.error("expected MOTION after the hierarchy")
+    toks = cur.next_tokens()
+    if toks[0] != "Frames:" or len(toks) != 2:
+        raise cur.error("expected 'Frames: N'")
+    try:
+        n_frames = int(toks[1])
+    except ValueError:
+        raise cur.error(f"bad frame count {toks[1]!r}") from None
+    if n_frames <= 0:
+        raise cur.error("zero frames: nothing to analyse")
+    toks = cur.next_tokens()
+    if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
+        raise cur.error("expected 'Frame Time: seconds'")
+    frame_time = float(_floats(cur, toks[2:], "Frame Time")[0])
+    if frame_time <= 0:
+        raise cur.error("Frame Time must be positive")
+    n_ch = sum(len(j.channels) for j in joints)
+    body = cur.lines[cur.i :]
+    rows = [(cur.i + k + 1, ln) for k, ln in enumerate(body) if ln.strip()]
+    if len(rows) < n_frames:
+        line = cur.i + len(body)
+        raise InputError(f"{source}:{line}: truncated: header says {n_frames} frames, file has {len(rows)}")
+    frames = np.empty((n_frames, n_ch))
+    try:
+        data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows[:n_frames])), ndmin=2)
+        ok = data.shape == (n_frames, n_ch) and np.all(np.isfinite(data))
+    except ValueError:
+        ok = False
+    if ok:
+        frames[:] = data
+    else:  # find the offending line for the message
+        for k, (lineno, ln) in enumerate(rows[:n_frames]):
+            toks = ln.split()
+            if len(toks) != n_ch:
+                raise InputError(f"{source}:{lineno}: frame {k} has {len(toks)} values, hierarchy needs {n_ch}")
+            cur.i = lineno
+            frames[k] = _floats(cur, toks, f"frame {k}")
+    return BvhMotion(joints, frame_time, frames, source)
+
+
+def read_bvh(path: str | Path) -> BvhMotion:
+    """Read a BVH file (see :func:`parse_bvh`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise InputError(f"{p}: cannot read: {e.strerror}") from None
+    return parse_bvh(text, str(p))
+
+
+def _fmt(v: np.ndarray) -> str:
+    return " ".join(f"{x:.6f}" for x in v)
+
+
+def format_hierarchy(joints: list[BvhJoint]) -> str:
+    """The HIERARCHY section for ``joints`` (inverse of :func:`parse_hierarchy`)."""
+    out = ["HIERARCHY"]
+
+    def emit(i: int, depth: int) -> None:
+        j = joints[i]
+        pad = "\t" * depth
+        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
+        out.append(pad + "{")
+        out.append(f"{pad}\tOFFSET {_fmt(j.offset)}")
+        out.append(f"{pad}\tCHANNELS {len(j.channels)} {' '.join(j.channels)}")
+        for c in j.children:
+            emit(c, depth + 1)
+        if j.end_site is not None:
+            out.extend([f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {_fmt(j.end_site)}", pad + "\t}"])
+        out.append(pad + "}")
+
+    emit(0, 0)
+    return "\n".join(out) + "\n"
+
+
+def write_bvh(motion: BvhMotion, path: str | Path) -> None:
+    """Write ``motion`` with its hierarchy, frame count and frame time unchanged."""
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(format_hierarchy(motion.joints))
+        f.write(f"MOTION\nFrames: {len(motion.frames)}\nFrame Time: {motion.frame_time:.7g}\n")
+        np.savetxt(f, motion.frames, fmt="%.6f")
