@@ -1,0 +1,141 @@
+"""Which skeleton joint is which body segment: name patterns and explicit mapping files.
+
+Each BVH joint "owns" the segment from itself to its child. Patterns cover the common
+skeletons (Bandai, CMU, SFU, Mixamo-style); anything else needs a mapping file, a TOML
+table ``[segments]`` of ``joint name = "kind"`` (kinds below, plus ``side = "left"`` etc.
+inferred from the name or given as ``"thigh:left"``).
+
+Kinds: pelvis, spine (any trunk joint between pelvis and neck), neck, head, collar,
+upper_arm, forearm, hand, thigh, shank, foot, toe, and the massless ones: fingers,
+root (a static reference joint above the pelvis) and link (a short connector bone such
+as CMU's LHipJoint).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from livezmp.errors import InputError
+
+KINDS = (
+    "root", "link", "pelvis", "spine", "neck", "head", "collar", "upper_arm", "forearm", "hand",
+    "thigh", "shank", "foot", "toe", "fingers",
+)
+
+# Order matters: first match wins. Names are lower-cased with separators removed.
+_PATTERNS: list[tuple[str, str]] = [
+    (r"(thumb|index|middle|ring|pinky|finger|handend|handtip|hand_?site)", "fingers"),
+    (r"(toebase|toe|ball)", "toe"),
+    (r"hipjoint", "link"),
+    (r"(forearm|lowerarm|elbow|radius|ulna)", "forearm"),
+    (r"(upperarm|humerus|^(l|r|left|right)?arm$|arm(l|r|left|right)?$)", "upper_arm"),
+    (r"(collar|clavicle|shoulder)", "collar"),
+    (r"(hand|wrist)", "hand"),
+    (r"(upleg|upperleg|thigh|hip(l|r|left|right)$|^(l|r|left|right)hip$|femur)", "thigh"),
+    (r"(lowleg|lowerleg|shin|knee|calf|tibia|^(l|r|left|right)?leg$|leg(l|r|left|right)?$)", "shank"),
+    (r"(foot|ankle)", "foot"),
+    (r"(head)", "head"),
+    (r"(neck)", "neck"),
+    (r"(hips|pelvis|hip$|^hip)", "pelvis"),
+    (r"(spine|chest|torso|back|abdomen|thorax|waist)", "spine"),
+    (r"(root|reference)", "root"),
+]
+_LEFT = re.compile(r"(^l(?=[a-z])|left|_l$|^l_|\.l$|l$)")
+_RIGHT = re.compile(r"(^r(?=[a-z])|right|_r$|^r_|\.r$|r$)")
+
+
+@dataclass(frozen=True)
+class SegmentTag:
+    kind: str
+    side: str  # "left", "right" or "center"
+
+
+def _clean(name: str) -> str:
+    s = name.lower()
+    s = re.sub(r"^(mixamorig[:_]?|bip0?1[ _]?|[a-z]+:)", "", s)
+    return s
+
+
+def _side(name: str) -> str:
+    s = name.lower().replace(" ", "_")
+    if "left" in s or re.search(r"(^l[_.]|[_.]l$|^l(?=[A-Z]))", name) or re.search(r"(^l[_.]|[_.]l$)", s):
+        return "left"
+    if "right" in s or re.search(r"(^r[_.]|[_.]r$)", s):
+        return "right"
+    # CMU style "LeftUpLeg" handled above; "lfemur"/"rtibia" (ASF-derived) here
+    if re.match(r"^l(femur|tibia|foot|toes|humerus|radius|wrist|hand|clavicle|hipjoint|thumb|fingers)", s):
+        return "left"
+    if re.match(r"^r(femur|tibia|foot|toes|humerus|radius|wrist|hand|clavicle|hipjoint|thumb|fingers)", s):
+        return "right"
+    if re.search(r"[a-z](_?l)$", s) and not s.endswith(("pelvis", "ball")):
+        return "left" if s.endswith("_l") else "center"
+    return "center"
+
+
+def classify(name: str) -> SegmentTag | None:
+    """Segment kind and side of a joint name, or None when no pattern matches."""
+    s = re.sub(r"[\s_.\-]", "", _clean(name))
+    s = re.sub(r"^(left|right)", "", s)
+    s = re.sub(r"(left|right)$", "", s)
+    side = _side(name)
+    for pat, kind in _PATTERNS:
+        if re.search(pat, s):
+            if kind == "pelvis" and side != "center":
+                kind = "thigh"  # "LeftHip" names the hip joint, i.e. the thigh segment
+            if kind in ("pelvis", "spine", "neck", "head", "root"):
+                side = "center"
+            return SegmentTag(kind, side)
+    return None
+
+
+def load_mapping(path: str | Path) -> dict[str, SegmentTag]:
+    """Read an explicit mapping file: TOML ``[segments]`` table of joint = "kind[:side]"."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise InputError(f"{p}: cannot read mapping: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{p}: bad TOML: {e}") from None
+    table = data.get("segments")
+    if not isinstance(table, dict):
+        raise InputError(f"{p}: missing [segments] table")
+    out: dict[str, SegmentTag] = {}
+    for joint, val in table.items():
+        kind, _, side = str(val).partition(":")
+        if kind not in KINDS:
+            raise InputError(f"{p}: joint {joint!r}: unknown segment kind {kind!r} (one of {', '.join(KINDS)})")
+        if side not in ("", "left", "right", "center"):
+            raise InputError(f"{p}: joint {joint!r}: side must be left, right or center")
+        out[joint] = SegmentTag(kind, side or _side(joint))
+    return out
+
+
+def tag_joints(names: list[str], mapping: dict[str, SegmentTag] | None = None, source: str = "") -> list[SegmentTag]:
+    """Tag every joint; joints named in ``mapping`` take its tag, others the patterns.
+
+    Raises InputError when the result is not a usable humanoid (needs a pelvis and two
+    legs with thigh, shank and foot) so that unknown skeletons fail loudly.
+    """
+    mapping = mapping or {}
+    tags: list[SegmentTag] = []
+    unknown: list[str] = []
+    for n in names:
+        t = mapping.get(n) or classify(n)
+        if t is None:
+            unknown.append(n)
+            t = SegmentTag("fingers", "center")  # massless until mapped
+        tags.append(t)
+    need = [("pelvis", "center")] + [(k, s) for s in ("left", "right") for k in ("thigh", "shank", "foot")]
+    have = {(t.kind, t.side) for t in tags}
+    missing = [f"{k}:{s}" if s != "center" else k for k, s in need if (k, s) not in have]
+    if missing:
+        extra = f"; unrecognised joints: {', '.join(unknown[:8])}" if unknown else ""
+        raise InputError(
+            f"{source}: unknown skeleton: no joint found for {', '.join(missing)}{extra} "
+            "(give a mapping file with --mapping)"
+        )
+    return tags
