@@ -1,0 +1,117 @@
+"""A body model: a Pinocchio model in livezmp's internal frame, plus what livezmp needs
+around it (input channels, feet, the joints a correction may use).
+
+Internal frame: z up, metres, ground plane z = ground height. Every model is a chain of
+one-degree-of-freedom joints, one per input channel, so ``q`` is the input channel
+vector converted to SI (``q = channels * channel_scale``), ``v = dq/dt`` and
+``a = d²q/dt²`` exactly: the estimator differentiates channels and the dynamics
+consume the result with no further conversion. A URDF robot's floating base is six
+such joints (x, y, z, then yaw, pitch, roll: R = Rz·Ry·Rx), singular only at ±90° pitch.
+``world_from_input`` rotates the input's world frame (e.g. BVH y-up) into the internal one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+
+@dataclass
+class Foot:
+    """One foot. Either ``sole_local`` (k, 3) corners in the frame ``frame_id`` (robots),
+    or a heel-to-toe rectangle from the ``frame_id`` (ankle) and ``toe_frame_id`` frames
+    (skeletons) with the given dimensions in metres."""
+
+    side: str
+    frame_id: int
+    sole_local: np.ndarray | None = None
+    toe_frame_id: int | None = None
+    heel_back: float = 0.0
+    toe_front: float = 0.0
+    width: float = 0.0
+    ankle_height: float = 0.0
+    toe_height: float = 0.0
+
+
+@dataclass
+class CorrectionJoints:
+    """Where a root (waist) rotation lives: q indices of the root's rotation channels
+    (roll about x, pitch about y, yaw about z in the internal frame) and of each hip's
+    rotation channels, and the q indices of the leg chains (hip to ankle) per side."""
+
+    root_rotation: list[int] = field(default_factory=list)
+    legs: dict[str, list[int]] = field(default_factory=dict)
+    root_frame_id: int = 0
+
+
+@dataclass
+class BodyModel:
+    """Everything livezmp knows about a body. ``kind`` is "bvh" or "urdf"."""
+
+    kind: str
+    model: pin.Model
+    point_model: pin.Model  # same kinematics, each segment a point mass (the seed's ZMP)
+    channel_names: list[str]
+    channel_scale: np.ndarray  # (nq,) input unit → SI
+    angle_mask: np.ndarray  # (nq,) bool
+    feet: dict[str, Foot]
+    world_from_input: np.ndarray  # (3, 3)
+    up_axis: str
+    units: str
+    total_mass: float
+    correction: CorrectionJoints
+    named_points: dict[str, int] = field(default_factory=dict)  # e.g. ankle/toe frames for checks
+    base_channels: list[int] = field(default_factory=list)  # q indices of a robot's floating base
+    has_base_input: bool = True
+    joint_names: list[str] = field(default_factory=list)  # a robot's actuated joints (URDF names)
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    def channels_to_q(self, channels: np.ndarray) -> np.ndarray:
+        """Input channel values (file units, degrees) → q (m, rad)."""
+        return channels * self.channel_scale
+
+    def q_to_channels(self, q: np.ndarray) -> np.ndarray:
+        return q / self.channel_scale
+
+    def to_input_frame(self, p: np.ndarray) -> np.ndarray:
+        """Internal-frame points (..., 3) → the input's world frame (still metres)."""
+        return p @ self.world_from_input
+
+
+def point_mass_copy(model: pin.Model) -> pin.Model:
+    """The same model with every body's rotational inertia removed (point masses at the
+    segment centres of mass): its centroidal dynamics give the seed paper's ZMP."""
+    pm = model.copy()
+    for i in range(len(pm.inertias)):
+        old = pm.inertias[i]
+        pm.inertias[i] = pin.Inertia(old.mass, old.lever, np.zeros((3, 3)))
+    return pm
+
+
+def foot_soles(body: BodyModel, data: pin.Data) -> dict[str, np.ndarray]:
+    """Sole corners (k, 3) of each foot in the internal world frame for the current
+    ``data`` (frame placements must be up to date)."""
+    out = {}
+    for side, foot in body.feet.items():
+        m = data.oMf[foot.frame_id]
+        if foot.sole_local is not None:
+            out[side] = foot.sole_local @ m.rotation.T + m.translation
+            continue
+        a = m.translation
+        t = data.oMf[foot.toe_frame_id].translation
+        d = t[:2] - a[:2]
+        n = float(np.hypot(d[0], d[1]))
+        u = d / n if n > 1e-9 else np.array([1.0, 0.0])
+        w = np.array([-u[1], u[0]]) * (foot.width / 2)
+        heel = a[:2] - u * foot.heel_back
+        tip = t[:2] + u * foot.toe_front
+        zh, zt = a[2] - foot.ankle_height, t[2] - foot.toe_height
+        out[side] = np.array(
+            [[*(heel - w), zh], [*(tip - w), zt], [*(tip + w), zt], [*(heel + w), zh]]
+        )
+    return out

@@ -1,0 +1,259 @@
+"""Body model of a BVH skeleton on Pinocchio.
+
+Each rotation channel becomes a revolute joint and each position channel a prismatic
+joint, in the file's channel order; a joint's position channels replace its offset.
+Segment masses, centres of mass and radii of gyration come from de Leva (1996), see
+:mod:`livezmp.anthropometry`; stature is estimated from the leg bones (thigh + shank
+≈ 49.2 % of stature in de Leva's table). The input's world frame is rotated into the
+internal z-up frame at the root.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from livezmp.anthropometry import DE_LEVA_MALE
+from livezmp.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.bvh import UNIT_SCALES, BvhMotion, detect_length_unit
+from livezmp.errors import InputError
+from livezmp.segments import SegmentTag, tag_joints
+
+# input world → internal z-up: for y-up, internal (x, y, z) = input (z, x, y)
+WORLD_FROM_INPUT = {
+    "y": np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+    "z": np.eye(3),
+}
+_AXES = {"X": 0, "Y": 1, "Z": 2}
+_NEXT = {"upper_arm": "forearm", "forearm": "hand", "thigh": "shank", "shank": "foot", "foot": "toe"}
+_TRUNK = ("pelvis", "spine", "neck", "head")
+LEG_FRACTION_OF_STATURE = (422.2 + 434.0) / 1741  # de Leva thigh + shank over stature
+
+
+@dataclass(frozen=True)
+class BvhBodyOptions:
+    """Options for :func:`body_from_bvh`. Lengths in metres, mass in kg.
+
+    Foot dimensions default to fractions of the estimated stature (``None``)."""
+
+    total_mass: float = 70.0
+    units: str | None = None  # 'm', 'cm', 'mm', 'in'; None = detect
+    up_axis: str | None = None  # 'y' or 'z'; None = detect
+    mapping: dict[str, SegmentTag] | None = None
+    sole_width: float | None = None
+    heel_back: float | None = None
+    toe_front: float | None = None
+
+
+def _rot_to(d: np.ndarray) -> np.ndarray:
+    """A rotation whose z axis points along ``d``."""
+    z = d / np.linalg.norm(d)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _segment_vector(motion: BvhMotion, tags: list[SegmentTag], i: int, scale: float) -> np.ndarray:
+    """Bone vector (metres, joint-local) of the segment joint ``i`` owns; zero if none."""
+    j = motion.joints[i]
+    kind = tags[i].kind
+    kids = j.children
+    if kind in _TRUNK:
+        cont = [c for c in kids if tags[c].kind in _TRUNK]
+        kids = cont or kids
+    elif kind in _NEXT:
+        cont = [c for c in kids if tags[c].kind == _NEXT[kind]]
+        kids = cont or kids
+    if kids:
+        vecs = [motion.joints[c].offset for c in kids]
+        return scale * max(vecs, key=lambda v: float(np.linalg.norm(v)))
+    if j.end_site is not None:
+        return scale * j.end_site
+    return np.zeros(3)
+
+
+def _mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
+    """joint index → (de Leva kind, mass fraction, proximal-is-up) for every massive joint."""
+    out: dict[int, tuple[str, float, bool]] = {}
+    limb = {"upper_arm", "forearm", "hand", "thigh", "shank", "foot"}
+    for i, t in enumerate(tags):
+        if t.kind in limb:
+            kind = {"upper_arm": "upper_arm", "forearm": "forearm", "hand": "hand",
+                    "thigh": "thigh", "shank": "shank", "foot": "foot"}[t.kind]
+            out[i] = (kind, DE_LEVA_MALE[kind].mass_fraction, False)
+        elif t.kind == "head":
+            out[i] = ("head", DE_LEVA_MALE["head"].mass_fraction, True)
+    pelvis = [i for i, t in enumerate(tags) if t.kind == "pelvis"][0]
+    spine: list[int] = []
+    k = pelvis
+    while True:  # walk up the trunk from the pelvis
+        nxt = [c for c in motion.joints[k].children if tags[c].kind == "spine"]
+        if not nxt:
+            break
+        k = nxt[0]
+        spine.append(k)
+    lpt, mpt, upt = (DE_LEVA_MALE[n].mass_fraction for n in ("lower_trunk", "middle_trunk", "upper_trunk"))
+    if not spine:
+        out[pelvis] = ("middle_trunk", lpt + mpt + upt, True)
+        return out
+    out[pelvis] = ("lower_trunk", lpt, True)
+    if len(spine) == 1:
+        out[spine[0]] = ("middle_trunk", mpt + upt, True)
+        return out
+    for s in spine[:-1]:
+        out[s] = ("middle_trunk", mpt / (len(spine) - 1), True)
+    out[spine[-1]] = ("upper_trunk", upt, True)
+    return out
+
+
+def _stature(motion: BvhMotion, tags: list[SegmentTag], scale: float) -> float:
+    legs = []
+    for side in ("left", "right"):
+        shank = next(i for i, t in enumerate(tags) if t.kind == "shank" and t.side == side)
+        foot = next(i for i, t in enumerate(tags) if t.kind == "foot" and t.side == side)
+        legs.append(np.linalg.norm(motion.joints[shank].offset) + np.linalg.norm(motion.joints[foot].offset))
+    leg = scale * float(np.mean(legs))
+    if leg <= 0:
+        raise InputError(f"{motion.source}: leg bones have zero length; cannot scale the body")
+    return leg / LEG_FRACTION_OF_STATURE
+
+
+def _build(motion: BvhMotion, tags: list[SegmentTag], scale: float, world_from_input: np.ndarray,
+           opts: BvhBodyOptions) -> tuple[pin.Model, list[int], list[int]]:
+    """Model + per-BVH-joint frame ids + per-channel q index."""
+    model = pin.Model()
+    model.name = "bvh"
+    frames: list[int] = []
+    q_index: list[int] = []
+    anchor: list[tuple[int, pin.SE3]] = []  # (pin joint, placement in it) of each BVH joint
+    stature = _stature(motion, tags, scale)
+    masses = _mass_table(tags, motion)
+    for i, j in enumerate(motion.joints):
+        pos_axes = [_AXES[c[0]] for c in j.channels if c.endswith("position")]
+        seen_rot = False
+        for c in j.channels:
+            if c.endswith("rotation"):
+                seen_rot = True
+            elif seen_rot:
+                raise InputError(f"{motion.source}: joint {j.name}: position channels after rotation "
+                                 "channels are not supported")
+        off = scale * j.offset.copy()
+        off[pos_axes] = 0.0
+        if j.parent < 0:
+            parent_joint, place = 0, pin.SE3(world_from_input, world_from_input @ off)
+        else:
+            parent_joint, pplace = anchor[j.parent]
+            place = pplace * pin.SE3(np.eye(3), off)
+        for c in j.channels:
+            ax = _AXES[c[0]]
+            jm = [pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ][ax]() if c.endswith("position") \
+                else [pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ][ax]()
+            parent_joint = model.addJoint(parent_joint, jm, place, f"{j.name}.{c}")
+            q_index.append(model.joints[parent_joint].idx_q)
+            place = pin.SE3.Identity()
+        anchor.append((parent_joint, place))
+        frames.append(model.addFrame(pin.Frame(j.name, parent_joint, place, pin.FrameType.OP_FRAME)))
+        if j.end_site is not None:
+            site = place * pin.SE3(np.eye(3), scale * j.end_site)
+            model.addFrame(pin.Frame(f"{j.name}.end", parent_joint, site, pin.FrameType.OP_FRAME))
+        if i in masses:
+            kind, frac, prox_up = masses[i]
+            par = DE_LEVA_MALE[kind]
+            d = _segment_vector(motion, tags, i, scale)
+            length = float(np.linalg.norm(d))
+            if length < 1e-6:  # leaf segment: continue the parent bone's direction
+                d_par = scale * j.offset
+                nd = float(np.linalg.norm(d_par))
+                direction = d_par / nd if nd > 1e-9 else np.array([0.0, 0.0, 1.0])
+                length = par.length_fraction * stature
+                d = direction * length
+            com_frac = (1.0 - par.com_fraction) if prox_up else par.com_fraction
+            m = opts.total_mass * frac
+            rs, rt, rl = (g * length for g in par.gyration)
+            rot = _rot_to(d)
+            inertia = rot @ np.diag([m * rs * rs, m * rt * rt, m * rl * rl]) @ rot.T
+            model.appendBodyToJoint(parent_joint, pin.Inertia(m, com_frac * d, inertia), place)
+    return model, frames, q_index
+
+
+def _detect_up(motion: BvhMotion, tags: list[SegmentTag], scale: float, opts: BvhBodyOptions) -> str:
+    """The axis along which the head is above the feet in the first frame."""
+    model, frames, _ = _build(motion, tags, scale, np.eye(3), opts)
+    data = model.createData()
+    q = _channel_scale(motion, scale) * motion.frames[0]
+    pin.framesForwardKinematics(model, data, q)
+    pos = lambda kind: np.mean([data.oMf[frames[i]].translation for i, t in enumerate(tags) if t.kind == kind], 0)  # noqa: E731
+    head_kind = "head" if any(t.kind == "head" for t in tags) else "pelvis"
+    v = pos(head_kind) - pos("foot")
+    ax = int(np.argmax(np.abs(v)))
+    if ax == 1 and v[1] > 0:
+        return "y"
+    if ax == 2 and v[2] > 0:
+        return "z"
+    raise InputError(f"{motion.source}: cannot tell the up axis (head-to-feet vector {np.round(v, 3)}); give --up")
+
+
+def _channel_scale(motion: BvhMotion, scale: float) -> np.ndarray:
+    return np.array([scale if c.endswith("position") else np.pi / 180 for j in motion.joints for c in j.channels])
+
+
+def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> BodyModel:
+    """Build the body model of ``motion``'s skeleton (see module docstring)."""
+    opts = opts or BvhBodyOptions()
+    if opts.total_mass <= 0:
+        raise InputError(f"total mass must be positive, got {opts.total_mass}")
+    tags = tag_joints([j.name for j in motion.joints], opts.mapping, motion.source)
+    units = opts.units or detect_length_unit(motion.joints, motion.source)
+    if units not in UNIT_SCALES:
+        raise InputError(f"unknown length unit {units!r} (one of {', '.join(UNIT_SCALES)})")
+    scale = UNIT_SCALES[units]
+    up = opts.up_axis or _detect_up(motion, tags, scale, opts)
+    if up not in WORLD_FROM_INPUT:
+        raise InputError(f"unsupported up axis {up!r} (y or z)")
+    r_in = WORLD_FROM_INPUT[up]
+    model, frames, q_index = _build(motion, tags, scale, r_in, opts)
+    if q_index != list(range(model.nq)):
+        raise AssertionError("channel order and q order must agree")
+    stature = _stature(motion, tags, scale)
+    feet = {}
+    named = {}
+    for side in ("left", "right"):
+        fi = next(i for i, t in enumerate(tags) if t.kind == "foot" and t.side == side)
+        toes = [c for c in motion.joints[fi].children if tags[c].kind == "toe"]
+        if toes:
+            toe_frame = frames[toes[0]]
+            tj = motion.joints[toes[0]]
+            tip = scale * float(np.linalg.norm(tj.end_site)) if tj.end_site is not None else 0.0
+        else:
+            toe_frame = model.getFrameId(f"{motion.joints[fi].name}.end") if motion.joints[fi].end_site is not None \
+                else frames[fi]
+            tip = 0.0
+        foot_len = 0.148 * stature  # de Leva foot length / stature
+        feet[side] = Foot(
+            side, frames[fi], toe_frame_id=toe_frame,
+            heel_back=opts.heel_back if opts.heel_back is not None else 0.25 * foot_len,
+            toe_front=opts.toe_front if opts.toe_front is not None else (tip if tip > 0.01 else 0.2 * foot_len),
+            width=opts.sole_width if opts.sole_width is not None else 0.055 * stature,
+            ankle_height=0.039 * stature, toe_height=0.015 * stature,
+        )
+        named[f"{side}_ankle"] = frames[fi]
+        named[f"{side}_toe"] = toe_frame
+    pelvis = next(i for i, t in enumerate(tags) if t.kind == "pelvis")
+    ch0 = motion.joints[pelvis].first_channel
+    root_rot = [ch0 + k for k, c in enumerate(motion.joints[pelvis].channels) if c.endswith("rotation")]
+    legs = {}
+    for side in ("left", "right"):
+        th = next(i for i, t in enumerate(tags) if t.kind == "thigh" and t.side == side)
+        c0 = motion.joints[th].first_channel
+        legs[side] = [c0 + k for k, c in enumerate(motion.joints[th].channels) if c.endswith("rotation")]
+    names = motion.channel_labels()
+    return BodyModel(
+        kind="bvh", model=model, point_model=point_mass_copy(model), channel_names=names,
+        channel_scale=_channel_scale(motion, scale),
+        angle_mask=np.array([n.endswith("rotation") for n in names]),
+        feet=feet, world_from_input=r_in, up_axis=up, units=units, total_mass=opts.total_mass,
+        correction=CorrectionJoints(root_rot, legs, frames[pelvis]), named_points=named,
+    )

@@ -1,0 +1,66 @@
+"""Load a motion file into a body model plus its frames: a BVH, or a robot
+joint-trajectory CSV with its URDF."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.base_placement import place_base
+from livezmp.body import BodyModel
+from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
+from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
+from livezmp.bvh import BvhMotion, read_bvh
+from livezmp.errors import InputError
+from livezmp.trajectory_csv import JointTrajectory, read_joint_csv
+
+
+@dataclass
+class LoadedMotion:
+    """``frames`` (F, nq) raw input channels in the body's channel order; ``times`` (F,) s."""
+
+    body: BodyModel
+    times: np.ndarray
+    frames: np.ndarray
+    source: str
+    bvh: BvhMotion | None = None
+    trajectory: JointTrajectory | None = None
+
+    @property
+    def fps(self) -> float:
+        return float((len(self.times) - 1) / (self.times[-1] - self.times[0])) if len(self.times) > 1 else 0.0
+
+
+def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: BvhBodyOptions | None = None,
+                urdf_options: UrdfBodyOptions | None = None) -> LoadedMotion:
+    """Load ``path``: ``.bvh`` on its own, ``.csv`` with ``robot`` (a URDF)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    suffix = p.suffix.lower()
+    if suffix == ".bvh":
+        motion = read_bvh(p)
+        body = body_from_bvh(motion, bvh_options)
+        times = np.arange(len(motion.frames)) * motion.frame_time
+        return LoadedMotion(body, times, motion.frames, str(p), bvh=motion)
+    if suffix == ".csv":
+        if robot is None:
+            raise InputError(f"{p}: a joint-trajectory CSV needs --robot ROBOT.urdf")
+        body = body_from_urdf(robot, urdf_options)
+        traj = read_joint_csv(p, body.joint_names)
+        return LoadedMotion(body, traj.t, trajectory_frames(body, traj), str(p), trajectory=traj)
+    raise InputError(f"{p}: unknown motion format {suffix!r} (.bvh, or .csv with --robot)")
+
+
+def trajectory_frames(body: BodyModel, traj: JointTrajectory) -> np.ndarray:
+    """Robot frames in the body's channel order (base x, y, z, yaw, pitch, roll, joints).
+
+    Without base columns the base is placed so the stance foot stays flat on the ground."""
+    if traj.base is None:
+        base = place_base(body, traj.q)
+    else:
+        x, y, z, roll, pitch, yaw = traj.base.T
+        base = np.column_stack([x, y, z, yaw, pitch, roll])
+    return np.hstack([base, traj.q])

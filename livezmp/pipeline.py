@@ -1,0 +1,122 @@
+"""The per-frame pipeline: estimate → ZMP → contacts → support polygon → clamp.
+
+The same :class:`Pipeline` serves live streams (``step`` per frame) and files
+(``run`` over a whole motion), so live and offline results agree. Results come out
+``lag`` frames behind the input (the estimator's fixed lag); ``flush`` delivers the
+last ones at the end of a file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from livezmp.body import BodyModel, foot_soles
+from livezmp.contacts import ContactConfig, ContactDetector, GroundConfig
+from livezmp.errors import InputError
+from livezmp.estimator import Estimate, EstimatorConfig, StreamingEstimator
+from livezmp.support import clamp_to_polygon, support_polygon
+from livezmp.zmp import compute_zmp, zmp_on_plane
+
+MODES = ("full", "seed")
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """``mode``: "full" (rigid bodies) or "seed" (point masses). ``ground_z`` fixes the
+    ground height (internal frame, m) instead of detecting it from the feet."""
+
+    mode: str = "full"
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    contacts: ContactConfig = field(default_factory=ContactConfig)
+    ground_z: float | None = None
+    ground_warmup_frames: int = 60
+    flight_fraction: float = 0.05
+
+
+@dataclass
+class FrameResult:
+    """One analysed frame, internal frame (z up, metres).
+
+    ``zmp``/``clamped``/``margin``/``inside`` are None in flight (no ZMP) or when there is
+    no support; ``margin`` is the signed distance to the polygon edge (+ inside)."""
+
+    index: int
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    zmp: np.ndarray | None
+    com: np.ndarray
+    support: str
+    polygon: np.ndarray
+    soles: dict[str, np.ndarray]
+    ground_z: float
+    inside: bool | None = None
+    clamped: np.ndarray | None = None
+    margin: float | None = None
+
+
+class Pipeline:
+    """Streaming balance analysis of one body. ``step`` costs the same at every frame."""
+
+    def __init__(self, body: BodyModel, config: PipelineConfig | None = None, nominal_dt: float | None = None):
+        self.body = body
+        self.config = config or PipelineConfig()
+        if self.config.mode not in MODES:
+            raise InputError(f"unknown ZMP mode {self.config.mode!r} (full or seed)")
+        self.model = body.model if self.config.mode == "full" else body.point_model
+        self.data = self.model.createData()
+        self.estimator = StreamingEstimator(body.nq, body.angle_mask, self.config.estimator, nominal_dt)
+        ground = GroundConfig(warmup_frames=self.config.ground_warmup_frames, override=self.config.ground_z)
+        self.contacts = ContactDetector(self.config.contacts, ground)
+        self._outside_contacts: dict[int, tuple[bool, bool]] = {}
+
+    @property
+    def lag(self) -> int:
+        return self.config.estimator.lag
+
+    def step(self, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None = None) -> FrameResult | None:
+        """Feed one input frame (raw channels in file units, time in s); return the result
+        for the frame ``lag`` frames back, or None while the estimator fills.
+
+        ``contacts`` (left, right) from foot sensors replaces contact detection for this frame."""
+        if contacts is not None:
+            idx = self.estimator.count
+            self._outside_contacts[idx] = contacts
+        est = self.estimator.step(t, self.body.channels_to_q(np.asarray(channels, dtype=float)))
+        return None if est is None else self._analyse(est)
+
+    def flush(self) -> list[FrameResult]:
+        """Results for the last ``lag`` frames (end of a file or stream)."""
+        return [self._analyse(e) for e in self.estimator.flush()]
+
+    def run(self, times: np.ndarray, frames: np.ndarray) -> list[FrameResult]:
+        """Analyse a whole motion; one result per input frame, in order."""
+        out = [r for k in range(len(frames)) if (r := self.step(float(times[k]), frames[k])) is not None]
+        return out + self.flush()
+
+    def _analyse(self, est: Estimate) -> FrameResult:
+        model, data = self.model, self.data
+        z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction)
+        pin.updateFramePlacements(model, data)
+        soles = foot_soles(self.body, data)
+        vel = {s: pin.getFrameVelocity(model, data, f.frame_id, pin.LOCAL_WORLD_ALIGNED).linear
+               for s, f in self.body.feet.items()}
+        outside = self._outside_contacts.pop(est.index, None)
+        support = self.contacts.update(soles["left"], vel["left"], soles["right"], vel["right"], outside)
+        ground = self.contacts.ground_height
+        zmp = None
+        if z.zmp is not None:
+            # the ZMP was computed on z = 0; move it onto the detected ground plane
+            zmp = zmp_on_plane(z.zmp, z.com_acc, ground)
+        poly = support_polygon(soles["left"][:, :2], soles["right"][:, :2], support)
+        res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground)
+        if zmp is not None and len(poly):
+            c = clamp_to_polygon(zmp[:2], poly)
+            res.inside, res.margin = c.inside, c.margin
+            res.clamped = np.array([c.point[0], c.point[1], ground])
+        return res
+

@@ -1,0 +1,70 @@
+"""Zero Moment Point from the rigid-body dynamics of a body model.
+
+Two modes:
+
+- ``full``: the ground reaction wrench equals the rate of centroidal momentum minus
+  gravity (Pinocchio's ``computeCentroidalMomentumTimeVariation``), so every segment's
+  rate of angular momentum is included.
+- ``seed``: the same with every segment a point mass at its centre of mass — exactly the
+  point-mass formula of the seed paper (with its misprint corrected: the second sum is
+  horizontal acceleration × height):
+  x_zmp = [Σ m_i (z̈_i + g) x_i − Σ m_i ẍ_i (z_i − z_g)] / Σ m_i (z̈_i + g), same for y.
+
+With F the contact force and τ its moment about the CoM c, the ZMP on the ground
+plane z = z_g is p_x = c_x − (τ_y + h F_x)/F_z, p_y = c_y + (τ_x − h F_y)/F_z with
+h = c_z − z_g. When F_z < ``flight_fraction`` × m g the body is (nearly) in flight: no
+ZMP is reported (never a division by ~0, never NaN).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+GRAVITY = 9.80665  # m/s²
+
+
+@dataclass
+class ZmpResult:
+    """ZMP and CoM in the internal frame (m); ``zmp`` is None in flight.
+
+    ``force`` is the ground reaction force (N) and ``com_acc`` the CoM acceleration (m/s²)."""
+
+    zmp: np.ndarray | None
+    com: np.ndarray
+    com_acc: np.ndarray
+    force: np.ndarray
+
+
+def zmp_from_wrench(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground_z: float,
+                    min_fz: float) -> np.ndarray | None:
+    """ZMP on z = ground_z of a contact wrench (force, moment about ``com``); None if F_z < min_fz."""
+    fz = force[2]
+    if not fz >= min_fz:  # also catches NaN
+        return None
+    h = com[2] - ground_z
+    return np.array([com[0] - (moment[1] + h * force[0]) / fz, com[1] + (moment[0] - h * force[1]) / fz, ground_z])
+
+
+def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                ground_z: float = 0.0, flight_fraction: float = 0.05) -> ZmpResult:
+    """ZMP of ``model`` in state (q, v, a) (SI units, internal z-up frame).
+
+    Pass the body's ``model`` for the full ZMP, its ``point_model`` for the seed's.
+    Leaves ``data`` with kinematics of (q, v, a) computed (joint placements, CoM)."""
+    pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
+    mass = data.mass[0]
+    dh = data.dhg
+    force = dh.linear + np.array([0.0, 0.0, mass * GRAVITY])
+    com = data.com[0].copy()
+    zmp = zmp_from_wrench(com, force, dh.angular, ground_z, flight_fraction * mass * GRAVITY)
+    return ZmpResult(zmp, com, dh.linear / mass, force)
+
+
+def zmp_on_plane(zmp0: np.ndarray, com_acc: np.ndarray, ground_z: float) -> np.ndarray:
+    """Move a ZMP computed on z = 0 to the plane z = ground_z, along the contact force's
+    line of action: p(h) = p(0) + h · F_xy / F_z with F ∝ c̈ + g (m, internal frame)."""
+    fz = com_acc[2] + GRAVITY
+    return np.array([zmp0[0] + ground_z * com_acc[0] / fz, zmp0[1] + ground_z * com_acc[1] / fz, ground_z])
