@@ -1,0 +1,202 @@
+"""Sliding-window smoothing-spline differentiator.
+
+Following the chain of the source paper (spline -> differentiate -> spline
+again -> differentiate), each window of samples y(t_i) is fitted with a cubic
+smoothing spline S1, the minimiser of
+
+    sum_i (y_i - S1(t_i))^2 + lam * integral S1''(t)^2 dt,
+
+position and velocity are S1 and S1', then a second smoothing spline S2 with
+the same lam is fitted to the velocities S1'(t_i) and acceleration is S2'.
+Differentiating S1 twice would give a useless acceleration at the newest
+sample, since a smoothing spline's second derivative is zero at both ends.
+
+The smoothing parameter is set by a cutoff frequency: on uniform samples the
+spline is a linear filter whose gain is exactly 1/2 at ``cutoff_hz``
+(see :func:`smoothing_lambda`).  lam has units of s^3 for any channel unit.
+
+Everything is linear in y, so on uniform samples the estimate at a fixed
+position in the window is a fixed weight vector: it is precomputed once and
+each frame costs one (3 x W) @ (W x n) product over a ring buffer.  Windows
+with irregular timestamps (dropped frames, jitter) and the warm-up windows get
+an exact fit on the actual times: the weights for that one window, O(W) by a
+banded Cholesky factorisation, then the same product.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg.lapack import dpbtrf, dpbtrs
+
+
+def smoothing_lambda(dt: float, cutoff_hz: float) -> float:
+    """Smoothing parameter lam (s^3) whose spline has gain 1/2 at ``cutoff_hz`` on samples ``dt`` s apart.
+
+    On an infinite uniform grid the cubic smoothing spline is the filter
+    H(w) = 1 / (1 + (lam / dt^3) (2 - 2 cos w dt)^2 * 3 / (2 + cos w dt)), w in rad/s,
+    which tends to 1 / (1 + lam dt w^4) at low frequency.  ``cutoff_hz`` must
+    lie below the Nyquist frequency 1 / (2 dt).
+    """
+    if not 0.0 < cutoff_hz * dt < 0.5:
+        raise ValueError(f"cutoff {cutoff_hz} Hz must lie in (0, {0.5 / dt:g}) Hz for samples {dt:g} s apart")
+    theta = 2.0 * math.pi * cutoff_hz * dt
+    return dt**3 * (2.0 + math.cos(theta)) / (3.0 * (2.0 - 2.0 * math.cos(theta)) ** 2)
+
+
+def _slopes_adjoint(u: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Transpose of the knot-slope map of a natural cubic spline, applied to ``u`` (k, r).
+
+    The slopes at the knots are v = Dg g + Dc c for knot values g and second
+    derivatives c (both (k,)); this returns (Dg^T u, Dc^T u).
+    """
+    hc = h[:, None]
+    rate = u[:-1] / hc
+    zg = np.zeros_like(u)
+    zg[:-1] -= rate
+    zg[1:] += rate
+    end_rate = u[-1] / hc[-1]  # the last slope uses the last interval from the left
+    zg[-2] -= end_rate
+    zg[-1] += end_rate
+    arm = u[:-1] * hc / 6.0
+    zc = np.zeros_like(u)
+    zc[:-1] -= 2.0 * arm
+    zc[1:] -= arm
+    end_arm = u[-1] * hc[-1] / 6.0
+    zc[-2] += end_arm
+    zc[-1] += 2.0 * end_arm
+    return zg, zc
+
+
+def window_weights(t: np.ndarray, lam: float, index: int) -> np.ndarray:
+    """(3, k) weights giving [position, velocity, acceleration] at sample ``index`` of one window.
+
+    ``t``: (k,) strictly increasing times, s; ``lam``: smoothing parameter, s^3.
+    For samples Y (k, n) of any unit the estimate is ``weights @ Y``: S1(t_index),
+    S1'(t_index) (unit/s) and S2'(t_index) (unit/s^2).  One sample gives zero
+    derivatives, two give the line through them.
+
+    Smoothing by the Reinsch algorithm (Green & Silverman 1994, ch. 2):
+    S1 has knot values g = y - lam Q A^-1 Q^T y and second derivatives
+    A^-1 Q^T y, A = R + lam Q^T Q pentadiagonal.  Only one row of each linear
+    map is wanted, so it is found through the transposed maps: two banded
+    solves with one or two right-hand sides, O(k), whatever the channel count.
+    """
+    k = t.shape[0]
+    unit = np.zeros((k, 1))
+    unit[index] = 1.0
+    if k == 1:
+        return np.array([[1.0], [0.0], [0.0]])
+    h = np.diff(t)
+    if k == 2:
+        vel, _ = _slopes_adjoint(unit, h)
+        acc, _ = _slopes_adjoint(vel, h)
+        return np.hstack([unit, vel, acc]).T
+    # Columns of the k x (k-2) second-difference matrix Q: entries at rows a, a+1, a+2.
+    lo = (1.0 / h[:-1])[:, None]
+    hi = (1.0 / h[1:])[:, None]
+    mid = -lo - hi
+    # Upper banded form of A = R + lam Q^T Q (symmetric positive definite).
+    ab = np.zeros((3, k - 2))
+    ab[2] = (h[:-1] + h[1:]) / 3.0 + lam * (lo**2 + mid**2 + hi**2)[:, 0]
+    ab[1, 1:] = h[1:-1] / 6.0 + lam * (mid[:-1] * lo[1:] + hi[:-1] * mid[1:])[:, 0]
+    ab[0, 2:] = lam * (hi[:-2] * lo[2:])[:, 0]
+    # LAPACK directly: the scipy.linalg wrappers cost more than the O(k) work here.
+    factor, info = dpbtrf(ab)
+    if info != 0:
+        raise ValueError(f"smoothing system not positive definite (info {info}): times must increase")
+
+    def hat_t(base: np.ndarray, extra: np.ndarray) -> np.ndarray:
+        # base + Q A^-1 (extra[1:-1] - lam Q^T base): the transposed smoothing map.  With extra = 0 it
+        # is a row of the hat matrix; with (base, extra) = (Dg^T u, Dc^T u) it is V^T u for the
+        # knot-velocity map V = Dg H + Dc A^-1 Q^T.
+        rhs = extra[1:-1] - lam * (lo * base[:-2] + mid * base[1:-1] + hi * base[2:])
+        inner, _ = dpbtrs(factor, rhs)
+        out = base.copy()
+        out[:-2] += lo * inner
+        out[1:-1] += mid * inner
+        out[2:] += hi * inner
+        return out
+
+    zg, zc = _slopes_adjoint(unit, h)
+    pos_vel = hat_t(np.hstack([unit, zg]), np.hstack([np.zeros_like(unit), zc]))
+    acc = hat_t(*_slopes_adjoint(pos_vel[:, 1:], h))
+    return np.hstack([pos_vel, acc]).T
+
+
+def uniform_weights(window: int, lag: int, dt: float, lam: float) -> np.ndarray:
+    """(3, window) weights giving [position, velocity, acceleration] at ``lag`` samples before the newest.
+
+    Valid for ``window`` samples exactly ``dt`` s apart, oldest first: the
+    estimate for data Y of shape (window, n) is ``weights @ Y``.
+    """
+    return window_weights(np.arange(window) * dt, lam, window - 1 - lag)
+
+
+class SlidingSplineDifferentiator:
+    """Ring buffer of the last ``window`` samples and the smoothing-spline estimate inside it.
+
+    ``dt`` is the nominal sample period (s); windows whose intervals all lie
+    within ``jitter_tol * dt`` of it use the precomputed weights, any other
+    window (and the warm-up, fewer than ``window`` samples) gets an exact fit
+    on its actual timestamps.  Memory is fixed at construction.
+    """
+
+    def __init__(self, n_channels: int, window: int, lag: int, dt: float, lam: float, jitter_tol: float):
+        if not 0 <= lag < window:
+            raise ValueError(f"lag {lag} must satisfy 0 <= lag < window {window}")
+        self.window = window
+        self.lag = lag
+        self.dt = dt
+        self.lam = lam
+        self.jitter_tol = jitter_tol
+        self.weights = uniform_weights(window, lag, dt, lam)
+        # Each sample is written twice, W apart, so the window is always one contiguous slice.
+        self._y = np.zeros((2 * window, n_channels))
+        self._t = np.zeros(2 * window)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._slot = self.window - 1
+        self.count = 0
+        self._last_irregular = -1  # sample number that ends the most recent off-nominal interval
+
+    def push(self, t: float, y: np.ndarray) -> None:
+        """Append one sample: time ``t`` (s, after the previous one) and values ``y`` (n,)."""
+        if self.count and abs(t - self._t[self._slot + self.window] - self.dt) > self.jitter_tol * self.dt:
+            self._last_irregular = self.count
+        s = (self._slot + 1) % self.window
+        self._y[s] = y
+        self._y[s + self.window] = y
+        self._t[s] = t
+        self._t[s + self.window] = t
+        self._slot = s
+        self.count += 1
+
+    def backfill(self, channels: np.ndarray, values: np.ndarray) -> None:
+        """Overwrite the whole history of the masked ``channels`` with their ``values`` (n,).
+
+        Used when a channel is seen for the first time: its earlier samples are
+        taken as equal to its first value rather than to a placeholder.
+        """
+        self._y[:, channels] = values[channels]
+
+    def time_at(self, lag: int) -> float:
+        """Timestamp (s) of the sample ``lag`` samples before the newest."""
+        return float(self._t[self._slot + self.window - lag])
+
+    def estimate(self, lag: int | None = None) -> np.ndarray:
+        """(3, n) position, velocity, acceleration at ``lag`` (default: the configured lag) samples before the newest.
+
+        Needs at least ``lag + 1`` samples held.
+        """
+        k = min(self.count, self.window)
+        end = self._slot + self.window + 1
+        samples = self._y[end - k : end]
+        if lag is None:
+            lag = self.lag
+            if k == self.window and self._last_irregular < self.count - self.window + 1:
+                return self.weights @ samples
+        return window_weights(self._t[end - k : end], self.lam, k - 1 - lag) @ samples
