@@ -115,3 +115,25 @@ def foot_soles(body: BodyModel, data: pin.Data) -> dict[str, np.ndarray]:
             [[*(heel - w), zh], [*(tip - w), zt], [*(tip + w), zt], [*(heel + w), zh]]
         )
     return out
+
+
+def _point_velocity(model: pin.Model, data: pin.Data, frame_id: int, points: np.ndarray) -> np.ndarray:
+    """Velocity (k, 3) of points rigidly attached to a frame, m/s, world axes."""
+    v = pin.getFrameVelocity(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
+    return v.linear + np.cross(v.angular, points - data.oMf[frame_id].translation)
+
+
+def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: dict[str, np.ndarray]) -> dict:
+    """Velocity (k, 3) of each sole corner, m/s, internal world frame (``data`` must hold
+    the kinematics of (q, v)). Skeleton soles: heel corners move rigidly with the ankle,
+    toe corners with the toe joint, so a heel the foot rolls over stands still."""
+    out = {}
+    for side, foot in body.feet.items():
+        sole = soles[side]
+        if foot.sole_local is not None:
+            out[side] = _point_velocity(model, data, foot.frame_id, sole)
+        else:
+            heel = _point_velocity(model, data, foot.frame_id, sole[[0, 3]])
+            toe = _point_velocity(model, data, foot.toe_frame_id, sole[[1, 2]])
+            out[side] = np.array([heel[0], toe[0], toe[1], heel[1]])
+    return out

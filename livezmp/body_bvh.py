@@ -200,6 +200,21 @@ def _channel_scale(motion: BvhMotion, scale: float) -> np.ndarray:
     return np.array([scale if c.endswith("position") else np.pi / 180 for j in motion.joints for c in j.channels])
 
 
+def _calibrate_heels(model: pin.Model, feet: dict[str, Foot], q0: np.ndarray, stature: float) -> None:
+    """Set each foot's ankle height so that the sole is flat when the foot is.
+
+    Skeletons put the ankle and toe joints at different heights above the sole; in the
+    first frame the foot whose toe is lower is taken to stand flat, and the ankle-above-toe
+    height it shows (bounded to 0–10 % of stature) is used for both feet."""
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q0)
+    z = {s: (data.oMf[f.frame_id].translation[2], data.oMf[f.toe_frame_id].translation[2]) for s, f in feet.items()}
+    flat = min(z, key=lambda s: z[s][1])
+    rise = float(np.clip(z[flat][0] - z[flat][1], 0.0, 0.1 * stature))
+    for f in feet.values():
+        f.ankle_height = f.toe_height + rise
+
+
 def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> BodyModel:
     """Build the body model of ``motion``'s skeleton (see module docstring)."""
     opts = opts or BvhBodyOptions()
@@ -237,10 +252,11 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
             heel_back=opts.heel_back if opts.heel_back is not None else 0.25 * foot_len,
             toe_front=opts.toe_front if opts.toe_front is not None else (tip if tip > 0.01 else 0.2 * foot_len),
             width=opts.sole_width if opts.sole_width is not None else 0.055 * stature,
-            ankle_height=0.039 * stature, toe_height=0.015 * stature,
+            toe_height=0.015 * stature,
         )
         named[f"{side}_ankle"] = frames[fi]
         named[f"{side}_toe"] = toe_frame
+    _calibrate_heels(model, feet, motion.frames[0] * _channel_scale(motion, scale), stature)
     pelvis = next(i for i, t in enumerate(tags) if t.kind == "pelvis")
     ch0 = motion.joints[pelvis].first_channel
     root_rot = [ch0 + k for k, c in enumerate(motion.joints[pelvis].channels) if c.endswith("rotation")]

@@ -8,12 +8,12 @@ last ones at the end of a file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel, foot_soles
+from livezmp.body import BodyModel, foot_soles, sole_velocities
 from livezmp.contacts import ContactConfig, ContactDetector, GroundConfig
 from livezmp.errors import InputError
 from livezmp.estimator import Estimate, EstimatorConfig, StreamingEstimator
@@ -63,20 +63,25 @@ class Pipeline:
     """Streaming balance analysis of one body. ``step`` costs the same at every frame."""
 
     def __init__(self, body: BodyModel, config: PipelineConfig | None = None, nominal_dt: float | None = None):
+        """``nominal_dt``: the input's frame period (s); it sets the estimator's rate."""
         self.body = body
         self.config = config or PipelineConfig()
         if self.config.mode not in MODES:
             raise InputError(f"unknown ZMP mode {self.config.mode!r} (full or seed)")
         self.model = body.model if self.config.mode == "full" else body.point_model
         self.data = self.model.createData()
-        self.estimator = StreamingEstimator(body.nq, body.angle_mask, self.config.estimator, nominal_dt)
+        est_cfg = self.config.estimator
+        if nominal_dt is not None:
+            est_cfg = replace(est_cfg, rate_hz=1.0 / nominal_dt)
+        self.estimator = StreamingEstimator(body.nq, body.angle_mask, est_cfg)
+        self._count = 0
         ground = GroundConfig(warmup_frames=self.config.ground_warmup_frames, override=self.config.ground_z)
         self.contacts = ContactDetector(self.config.contacts, ground)
         self._outside_contacts: dict[int, tuple[bool, bool]] = {}
 
     @property
     def lag(self) -> int:
-        return self.config.estimator.lag
+        return self.estimator.lag
 
     def step(self, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None = None) -> FrameResult | None:
         """Feed one input frame (raw channels in file units, time in s); return the result
@@ -84,14 +89,17 @@ class Pipeline:
 
         ``contacts`` (left, right) from foot sensors replaces contact detection for this frame."""
         if contacts is not None:
-            idx = self.estimator.count
-            self._outside_contacts[idx] = contacts
+            self._outside_contacts[self._count] = contacts
+        self._count += 1
         est = self.estimator.step(t, self.body.channels_to_q(np.asarray(channels, dtype=float)))
         return None if est is None else self._analyse(est)
 
     def flush(self) -> list[FrameResult]:
-        """Results for the last ``lag`` frames (end of a file or stream)."""
-        return [self._analyse(e) for e in self.estimator.flush()]
+        """Results for the last ``lag`` frames (end of a file or stream); then a new stream starts."""
+        out = [self._analyse(e) for e in self.estimator.flush()]
+        self._count = 0
+        self._outside_contacts.clear()
+        return out
 
     def run(self, times: np.ndarray, frames: np.ndarray) -> list[FrameResult]:
         """Analyse a whole motion; one result per input frame, in order."""
@@ -103,8 +111,7 @@ class Pipeline:
         z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
-        vel = {s: pin.getFrameVelocity(model, data, f.frame_id, pin.LOCAL_WORLD_ALIGNED).linear
-               for s, f in self.body.feet.items()}
+        vel = sole_velocities(self.body, model, data, soles)
         outside = self._outside_contacts.pop(est.index, None)
         support = self.contacts.update(soles["left"], vel["left"], soles["right"], vel["right"], outside)
         ground = self.contacts.ground_height

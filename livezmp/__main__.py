@@ -1,0 +1,5 @@
+import sys
+
+from livezmp.cli import main
+
+sys.exit(main())
