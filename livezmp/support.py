@@ -1,0 +1,234 @@
+"""Support polygons on the ground plane: the convex hull of the soles, and the clamp of a point to it.
+
+Frame: world, z up. Everything here lives on the ground plane: points are (x, y) in metres.
+A polygon is an (m, 2) array of vertices, counter-clockwise, with no repeated or collinear
+vertices, as :func:`convex_hull` returns it. Degenerate polygons are valid: m = 0 (flight, no
+support), m = 1 (a point) and m = 2 (a segment). Coordinates beyond 1e12 m are rejected as a units
+mistake; detail finer than about 1e-100 m is below the arithmetic's resolution (products of
+coordinate differences underflow).
+
+The polygons are tiny (4 to 16 vertices) and these functions run once per frame, so the inner
+loops use plain Python floats: on such sizes they beat numpy, whose per-call overhead dominates
+(see benchmarks/bench_support.py).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from livezmp.errors import InputError
+
+SUPPORT_LABELS = ("left", "right", "double", "none")
+
+# Coordinates beyond this (metres) are a units mistake; the bound also keeps products of coordinates
+# far from overflow.
+_MAX_COORD = 1e12
+# Hull vertices closer than this fraction of the coordinates' magnitude to the segment between their
+# neighbours are dropped (collinear or coincident), so rounding noise never adds sliver vertices.
+_COLLINEAR_REL_TOL = 1e-9
+
+
+class SupportError(InputError):
+    """Bad input to a support-polygon function: wrong shape, non-finite value, unknown support label."""
+
+
+class Clamp(NamedTuple):
+    """Result of :func:`clamp_to_polygon`; unpacks as ``(point, inside, margin)``."""
+
+    point: np.ndarray
+    """(2,) nearest point of the polygon to the query, in metres (the query itself if inside)."""
+    inside: bool
+    """True if the query lies in the polygon, its boundary included."""
+    margin: float
+    """Signed distance in metres: inside, the distance to the nearest edge (>= 0); outside, minus the
+    distance to the polygon (< 0)."""
+
+
+def _xy_rows(points, name: str) -> list[list[float]]:
+    """The (x, y) columns of a (k, 2) or (k, 3) array as a list of [x, y] floats, validated."""
+    try:
+        a = np.asarray(points, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SupportError(f"{name}: not an array of numbers ({exc})") from None
+    if a.ndim != 2 or a.shape[1] not in (2, 3):
+        raise SupportError(f"{name}: expected (k, 2) or (k, 3) points in metres, got shape {a.shape}")
+    xy = a[:, :2]
+    ok = np.abs(xy) <= _MAX_COORD  # False for NaN too
+    if not ok.all():
+        row = int(np.argmin(ok.all(axis=1)))
+        raise SupportError(f"{name}: row {row} has a non-finite or implausible coordinate {xy[row].tolist()} m")
+    return xy.tolist()
+
+
+def _point(p_xy, name: str = "point") -> tuple[float, float]:
+    try:
+        a = np.asarray(p_xy, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SupportError(f"{name}: not a number pair ({exc})") from None
+    if a.shape != (2,):
+        raise SupportError(f"{name}: expected (x, y) in metres, got shape {a.shape}")
+    x, y = float(a[0]), float(a[1])
+    if not (abs(x) <= _MAX_COORD and abs(y) <= _MAX_COORD):
+        raise SupportError(f"{name}: non-finite or implausible coordinate ({x}, {y}) m")
+    return x, y
+
+
+def _half_hull(pts: list) -> list:
+    """One chain of Andrew's monotone-chain hull over sorted points, keeping only left turns."""
+    chain: list = []
+    for p in pts:
+        while len(chain) >= 2:
+            (ox, oy), (ax, ay) = chain[-2], chain[-1]
+            if (ax - ox) * (p[1] - oy) - (ay - oy) * (p[0] - ox) > 0.0:
+                break
+            chain.pop()
+        chain.append(p)
+    return chain
+
+
+def _drop_slivers(hull: list, tol: float) -> list:
+    """Remove hull vertices within ``tol`` (metres) of the segment joining their neighbours.
+
+    Rounding can leave near-duplicate or near-collinear vertices; a tolerance inside the chain
+    itself would not do, since for a near-vertical line the x order is not the order along it.
+    """
+    i = 0
+    while len(hull) > 1 and i < len(hull):
+        (ax, ay), (bx, by), (cx, cy) = hull[i - 1], hull[i], hull[(i + 1) % len(hull)]
+        ex, ey = cx - ax, cy - ay
+        # Distance to the line first (cheap), to the segment only when that is small.
+        if abs(ex * (by - ay) - ey * (bx - ax)) <= tol * math.hypot(ex, ey) and (
+            _nearest_on_segment(bx, by, ax, ay, cx, cy)[2] <= tol
+        ):
+            del hull[i]
+            i = max(i - 1, 0)  # the previous vertex has a new neighbour: look at it again
+        else:
+            i += 1
+    return hull
+
+
+def _hull_rows(rows: list[list[float]]) -> list[tuple[float, float]]:
+    pts = sorted({(x, y) for x, y in rows})
+    if len(pts) <= 1:
+        return pts
+    xs = [p[0] for p in pts]
+    ys = [p[1] for p in pts]
+    # Rounding in a coordinate difference scales with the coordinates' magnitude.
+    scale = max(max(xs) - min(xs), max(ys) - min(ys), abs(xs[0]), abs(xs[-1]), max(map(abs, ys)))
+    hull = _half_hull(pts)[:-1] + _half_hull(pts[::-1])[:-1]
+    return _drop_slivers(hull, _COLLINEAR_REL_TOL * scale)
+
+
+def convex_hull(points_xy) -> np.ndarray:
+    """Convex hull of points on the ground plane.
+
+    points_xy: (k, 2) or (k, 3) array of points in metres (a z column is ignored), k >= 0.
+    Returns an (m, 2) array of hull vertices, counter-clockwise, starting at the lowest-x (then
+    lowest-y) point, without repeated or collinear vertices: a vertex within 1e-9 * L of the segment
+    joining its neighbours is dropped, L being the larger of the points' extent and their largest
+    absolute coordinate. Degenerate inputs give degenerate hulls, never NaN: no points -> (0, 2);
+    coincident points -> the single point (1, 2); collinear points -> the segment's two ends (2, 2).
+    Raises SupportError on a wrong shape or a coordinate that is not finite or beyond 1e12 m.
+    """
+    return np.array(_hull_rows(_xy_rows(points_xy, "points")), dtype=float).reshape(-1, 2)
+
+
+def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
+    """Support polygon for one frame, on the ground plane, in metres.
+
+    left_sole_xy, right_sole_xy: (k, 2) or (k, 3) sole corner points of each foot in world
+    coordinates (z ignored), or None when that foot is not needed (a swing foot, or flight).
+    support: "left" or "right" (single support on that foot), "double", or "none" (flight).
+    Returns the convex hull (see :func:`convex_hull`) of the stance sole, of both soles in double
+    support, or an empty (0, 2) array in flight.
+    Raises SupportError on an unknown label or when a needed sole is None or malformed.
+    """
+    if support not in SUPPORT_LABELS:
+        raise SupportError(f"support: unknown label {support!r}, expected one of {', '.join(SUPPORT_LABELS)}")
+    needed = {"left": ("left",), "right": ("right",), "double": ("left", "right"), "none": ()}[support]
+    soles = {"left": left_sole_xy, "right": right_sole_xy}
+    rows: list[list[float]] = []
+    for foot in needed:
+        if soles[foot] is None:
+            raise SupportError(f"support {support!r} needs the {foot} sole, got None")
+        rows += _xy_rows(soles[foot], f"{foot} sole")
+    return np.array(_hull_rows(rows), dtype=float).reshape(-1, 2)
+
+
+def _nearest_on_segment(px: float, py: float, ax: float, ay: float, bx: float, by: float):
+    """Nearest point (qx, qy) of segment ab to p, and its distance to p."""
+    ex, ey = bx - ax, by - ay
+    length = math.hypot(ex, ey)  # not ex*ex + ey*ey, which underflows for tiny segments
+    if length == 0.0:
+        return ax, ay, math.hypot(px - ax, py - ay)
+    ux, uy = ex / length, ey / length
+    s = min(length, max(0.0, (px - ax) * ux + (py - ay) * uy))
+    qx, qy = ax + s * ux, ay + s * uy
+    return qx, qy, math.hypot(px - qx, py - qy)
+
+
+def _clamp_rows(px: float, py: float, verts: list[list[float]]) -> tuple[float, float, bool, float]:
+    m = len(verts)
+    if m == 1:
+        qx, qy = verts[0]
+        d = math.hypot(px - qx, py - qy)
+        return qx, qy, d == 0.0, -d
+    if m == 2:
+        (ax, ay), (bx, by) = verts
+        qx, qy, d = _nearest_on_segment(px, py, ax, ay, bx, by)
+        return qx, qy, d == 0.0, -d
+    # Accept either orientation: the sign of the doubled area says which side of an edge is inside.
+    area2 = 0.0
+    ax, ay = verts[-1]
+    for bx, by in verts:
+        area2 += ax * by - bx * ay
+        ax, ay = bx, by
+    if area2 == 0.0:
+        # Three or more vertices on one line (not a hull): clamp to the segment they span.
+        return _clamp_rows(px, py, _hull_rows(verts))
+    sign = -1.0 if area2 < 0.0 else 1.0
+    inner = math.inf  # smallest distance to an edge line, meaningful when inside
+    best = (px, py, math.inf)  # nearest boundary point over the edges that see p from outside
+    ax, ay = verts[-1]
+    for bx, by in verts:
+        ex, ey = bx - ax, by - ay
+        length = math.hypot(ex, ey)
+        if length > 0.0:
+            cross = sign * (ex * (py - ay) - ey * (px - ax))
+            if cross < 0.0:
+                # For a convex polygon the nearest boundary point lies on an edge that has p on
+                # its outer side, so only those edges need a projection.
+                q = _nearest_on_segment(px, py, ax, ay, bx, by)
+                if q[2] < best[2]:
+                    best = q
+            else:
+                inner = min(inner, cross / length)
+        ax, ay = bx, by
+    if best[2] == math.inf:
+        return px, py, True, inner
+    return best[0], best[1], False, -best[2]
+
+
+def clamp_to_polygon(p_xy, poly) -> Clamp:
+    """Clamp a ground-plane point (e.g. the ZMP) to a convex support polygon.
+
+    p_xy: (2,) point (x, y) in metres, world frame.
+    poly: (m, 2) convex polygon in metres, as from :func:`convex_hull` or :func:`support_polygon`
+    (either orientation is accepted); m = 1 (point) and m = 2 (segment) are handled. A non-convex
+    polygon gives meaningless results.
+    Returns Clamp(point, inside, margin): the nearest point of the polygon (p itself if inside),
+    whether p is inside (boundary included), and the signed distance to the polygon's edge:
+    positive inside (distance to the nearest edge), negative outside (minus the distance to the
+    polygon), 0 on the boundary. For a point or a segment, inside means on it, and margin <= 0.
+    Raises SupportError for an empty polygon (flight: there is nothing to clamp to), a wrong shape
+    or a coordinate that is not finite or beyond 1e12 m.
+    """
+    px, py = _point(p_xy)
+    verts = _xy_rows(poly, "polygon")
+    if not verts:
+        raise SupportError("polygon: empty (flight phase, no support), nothing to clamp to")
+    qx, qy, inside, margin = _clamp_rows(px, py, verts)
+    return Clamp(np.array((qx, qy)), inside, margin)
