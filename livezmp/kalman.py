@@ -47,8 +47,8 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 class ConstantAccelerationKalman:
     """Per-channel constant-acceleration Kalman filter over ``n`` channels.
 
-    ``angle_mask`` (n,) bool marks angle channels (rad).  ``jerk_psd`` and
-    ``meas_var`` are scalars or (n,) arrays.  ``init_var`` (3,) is the prior
+    ``angle_mask`` (n,) bool marks angle channels (rad).  ``jerk_psd`` (>= 0)
+    and ``meas_var`` (> 0) are scalars or (n,) arrays.  ``init_var`` (3,) is the prior
     variance of [position, velocity, acceleration] about [first sample, 0, 0]
     when a channel is first seen; make the last two large for a diffuse start.
     """
@@ -62,6 +62,7 @@ class ConstantAccelerationKalman:
         self.x = np.zeros((n, 3))
         self.P = np.zeros((n, 3, 3))
         self.started = np.zeros(n, dtype=bool)
+        self._all_started = False
         self._any_angle = bool(self.angle_mask.any())
         self._dt = None
         self._F = self._FF = self._Q = None
@@ -71,9 +72,12 @@ class ConstantAccelerationKalman:
         self.x[:] = 0.0
         self.P[:] = 0.0
         self.started[:] = False
+        self._all_started = False
 
     def _predict(self, dt: float) -> None:
-        if dt != self._dt:
+        # Timestamps like i / rate differ in the last bits from step to step; F and Q for a dt within
+        # 1e-9 of the cached one differ by far less than the filter's rounding, so reuse them.
+        if self._dt is None or abs(dt - self._dt) > 1e-9 * self._dt:
             self._dt = dt
             self._F = ca_transition(dt)
             # Row-major vec(F P F^T) = (F kron F) vec(P): one (n, 9) @ (9, 9) product, far cheaper than
@@ -95,18 +99,25 @@ class ConstantAccelerationKalman:
         valid = np.isfinite(y)
         if dt is not None:
             self._predict(dt)
-        fresh = valid & ~self.started
-        if fresh.any():
-            self.x[fresh] = 0.0
-            self.x[fresh, 0] = y[fresh]
-            self.P[fresh] = self.init_cov
-            self.started |= fresh
-        update = valid & ~fresh
-        innovation = np.where(update, y, self.x[:, 0]) - self.x[:, 0]
+        predicted = self.x[:, 0]
+        col = self.P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
+        scale = 1.0 / (col[:, 0] + self.meas_var)
+        if valid.all() and self._all_started:
+            innovation = y - predicted  # the common case: every channel measured
+        else:
+            fresh = valid & ~self.started
+            if fresh.any():
+                self.x[fresh] = 0.0
+                self.x[fresh, 0] = y[fresh]
+                self.P[fresh] = self.init_cov
+                self.started |= fresh
+                self._all_started = bool(self.started.all())
+            update = valid & ~fresh
+            innovation = np.where(update, y, predicted) - predicted
+            scale *= update
         if self._any_angle:
             innovation = np.where(self.angle_mask, wrap_angle(innovation), innovation)
-        col = self.P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
-        gain = col * (update / (col[:, 0] + self.meas_var))[:, None]
+        gain = col * scale[:, None]
         self.x += gain * innovation[:, None]
         self.P -= gain[:, :, None] * col[:, None, :]
         return self.x[:, 0]
