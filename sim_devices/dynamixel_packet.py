@@ -1,0 +1,210 @@
+"""Dynamixel Protocol 2.0 packet codec: CRC-16, byte stuffing, framing.
+
+Packet layout (ROBOTIS e-manual, Protocol 2.0)::
+
+    FF FF FD 00 | ID | LEN_L LEN_H | INST | PARAMS... | CRC_L CRC_H
+
+LEN counts INST, PARAMS and CRC. Status packets use INST 0x55 and start their
+parameters with the error byte. Transmitters stuff ``FF FF FD`` into
+``FF FF FD FD`` from INST up to the end of the parameters; the CRC
+(CRC-16/BUYPASS: poly 0x8005, init 0, no reflection) covers the stuffed packet
+from the header on. Fast Sync/Bulk Read replies are not stuffed and carry one
+running CRC per device segment.
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+HEADER = b"\xff\xff\xfd\x00"
+BROADCAST_ID = 0xFE
+STATUS = 0x55
+ALERT = 0x80
+MAX_PACKET = 1024  # bytes on the wire, as dynamixel-sdk's RXPACKET_MAX_LEN
+_PATTERN = b"\xff\xff\xfd"
+_STUFFED = b"\xff\xff\xfd\xfd"
+_POLY = 0x8005
+
+
+class Instruction(enum.IntEnum):
+    PING = 0x01
+    READ = 0x02
+    WRITE = 0x03
+    REG_WRITE = 0x04
+    ACTION = 0x05
+    FACTORY_RESET = 0x06
+    REBOOT = 0x08
+    CLEAR = 0x10
+    SYNC_READ = 0x82
+    SYNC_WRITE = 0x83
+    FAST_SYNC_READ = 0x8A
+    BULK_READ = 0x92
+    BULK_WRITE = 0x93
+    FAST_BULK_READ = 0x9A
+
+
+class ErrorCode(enum.IntEnum):
+    """Error numbers of a status packet's error byte (bits 0-6; bit 7 is `ALERT`)."""
+
+    NONE = 0
+    RESULT_FAIL = 1
+    INSTRUCTION = 2
+    CRC = 3
+    DATA_RANGE = 4
+    DATA_LENGTH = 5
+    DATA_LIMIT = 6
+    ACCESS = 7
+
+
+def _byte_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = (crc << 1) ^ _POLY if crc & 0x8000 else crc << 1
+        table.append(crc & 0xFFFF)
+    return tuple(table)
+
+
+_TABLE = _byte_table()
+# Below this length the table loop beats numpy's call overhead.
+_VECTOR_MIN = 48
+
+
+@functools.cache
+def _shift_table() -> np.ndarray:
+    """Row k, column v: the CRC register after byte v followed by k zero bytes, from zero."""
+    table = np.empty((MAX_PACKET, 256), dtype=np.uint16)
+    row = np.array(_TABLE, dtype=np.uint32)
+    lookup = row.copy()
+    table[0] = row
+    for k in range(1, MAX_PACKET):
+        row = ((row << 8) & 0xFFFF) ^ lookup[row >> 8]
+        table[k] = row
+    return table
+
+
+_DESCENDING = np.arange(MAX_PACKET - 1, -1, -1)
+
+
+def crc16(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
+    """CRC-16 of ``data`` continuing from register value ``crc`` (0 to start a packet)."""
+    n = len(data)
+    if n < _VECTOR_MIN or n > MAX_PACKET:
+        table = _TABLE
+        for byte in data:
+            crc = ((crc << 8) & 0xFFFF) ^ table[(crc >> 8) ^ byte]
+        return crc
+    # The CRC is linear: XOR the contribution of each byte at its distance from the end,
+    # and that of the starting register shifted through n bytes.
+    shift = _shift_table()
+    value = int(np.bitwise_xor.reduce(shift[_DESCENDING[-n:], np.frombuffer(data, dtype=np.uint8)]))
+    if crc:
+        value ^= int(shift[n - 1, crc >> 8]) ^ int(shift[n - 2, crc & 0xFF])
+    return value
+
+
+def stuff(body: bytes) -> bytes:
+    """Byte-stuff a packet body (INST and parameters): FF FF FD -> FF FF FD FD."""
+    return body.replace(_PATTERN, _STUFFED) if _PATTERN in body else body
+
+
+def unstuff(body: bytes) -> bytes:
+    """Undo `stuff`."""
+    return body.replace(_STUFFED, _PATTERN) if _STUFFED in body else body
+
+
+def encode_packet(packet_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """A complete stuffed packet with length and CRC."""
+    body = stuff(bytes((instruction,)) + params)
+    length = len(body) + 2
+    packet = HEADER + bytes((packet_id, length & 0xFF, length >> 8)) + body
+    crc = crc16(packet)
+    return packet + bytes((crc & 0xFF, crc >> 8))
+
+
+def encode_status(packet_id: int, error: int, params: bytes = b"") -> bytes:
+    """A status packet from ``packet_id`` with error byte ``error``."""
+    return encode_packet(packet_id, STATUS, bytes((error,)) + params)
+
+
+def encode_fast_status(segments: Iterable[tuple[int, int, bytes]]) -> bytes:
+    """The single reply to Fast Sync/Bulk Read from ``(error, id, data)`` segments, in order.
+
+    Each device appends error, id, data and the running CRC of everything sent so
+    far; the last segment's CRC is the packet CRC. No byte stuffing.
+    """
+    segments = list(segments)
+    length = 1 + sum(4 + len(data) for _, _, data in segments)
+    out = bytearray(HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8, STATUS)))
+    crc = crc16(out)
+    for error, dxl_id, data in segments:
+        segment = bytes((error, dxl_id)) + data
+        crc = crc16(segment, crc)
+        tail = bytes((crc & 0xFF, crc >> 8))
+        crc = crc16(tail, crc)
+        out += segment
+        out += tail
+    return bytes(out)
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    """One received packet: parameters are un-stuffed; ``size`` is its length on the wire."""
+
+    id: int
+    instruction: int
+    params: bytes
+    crc_ok: bool
+    size: int
+
+
+class PacketReader:
+    """Split a byte stream into packets; bounded buffer, resynchronises on garbage.
+
+    A partial packet older than ``inter_byte_timeout`` seconds when more bytes
+    arrive is discarded, as a servo does after 1.5 ms of silence mid-packet.
+    """
+
+    def __init__(self, inter_byte_timeout: float = 1.5e-3) -> None:
+        self._buffer = bytearray()
+        self._last = 0.0
+        self._timeout = inter_byte_timeout
+
+    def clear(self) -> None:
+        self._buffer.clear()
+
+    def feed(self, data: bytes, now: float) -> list[Packet]:
+        """Add bytes received at ``now`` (s); return the packets they complete."""
+        buffer = self._buffer
+        if buffer and now - self._last > self._timeout:
+            buffer.clear()
+        self._last = now
+        buffer += data
+        packets = []
+        while True:
+            start = buffer.find(HEADER)
+            if start < 0:
+                del buffer[:-3]  # keep what may be the start of a header
+                return packets
+            if start:
+                del buffer[:start]
+            if len(buffer) < 7:
+                return packets
+            length = buffer[5] | buffer[6] << 8
+            if length < 3 or length > MAX_PACKET - 7:
+                del buffer[:4]  # not a packet: look for the next header
+                continue
+            end = 7 + length
+            if len(buffer) < end:
+                return packets
+            raw = bytes(buffer[:end])
+            del buffer[:end]
+            crc_ok = crc16(memoryview(raw)[:-2]) == raw[-2] | raw[-1] << 8
+            body = unstuff(raw[7:-2]) if crc_ok else raw[7:-2]
+            packets.append(Packet(raw[4], body[0], body[1:], crc_ok, end))

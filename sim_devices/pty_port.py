@@ -1,0 +1,229 @@
+"""A simulated serial device served on a real pseudo-terminal.
+
+`PtyPort` opens a pty pair (``os.openpty``, slave side in raw mode) and serves the
+master side from one background thread. Unmodified clients (pyserial,
+dynamixel-sdk, python-can's slcan) open :attr:`PtyPort.path`, a symlink in a
+private temporary directory that points at the current ``/dev/pts/N``. The
+symlink is the stable name: :meth:`PtyPort.vanish` closes the pty and removes the
+link (clients get I/O errors, as when a USB adapter is unplugged) and
+:meth:`PtyPort.restore` opens a fresh pty and re-points the link, so a client can
+reopen the same path.
+
+The device behind the port is any object with the `ByteDevice` methods. All of
+its methods are called from the port thread, with ``now`` from
+``time.monotonic()`` in seconds. Replies are ``(due, bytes)`` pairs: the port
+writes each payload once ``due`` has passed, in due order, so devices can model
+response delays without sleeping.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import heapq
+import itertools
+import math
+import os
+import select
+import shutil
+import tempfile
+import termios
+import threading
+import time
+import tty
+from collections.abc import Iterable
+from typing import Protocol
+
+Reply = tuple[float, bytes]
+
+# Bytes waiting for a client that does not read are dropped beyond this bound,
+# as a real adapter's FIFO would overflow; it keeps memory bounded.
+MAX_PENDING_OUTPUT = 64 * 1024
+
+_SPEEDS = {
+    getattr(termios, f"B{rate}"): rate
+    for rate in (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600,
+                 1000000, 1152000, 1500000, 2000000, 2500000, 3000000, 3500000, 4000000)
+    if hasattr(termios, f"B{rate}")
+}
+
+
+class ByteDevice(Protocol):
+    """What a `PtyPort` serves: a byte-stream device driven by the port thread."""
+
+    def on_bytes(self, data: bytes, now: float) -> Iterable[Reply]:
+        """Consume bytes written by the client at monotonic time ``now`` (s)."""
+
+    def poll(self, now: float) -> Iterable[Reply]:
+        """Do timed work that is due at ``now`` (s); called once ``now >= next_deadline()``."""
+
+    def next_deadline(self) -> float:
+        """Monotonic time (s) at which `poll` must next run, or ``math.inf``."""
+
+
+class PtyPort:
+    """Serve ``device`` on a pty reachable at the stable path :attr:`path`.
+
+    The serving thread starts at construction and stops on :meth:`close` (also
+    the context-manager exit). An exception raised by the device is kept and
+    re-raised by :meth:`close`, so device bugs surface in the caller.
+    """
+
+    def __init__(self, device: ByteDevice, name: str = "ttySIM") -> None:
+        self._device = device
+        self._dir = tempfile.mkdtemp(prefix="livezmp-pty-")
+        self.path = os.path.join(self._dir, name)
+        self._lock = threading.RLock()
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        self._master = -1
+        self._slave = -1
+        self._pending: list[tuple[float, int, bytes]] = []
+        self._seq = itertools.count()
+        self._out = bytearray()
+        self._closed = False
+        self.error: BaseException | None = None
+        self.dropped_output_bytes = 0
+        self._open_pty()
+        self._thread = threading.Thread(target=self._run, name=f"pty-{name}", daemon=True)
+        self._thread.start()
+
+    # -- public API -------------------------------------------------------------------------------
+
+    @property
+    def present(self) -> bool:
+        """True while the pty exists and :attr:`path` resolves to it."""
+        return self._master >= 0
+
+    def vanish(self) -> None:
+        """Unplug: close the pty, drop queued output and remove the symlink."""
+        with self._lock:
+            if self._master < 0:
+                return
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.path)
+            os.close(self._master)
+            os.close(self._slave)
+            self._master = self._slave = -1
+            self._pending.clear()
+            self._out.clear()
+        self._wake()
+
+    def restore(self) -> None:
+        """Plug back in: open a new pty and point :attr:`path` at it."""
+        with self._lock:
+            if self._master < 0 and not self._closed:
+                self._open_pty()
+        self._wake()
+
+    def line_speed(self) -> int | None:
+        """The client's configured line speed in baud, or None if unknown or absent."""
+        with self._lock:
+            if self._slave < 0:
+                return None
+            try:
+                return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
+            except termios.error:
+                return None
+
+    def close(self) -> None:
+        """Stop the thread, close the pty and remove the temporary directory."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._wake()
+        self._thread.join(timeout=5.0)
+        self.vanish()
+        os.close(self._wake_r)
+        os.close(self._wake_w)
+        shutil.rmtree(self._dir, ignore_errors=True)
+        if self.error is not None:
+            raise RuntimeError(f"simulated device on {self.path} failed: {self.error!r}") from self.error
+
+    def __enter__(self) -> PtyPort:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- internals --------------------------------------------------------------------------------
+
+    def _open_pty(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        os.set_blocking(master, False)
+        link = self.path + ".new"
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(link)
+        os.symlink(os.ttyname(slave), link)
+        os.replace(link, self.path)
+        self._master, self._slave = master, slave
+
+    def _wake(self) -> None:
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+
+    def _run(self) -> None:
+        try:
+            self._serve()
+        except Exception as exc:  # kept and re-raised by close()
+            self.error = exc
+
+    def _serve(self) -> None:
+        device = self._device
+        while True:
+            with self._lock:
+                if self._closed:
+                    return
+                master = self._master
+                due = min(device.next_deadline(), self._pending[0][0] if self._pending else math.inf)
+                writers = [master] if master >= 0 and self._out else []
+            timeout = None if due == math.inf else max(0.0, due - time.monotonic())
+            readers = [self._wake_r] if master < 0 else [self._wake_r, master]
+            readable, _, _ = select.select(readers, writers, [], timeout)
+            if self._wake_r in readable:
+                with contextlib.suppress(BlockingIOError):
+                    os.read(self._wake_r, 4096)
+            now = time.monotonic()
+            with self._lock:
+                # The pty may have vanished or been replaced while we waited: only read the one we
+                # selected on if it is still current.
+                if master >= 0 and master == self._master and master in readable:
+                    data = self._read(master)
+                    if data:
+                        self._queue(device.on_bytes(data, now))
+                if now >= device.next_deadline():
+                    self._queue(device.poll(now))
+                if self._master >= 0:
+                    self._flush(self._master, time.monotonic())
+
+    def _read(self, master: int) -> bytes:
+        try:
+            return os.read(master, 65536)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            if exc.errno == errno.EIO:  # no client end open: nothing to read
+                return b""
+            raise
+
+    def _queue(self, replies: Iterable[Reply]) -> None:
+        for due, payload in replies:
+            heapq.heappush(self._pending, (due, next(self._seq), payload))
+
+    def _flush(self, master: int, now: float) -> None:
+        pending = self._pending
+        while pending and pending[0][0] <= now:
+            self._out += heapq.heappop(pending)[2]
+        if len(self._out) > MAX_PENDING_OUTPUT:
+            excess = len(self._out) - MAX_PENDING_OUTPUT
+            del self._out[:excess]
+            self.dropped_output_bytes += excess
+        if not self._out:
+            return
+        try:
+            written = os.write(master, self._out)
+        except BlockingIOError:
+            return
+        del self._out[:written]
