@@ -76,7 +76,15 @@ def _segment_vector(motion: BvhMotion, tags: list[SegmentTag], i: int, scale: fl
 
 
 def _mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
-    """joint index → (de Leva kind, mass fraction, proximal-is-up) for every massive joint."""
+    """joint index → (de Leva kind, mass fraction, proximal-is-up) for every massive joint;
+    fractions renormalised so that a skeleton missing segments (no arms, say) keeps its
+    total mass."""
+    out = _raw_mass_table(tags, motion)
+    total = sum(f for _, f, _ in out.values())
+    return {i: (k, f / total, up) for i, (k, f, up) in out.items()}
+
+
+def _raw_mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
     out: dict[int, tuple[str, float, bool]] = {}
     limb = {"upper_arm", "forearm", "hand", "thigh", "shank", "foot"}
     for i, t in enumerate(tags):
@@ -221,7 +229,7 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
     if opts.total_mass <= 0:
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
     tags = tag_joints([j.name for j in motion.joints], opts.mapping, motion.source)
-    units = opts.units or detect_length_unit(motion.joints, motion.source)
+    units = opts.units or detect_length_unit(_stature(motion, tags, 1.0), motion.source)
     if units not in UNIT_SCALES:
         raise InputError(f"unknown length unit {units!r} (one of {', '.join(UNIT_SCALES)})")
     scale = UNIT_SCALES[units]

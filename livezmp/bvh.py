@@ -251,54 +251,16 @@ def write_bvh(motion: BvhMotion, path: str | Path) -> None:
 UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 
 
-def skeleton_span(joints: list[BvhJoint]) -> float:
-    """Longest leaf-to-leaf path through the hierarchy, in file units (bone offsets summed).
-
-    For a humanoid this is about its stature or arm span, both ≈ body height.
-    """
-    n = len(joints)
-    adj: list[list[tuple[int, float]]] = [[] for _ in range(n + n)]
-    nodes = n
-    for i, j in enumerate(joints):
-        if j.parent >= 0:
-            w = float(np.linalg.norm(j.offset))
-            adj[i].append((j.parent, w))
-            adj[j.parent].append((i, w))
-        if j.end_site is not None:
-            w = float(np.linalg.norm(j.end_site))
-            adj[i].append((nodes, w))
-            adj[nodes].append((i, w))
-            nodes += 1
-
-    def farthest(start: int) -> tuple[int, float]:
-        dist = {start: 0.0}
-        stack = [start]
-        while stack:
-            u = stack.pop()
-            for v, w in adj[u]:
-                if v not in dist:
-                    dist[v] = dist[u] + w
-                    stack.append(v)
-        far = max(dist, key=dist.__getitem__)
-        return far, dist[far]
-
-    a, _ = farthest(0)
-    return farthest(a)[1]
-
-
-def detect_length_unit(joints: list[BvhJoint], source: str = "") -> str:
-    """Guess the file's length unit ('m', 'cm', 'mm', 'in') from the skeleton's size.
-
-    A human skeleton spans 0.5–2.5 m. Ambiguous sizes default to centimetres, the most
-    common BVH unit; pass an explicit unit to override.
-    """
-    span = skeleton_span(joints)
-    if 0.3 <= span <= 3.0:
+def detect_length_unit(stature: float, source: str = "") -> str:
+    """Guess the file's length unit ('m', 'cm', 'mm', 'in') from a human's estimated
+    stature in file units (0.8–2.5 m for people). Sizes in between default to centimetres,
+    the most common BVH unit; pass an explicit unit to override."""
+    if 0.4 <= stature <= 3.0:
         return "m"
-    if 25.0 <= span < 80.0:
+    if 20.0 <= stature < 80.0:
         return "in"
-    if 80.0 <= span <= 300.0:
+    if 80.0 <= stature <= 300.0:
         return "cm"
-    if 300.0 < span <= 3000.0:
+    if 300.0 < stature <= 3000.0:
         return "mm"
-    raise InputError(f"{source}: cannot tell the length unit from a skeleton span of {span:g}; give --units")
+    raise InputError(f"{source}: cannot tell the length unit from an estimated stature of {stature:g}; give --units")

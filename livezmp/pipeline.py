@@ -118,7 +118,7 @@ class Pipeline:
         zmp = None
         if z.zmp is not None:
             # the ZMP was computed on z = 0; move it onto the detected ground plane
-            zmp = zmp_on_plane(z.zmp, z.com_acc, ground)
+            zmp = zmp_on_plane(z.zmp, z.force, ground)
         poly = support_polygon(soles["left"][:, :2], soles["right"][:, :2], support)
         res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground)
         if zmp is not None and len(poly):

@@ -43,8 +43,8 @@ _PATTERNS: list[tuple[str, str]] = [
     (r"(spine|chest|torso|back|abdomen|thorax|waist)", "spine"),
     (r"(root|reference)", "root"),
 ]
-_LEFT = re.compile(r"(^l(?=[a-z])|left|_l$|^l_|\.l$|l$)")
-_RIGHT = re.compile(r"(^r(?=[a-z])|right|_r$|^r_|\.r$|r$)")
+_ASF_BONES = ("femur", "tibia", "foot", "toes", "humerus", "radius", "wrist", "hand", "clavicle", "hipjoint",
+              "thumb", "fingers")
 
 
 @dataclass(frozen=True)
@@ -60,18 +60,20 @@ def _clean(name: str) -> str:
 
 
 def _side(name: str) -> str:
-    s = name.lower().replace(" ", "_")
-    if "left" in s or re.search(r"(^l[_.]|[_.]l$|^l(?=[A-Z]))", name) or re.search(r"(^l[_.]|[_.]l$)", s):
+    """left/right/center from a joint name: 'Left…', '…_L', 'LThigh', 'l_hip', ASF 'lfemur'."""
+    low = name.lower()
+    if "left" in low:
         return "left"
-    if "right" in s or re.search(r"(^r[_.]|[_.]r$)", s):
+    if "right" in low:
         return "right"
-    # CMU style "LeftUpLeg" handled above; "lfemur"/"rtibia" (ASF-derived) here
-    if re.match(r"^l(femur|tibia|foot|toes|humerus|radius|wrist|hand|clavicle|hipjoint|thumb|fingers)", s):
+    tokens = [t.lower() for t in re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])|\d+", name.split(":")[-1])]
+    if "l" in tokens:
         return "left"
-    if re.match(r"^r(femur|tibia|foot|toes|humerus|radius|wrist|hand|clavicle|hipjoint|thumb|fingers)", s):
+    if "r" in tokens:
         return "right"
-    if re.search(r"[a-z](_?l)$", s) and not s.endswith(("pelvis", "ball")):
-        return "left" if s.endswith("_l") else "center"
+    for side, prefix in (("left", "l"), ("right", "r")):
+        if any(low.split(":")[-1] == prefix + b or low.split(":")[-1].startswith(prefix + b) for b in _ASF_BONES):
+            return side
     return "center"
 
 

@@ -23,14 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-GRAVITY = 9.80665  # m/s²
-
 
 @dataclass
 class ZmpResult:
     """ZMP and CoM in the internal frame (m); ``zmp`` is None in flight.
 
-    ``force`` is the ground reaction force (N) and ``com_acc`` the CoM acceleration (m/s²)."""
+    ``force`` is the ground reaction force (N), ``com_acc`` the CoM acceleration (m/s²)."""
 
     zmp: np.ndarray | None
     com: np.ndarray
@@ -57,14 +55,13 @@ def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, 
     pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
     mass = data.mass[0]
     dh = data.dhg
-    force = dh.linear + np.array([0.0, 0.0, mass * GRAVITY])
+    force = dh.linear - mass * model.gravity.linear  # the model's gravity points down (−z)
     com = data.com[0].copy()
-    zmp = zmp_from_wrench(com, force, dh.angular, ground_z, flight_fraction * mass * GRAVITY)
+    zmp = zmp_from_wrench(com, force, dh.angular, ground_z, flight_fraction * mass * float(-model.gravity.linear[2]))
     return ZmpResult(zmp, com, dh.linear / mass, force)
 
 
-def zmp_on_plane(zmp0: np.ndarray, com_acc: np.ndarray, ground_z: float) -> np.ndarray:
-    """Move a ZMP computed on z = 0 to the plane z = ground_z, along the contact force's
-    line of action: p(h) = p(0) + h · F_xy / F_z with F ∝ c̈ + g (m, internal frame)."""
-    fz = com_acc[2] + GRAVITY
-    return np.array([zmp0[0] + ground_z * com_acc[0] / fz, zmp0[1] + ground_z * com_acc[1] / fz, ground_z])
+def zmp_on_plane(zmp0: np.ndarray, force: np.ndarray, ground_z: float) -> np.ndarray:
+    """Move a ZMP computed on z = 0 to the plane z = ground_z along the line of action of
+    the contact force: p(h) = p(0) + h · F_xy / F_z (m, internal frame)."""
+    return np.array([zmp0[0] + ground_z * force[0] / force[2], zmp0[1] + ground_z * force[1] / force[2], ground_z])

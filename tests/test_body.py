@@ -1,0 +1,202 @@
+"""Body models from BVH and URDF: masses, units, up axis, feet, mappings, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from data_paths import OP3_URDF
+
+from livezmp.body import foot_soles
+from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
+from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
+from livezmp.bvh import parse_bvh
+from livezmp.errors import InputError
+from livezmp.segments import classify, load_mapping
+
+
+def make_bvh(scale: float = 1.0, up: str = "y", names: dict | None = None, frames: int = 3) -> str:
+    """A minimal humanoid in cm (× scale), standing, y up (or z up)."""
+    n = {"hips": "Hips", "spine": "Spine", "head": "Head", "thigh": "UpLeg", "shin": "Leg", "foot": "Foot",
+         "toe": "ToeBase", **(names or {})}
+
+    def off(x, y, z):
+        v = np.array([x, y, z], float) * scale
+        if up == "z":
+            v = np.array([v[0], -v[2], v[1]])
+        return " ".join(f"{c:g}" for c in v)
+
+    legs = ""
+    for side, sx in (("Left", 10), ("Right", -10)):
+        legs += f"""
+  JOINT {side}{n['thigh']}
+  {{
+    OFFSET {off(sx, -5, 0)}
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT {side}{n['shin']}
+    {{
+      OFFSET {off(0, -42, 0)}
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT {side}{n['foot']}
+      {{
+        OFFSET {off(0, -43, 0)}
+        CHANNELS 3 Zrotation Xrotation Yrotation
+        JOINT {side}{n['toe']}
+        {{
+          OFFSET {off(0, -6, 12)}
+          CHANNELS 3 Zrotation Xrotation Yrotation
+          End Site
+          {{
+            OFFSET {off(0, 0, 5)}
+          }}
+        }}
+      }}
+    }}
+  }}"""
+    text = f"""HIERARCHY
+ROOT {n['hips']}
+{{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT {n['spine']}
+  {{
+    OFFSET {off(0, 10, 0)}
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT {n['head']}
+    {{
+      OFFSET {off(0, 50, 0)}
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site
+      {{
+        OFFSET {off(0, 20, 0)}
+      }}
+    }}
+  }}{legs}
+}}
+MOTION
+Frames: {frames}
+Frame Time: 0.01
+"""
+    root = np.array([0, 96, 0.0]) * scale
+    if up == "z":
+        root = np.array([root[0], -root[2], root[1]])
+    row = " ".join(f"{v:g}" for v in root) + " 0" * (3 + 3 + 3 + 2 * 12)
+    return text + "\n".join([row] * frames) + "\n"
+
+
+def test_bvh_model_mass_channels_and_units(bandai_walk):
+    body = body_from_bvh(bandai_walk, BvhBodyOptions(total_mass=80.0))
+    assert body.units == "cm" and body.up_axis == "y"
+    assert body.nq == bandai_walk.n_channels == 132
+    assert pin.computeTotalMass(body.model) == pytest.approx(80.0)
+    assert body.angle_mask.sum() == 66
+    assert np.allclose(body.channel_scale[body.angle_mask], np.pi / 180)
+    assert np.allclose(body.channel_scale[~body.angle_mask], 0.01)
+
+
+@pytest.mark.parametrize("scale,unit", [(1.0, "cm"), (0.01, "m"), (1 / 2.54, "in"), (10.0, "mm")])
+def test_units_detected_from_skeleton_height(scale, unit):
+    motion = parse_bvh(make_bvh(scale), "synthetic.bvh")
+    body = body_from_bvh(motion)
+    assert body.units == unit
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, body.channels_to_q(motion.frames[0]))
+    # the head end is 1.76 m above the toe tip whatever the file's unit
+    head = data.oMf[body.model.getFrameId("Head.end")].translation[2]
+    toe = data.oMf[body.model.getFrameId("LeftToeBase.end")].translation[2]
+    assert head - toe == pytest.approx(1.76, abs=1e-5)  # offsets are written with 6 digits
+
+
+def test_up_axis_detected_and_overridden():
+    body = body_from_bvh(parse_bvh(make_bvh(up="z"), "z.bvh"))
+    assert body.up_axis == "z"
+    with pytest.raises(InputError, match="up axis"):
+        body_from_bvh(parse_bvh(make_bvh(up="z"), "z.bvh"), BvhBodyOptions(up_axis="x"))
+
+
+def test_static_standing_com_over_feet():
+    motion = parse_bvh(make_bvh(), "s.bvh")
+    body = body_from_bvh(motion)
+    data = body.model.createData()
+    q = body.channels_to_q(motion.frames[0])
+    com = pin.centerOfMass(body.model, data, q)
+    pin.framesForwardKinematics(body.model, data, q)
+    soles = foot_soles(body, data)
+    # symmetric skeleton: CoM on the mid-line; soles flat (heel and toe at the same height)
+    assert abs(com[1]) < 1e-9
+    for sole in soles.values():
+        assert np.ptp(sole[:, 2]) < 1e-9
+    assert soles["left"][:, 1].min() > 0 > soles["right"][:, 1].max()  # internal y = input x: left is +x
+
+
+def test_names_from_common_skeletons():
+    cases = {"LeftUpLeg": ("thigh", "left"), "RightLeg": ("shank", "right"), "LeftFoot": ("foot", "left"),
+             "LeftToeBase": ("toe", "left"), "Spine1": ("spine", "center"), "UpperLeg_R": ("thigh", "right"),
+             "LowerLeg_L": ("shank", "left"), "Toes_L": ("toe", "left"), "UpperArm_L": ("upper_arm", "left"),
+             "LowerArm_R": ("forearm", "right"), "mixamorig:RightForeArm": ("forearm", "right"),
+             "lfemur": ("thigh", "left"), "rtibia": ("shank", "right"), "LeftShoulder": ("collar", "left"),
+             "RightHand": ("hand", "right"), "LThigh": ("thigh", "left"), "RShin": ("shank", "right"),
+             "Hips": ("pelvis", "center"), "Neck": ("neck", "center"), "Head": ("head", "center")}
+    for name, want in cases.items():
+        tag = classify(name)
+        assert (tag.kind, tag.side) == want, name
+
+
+def test_unknown_skeleton_needs_mapping(tmp_path):
+    names = {"thigh": "Femur_", "shin": "Crus_", "foot": "Pes_", "toe": "Digit_"}
+    text = make_bvh(names=names).replace("LeftFemur_", "FemurA").replace("RightFemur_", "FemurB")
+    text = text.replace("LeftCrus_", "CrusA").replace("RightCrus_", "CrusB")
+    text = text.replace("LeftPes_", "PesA").replace("RightPes_", "PesB")
+    text = text.replace("LeftDigit_", "DigitA").replace("RightDigit_", "DigitB")
+    motion = parse_bvh(text, "odd.bvh")
+    with pytest.raises(InputError, match="unknown skeleton.*--mapping"):
+        body_from_bvh(motion)
+    m = tmp_path / "map.toml"
+    m.write_text('[segments]\nFemurA = "thigh:left"\nFemurB = "thigh:right"\nCrusA = "shank:left"\n'
+                 'CrusB = "shank:right"\nPesA = "foot:left"\nPesB = "foot:right"\nDigitA = "toe:left"\n'
+                 'DigitB = "toe:right"\n')
+    body = body_from_bvh(motion, BvhBodyOptions(mapping=load_mapping(m)))
+    assert pin.computeTotalMass(body.model) == pytest.approx(70.0)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[segments]\nFemurA = "wing"\n')
+    with pytest.raises(InputError, match="bad.toml.*FemurA.*wing"):
+        load_mapping(bad)
+
+
+def test_op3_model(op3_body):
+    assert op3_body.nq == 26
+    assert op3_body.total_mass == pytest.approx(3.14747)
+    assert op3_body.correction.legs["left"] == [op3_body.channel_names.index(n) for n in
+                                               ("l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee",
+                                                "l_ank_pitch", "l_ank_roll")]
+    data = op3_body.model.createData()
+    pin.framesForwardKinematics(op3_body.model, data, np.zeros(26))
+    soles = foot_soles(op3_body, data)
+    for side, sign in (("left", 1), ("right", -1)):
+        s = soles[side]
+        assert np.ptp(s[:, 0]) == pytest.approx(0.127)  # the built-in config's vendor foot length
+        assert sign * s[:, 1].mean() > 0
+
+
+def test_urdf_without_config_uses_leaf_links(tmp_path):
+    urdf = tmp_path / "robot.urdf"
+    urdf.write_text(OP3_URDF.read_text().replace('name="robotis_op3"', 'name="unknown_bot"'))
+    body = body_from_urdf(urdf, UrdfBodyOptions(sole_length=0.1, sole_width=0.05))
+    names = {s: body.model.frames[f.frame_id].name for s, f in body.feet.items()}
+    assert names == {"left": "l_ank_roll_link", "right": "r_ank_roll_link"}
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, np.zeros(26))
+    assert np.ptp(foot_soles(body, data)["left"][:, 0]) == pytest.approx(0.1)
+
+
+def test_urdf_errors(tmp_path):
+    no_inertia = tmp_path / "a.urdf"
+    no_inertia.write_text('<robot name="x"><link name="a"/><link name="b"/>'
+                          '<joint name="j" type="revolute"><parent link="a"/><child link="b"/>'
+                          '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>')
+    with pytest.raises(InputError, match="a.urdf.*inertial"):
+        body_from_urdf(no_inertia)
+    garbage = tmp_path / "b.urdf"
+    garbage.write_text("<robot")
+    with pytest.raises(InputError, match="b.urdf"):
+        body_from_urdf(garbage)
