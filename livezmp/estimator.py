@@ -180,7 +180,6 @@ class StreamingEstimator:
         self._missing[:] = False
         self._count = 0
         self._t_last = -math.inf
-        self._all_started = False
 
     def step(self, t: float, y: np.ndarray) -> Estimate | None:
         """Take the sample ``y`` (n,) at time ``t`` (s, strictly after the previous one).
@@ -196,14 +195,10 @@ class StreamingEstimator:
         if t <= self._t_last:
             raise EstimatorError(f"step(): time {t!r} s is not after the previous sample's {self._t_last!r} s")
         valid = np.isfinite(y)
-        newly = None
-        if not self._all_started:
-            newly = valid & ~self.kalman.started
+        newly = None if self.kalman.all_started else valid & ~self.kalman.started
         position = self.kalman.step(t - self._t_last if self._count else None, y)
-        if newly is not None:
-            if self._count and newly.any():
-                self.spline.backfill(newly, position)
-            self._all_started = bool(self.kalman.started.all())
+        if newly is not None and self._count and newly.any():
+            self.spline.backfill(newly, position)
         self.spline.push(t, position)
         self._missing[self._count % (self.lag + 1)] = ~valid
         self._t_last = t

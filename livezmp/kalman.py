@@ -51,6 +51,7 @@ class ConstantAccelerationKalman:
     and ``meas_var`` (> 0) are scalars or (n,) arrays.  ``init_var`` (3,) is the prior
     variance of [position, velocity, acceleration] about [first sample, 0, 0]
     when a channel is first seen; make the last two large for a diffuse start.
+    ``started`` (n,) marks the channels seen so far, ``all_started`` all of them.
     """
 
     def __init__(self, angle_mask: np.ndarray, jerk_psd, meas_var, init_var):
@@ -62,7 +63,7 @@ class ConstantAccelerationKalman:
         self.x = np.zeros((n, 3))
         self.P = np.zeros((n, 3, 3))
         self.started = np.zeros(n, dtype=bool)
-        self._all_started = False
+        self.all_started = False
         self._any_angle = bool(self.angle_mask.any())
         self._dt = None
         self._F = self._FF = self._Q = None
@@ -72,7 +73,7 @@ class ConstantAccelerationKalman:
         self.x[:] = 0.0
         self.P[:] = 0.0
         self.started[:] = False
-        self._all_started = False
+        self.all_started = False
 
     def _predict(self, dt: float) -> None:
         # Timestamps like i / rate differ in the last bits from step to step; F and Q for a dt within
@@ -81,8 +82,8 @@ class ConstantAccelerationKalman:
             self._dt = dt
             self._F = ca_transition(dt)
             # Row-major vec(F P F^T) = (F kron F) vec(P): one (n, 9) @ (9, 9) product, far cheaper than
-            # a stacked 3x3 matmul.
-            self._FF = np.kron(self._F, self._F).T
+            # a stacked 3x3 matmul.  (np.kron itself is slow for 3x3.)
+            self._FF = (self._F[:, None, :, None] * self._F[None, :, None, :]).reshape(9, 9).T
             self._Q = (self.jerk_psd * white_jerk_covariance(dt)).reshape(-1, 9)
         n = self.x.shape[0]
         self.x = self.x @ self._F.T
@@ -102,7 +103,7 @@ class ConstantAccelerationKalman:
         predicted = self.x[:, 0]
         col = self.P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
         scale = 1.0 / (col[:, 0] + self.meas_var)
-        if valid.all() and self._all_started:
+        if valid.all() and self.all_started:
             innovation = y - predicted  # the common case: every channel measured
         else:
             fresh = valid & ~self.started
@@ -111,7 +112,7 @@ class ConstantAccelerationKalman:
                 self.x[fresh, 0] = y[fresh]
                 self.P[fresh] = self.init_cov
                 self.started |= fresh
-                self._all_started = bool(self.started.all())
+                self.all_started = bool(self.started.all())
             update = valid & ~fresh
             innovation = np.where(update, y, predicted) - predicted
             scale *= update

@@ -197,8 +197,10 @@ def test_channel_missing_at_start_is_flagged_then_joins_without_a_jump():
     est = StreamingEstimator(2, None, EstimatorConfig(lag_s=0.0))
     outs = []
     for i in range(40):
-        y = np.array([0.5 * i * CFG.dt, np.nan if i < 10 else 2.0])
+        y = np.array([np.nan if i == 0 else 0.5 * i * CFG.dt, np.nan if i < 10 else 2.0])  # frame 0 empty
         outs.append(est.step(i * CFG.dt, y))
+    assert all(np.isfinite(o.q).all() and np.isfinite(o.qd).all() and np.isfinite(o.qdd).all() for o in outs)
+    assert outs[0].missing.all() and not outs[1].missing[0]
     assert all(o.missing[1] for o in outs[:10]) and not any(o.missing[1] for o in outs[10:])
     assert all(o.q[1] == 0.0 for o in outs[:10])
     np.testing.assert_allclose([o.q[1] for o in outs[10:]], 2.0, atol=1e-9)  # history back-filled
