@@ -1,0 +1,162 @@
+"""One recorded walk in SI units, from a BVH file or a robot joint-trajectory CSV.
+
+Rotation channels are read as the file gives them, one angle per channel in the
+file's Euler order (no re-parametrisation), converted to radians and unwrapped in time
+(a jump of more than 180° between frames is taken as a wrap through ±180°); each
+channel is then shifted by whole turns so that its mean lies in (−180°, 180°].
+The root is the top-most joint whose position channels move (a BVH's root or Hips, a
+robot's base). Its heading is normalised: the whole take is turned about the up axis
+so that it walks along the internal +x axis (the net displacement's direction), and
+the root's rotation channels are re-extracted in their own Euler order (middle angle
+within ±90°). Without this the root's angles would carry the walking direction, and
+takes walking in opposite directions would not be comparable. :func:`turn_root`
+turns a changed walk back before it is written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from livezmp.body import BodyModel
+from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
+from livezmp.body_urdf import body_from_urdf
+from livezmp.bvh import BvhMotion, read_bvh
+from livezmp.errors import InputError
+from livezmp.gait.channels import ChannelTag, tag_channels
+from livezmp.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
+
+
+@dataclass
+class GaitTake:
+    """A walk: ``t`` (F,) s; ``q`` (F, n) channel values in SI (m, rad; angles unwrapped);
+    ``body`` the body model whose channels ``q`` follows; ``angle_index`` the rotation
+    channels' columns; ``tags`` one per rotation channel; ``root_xyz`` the q columns of the
+    moving root's x, y, z position in the input frame (−1 where absent, all −1 if the
+    root does not move), ``root_rot`` the columns of its rotation channels and
+    ``root_seq`` their intrinsic Euler order (e.g. "ZXY"); ``heading`` rad, the angle about
+    the up axis the recorded walk is turned from internal +x (``q`` is turned back by it);
+    ``origin`` the BVH motion or CSV trajectory it came from."""
+
+    source: str
+    t: np.ndarray
+    q: np.ndarray
+    body: BodyModel
+    angle_index: np.ndarray
+    tags: list[ChannelTag]
+    root_xyz: list[int]
+    root_rot: list[int]
+    root_seq: str
+    heading: float
+    origin: BvhMotion | JointTrajectory
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(F, C) rotation channels, rad."""
+        return self.q[:, self.angle_index]
+
+    def ground(self) -> np.ndarray:
+        """(F, 2) m: the root's position on the ground plane (internal frame: x forward, y; z up)."""
+        return _ground(self.q, self.body, self.root_xyz)
+
+
+def _ground(q: np.ndarray, body: BodyModel, root_xyz: list[int]) -> np.ndarray:
+    p = np.zeros((len(q), 3))
+    for k, col in enumerate(root_xyz):
+        if col >= 0:
+            p[:, k] = q[:, col]
+    return (p @ body.world_from_input.T)[:, :2]
+
+
+def turn_root(q: np.ndarray, take: GaitTake, angle: float) -> np.ndarray:
+    """Copy of ``q`` (F, n) with the root turned by ``angle`` rad about the up axis (see module doc)."""
+    return _turn(q, take.body, take.root_xyz, take.root_rot, take.root_seq, angle)
+
+
+def _turn(q: np.ndarray, body: BodyModel, root_xyz: list[int], root_rot: list[int], seq: str,
+          angle: float) -> np.ndarray:
+    out = q.copy()
+    w = body.world_from_input
+    r_in = w.T @ Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix() @ w  # about the input's up axis
+    if min(root_xyz) >= 0:
+        out[:, root_xyz] = q[:, root_xyz] @ r_in.T
+    if root_rot:
+        turned = Rotation.from_matrix(r_in) * Rotation.from_euler(seq, q[:, root_rot])
+        out[:, root_rot] = turned.as_euler(seq)
+    return out
+
+
+def unwrap_angles(q: np.ndarray, angle_mask: np.ndarray) -> np.ndarray:
+    """Copy of ``q`` (F, n) with angle columns (rad) unwrapped in time, each mean in (−π, π]."""
+    out = q.copy()
+    a = np.unwrap(q[:, angle_mask], axis=0)
+    a -= 2 * np.pi * np.ceil(a.mean(axis=0) / (2 * np.pi) - 0.5)
+    out[:, angle_mask] = a
+    return out
+
+
+def _root_columns(body: BodyModel, q: np.ndarray) -> tuple[list[int], list[int], str]:
+    """q columns of the x, y, z position and of the rotation channels of the top-most moving
+    joint, and the rotations' intrinsic Euler order."""
+    moving = [i for i in range(q.shape[1]) if not body.angle_mask[i] and np.ptp(q[:, i]) > 1e-9]
+    if not moving:
+        return [-1, -1, -1], [], ""
+    names = body.channel_names
+    if body.kind == "urdf":
+        rot = ["base_yaw", "base_pitch", "base_roll"]  # R = Rz·Ry·Rx (body_urdf)
+        return [names.index(n) for n in ("base_x", "base_y", "base_z")], [names.index(n) for n in rot], "ZYX"
+    joint = names[moving[0]].rsplit(".", 1)[0]
+    xyz = [names.index(f"{joint}.{a}position") if f"{joint}.{a}position" in names else -1 for a in "XYZ"]
+    rot = [i for i, n in enumerate(names) if n.startswith(f"{joint}.") and n.endswith("rotation")]
+    return xyz, rot, "".join(names[i][len(joint) + 1] for i in rot)
+
+
+def _make(source: str, t: np.ndarray, q_raw: np.ndarray, body: BodyModel, origin) -> GaitTake:
+    xyz, rot, seq = _root_columns(body, q_raw)
+    heading = 0.0
+    if min(xyz) >= 0:
+        g = _ground(q_raw, body, xyz)
+        d = g[-1] - g[0]
+        if np.hypot(*d) > 1e-6:
+            heading = float(np.arctan2(d[1], d[0]))
+            q_raw = _turn(q_raw, body, xyz, rot, seq, -heading)
+    q = unwrap_angles(q_raw, body.angle_mask)
+    tags = tag_channels(body, q.mean(axis=0), source)
+    return GaitTake(source, t, q, body, np.nonzero(body.angle_mask)[0], tags, xyz, rot, seq, heading, origin)
+
+
+def take_from_bvh(motion: BvhMotion, up: str = "y", units: str | None = None) -> GaitTake:
+    """A BVH walk; ``up`` is the file's up axis ("y" or "z"), ``units`` its length unit (None = detect)."""
+    if up not in ("y", "z"):
+        raise InputError(f"{motion.source}: up axis must be 'y' or 'z', got {up!r}")
+    body = body_from_bvh(motion, BvhBodyOptions(units=units, up_axis=up))
+    t = np.arange(len(motion.frames)) * motion.frame_time
+    return _make(motion.source, t, body.channels_to_q(motion.frames), body, motion)
+
+
+def take_from_trajectory(traj: JointTrajectory, body: BodyModel) -> GaitTake:
+    """A robot walk from a joint-trajectory CSV and the robot's URDF body model (z up)."""
+    q = np.zeros((len(traj.t), body.nq))
+    names = body.channel_names
+    for k, n in enumerate(traj.joint_names):
+        q[:, names.index(n)] = traj.q[:, k]
+    if traj.base is not None:
+        for k, n in enumerate(BASE_COLUMNS):
+            q[:, names.index(n)] = traj.base[:, k]
+    return _make(traj.source, traj.t, q, body, traj)
+
+
+def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: str | Path | None = None) -> GaitTake:
+    """Read a walk from a ``.bvh`` file, or a ``.csv`` joint trajectory (needs ``urdf``)."""
+    p = Path(path)
+    if p.suffix.lower() == ".bvh":
+        return take_from_bvh(read_bvh(p), up, units)
+    if p.suffix.lower() == ".csv":
+        if urdf is None:
+            raise InputError(f"{p}: a joint-trajectory CSV needs the robot's URDF (--urdf)")
+        body = body_from_urdf(urdf)
+        return take_from_trajectory(read_joint_csv(p, body.joint_names), body)
+    raise InputError(f"{p}: unknown walk format {p.suffix!r} (.bvh or .csv)")
