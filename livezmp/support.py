@@ -55,12 +55,12 @@ def _xy_rows(points, name: str) -> list[list[float]]:
         raise SupportError(f"{name}: not an array of numbers ({exc})") from None
     if a.ndim != 2 or a.shape[1] not in (2, 3):
         raise SupportError(f"{name}: expected (k, 2) or (k, 3) points in metres, got shape {a.shape}")
-    xy = a[:, :2]
-    ok = np.abs(xy) <= _MAX_COORD  # False for NaN too
-    if not ok.all():
-        row = int(np.argmin(ok.all(axis=1)))
-        raise SupportError(f"{name}: row {row} has a non-finite or implausible coordinate {xy[row].tolist()} m")
-    return xy.tolist()
+    rows = a[:, :2].tolist()
+    # Plain floats: faster than numpy on a handful of rows. The comparisons are False for NaN too.
+    for i, (x, y) in enumerate(rows):
+        if not (-_MAX_COORD <= x <= _MAX_COORD and -_MAX_COORD <= y <= _MAX_COORD):
+            raise SupportError(f"{name}: row {i} has a non-finite or implausible coordinate [{x}, {y}] m")
+    return rows
 
 
 def _point(p_xy, name: str = "point") -> tuple[float, float]:
@@ -95,18 +95,18 @@ def _drop_slivers(hull: list, tol: float) -> list:
     Rounding can leave near-duplicate or near-collinear vertices; a tolerance inside the chain
     itself would not do, since for a near-vertical line the x order is not the order along it.
     """
-    i = 0
-    while len(hull) > 1 and i < len(hull):
-        (ax, ay), (bx, by), (cx, cy) = hull[i - 1], hull[i], hull[(i + 1) % len(hull)]
-        ex, ey = cx - ax, cy - ay
-        # Distance to the line first (cheap), to the segment only when that is small.
-        if abs(ex * (by - ay) - ey * (bx - ax)) <= tol * math.hypot(ex, ey) and (
-            _nearest_on_segment(bx, by, ax, ay, cx, cy)[2] <= tol
-        ):
-            del hull[i]
-            i = max(i - 1, 0)  # the previous vertex has a new neighbour: look at it again
+    while len(hull) > 1:
+        triples = zip(hull[-1:] + hull[:-1], hull, hull[1:] + hull[:1], strict=True)
+        for i, ((ax, ay), (bx, by), (cx, cy)) in enumerate(triples):
+            ex, ey = cx - ax, cy - ay
+            # Distance to the line first (cheap), to the segment only when that is small.
+            if abs(ex * (by - ay) - ey * (bx - ax)) <= tol * math.hypot(ex, ey) and (
+                _nearest_on_segment(bx, by, ax, ay, cx, cy)[2] <= tol
+            ):
+                del hull[i]
+                break  # rare: start over with the new neighbours
         else:
-            i += 1
+            return hull
     return hull
 
 
@@ -114,10 +114,9 @@ def _hull_rows(rows: list[list[float]]) -> list[tuple[float, float]]:
     pts = sorted({(x, y) for x, y in rows})
     if len(pts) <= 1:
         return pts
-    xs = [p[0] for p in pts]
     ys = [p[1] for p in pts]
     # Rounding in a coordinate difference scales with the coordinates' magnitude.
-    scale = max(max(xs) - min(xs), max(ys) - min(ys), abs(xs[0]), abs(xs[-1]), max(map(abs, ys)))
+    scale = max(abs(pts[0][0]), abs(pts[-1][0]), abs(min(ys)), abs(max(ys)))
     hull = _half_hull(pts)[:-1] + _half_hull(pts[::-1])[:-1]
     return _drop_slivers(hull, _COLLINEAR_REL_TOL * scale)
 
@@ -128,9 +127,9 @@ def convex_hull(points_xy) -> np.ndarray:
     points_xy: (k, 2) or (k, 3) array of points in metres (a z column is ignored), k >= 0.
     Returns an (m, 2) array of hull vertices, counter-clockwise, starting at the lowest-x (then
     lowest-y) point, without repeated or collinear vertices: a vertex within 1e-9 * L of the segment
-    joining its neighbours is dropped, L being the larger of the points' extent and their largest
-    absolute coordinate. Degenerate inputs give degenerate hulls, never NaN: no points -> (0, 2);
-    coincident points -> the single point (1, 2); collinear points -> the segment's two ends (2, 2).
+    joining its neighbours is dropped, L being the largest absolute coordinate. Degenerate inputs
+    give degenerate hulls, never NaN: no points -> (0, 2); coincident points -> the single point
+    (1, 2); collinear points -> the segment's two ends (2, 2).
     Raises SupportError on a wrong shape or a coordinate that is not finite or beyond 1e12 m.
     """
     return np.array(_hull_rows(_xy_rows(points_xy, "points")), dtype=float).reshape(-1, 2)
