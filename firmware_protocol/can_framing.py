@@ -139,6 +139,9 @@ class CanDecoder:
             return []
         if self.nodes is not None and node not in self.nodes:
             return []  # another node's traffic: not ours, not an error
+        if len(data) > 8:
+            self.errors["bad_length"] += 1
+            return []
         try:
             received = self._frame(msg_id, from_node, node, tid, last, index, bytes(data))
         except DecodeError as err:
@@ -163,7 +166,7 @@ class CanDecoder:
             payload = self._segment(key, tid, last, index, data)
             if payload is None:
                 return None
-            if len(payload) <= 8:
+            if len(payload) <= 8 + CRC_SIZE:
                 raise DecodeError("multi-frame transfer of a payload that fits one frame", "bad_length")
             payload, crc = payload[:-CRC_SIZE], int.from_bytes(payload[-CRC_SIZE:], "little")
             if transfer_crc(msg_id, payload) != crc:
