@@ -102,6 +102,7 @@ class _Servo:
         self.id = dxl_id
         self.index = index  # servo position in the chain = joint index in the plant
         self.table = ct.initial_table()
+        self.table[7] = dxl_id
         self.registered: tuple[int, bytes] | None = None
         self.boot_time = now
         self.turn_offset = 0
@@ -316,11 +317,16 @@ class DynamixelChain:
     def _error(self, servo: _Servo, code: int) -> int:
         return code | (ALERT if servo.table[70] else 0)
 
-    def _status(self, servo: _Servo, code: int, params: bytes = b"", *, level: int) -> list[tuple[float, bytes]]:
-        """A one-reply list if the servo's Status Return Level allows replies of ``level``."""
+    def _status(self, servo: _Servo, code: int, params: bytes = b"", *, level: int,
+                reply_id: int | None = None) -> list[tuple[float, bytes]]:
+        """A one-reply list if the servo's Status Return Level allows replies of ``level``.
+
+        ``reply_id`` is the id the instruction was addressed to, when a write may have changed it.
+        """
         if servo.table[68] < level:
             return []
-        return [(servo.return_delay, encode_status(servo.id, self._error(servo, code), params))]
+        reply_id = servo.id if reply_id is None else reply_id
+        return [(servo.return_delay, encode_status(reply_id, self._error(servo, code), params))]
 
     def _schedule(self, now: float, instruction_size: int, entries: list[tuple[float, bytes]]) -> list[Reply]:
         """Due times for replies sent one after the other, each after its delay; faults applied."""
@@ -367,7 +373,7 @@ class DynamixelChain:
         for servo in self._targets(packet.id, line):
             code = self._write(servo, packet.params, now)
             if packet.id != BROADCAST_ID:
-                entries = self._status(servo, code, level=2)
+                entries = self._status(servo, code, level=2, reply_id=packet.id)
         return entries
 
     def _reg_write(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -391,7 +397,7 @@ class DynamixelChain:
                 servo.table[69] = 0
                 code = self._write(servo, bytes((address & 0xFF, address >> 8)) + data, now)
             if packet.id != BROADCAST_ID:
-                entries = self._status(servo, code, level=2)
+                entries = self._status(servo, code, level=2, reply_id=packet.id)
         return entries
 
     def _factory_reset(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:

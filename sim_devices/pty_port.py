@@ -81,6 +81,7 @@ class PtyPort:
         self._pending: list[tuple[float, int, bytes]] = []
         self._seq = itertools.count()
         self._out = bytearray()
+        self._unplug_requests: list[threading.Event] = []
         self._closed = False
         self.error: BaseException | None = None
         self.dropped_output_bytes = 0
@@ -96,18 +97,16 @@ class PtyPort:
         return self._master >= 0
 
     def vanish(self) -> None:
-        """Unplug: close the pty, drop queued output and remove the symlink."""
+        """Unplug: close the pty, drop queued output and remove the symlink; returns when done."""
+        if threading.current_thread() is self._thread or not self._thread.is_alive():
+            self._unplug()
+            return
+        # The serving thread may be blocked in select() on the pty: let it close the descriptors.
+        done = threading.Event()
         with self._lock:
-            if self._master < 0:
-                return
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.path)
-            os.close(self._master)
-            os.close(self._slave)
-            self._master = self._slave = -1
-            self._pending.clear()
-            self._out.clear()
+            self._unplug_requests.append(done)
         self._wake()
+        done.wait(timeout=5.0)
 
     def restore(self) -> None:
         """Plug back in: open a new pty and point :attr:`path` at it."""
@@ -160,6 +159,18 @@ class PtyPort:
         os.replace(link, self.path)
         self._master, self._slave = master, slave
 
+    def _unplug(self) -> None:
+        with self._lock:
+            if self._master < 0:
+                return
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.path)
+            os.close(self._master)
+            os.close(self._slave)
+            self._master = self._slave = -1
+            self._pending.clear()
+            self._out.clear()
+
     def _wake(self) -> None:
         with contextlib.suppress(OSError):
             os.write(self._wake_w, b"x")
@@ -176,6 +187,11 @@ class PtyPort:
             with self._lock:
                 if self._closed:
                     return
+                if self._unplug_requests:
+                    self._unplug()
+                    for done in self._unplug_requests:
+                        done.set()
+                    self._unplug_requests.clear()
                 master = self._master
                 due = min(device.next_deadline(), self._pending[0][0] if self._pending else math.inf)
                 writers = [master] if master >= 0 and self._out else []

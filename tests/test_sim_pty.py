@@ -1,0 +1,134 @@
+"""PtyPort: a real pty, a stable symlinked path, timed replies, unplug/replug, clean shutdown."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import pytest
+import serial
+
+from sim_devices.pty_port import MAX_PENDING_OUTPUT, PtyPort
+
+
+class Echo:
+    """Answers each chunk upper-cased after ``delay`` s; optional one-off timed message."""
+
+    def __init__(self, delay: float = 0.0, message_at: float = math.inf, burst: int = 0) -> None:
+        self.delay = delay
+        self.message_at = message_at
+        self.burst = burst
+        self.polls: list[float] = []
+
+    def on_bytes(self, data: bytes, now: float):
+        if self.burst:
+            return [(now, bytes(65536))] * self.burst
+        return [(now + self.delay, data.upper())]
+
+    def poll(self, now: float):
+        self.polls.append(now)
+        self.message_at = math.inf
+        return [(now, b"tick")]
+
+    def next_deadline(self) -> float:
+        return self.message_at
+
+
+class Broken(Echo):
+    def on_bytes(self, data: bytes, now: float):
+        raise ZeroDivisionError("device bug")
+
+
+def wait_until(condition, timeout: float = 2.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.002)
+    return condition()
+
+
+def test_path_is_a_stable_symlink_to_a_real_pty():
+    with PtyPort(Echo(), name="ttyTEST") as port:
+        assert os.path.islink(port.path) and os.path.basename(port.path) == "ttyTEST"
+        assert os.readlink(port.path).startswith("/dev/pts/")
+        with serial.Serial(port.path, 115200, timeout=1.0) as client:
+            client.write(b"hello")
+            assert client.read(5) == b"HELLO"
+
+
+def test_replies_are_written_in_due_order_at_their_due_time():
+    device = Echo(delay=0.03)
+    with PtyPort(device) as port, serial.Serial(port.path, 115200, timeout=1.0) as client:
+        start = time.perf_counter()
+        client.write(b"a")
+        time.sleep(0.005)
+        client.write(b"b")
+        assert client.read(1) == b"A"
+        assert time.perf_counter() - start >= 0.03
+        assert client.read(1) == b"B"
+
+
+def test_poll_runs_at_the_device_deadline():
+    device = Echo()
+    with PtyPort(device) as port, serial.Serial(port.path, 115200, timeout=1.0) as client:
+        start = time.monotonic()
+        device.message_at = start + 0.05
+        client.write(b"x")  # wakes the port so it sees the new deadline
+        assert client.read(5) == b"Xtick"
+        assert device.polls and device.polls[0] >= start + 0.05
+
+
+def test_vanish_gives_client_errors_and_restore_allows_reopening_the_same_path():
+    with PtyPort(Echo()) as port:
+        client = serial.Serial(port.path, 115200, timeout=0.5)
+        port.vanish()
+        assert not port.present and not os.path.exists(port.path)
+        with pytest.raises(serial.SerialException):
+            client.write(b"x")
+        with pytest.raises(serial.SerialException):
+            client.read(1)
+        client.close()
+        with pytest.raises(serial.SerialException):
+            serial.Serial(port.path, 115200)
+        port.restore()
+        assert port.present and os.path.exists(port.path)
+        with serial.Serial(port.path, 115200, timeout=1.0) as again:
+            again.write(b"back")
+            assert again.read(4) == b"BACK"
+
+
+def test_line_speed_is_the_clients_setting():
+    with PtyPort(Echo()) as port:
+        with serial.Serial(port.path, 57600):
+            assert port.line_speed() == 57600
+        with serial.Serial(port.path, 1_000_000):
+            assert port.line_speed() == 1_000_000
+        port.vanish()
+        assert port.line_speed() is None
+
+
+def test_output_to_a_client_that_never_reads_is_bounded():
+    with PtyPort(Echo(burst=32)) as port, serial.Serial(port.path, 115200) as client:
+        client.write(b"go")  # 2 MiB of replies, never read
+        assert wait_until(lambda: port.dropped_output_bytes > 0)
+        assert len(port._out) <= MAX_PENDING_OUTPUT
+
+
+def test_close_stops_the_thread_and_removes_the_path():
+    port = PtyPort(Echo())
+    directory = os.path.dirname(port.path)
+    port.close()
+    assert not port._thread.is_alive()
+    assert not os.path.exists(directory)
+    port.close()  # idempotent
+
+
+def test_device_errors_surface_on_close():
+    port = PtyPort(Broken())
+    with serial.Serial(port.path, 115200) as client:
+        client.write(b"x")
+        assert wait_until(lambda: port.error is not None)
+    with pytest.raises(RuntimeError, match="device bug"):
+        port.close()
