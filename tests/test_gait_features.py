@@ -3,6 +3,7 @@ from known sinusoids: they must come out as constructed."""
 
 import numpy as np
 import pytest
+from data_paths import OP3_URDF
 
 from livezmp.bvh import parse_bvh, write_bvh
 from livezmp.errors import InputError
@@ -14,7 +15,6 @@ from livezmp.gait.sinewalk import sine_bvh, sine_trajectory, walk_spec
 from livezmp.gait.take import load_take, take_from_bvh
 from livezmp.trajectory_csv import write_joint_csv
 
-OP3 = "../shared/data/robots/robotis_op3.urdf"
 OP3_JOINTS = ["head_pan", "head_tilt", "l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ank_pitch",
               "l_ank_roll", "l_sho_pitch", "l_sho_roll", "l_el", "r_hip_yaw", "r_hip_roll", "r_hip_pitch",
               "r_knee", "r_ank_pitch", "r_ank_roll", "r_sho_pitch", "r_sho_roll", "r_el"]
@@ -152,7 +152,7 @@ def test_robot_csv_walk_features_come_out_as_constructed(tmp_path):
             "r_knee": (-0.6, 0.4, 1.0 + np.pi), "l_sho_pitch": (0.2, 0.15, np.pi)}
     path = tmp_path / "op3_walk.csv"
     write_joint_csv(sine_trajectory(OP3_JOINTS, spec, 1.6, 0.22, 4.0), path)
-    take = load_take(path, urdf=OP3)
+    take = load_take(path, urdf=OP3_URDF)
     tag = {t.name: t for t in take.tags}
     assert tag["l_hip_pitch"].key == "thigh:left:lateral"
     assert tag["r_knee"].key == "shank:right:lateral"

@@ -29,7 +29,7 @@ def mean_cycle(take: GaitTake, feats: WalkFeatures, phases: int = PHASES) -> np.
     ev = feats.cycles.events
     phi = np.arange(phases) / phases
     times = (ev[:-1, None] + phi * np.diff(ev)[:, None]).ravel()
-    vals = make_interp_spline(take.t, take.angles, k=1, axis=0)(times)  # (cycles*phases, C)
+    vals = make_interp_spline(take.t, take.angles, k=3, axis=0)(times)  # (cycles*phases, C)
     return vals.reshape(len(ev) - 1, phases, -1).mean(axis=0).T
 
 

@@ -1,12 +1,13 @@
 """Gait cycles from the thigh's flexion oscillation, and the walk's frequency.
 
 A cycle (a stride: two steps) starts each time the thigh flexion angle rises through
-the middle of its range. Hysteresis (the angle must first fall 30 % of the half-range
-below the middle) keeps noise from making extra crossings. Only the longest run of
-consecutive plausible cycles (within ±20 % of the median cycle time) is used, so
-standing still, starting and stopping at either end of a take and interruptions are
-left out. The frequency is then refined by fitting the reference
-waveform's harmonics over those whole cycles (exact for a periodic waveform).
+its mean: first found with the middle of its range, then again with the mean over the
+cycles found. Hysteresis (the angle must first fall 30 % of the half-range below that
+level) keeps noise from making extra crossings. Only the longest run of consecutive
+plausible cycles (within ±20 % of the median cycle time) is used, so standing still,
+starting and stopping at either end of a take and interruptions are left out. The
+frequency is refined by fitting the reference waveform's harmonics over those whole
+cycles (exact for a periodic waveform).
 """
 
 from __future__ import annotations
@@ -98,4 +99,10 @@ def detect_cycles(t: np.ndarray, x: np.ndarray, what: str, harmonics: int = 5,
     h = max_harmonics(f0, 1.0 / float(np.median(np.diff(t))), harmonics)
     best = minimize_scalar(lambda f: float(hm.fit(tw, xw, f, h)[1][0]), bounds=(0.95 * f0, 1.05 * f0),
                            method="bounded", options={"xatol": 1e-12 * f0})
+    # Cycles start where the waveform rises through its own mean: there a smooth waveform is
+    # nearly straight, so the interpolated times do not depend on where the samples fall.
+    mean = float(hm.fit(tw, xw, best.x, h)[0][0, 0])
+    events = _longest_run(up_crossings(t, x, mean, HYSTERESIS * half), min_period, max_period)
+    if len(events) < 3:
+        raise InputError(f"{what}: fewer than two whole gait cycles ({max(len(events) - 1, 0)}); need a longer take")
     return Cycles(events, float(best.x))
