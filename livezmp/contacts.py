@@ -139,6 +139,8 @@ class GroundEstimator:
         cfg = self.config
         if cfg.override is not None:
             return cfg.override
+        if not math.isfinite(lowest_z):
+            raise ContactError(f"ground: lowest sole point z must be finite, got {lowest_z}")
         if self._count < cfg.warmup_frames:
             self._window[self._count] = lowest_z
             self._count += 1
@@ -166,6 +168,8 @@ def step_foot(state: FootContact, height: float, speed: float, cfg: ContactConfi
     The first frame decides at once: in contact unless the lift-off thresholds are exceeded (a
     foot that starts near the ground and barely moving is standing on it).
     """
+    if not (math.isfinite(height) and math.isfinite(speed)):
+        raise ContactError(f"foot: height {height} m and speed {speed} m/s must be finite")
     lifts = height > cfg.height_off or speed > cfg.speed_off
     if state.in_contact is None:
         return FootContact(not lifts)

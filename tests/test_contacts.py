@@ -380,6 +380,13 @@ def test_bad_frames_name_frame_and_field():
     assert issubclass(ContactError, InputError)
 
 
+def test_pure_steps_reject_non_finite_input():
+    with pytest.raises(ContactError, match="foot: height nan m"):
+        step_foot(FootContact(True), float("nan"), 0.0, CFG)
+    with pytest.raises(ContactError, match="ground: lowest sole point z must be finite"):
+        GroundEstimator().update(float("inf"))
+
+
 @pytest.mark.parametrize(
     "make, match",
     [
