@@ -95,6 +95,7 @@ class _Transfer:
     next_index: int
     last_data: bytes
     data: bytearray
+    done: bool = False  # complete: kept only to recognise a repeat of its last frame
 
 
 class CanDecoder:
@@ -119,6 +120,11 @@ class CanDecoder:
         self.delivered = 0
         self._transfers: OrderedDict[tuple[int, int], _Transfer] = OrderedDict()
         self._streams: OrderedDict[tuple[int, int], SequenceTracker] = OrderedDict()
+
+    @property
+    def held(self) -> tuple[int, int]:
+        """(transfers in reassembly, streams tracked): bounded by max_transfers and max_streams."""
+        return len(self._transfers), len(self._streams)
 
     def feed(self, can_id: int, data: bytes, *, is_extended: bool = True, is_error: bool = False,
              is_remote: bool = False) -> list[Received]:
@@ -185,7 +191,8 @@ class CanDecoder:
         return Received(msg, tid, node)
 
     def _abort(self, key) -> None:
-        if self._transfers.pop(key, None) is not None:
+        transfer = self._transfers.pop(key, None)
+        if transfer is not None and not transfer.done:
             self.errors["bad_transfer"] += 1
 
     def _segment(self, key, tid, last, index, data) -> bytes | None:
@@ -198,8 +205,9 @@ class CanDecoder:
             if len(data) != 8:
                 raise DecodeError("first frame of a transfer shorter than 8 bytes", "bad_transfer")
             if len(self._transfers) >= self.max_transfers:
-                self._transfers.popitem(last=False)
-                self.errors["bad_transfer"] += 1
+                _, evicted = self._transfers.popitem(last=False)
+                if not evicted.done:
+                    self.errors["bad_transfer"] += 1
             self._transfers[key] = _Transfer(tid, 1, data, bytearray(data))
             return None
         if transfer is None:
@@ -207,7 +215,8 @@ class CanDecoder:
         self._transfers.move_to_end(key)
         if transfer.tid == tid and index == transfer.next_index - 1 and data == transfer.last_data:
             raise DecodeError("frame received twice", "duplicate")
-        if transfer.tid != tid or index != transfer.next_index or (not last and len(data) != 8) or not data:
+        if transfer.done or transfer.tid != tid or index != transfer.next_index or (not last and len(data) != 8) \
+                or not data:
             self._transfers.pop(key)
             raise DecodeError("missing, reordered or short frame", "bad_transfer")
         transfer.data += data
@@ -218,7 +227,7 @@ class CanDecoder:
                 self._transfers.pop(key)
                 raise DecodeError(f"transfer longer than {MAX_FRAMES} frames", "bad_transfer")
             return None
-        self._transfers.pop(key)
+        transfer.done = True
         return bytes(transfer.data)
 
     def _tracker(self, key) -> SequenceTracker:

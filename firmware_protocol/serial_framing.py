@@ -95,6 +95,11 @@ class StreamDecoder:
         self._skipping = False  # inside an oversize run: drop until the next delimiter
         self._trackers = (SequenceTracker(SEQ_BITS, SEQ_BEHIND), SequenceTracker(SEQ_BITS, SEQ_BEHIND))
 
+    @property
+    def buffered(self) -> int:
+        """Bytes of an incomplete frame held (never more than MAX_ENCODED)."""
+        return len(self._buf)
+
     def feed(self, data: bytes) -> list[Message]:
         """Messages completed by ``data``, in order."""
         return [r.message for r in self.feed_frames(data)]

@@ -79,7 +79,10 @@ static fwp_can_transfer_t *find_transfer(fwp_can_rx_t *rx, uint8_t msg_id, uint8
 static void abort_transfer(fwp_can_rx_t *rx, uint8_t msg_id, uint8_t node)
 {
     fwp_can_transfer_t *t = find_transfer(rx, msg_id, node);
-    if (t != NULL) { t->in_use = 0; rx->errors[FWP_E_BAD_TRANSFER]++; }
+    if (t != NULL) {
+        if (!t->done) rx->errors[FWP_E_BAD_TRANSFER]++;
+        t->in_use = 0;
+    }
 }
 
 static fwp_can_transfer_t *new_transfer(fwp_can_rx_t *rx)
@@ -90,7 +93,7 @@ static fwp_can_transfer_t *new_transfer(fwp_can_rx_t *rx)
         if (!rx->transfers[i].in_use) return &rx->transfers[i];
         if (rx->transfers[i].stamp < oldest->stamp) oldest = &rx->transfers[i];
     }
-    rx->errors[FWP_E_BAD_TRANSFER]++; /* every slot busy: evict the least recently used */
+    if (!oldest->done) rx->errors[FWP_E_BAD_TRANSFER]++; /* every slot busy: evict the least recently used */
     return oldest;
 }
 
@@ -123,7 +126,7 @@ static int add_segment(fwp_can_rx_t *rx, uint8_t msg_id, uint8_t node, uint8_t t
         abort_transfer(rx, msg_id, node);
         if (f->dlc != 8) return -(int)FWP_E_BAD_TRANSFER;
         t = new_transfer(rx);
-        t->in_use = 1; t->msg_id = msg_id; t->node = node; t->tid = tid; t->next_index = 1;
+        t->in_use = 1; t->done = 0; t->msg_id = msg_id; t->node = node; t->tid = tid; t->next_index = 1;
         t->stamp = ++rx->clock;
         t->last_dlc = 8; memcpy(t->last_data, f->data, 8);
         t->len = 8; memcpy(t->data, f->data, 8);
@@ -134,7 +137,7 @@ static int add_segment(fwp_can_rx_t *rx, uint8_t msg_id, uint8_t node, uint8_t t
     if (t->tid == tid && index + 1 == t->next_index && t->last_dlc == f->dlc &&
         memcmp(t->last_data, f->data, f->dlc) == 0)
         return -(int)FWP_E_DUPLICATE;
-    if (t->tid != tid || index != t->next_index || (!last && f->dlc != 8) || f->dlc == 0) {
+    if (t->done || t->tid != tid || index != t->next_index || (!last && f->dlc != 8) || f->dlc == 0) {
         t->in_use = 0;
         return -(int)FWP_E_BAD_TRANSFER;
     }
@@ -146,7 +149,7 @@ static int add_segment(fwp_can_rx_t *rx, uint8_t msg_id, uint8_t node, uint8_t t
         if (t->next_index == FWP_CAN_MAX_FRAMES) { t->in_use = 0; return -(int)FWP_E_BAD_TRANSFER; }
         return 0;
     }
-    t->in_use = 0;
+    t->done = 1;
     *done = t;
     return 1;
 }

@@ -31,6 +31,7 @@ int fwp_can_encode(const fwp_msg_t *m, uint8_t node, uint8_t tid, int from_node,
 
 typedef struct {
     uint8_t in_use, msg_id, node, tid, next_index, last_dlc;
+    uint8_t done; /* complete: kept only to recognise a repeat of its last frame */
     uint8_t last_data[8];
     uint16_t len;
     uint32_t stamp; /* least recently used is evicted first */
