@@ -37,13 +37,20 @@ class Foot:
 
 @dataclass
 class CorrectionJoints:
-    """Where a root (waist) rotation lives: q indices of the root's rotation channels
-    (roll about x, pitch about y, yaw about z in the internal frame) and of each hip's
-    rotation channels, and the q indices of the leg chains (hip to ankle) per side."""
+    """What a balance correction moves. ``root_channels``: q indices of the root's
+    translation and rotation channels, in chain order (the root is the pelvis of a
+    skeleton, the floating base of a robot); ``root_frame_id``: the frame they place.
+    ``legs``: q indices each leg re-solve may change (a skeleton's thigh rotations, a
+    robot's whole leg chain); ``hips``: frame of each hip joint centre (the pivot);
+    ``foot_frames``: frames whose world placement each leg must keep (positions of
+    the ankle and toe joints for a skeleton; the full pose of the foot for a robot)."""
 
-    root_rotation: list[int] = field(default_factory=list)
-    legs: dict[str, list[int]] = field(default_factory=dict)
-    root_frame_id: int = 0
+    root_channels: list[int]
+    root_frame_id: int
+    legs: dict[str, list[int]]
+    hips: dict[str, int]
+    foot_frames: dict[str, list[int]]
+    full_foot_pose: bool
 
 
 @dataclass

@@ -29,6 +29,7 @@ WORLD_FROM_INPUT = {
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 _NEXT = {"upper_arm": "forearm", "forearm": "hand", "thigh": "shank", "shank": "foot", "foot": "toe"}
 _TRUNK = ("pelvis", "spine", "neck", "head")
+CALIBRATION_S = 2.0  # s of motion that calibrate the feet
 LEG_FRACTION_OF_STATURE = (422.2 + 434.0) / 1741  # de Leva thigh + shank over stature
 
 
@@ -208,17 +209,21 @@ def _channel_scale(motion: BvhMotion, scale: float) -> np.ndarray:
     return np.array([scale if c.endswith("position") else np.pi / 180 for j in motion.joints for c in j.channels])
 
 
-def _calibrate_heels(model: pin.Model, feet: dict[str, Foot], q0: np.ndarray, stature: float) -> None:
+def _calibrate_heels(model: pin.Model, feet: dict[str, Foot], qs: np.ndarray, stature: float) -> None:
     """Set each foot's ankle height so that the sole is flat when the foot is.
 
-    Skeletons put the ankle and toe joints at different heights above the sole; in the
-    first frame the foot whose toe is lower is taken to stand flat, and the ankle-above-toe
-    height it shows (bounded to 0–10 % of stature) is used for both feet."""
+    Skeletons put the ankle and toe joints at different heights above the sole. Over the
+    given frames (the first seconds of the take) each foot's lowest ankle and lowest toe
+    heights are where it stood flat; their difference (the median over both feet,
+    bounded to 0–10 % of stature) is the ankle's height above the toe joint's."""
     data = model.createData()
-    pin.framesForwardKinematics(model, data, q0)
-    z = {s: (data.oMf[f.frame_id].translation[2], data.oMf[f.toe_frame_id].translation[2]) for s, f in feet.items()}
-    flat = min(z, key=lambda s: z[s][1])
-    rise = float(np.clip(z[flat][0] - z[flat][1], 0.0, 0.1 * stature))
+    low = {s: [np.inf, np.inf] for s in feet}
+    for q in qs:
+        pin.framesForwardKinematics(model, data, q)
+        for s, f in feet.items():
+            low[s][0] = min(low[s][0], data.oMf[f.frame_id].translation[2])
+            low[s][1] = min(low[s][1], data.oMf[f.toe_frame_id].translation[2])
+    rise = float(np.clip(np.median([a - t for a, t in low.values()]), 0.0, 0.1 * stature))
     for f in feet.values():
         f.ankle_height = f.toe_height + rise
 
@@ -264,20 +269,29 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
         )
         named[f"{side}_ankle"] = frames[fi]
         named[f"{side}_toe"] = toe_frame
-    _calibrate_heels(model, feet, motion.frames[0] * _channel_scale(motion, scale), stature)
+    calib = motion.frames[: max(1, round(CALIBRATION_S / motion.frame_time))]
+    _calibrate_heels(model, feet, calib * _channel_scale(motion, scale), stature)
     pelvis = next(i for i, t in enumerate(tags) if t.kind == "pelvis")
-    ch0 = motion.joints[pelvis].first_channel
-    root_rot = [ch0 + k for k, c in enumerate(motion.joints[pelvis].channels) if c.endswith("rotation")]
-    legs = {}
+    pj = motion.joints[pelvis]
+    if not any(c.endswith("position") for c in pj.channels) or not any(c.endswith("rotation") for c in pj.channels):
+        raise InputError(f"{motion.source}: the pelvis joint {pj.name} needs position and rotation channels")
+    legs, hips = {}, {}
     for side in ("left", "right"):
         th = next(i for i, t in enumerate(tags) if t.kind == "thigh" and t.side == side)
         c0 = motion.joints[th].first_channel
         legs[side] = [c0 + k for k, c in enumerate(motion.joints[th].channels) if c.endswith("rotation")]
+        hips[side] = frames[th]
+    correction = CorrectionJoints(
+        root_channels=list(range(pj.first_channel, pj.first_channel + len(pj.channels))),
+        root_frame_id=frames[pelvis], legs=legs, hips=hips,
+        foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")},
+        full_foot_pose=False,
+    )
     names = motion.channel_labels()
     return BodyModel(
         kind="bvh", model=model, point_model=point_mass_copy(model), channel_names=names,
         channel_scale=_channel_scale(motion, scale),
         angle_mask=np.array([n.endswith("rotation") for n in names]),
         feet=feet, world_from_input=r_in, up_axis=up, units=units, total_mass=opts.total_mass,
-        correction=CorrectionJoints(root_rot, legs, frames[pelvis]), named_points=named,
+        correction=correction, named_points=named,
     )

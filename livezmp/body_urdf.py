@@ -140,10 +140,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
             if n not in jid:
                 raise InputError(f"{cfg.source}: correction leg joint {n!r} is not in {path}")
         legs[side] = [model.joints[jid[n]].idx_q for n in wanted]
-    root_rot = [model.joints[jid[n]].idx_q for n in ("base_roll", "base_pitch", "base_yaw")]
-    for n in cfg.waist:
-        if n not in jid:
-            raise InputError(f"{cfg.source}: waist joint {n!r} is not in {path}")
+    hips = {s: model.getFrameId(model.names[_chain(model, f)[0]]) for s, f in feet_frames.items()}
     named = {f"{s}_foot": f for s, f in feet_frames.items()}
     return BodyModel(
         kind="urdf", model=model, point_model=point_mass_copy(model), channel_names=names,
@@ -151,7 +148,8 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
         angle_mask=np.array([not model.joints[jid[n]].shortname().startswith("JointModelP") for n in names]),
         feet=feet, world_from_input=np.eye(3), up_axis="z", units="m",
         total_mass=float(pin.computeTotalMass(model)),
-        correction=CorrectionJoints(root_rot, legs, model.getFrameId("base_attach")),
+        correction=CorrectionJoints(list(range(len(BASE_JOINTS))), model.getFrameId("base_attach"), legs, hips,
+                                    {s: [f] for s, f in feet_frames.items()}, full_foot_pose=True),
         named_points=named, base_channels=list(range(6)),
         joint_names=names[6:],
     )

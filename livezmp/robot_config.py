@@ -8,9 +8,8 @@ the URDF's ``<robot name>`` (``livezmp/data/robots/NAME.toml``); everything is o
     sole = [[x, y, z], ...]          # corners in the link frame, metres
     # or: box = { length = 0.127, width = 0.072, center = [x, y, z] }
 
-    [correction]                      # joints the balance corrector may move
-    waist = ["waist_yaw", "waist_pitch", "waist_roll"]   # if the robot has a waist
-    [correction.legs]                 # default: the chain from the base to each foot
+    [correction.legs]                 # joints a leg re-solve may move; default: the
+                                      # chain from the base to each foot
     left = ["l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ank_pitch", "l_ank_roll"]
 
     [servos.l_hip_pitch]              # for servo links
@@ -52,7 +51,6 @@ class ServoConfig:
 @dataclass
 class RobotConfig:
     feet: dict[str, dict] = field(default_factory=dict)
-    waist: list[str] = field(default_factory=list)
     legs: dict[str, list[str]] = field(default_factory=dict)
     servos: dict[str, ServoConfig] = field(default_factory=dict)
     source: str = "<defaults>"
@@ -72,7 +70,6 @@ def _parse(data: dict, source: str) -> RobotConfig:
             f = {**f, "sole": sole}
         cfg.feet[side] = f
     corr = data.get("correction") or {}
-    cfg.waist = list(corr.get("waist", []))
     cfg.legs = {k: list(v) for k, v in (corr.get("legs") or {}).items()}
     for joint, s in (data.get("servos") or {}).items():
         if "id" not in s:

@@ -1,0 +1,462 @@
+"""Balance correction of a whole motion, offline: root (waist) rotations, smallest and
+smooth, that bring the ZMP into the support polygon; legs re-solved so feet stay put.
+
+The problem over the whole take: find root rotation offsets δ_k (rad, internal world
+axes, one 3-vector per frame) minimising
+
+    Σ_k |ZMP_k(δ) − target_k|² / σ_z²  +  Σ_k |δ_k|² / σ_δ²  +  Σ_k |δ̈_k|² / σ_a²
+
+subject to |δ_k| ≤ max_rotation per axis, where target_k is the ZMP itself when it is
+inside the polygon by at least ``margin`` and the polygon point ``margin`` inside
+otherwise. ZMP_k depends on δ at neighbouring frames too, through the estimator's
+velocities and accelerations, so the problem is solved for all frames at once by
+Gauss-Newton: each iteration linearises ZMP_k in δ_j with
+(∂ZMP/∂q, ∂ZMP/∂q̇, ∂ZMP/∂q̈ at frame k) × (the estimator's impulse response from j to k)
+× (∂channels/∂δ at frame j), solves the bounded linear least-squares problem
+(scipy's ``lsq_linear``) and re-analyses the corrected motion exactly with the same
+per-frame pipeline that ``livezmp analyze`` runs. The rate limit is applied last as a
+projection; frames still outside, and frames whose correction was cut by a limit,
+are reported.
+
+:func:`seed_grid_search` is the seed paper's method for comparison: per frame, search
+the three rotations in fixed steps for the smallest that puts the ZMP inside, holding
+the frame's velocities and accelerations.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import lsq_linear
+
+from livezmp.body import BodyModel
+from livezmp.estimator import StreamingEstimator
+from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig
+from livezmp.root_motion import RootMover
+from livezmp.support import clamp_to_polygon
+from livezmp.zmp import compute_zmp
+
+
+@dataclass(frozen=True)
+class CorrectionLimits:
+    """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""
+
+    max_rotation_deg: tuple[float, float, float] = (15.0, 15.0, 10.0)  # about x, y, z (internal)
+    max_rate_deg_s: float = 90.0
+    margin_m: float = 0.005  # aim this far inside the polygon
+    zmp_tolerance_m: float = 0.001  # σ_z
+    rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
+    accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
+    iterations: int = 15
+
+
+@dataclass
+class CorrectionResult:
+    """``delta`` (F, 3) rad; ``frames`` corrected raw channels (F, nq); figures for the report."""
+
+    delta: np.ndarray
+    frames: np.ndarray
+    before: list[FrameResult]
+    after: list[FrameResult]
+    foot_displacement_m: dict[str, float]
+    rate_limited_frames: list[int]
+    solver_s: float
+    history: list[int] = field(default_factory=list)  # frames outside after each iteration
+
+    def report(self) -> dict:
+        judged_b = [r for r in self.before if r.inside is not None]
+        judged_a = [r for r in self.after if r.inside is not None]
+        out_a = [r.index for r in judged_a if not r.inside]
+        deg = np.degrees(self.delta)
+        n = len(self.frames)
+        return {
+            "frames": n,
+            "support_frames": len(judged_a),
+            "out_of_support_before": sum(1 for r in judged_b if not r.inside),
+            "out_of_support_after": len(out_a),
+            "inside_fraction_before": round(np.mean([r.inside for r in judged_b]), 6) if judged_b else None,
+            "inside_fraction_after": round(np.mean([r.inside for r in judged_a]), 6) if judged_a else None,
+            "infeasible_frames": out_a,
+            "rate_limited_frames": self.rate_limited_frames,
+            "max_root_rotation_deg": round(float(np.abs(deg).max()), 4) if n else 0.0,
+            "rms_root_rotation_deg": round(float(np.sqrt(np.mean(np.sum(deg**2, axis=1)))), 4) if n else 0.0,
+            "max_root_rate_deg_s": round(float(np.abs(np.diff(deg, axis=0)).max() * self._fps()), 3) if n > 1 else 0.0,
+            "max_foot_displacement_mm": round(1000 * self.foot_displacement_m["stance"], 4),
+            "max_swing_foot_displacement_mm": round(1000 * self.foot_displacement_m["swing"], 4),
+            "solver_ms_per_frame": round(1000 * self.solver_s / max(n, 1), 4),
+            "outside_after_iteration": self.history,
+        }
+
+    def _fps(self) -> float:
+        ts = [r.t for r in self.before]
+        return (len(ts) - 1) / (ts[-1] - ts[0]) if len(ts) > 1 else 0.0
+
+
+def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:
+    """Weight of the left hip as the rotation pivot per frame (1 left stance, 0 right,
+    ½ double/none), smoothed over ``ramp_frames`` so the pivot never jumps."""
+    raw = np.array([{"left": 1.0, "right": 0.0}.get(r.support, 0.5) for r in results])
+    if ramp_frames <= 1 or len(raw) < 2:
+        return raw
+    kernel = np.hanning(ramp_frames + 2)[1:-1]
+    kernel /= kernel.sum()
+    pad = ramp_frames
+    padded = np.concatenate([np.full(pad, raw[0]), raw, np.full(pad, raw[-1])])
+    return np.convolve(padded, kernel, mode="same")[pad:-pad]
+
+
+def _target(r: FrameResult, margin: float) -> np.ndarray | None:
+    """The ZMP target (2,) for a frame that is outside or within ``margin`` of the edge."""
+    if r.zmp is None or r.margin is None or r.margin >= margin:
+        return None
+    poly = r.polygon
+    centre = poly.mean(axis=0)
+    p = r.clamped[:2] if not r.inside else r.zmp[:2]
+    d = centre - p
+    n = np.linalg.norm(d)
+    step = min(margin, n) if len(poly) > 2 else 0.0
+    return p + (d / n * step if n > 1e-12 else 0.0)
+
+
+def estimator_matrices(pipe: Pipeline, times: np.ndarray, edge: int) -> list[sp.csr_matrix]:
+    """The estimator as three linear maps (F × F, sparse): position, velocity and
+    acceleration at output frame k per unit input at frame j. The estimator is linear
+    (for changes far from an angle wrap); its response is exact for inputs within
+    ``edge`` frames of either end (warm-up and flush) and the steady-state kernel in
+    between, truncated where it falls below 1e-7 of its peak."""
+    f = len(times)
+    cfg = pipe.estimator.config
+    cols = sorted(set(range(min(edge, f))) | set(range(max(f - edge, 0), f)))
+    est = StreamingEstimator(len(cols), np.zeros(len(cols), bool), cfg)
+    resp = np.zeros((3, f, len(cols)))
+    impulses = np.zeros((f, len(cols)))
+    impulses[cols, np.arange(len(cols))] = 1.0
+    outs = [est.step(float(times[k]), impulses[k]) for k in range(f)]
+    for e in [o for o in outs if o is not None] + est.flush():
+        resp[:, e.index] = [e.q, e.qd, e.qdd]
+    # steady state: one impulse well after the warm-up
+    lag, span = pipe.estimator.lag, 3 * cfg.window
+    start = max(4 * cfg.window, int(5 * cfg.rate_hz))
+    one = StreamingEstimator(1, np.zeros(1, bool), cfg)
+    kernel = np.zeros((3, lag + span + 1))
+    for k in range(start + span + lag + 1):
+        e = one.step(k * cfg.dt, np.array([1.0 if k == start else 0.0]))
+        if e is not None and start - lag <= e.index <= start + span:
+            kernel[:, e.index - start + lag] = [e.q[0], e.qd[0], e.qdd[0]]
+    keep = np.abs(kernel).max(axis=0) > 1e-7 * np.abs(kernel).max()
+    kd = np.arange(-lag, span + 1)[keep]
+    kernel = kernel[:, keep]
+    mats = []
+    for i in range(3):
+        rows, cj, vals = [], [], []
+        big = np.abs(resp[i]) > 1e-7 * max(np.abs(resp[i]).max(), 1e-300)
+        r_idx, c_idx = np.nonzero(big)
+        rows += r_idx.tolist()
+        cj += [cols[c] for c in c_idx]
+        vals += resp[i][r_idx, c_idx].tolist()
+        edge_cols = set(cols)
+        for j in range(f):
+            if j in edge_cols:
+                continue
+            k = j + kd
+            ok = (k >= 0) & (k < f)
+            rows += k[ok].tolist()
+            cj += [j] * int(ok.sum())
+            vals += kernel[i][ok].tolist()
+        mats.append(sp.csr_matrix((vals, (rows, cj)), shape=(f, f)))
+    return mats
+
+
+class _Linearisation:
+    """∂ZMP_k/∂δ_j as a sparse (2F × 3F) matrix around the current correction."""
+
+    def __init__(self, model, mover: RootMover, changed: list[int], est: list[sp.csr_matrix]):
+        self.model, self.mover = model, mover
+        self.data = model.createData()
+        self.changed = changed
+        self.est = est
+
+    def channel_jacobians(self, q_base: np.ndarray, delta: np.ndarray, w: np.ndarray, eps: float = 1e-4):
+        """C_j = ∂q_changed/∂δ at each frame (F, m, 3), by central differences."""
+        f = len(q_base)
+        out = np.zeros((f, len(self.changed), 3))
+        for j in range(f):
+            for a in range(3):
+                d = delta[j].copy()
+                d[a] += eps
+                qp = self.mover.apply(q_base[j], d, w[j])[self.changed]
+                d[a] -= 2 * eps
+                qm = self.mover.apply(q_base[j], d, w[j])[self.changed]
+                out[j, :, a] = (qp - qm) / (2 * eps)
+        return out
+
+    def zmp_partials(self, r: FrameResult, eps: float = 1e-6) -> np.ndarray | None:
+        """G (3, 2, m): ∂ZMP_xy/∂(q, q̇, q̈) of the changed channels at one analysed frame."""
+        base = [r.q, r.v, r.a]
+        z0 = compute_zmp(self.model, self.data, *base, r.ground_z).zmp
+        if z0 is None:
+            return None
+        g = np.zeros((3, 2, len(self.changed)))
+        for i in range(3):
+            for c, qi in enumerate(self.changed):
+                args = [b.copy() for b in base]
+                args[i][qi] += eps
+                z = compute_zmp(self.model, self.data, *args, r.ground_z).zmp
+                if z is None:
+                    return None
+                g[i, :, c] = (z[:2] - z0[:2]) / eps
+        return g
+
+    def matrix(self, results: list[FrameResult], rows: list[int], cjac: np.ndarray) -> sp.csr_matrix:
+        f = len(cjac)
+        data, ri, ci = [], [], []
+        e0, e1, e2 = self.est
+        for row, k in enumerate(rows):
+            g = self.zmp_partials(results[k])
+            if g is None:
+                continue
+            js = np.union1d(np.union1d(e0[k].indices, e1[k].indices), e2[k].indices)
+            for j in js:
+                gk = g[0] * e0[k, j] + g[1] * e1[k, j] + g[2] * e2[k, j]
+                block = gk @ cjac[j]  # (2, 3)
+                data.extend(block.ravel())
+                ri.extend([2 * row] * 3 + [2 * row + 1] * 3)
+                ci.extend([3 * j, 3 * j + 1, 3 * j + 2] * 2)
+        return sp.csr_matrix((data, (ri, ci)), shape=(2 * len(rows), 3 * f))
+
+
+def _second_difference(f: int, dt: float) -> sp.csr_matrix:
+    d2 = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(max(f - 2, 0), f)) / dt**2
+    return sp.kron(d2, sp.eye(3)).tocsr()
+
+
+def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_acc, bounds, dt) -> np.ndarray:
+    """One damped linearised step. ZMP rows are active for frames short of the margin;
+    frames that the predicted step would push short of it join the active set, and so do
+    frame-to-frame steps beyond the rate limit (held at the limit by stiff rows), in up
+    to five rounds, so a correction neither trades one frame for another nor jerks."""
+    f = len(delta)
+    x0 = delta.ravel()
+    active = {i for i, k in enumerate(judged) if _target(current[k], limits.margin_m) is not None}
+    hold: dict[int, np.ndarray] = {}
+    rate: dict[int, float] = {}  # flat index of δ_k,a (k ≥ 1) → signed step to hold
+    max_step = np.radians(limits.max_rate_deg_s) * dt
+    stiff = 100.0 / max_step
+    trust = sp.eye(3 * f, format="csr") * np.sqrt(mu) / np.radians(limits.rotation_scale_deg)
+    x = x0
+    for _ in range(5):
+        idx = sorted(active | set(hold))
+        tgt = np.array([_target(current[judged[i]], limits.margin_m) if i in active else hold[i] for i in idx])
+        rows = np.ravel([[2 * i, 2 * i + 1] for i in idx])
+        jz = jall[rows]
+        rhs = jz @ x0 - (zall[idx] - tgt).ravel() / limits.zmp_tolerance_m
+        keys = sorted(rate)
+        steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)),
+                               (np.repeat(np.arange(len(keys)), 2), np.ravel([[c, c - 3] for c in keys]))),
+                              shape=(len(keys), 3 * f))
+        a = sp.vstack([jz, reg_size, reg_acc, trust, steps]).tocsr()
+        b = np.concatenate([rhs, np.zeros(3 * f), np.zeros(reg_acc.shape[0]), trust @ x0,
+                            stiff * np.array([rate[c] for c in keys])])
+        x = lsq_linear(a, b, bounds=bounds, method="trf", lsmr_tol="auto", max_iter=200).x
+        pred = zall + (jall @ (x - x0)).reshape(-1, 2) * limits.zmp_tolerance_m
+        grew = False
+        for i, k in enumerate(judged):
+            if i in active or i in hold:
+                continue
+            if clamp_to_polygon(pred[i], current[k].polygon).margin < limits.margin_m:
+                hold[i] = zall[i]  # keep it where it is: inside with margin now
+                grew = True
+        inc = np.diff(x.reshape(f, 3), axis=0).ravel()
+        for c in np.nonzero(np.abs(inc) > max_step * 1.001)[0]:
+            if c + 3 not in rate:
+                rate[c + 3] = float(np.sign(inc[c]) * max_step)
+                grew = True
+        if not grew:
+            break
+    return x.reshape(f, 3)
+
+
+def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimits, reg_size, reg_acc) -> float:
+    """The exact objective: squared distances short of ``margin`` inside, plus the regularisers."""
+    short = np.array([max(0.0, limits.margin_m - r.margin) for r in results if r.margin is not None])
+    x = delta.ravel()
+    return float(np.sum((short / limits.zmp_tolerance_m) ** 2) + np.sum((reg_size @ x) ** 2)
+                 + np.sum((reg_acc @ x) ** 2))
+
+
+def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, body: BodyModel, mover: RootMover,
+                     q_base: np.ndarray, foot_tolerance: float = 0.0006) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame bounds on δ. Roll about a pivot between the hips lifts one hip and lowers
+    the other, yaw moves them fore and aft; where both feet bear weight and the legs may
+    only turn at the thigh (a skeleton), roll and yaw are bounded so that the feet move
+    less than ``foot_tolerance``."""
+    hi = np.tile(np.radians(limits.max_rotation_deg), (len(w), 1))
+    if not body.correction.full_foot_pose:
+        import pinocchio as pin
+
+        data = body.model.createData()
+        hips = body.correction.hips
+        for k in range(len(w)):
+            both = 2 * min(w[k], 1 - w[k])  # 0 in single support, 1 in double support
+            if both < 1e-9:
+                continue
+            pin.framesForwardKinematics(body.model, data, q_base[k])
+            half = 0.5 * np.linalg.norm(data.oMf[hips["left"]].translation - data.oMf[hips["right"]].translation)
+            hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], foot_tolerance / (half * both))
+    return -hi.ravel(), hi.ravel()
+
+
+def rate_limit(delta: np.ndarray, max_step: float) -> tuple[np.ndarray, list[int]]:
+    """Project ``delta`` (F, 3) so no frame-to-frame step exceeds ``max_step`` (rad),
+    moving values toward zero; returns the result and the frames changed."""
+    out = delta.copy()
+    changed = set()
+    for _ in range(len(out)):
+        moved = False
+        for k in range(1, len(out)):
+            step = out[k] - out[k - 1]
+            bad = np.abs(step) > max_step + 1e-12
+            if bad.any():
+                # shrink the larger-magnitude end toward the other
+                for a in np.nonzero(bad)[0]:
+                    hi = k if abs(out[k, a]) > abs(out[k - 1, a]) else k - 1
+                    lo = k - 1 if hi == k else k
+                    out[hi, a] = out[lo, a] + np.sign(out[hi, a] - out[lo, a]) * max_step
+                    changed.add(hi)
+                moved = True
+        if not moved:
+            break
+    return out, sorted(changed)
+
+
+def apply_delta(mover: RootMover, body: BodyModel, frames: np.ndarray, delta: np.ndarray,
+                w: np.ndarray) -> np.ndarray:
+    """Corrected raw channels (F, nq): only the root and leg correction channels change."""
+    out = frames.copy()
+    cols = _changed_channels(body)
+    for k in range(len(frames)):
+        if np.any(delta[k]):
+            q = mover.apply(body.channels_to_q(frames[k]), delta[k], w[k])
+            out[k, cols] = q[cols] / body.channel_scale[cols]
+    return out
+
+
+def _changed_channels(body: BodyModel) -> list[int]:
+    corr = body.correction
+    return sorted(set(corr.root_channels) | {c for cols in corr.legs.values() for c in cols})
+
+
+def foot_displacement(body: BodyModel, a: np.ndarray, b: np.ndarray, stance: list[str]) -> dict[str, float]:
+    """Largest world displacement (m) of the foot frames between two takes of raw channels,
+    split into feet in stance (per the support labels) and feet in swing."""
+    data_a, data_b = body.model.createData(), body.model.createData()
+    import pinocchio as pin
+
+    worst = {"stance": 0.0, "swing": 0.0}
+    for k in range(len(a)):
+        pin.framesForwardKinematics(body.model, data_a, body.channels_to_q(a[k]))
+        pin.framesForwardKinematics(body.model, data_b, body.channels_to_q(b[k]))
+        for side, frames in body.correction.foot_frames.items():
+            d = max(np.linalg.norm(data_a.oMf[f].translation - data_b.oMf[f].translation) for f in frames)
+            key = "stance" if stance[k] in (side, "double") else "swing"
+            worst[key] = max(worst[key], float(d))
+    return worst
+
+
+def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
+                   limits: CorrectionLimits | None = None, nominal_dt: float | None = None) -> CorrectionResult:
+    """Correct a whole take (raw channels ``frames`` (F, nq) at ``times``); see module docstring."""
+    limits = limits or CorrectionLimits()
+    t0 = time.perf_counter()
+    dt = nominal_dt or float(np.median(np.diff(times)))
+
+    def analyse(fr: np.ndarray) -> list[FrameResult]:
+        return Pipeline(body, config, dt).run(times, fr)
+
+    before = analyse(frames)
+    f = len(frames)
+    pipe = Pipeline(body, config, dt)
+    model = pipe.model
+    mover = RootMover(body)
+    changed = _changed_channels(body)
+    w = stance_weights(before, max(1, round(0.1 / dt)))
+    est = estimator_matrices(pipe, times, edge=3 * pipe.estimator.config.window + pipe.estimator.lag)
+    lin = _Linearisation(model, mover, changed, est)
+    q_base = np.array([body.channels_to_q(fr) for fr in frames])
+    reg_size = sp.eye(3 * f, format="csr") / np.radians(limits.rotation_scale_deg)
+    reg_acc = _second_difference(f, dt) / np.radians(limits.accel_scale_deg_s2)
+    cjac = lin.channel_jacobians(q_base, np.zeros((f, 3)), w)
+    bounds = _rotation_bounds(limits, w, body, mover, q_base)
+    delta = np.zeros((f, 3))
+    current = before
+    cost = _cost(current, delta, limits, reg_size, reg_acc)
+    history = []
+    mu = 1.0
+    for _ in range(limits.iterations):
+        judged = [k for k, r in enumerate(current) if r.margin is not None]
+        if not any(_target(current[k], limits.margin_m) is not None for k in judged):
+            break
+        jall = (lin.matrix(current, judged, cjac) / limits.zmp_tolerance_m).tocsr()
+        zall = np.array([current[k].zmp[:2] for k in judged])
+        accepted = False
+        for _attempt in range(5):  # Levenberg-Marquardt: damp the step until the exact cost drops
+            cand = _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_acc, bounds, dt)
+            corrected = apply_delta(mover, body, frames, cand, w)
+            trial = analyse(corrected)
+            trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)
+            if trial_cost < cost:
+                delta, current, cost, accepted = cand, trial, trial_cost, True
+                mu = max(mu / 3, 1e-3)
+                break
+            mu *= 4
+        history.append(sum(1 for r in current if r.inside is False))
+        if not accepted or history[-1] == 0:
+            break
+    delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt)
+    corrected = apply_delta(mover, body, frames, delta, w)
+    after = analyse(corrected)
+    solver_s = time.perf_counter() - t0
+    feet = foot_displacement(body, frames, corrected, [r.support for r in before])
+    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history)
+
+
+def seed_grid_search(body: BodyModel, config: PipelineConfig, results: list[FrameResult], frames_idx: list[int],
+                     step_deg: float = 0.5, limits: CorrectionLimits | None = None) -> dict[int, np.ndarray]:
+    """The seed paper's search, as a baseline: for each frame in ``frames_idx`` that is
+    outside, try root rotations on a fixed grid (``step_deg``; roll and pitch, in square
+    shells of growing size) holding the frame's velocities and accelerations, and keep
+    the smallest that puts the ZMP inside. Returns δ (rad) per frame; frames where no
+    grid point within the limits works are left out."""
+    limits = limits or CorrectionLimits()
+    model = body.model if config.mode == "full" else body.point_model
+    data = model.createData()
+    mover = RootMover(body)
+    w = stance_weights(results, 1)
+    n = [int(limits.max_rotation_deg[a] / step_deg) for a in range(2)]
+    out: dict[int, np.ndarray] = {}
+    for k in frames_idx:
+        r = results[k]
+        if r.inside is not False:
+            continue
+        found = None
+        for shell in range(1, max(n) + 1):
+            best = None
+            for i in range(-min(shell, n[0]), min(shell, n[0]) + 1):
+                for j in range(-min(shell, n[1]), min(shell, n[1]) + 1):
+                    if max(abs(i), abs(j)) != shell:
+                        continue
+                    d = np.radians([i * step_deg, j * step_deg, 0.0])
+                    q = mover.apply(r.q, d, w[k])
+                    z = compute_zmp(model, data, q, r.v, r.a, r.ground_z).zmp
+                    if z is not None and clamp_to_polygon(z[:2], r.polygon).inside:
+                        if best is None or np.linalg.norm(d) < np.linalg.norm(best):
+                            best = d
+            if best is not None:
+                found = best
+                break
+        if found is not None:
+            out[k] = found
+    return out

@@ -1,0 +1,129 @@
+"""Rotate a body's root (pelvis / floating base) about a pivot while the feet stay put.
+
+``RootMover.apply(q, delta, w_left)`` turns a root rotation offset ``delta`` (a rotation
+vector in the internal world frame, rad: roll about x, pitch about y, yaw about z) into
+new channel values: the root rotates about a pivot between the hip joint centres
+(``w_left`` = weight of the left hip: 1 in left stance, 0 in right stance, ½ in double
+support, so the stance leg's hip does not move), its channels are re-solved from the new
+pose, and each leg's correction channels are re-solved (damped Gauss-Newton) so that its
+foot frames keep their world placement. For a robot with six-joint legs this is exact;
+for a skeleton whose legs may only turn at the thigh, the stance foot is exact and a
+swing foot keeps its place to the extent the thigh alone allows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from livezmp.body import BodyModel
+
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+@dataclass
+class _RootChain:
+    first_joint: int  # pinocchio joint id of the first root channel
+    trans_q: list[int]
+    trans_axes: list[int]
+    rot_q: list[int]
+    rot_seq: str  # intrinsic Euler sequence, e.g. "ZXY"
+
+
+def _root_chain(body: BodyModel) -> _RootChain:
+    model = body.model
+    chain = _RootChain(0, [], [], [], "")
+    for qi in body.correction.root_channels:
+        jid = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == qi)
+        if not chain.first_joint:
+            chain.first_joint = jid
+        kind = model.joints[jid].shortname().replace("JointModel", "")
+        if kind[0] == "P":
+            chain.trans_q.append(qi)
+            chain.trans_axes.append(_AXIS[kind[1]])
+        else:
+            chain.rot_q.append(qi)
+            chain.rot_seq += kind[1]
+    return chain
+
+
+class RootMover:
+    """Applies root rotation offsets to configurations of ``body`` (see module docstring)."""
+
+    def __init__(self, body: BodyModel, ik_iterations: int = 6, ik_tolerance: float = 1e-7):
+        self.body = body
+        self.model = body.model
+        self.data = body.model.createData()
+        self.chain = _root_chain(body)
+        self.ik_iterations = ik_iterations
+        self.ik_tolerance = ik_tolerance
+        self.last_foot_error = 0.0
+
+    def _fk(self, q: np.ndarray) -> None:
+        pin.framesForwardKinematics(self.model, self.data, q)
+
+    def _root_parent(self) -> pin.SE3:
+        j = self.chain.first_joint
+        return self.data.oMi[self.model.parents[j]] * self.model.jointPlacements[j]
+
+    def set_root_pose(self, q: np.ndarray, pose: pin.SE3) -> None:
+        """Write the root channels of ``q`` (in place) so that the root frame has ``pose``;
+        ``q`` must be the configuration of the last forward-kinematics call."""
+        local = self._root_parent().actInv(pose)
+        c = self.chain
+        for qi, ax in zip(c.trans_q, c.trans_axes, strict=True):
+            q[qi] = local.translation[ax]
+        angles = Rotation.from_matrix(local.rotation).as_euler(c.rot_seq)
+        old = q[c.rot_q]
+        q[c.rot_q] = old + (angles - old + np.pi) % (2 * np.pi) - np.pi  # nearest to the old values
+
+    def foot_targets(self) -> dict[str, list[pin.SE3]]:
+        return {s: [self.data.oMf[f].copy() for f in fs] for s, fs in self.body.correction.foot_frames.items()}
+
+    def apply(self, q: np.ndarray, delta: np.ndarray, w_left: float) -> np.ndarray:
+        """New configuration for root rotation offset ``delta`` (rad, world axes) about the
+        pivot ``w_left`` · left hip + (1 − w_left) · right hip; feet kept in place."""
+        q_new = np.array(q, dtype=float)
+        self._fk(q_new)
+        corr = self.body.correction
+        targets = self.foot_targets()
+        pivot = w_left * self.data.oMf[corr.hips["left"]].translation \
+            + (1.0 - w_left) * self.data.oMf[corr.hips["right"]].translation
+        root = self.data.oMf[corr.root_frame_id]
+        r = pin.exp3(np.asarray(delta, dtype=float))
+        new_root = pin.SE3(r @ root.rotation, pivot + r @ (root.translation - pivot))
+        self.set_root_pose(q_new, new_root)
+        err = 0.0
+        for side, cols in corr.legs.items():
+            err = max(err, self._solve_leg(q_new, cols, corr.foot_frames[side], targets[side]))
+        self.last_foot_error = err
+        return q_new
+
+    def _residual(self, frames: list[int], targets: list[pin.SE3]) -> np.ndarray:
+        if self.body.correction.full_foot_pose:
+            return np.concatenate([pin.log6(self.data.oMf[f].actInv(t)).vector for f, t in zip(frames, targets,
+                                                                                                  strict=True)])
+        return np.concatenate([t.translation - self.data.oMf[f].translation for f, t in zip(frames, targets,
+                                                                                           strict=True)])
+
+    def _solve_leg(self, q: np.ndarray, cols: list[int], frames: list[int], targets: list[pin.SE3]) -> float:
+        """Damped Gauss-Newton on the leg's channels; returns the remaining position error (m)."""
+        full = self.body.correction.full_foot_pose
+        ref = pin.LOCAL if full else pin.LOCAL_WORLD_ALIGNED
+        for _ in range(self.ik_iterations):
+            pin.computeJointJacobians(self.model, self.data, q)
+            pin.updateFramePlacements(self.model, self.data)
+            e = self._residual(frames, targets)
+            if np.max(np.abs(e)) < self.ik_tolerance:
+                break
+            jac = np.vstack([pin.getFrameJacobian(self.model, self.data, f, ref)[: 6 if full else 3, cols]
+                             for f in frames])
+            q[cols] += np.linalg.solve(jac.T @ jac + 1e-9 * np.eye(len(cols)), jac.T @ e)
+        self._fk(q)
+        e = self._residual(frames, targets)
+        if full:
+            return float(max(np.linalg.norm(e[k:k + 3]) for k in range(0, len(e), 6)))
+        return float(max(np.linalg.norm(e[k:k + 3]) for k in range(0, len(e), 3)))
