@@ -25,7 +25,8 @@ Behaviour, as the e-manual describes the real servo:
   the Shutdown mask has the bit, torque goes off and cannot be switched on
   (result fail) until a reboot clears the error;
 * a servo only hears the host when the client's line speed matches its Baud
-  Rate register (when the line speed can be read from the pty).
+  Rate register (when the line speed can be read from the pty);
+* a write that changes the ID is acknowledged under the id it was sent to.
 
 Positions are ticks (4096 per revolution); the plant works in radians with
 ``ticks = zero_tick + rad * 4096 / 2pi`` (before Homing Offset and the Drive
@@ -76,8 +77,12 @@ TICKS_PER_RAD = ct.POSITION_TICKS_PER_REV / (2.0 * math.pi)
 STALL_CURRENT = 2.3  # A, XM430-W350 at 12 V: the current at full PWM when stalled
 IN_POSITION_TICKS = 20  # Moving Status bit 0 tolerance chosen for the simulator
 _CLEAR_KEY = b"\x01\x44\x58\x4c\x22"
-_LIVE = struct.Struct("<HBBhhiiii")  # Realtime Tick .. Position Trajectory, addresses 120-143
+# Realtime Tick .. Position Trajectory (addresses 120-143), refreshed from the plant for all servos at once
+_LIVE = np.dtype([("tick", "<u2"), ("moving", "u1"), ("moving_status", "u1"), ("pwm", "<i2"),
+                  ("current", "<i2"), ("velocity", "<i4"), ("position", "<i4"), ("velocity_trajectory", "<i4"),
+                  ("position_trajectory", "<i4")])
 _LIVE_START = 120
+_LIVE_END = _LIVE_START + _LIVE.itemsize
 _PING = struct.Struct("<HB")
 _ADDRESS_LENGTH = struct.Struct("<HH")
 _RESET_KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}  # factory reset option -> kept
@@ -96,15 +101,15 @@ class ChainStats:
 
 
 class _Servo:
-    __slots__ = ("id", "index", "table", "registered", "boot_time", "turn_offset", "baud")
+    __slots__ = ("id", "index", "table", "registered", "turn_offset", "baud")
 
-    def __init__(self, dxl_id: int, index: int, now: float) -> None:
+    def __init__(self, dxl_id: int, index: int, table: memoryview) -> None:
         self.id = dxl_id
         self.index = index  # servo position in the chain = joint index in the plant
-        self.table = ct.initial_table()
+        self.table = table  # this servo's row of the chain's control-table memory
+        self.table[:] = ct.initial_table()
         self.table[7] = dxl_id
         self.registered: tuple[int, bytes] | None = None
-        self.boot_time = now
         self.turn_offset = 0
         self.baud = ct.BAUD_RATES[self.table[8]]
 
@@ -127,6 +132,7 @@ class DynamixelChain:
     ``baud_rate`` (bit/s) sets every servo's Baud Rate register; ``settings`` maps
     control-table field names to values written to every servo at start (e.g.
     ``{"return_delay_time": 0}``); ``faults`` is a fault spec (see `faults`).
+    Bad arguments raise ValueError, an unknown field name KeyError, naming it.
     """
 
     def __init__(self, ids: Sequence[int], plant: JointPlant | None = None, *, faults: str | FaultSpec = "",
@@ -149,13 +155,23 @@ class DynamixelChain:
         self._lock = threading.Lock()
         self._zero = zero_tick
         self._emulate_wire = emulate_wire_time
+        self._bus_free = -math.inf  # with wire time: when the bus is next idle (monotonic s)
         now = time.monotonic()
         self._plant_time = now
         self._last_packet = now
         self._refreshed_at = -math.inf
-        self._servos = [_Servo(dxl_id, index, now) for index, dxl_id in enumerate(ids)]
-        self._by_id = {servo.id: servo for servo in self._servos}
-        self._joints = np.arange(len(ids))
+        # One bytearray holds every servo's table (a memoryview row each) so that a numpy view can
+        # refresh the plant-driven registers of all servos in one assignment.
+        memory = bytearray(len(ids) * ct.TABLE_SIZE)
+        self._tables = np.frombuffer(memory, dtype=np.uint8).reshape(len(ids), ct.TABLE_SIZE)
+        rows = memoryview(memory)
+        self._servos = [_Servo(dxl_id, index, rows[index * ct.TABLE_SIZE: (index + 1) * ct.TABLE_SIZE])
+                        for index, dxl_id in enumerate(ids)]
+        self._by_id: dict[int, _Servo] = {}
+        self._hearing_line: int | None = -1
+        self._hearing_map: dict[int, _Servo] = {}
+        self._readdress()
+        self._boot = np.full(len(ids), now)
         self._sign = np.ones(len(ids))
         self._offset = np.zeros(len(ids))
         self._threshold = np.zeros(len(ids))
@@ -296,21 +312,31 @@ class DynamixelChain:
             entries = [] if servo is None else self._status(servo, ErrorCode.INSTRUCTION, level=2)
         else:
             entries = handler(packet, now, line)
-        return self._schedule(now, packet.size, entries) if entries else []
+        return self._schedule(now, packet.size, entries)
 
-    def _hears(self, servo: _Servo, line: int | None) -> bool:
-        if line is None or servo.baud == line:
-            return True
-        self.stats.unheard += 1
-        return False
+    def _readdress(self) -> None:
+        """Rebuild the id lookups after an id or baud-rate change."""
+        self._by_id = {servo.id: servo for servo in self._servos}
+        self._hearing_line = -1
+
+    def _hearing(self, line: int | None) -> dict[int, _Servo]:
+        """Servos by id that can hear a host at line speed ``line`` (None: unknown, all)."""
+        if line != self._hearing_line:
+            self._hearing_line = line
+            self._hearing_map = {s.id: s for s in self._servos if line is None or s.baud == line}
+        return self._hearing_map
 
     def _unicast(self, dxl_id: int, line: int | None) -> _Servo | None:
-        servo = self._by_id.get(dxl_id)
-        return servo if servo is not None and self._hears(servo, line) else None
+        servo = self._hearing(line).get(dxl_id)
+        if servo is None and dxl_id in self._by_id:
+            self.stats.unheard += 1
+        return servo
 
     def _targets(self, dxl_id: int, line: int | None) -> list[_Servo]:
         if dxl_id == BROADCAST_ID:
-            return [servo for servo in self._servos if self._hears(servo, line)]
+            hearing = self._hearing(line)
+            self.stats.unheard += len(self._servos) - len(hearing)
+            return list(hearing.values())
         servo = self._unicast(dxl_id, line)
         return [] if servo is None else [servo]
 
@@ -329,11 +355,16 @@ class DynamixelChain:
         return [(servo.return_delay, encode_status(reply_id, self._error(servo, code), params))]
 
     def _schedule(self, now: float, instruction_size: int, entries: list[tuple[float, bytes]]) -> list[Reply]:
-        """Due times for replies sent one after the other, each after its delay; faults applied."""
+        """Due times for replies sent one after the other, each after its delay; faults applied.
+
+        With wire time, the instruction starts once the bus is free (after earlier instructions and
+        replies) and every byte takes 10 bit times.
+        """
+        t = now
         byte_time = 0.0
         if self._emulate_wire:
             byte_time = 10.0 / (self._port.line_speed() or self._servos[0].baud)
-        t = now + instruction_size * byte_time
+            t = max(now, self._bus_free) + instruction_size * byte_time
         replies = []
         for delay, payload in entries:
             t += delay + len(payload) * byte_time
@@ -343,6 +374,7 @@ class DynamixelChain:
             if corrupt:  # error, parameters or CRC: the client's CRC check catches it
                 payload = self._faults.corrupt(payload, 8, len(payload))
             replies.append((t + extra, payload))
+        self._bus_free = t
         self.stats.replies += len(replies)
         return replies
 
@@ -416,7 +448,6 @@ class DynamixelChain:
                 for name, value in keep.items():
                     servo.put(name, value)
                 self._restart(servo, now)
-        self._by_id = {servo.id: servo for servo in self._servos}
         return entries
 
     def _reboot_instruction(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -473,9 +504,13 @@ class DynamixelChain:
         entries = []
         segments = []
         delay = 0.0
+        hearing = self._hearing(line)
         for dxl_id, address, length in requests:
-            servo = self._unicast(dxl_id, line)
-            if servo is None or servo.table[68] < 1:
+            servo = hearing.get(dxl_id)
+            if servo is None:
+                self.stats.unheard += dxl_id in self._by_id
+                continue
+            if servo.table[68] < 1:
                 continue
             code, data = self._read(servo, address, length)
             if fast:
@@ -496,10 +531,13 @@ class DynamixelChain:
         if length == 0 or (len(params) - 4) % stride:
             return []
         head = params[:2]
+        hearing = self._hearing(line)
         for i in range(4, len(params), stride):
-            servo = self._unicast(params[i], line)
+            servo = hearing.get(params[i])
             if servo is not None:
                 self._write(servo, head + params[i + 1: i + stride], now)
+            else:
+                self.stats.unheard += params[i] in self._by_id
         return []
 
     def _bulk_write(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -603,9 +641,10 @@ class DynamixelChain:
             self._remap(servo)
         elif name == "baud_rate":
             servo.baud = ct.BAUD_RATES[servo.table[8]]
+            self._readdress()
         elif name == "id":
             servo.id = servo.table[7]
-            self._by_id = {s.id: s for s in self._servos}
+            self._readdress()
         if name in ("homing_offset", "drive_mode", "moving_threshold", "goal_position"):
             self._refreshed_at = -math.inf
 
@@ -659,29 +698,33 @@ class DynamixelChain:
             return
         self._refreshed_at = now
         plant = self.plant
-        joints = self._joints
+        n = len(self._servos)
         sign = self._sign
-        position = np.rint(self._zero + sign * plant.position[joints] * TICKS_PER_RAD + self._offset)
-        velocity = np.rint(sign * plant.velocity[joints] / ct.VELOCITY_UNIT)
-        current = sign * plant.current[joints]
-        pwm = np.clip(np.rint(current / STALL_CURRENT * ct.PWM_FULL_SCALE), -ct.PWM_FULL_SCALE, ct.PWM_FULL_SCALE)
-        current = np.clip(np.rint(current / ct.CURRENT_UNIT), -32768, 32767)
+        live = np.empty(n, dtype=_LIVE)
+        position = np.rint(self._zero + sign * plant.position[:n] * TICKS_PER_RAD + self._offset)
+        velocity = np.rint(sign * plant.velocity[:n] / ct.VELOCITY_UNIT)
+        current = sign * plant.current[:n]
         moving = np.abs(velocity) > self._threshold
-        in_position = (np.abs(self._goal - position) <= IN_POSITION_TICKS) & ~moving
-        rows = zip(self._servos, position.astype(np.int64).tolist(), velocity.astype(np.int64).tolist(),
-                   current.astype(np.int64).tolist(), pwm.astype(np.int64).tolist(), moving.tolist(),
-                   in_position.tolist(), self._goal.astype(np.int64).tolist(), strict=True)
-        for servo, pos, vel, cur, duty, mov, arrived, goal in rows:
-            tick = int((now - servo.boot_time) * 1000.0) % 32768
-            _LIVE.pack_into(servo.table, _LIVE_START, tick, mov, arrived, duty, cur, vel, pos, vel, goal)
+        live["tick"] = ((now - self._boot) * 1000.0).astype(np.int64) % 32768
+        live["moving"] = moving
+        live["moving_status"] = (np.abs(self._goal - position) <= IN_POSITION_TICKS) & ~moving
+        live["pwm"] = np.clip(np.rint(current * (ct.PWM_FULL_SCALE / STALL_CURRENT)), -ct.PWM_FULL_SCALE,
+                              ct.PWM_FULL_SCALE)
+        live["current"] = np.clip(np.rint(current / ct.CURRENT_UNIT), -32768, 32767)
+        live["velocity"] = velocity
+        live["position"] = position
+        live["velocity_trajectory"] = velocity
+        live["position_trajectory"] = self._goal
+        self._tables[:, _LIVE_START:_LIVE_END] = live.view(np.uint8).reshape(n, _LIVE.itemsize)
 
     def _restart(self, servo: _Servo, now: float) -> None:
         """State after power-up with the table already reset: torque off, errors and registrations cleared."""
         servo.registered = None
         servo.turn_offset = 0
-        servo.boot_time = now
+        self._boot[servo.index] = now
         servo.id = servo.table[7]
         servo.baud = ct.BAUD_RATES[servo.table[8]]
+        self._readdress()
         self.plant.set_torque(servo.index, False)
         self._remap(servo)
         self._hold_present(servo, now)

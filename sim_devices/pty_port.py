@@ -31,6 +31,7 @@ import termios
 import threading
 import time
 import tty
+import weakref
 from collections.abc import Iterable
 from typing import Protocol
 
@@ -72,6 +73,8 @@ class PtyPort:
     def __init__(self, device: ByteDevice, name: str = "ttySIM") -> None:
         self._device = device
         self._dir = tempfile.mkdtemp(prefix="livezmp-pty-")
+        # Remove the directory at exit even if close() is never called.
+        self._cleanup = weakref.finalize(self, shutil.rmtree, self._dir, ignore_errors=True)
         self.path = os.path.join(self._dir, name)
         self._lock = threading.RLock()
         self._wake_r, self._wake_w = os.pipe()
@@ -136,7 +139,7 @@ class PtyPort:
         self.vanish()
         os.close(self._wake_r)
         os.close(self._wake_w)
-        shutil.rmtree(self._dir, ignore_errors=True)
+        self._cleanup()
         if self.error is not None:
             raise RuntimeError(f"simulated device on {self.path} failed: {self.error!r}") from self.error
 

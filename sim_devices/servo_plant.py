@@ -117,23 +117,30 @@ class ServoPlant:
             self._substep(h)
 
     def _substep(self, h: float) -> None:
+        # ufuncs with out= rather than np.clip/np.where: this runs per packet, on small arrays.
         on = self.torque_on
         velocity = self.velocity
         # Torque on: the average velocity that makes this step exactly first-order, then limits.
-        track = (self.goal - self.position) * (-np.expm1(-h / self.tau) / h)
-        track = np.clip(track, -self.max_velocity, self.max_velocity)
+        driven = self.goal - self.position
+        driven *= -np.expm1(-h / self.tau) / h
+        np.minimum(driven, self.max_velocity, out=driven)
+        np.maximum(driven, -self.max_velocity, out=driven)
         dv = self.max_acceleration * h
-        driven = np.clip(track, velocity - dv, velocity + dv)
+        np.minimum(driven, velocity + dv, out=driven)
+        np.maximum(driven, velocity - dv, out=driven)
         # Torque off: exact integral of an exponentially decaying velocity.
         decay = np.exp(-h / self.coast_time_constant)
-        coast_shift = velocity * self.coast_time_constant * (1.0 - decay)
         new_velocity = np.where(on, driven, velocity * decay)
-        position = self.position + np.where(on, driven * h, coast_shift)
-        clipped = np.clip(position, self.lower, self.upper)
+        shift = np.where(on, driven * h, velocity * self.coast_time_constant * (1.0 - decay))
+        position = self.position + shift
+        clipped = np.minimum(np.maximum(position, self.lower), self.upper)
         new_velocity[clipped != position] = 0.0
-        acceleration = (new_velocity - velocity) / h
-        torque = self.inertia * acceleration + self.damping * new_velocity + self.external_torque
+        torque = (new_velocity - velocity) * (self.inertia / h)
+        torque += self.damping * new_velocity
+        torque += self.external_torque
+        torque /= self.torque_constant
+        torque[~on] = 0.0
         # In place, so arrays handed out earlier stay live views of the state.
-        np.copyto(self.current, np.where(on, torque / self.torque_constant, 0.0))
-        np.copyto(self.position, clipped)
-        np.copyto(self.velocity, new_velocity)
+        self.current[:] = torque
+        self.position[:] = clipped
+        self.velocity[:] = new_velocity

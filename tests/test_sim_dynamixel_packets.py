@@ -315,8 +315,8 @@ def test_encoded_packets_match_dynamixel_sdk_and_read_back(packet_id, instructio
     packet = encode_packet(packet_id, instruction, params)
     assert packet == sdk_packet(packet_id, instruction, params)
     assert unstuff(stuff(params)) == params
-    unstuffed = SDK.removeStuffing(list(packet))
-    assert bytes(unstuffed[8: 8 + len(params)]) == params
+    # (dynamixel-sdk 4.1's removeStuffing is not an oracle: it edits in place and mis-decodes e.g.
+    # FF FF FD FF FD FD, so the read-back is checked against the original parameters.)
     reader = PacketReader()
     received = [p for i in range(len(packet)) for p in reader.feed(packet[i: i + 1], 0.0)]
     assert [(p.id, p.instruction, p.params, p.crc_ok) for p in received] == [

@@ -233,13 +233,19 @@ def test_wire_time_emulation_makes_sync_read_take_bus_time():
     with DynamixelChain(IDS, settings={"return_delay_time": 0}, emulate_wire_time=True) as chain:
         port = PortHandler(chain.path)
         assert port.openPort()
-        reader = GroupSyncRead(port, PacketHandler(2.0), PRESENT_POSITION, 4)
+        ph = PacketHandler(2.0)
+        reader = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
         for dxl_id in IDS:
             reader.addParam(dxl_id)
         start = time.perf_counter()
         assert reader.txRxPacket() == COMM_SUCCESS
         # 34-byte instruction + 20 x 15-byte replies, 10 bits per byte at 1 Mbps.
         assert time.perf_counter() - start >= (34 + 20 * 15) * 10e-6
+        start = time.perf_counter()
+        assert sync_write(port, ph, GOAL_POSITION, 4, dict.fromkeys(IDS, 2048)) == COMM_SUCCESS  # no wait
+        assert reader.txRxPacket() == COMM_SUCCESS
+        # The read waits for the 114-byte sync write to clear the bus first.
+        assert time.perf_counter() - start >= (114 + 34 + 20 * 15) * 10e-6
         port.closePort()
 
 
@@ -249,3 +255,15 @@ def test_changing_the_id_register_readdresses_the_servo(rig):
     assert ph.write1ByteTxRx(port, 20, 7, 30) == (COMM_SUCCESS, 0)
     assert ph.ping(port, 30) == (1020, COMM_SUCCESS, 0)
     assert ph.ping(port, 20)[1] == COMM_RX_TIMEOUT
+
+
+@pytest.mark.parametrize(("kwargs", "error", "message"), [
+    ({"ids": [1, 1]}, ValueError, "ids must be distinct integers in 0..252"),
+    ({"ids": [1], "baud_rate": 12345}, ValueError, "baud_rate 12345 is not an XM430 rate"),
+    ({"ids": [1], "settings": {"return_dalay_time": 0}}, KeyError, "no control-table field 'return_dalay_time'"),
+    ({"ids": [1], "settings": {"led": 300}}, ValueError, "field 'led': value 300 does not fit 1 byte"),
+    ({"ids": [1, 2], "plant": ServoPlant(1)}, ValueError, "plant has 1 joints for 2 servos"),
+])
+def test_construction_errors_name_the_problem(kwargs, error, message):
+    with pytest.raises(error, match=message):
+        DynamixelChain(**kwargs)

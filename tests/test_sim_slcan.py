@@ -211,3 +211,17 @@ def test_adapter_vanishes_and_comes_back_power_cycled():
         assert [bytes(m.data) for m in receive(bus, 1)] == [b"\x07"]
         bus.shutdown()
         assert adapter.fault_counters.vanishes == 1
+
+
+def test_delayed_frames_arrive_late_but_intact():
+    with SlcanAdapter([EchoNode(0x100, 0x101)], faults="delay=1:30ms") as adapter:
+        raw = Raw(adapter.path)
+        raw("S8", 1)
+        raw("O", 1)
+        raw.port.write(b"t1001AA\r")
+        start = time.monotonic()
+        assert raw.port.read(2) == b"z\r"  # the acknowledgement is not a frame: not delayed
+        assert raw.port.read(9) == b"t1011AA\r"
+        assert time.monotonic() - start >= 0.03
+        assert adapter.fault_counters.delayed == 1
+        raw.close()
