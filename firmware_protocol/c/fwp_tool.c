@@ -1,7 +1,7 @@
 /*
  * fwp_tool.c - command-line companion of the C reference (host-side tool, uses stdio and time.h).
  *
- *   fwp_tool info                     schema hash, limits and per-message CRC seeds as JSON
+ *   fwp_tool info                     schema hash, limits, CRC check value and per-message seeds (JSON)
  *   fwp_tool serial host|board|any    hex byte stream on stdin -> one JSON line per delivered message
  *                                     (with the frame the C encoder makes of it), then the error counters
  *   fwp_tool can host|node [NODE...]  CAN frames on stdin, one per line: "X <id> <data>" (extended),
@@ -273,8 +273,10 @@ static int run_info(void)
     static const uint8_t ids[] = {0x01, 0x02, 0x08, 0x09, 0x0a, 0x0b, 0x10, 0x11, 0x12, 0x18, 0x19, 0x1a, 0x1b,
                                   0x20, 0x21};
     unsigned i;
-    printf("{\"schema_hash\":%llu,\"version\":%u,\"max_payload\":%u,\"max_encoded\":%u,\"seeds\":{",
-           (unsigned long long)FWP_SCHEMA_HASH, FWP_PROTOCOL_VERSION, FWP_MAX_PAYLOAD, (unsigned)FWP_MAX_ENCODED);
+    static const uint8_t check[] = "123456789";
+    printf("{\"schema_hash\":%llu,\"version\":%u,\"max_payload\":%u,\"max_encoded\":%u,\"crc_check\":%lu,"
+           "\"seeds\":{", (unsigned long long)FWP_SCHEMA_HASH, FWP_PROTOCOL_VERSION, FWP_MAX_PAYLOAD,
+           (unsigned)FWP_MAX_ENCODED, (unsigned long)fwp_crc32(0, check, 9));
     for (i = 0; i < sizeof ids; i++) {
         const fwp_msg_info_t *m = fwp_msg_info(ids[i]);
         printf("%s\"%s\":[%u,\"%c\",%lu]", i ? "," : "", m->name, m->msg_id, m->direction, (unsigned long)m->seed);
