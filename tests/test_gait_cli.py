@@ -1,4 +1,9 @@
-"""`livezmp gait analyze | synth | compare` end to end on files, in process."""
+"""`livezmp gait analyze | synth | compare` end to end on files, in process (through
+`add_gait_commands` on a local parser: the `livezmp` command does not register `gait` yet)
+and once as a subprocess."""
+
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -144,3 +149,13 @@ def test_an_unmatched_skeleton_in_the_set_names_the_file(takes, tmp_path, capsys
     assert main(["gait", "analyze", str(d), "--pattern", r"p(?P<subject>\d+)_(?P<condition>\w+)\.bvh",
                  "--base", "normal", "--variant", "fast=fast", "--out", str(tmp_path / "o")]) == 2
     assert "p04_fast.bvh: skeleton does not match" in one_line_error(capsys)
+
+
+def test_runs_as_a_subprocess(takes):
+    r = subprocess.run([sys.executable, "-m", "livezmp.gait.cli", "gait", "compare", str(takes / "p01_normal.bvh"),
+                        str(takes / "p01_normal.bvh")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert last_number(r.stdout) == 0.0
+    r = subprocess.run([sys.executable, "-m", "livezmp.gait.cli", "gait", "compare", str(takes / "missing.bvh"),
+                        str(takes / "p01_normal.bvh")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.strip().endswith("missing.bvh: cannot read: No such file or directory")
