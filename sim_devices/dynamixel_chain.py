@@ -197,9 +197,10 @@ class DynamixelChain:
         config = {"baud_rate": _BAUD_CODES[baud_rate], **(settings or {})}
         for servo in self._servos:
             self._remap(servo)
-            self._hold_present(servo, now)
             for key, value in config.items():
                 self._poke(servo, key, value, now)
+            if "goal_position" not in config:  # the goal starts where the joint is
+                self._hold_present(servo, now)
         self._faults.start(now)
         self._port = PtyPort(self, name)  # last: its thread calls back into this object
 

@@ -86,7 +86,7 @@ class PtyPort:
         self._out = bytearray()
         self._unplug_requests: list[threading.Event] = []
         self._closed = False
-        self.error: BaseException | None = None
+        self.error: Exception | None = None
         self.dropped_output_bytes = 0
         self._open_pty()
         self._thread = threading.Thread(target=self._run, name=f"pty-{name}", daemon=True)

@@ -96,6 +96,7 @@ class SlcanAdapter:
     """An slcan adapter at :attr:`path` bridging the host to ``nodes`` (see module docstring).
 
     ``tick_period`` (s) is how often the nodes' ``tick`` runs while the channel is open.
+    Node methods run on the port thread; give all nodes at construction.
     """
 
     def __init__(self, nodes: Sequence[CanNode] = (), *, faults: str | FaultSpec = "",
@@ -128,10 +129,12 @@ class SlcanAdapter:
 
     @property
     def port(self) -> PtyPort:
+        """The pty port, e.g. to `PtyPort.vanish` / `PtyPort.restore` by hand."""
         return self._port
 
     @property
     def fault_counters(self) -> FaultCounters:
+        """What the fault injector actually injected so far."""
         return self._faults.counters
 
     @property
@@ -140,6 +143,7 @@ class SlcanAdapter:
         return self._open
 
     def close(self) -> None:
+        """Stop serving and remove the device path."""
         self._port.close()
 
     def __enter__(self) -> SlcanAdapter:

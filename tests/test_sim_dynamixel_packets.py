@@ -167,7 +167,7 @@ def test_factory_reset_example_keeps_only_the_id(bus):
     assert chain.register(1, "id") == 1
     assert chain.register(1, "return_delay_time") == 250
     assert chain.register(1, "baud_rate") == 1  # factory 57600 bps: the 1 Mbps host no longer reaches it
-    assert exchange(ser, h("FF FF FD 00 01 03 00 01 19 4E"), 14) == b""
+    assert exchange(ser, h("FF FF FD 00 01 03 00 01 19 4E"), 0) == b""
 
 
 def test_clear_example_resets_the_multi_turn_count(bus):
