@@ -1,6 +1,5 @@
 """`livezmp gait analyze | synth | compare` end to end on files, in process (through
-`add_gait_commands` on a local parser: the `livezmp` command does not register `gait` yet)
-and once as a subprocess."""
+`add_gait_commands` on a local parser) and as a real `python -m livezmp gait` subprocess."""
 
 import subprocess
 import sys
@@ -152,10 +151,10 @@ def test_an_unmatched_skeleton_in_the_set_names_the_file(takes, tmp_path, capsys
 
 
 def test_runs_as_a_subprocess(takes):
-    r = subprocess.run([sys.executable, "-m", "livezmp.gait.cli", "gait", "compare", str(takes / "p01_normal.bvh"),
+    r = subprocess.run([sys.executable, "-m", "livezmp", "gait", "compare", str(takes / "p01_normal.bvh"),
                         str(takes / "p01_normal.bvh")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert last_number(r.stdout) == 0.0
-    r = subprocess.run([sys.executable, "-m", "livezmp.gait.cli", "gait", "compare", str(takes / "missing.bvh"),
+    r = subprocess.run([sys.executable, "-m", "livezmp", "gait", "compare", str(takes / "missing.bvh"),
                         str(takes / "p01_normal.bvh")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.strip().endswith("missing.bvh: cannot read: No such file or directory")

@@ -2,8 +2,7 @@
 
 :func:`add_gait_commands` registers the ``gait`` command on an argparse subparsers
 object; each leaf sets ``func(args) -> int``. :func:`main` runs the gait commands alone
-(argv-like list, in process; or ``python -m livezmp.gait.cli gait ...``), printing user
-errors as one line with exit code 2.
+(argv-like list, in process), printing user errors as one line with exit code 2.
 """
 
 from __future__ import annotations
@@ -186,7 +185,3 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as e:
         print(f"livezmp: error: {e}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())
