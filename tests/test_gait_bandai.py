@@ -9,7 +9,7 @@ import pytest
 from data_paths import BANDAI
 
 from livezmp.bvh import read_bvh, write_bvh
-from livezmp.gait.cli import main
+from livezmp.cli import main
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
 from livezmp.gait.population import analyze

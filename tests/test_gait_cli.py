@@ -1,5 +1,5 @@
-"""`livezmp gait analyze | synth | compare` end to end on files, in process (through
-`add_gait_commands` on a local parser) and as a real `python -m livezmp gait` subprocess."""
+"""`livezmp gait analyze | synth | compare` end to end on files, in process (the `livezmp`
+command's own `main`) and as a real `python -m livezmp gait` subprocess."""
 
 import subprocess
 import sys
@@ -10,7 +10,7 @@ from data_paths import OP3_URDF
 
 from livezmp.body_urdf import body_from_urdf
 from livezmp.bvh import read_bvh, write_bvh
-from livezmp.gait.cli import main
+from livezmp.cli import main
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
 from livezmp.gait.sinewalk import sine_bvh, sine_trajectory, walk_spec

@@ -1,14 +1,14 @@
 """``livezmp gait analyze | synth | compare``: the command-line front end of :mod:`livezmp.gait`.
 
 :func:`add_gait_commands` registers the ``gait`` command on an argparse subparsers
-object; each leaf sets ``func(args) -> int``. :func:`main` runs the gait commands alone
-(argv-like list, in process), printing user errors as one line with exit code 2.
+object (``livezmp.cli`` does); each leaf sets ``func(args) -> int`` and raises
+:class:`InputError` for user mistakes, which the ``livezmp`` command prints as one line
+with exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -173,15 +173,3 @@ def add_gait_commands(subparsers) -> argparse.ArgumentParser:
     _input_options(p)
     p.set_defaults(func=cmd_compare)
     return gait
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run ``gait ...`` in process (``argv`` without the program name, e.g. ["gait", "compare", ...])."""
-    parser = argparse.ArgumentParser(prog="livezmp")
-    add_gait_commands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except InputError as e:
-        print(f"livezmp: error: {e}", file=sys.stderr)
-        return 2
