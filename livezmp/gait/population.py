@@ -117,7 +117,7 @@ class GaitAnalysis:
             tags = [ChannelTag(**t) for t in d["tags"]]
             out = cls(d["base"], float(d["threshold_cv_percent"]), float(d["min_base_deg"]),
                       float(d["min_change_percent"]), tags, variants, d.get("takes", []))
-        except (KeyError, TypeError) as e:
+        except (KeyError, TypeError, ValueError) as e:
             raise InputError(f"{source}: malformed gait features file: {type(e).__name__} {e}") from None
         for v in out.variants:
             if len(v.dc) != len(tags) or len(v.amplitude) != len(tags):
