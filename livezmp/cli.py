@@ -6,14 +6,18 @@ from __future__ import annotations
 import argparse
 import sys
 
-from livezmp.analyze import add_analyze_command
+from livezmp.commands.analyze import add_analyze_command
+from livezmp.commands.correct import add_correct_command
 from livezmp.errors import InputError
+from livezmp.gait.cli import add_gait_commands
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="livezmp", description="Real-time balance monitor for humanoid motion.")
     sub = p.add_subparsers(dest="command", required=True)
     add_analyze_command(sub)
+    add_correct_command(sub)
+    add_gait_commands(sub)
     return p
 
 

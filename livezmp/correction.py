@@ -26,15 +26,17 @@ the frame's velocities and accelerations.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import lsq_linear
 
 from livezmp.body import BodyModel
+from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
+from livezmp.bvh import BvhMotion
 from livezmp.estimator import StreamingEstimator
-from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig
+from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
 from livezmp.root_motion import RootMover
 from livezmp.support import clamp_to_polygon
 from livezmp.zmp import compute_zmp
@@ -108,7 +110,7 @@ def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:
     return np.convolve(padded, kernel, mode="same")[pad:-pad]
 
 
-def _target(r: FrameResult, margin: float) -> np.ndarray | None:
+def zmp_target(r: FrameResult, margin: float) -> np.ndarray | None:
     """The ZMP target (2,) for a frame that is outside or within ``margin`` of the edge."""
     if r.zmp is None or r.margin is None or r.margin >= margin:
         return None
@@ -240,7 +242,7 @@ def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_ac
     to five rounds, so a correction neither trades one frame for another nor jerks."""
     f = len(delta)
     x0 = delta.ravel()
-    active = {i for i, k in enumerate(judged) if _target(current[k], limits.margin_m) is not None}
+    active = {i for i, k in enumerate(judged) if zmp_target(current[k], limits.margin_m) is not None}
     hold: dict[int, np.ndarray] = {}
     rate: dict[int, float] = {}  # flat index of δ_k,a (k ≥ 1) → signed step to hold
     max_step = np.radians(limits.max_rate_deg_s) * dt
@@ -249,7 +251,7 @@ def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_ac
     x = x0
     for _ in range(5):
         idx = sorted(active | set(hold))
-        tgt = np.array([_target(current[judged[i]], limits.margin_m) if i in active else hold[i] for i in idx])
+        tgt = np.array([zmp_target(current[judged[i]], limits.margin_m) if i in active else hold[i] for i in idx])
         rows = np.ravel([[2 * i, 2 * i + 1] for i in idx])
         jz = jall[rows]
         rhs = jz @ x0 - (zall[idx] - tgt).ravel() / limits.zmp_tolerance_m
@@ -397,7 +399,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     mu = 1.0
     for _ in range(limits.iterations):
         judged = [k for k, r in enumerate(current) if r.margin is not None]
-        if not any(_target(current[k], limits.margin_m) is not None for k in judged):
+        if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
             break
         jall = (lin.matrix(current, judged, cjac) / limits.zmp_tolerance_m).tocsr()
         zall = np.array([current[k].zmp[:2] for k in judged])
@@ -460,3 +462,13 @@ def seed_grid_search(body: BodyModel, config: PipelineConfig, results: list[Fram
         if found is not None:
             out[k] = found
     return out
+
+
+def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
+                limits: CorrectionLimits | None = None) -> BvhMotion:
+    """A balance-corrected copy of a BVH motion (same hierarchy, frame count and time)."""
+    body = body_from_bvh(motion, BvhBodyOptions(total_mass=total_mass))
+    times = np.arange(len(motion.frames)) * motion.frame_time
+    result = correct_motion(body, times, motion.frames, default_config(body, motion.fps, mode), limits,
+                            nominal_dt=motion.frame_time)
+    return replace(motion, frames=result.frames)

@@ -59,6 +59,15 @@ class FrameResult:
     margin: float | None = None
 
 
+def default_config(body: BodyModel, fps: float, mode: str = "full", ground_z: float | None = None) -> PipelineConfig:
+    """The configuration ``livezmp analyze`` uses: human or small-robot contact thresholds
+    by body kind, contacts debounced over about 1/60 s whatever the frame rate (one frame
+    at 30 Hz, two at 120 Hz); ``ground_z`` in the internal frame (m), None = detected."""
+    contacts = ContactConfig.small_robot() if body.kind == "urdf" else ContactConfig()
+    contacts = replace(contacts, min_frames=max(1, round(fps / 60)))
+    return PipelineConfig(mode=mode, contacts=contacts, ground_z=ground_z)
+
+
 class Pipeline:
     """Streaming balance analysis of one body. ``step`` costs the same at every frame."""
 

@@ -1,25 +1,18 @@
-"""`livezmp analyze`: run the per-frame pipeline over a motion file and write the results."""
+"""What the subcommands share: body options, loading the motion (or the demo), the
+pipeline configuration and running it."""
 
 from __future__ import annotations
 
 import argparse
-import sys
-from dataclasses import replace
 
 import numpy as np
 
 from livezmp.body_bvh import BvhBodyOptions
 from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
-from livezmp.contacts import ContactConfig
 from livezmp.demo import demo_robot_path, demo_trajectory
-from livezmp.errors import InputError
 from livezmp.motion_file import LoadedMotion, load_motion, trajectory_frames
-from livezmp.pipeline import Pipeline, PipelineConfig
-from livezmp.plot import plot_analysis
-from livezmp.report import summarize, write_json, write_zmp_csv
+from livezmp.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.segments import load_mapping
-
-PROGRESS_MIN_FRAMES = 5000
 
 
 def add_body_options(p: argparse.ArgumentParser) -> None:
@@ -50,16 +43,14 @@ def load_from_args(args: argparse.Namespace) -> LoadedMotion:
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
-    contacts = ContactConfig.small_robot() if loaded.body.kind == "urdf" else ContactConfig()
-    # debounce contacts over ~1/60 s whatever the frame rate (one frame at 30 Hz, two at 120 Hz)
-    contacts = replace(contacts, min_frames=max(1, round(loaded.fps / 60)))
-    cfg = PipelineConfig(mode=args.mode, contacts=contacts)
+    """:func:`default_config` with the command line's mode and ground height."""
+    ground = None
     if args.ground is not None:
         up = "xyz".index(loaded.body.up_axis)
         p = np.zeros(3)
         p[up] = args.ground
-        cfg = replace(cfg, ground_z=float((loaded.body.world_from_input @ p)[2]))
-    return cfg
+        ground = float((loaded.body.world_from_input @ p)[2])
+    return default_config(loaded.body, loaded.fps, args.mode, ground)
 
 
 def run_pipeline(loaded: LoadedMotion, cfg: PipelineConfig, progress: bool = False) -> list:
@@ -82,34 +73,3 @@ def run_pipeline(loaded: LoadedMotion, cfg: PipelineConfig, progress: bool = Fal
     return out + pipe.flush()
 
 
-def cmd_analyze(args: argparse.Namespace) -> int:
-    loaded = load_from_args(args)
-    if len(loaded.frames) < 2:
-        raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
-    cfg = pipeline_config(args, loaded)
-    show = len(loaded.frames) >= PROGRESS_MIN_FRAMES and sys.stderr.isatty()
-    results = run_pipeline(loaded, cfg, progress=show)
-    summary = {"source": loaded.source, **summarize(loaded.body, results, loaded.fps, cfg.mode)}
-    if args.out:
-        write_zmp_csv(loaded.body, results, args.out)
-    if args.summary_json:
-        write_json(summary, args.summary_json)
-    if args.plot:
-        plot_analysis(loaded.body, results, args.plot, title=f"{loaded.source} ({cfg.mode} ZMP)")
-    inside = summary["inside_fraction"]
-    print(f"{loaded.source}: {summary['frames']} frames at {summary['fps']:.1f} Hz, "
-          f"{summary['support_frames']} with support, {summary['flight_frames']} flight, "
-          f"{summary['out_of_support_frames']} out of support, inside "
-          f"{'n/a' if inside is None else f'{100 * inside:.1f} %'}, "
-          f"max excursion {1000 * summary['max_excursion_m']:.1f} mm")
-    return 0
-
-
-def add_analyze_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, or CSV + URDF)")
-    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot); default: built-in demo")
-    p.add_argument("--out", help="per-frame CSV (zmp.csv)")
-    p.add_argument("--summary-json", help="summary JSON")
-    p.add_argument("--plot", help="figure (PNG)")
-    add_body_options(p)
-    p.set_defaults(func=cmd_analyze)

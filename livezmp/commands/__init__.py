@@ -1,0 +1,1 @@
+"""The `livezmp` subcommands, one module each; :mod:`livezmp.cli` assembles them."""

@@ -1,0 +1,46 @@
+"""`livezmp analyze`: run the per-frame pipeline over a motion file and write the results."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from livezmp.commands.common import add_body_options, load_from_args, pipeline_config, run_pipeline
+from livezmp.errors import InputError
+from livezmp.plot import plot_analysis
+from livezmp.report import summarize, write_json, write_zmp_csv
+
+PROGRESS_MIN_FRAMES = 5000
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    loaded = load_from_args(args)
+    if len(loaded.frames) < 2:
+        raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
+    cfg = pipeline_config(args, loaded)
+    show = len(loaded.frames) >= PROGRESS_MIN_FRAMES and sys.stderr.isatty()
+    results = run_pipeline(loaded, cfg, progress=show)
+    summary = {"source": loaded.source, **summarize(loaded.body, results, loaded.fps, cfg.mode)}
+    if args.out:
+        write_zmp_csv(loaded.body, results, args.out)
+    if args.summary_json:
+        write_json(summary, args.summary_json)
+    if args.plot:
+        plot_analysis(loaded.body, results, args.plot, title=f"{loaded.source} ({cfg.mode} ZMP)")
+    inside = summary["inside_fraction"]
+    print(f"{loaded.source}: {summary['frames']} frames at {summary['fps']:.1f} Hz, "
+          f"{summary['support_frames']} with support, {summary['flight_frames']} flight, "
+          f"{summary['out_of_support_frames']} out of support, inside "
+          f"{'n/a' if inside is None else f'{100 * inside:.1f} %'}, "
+          f"max excursion {1000 * summary['max_excursion_m']:.1f} mm")
+    return 0
+
+
+def add_analyze_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, or CSV + URDF)")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot); default: built-in demo")
+    p.add_argument("--out", help="per-frame CSV (zmp.csv)")
+    p.add_argument("--summary-json", help="summary JSON")
+    p.add_argument("--plot", help="figure (PNG)")
+    add_body_options(p)
+    p.set_defaults(func=cmd_analyze)

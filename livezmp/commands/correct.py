@@ -1,0 +1,68 @@
+"""`livezmp correct`: balance-correct a motion file (BVH, or joint-trajectory CSV + URDF)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+from livezmp.bvh import write_bvh
+from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
+from livezmp.correction import CorrectionLimits, correct_motion
+from livezmp.errors import InputError
+from livezmp.report import write_json
+from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
+
+
+def add_limit_options(p: argparse.ArgumentParser) -> None:
+    d = CorrectionLimits()
+    p.add_argument("--max-rotation-deg", type=float, nargs=3, metavar=("ROLL", "PITCH", "YAW"),
+                   default=list(d.max_rotation_deg), help="largest root rotation per axis, degrees")
+    p.add_argument("--max-rate-deg-s", type=float, default=d.max_rate_deg_s, help="largest root rotation rate, deg/s")
+    p.add_argument("--margin-mm", type=float, default=1000 * d.margin_m,
+                   help="how far inside the support polygon to aim, mm")
+
+
+def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
+    if min(args.max_rotation_deg) <= 0 or args.max_rate_deg_s <= 0 or args.margin_mm < 0:
+        raise InputError("--max-rotation-deg and --max-rate-deg-s must be positive, --margin-mm not negative")
+    return replace(CorrectionLimits(), max_rotation_deg=tuple(args.max_rotation_deg),
+                   max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
+
+
+def cmd_correct(args: argparse.Namespace) -> int:
+    if args.motion is None:
+        raise InputError("correct: give a motion file (.bvh, or .csv with --robot)")
+    loaded = load_from_args(args)
+    cfg = pipeline_config(args, loaded)
+    result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
+                            nominal_dt=1.0 / loaded.fps)
+    if loaded.bvh is not None:
+        write_bvh(replace(loaded.bvh, frames=result.frames), args.output)
+    else:
+        traj = loaded.trajectory
+        q = loaded.body.channels_to_q(result.frames)
+        nb = len(loaded.body.base_channels)
+        base = None
+        if traj.base is not None:  # back to the CSV's (x, y, z, roll, pitch, yaw)
+            base = q[:, [0, 1, 2, 5, 4, 3]]
+        write_joint_csv(JointTrajectory(traj.t, q[:, nb:], traj.joint_names, base), args.output)
+    report = {"source": loaded.source, "output": args.output, "mode": cfg.mode, **result.report()}
+    if args.report:
+        write_json(report, args.report)
+    print(f"{loaded.source}: {report['out_of_support_before']} → {report['out_of_support_after']} of "
+          f"{report['support_frames']} support frames outside; root rotation max "
+          f"{report['max_root_rotation_deg']:.2f}°, rms {report['rms_root_rotation_deg']:.2f}°; stance feet moved "
+          f"≤ {report['max_foot_displacement_mm']:.3f} mm; wrote {args.output}")
+    if report["infeasible_frames"]:
+        print(f"not fully corrected within the limits: frames {report['infeasible_frames']}")
+    return 0
+
+
+def add_correct_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot)")
+    p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
+    p.add_argument("--report", help="report JSON")
+    add_body_options(p)
+    add_limit_options(p)
+    p.set_defaults(func=cmd_correct)

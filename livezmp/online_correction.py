@@ -1,0 +1,112 @@
+"""Per-frame balance correction for the live loop: causal, constant cost per frame.
+
+Each frame, the ZMP's shortfall from ``margin`` inside the support polygon is turned
+into a change of the root rotation δ through the quasi-static sensitivity of the ZMP
+to δ: rotating the upper body by δ about the pivot P moves the CoM by
+(m_upper / m) · δ × (c_upper − P). A damped least-squares step (yaw damped hardest:
+it barely moves the ZMP) is taken with gain ``gain_per_s`` × dt — the loop integrates,
+so model error only slows it; keep 1/gain well above the estimator's lag — then
+limited in acceleration, rate and size. When the ZMP
+is comfortably inside, δ relaxes back toward zero over ``relax_s``, but never so fast
+that the ZMP would lose its margin. The output is joint offsets: the root and thigh
+channels of a skeleton, the leg joints of a robot (its base is not actuated).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from livezmp.body import BodyModel
+from livezmp.correction import CorrectionLimits, zmp_target
+from livezmp.pipeline import FrameResult
+from livezmp.root_motion import RootMover
+from livezmp.support import clamp_to_polygon
+
+
+@dataclass
+class OnlineCorrection:
+    """``delta`` (3,) rad root rotation; ``offsets`` (nq,) SI offsets to add to the
+    commanded channels (zero outside the corrector's own channels); ``limited`` when a
+    limit cut the step this frame."""
+
+    delta: np.ndarray
+    offsets: np.ndarray
+    limited: bool
+
+
+class OnlineCorrector:
+    """Causal corrector; call :meth:`step` once per analysed frame."""
+
+    def __init__(self, body: BodyModel, dt: float, limits: CorrectionLimits | None = None, gain_per_s: float = 4.0,
+                 relax_s: float = 2.0, max_accel_deg_s2: float = 2000.0, pivot_tau_s: float = 0.05):
+        self.body = body
+        self.limits = limits or CorrectionLimits()
+        self.dt = dt
+        self.gain = min(1.0, gain_per_s * dt)
+        self.relax = min(1.0, dt / relax_s)
+        self.max_step = np.radians(self.limits.max_rate_deg_s) * dt
+        self.max_accel_step = np.radians(max_accel_deg_s2) * dt * dt
+        self.max_rot = np.radians(np.asarray(self.limits.max_rotation_deg, dtype=float))
+        self.pivot_alpha = min(1.0, dt / pivot_tau_s)
+        self.mover = RootMover(body)
+        self.data = body.model.createData()
+        corr = body.correction
+        self.leg_roots = [body.model.frames[corr.hips[s]].parentJoint for s in ("left", "right")]
+        actuated = set(corr.root_channels) if body.kind == "bvh" else set()
+        actuated |= {c for cols in corr.legs.values() for c in cols}
+        self.channels = np.array(sorted(actuated))
+        self.reset()
+
+    def reset(self) -> None:
+        self.delta = np.zeros(3)
+        self.prev_step = np.zeros(3)
+        self.w_left = 0.5
+
+    def sensitivity(self, q: np.ndarray) -> np.ndarray:
+        """S (2, 3): quasi-static ZMP (= CoM) shift per radian of δ, m/rad."""
+        model, data = self.body.model, self.data
+        pin.centerOfMass(model, data, q, False)
+        m = data.mass[0]
+        legs_m = sum(data.mass[j] for j in self.leg_roots)
+        legs_mc = sum(data.mass[j] * data.com[j] for j in self.leg_roots)
+        m_up = m - legs_m
+        c_up = (m * data.com[0] - legs_mc) / m_up
+        corr = self.body.correction
+        pivot = self.w_left * data.oMf[corr.hips["left"]].translation \
+            + (1 - self.w_left) * data.oMf[corr.hips["right"]].translation
+        r = c_up - pivot
+        return -(m_up / m) * pin.skew(r)[:2]
+
+    def step(self, result: FrameResult, q_command: np.ndarray) -> OnlineCorrection:
+        """Update δ from an analysed frame and return offsets for ``q_command`` (SI, the
+        posture about to be sent, before correction)."""
+        self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
+        pin.framesForwardKinematics(self.body.model, self.data, result.q)
+        s = self.sensitivity(result.q)
+        damp = np.diag([1e-6, 1e-6, 1e-4])
+        target = zmp_target(result, self.limits.margin_m)
+        if target is not None:
+            err = target - result.zmp[:2]
+            want = self.delta + self.gain * np.linalg.solve(s.T @ s + damp, s.T @ err)
+        else:
+            want = self.delta * (1 - self.relax)
+            if result.zmp is not None and result.margin is not None and len(result.polygon) > 2:
+                # relax only as far as the predicted ZMP keeps its margin
+                pred = result.zmp[:2] + s @ (want - self.delta)
+                if clamp_to_polygon(pred, result.polygon).margin < self.limits.margin_m:
+                    want = self.delta.copy()
+        step = want - self.delta
+        lo, hi = self.prev_step - self.max_accel_step, self.prev_step + self.max_accel_step
+        clipped = np.clip(np.clip(step, lo, hi), -self.max_step, self.max_step)
+        new = np.clip(self.delta + clipped, -self.max_rot, self.max_rot)
+        limited = bool(np.any(np.abs(new - want) > 1e-12))
+        self.prev_step = new - self.delta
+        self.delta = new
+        offsets = np.zeros(self.body.nq)
+        if np.any(self.delta):
+            q_new = self.mover.apply(q_command, self.delta, self.w_left)
+            offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
+        return OnlineCorrection(self.delta.copy(), offsets, limited)
