@@ -35,15 +35,17 @@ def cobs_encode(data: bytes) -> bytes:
 def cobs_decode(encoded: bytes) -> bytes:
     """Decode one COBS block sequence (no delimiter); DecodeError(kind='bad_framing') if malformed."""
     n = len(encoded)
+    if not n:
+        return b""
+    if b"\0" in encoded:
+        raise DecodeError("0x00 inside a COBS frame", "bad_framing")
     out = bytearray(encoded)
     dropped = []  # code bytes after a full (0xFF) block stand for nothing
     i = 0
-    while i < n:
+    while True:
         code = encoded[i]
         j = i + code
-        if code == 0 or j > n:
-            raise DecodeError("COBS block runs past the end of the frame", "bad_framing")
-        if j == n:
+        if j >= n:
             break
         # Each later code byte sits where the data had a zero: overwrite it in place.
         if code == 0xFF:
@@ -51,6 +53,8 @@ def cobs_decode(encoded: bytes) -> bytes:
         else:
             out[j] = 0
         i = j
+    if j > n:
+        raise DecodeError("COBS block runs past the end of the frame", "bad_framing")
     for j in reversed(dropped):
         del out[j]
     del out[:1]

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 import operator
 import struct
+from dataclasses import dataclass
+from itertools import chain
 
 from .errors import DecodeError, ProtocolError
 from .messages import MESSAGE_CLASSES, Message
@@ -39,9 +41,6 @@ def _structs(spec: MessageSpec) -> tuple[struct.Struct, ...]:
 
 # Built once from the schema: constant tables, not state.
 _STRUCTS = {spec.msg_id: _structs(spec) for spec in MESSAGES}
-_HEAD_WIDTH = {spec.msg_id: _width(spec.head) for spec in MESSAGES}
-_GROUP_WIDTH = {spec.msg_id: _width(spec.group) for spec in MESSAGES}
-_GROUP_OFFSETS = {spec.msg_id: tuple(_width(spec.group[:i]) for i in range(len(spec.group))) for spec in MESSAGES}
 
 
 def _struct(spec: MessageSpec, count: int) -> struct.Struct:
@@ -59,12 +58,15 @@ def encode_payload(msg: Message) -> bytes:
         return _pack(_struct(spec, 0), [*values, count], msg) + _pack_variable(msg, spec, columns)
     if spec.group_max:
         values.append(count)
-        for row in zip(*columns, strict=True):
-            for f, v in zip(spec.group, row, strict=True):
-                if f.count > 1:
-                    values.extend(v)
-                else:
-                    values.append(v)
+        if all(f.count == 1 for f in spec.group):
+            values.extend(chain.from_iterable(zip(*columns, strict=True)))
+        else:
+            for row in zip(*columns, strict=True):
+                for f, v in zip(spec.group, row, strict=True):
+                    if f.count > 1:
+                        values.extend(v)
+                    else:
+                        values.append(v)
     return _pack(_struct(spec, count), values, msg)
 
 
@@ -189,6 +191,30 @@ def _check_scalar(where: str, f: Field, v: object) -> None:
         raise ProtocolError(f"{where}: {v!r} is not an integer in 0..{top}")
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """How to turn the struct values of a fixed-record message into dataclass arguments."""
+
+    structs: tuple[struct.Struct, ...]  # by record count
+    head_width: int
+    head_plain: bool  # every head field is one int or float: the head arguments are values[:head_width]
+    group_width: int
+    columns: tuple[tuple[Field, int], ...]  # group field, offset of its first value in a record
+    has_float: bool
+
+
+def _plan(spec: MessageSpec) -> _Plan:
+    offsets = [_width(spec.group[:i]) for i in range(len(spec.group))]
+    return _Plan(
+        _STRUCTS[spec.msg_id], _width(spec.head), all(f.count == 1 and f.kind in ("int", "float") for f in spec.head),
+        _width(spec.group), tuple(zip(spec.group, offsets, strict=True)),
+        any(f.kind == "float" for f in (*spec.head, *spec.group)),
+    )
+
+
+_PLANS = {spec.msg_id: _plan(spec) for spec in MESSAGES if not spec.variable_records}
+
+
 def decode_payload(spec: MessageSpec, payload: bytes) -> Message:
     """The message a payload holds; DecodeError(kind='bad_length' | 'bad_value') if it is malformed."""
     count = 0
@@ -200,30 +226,35 @@ def decode_payload(spec: MessageSpec, payload: bytes) -> Message:
             raise DecodeError(f"{spec.name}: {count} records, limit {spec.group_max}", "bad_length")
         if spec.variable_records:
             head = _unpack(_struct(spec, 0), payload[: spec.fixed_size], spec)
-            return _build(spec, head, _unpack_variable(spec, payload, count))
-    values = _unpack(_struct(spec, count), payload, spec)
-    return _build(spec, values, _columns(spec, values, count) if count else [() for _ in spec.group])
+            columns = [_column(spec, f, col) for f, col in zip(spec.group, _unpack_variable(spec, payload, count),
+                                                               strict=True)]
+            return _assemble(spec, _head_args(spec, head), columns, count)
+    plan = _PLANS[spec.msg_id]
+    values = _unpack(plan.structs[count], payload, spec)
+    # Integers are bounded, so the sum is finite exactly when every float is.
+    if plan.has_float and not math.isfinite(sum(values)):
+        raise DecodeError(f"{spec.name}: a float is not finite", "bad_value")
+    args = list(values[: plan.head_width]) if plan.head_plain else _head_args(spec, values)
+    if not spec.group_max:
+        return MESSAGE_CLASSES[spec.msg_id](*args)
+    base = plan.head_width + 1
+    width = plan.group_width
+    end = base + width * count
+    columns = []
+    for f, offset in plan.columns:
+        start = base + offset
+        if f.count == 1:
+            col = values[start:end:width]
+        else:
+            col = tuple(zip(*(values[start + k : end : width] for k in range(f.count)), strict=True))
+        columns.append(col if f.kind in ("int", "float") else _column(spec, f, col))
+    return _assemble(spec, args, columns, count)
 
 
 def _unpack(st: struct.Struct, payload: bytes, spec: MessageSpec) -> tuple:
     if len(payload) != st.size:
         raise DecodeError(f"{spec.name}: {len(payload)} bytes, expected {st.size}", "bad_length")
     return st.unpack(payload)
-
-
-def _columns(spec: MessageSpec, values: tuple, count: int) -> list[tuple]:
-    """Group values (record-major after the head and count) regrouped as one tuple per field."""
-    base = _HEAD_WIDTH[spec.msg_id] + 1
-    width = _GROUP_WIDTH[spec.msg_id]
-    end = base + width * count
-    columns = []
-    for f, offset in zip(spec.group, _GROUP_OFFSETS[spec.msg_id], strict=True):
-        start = base + offset
-        if f.count == 1:
-            columns.append(values[start:end:width])
-        else:
-            columns.append(tuple(zip(*(values[start + k : end : width] for k in range(f.count)), strict=True)))
-    return columns
 
 
 def _unpack_variable(spec: MessageSpec, payload: bytes, count: int) -> list[tuple]:
@@ -255,36 +286,40 @@ def _unpack_variable(spec: MessageSpec, payload: bytes, count: int) -> list[tupl
     return [tuple(col) for col in zip(*rows, strict=True)] if rows else [() for _ in spec.group]
 
 
-def _build(spec: MessageSpec, head: tuple, columns: list[tuple]) -> Message:
-    """Validate and assemble; ``head`` holds the head values first (extra trailing values are ignored)."""
+def _head_args(spec: MessageSpec, values: tuple) -> list:
     args = []
     i = 0
     for f in spec.head:
         if f.count > 1:
-            v = head[i : i + f.count]
+            v = values[i : i + f.count]
             if not math.isfinite(sum(v)):
                 raise DecodeError(f"{spec.name}.{f.name}: not finite", "bad_value")
         else:
-            v = head[i]
-            if f.kind != "int":
-                v = _scalar(spec, f, v)
+            v = values[i] if f.kind == "int" else _scalar(spec, f, values[i])
         args.append(v)
         i += f.count
-    for f, col in zip(spec.group, columns, strict=True):
-        if f.kind == "float":
-            total = sum(col) if f.count == 1 else sum(map(sum, col))  # finite float32s cannot overflow
-            if not math.isfinite(total):
-                raise DecodeError(f"{spec.name}.{f.name}: not finite", "bad_value")
-        elif f.kind == "bool":
-            if col and max(col) > 1:
-                raise DecodeError(f"{spec.name}.{f.name}: not a bool", "bad_value")
-            col = tuple(map(bool, col))
-        elif f.kind == "enum":
-            col = tuple(_scalar(spec, f, v) for v in col)
-        args.append(col)
-    if columns and len(set(columns[0])) != len(columns[0]):
+    return args
+
+
+def _assemble(spec: MessageSpec, args: list, columns: list[tuple], count: int) -> Message:
+    if len(set(columns[0])) != count:
         raise DecodeError(f"{spec.name}.{spec.group[0].name}: duplicated id", "bad_value")
-    return MESSAGE_CLASSES[spec.msg_id](*args)
+    return MESSAGE_CLASSES[spec.msg_id](*args, *columns)
+
+
+def _column(spec: MessageSpec, f: Field, col: tuple) -> tuple:
+    """Validate and convert one group column (floats already known finite for fixed records)."""
+    if f.kind == "float":
+        total = sum(col) if f.count == 1 else sum(map(sum, col))
+        if not math.isfinite(total):
+            raise DecodeError(f"{spec.name}.{f.name}: not finite", "bad_value")
+    elif f.kind == "bool":
+        if col and max(col) > 1:
+            raise DecodeError(f"{spec.name}.{f.name}: not a bool", "bad_value")
+        return tuple(map(bool, col))
+    elif f.kind == "enum":
+        return tuple(_scalar(spec, f, v) for v in col)
+    return col
 
 
 def _scalar(spec: MessageSpec, f: Field, v):

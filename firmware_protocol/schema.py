@@ -149,16 +149,8 @@ class MessageSpec:
     group: tuple[Field, ...]
     group_max: int  # 0 when the message has no group
     seed: int  # CRC seed: CRC-32 of ``line``
-
-    @property
-    def fixed_size(self) -> int:
-        """Bytes of the payload when the group is empty (head plus the count byte)."""
-        return sum(f.size for f in self.head) + (1 if self.group_max else 0)
-
-    @property
-    def variable_records(self) -> bool:
-        """True when a group record has a variable size (it holds a str16)."""
-        return any(f.kind == "str" for f in self.group)
+    fixed_size: int  # payload bytes with an empty group: the head plus the count byte
+    variable_records: bool  # a group record holds a str16, so records vary in size
 
 
 def _parse_field(token: str) -> Field:
@@ -189,7 +181,9 @@ def _parse_line(line: str) -> MessageSpec:
         else:
             (group if group_max else head).append(_parse_field(token))
     seed = zlib.crc32(line.encode("ascii"))
-    return MessageSpec(msg_id, name, direction, line, tuple(head), tuple(group), group_max, seed)
+    fixed_size = sum(f.size for f in head) + (1 if group_max else 0)
+    variable = any(f.kind == "str" for f in group)
+    return MessageSpec(msg_id, name, direction, line, tuple(head), tuple(group), group_max, seed, fixed_size, variable)
 
 
 def _enum_lines() -> list[str]:

@@ -37,6 +37,9 @@ ERROR_KINDS = (
     "wrong_direction", "duplicate", "stale", "seq_gap", "seq_restart",
 )
 _SEED_BYTES = {msg_id: spec.seed.to_bytes(4, "little") for msg_id, spec in BY_ID.items()}
+_CRC = struct.Struct("<I")
+_SENDER_FLAGS = {"host": (0,), "board": (FLAG_FROM_BOARD,), "both": (0, FLAG_FROM_BOARD), "any": (0, FLAG_FROM_BOARD)}
+_SYNC_IDS = frozenset(spec.msg_id for spec in BY_ID.values() if spec.name in SYNC_SESSION)
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,7 +155,8 @@ class StreamDecoder:
 
     def _parse(self, encoded: bytes) -> Received | None:
         raw = cobs_decode(encoded)
-        if len(raw) < MIN_FRAME:
+        n = len(raw)
+        if n < MIN_FRAME:
             raise DecodeError("frame shorter than header + CRC", "bad_length")
         version, flags, msg_id, seq, length = HEADER.unpack_from(raw)
         if version != PROTOCOL_VERSION:
@@ -160,27 +164,27 @@ class StreamDecoder:
         spec = BY_ID.get(msg_id)
         if spec is None:
             raise DecodeError(f"message id {msg_id:#04x}", "unknown_id")
-        body = raw[:-CRC_SIZE]
-        if frame_crc(msg_id, body) != int.from_bytes(raw[-CRC_SIZE:], "little"):
+        if zlib.crc32(_SEED_BYTES[msg_id], zlib.crc32(raw[:-CRC_SIZE])) != _CRC.unpack_from(raw, n - CRC_SIZE)[0]:
             raise DecodeError("CRC mismatch", "bad_crc")
-        if flags & ~FLAG_FROM_BOARD:
+        if flags > FLAG_FROM_BOARD:
             raise DecodeError(f"reserved flag bits {flags:#04x}", "bad_header")
-        if length != len(body) - HEADER.size:
+        if length != n - MIN_FRAME:
             raise DecodeError("length field disagrees with the frame", "bad_length")
-        from_board = bool(flags & FLAG_FROM_BOARD)
-        if spec.direction != "both" and (spec.direction == "board") != from_board:
+        if flags not in _SENDER_FLAGS[spec.direction]:
             raise DecodeError(f"{spec.name} in the wrong direction", "bad_header")
-        if self.accept != "any" and (self.accept == "board") != from_board:
+        if flags not in _SENDER_FLAGS[self.accept]:
             raise DecodeError("frame from our own side (echo?)", "wrong_direction")
-        msg = decode_payload(spec, body[HEADER.size :])
-        tracker = self._trackers[from_board]
-        if spec.name in SYNC_SESSION:
+        msg = decode_payload(spec, raw[HEADER.size : -CRC_SIZE])
+        tracker = self._trackers[flags]
+        if msg_id in _SYNC_IDS:
             tracker.reset()
         verdict, lost = tracker.classify(seq)
-        if verdict in ("duplicate", "stale"):
-            self.errors[verdict] += 1
-            return None
-        if verdict == "restart":
+        if verdict == "new":
+            if lost:
+                self.errors["seq_gap"] += lost
+        elif verdict == "restart":
             self.errors["seq_restart"] += 1
-        self.errors["seq_gap"] += lost
+        else:
+            self.errors[verdict] += 1  # duplicate or stale: dropped
+            return None
         return Received(msg, seq)
