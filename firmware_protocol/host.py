@@ -167,7 +167,8 @@ class HostSession:
         """Pump until a received message satisfies ``done`` (returned) or the deadline passes (None)."""
         deadline = self.clock() + timeout
         while True:
-            for msg in self._pump(max(0.0, min(0.01, deadline - self.clock()))):
+            # A fixed read timeout: changing a serial port's timeout reconfigures the port.
+            for msg in self._pump(0.005 if deadline - self.clock() > 0.005 else 0.0):
                 if done(msg):
                     return msg
             if self.clock() >= deadline:

@@ -249,7 +249,10 @@ def from_dict(data: dict[str, Any]) -> Message:
     for name, f in kinds.items():
         if name not in data:
             raise ProtocolError(f"{spec.name}: missing field {name!r}")
-        values[name] = _typed(data[name], f.kind, f.enum, name in (g.name for g in spec.group))
+        try:
+            values[name] = _typed(data[name], f.kind, f.enum, name in (g.name for g in spec.group))
+        except (TypeError, ValueError) as err:
+            raise ProtocolError(f"{spec.name}.{name}: {err}") from None
     return cls(**values)
 
 

@@ -19,7 +19,7 @@ from firmware_protocol.can_framing import CanDecoder, encode_can, split_can_id
 from firmware_protocol.cobs import cobs_decode, cobs_encode, max_encoded_size
 from firmware_protocol.schema import MESSAGES, SCHEMA_TEXT
 from firmware_protocol.serial_framing import MAX_ENCODED, MAX_FRAME
-from firmware_protocol.strategies import message_of, messages
+from firmware_protocol.strategies import message_of
 from firmware_protocol.vectors import VECTORS_PATH, build, dumps
 
 SPEC = (Path(fp.__file__).parent / "SPEC.md").read_text()
@@ -127,17 +127,24 @@ def test_vectors_file_is_current_and_decodes():
         assert all(split_can_id(can_id)[0] == msg.spec.msg_id for can_id, _ in v["can"])
 
 
-@settings(max_examples=300)
-@given(messages())
-def test_payload_round_trip(msg):
+NAMES = [spec.name for spec in MESSAGES]
+
+
+@pytest.mark.parametrize("name", NAMES)
+@settings(max_examples=60)
+@given(data=st.data())
+def test_payload_round_trip(name, data):
+    msg = data.draw(message_of(name))
     payload = fp.encode_payload(msg)
     assert fp.decode_payload(msg.spec, payload) == msg
     assert fp.encode_payload(fp.decode_payload(msg.spec, payload)) == payload  # bytes, so -0.0 survives too
 
 
-@settings(max_examples=300)
-@given(messages(), st.integers(0, 0xFFFF), st.data())
-def test_serial_round_trip_in_any_chunking(msg, seq, data):
+@pytest.mark.parametrize("name", NAMES)
+@settings(max_examples=60)
+@given(seq=st.integers(0, 0xFFFF), data=st.data())
+def test_serial_round_trip_in_any_chunking(name, seq, data):
+    msg = data.draw(message_of(name))
     from_board = msg.spec.direction == "board" or (msg.spec.direction == "both" and seq % 2 == 1)
     frame = fp.encode(msg, seq, from_board)
     assert frame.endswith(b"\0") and b"\0" not in frame[:-1]
@@ -151,9 +158,11 @@ def test_serial_round_trip_in_any_chunking(msg, seq, data):
     assert not any(dec.errors.values())
 
 
-@settings(max_examples=300)
-@given(messages(), st.integers(1, 127), st.integers(0, 31))
-def test_can_round_trip(msg, node, tid):
+@pytest.mark.parametrize("name", NAMES)
+@settings(max_examples=60)
+@given(node=st.integers(1, 127), tid=st.integers(0, 31), data=st.data())
+def test_can_round_trip(name, node, tid, data):
+    msg = data.draw(message_of(name))
     from_node = msg.spec.direction == "board" or (msg.spec.direction == "both" and tid % 2 == 1)
     frames = encode_can(msg, node, tid, from_node)
     payload = fp.encode_payload(msg)
@@ -222,6 +231,8 @@ def test_wrong_direction_and_bad_envelope_arguments_are_refused():
         fp.from_dict({"type": "ESTOP", "engage": True, "force": 1})
     with pytest.raises(fp.ProtocolError, match="missing field 'engage'"):
         fp.from_dict({"type": "ESTOP"})
+    with pytest.raises(fp.ProtocolError, match="WATCHDOG.action: 9 is not a valid WatchdogAction"):
+        fp.from_dict({"type": "WATCHDOG", "timeout_ms": 5, "action": 9})
 
 
 DECODE_CASES = [
