@@ -134,6 +134,10 @@ class BoardEngine:
             self._reply(received, NackCode.NOT_CONNECTED)
             return
         else:
+            if received.node == BROADCAST and isinstance(msg, SetGoals | Torque):
+                msg = self._own_part(msg)  # a broadcast addresses every node: take our joints, ignore the rest
+                if msg is None:
+                    return
             code = self._command(msg)
             if code is not None:
                 self._reply(received, code)
@@ -141,6 +145,16 @@ class BoardEngine:
         if not isinstance(msg, SetGoals | Heartbeat | Ack | Nack):
             self._reply(received, None)
         self._last_feed = now
+
+    def _own_part(self, msg: SetGoals | Torque) -> SetGoals | Torque | None:
+        """The records of a broadcast command for our joints; None if it has none."""
+        mine = [i for i, joint in enumerate(msg.ids) if joint in self.torque]
+        if not mine:
+            return None
+        ids = tuple(msg.ids[i] for i in mine)
+        if isinstance(msg, SetGoals):
+            return SetGoals(msg.cmd_seq, ids, tuple(msg.position[i] for i in mine))
+        return Torque(ids, tuple(msg.enable[i] for i in mine))
 
     def _hello(self, msg: Hello, now: float) -> None:
         self._send(self.hello_ack)

@@ -28,17 +28,19 @@ NAMES = ("l_hip", "l_knee", "l_ankle")
 class MemoryBackend:
     """Trivial board hardware: ideal servos, optional IMU and foot sensors, a log of what was asked."""
 
-    def __init__(self, imu: bool = True):
-        self.goal = dict.fromkeys(JOINTS, 0.0)
-        self.torque = dict.fromkeys(JOINTS, False)
+    def __init__(self, imu: bool = True, joints: tuple[int, ...] = JOINTS):
+        self.joints = joints
+        self.goal = dict.fromkeys(joints, 0.0)
+        self.torque = dict.fromkeys(joints, False)
         self.holds = 0
         self.drops = 0
         self.has_imu = imu
 
     def joint_state(self, t_us):
-        err = tuple(0 if self.torque[j] else int(JointError.TORQUE_OFF) for j in JOINTS)
-        return fp.JointState(t_us, JOINTS, tuple(self.goal[j] for j in JOINTS), (0.0,) * 3,
-                             tuple(0.5 if self.torque[j] else 0.0 for j in JOINTS), err)
+        js = self.joints
+        err = tuple(0 if self.torque[j] else int(JointError.TORQUE_OFF) for j in js)
+        return fp.JointState(t_us, js, tuple(self.goal[j] for j in js), (0.0,) * len(js),
+                             tuple(0.5 if self.torque[j] else 0.0 for j in js), err)
 
     def foot_sensors(self, t_us):
         return fp.FootSensors(t_us, (0, 1), ((10.0, 10.0, 10.0, 10.0),) * 2, (0.0, 0.0), (0.0, 0.0))
@@ -60,7 +62,7 @@ class MemoryBackend:
 
     def drop_torque(self):
         self.drops += 1
-        self.torque = dict.fromkeys(JOINTS, False)
+        self.torque = dict.fromkeys(self.joints, False)
 
 
 @contextlib.contextmanager
@@ -221,7 +223,7 @@ def test_session_commands_reach_the_servos_and_state_comes_back(kind):
 def test_watchdog_trips_when_the_host_goes_quiet_and_recovers(action):
     backend = MemoryBackend()
     with link("pty") as (host_t, board_t), running(make_board(board_t, backend)) as board:
-        host = fp.HostSession(host_t, watchdog_timeout=0.1, watchdog_action=action)
+        host = fp.HostSession(host_t, watchdog_timeout=0.2, watchdog_action=action)
         host.connect()
         host.set_torque(JOINTS, True)
         host.send_goals(JOINTS, (0.1, 0.2, 0.3))
@@ -229,10 +231,10 @@ def test_watchdog_trips_when_the_host_goes_quiet_and_recovers(action):
         while time.monotonic() - t0 < 0.3:  # a healthy control loop: polls (and so heartbeats) keep it alive
             host.poll(timeout=0.01)
         assert board.state == BoardState.ACTIVE and backend.holds == backend.drops == 0
-        time.sleep(0.25)  # the control loop stalls: no poll, no heartbeat
+        time.sleep(0.4)  # the control loop stalls: no poll, no heartbeat
         seen = wait_for(host, lambda ms: any(isinstance(m, fp.Fault) for m in ms))
         fault = next(m for m in seen if isinstance(m, fp.Fault))
-        assert fault.code == FaultCode.WATCHDOG_EXPIRED and fault.value >= 0.1
+        assert fault.code == FaultCode.WATCHDOG_EXPIRED and fault.value >= 0.2
         if action == WatchdogAction.HOLD:
             assert board.state == BoardState.HOLDING and backend.holds == 1 and all(backend.torque.values())
             host.send_goals(JOINTS, (0.0, 0.0, 0.0))
@@ -347,6 +349,32 @@ def test_broadcast_estop_stops_every_node_and_nobody_answers():
         (estop,) = [f for f in frames if f.arbitration_id >> 21 == 0x01]
         assert estop.arbitration_id >> 13 & 0x7F == 0  # node 0: broadcast
         assert not [f for f in frames if f.arbitration_id >> 21 in (0x18, 0x19)]  # no ACK / NACK storm
+
+
+def test_broadcast_goals_reach_each_node_for_the_joints_it_owns():
+    """Sync write on CAN: one transfer to node 0, each servo node takes its own joint."""
+    channel = f"fw-{time.monotonic_ns()}"
+    buses = [can.Bus(interface="virtual", channel=channel) for _ in range(4)]
+    try:
+        left, right = MemoryBackend(joints=(11,)), MemoryBackend(joints=(21,))
+        boards = [fp.BoardEngine(fp.CanTransport(buses[0], 3, role="board"), left, joint_ids=(11,),
+                                 joint_names=("l_hip",)),
+                  fp.BoardEngine(fp.CanTransport(buses[1], 4, role="board"), right, joint_ids=(21,),
+                                 joint_names=("r_hip",))]
+        with running(boards[0]), running(boards[1]):
+            hosts = [fp.HostSession(fp.CanTransport(buses[2], 3)), fp.HostSession(fp.CanTransport(buses[3], 4))]
+            for host in hosts:
+                host.connect()
+            hosts[0].transport.send(fp.SetGoals(0, (11, 21), (0.5, -0.5)), broadcast=True)
+            deadline = time.monotonic() + 2
+            while time.monotonic() < deadline and (left.goal[11], right.goal[21]) != (0.5, -0.5):
+                for host in hosts:
+                    host.poll(timeout=0.005)
+            assert (left.goal, right.goal) == ({11: 0.5}, {21: -0.5})
+            assert not hosts[0].health.nacks and not hosts[1].health.nacks
+    finally:
+        for bus in buses:
+            bus.shutdown()
 
 
 class FlakyBus:
