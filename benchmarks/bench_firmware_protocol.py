@@ -22,7 +22,7 @@ from pathlib import Path
 
 import firmware_protocol as fp
 from firmware_protocol.can_framing import CanDecoder, encode_can
-from firmware_protocol.vectors import _f32
+from firmware_protocol.vectors import f32
 
 REQUIRED_FPS = 50 * 1000
 
@@ -30,7 +30,7 @@ REQUIRED_FPS = 50 * 1000
 def joint_state(n: int = 20) -> fp.JointState:
     rng = random.Random(0)
     def column(lo: float, hi: float) -> tuple[float, ...]:
-        return tuple(_f32(rng.uniform(lo, hi)) for _ in range(n))
+        return tuple(f32(rng.uniform(lo, hi)) for _ in range(n))
 
     return fp.JointState(123456, tuple(range(1, n + 1)), column(-3, 3), column(-8, 8), column(0, 2), (0,) * n)
 

@@ -38,18 +38,19 @@ from .serial_framing import encode
 VECTORS_PATH = Path(__file__).with_name("vectors") / "frames.json"
 
 
-def _f32(x: float) -> float:
-    """x rounded to float32, so the vector's value is exactly what the wire carries."""
+def f32(x: float) -> float:
+    """x rounded to float32, so a value is exactly what the wire carries."""
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-def _joints(n: int) -> JointState:
+def example_joint_state(n: int) -> JointState:
+    """A JOINT_STATE of joints 0..n-1 with float32-exact, distinct values."""
     return JointState(
         board_time_us=0xFFFFFFFF - n,
         ids=tuple(range(n)),
-        position=tuple(_f32(0.1 * i - 1.5) for i in range(n)),
-        velocity=tuple(_f32(-0.25 * i) for i in range(n)),
-        current=tuple(_f32(0.01 * i) for i in range(n)),
+        position=tuple(f32(0.1 * i - 1.5) for i in range(n)),
+        velocity=tuple(f32(-0.25 * i) for i in range(n)),
+        current=tuple(f32(0.01 * i) for i in range(n)),
         error=tuple((1 << (i % 8)) if i % 3 == 0 else 0 for i in range(n)),
     )
 
@@ -60,22 +61,22 @@ def examples() -> list[tuple[str, object, int, int, int]]:
     return [
         ("estop_engage", Estop(True), 0, 0, 0),
         ("estop_release", Estop(False), 65535, 3, 31),
-        ("fault_overheat", Fault(123456789, FaultCode.OVERHEAT, 7, _f32(358.15)), 42, 5, 1),
-        ("set_goals_two", SetGoals(65535, (1, 2), (_f32(0.5), _f32(-1.25))), 1, 1, 0),
+        ("fault_overheat", Fault(123456789, FaultCode.OVERHEAT, 7, f32(358.15)), 42, 5, 1),
+        ("set_goals_two", SetGoals(65535, (1, 2), (f32(0.5), f32(-1.25))), 1, 1, 0),
         ("set_goals_one_fits_one_can_frame", SetGoals(9, (4,), (-0.0,)), 2, 4, 2),
         ("set_goals_empty", SetGoals(0, (), ()), 3, 1, 3),
-        ("joint_state_20", _joints(20), 500, 1, 7),
-        ("joint_state_max", _joints(MAX_JOINTS), 501, 2, 8),
-        ("joint_state_one", _joints(1), 502, 9, 9),
-        ("imu_upright", Imu(1000, (1.0, 0.0, 0.0, 0.0), (0.0, tiny, -0.0), (0.0, 0.0, _f32(9.80665))), 7, 1, 4),
-        ("foot_sensors_two", FootSensors(2000, (0, 1), ((10.0, 20.0, 30.0, 40.0), (0.0, 0.0, 0.0, _f32(3.0e38))),
-                                         (_f32(0.02), 0.0), (_f32(-0.01), 0.0)), 8, 1, 5),
+        ("joint_state_20", example_joint_state(20), 500, 1, 7),
+        ("joint_state_max", example_joint_state(MAX_JOINTS), 501, 2, 8),
+        ("joint_state_one", example_joint_state(1), 502, 9, 9),
+        ("imu_upright", Imu(1000, (1.0, 0.0, 0.0, 0.0), (0.0, tiny, -0.0), (0.0, 0.0, f32(9.80665))), 7, 1, 4),
+        ("foot_sensors_two", FootSensors(2000, (0, 1), ((10.0, 20.0, 30.0, 40.0), (0.0, 0.0, 0.0, f32(3.0e38))),
+                                         (f32(0.02), 0.0), (f32(-0.01), 0.0)), 8, 1, 5),
         ("torque_mixed", Torque((1, 2, 255), (True, False, True)), 9, 1, 6),
         ("watchdog_drop", Watchdog(200, WatchdogAction.DROP_TORQUE), 10, 1, 10),
         ("stream_rates", StreamRates(1000, 100, 500, 10), 11, 1, 11),
         ("ack", Ack(0x10, 9), 12, 1, 12),
         ("nack_estopped", Nack(0x08, 65535, NackCode.ESTOPPED), 13, 1, 13),
-        ("status_holding", Status(BoardState.HOLDING, WatchdogAction.HOLD, 500, 0xFFFFFFFF, 77, _f32(11.9), 3),
+        ("status_holding", Status(BoardState.HOLDING, WatchdogAction.HOLD, 500, 0xFFFFFFFF, 77, f32(11.9), 3),
          14, 1, 14),
         ("heartbeat_host", Heartbeat(0xFFFFFFFF, BoardState.ACTIVE), 15, 127, 15),
         ("hello", Hello(SCHEMA_HASH), 0, 1, 0),

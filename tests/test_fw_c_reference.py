@@ -164,8 +164,8 @@ def _corrupted_can_frames(rng: random.Random, transfers: int) -> list[tuple[str,
     out = []
     tids = {}
     for _ in range(transfers):
-        msg = rng.choice([fp.vectors._joints(rng.randrange(6)), fp.Heartbeat(rng.getrandbits(32), 1),
-                          fp.Status(1, 0, 200, 3, 7, 12.0, 0), fp.vectors._joints(rng.randrange(30))])
+        msg = rng.choice([fp.vectors.example_joint_state(rng.randrange(6)), fp.Heartbeat(rng.getrandbits(32), 1),
+                          fp.Status(1, 0, 200, 3, 7, 12.0, 0), fp.vectors.example_joint_state(rng.randrange(30))])
         node = rng.randrange(1, 7)  # more streams than the C receiver's 4 transfer slots
         key = (msg.spec.msg_id, node)
         tids[key] = (tids.get(key, 0) + rng.choice((1, 1, 1, 0, 2, 20))) % 32

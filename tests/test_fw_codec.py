@@ -109,7 +109,7 @@ def test_payload_sizes_match_the_spec_table():
     for spec in MESSAGES:
         if spec.name in sizes:
             assert spec.fixed_size == sizes[spec.name], spec.name
-    assert len(fp.encode_payload(fp.vectors._joints(20))) == 5 + 15 * 20
+    assert len(fp.encode_payload(fp.vectors.example_joint_state(20))) == 5 + 15 * 20
     assert MAX_FRAME == 1031 and MAX_ENCODED == 1036
 
 
@@ -220,7 +220,7 @@ def test_bad_values_raise_one_line_protocol_error_naming_the_field(msg, text):
 
 def test_wrong_direction_and_bad_envelope_arguments_are_refused():
     with pytest.raises(fp.ProtocolError, match="JOINT_STATE is sent by the board only"):
-        fp.encode(fp.vectors._joints(1), 0, from_board=False)
+        fp.encode(fp.vectors.example_joint_state(1), 0, from_board=False)
     with pytest.raises(fp.ProtocolError, match="seq 70000"):
         fp.encode(fp.Estop(), 70000)
     with pytest.raises(fp.ProtocolError, match="node id 0"):

@@ -21,7 +21,7 @@ from firmware_protocol.vectors import examples
 ERRORS_NOT_LOSS = ("seq_gap", "seq_restart")
 
 
-def _f32(rng: random.Random) -> float:
+def _random_f32(rng: random.Random) -> float:
     return struct.unpack("<f", struct.pack("<f", rng.uniform(-4, 4)))[0]
 
 
@@ -34,8 +34,12 @@ def _board_messages(rng: random.Random, n: int) -> list:
 
 def _joint_state(rng: random.Random, k: int) -> fp.JointState:
     ids = tuple(rng.sample(range(256), k))
-    return fp.JointState(rng.getrandbits(32), ids, tuple(_f32(rng) for _ in ids), tuple(_f32(rng) for _ in ids),
-                         tuple(_f32(rng) for _ in ids), tuple(rng.getrandbits(16) for _ in ids))
+
+    def column() -> tuple[float, ...]:
+        return tuple(_random_f32(rng) for _ in ids)
+
+    errors = tuple(rng.getrandbits(16) for _ in ids)
+    return fp.JointState(rng.getrandbits(32), ids, column(), column(), column(), errors)
 
 
 def _frames(msgs: list, first_seq: int = 0) -> list[bytes]:
