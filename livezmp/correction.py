@@ -390,7 +390,6 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     q_base = np.array([body.channels_to_q(fr) for fr in frames])
     reg_size = sp.eye(3 * f, format="csr") / np.radians(limits.rotation_scale_deg)
     reg_acc = _second_difference(f, dt) / np.radians(limits.accel_scale_deg_s2)
-    cjac = lin.channel_jacobians(q_base, np.zeros((f, 3)), w)
     bounds = _rotation_bounds(limits, w, body, mover, q_base)
     delta = np.zeros((f, 3))
     current = before
@@ -401,6 +400,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
         judged = [k for k, r in enumerate(current) if r.margin is not None]
         if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
             break
+        cjac = lin.channel_jacobians(q_base, delta, w)
         jall = (lin.matrix(current, judged, cjac) / limits.zmp_tolerance_m).tocsr()
         zall = np.array([current[k].zmp[:2] for k in judged])
         accepted = False

@@ -20,7 +20,7 @@ def demo_robot_path() -> Path:
     return Path(str(resources.files("livezmp") / "data" / "robots" / "livezmp_mini.urdf"))
 
 
-def _smooth(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+def smooth_ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
     """0 before t0, 1 after t1, a smooth (C2) ramp between."""
     s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
     return s * s * s * (10 - 15 * s + 6 * s * s)
@@ -30,10 +30,10 @@ def demo_trajectory(joint_names: list[str], duration: float = 12.0, rate: float 
     """The demo motion for ``livezmp_mini`` (rad, ``joint_names`` order, no base columns)."""
     t = np.arange(int(duration * rate)) / rate
     q = {n: np.zeros_like(t) for n in joint_names}
-    squat = 0.5 * (_smooth(t, 0.5, 1.5) - _smooth(t, 2.0, 3.0))
-    sway = 0.12 * np.sin(2 * np.pi * 0.5 * (t - 3.0)) * (_smooth(t, 3.0, 3.5) - _smooth(t, 5.5, 6.0))
-    lean = 0.35 * (_smooth(t, 6.0, 7.0) - _smooth(t, 8.0, 9.0))
-    arms = 1.0 * np.sin(2 * np.pi * 1.5 * (t - 9.0)) * (_smooth(t, 9.0, 9.3) - _smooth(t, 11.5, 11.9))
+    squat = 0.5 * (smooth_ramp(t, 0.5, 1.5) - smooth_ramp(t, 2.0, 3.0))
+    sway = 0.12 * np.sin(2 * np.pi * 0.5 * (t - 3.0)) * (smooth_ramp(t, 3.0, 3.5) - smooth_ramp(t, 5.5, 6.0))
+    lean = 0.35 * (smooth_ramp(t, 6.0, 7.0) - smooth_ramp(t, 8.0, 9.0))
+    arms = 1.0 * np.sin(2 * np.pi * 1.5 * (t - 9.0)) * (smooth_ramp(t, 9.0, 9.3) - smooth_ramp(t, 11.5, 11.9))
     for s in ("l", "r"):
         q[f"{s}_hip_pitch"] = -squat
         q[f"{s}_knee"] = 2 * squat

@@ -1,20 +1,23 @@
 """Per-frame balance correction for the live loop: causal, constant cost per frame.
 
-Each frame, the ZMP's shortfall from ``margin`` inside the support polygon is turned
+Each frame, the ZMP's shortfall from ``margin_m`` inside the support polygon (15 mm by
+default: wider than offline, so the correction starts early and gently) is turned
 into a change of the root rotation δ through the quasi-static sensitivity of the ZMP
 to δ: rotating the upper body by δ about the pivot P moves the CoM by
 (m_upper / m) · δ × (c_upper − P). A damped least-squares step (yaw damped hardest:
 it barely moves the ZMP) is taken with gain ``gain_per_s`` × dt — the loop integrates,
 so model error only slows it; keep 1/gain well above the estimator's lag — then
-limited in acceleration, rate and size. When the ZMP
-is comfortably inside, δ relaxes back toward zero over ``relax_s``, but never so fast
-that the ZMP would lose its margin. The output is joint offsets: the root and thigh
-channels of a skeleton, the leg joints of a robot (its base is not actuated).
+limited in acceleration (the trunk's own angular acceleration pushes the ZMP the
+other way at first), rate and size. When the ZMP is comfortably inside, δ relaxes
+back toward zero over ``relax_s``, but only while the ZMP keeps three margins
+(hysteresis, so relaxing and correcting do not chase each other). The output is joint
+offsets: the root and thigh channels of a skeleton, the leg joints of a robot (its
+base is not actuated).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -41,9 +44,10 @@ class OnlineCorrector:
     """Causal corrector; call :meth:`step` once per analysed frame."""
 
     def __init__(self, body: BodyModel, dt: float, limits: CorrectionLimits | None = None, gain_per_s: float = 4.0,
-                 relax_s: float = 2.0, max_accel_deg_s2: float = 2000.0, pivot_tau_s: float = 0.05):
+                 relax_s: float = 2.0, max_accel_deg_s2: float = 500.0, pivot_tau_s: float = 0.05,
+                 margin_m: float = 0.015):
         self.body = body
-        self.limits = limits or CorrectionLimits()
+        self.limits = replace(limits or CorrectionLimits(), margin_m=margin_m)
         self.dt = dt
         self.gain = min(1.0, gain_per_s * dt)
         self.relax = min(1.0, dt / relax_s)
@@ -94,9 +98,10 @@ class OnlineCorrector:
         else:
             want = self.delta * (1 - self.relax)
             if result.zmp is not None and result.margin is not None and len(result.polygon) > 2:
-                # relax only as far as the predicted ZMP keeps its margin
+                # relax only as far as the predicted ZMP keeps three margins: the hysteresis
+                # stops a relax-correct limit cycle
                 pred = result.zmp[:2] + s @ (want - self.delta)
-                if clamp_to_polygon(pred, result.polygon).margin < self.limits.margin_m:
+                if clamp_to_polygon(pred, result.polygon).margin < 3 * self.limits.margin_m:
                     want = self.delta.copy()
         step = want - self.delta
         lo, hi = self.prev_step - self.max_accel_step, self.prev_step + self.max_accel_step

@@ -1,0 +1,196 @@
+"""Balance correction: the root mover, the offline sequence solver and the online corrector."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from data_paths import BANDAI
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from livezmp.base_placement import BasePlacer
+from livezmp.bvh import read_bvh
+from livezmp.cli import main
+from livezmp.correction import CorrectionLimits, rate_limit
+from livezmp.demo import smooth_ramp
+from livezmp.online_correction import OnlineCorrector
+from livezmp.pipeline import FrameResult, Pipeline, default_config
+from livezmp.root_motion import RootMover
+
+# rotations about world +y; the OP3's pitch axes are ±y per side (URDF), hence the signs
+OP3_FLEX = (("l_hip_pitch", -1, 1), ("l_knee", 2, 1), ("l_ank_pitch", -1, -1),
+            ("r_hip_pitch", -1, -1), ("r_knee", 2, -1), ("r_ank_pitch", -1, 1))
+
+
+def op3_pose(body, bend: float = 0.35, lean: float = 0.0) -> np.ndarray:
+    """Joint angles (rad) of the OP3 standing with bent knees, leaning forward at the ankles."""
+    names = body.joint_names
+    q = np.zeros(len(names))
+    for joint, world, axis_y in OP3_FLEX:
+        q[names.index(joint)] = world * axis_y * bend
+    q[names.index("l_ank_pitch")] += lean
+    q[names.index("r_ank_pitch")] -= lean
+    return q
+
+
+def full_q(body, joints: np.ndarray) -> np.ndarray:
+    return np.concatenate([BasePlacer(body).update(joints), joints])
+
+
+@pytest.mark.parametrize("w_left", [0.0, 0.5, 1.0])
+def test_root_mover_keeps_robot_feet_exactly(op3_body, w_left):
+    mover = RootMover(op3_body)
+    q = full_q(op3_body, op3_pose(op3_body))
+    data = op3_body.model.createData()
+    pin.framesForwardKinematics(op3_body.model, data, q)
+    feet = {s: data.oMf[f[0]].copy() for s, f in op3_body.correction.foot_frames.items()}
+    root = data.oMf[op3_body.correction.root_frame_id].copy()
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        delta = np.radians(rng.uniform(-8, 8, 3))
+        q2 = mover.apply(q, delta, w_left)
+        pin.framesForwardKinematics(op3_body.model, data, q2)
+        for s, m in feet.items():
+            err = pin.log6(data.oMf[op3_body.correction.foot_frames[s][0]].actInv(m)).vector
+            assert np.abs(err).max() < 1e-6  # below a micrometre
+        new_root = data.oMf[op3_body.correction.root_frame_id]
+        np.testing.assert_allclose(new_root.rotation, pin.exp3(delta) @ root.rotation, atol=1e-10)
+        # only the base and leg channels move
+        legs = {c for cols in op3_body.correction.legs.values() for c in cols} | set(range(6))
+        untouched = [i for i in range(op3_body.nq) if i not in legs]
+        np.testing.assert_array_equal(q2[untouched], q[untouched])
+
+
+def test_root_mover_skeleton_keeps_stance_foot(bandai_walk):
+    from livezmp.body_bvh import body_from_bvh
+
+    body = body_from_bvh(bandai_walk)
+    mover = RootMover(body)
+    q = body.channels_to_q(bandai_walk.frames[40])
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, q)
+    before = {f: data.oMf[f].translation.copy() for fs in body.correction.foot_frames.values() for f in fs}
+    for delta in (np.radians([3.0, 0, 0]), np.radians([0, 4.0, 0]), np.radians([1.5, -2.0, 2.0])):
+        q2 = mover.apply(q, delta, 1.0)  # left stance: pivot at the left hip
+        pin.framesForwardKinematics(body.model, data, q2)
+        for f in body.correction.foot_frames["left"]:
+            assert np.linalg.norm(data.oMf[f].translation - before[f]) < 2e-5
+        changed = np.nonzero(np.abs(q2 - q) > 1e-12)[0]
+        allowed = set(body.correction.root_channels) | {c for cs in body.correction.legs.values() for c in cs}
+        assert set(changed) <= allowed
+
+
+def test_rate_limit_projection():
+    d = np.zeros((6, 3))
+    d[3, 0] = 1.0
+    out, changed = rate_limit(d, 0.25)
+    assert np.abs(np.diff(out, axis=0)).max() <= 0.25 + 1e-12
+    assert changed and np.abs(out).max() <= 1.0
+
+
+def test_correct_cli_on_a_bandai_walk(tmp_path):
+    """walk_normal_002: the corrected BVH, re-analysed by `livezmp analyze`, is ≥ 99 % inside;
+    the feet stay put; only root and thigh channels change; hierarchy and timing are kept."""
+    src = BANDAI / "walk_normal_002.bvh"
+    out, rep, summ = tmp_path / "c.bvh", tmp_path / "r.json", tmp_path / "s.json"
+    assert main(["correct", str(src), "-o", str(out), "--report", str(rep)]) == 0
+    report = json.loads(rep.read_text())
+    for key in ("frames", "out_of_support_before", "out_of_support_after", "infeasible_frames",
+                "max_root_rotation_deg", "rms_root_rotation_deg", "max_foot_displacement_mm", "solver_ms_per_frame"):
+        assert key in report
+    assert report["out_of_support_before"] > 50
+    assert main(["analyze", str(out), "--summary-json", str(summ)]) == 0
+    after = json.loads(summ.read_text())
+    assert after["inside_fraction"] >= 0.99
+    assert after["out_of_support_frames"] == report["out_of_support_after"]
+    a, b = read_bvh(src), read_bvh(out)
+    assert [j.name for j in a.joints] == [j.name for j in b.joints]
+    assert b.frames.shape == a.frames.shape and b.frame_time == pytest.approx(a.frame_time)
+    labels = a.channel_labels()
+    moved = {labels[c] for c in np.nonzero(np.abs(b.frames - a.frames).max(axis=0) > 1e-5)[0]}
+    assert moved and all(m.split(".")[0] in ("Hips", "UpperLeg_L", "UpperLeg_R") for m in moved), moved
+    # feet: ankle and toe joints of a foot bearing weight move ≤ 1 mm
+    assert report["max_foot_displacement_mm"] <= 1.0
+    limits = CorrectionLimits()
+    assert report["max_root_rotation_deg"] <= max(limits.max_rotation_deg) + 1e-6
+    assert report["max_root_rate_deg_s"] <= limits.max_rate_deg_s + 1e-3
+
+
+def _closed_loop_lean(body, correct: bool, seconds: float = 6.0, rate: float = 100.0):
+    """The OP3 leans forward at the ankles until its CoM is ~2 mm past the toes, holds,
+    and comes back. The corrector's offsets are added to the command; the robot executes
+    the command exactly and its base rests on the stance foot. Returns per-frame
+    (time, inside, delta) of the analysed (lagged) frames and the sent offsets."""
+    dt = 1.0 / rate
+    pipe = Pipeline(body, default_config(body, rate), dt)
+    corrector = OnlineCorrector(body, dt)
+    cmd_base, robot_base = BasePlacer(body), BasePlacer(body)
+    out, last = [], None
+    for k in range(int(seconds * rate)):
+        t = k * dt
+        lean = 0.32 * (smooth_ramp(t, 0.5, 2.0) - smooth_ramp(t, 4.5, 5.5))
+        joints = op3_pose(body, lean=lean)
+        q_cmd = np.concatenate([cmd_base.update(joints), joints])
+        sent = q_cmd
+        delta = np.zeros(3)
+        if correct and last is not None:
+            c = corrector.step(last, q_cmd)
+            sent = q_cmd + c.offsets
+            delta = c.delta
+        sensed = sent[6:]
+        r = pipe.step(t, np.concatenate([robot_base.update(sensed), sensed]))
+        if r is not None:
+            last = r
+            out.append((r.t, r.inside, delta))
+    return out
+
+
+def test_online_corrector_saves_a_lean_that_fails_without_it(op3_body):
+    off = _closed_loop_lean(op3_body, correct=False)
+    on = _closed_loop_lean(op3_body, correct=True)
+    lean_window = [k for k, (t, _, _) in enumerate(off) if 2.5 <= t <= 4.5]
+    outside_off = sum(1 for k in lean_window if off[k][1] is False)
+    outside_on = sum(1 for k in lean_window if on[k][1] is False)
+    print(f"lean held 2.5-4.5 s: outside {outside_off}/{len(lean_window)} frames without correction, "
+          f"{outside_on} with")
+    assert outside_off == len(lean_window)  # without correction the ZMP stays out the whole hold
+    assert outside_on == 0
+    first_out = next(k for k, (_, inside, _) in enumerate(on) if inside is False)
+    back_in = next(k for k in range(first_out, len(on)) if on[k][1])
+    assert back_in - first_out <= 40, "inside again within 0.4 s of first leaving"
+    deltas = np.array([d for _, _, d in on])
+    limits = CorrectionLimits()
+    assert np.abs(np.diff(deltas, axis=0)).max() <= np.radians(limits.max_rate_deg_s) / 100 + 1e-12
+    assert np.abs(deltas).max(axis=0).max() <= np.radians(max(limits.max_rotation_deg)) + 1e-12
+
+
+def _fake_result(body, q, zmp_xy, support: str, poly: np.ndarray, margin: float) -> FrameResult:
+    z = np.array([*zmp_xy, 0.0])
+    inside = margin >= 0
+    return FrameResult(0, 0.0, q, np.zeros_like(q), np.zeros_like(q), z, z + [0, 0, 0.2], support, poly,
+                       {}, 0.0, inside, z if inside else np.array([*np.clip(zmp_xy, -0.05, 0.05), 0.0]), margin)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.sampled_from(["left", "right", "double"])),
+                min_size=1, max_size=60),
+       st.floats(1.0, 20.0), st.floats(5.0, 200.0))
+def test_online_corrections_never_exceed_limits(op3_body, frames, max_rot, max_rate):
+    """Whatever ZMP sequence comes in, δ stays within the rotation limit and steps within the rate limit."""
+    limits = CorrectionLimits(max_rotation_deg=(max_rot, max_rot, max_rot), max_rate_deg_s=max_rate)
+    dt = 0.01
+    corrector = OnlineCorrector(op3_body, dt, limits)
+    q = full_q(op3_body, op3_pose(op3_body))
+    poly = np.array([[-0.05, -0.05], [0.05, -0.05], [0.05, 0.05], [-0.05, 0.05]])
+    prev = np.zeros(3)
+    for x, y, support in frames:
+        inside = abs(x) <= 0.05 and abs(y) <= 0.05
+        margin = min(0.05 - abs(x), 0.05 - abs(y)) if inside else -max(abs(x) - 0.05, abs(y) - 0.05)
+        c = corrector.step(_fake_result(op3_body, q, (x, y), support, poly, margin), q)
+        assert np.all(np.abs(c.delta) <= np.radians(max_rot) + 1e-12)
+        assert np.all(np.abs(c.delta - prev) <= np.radians(max_rate) * dt + 1e-12)
+        assert np.all(np.isfinite(c.offsets))
+        prev = c.delta
