@@ -1,0 +1,101 @@
+"""The servo-link interface: one set of calls, many backends, chosen by a URL.
+
+    dynamixel:/dev/ttyUSB0?baud=1000000     Dynamixel Protocol 2.0 bus (dynamixel-sdk)
+    can:slcan:/dev/ttyACM0?bitrate=1000000  CAN servos (python-can, any interface)
+    fw:/dev/ttyACM0                         a firmware board (firmware_protocol over pyserial)
+    mock:                                   an in-process simulated robot, no bus
+
+A link reads the robot's joint state (and, where the device has them, foot sensors and
+IMU) and writes goal positions, in radians, in the robot's joint-name order. Ticks,
+zero offsets and directions are the backend's business (from the robot config).
+
+Safety contract every backend keeps: ``read`` never returns a frame it could not
+verify (bad CRC, short reply, timeout, hardware error on a joint it then reports): it
+raises :class:`LinkReadError` and counts it; ``write_goals`` sends nothing when given a
+non-finite value; ``safe_stop`` is idempotent and is the first thing called on any
+exit path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+class LinkError(RuntimeError):
+    """A device or bus fault (port gone, no answer, refused handshake)."""
+
+
+class LinkReadError(LinkError):
+    """One read failed verification; the frame is dropped, the link may still be up."""
+
+
+@dataclass
+class FootSensors:
+    """Per-foot vertical forces (N) at the sole corners and the board's centre of
+    pressure (m, in the foot frame, or None)."""
+
+    forces: dict[str, np.ndarray]
+    cop: dict[str, np.ndarray | None]
+
+
+@dataclass
+class LinkFrame:
+    """One verified read. ``t``: host monotonic time of the read (s); ``positions``
+    (n,) rad; ``velocities`` (n,) rad/s or None; ``currents`` (n,) A or None;
+    ``hardware_errors``: joint name → device error bits (only joints with errors);
+    ``device_time``: the device's own timestamp (s) if it has one."""
+
+    t: float
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    currents: np.ndarray | None = None
+    hardware_errors: dict[str, int] = field(default_factory=dict)
+    feet: FootSensors | None = None
+    imu: dict[str, np.ndarray] | None = None
+    device_time: float | None = None
+
+
+@dataclass
+class LinkStats:
+    """Counters since open: reads/writes attempted and failed, by kind."""
+
+    reads: int = 0
+    read_errors: int = 0
+    writes: int = 0
+    write_errors: int = 0
+    reconnects: int = 0
+    errors_by_kind: dict[str, int] = field(default_factory=dict)
+
+    def count(self, kind: str) -> None:
+        self.errors_by_kind[kind] = self.errors_by_kind.get(kind, 0) + 1
+
+
+class Link(Protocol):
+    """What the live loop needs from a servo bus or board."""
+
+    joint_names: list[str]
+    stats: LinkStats
+
+    def open(self) -> None:
+        """Connect, check the devices, enable torque. Raises LinkError."""
+
+    def read(self) -> LinkFrame:
+        """One verified joint-state read. Raises LinkReadError or LinkError."""
+
+    def write_goals(self, positions: np.ndarray) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order. Raises LinkError."""
+
+    def hold(self) -> None:
+        """Hold the present posture (goals = present positions)."""
+
+    def safe_stop(self, drop_torque: bool = False) -> None:
+        """Stop commanding: hold (or drop torque); idempotent; never raises."""
+
+    def reconnect(self) -> bool:
+        """Try once to reopen a vanished port; True when the link is back."""
+
+    def close(self) -> None:
+        """safe_stop, then release the port."""
