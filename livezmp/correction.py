@@ -110,17 +110,18 @@ def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:
     return np.convolve(padded, kernel, mode="same")[pad:-pad]
 
 
+def _inset(p: np.ndarray, poly: np.ndarray, margin: float) -> np.ndarray:
+    """``p`` (on or in the polygon) moved up to ``margin`` toward the polygon's centre."""
+    d = poly.mean(axis=0) - p
+    n = np.linalg.norm(d)
+    return p + d / n * min(margin, n) if n > 1e-12 and len(poly) > 2 else p
+
+
 def zmp_target(r: FrameResult, margin: float) -> np.ndarray | None:
     """The ZMP target (2,) for a frame that is outside or within ``margin`` of the edge."""
     if r.zmp is None or r.margin is None or r.margin >= margin:
         return None
-    poly = r.polygon
-    centre = poly.mean(axis=0)
-    p = r.clamped[:2] if not r.inside else r.zmp[:2]
-    d = centre - p
-    n = np.linalg.norm(d)
-    step = min(margin, n) if len(poly) > 2 else 0.0
-    return p + (d / n * step if n > 1e-12 else 0.0)
+    return _inset(r.clamped[:2] if not r.inside else r.zmp[:2], r.polygon, margin)
 
 
 def estimator_matrices(pipe: Pipeline, times: np.ndarray, edge: int) -> list[sp.csr_matrix]:
@@ -268,8 +269,11 @@ def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_ac
         for i, k in enumerate(judged):
             if i in active or i in hold:
                 continue
-            if clamp_to_polygon(pred[i], current[k].polygon).margin < limits.margin_m:
-                hold[i] = zall[i]  # keep it where it is: inside with margin now
+            c = clamp_to_polygon(pred[i], current[k].polygon)
+            if c.margin < limits.margin_m:
+                # let it move, but no further than the margin: aim at the predicted point
+                # brought back inside
+                hold[i] = _inset(c.point, current[k].polygon, limits.margin_m)
                 grew = True
         inc = np.diff(x.reshape(f, 3), axis=0).ravel()
         for c in np.nonzero(np.abs(inc) > max_step * 1.001)[0]:
