@@ -17,9 +17,12 @@ import serial
 from dynamixel_sdk.protocol2_packet_handler import Protocol2PacketHandler
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from sim_support import short_gil_switch  # noqa: F401 - a fixture
 
 from sim_devices.dynamixel_chain import STALL_CURRENT, DynamixelChain
 from sim_devices.dynamixel_packet import PacketReader, crc16, encode_fast_status, encode_packet, stuff, unstuff
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
 SDK = Protocol2PacketHandler()
 

@@ -21,9 +21,12 @@ from dynamixel_sdk import (
     PacketHandler,
     PortHandler,
 )
+from sim_support import sdk_latency_timer, short_gil_switch, wait_until  # noqa: F401 - fixtures
 
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.servo_plant import ServoPlant
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch", "sdk_latency_timer")
 
 IDS = list(range(1, 21))
 PRESENT_POSITION, GOAL_POSITION, TORQUE_ENABLE = 132, 116, 64
@@ -32,15 +35,6 @@ PRESENT_POSITION, GOAL_POSITION, TORQUE_ENABLE = 132, 116, 64
 def le32(value: int) -> list[int]:
     return [DXL_LOBYTE(DXL_LOWORD(value)), DXL_HIBYTE(DXL_LOWORD(value)),
             DXL_LOBYTE(DXL_HIWORD(value)), DXL_HIBYTE(DXL_HIWORD(value))]
-
-
-def wait_until(condition, timeout: float = 3.0, interval: float = 0.005) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(interval)
-    return condition()
 
 
 @pytest.fixture

@@ -8,8 +8,11 @@ import time
 
 import pytest
 import serial
+from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 
 from sim_devices.pty_port import MAX_PENDING_OUTPUT, PtyPort
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
 
 class Echo:
@@ -38,15 +41,6 @@ class Echo:
 class Broken(Echo):
     def on_bytes(self, data: bytes, now: float):
         raise ZeroDivisionError("device bug")
-
-
-def wait_until(condition, timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.002)
-    return condition()
 
 
 def test_path_is_a_stable_symlink_to_a_real_pty():

@@ -11,18 +11,12 @@ import time
 import can
 import pytest
 import serial
+from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 
 from sim_devices.can_node import CanFrame, CounterNode, EchoNode
 from sim_devices.slcan_adapter import SlcanAdapter, encode_frame, parse_frame
 
-
-def wait_until(condition, timeout: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.005)
-    return condition()
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
 
 def open_bus(adapter: SlcanAdapter, bitrate: int = 1_000_000) -> can.BusABC:
@@ -39,7 +33,7 @@ def receive(bus: can.BusABC, count: int, timeout: float = 2.0) -> list[can.Messa
     return messages
 
 
-def drain(bus: can.BusABC, quiet: float = 0.1) -> list[can.Message]:
+def drain(bus: can.BusABC, quiet: float = 0.25) -> list[can.Message]:
     """Receive until nothing arrives for ``quiet`` seconds."""
     messages = []
     while (message := bus.recv(timeout=quiet)) is not None:
