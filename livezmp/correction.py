@@ -293,12 +293,13 @@ def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimit
                  + np.sum((reg_acc @ x) ** 2))
 
 
-def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, body: BodyModel, mover: RootMover,
+def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str], body: BodyModel,
                      q_base: np.ndarray, foot_tolerance: float = 0.0006) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame bounds on δ. Roll about a pivot between the hips lifts one hip and lowers
-    the other, yaw moves them fore and aft; where both feet bear weight and the legs may
-    only turn at the thigh (a skeleton), roll and yaw are bounded so that the feet move
-    less than ``foot_tolerance``."""
+    """Per-frame bounds on δ. Roll about the pivot P lifts or lowers each hip by
+    |h − P|·δ, yaw moves it fore and aft; where the legs may only turn at the thigh (a
+    skeleton) a hip that moves along the leg moves its foot. So for every foot bearing
+    weight (per the support label) roll and yaw are bounded to keep it within
+    ``foot_tolerance``; the pivot weight ``w`` (of the left hip) sets |h − P|."""
     hi = np.tile(np.radians(limits.max_rotation_deg), (len(w), 1))
     if not body.correction.full_foot_pose:
         import pinocchio as pin
@@ -306,12 +307,13 @@ def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, body: BodyModel, m
         data = body.model.createData()
         hips = body.correction.hips
         for k in range(len(w)):
-            both = 2 * min(w[k], 1 - w[k])  # 0 in single support, 1 in double support
-            if both < 1e-9:
+            loaded = {"left": ["left"], "right": ["right"], "double": ["left", "right"]}.get(supports[k], [])
+            lever = max([(1 - w[k]) if s == "left" else w[k] for s in loaded], default=0.0)
+            if lever < 1e-9:
                 continue
             pin.framesForwardKinematics(body.model, data, q_base[k])
-            half = 0.5 * np.linalg.norm(data.oMf[hips["left"]].translation - data.oMf[hips["right"]].translation)
-            hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], foot_tolerance / (half * both))
+            width = np.linalg.norm(data.oMf[hips["left"]].translation - data.oMf[hips["right"]].translation)
+            hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], foot_tolerance / (width * lever))
     return -hi.ravel(), hi.ravel()
 
 
@@ -394,7 +396,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     q_base = np.array([body.channels_to_q(fr) for fr in frames])
     reg_size = sp.eye(3 * f, format="csr") / np.radians(limits.rotation_scale_deg)
     reg_acc = _second_difference(f, dt) / np.radians(limits.accel_scale_deg_s2)
-    bounds = _rotation_bounds(limits, w, body, mover, q_base)
+    bounds = _rotation_bounds(limits, w, [r.support for r in before], body, q_base)
     delta = np.zeros((f, 3))
     current = before
     cost = _cost(current, delta, limits, reg_size, reg_acc)
