@@ -1,0 +1,84 @@
+"""Balance correction: the sequence solver against the seed paper's fixed-step search.
+
+On the same frames of a Bandai walk: the seed searches, frame by frame, root rotations
+on a fixed grid (0.5°) holding each frame's velocities and accelerations, and keeps the
+smallest that puts that frame's ZMP inside; the solver corrects the whole take at once
+(smooth, rate-limited, accounting for the accelerations its own rotations cause).
+Printed side by side: rotation size on the frames both treat, time per frame, and how
+many frames are inside when each result is re-analysed as a motion.
+
+    python benchmarks/bench_correction.py [--walk walk_normal_001.bvh] [--frames 120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.body_bvh import body_from_bvh
+from livezmp.bvh import read_bvh
+from livezmp.correction import apply_delta, correct_motion, seed_grid_search, stance_weights
+from livezmp.pipeline import Pipeline, default_config
+from livezmp.root_motion import RootMover
+
+BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh" / "bandai"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--walk", default="walk_normal_001.bvh")
+    ap.add_argument("--frames", type=int, default=120, help="frames of the walk to use (from its start)")
+    ap.add_argument("--step-deg", type=float, default=0.5)
+    args = ap.parse_args()
+    motion = read_bvh(BANDAI / args.walk)
+    body = body_from_bvh(motion)
+    frames = motion.frames[: args.frames]
+    times = np.arange(len(frames)) * motion.frame_time
+    cfg = default_config(body, motion.fps)
+
+    s = time.perf_counter()
+    solved = correct_motion(body, times, frames, cfg, nominal_dt=motion.frame_time)
+    t_solver = time.perf_counter() - s
+    before = solved.before
+    outside = [r.index for r in before if r.inside is False]
+
+    s = time.perf_counter()
+    seed = seed_grid_search(body, cfg, before, outside, step_deg=args.step_deg)
+    t_seed = time.perf_counter() - s
+    delta_seed = np.zeros((len(frames), 3))
+    for k, d in seed.items():
+        delta_seed[k] = d
+    w = stance_weights(before, 1)
+    seed_frames = apply_delta(RootMover(body), body, frames, delta_seed, w)
+    seed_after = Pipeline(body, cfg, motion.frame_time).run(times, seed_frames)
+
+    both = sorted(seed)
+    mag_seed = np.degrees(np.linalg.norm(delta_seed[both], axis=1))
+    mag_solver = np.degrees(np.linalg.norm(solved.delta[both], axis=1))
+
+    def inside(results):
+        judged = [r for r in results if r.inside is not None]
+        return sum(r.inside for r in judged), len(judged)
+
+    i_seed, n = inside(seed_after)
+    i_solver, _ = inside(solved.after)
+    i_before, _ = inside(before)
+    print(f"\n{args.walk}, first {len(frames)} frames: {len(outside)} outside before "
+          f"({i_before}/{n} inside); the seed found a grid point for {len(seed)} of them\n")
+    print(f"{'':44s} {'seed grid search':>18s} {'sequence solver':>18s}")
+    print(f"{'mean |rotation| on those frames (deg)':44s} {mag_seed.mean():18.2f} {mag_solver.mean():18.2f}")
+    print(f"{'max |rotation| on those frames (deg)':44s} {mag_seed.max():18.2f} {mag_solver.max():18.2f}")
+    jerk_seed = np.degrees(np.abs(np.diff(delta_seed, 2, axis=0)).max()) * motion.fps**2
+    jerk_solver = np.degrees(np.abs(np.diff(solved.delta, 2, axis=0)).max()) * motion.fps**2
+    print(f"{'max rotational acceleration (deg/s²)':44s} {jerk_seed:18.0f} {jerk_solver:18.0f}")
+    print(f"{'time per corrected frame (ms)':44s} {1000 * t_seed / max(len(outside), 1):18.1f} "
+          f"{1000 * t_solver / max(len(outside), 1):18.1f}")
+    print(f"{'frames inside when re-analysed':44s} {f'{i_seed}/{n}':>18s} {f'{i_solver}/{n}':>18s}")
+    print(f"\nsolver / seed time ratio: {t_solver / t_seed:.2f}")
+
+
+if __name__ == "__main__":
+    main()
