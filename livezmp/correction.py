@@ -196,12 +196,15 @@ class _Linearisation:
                 out[j, :, a] = (qp - qm) / (2 * eps)
         return out
 
-    def zmp_partials(self, r: FrameResult, eps: float = 1e-6) -> np.ndarray | None:
-        """G (3, 2, m): ∂ZMP_xy/∂(q, q̇, q̈) of the changed channels at one analysed frame."""
+    def zmp_partials(self, r: FrameResult, eps: float = 1e-6) -> tuple[np.ndarray, float] | None:
+        """G (3, 2, m): ∂ZMP_xy/∂(q, q̇, q̈) of the changed channels at one analysed frame,
+        and the frame's load: vertical ground force over body weight."""
         base = [r.q, r.v, r.a]
-        z0 = compute_zmp(self.model, self.data, *base, r.ground_z).zmp
+        res = compute_zmp(self.model, self.data, *base, r.ground_z)
+        z0 = res.zmp
         if z0 is None:
             return None
+        load = float(res.force[2] / (self.data.mass[0] * -self.model.gravity.linear[2]))
         g = np.zeros((3, 2, len(self.changed)))
         for i in range(3):
             for c, qi in enumerate(self.changed):
@@ -211,16 +214,22 @@ class _Linearisation:
                 if z is None:
                     return None
                 g[i, :, c] = (z[:2] - z0[:2]) / eps
-        return g
+        return g, load
 
-    def matrix(self, results: list[FrameResult], rows: list[int], cjac: np.ndarray) -> sp.csr_matrix:
+    def matrix(self, results: list[FrameResult], rows: list[int], cjac: np.ndarray
+               ) -> tuple[sp.csr_matrix, np.ndarray]:
+        """The Jacobian rows of ``rows`` and each row's weight: the frame's load, so that
+        frames near flight, where the ZMP is a ratio of small numbers, do not dominate
+        the linear step (the exact cost still counts them in full)."""
         f = len(cjac)
         data, ri, ci = [], [], []
+        weight = np.zeros(len(rows))
         e0, e1, e2 = self.est
         for row, k in enumerate(rows):
-            g = self.zmp_partials(results[k])
-            if g is None:
+            part = self.zmp_partials(results[k])
+            if part is None:
                 continue
+            g, weight[row] = part[0], min(1.0, part[1])
             js = np.union1d(np.union1d(e0[k].indices, e1[k].indices), e2[k].indices)
             for j in js:
                 gk = g[0] * e0[k, j] + g[1] * e1[k, j] + g[2] * e2[k, j]
@@ -228,7 +237,7 @@ class _Linearisation:
                 data.extend(block.ravel())
                 ri.extend([2 * row] * 3 + [2 * row + 1] * 3)
                 ci.extend([3 * j, 3 * j + 1, 3 * j + 2] * 2)
-        return sp.csr_matrix((data, (ri, ci)), shape=(2 * len(rows), 3 * f))
+        return sp.csr_matrix((data, (ri, ci)), shape=(2 * len(rows), 3 * f)), weight
 
 
 def _second_difference(f: int, dt: float) -> sp.csr_matrix:
@@ -236,7 +245,7 @@ def _second_difference(f: int, dt: float) -> sp.csr_matrix:
     return sp.kron(d2, sp.eye(3)).tocsr()
 
 
-def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_acc, bounds, dt) -> np.ndarray:
+def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt) -> np.ndarray:
     """One damped linearised step. ZMP rows are active for frames short of the margin;
     frames that the predicted step would push short of it join the active set, and so do
     frame-to-frame steps beyond the rate limit (held at the limit by stiff rows), in up
@@ -254,8 +263,9 @@ def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_ac
         idx = sorted(active | set(hold))
         tgt = np.array([zmp_target(current[judged[i]], limits.margin_m) if i in active else hold[i] for i in idx])
         rows = np.ravel([[2 * i, 2 * i + 1] for i in idx])
-        jz = jall[rows]
-        rhs = jz @ x0 - (zall[idx] - tgt).ravel() / limits.zmp_tolerance_m
+        wrow = np.repeat(load[idx], 2)
+        jz = sp.diags(wrow) @ jall[rows]
+        rhs = jz @ x0 - wrow * (zall[idx] - tgt).ravel() / limits.zmp_tolerance_m
         keys = sorted(rate)
         steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)),
                                (np.repeat(np.arange(len(keys)), 2), np.ravel([[c, c - 3] for c in keys]))),
@@ -286,8 +296,11 @@ def _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_ac
 
 
 def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimits, reg_size, reg_acc) -> float:
-    """The exact objective: squared distances short of ``margin`` inside, plus the regularisers."""
-    short = np.array([max(0.0, limits.margin_m - r.margin) for r in results if r.margin is not None])
+    """The exact objective: per frame, the distance short of ``margin`` inside, times the
+    frame's load (a moment about the polygon edge, which stays finite where the ZMP, a
+    ratio, runs off near flight), squared; plus the regularisers."""
+    short = np.array([max(0.0, limits.margin_m - r.margin) * min(1.0, max(r.load, 0.0))
+                      for r in results if r.margin is not None])
     x = delta.ravel()
     return float(np.sum((short / limits.zmp_tolerance_m) ** 2) + np.sum((reg_size @ x) ** 2)
                  + np.sum((reg_acc @ x) ** 2))
@@ -407,11 +420,12 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
         if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
             break
         cjac = lin.channel_jacobians(q_base, delta, w)
-        jall = (lin.matrix(current, judged, cjac) / limits.zmp_tolerance_m).tocsr()
+        jmat, load = lin.matrix(current, judged, cjac)
+        jall = (jmat / limits.zmp_tolerance_m).tocsr()
         zall = np.array([current[k].zmp[:2] for k in judged])
         accepted = False
         for _attempt in range(5):  # Levenberg-Marquardt: damp the step until the exact cost drops
-            cand = _solve_step(current, judged, jall, zall, delta, mu, limits, reg_size, reg_acc, bounds, dt)
+            cand = _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt)
             corrected = apply_delta(mover, body, frames, cand, w)
             trial = analyse(corrected)
             trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)

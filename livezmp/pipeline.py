@@ -41,7 +41,8 @@ class FrameResult:
     """One analysed frame, internal frame (z up, metres).
 
     ``zmp``/``clamped``/``margin``/``inside`` are None in flight (no ZMP) or when there is
-    no support; ``margin`` is the signed distance to the polygon edge (+ inside)."""
+    no support; ``margin`` is the signed distance to the polygon edge (+ inside);
+    ``load`` is the vertical ground force over body weight."""
 
     index: int
     t: float
@@ -57,6 +58,7 @@ class FrameResult:
     inside: bool | None = None
     clamped: np.ndarray | None = None
     margin: float | None = None
+    load: float = 0.0  # vertical ground force over body weight (1 standing still, 0 in flight)
 
 
 def default_config(body: BodyModel, fps: float, mode: str = "full", ground_z: float | None = None) -> PipelineConfig:
@@ -129,7 +131,8 @@ class Pipeline:
             # the ZMP was computed on z = 0; move it onto the detected ground plane
             zmp = zmp_on_plane(z.zmp, z.force, ground)
         poly = support_polygon(soles["left"][:, :2], soles["right"][:, :2], support)
-        res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground)
+        res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground,
+                          load=float(z.force[2] / (data.mass[0] * -model.gravity.linear[2])))
         if zmp is not None and len(poly):
             c = clamp_to_polygon(zmp[:2], poly)
             res.inside, res.margin = c.inside, c.margin

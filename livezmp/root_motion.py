@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 from livezmp.body import BodyModel
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
+MAX_IK_STEP = 0.1  # rad per Gauss-Newton iteration and joint
 
 
 @dataclass
@@ -121,7 +122,13 @@ class RootMover:
                 break
             jac = np.vstack([pin.getFrameJacobian(self.model, self.data, f, ref)[: 6 if full else 3, cols]
                              for f in frames])
-            q[cols] += np.linalg.solve(jac.T @ jac + 1e-9 * np.eye(len(cols)), jac.T @ e)
+            # damped, and each step bounded, so a leg that cannot reach exactly (a thigh alone
+            # moving ankle and toe) settles at the nearby least-squares pose instead of
+            # swinging to another branch; a robot's six-joint leg reaches exactly: damp lightly
+            jtj = jac.T @ jac
+            damping = (1e-6 if full else 1e-3) * np.trace(jtj) / len(cols) + 1e-12
+            step = np.linalg.solve(jtj + damping * np.eye(len(cols)), jac.T @ e)
+            q[cols] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
         self._fk(q)
         e = self._residual(frames, targets)
         if full:
