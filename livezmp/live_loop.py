@@ -1,0 +1,441 @@
+"""The live balance loop: read → estimate → correct → write, at a fixed rate.
+
+Every cycle of a :class:`~livezmp.loop_clock.LoopClock` (absolute deadlines):
+
+1. read one verified frame from the link; the :class:`~livezmp.safety.FrameGuard`
+   rejects stale and corrupted ones;
+2. estimate: the robot has no base sensor, so the base pose comes from the joint
+   angles with the stance foot flat (:class:`~livezmp.base_placement.BasePlacer`);
+   base + joints go through the per-frame :class:`~livezmp.pipeline.Pipeline`
+   (results lag by the estimator's lag);
+3. correct: every ``correct_every`` cycles the
+   :class:`~livezmp.online_correction.OnlineCorrector` turns the newest result into
+   leg-joint offsets for the posture about to be sent (held in between: its IK costs
+   more than one 500 Hz period allows on every cycle);
+4. write: goals = command + offsets, through the
+   :class:`~livezmp.safety.GoalLimiter`.
+
+The command comes from a scenario or motion (``command(t)``: joint goals, rad, at loop
+time t in s) or, without one, is the posture of the first frame (hold and balance). At
+the start, and when commanding resumes after a stop, the goals blend from the present
+posture to the command over ``ramp_s``.
+
+A cycle whose read fails, or whose frame the guard rejects, writes nothing; the
+estimator is told the sample is missing (so its time grid stays uniform and short gaps
+are bridged by its Kalman prediction). Deadlines the clock skipped count as missing
+samples too. With no valid frame for the watchdog time the loop stops commanding (hold,
+or drop torque) and tries ``reconnect`` every ``reconnect_every_s``; the first valid
+frame after a gap longer than the watchdog time restarts the estimator and corrector
+(a gap must not produce a velocity spike) and ramps back to the command. After
+dropping torque, or a servo's hardware error, the loop only monitors. On every way out
+— the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
+first call to the link.
+
+Memory is bounded (histograms, a short event list) and each cycle costs the same
+whatever the length of the run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from livezmp.base_placement import BasePlacer
+from livezmp.body import BodyModel
+from livezmp.estimator import EstimatorConfig
+from livezmp.links.base import Link, LinkError, LinkFrame, LinkReadError
+from livezmp.loop_clock import LoopClock, Tick, TimingHistogram
+from livezmp.online_correction import OnlineCorrector
+from livezmp.pipeline import FrameResult, Pipeline, default_config
+from livezmp.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
+
+STAGES = ("read", "estimate", "correct", "write")
+FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_every``:
+    run the corrector every N cycles; ``ramp_s``: blend time from the present posture
+    to the command (s); ``estimator_*``: window, lag (s) and cutoff (Hz) of the
+    estimator; ``status_every_s``: period of the status callback."""
+
+    rate_hz: float = 500.0
+    correct: bool = True
+    correct_every: int = 2
+    ramp_s: float = 0.5
+    estimator_window_s: float = 0.2
+    estimator_lag_s: float = 0.05
+    estimator_cutoff_hz: float = 8.0
+    status_every_s: float = 1.0
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+
+
+@dataclass
+class LoopCounters:
+    """Per-run counts; ``judged``/``inside``: analysed frames with a support polygon and
+    those whose estimated ZMP was inside it."""
+
+    cycles: int = 0
+    read_errors: int = 0
+    write_errors: int = 0
+    stale_frames: int = 0
+    corrupted_frames: int = 0
+    good_frames: int = 0
+    commands_sent: int = 0
+    corrections_sent: int = 0
+    corrections_limited: int = 0
+    judged: int = 0
+    inside: int = 0
+    watchdog_trips: int = 0
+    reconnects: int = 0
+    resumes: int = 0
+    hardware_errors: dict[str, int] = field(default_factory=dict)
+
+
+def _smooth(s: float) -> float:
+    """0 → 1 over s in [0, 1], zero slope at both ends."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+class LiveLoop:
+    """The loop over one open ``link`` (joints in ``body.joint_names`` order).
+
+    ``command(t)``: joint goals (rad) at loop time t (s), or None to hold the first
+    frame's posture. ``clock``: a :class:`LoopClock` (default: real time at
+    ``config.rate_hz``). ``fell()``: the simulator's fall flag, when there is one.
+    ``on_event(msg)`` gets one-line notes of state changes; ``on_status(dict)`` a status
+    every ``config.status_every_s``."""
+
+    def __init__(self, link: Link, body: BodyModel, config: LoopConfig | None = None,
+                 command: Callable[[float], np.ndarray] | None = None, clock: LoopClock | None = None,
+                 fell: Callable[[], bool] | None = None, on_event: Callable[[str], None] | None = None,
+                 on_status: Callable[[dict], None] | None = None):
+        self.link = link
+        self.body = body
+        self.config = config or LoopConfig()
+        cfg = self.config
+        if cfg.correct_every < 1:
+            raise ValueError(f"correct_every = {cfg.correct_every}: must be at least 1")
+        self.clock = clock or LoopClock(cfg.rate_hz)
+        self.dt = self.clock.period
+        self.command = command
+        self.fell = fell
+        self.on_event = on_event
+        self.on_status = on_status
+        self.limits = joint_limits(body)
+        self.guard = FrameGuard(self.limits, cfg.safety)
+        self.limiter = GoalLimiter(self.limits, cfg.safety, self.dt)
+        est = EstimatorConfig(rate_hz=1.0 / self.dt, window_s=cfg.estimator_window_s, lag_s=cfg.estimator_lag_s,
+                              cutoff_hz=cfg.estimator_cutoff_hz)
+        self.pipeline_config = replace(default_config(body, 1.0 / self.dt), estimator=est)
+        self.counters = LoopCounters()
+        self.times = {s: TimingHistogram() for s in STAGES}
+        self.latency = TimingHistogram()
+        self.events: deque[str] = deque(maxlen=100)
+        self.nb = len(body.base_channels)
+        self._nan = np.full(body.nq, np.nan)
+        self._stop_reason: str | None = None
+        self._hold: np.ndarray | None = None
+        self.halted: str | None = None
+        self.torque_dropped = False
+        self.stopped = False  # the watchdog stopped commanding
+        self.link_down = False
+        self._restart_estimation()
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def _restart_estimation(self) -> None:
+        """A fresh estimator, base placement, corrector and offsets (start, or after a gap)."""
+        self.pipe = Pipeline(self.body, self.pipeline_config, nominal_dt=self.dt)
+        self.placer = BasePlacer(self.body)
+        self.command_placer = BasePlacer(self.body)
+        every = self.config.correct_every
+        self.corrector = OnlineCorrector(self.body, every * self.dt) if self.config.correct else None
+        self.limiter.reset()
+        self.guard.reset()
+        self.offsets = np.zeros(len(self.limits.names))
+        self.result: FrameResult | None = None
+        self._fresh = False  # a new result arrived this cycle
+        self._fed_until: int | None = None  # last grid index given to the estimator
+        self._fed = 0  # samples given to this pipeline
+        self._valid = np.zeros(self.pipe.lag + 1, dtype=bool)  # were the last lag + 1 samples real?
+        self._since_correction = every
+        self._ramp_from: np.ndarray | None = None
+        self._ramp_t0 = 0.0
+
+    def request_stop(self, reason: str) -> None:
+        """Ask the loop to end after the current cycle (safe from a signal handler)."""
+        if self._stop_reason is None:
+            self._stop_reason = reason
+
+    def _event(self, t: float, msg: str) -> None:
+        line = f"t={t:.3f}s: {msg}"
+        self.events.append(line)
+        if self.on_event is not None:
+            self.on_event(line)
+
+    # -- the loop ------------------------------------------------------------------------------
+
+    def run(self, duration: float | None = None) -> dict:
+        """Run until ``duration`` seconds of loop time (None: until :meth:`request_stop`);
+        return the summary (see :meth:`summary`)."""
+        self._last_reconnect = -math.inf
+        self._next_fell_check = 0.0
+        self._next_status = self.config.status_every_s
+        tick = self.clock.start()
+        self.start_time = tick.woke
+        self.watchdog = Watchdog(self.config.safety.watchdog_s, tick.woke)
+        try:
+            while True:
+                t = tick.index * self.dt
+                if duration is not None and t >= duration:
+                    self.request_stop("duration")
+                self._poll(t)
+                if self._stop_reason is not None:
+                    break
+                self._cycle(tick, t)
+                tick = self.clock.wait()
+        except BaseException as e:
+            self.request_stop(f"error: {type(e).__name__}: {e}")
+            raise
+        finally:
+            # stop commands go out first, whatever happened
+            self.link.safe_stop(drop_torque=self.torque_dropped)
+        return self.summary()
+
+    def _poll(self, t: float) -> None:
+        """Every so often: the simulator's fall flag and the status callback."""
+        t += 0.5 * self.dt  # grid times: do not let rounding push a check to the next cycle
+        if self.fell is not None and t >= self._next_fell_check:
+            self._next_fell_check = t + FELL_CHECK_S
+            if self.fell():
+                self.request_stop("fell")
+        if self.on_status is not None and t >= self._next_status:
+            self._next_status += self.config.status_every_s
+            self.on_status(self.status(t - 0.5 * self.dt))
+
+    def _cycle(self, tick: Tick, t: float) -> None:
+        now = self.clock.now
+        self.counters.cycles += 1
+        self._fresh = False
+        self._fill_skipped(tick.index)
+        if self.link_down or self.stopped:
+            self._try_reconnect(t, tick.woke)
+            if self.link_down:
+                self._check_watchdog(t, now())
+                return
+        t0 = now()
+        frame = self._read(t)
+        t1 = now()
+        self.times["read"].add(t1 - t0)
+        if frame is not None:
+            verdict = self.guard.check(frame, t0, t1)
+            if verdict is not None:
+                if verdict.kind == "stale":
+                    self.counters.stale_frames += 1
+                else:
+                    self.counters.corrupted_frames += 1
+                self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}")
+                frame = None
+        if frame is None:
+            self._missing_sample(tick.index, t)
+            self._check_watchdog(t, t1)
+            return
+        self.counters.good_frames += 1
+        if t1 - self.watchdog.last > self.config.safety.watchdog_s or self.stopped:
+            self._resume(t)
+        self.watchdog.feed(t1)
+        if frame.hardware_errors:
+            self._hardware_errors(t, frame)
+        self._estimate(tick.index, t, frame.positions)
+        t2 = now()
+        self.times["estimate"].add(t2 - t1)
+        if self.halted is not None:
+            return
+        command = self._command(t, frame.positions)
+        self._correct(command)
+        t3 = now()
+        self.times["correct"].add(t3 - t2)
+        goals, limited = self.limiter.apply(command, self.offsets)
+        try:
+            self.link.write_goals(goals)
+        except LinkError as e:
+            self.counters.write_errors += 1
+            self._event(t, f"write failed: {e}")
+            return
+        t4 = now()
+        self.times["write"].add(t4 - t3)
+        self.latency.add(t4 - t0)
+        self.counters.commands_sent += 1
+        if np.any(self.limiter.offsets):
+            self.counters.corrections_sent += 1
+        self.counters.corrections_limited += limited
+
+    def _read(self, t: float) -> LinkFrame | None:
+        try:
+            return self.link.read()
+        except LinkReadError:
+            self.counters.read_errors += 1
+        except LinkError as e:
+            self.counters.read_errors += 1
+            self.link_down = True
+            self._event(t, f"link down: {e}")
+        return None
+
+    def _fill_skipped(self, index: int) -> None:
+        """Missing samples for the deadlines the clock skipped since the last cycle (not
+        beyond the watchdog time: a longer gap restarts the estimator anyway)."""
+        if self._fed_until is not None and (index - self._fed_until) * self.dt <= self.config.safety.watchdog_s:
+            for k in range(self._fed_until + 1, index):
+                self._missing_sample(k, k * self.dt)
+
+    def _missing_sample(self, index: int, t: float) -> None:
+        if self._fed_until is not None and index > self._fed_until:
+            self._feed(index, t, self._nan, valid=False)
+
+    def _estimate(self, index: int, t: float, q: np.ndarray) -> None:
+        self._feed(index, t, np.concatenate([self.placer.update(q), q]), valid=True)
+
+    def _feed(self, index: int, t: float, channels: np.ndarray, valid: bool) -> None:
+        """One sample into the pipeline; keep its result only when it is the analysis of
+        a real sample, not of the estimator's prediction across a gap."""
+        ring = self._valid
+        ring[self._fed % len(ring)] = valid
+        self._fed += 1
+        self._fed_until = index
+        result = self.pipe.step(t, channels)
+        if result is None or not ring[result.index % len(ring)]:
+            return
+        self.result = result
+        self._fresh = True
+        if result.inside is not None:
+            self.counters.judged += 1
+            self.counters.inside += bool(result.inside)
+
+    def _command(self, t: float, present: np.ndarray) -> np.ndarray:
+        """The command at t, blended in from the posture where commanding (re)started."""
+        if self._ramp_from is None:
+            self._ramp_from, self._ramp_t0 = present.copy(), t
+            if self._hold is None:
+                self._hold = present.copy()
+        target = self._hold if self.command is None else np.asarray(self.command(t), dtype=float)
+        s = _smooth((t - self._ramp_t0) / self.config.ramp_s)
+        return target if s >= 1.0 else self._ramp_from + s * (target - self._ramp_from)
+
+    def _correct(self, command: np.ndarray) -> None:
+        if self.corrector is None or not self._fresh:
+            return
+        self._since_correction += 1
+        if self._since_correction < self.config.correct_every:
+            return
+        self._since_correction = 0
+        q_command = np.concatenate([self.command_placer.update(command), command])
+        self.offsets = self.corrector.step(self.result, q_command).offsets[self.nb:]
+
+    # -- faults --------------------------------------------------------------------------------
+
+    def _check_watchdog(self, t: float, now: float) -> None:
+        if self.stopped or not self.watchdog.expired(now):
+            return
+        self.stopped = True
+        self._fed_until = None  # no more predicted samples: the estimator restarts on resume
+        self.counters.watchdog_trips += 1
+        drop = self.config.safety.drop_torque
+        self.link.safe_stop(drop_torque=drop)
+        if drop:
+            self.torque_dropped = True
+            self.halted = "torque dropped by the watchdog"
+        self._event(t, f"watchdog: no valid frame for {1e3 * (now - self.watchdog.last):.0f} ms; "
+                       f"{'torque dropped' if drop else 'holding'}; reconnecting")
+
+    def _try_reconnect(self, t: float, now: float) -> None:
+        if now - self._last_reconnect < self.config.safety.reconnect_every_s:
+            return
+        self._last_reconnect = now
+        if self.link.reconnect():
+            self.counters.reconnects += 1
+            self.link_down = False
+            self._event(t, "link reconnected")
+
+    def _resume(self, t: float) -> None:
+        gap = self.clock.now() - self.watchdog.last
+        self._restart_estimation()
+        self.stopped = False
+        self.counters.resumes += 1
+        self._event(t, f"valid frames again after {1e3 * gap:.0f} ms; estimator restarted"
+                       + ("" if self.halted else ", ramping back to the command"))
+
+    def _hardware_errors(self, t: float, frame: LinkFrame) -> None:
+        for joint, bits in frame.hardware_errors.items():
+            if self.counters.hardware_errors.get(joint) != bits:
+                self.counters.hardware_errors[joint] = bits
+                self._event(t, f"servo {joint}: hardware error 0x{bits:02x}")
+        if self.config.safety.stop_on_hardware_error and self.halted is None:
+            self.halted = f"hardware error on {', '.join(sorted(frame.hardware_errors))}"
+            self.link.safe_stop(drop_torque=False)
+            self._event(t, f"safe stop: {self.halted}; monitoring only")
+
+    # -- reports -------------------------------------------------------------------------------
+
+    def status(self, t: float) -> dict:
+        """A short live status: loop time, rate, balance, errors, state."""
+        c = self.counters
+        r = self.result
+        return {"t": t, "hz": self.clock.stats().achieved_hz, "support": None if r is None else r.support,
+                "margin_mm": None if r is None or r.margin is None else 1e3 * r.margin,
+                "inside_fraction": c.inside / c.judged if c.judged else None,
+                "misses": self.clock.misses, "read_errors": c.read_errors, "corrections": c.corrections_sent,
+                "state": self.state}
+
+    @property
+    def state(self) -> str:
+        if self.halted is not None:
+            return "halted"
+        return "stopped" if self.stopped or self.link_down else "running"
+
+    def summary(self) -> dict:
+        """Counters, timing and rates of the run (JSON-ready; times in ms)."""
+        c = self.counters
+        clock = self.clock.stats()
+        stats = self.link.stats
+        return {
+            "cycles": c.cycles,
+            "achieved_hz": clock.achieved_hz,
+            "deadline_misses": clock.deadline_misses,
+            "read_errors": c.read_errors,
+            "write_errors": c.write_errors,
+            "stale_frames": c.stale_frames,
+            "corrupted_frames": c.corrupted_frames,
+            "corrections_sent": c.corrections_sent,
+            "inside_fraction": c.inside / c.judged if c.judged else None,
+            "max_latency_ms": 1e3 * self.latency.max if self.latency.count else None,
+            "p99_latency_ms": 1e3 * self.latency.quantile(0.99) if self.latency.count else None,
+            "p50_latency_ms": 1e3 * self.latency.quantile(0.5) if self.latency.count else None,
+            "fell": bool(self.fell()) if self.fell is not None else None,
+            "rate_hz": 1.0 / self.dt,
+            "correct": self.config.correct,
+            "correct_every": self.config.correct_every,
+            "stopped_by": self._stop_reason,
+            "state": self.state,
+            "halted": self.halted,
+            "good_frames": c.good_frames,
+            "commands_sent": c.commands_sent,
+            "corrections_limited": c.corrections_limited,
+            "judged_frames": c.judged,
+            "watchdog_trips": c.watchdog_trips,
+            "reconnects": c.reconnects,
+            "resumes": c.resumes,
+            "hardware_errors": dict(c.hardware_errors),
+            "clock": clock.as_dict(),
+            "timing": {s: h.summary_ms() for s, h in self.times.items()},
+            "link": {"reads": stats.reads, "read_errors": stats.read_errors, "writes": stats.writes,
+                     "write_errors": stats.write_errors, "reconnects": stats.reconnects,
+                     "errors_by_kind": dict(stats.errors_by_kind)},
+            "events": list(self.events),
+        }

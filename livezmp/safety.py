@@ -1,0 +1,185 @@
+"""The live loop's safety rules: which frames may drive a command, what may be sent,
+and when to stop commanding.
+
+* Frames (:class:`FrameGuard`). A link only returns frames it verified (CRC, lengths);
+  the guard adds the rules a link cannot know. *Stale*: the read took longer than
+  ``max_frame_age_s`` (the data is that old by the time a command could use it), or the
+  frame is not newer than the previous one (its host time, or the device's own
+  timestamp, did not advance: a repeated frame). *Corrupted*: a non-finite or
+  wrong-sized position vector, a joint beyond its URDF limits by more than
+  ``position_tolerance_rad``, or a joint that moved faster than ``speed_factor`` times
+  its URDF velocity limit since the last good frame (plus ``position_tolerance_rad``
+  of encoder noise). A rejected frame never drives a command.
+* Goals (:class:`GoalLimiter`). Correction offsets are clipped to
+  ``max_correction_rad`` per joint and may change by at most
+  ``max_correction_rate_rad_s`` (rad/s); the goals (command + offsets) are clipped to
+  the URDF joint limits less ``limit_margin_rad``.
+* Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` → the loop stops
+  commanding and either holds the present posture or drops torque
+  (``drop_torque``), and keeps trying to reconnect every ``reconnect_every_s``.
+* A servo that reports a hardware error (overload, overheating, ...) latches a safe
+  stop when ``stop_on_hardware_error`` (the default): the loop keeps monitoring but no
+  longer commands.
+
+Units: rad, rad/s, s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from livezmp.body import BodyModel
+from livezmp.errors import InputError
+from livezmp.links.base import LinkFrame
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Safety settings (see the module docstring); every number must be positive."""
+
+    watchdog_s: float = 0.1
+    drop_torque: bool = False
+    reconnect_every_s: float = 0.25
+    max_frame_age_s: float = 0.02
+    position_tolerance_rad: float = 0.05
+    speed_factor: float = 1.5
+    max_correction_rad: float = 0.5
+    max_correction_rate_rad_s: float = 3.0
+    limit_margin_rad: float = 0.01
+    stop_on_hardware_error: bool = True
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool):
+                continue
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise InputError(f"safety setting {f.name} = {value!r}: must be a positive number")
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Per joint, in link order: ``lower``/``upper`` positions (rad, ±inf when the URDF
+    gives none) and ``velocity`` (rad/s, inf when none)."""
+
+    names: list[str]
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+
+
+def joint_limits(body: BodyModel) -> JointLimits:
+    """The URDF limits of a robot body's actuated joints (``body.joint_names`` order)."""
+    nb = len(body.base_channels)
+    model = body.model
+
+    def finite(a: np.ndarray, fill: float) -> np.ndarray:
+        # Pinocchio marks "no limit" with ±max float (and velocity 0 for a missing tag)
+        a = np.asarray(a[nb:], dtype=float).copy()
+        a[np.abs(a) >= 1e300] = fill
+        return a
+
+    vel = finite(model.velocityLimit, math.inf)
+    vel[vel <= 0] = math.inf
+    return JointLimits(list(body.joint_names), finite(model.lowerPositionLimit, -math.inf),
+                       finite(model.upperPositionLimit, math.inf), vel)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Why a frame was rejected: ``kind`` "stale" or "corrupted", and a one-line ``reason``."""
+
+    kind: str
+    reason: str
+
+
+class FrameGuard:
+    """Applies the stale and corrupted rules to each frame; remembers the last good one."""
+
+    def __init__(self, limits: JointLimits, config: SafetyConfig):
+        self.limits = limits
+        self.config = config
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the last good frame (after a gap, the speed rule starts afresh)."""
+        self._last_q: np.ndarray | None = None
+        self._last_read = -math.inf
+        self._last_t = -math.inf
+        self._last_device_t = -math.inf
+
+    def check(self, frame: LinkFrame, read_start: float, now: float) -> Verdict | None:
+        """None when ``frame`` may drive a command, else why not. ``read_start``: when the
+        read was asked for; ``now``: when it returned (s, the loop's clock)."""
+        cfg, lim = self.config, self.limits
+        q = np.asarray(frame.positions, dtype=float)
+        if q.shape != lim.lower.shape:
+            return Verdict("corrupted", f"{q.size} positions for {lim.lower.size} joints")
+        if not np.all(np.isfinite(q)):
+            return Verdict("corrupted", f"joint {lim.names[int(np.argmin(np.isfinite(q)))]}: non-finite position")
+        tol = cfg.position_tolerance_rad
+        out = (q < lim.lower - tol) | (q > lim.upper + tol)
+        if out.any():
+            j = int(np.argmax(out))
+            return Verdict("corrupted", f"joint {lim.names[j]}: {q[j]:.3f} rad is beyond its limits "
+                                        f"[{lim.lower[j]:.3f}, {lim.upper[j]:.3f}]")
+        if now - read_start > cfg.max_frame_age_s:
+            return Verdict("stale", f"read took {1e3 * (now - read_start):.1f} ms "
+                                    f"(> {1e3 * cfg.max_frame_age_s:.1f} ms)")
+        if frame.t <= self._last_t or (frame.device_time is not None and frame.device_time <= self._last_device_t):
+            return Verdict("stale", "frame is not newer than the previous one")
+        if self._last_q is not None:
+            step = np.abs(q - self._last_q)
+            allowed = cfg.speed_factor * lim.velocity * (read_start - self._last_read) + tol
+            fast = step > allowed
+            if fast.any():
+                j = int(np.argmax(fast))
+                return Verdict("corrupted", f"joint {lim.names[j]}: jumped {step[j]:.3f} rad since the last frame")
+        self._last_q, self._last_read, self._last_t = q.copy(), read_start, frame.t
+        if frame.device_time is not None:
+            self._last_device_t = frame.device_time
+        return None
+
+
+class Watchdog:
+    """Expires when no valid frame was fed for ``timeout_s`` (s, the loop's clock)."""
+
+    def __init__(self, timeout_s: float, now: float):
+        self.timeout_s = timeout_s
+        self.last = now
+
+    def feed(self, now: float) -> None:
+        self.last = now
+
+    def expired(self, now: float) -> bool:
+        return now - self.last > self.timeout_s
+
+
+class GoalLimiter:
+    """command + correction offsets → goals inside the correction and joint limits;
+    ``dt``: seconds between calls (the loop period)."""
+
+    def __init__(self, limits: JointLimits, config: SafetyConfig, dt: float):
+        self.lower = limits.lower + config.limit_margin_rad
+        self.upper = limits.upper - config.limit_margin_rad
+        self.max_offset = config.max_correction_rad
+        self.max_step = config.max_correction_rate_rad_s * dt
+        self.reset()
+
+    def reset(self) -> None:
+        """Offsets start again from zero (after a stop)."""
+        self.offsets = np.zeros_like(self.lower)
+
+    def apply(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, and whether a
+        limit cut anything. Non-finite offsets count as zero."""
+        want = np.where(np.isfinite(offsets), offsets, 0.0)
+        sent = np.clip(np.clip(want, -self.max_offset, self.max_offset),
+                       self.offsets - self.max_step, self.offsets + self.max_step)
+        self.offsets = sent
+        goals = np.clip(command + sent, self.lower, self.upper)
+        limited = bool(np.any(sent != want) or np.any(goals != command + sent))
+        return goals, limited

@@ -1,0 +1,415 @@
+"""The live loop's clock, safety rules and cycle logic, on simulated time.
+
+A scripted link stands in for a servo bus here: a first-order servo model on a
+simulated clock, with faults scripted by read number, so every count can be compared
+with exactly what was injected. The real links over simulated devices are exercised
+in test_live_loop_links.py."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from livezmp.body_urdf import body_from_urdf
+from livezmp.demo import demo_robot_path
+from livezmp.errors import InputError
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.live_loop import LiveLoop, LoopConfig
+from livezmp.loop_clock import LoopClock, TimingHistogram
+from livezmp.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, Watchdog, joint_limits
+
+RATE = 500.0
+T = 1.0 / RATE
+
+
+@pytest.fixture(scope="module")
+def mini():
+    return body_from_urdf(demo_robot_path())
+
+
+class SimTime:
+    """A clock that only moves when slept on or charged for work; sleeps overshoot by ``overshoot`` s."""
+
+    def __init__(self, overshoot: float = 0.0):
+        self.t = 1000.0
+        self.overshoot = overshoot
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, d: float) -> None:
+        self.t += max(d, 0.0) + self.overshoot
+
+
+class ScriptedLink:
+    """A Link over first-order servos (time constant 30 ms) on a :class:`SimTime`.
+
+    ``fault(n, t)`` decides read number n's fate: None (good), "error" (LinkReadError),
+    "down" (LinkError: port gone), "nan", "jump", "slow" (takes 30 ms), "repeat" (the
+    previous frame again), "hw" (an overload reported on l_knee). ``reconnect_ok(t)``
+    says whether a reconnect at t succeeds. Every call is logged as (name, t)."""
+
+    def __init__(self, time: SimTime, names: list[str], q0: np.ndarray, fault=None, reconnect_ok=None):
+        self.time = time
+        self.joint_names = names
+        self.stats = LinkStats()
+        self.q = q0.copy()
+        self.goal = q0.copy()
+        self.torque = True
+        self.fault = fault or (lambda n, t: None)
+        self.reconnect_ok = reconnect_ok or (lambda t: True)
+        self.calls: list[tuple[str, float]] = []
+        self.writes: list[tuple[float, np.ndarray, np.ndarray]] = []  # time, goals, last read positions
+        self.last_frame: LinkFrame | None = None
+        self._t = time.t
+
+    def _advance(self) -> None:
+        dt, self._t = self.time.t - self._t, self.time.t
+        if self.torque:
+            self.q = self.goal + (self.q - self.goal) * math.exp(-dt / 0.03)
+
+    def read(self) -> LinkFrame:
+        self.time.t += 2e-4
+        self._advance()
+        n = self.stats.reads
+        self.stats.reads += 1
+        self.calls.append(("read", self.time.t))
+        fate = self.fault(n, self.time.t)
+        if fate in ("error", "down"):
+            self.stats.read_errors += 1
+            self.stats.count(fate)
+            raise (LinkReadError if fate == "error" else LinkError)(f"scripted {fate} at read {n}")
+        if fate == "repeat" and self.last_frame is not None:
+            return self.last_frame
+        if fate == "slow":
+            self.time.t += 0.03
+        q = self.q.copy()
+        if fate == "nan":
+            q[3] = np.nan
+        elif fate == "jump":
+            q[5] += 0.5
+        errors = {"l_knee": 0x20} if fate == "hw" else {}
+        self.last_frame = LinkFrame(self.time.t, q, hardware_errors=errors)
+        return self.last_frame
+
+    def write_goals(self, positions: np.ndarray) -> None:
+        self.time.t += 1e-4
+        self._advance()
+        self.calls.append(("write", self.time.t))
+        self.writes.append((self.time.t, positions.copy(), self.last_frame.positions.copy()))
+        self.stats.writes += 1
+        self.goal = positions.copy()
+
+    def hold(self) -> None:
+        self.goal = self.q.copy()
+
+    def safe_stop(self, drop_torque: bool = False) -> None:
+        self.calls.append(("safe_stop_drop" if drop_torque else "safe_stop", self.time.t))
+        self._advance()
+        self.goal = self.q.copy()
+        self.torque = not drop_torque
+
+    def reconnect(self) -> bool:
+        ok = self.reconnect_ok(self.time.t)
+        self.calls.append(("reconnect", self.time.t))
+        if ok:
+            self.stats.reconnects += 1
+        return ok
+
+    def close(self) -> None:
+        self.safe_stop()
+
+
+def scripted_loop(body, fault=None, reconnect_ok=None, config: LoopConfig | None = None, command=None,
+                  work: float = 0.0):
+    """A loop over a ScriptedLink on simulated time; ``work`` (s) is charged per cycle on top of the link's."""
+    clock_time = SimTime()
+    link = ScriptedLink(clock_time, body.joint_names, np.zeros(len(body.joint_names)), fault, reconnect_ok)
+
+    def now() -> float:
+        return clock_time.t
+
+    clock = LoopClock(RATE, now=now, sleep=lambda d: clock_time.sleep(d - work))
+    events: list[str] = []
+    loop = LiveLoop(link, body, config or LoopConfig(rate_hz=RATE), command=command, clock=clock,
+                    on_event=events.append)
+    return loop, link, clock_time, events
+
+
+# -- the clock ------------------------------------------------------------------------------------------
+
+def test_clock_keeps_absolute_deadlines_despite_sleep_overshoot():
+    """Sleeps that overshoot by 0.3 ms do not accumulate: every cycle wakes 0.3 ms after its own deadline."""
+    time = SimTime(overshoot=3e-4)
+    clock = LoopClock(RATE, now=time.now, sleep=time.sleep)
+    start = clock.start().woke
+    for _ in range(1000):
+        time.t += 5e-4  # the cycle's work
+        tick = clock.wait()
+    assert tick.index == 1000
+    assert tick.woke - start == pytest.approx(1000 * T + 3e-4, abs=1e-9)
+    stats = clock.stats()
+    assert stats.deadline_misses == 0 and stats.skipped == 0
+    assert stats.achieved_hz == pytest.approx(1000 / (1000 * T + 3e-4), rel=1e-9)  # only cycle 1 is late
+    assert stats.wake_late.quantile(0.99) == pytest.approx(3e-4, abs=1e-5)
+    # slack = period - overshoot - work, to within one 10 us bin
+    assert stats.slack.quantile(0.5) == pytest.approx(T - 3e-4 - 5e-4, abs=1e-5)
+
+
+def test_clock_counts_misses_and_skips_overrun_deadlines():
+    time = SimTime()
+    clock = LoopClock(RATE, now=time.now, sleep=time.sleep)
+    clock.start()
+    # 2.5 ms of work ends in cycle 2's slot; 7.1 ms from cycle 3's start ends in cycle 6's slot
+    work = [1e-3, 2.5e-3, 1e-3, 7.1e-3, 0.5e-3]
+    ticks = []
+    for w in work:
+        time.t += w
+        ticks.append(clock.wait())
+    assert [t.index for t in ticks] == [1, 2, 3, 6, 7]
+    # a late cycle runs at once in its own slot, then the grid resumes
+    assert ticks[1].woke - ticks[1].deadline == pytest.approx(0.5e-3)
+    assert ticks[3].woke - ticks[3].deadline == pytest.approx(1.1e-3)
+    assert ticks[2].woke == pytest.approx(ticks[2].deadline)
+    assert ticks[4].woke == pytest.approx(ticks[4].deadline)
+    stats = clock.stats()
+    assert (stats.deadline_misses, stats.skipped) == (2, 2)
+
+
+def test_clock_rejects_a_bad_rate():
+    with pytest.raises(InputError, match="loop rate 0 Hz"):
+        LoopClock(0)
+
+
+def test_histogram_quantiles_match_numpy_within_a_bin():
+    rng = np.random.default_rng(4)
+    x = rng.gamma(2.0, 4e-4, 20000)
+    h = TimingHistogram()
+    for v in x:
+        h.add(float(v))
+    for q in (0.01, 0.5, 0.9, 0.99):
+        assert abs(h.quantile(q) - np.quantile(x, q)) <= h.bin_s
+    assert h.mean == pytest.approx(x.mean())
+    assert h.max == x.max() and h.quantile(1.0) == x.max()
+
+
+# -- safety rules ---------------------------------------------------------------------------------------
+
+def test_joint_limits_are_the_urdf_limit_tags(mini):
+    root = ET.parse(demo_robot_path()).getroot()
+    tags = {j.get("name"): j.find("limit") for j in root.findall("joint") if j.get("type") == "revolute"}
+    lim = joint_limits(mini)
+    assert sorted(lim.names) == sorted(tags)
+    for i, name in enumerate(lim.names):
+        assert lim.lower[i] == float(tags[name].get("lower"))
+        assert lim.upper[i] == float(tags[name].get("upper"))
+        assert lim.velocity[i] == float(tags[name].get("velocity"))
+
+
+def _limits(n=3):
+    return JointLimits([f"j{i}" for i in range(n)], np.full(n, -1.0), np.full(n, 1.0), np.full(n, 5.0))
+
+
+def test_frame_guard_rules():
+    guard = FrameGuard(_limits(), SafetyConfig())
+    q = np.array([0.1, 0.2, 0.3])
+    assert guard.check(LinkFrame(1.0, q), 1.0, 1.0002) is None  # read asked at 1.0, back at 1.0002
+    cases = [  # frame, read start, read end, verdict kind, words of its reason
+        (LinkFrame(1.002, np.array([0.1, np.nan, 0.3])), 1.002, 1.0022, "corrupted", "joint j1: non-finite"),
+        (LinkFrame(1.002, np.array([0.1, 0.2])), 1.002, 1.0022, "corrupted", "2 positions for 3 joints"),
+        (LinkFrame(1.002, np.array([0.1, 1.2, 0.3])), 1.002, 1.0022, "corrupted",
+         "joint j1: 1.200 rad is beyond its limits [-1.000, 1.000]"),
+        # 2 ms after the last good read: 5 rad/s x 1.5 x 2 ms + 0.05 = 0.065 rad allowed
+        (LinkFrame(1.002, q + [0, 0, 0.07]), 1.002, 1.0022, "corrupted", "joint j2: jumped 0.070 rad"),
+        (LinkFrame(1.0, q), 1.002, 1.0022, "stale", "not newer than the previous one"),
+        (LinkFrame(1.045, q), 1.02, 1.045, "stale", "read took 25.0 ms (> 20.0 ms)"),
+        (LinkFrame(1.05, q, device_time=5.0), 1.05, 1.0502, None, None),
+        (LinkFrame(1.052, q, device_time=5.0), 1.052, 1.0522, "stale", "not newer than the previous one"),
+        # 0.06 rad more after 10 ms is plausible
+        (LinkFrame(1.06, q + 0.06, device_time=5.01), 1.06, 1.0602, None, None),
+    ]
+    for frame, start, end, kind, reason in cases:
+        v = guard.check(frame, start, end)
+        assert (v is None) if kind is None else (v.kind == kind and reason in v.reason), (frame, v)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.lists(st.floats(-3, 3), min_size=3, max_size=3), min_size=1, max_size=40),
+       st.lists(st.floats(-1.5, 1.5), min_size=3, max_size=3))
+def test_goal_limiter_never_exceeds_its_limits(offset_seq, command):
+    cfg = SafetyConfig(max_correction_rad=0.4, max_correction_rate_rad_s=2.0, limit_margin_rad=0.01)
+    lim = _limits()
+    limiter = GoalLimiter(lim, cfg, T)
+    command = np.array(command)
+    prev = np.zeros(3)
+    for offsets in offset_seq:
+        goals, limited = limiter.apply(command, np.array(offsets))
+        sent = limiter.offsets
+        assert np.all(np.abs(sent) <= 0.4 + 1e-12)
+        assert np.all(np.abs(sent - prev) <= 2.0 * T + 1e-12)
+        assert np.all(goals >= -0.99 - 1e-12) and np.all(goals <= 0.99 + 1e-12)
+        exact = np.allclose(sent, offsets, atol=0) and np.allclose(goals, command + sent, atol=0)
+        assert limited == (not exact)
+        prev = sent
+
+
+def test_safety_config_errors_name_the_field():
+    with pytest.raises(InputError, match="watchdog_s = -1: must be a positive number"):
+        SafetyConfig(watchdog_s=-1)
+
+
+def test_watchdog_expires_after_its_timeout():
+    w = Watchdog(0.1, 5.0)
+    assert not w.expired(5.1)
+    assert w.expired(5.1001)
+    w.feed(5.2)
+    assert not w.expired(5.25)
+
+
+# -- the loop on a scripted link ---------------------------------------------------------------------
+
+def _writes_follow_good_reads(link: ScriptedLink) -> bool:
+    """Every write comes right after a read in the same cycle."""
+    names = [c for c, _ in link.calls]
+    return all(i > 0 and names[i - 1] == "read" for i, c in enumerate(names) if c == "write")
+
+
+def test_failed_and_rejected_frames_never_drive_a_command(mini):
+    script = {50: "error", 51: "error", 90: "nan", 120: "jump", 150: "slow", 200: "repeat", 240: "error"}
+    loop, link, _, events = scripted_loop(mini, fault=lambda n, t: script.get(n))
+    s = loop.run(duration=0.8)
+    # the slow read (30.2 ms) passed 14 deadlines, which were skipped; every other cycle ran
+    assert s["cycles"] + s["clock"]["skipped_cycles"] == 0.8 * RATE
+    assert s["clock"]["skipped_cycles"] == 14 and s["deadline_misses"] == 1
+    assert (s["read_errors"], s["corrupted_frames"], s["stale_frames"]) == (3, 2, 2)
+    assert link.stats.reads == s["cycles"]
+    assert s["commands_sent"] == s["good_frames"] == link.stats.reads - len(script)
+    assert link.stats.writes == s["commands_sent"]
+    assert _writes_follow_good_reads(link)
+    assert any("corrupted frame dropped: joint l_hip_roll: non-finite" in e for e in events)
+    assert any("stale frame dropped: read took 30.2 ms" in e for e in events)
+    assert link.calls[-1][0] == "safe_stop"
+    assert s["stopped_by"] == "duration" and s["watchdog_trips"] == 0
+
+
+def test_watchdog_stops_commanding_and_resumes_without_a_velocity_spike(mini):
+    """Reads fail from 0.6 s to 0.85 s: within the 100 ms watchdog the loop holds and
+    stops writing; when frames return the estimator restarts and the goals ramp from the
+    present posture to the command."""
+    arm = mini.joint_names.index("l_sho_pitch")
+
+    def command(t):
+        q = np.zeros(len(mini.joint_names))
+        q[arm] = 0.5 * math.sin(2 * math.pi * t)
+        return q
+
+    loop, link, _, events = scripted_loop(mini, command=command,
+                                          fault=lambda n, t: "error" if 0.6 <= t - 1000.0 < 0.85 else None)
+    speeds = []
+    feed = loop._feed
+
+    def spy(index, t, channels, valid):
+        feed(index, t, channels, valid)
+        if loop._fresh:
+            speeds.append(abs(loop.result.v[6 + arm]))
+
+    loop._feed = spy
+    s = loop.run(duration=1.6)
+    writes = [(t - 1000.0, g, q) for t, g, q in link.writes]
+    stop = next(t for c, t in link.calls if c == "safe_stop") - 1000.0
+    last_good_read = max(t for c, t in link.calls if c == "read" and t - 1000.0 < 0.6) - 1000.0
+    assert 0.1 - 1e-9 <= stop - last_good_read <= 0.1 + T
+    assert not [t for t, _, _ in writes if 0.6 <= t < 0.85]
+    assert s["watchdog_trips"] == 1 and s["resumes"] == 1
+    t_back, goals_back, present = next(w for w in writes if w[0] >= 0.85)
+    # the first goals after the gap are the present posture, not a jump to the command
+    assert np.array_equal(goals_back, present)
+    assert abs(command(t_back)[arm] - present[arm]) > 0.1
+    assert any("watchdog: no valid frame for 10" in e for e in events)
+    # no velocity spike across the gap: the arm moves at most 0.5 * 2 pi rad/s
+    assert max(speeds) < 0.5 * 2 * math.pi * 1.2
+
+
+def test_port_loss_reconnects_when_the_port_returns(mini):
+    gone = (0.3, 0.9)
+
+    def fault(n, t):
+        return "down" if gone[0] <= t - 1000.0 < gone[1] else None
+
+    loop, link, time, events = scripted_loop(mini, fault=fault, reconnect_ok=lambda t: t - 1000.0 >= gone[1])
+    s = loop.run(duration=1.5)
+    reconnects = [t - 1000.0 for c, t in link.calls if c == "reconnect"]
+    assert reconnects[0] == pytest.approx(gone[0] + T, abs=T)
+    assert all(b - a >= 0.25 - 1e-9 for a, b in zip(reconnects, reconnects[1:], strict=False))
+    assert reconnects[-1] >= gone[1] and s["reconnects"] == 1
+    # while the port is gone the loop does not hammer it with reads
+    assert sum(1 for c, t in link.calls if c == "read" and gone[0] < t - 1000.0 < gone[1]) == 1
+    assert s["watchdog_trips"] == 1 and s["state"] == "running"
+    # commanding resumes on the first cycle after the reconnect
+    assert sum(1 for t, _, _ in link.writes if t - 1000.0 > reconnects[-1]) == round((1.5 - reconnects[-1]) / T)
+
+
+def test_watchdog_can_drop_torque_and_then_only_monitors(mini):
+    cfg = LoopConfig(rate_hz=RATE, safety=SafetyConfig(drop_torque=True))
+    loop, link, _, _ = scripted_loop(mini, fault=lambda n, t: "error" if 0.3 <= t - 1000.0 < 0.5 else None,
+                                     config=cfg)
+    s = loop.run(duration=0.8)
+    assert ("safe_stop_drop" in [c for c, _ in link.calls])
+    assert not [t for t, _, _ in link.writes if t - 1000.0 >= 0.3]
+    assert s["state"] == "halted" and s["good_frames"] > 0.8 * RATE * 0.5
+    assert link.calls[-1][0] == "safe_stop_drop"  # the exit keeps torque off
+
+
+def test_hardware_error_latches_a_safe_stop(mini):
+    loop, link, _, events = scripted_loop(mini, fault=lambda n, t: "hw" if n == 100 else None)
+    s = loop.run(duration=0.5)
+    assert s["hardware_errors"] == {"l_knee": 0x20}
+    assert s["halted"] == "hardware error on l_knee"
+    assert s["commands_sent"] == 100
+    assert any("servo l_knee: hardware error 0x20" in e for e in events)
+
+
+def test_stop_commands_go_out_first_on_an_exception(mini):
+    def command(t):
+        if t > 0.2:
+            raise RuntimeError("motion source failed")
+        return np.zeros(len(mini.joint_names))
+
+    loop, link, _, _ = scripted_loop(mini, command=command)
+    with pytest.raises(RuntimeError, match="motion source failed"):
+        loop.run(duration=1.0)
+    assert link.calls[-1][0] == "safe_stop" and link.calls[-2][0] == "read"
+
+
+def test_stop_request_ends_the_loop_with_a_safe_stop(mini):
+    loop, link, _, _ = scripted_loop(mini, config=LoopConfig(rate_hz=RATE, status_every_s=0.1))
+    loop.on_status = lambda status: loop.request_stop("SIGTERM") if status["t"] >= 0.3 else None
+    s = loop.run()
+    assert s["stopped_by"] == "SIGTERM" and s["cycles"] == 0.3 * RATE
+    assert link.calls[-1][0] == "safe_stop"
+
+
+def test_corrections_are_bounded_and_rate_limited(mini):
+    """A command that leans the robot forward at the ankles far beyond its toes: the
+    corrector pushes back, within the safety limits, every second cycle."""
+    cfg = LoopConfig(rate_hz=RATE, ramp_s=1e-9,
+                     safety=SafetyConfig(max_correction_rad=0.1, max_correction_rate_rad_s=1.0))
+    ankles = [mini.joint_names.index(n) for n in ("l_ank_pitch", "r_ank_pitch")]
+
+    def command(t):
+        q = np.zeros(len(mini.joint_names))
+        q[ankles] = -0.3 * min(t / 0.5, 1.0)
+        return q
+
+    loop, link, _, _ = scripted_loop(mini, command=command, config=cfg)
+    s = loop.run(duration=1.2)
+    assert s["corrections_sent"] > 0 and s["corrections_limited"] > 0
+    goals = np.array([g for _, g, _ in link.writes])
+    offsets = goals - np.array([command(i * T) for i in range(len(goals))])
+    assert np.abs(offsets).max() <= 0.1 + 1e-9
+    assert np.abs(np.diff(offsets, axis=0)).max() <= 1.0 * T + 1e-9
