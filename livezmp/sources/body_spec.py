@@ -1,0 +1,127 @@
+"""What a body model was built from, kept as text so a recording can rebuild it.
+
+A live source knows its body before the first frame (a skeleton BVH, or a URDF and its
+robot config). :class:`BodySpec` keeps those inputs as text plus the resolved options
+(length unit and up axis as detected, not as guessed again), so ``livezmp replay`` on
+another machine builds exactly the same :class:`~livezmp.body.BodyModel`.
+
+A skeleton spec keeps the BVH hierarchy lines verbatim and only the frames that body
+building reads (the first :data:`~livezmp.body_bvh.CALIBRATION_S` seconds calibrate the
+feet; the first frame gives the up axis), written at full precision.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.body import BodyModel
+from livezmp.body_bvh import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
+from livezmp.bvh import BvhMotion, parse_bvh, parse_hierarchy
+from livezmp.errors import InputError
+from livezmp.segments import SegmentTag
+
+SKELETON_FILE = "skeleton.bvh"
+URDF_FILE = "robot.urdf"
+ROBOT_CONFIG_FILE = "robot.toml"
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """``kind`` "bvh" or "urdf"; ``files`` name → text; ``options`` plain JSON values."""
+
+    kind: str
+    files: dict[str, str]
+    options: dict = field(default_factory=dict)
+
+
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise InputError(f"{path}: cannot read {what}: {e.strerror}") from None
+
+
+@dataclass
+class Skeleton:
+    """A skeleton file read: ``motion`` (its frames, or for a hierarchy alone one stand-in
+    frame at a nominal 30 Hz: the rest pose, rotations zero and position channels equal
+    to the offsets they replace), ``hierarchy`` its HIERARCHY lines verbatim,
+    ``has_motion`` whether the file had frames (and so a real frame time)."""
+
+    motion: BvhMotion
+    hierarchy: str
+    has_motion: bool
+
+
+def read_skeleton(path: str | Path) -> Skeleton:
+    """A BVH file (hierarchy and frames, e.g. a T-pose or a take), or a hierarchy alone."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    text = _read_text(p, "skeleton")
+    joints, cur = parse_hierarchy(text, str(p))
+    hierarchy = "\n".join(cur.lines[: cur.i]) + "\n"
+    if any(ln.strip() for ln in cur.lines[cur.i :]):
+        return Skeleton(parse_bvh(text, str(p)), hierarchy, True)
+    rest = [j.offset["XYZ".index(c[0])] if c.endswith("position") else 0.0 for j in joints for c in j.channels]
+    return Skeleton(BvhMotion(joints, 1.0 / 30.0, np.array([rest]), str(p)), hierarchy, False)
+
+
+def skeleton_body(skeleton: Skeleton, opts: BvhBodyOptions | None = None) -> tuple[BodyModel, BodySpec]:
+    """The body of a skeleton (:func:`body_from_bvh`) and its spec."""
+    opts = opts or BvhBodyOptions()
+    motion = skeleton.motion
+    body = body_from_bvh(motion, opts)
+    n = min(len(motion.frames), max(1, round(CALIBRATION_S / motion.frame_time)))
+    rows = "\n".join(" ".join(repr(float(x)) for x in row) for row in motion.frames[:n])
+    text = f"{skeleton.hierarchy}MOTION\nFrames: {n}\nFrame Time: {motion.frame_time!r}\n{rows}\n"
+    mapping = {k: f"{v.kind}:{v.side}" for k, v in (opts.mapping or {}).items()}
+    options = {"total_mass": opts.total_mass, "units": body.units, "up_axis": body.up_axis,
+               "sole_width": opts.sole_width, "heel_back": opts.heel_back, "toe_front": opts.toe_front,
+               "mapping": mapping, "source": motion.source}
+    return body, BodySpec("bvh", {SKELETON_FILE: text}, options)
+
+
+def robot_body(urdf: str | Path, opts: UrdfBodyOptions | None = None) -> tuple[BodyModel, BodySpec]:
+    """Body and spec of a URDF robot; the spec carries the robot config in use when it is
+    a file (given, or beside the URDF); the built-in configs are found again by robot name."""
+    opts = opts or UrdfBodyOptions()
+    path = Path(urdf)
+    body = body_from_urdf(path, opts)
+    files = {URDF_FILE: _read_text(path, "URDF")}
+    config = Path(opts.config) if opts.config else path.with_suffix(".toml")
+    if config.is_file():
+        files[ROBOT_CONFIG_FILE] = _read_text(config, "robot config")
+    options = {"sole_length": opts.sole_length, "sole_width": opts.sole_width, "sole_drop": opts.sole_drop,
+               "source": str(path)}
+    return body, BodySpec("urdf", files, options)
+
+
+def body_from_spec(spec: BodySpec) -> BodyModel:
+    """Rebuild the body a :class:`BodySpec` describes."""
+    o = spec.options
+    if spec.kind == "bvh":
+        motion = parse_bvh(spec.files[SKELETON_FILE], o.get("source", SKELETON_FILE))
+        mapping = {}
+        for joint, tag in (o.get("mapping") or {}).items():
+            kind, _, side = tag.partition(":")
+            mapping[joint] = SegmentTag(kind, side)
+        opts = BvhBodyOptions(total_mass=o["total_mass"], units=o["units"], up_axis=o["up_axis"],
+                              mapping=mapping or None, sole_width=o.get("sole_width"),
+                              heel_back=o.get("heel_back"), toe_front=o.get("toe_front"))
+        return body_from_bvh(motion, opts)
+    if spec.kind == "urdf":
+        with tempfile.TemporaryDirectory(prefix="livezmp-body-") as tmp:
+            for name, text in spec.files.items():
+                (Path(tmp) / name).write_text(text, encoding="utf-8")
+            config = Path(tmp) / ROBOT_CONFIG_FILE
+            opts = UrdfBodyOptions(config=str(config) if config.exists() else None,
+                                   sole_length=o.get("sole_length"), sole_width=o.get("sole_width"),
+                                   sole_drop=o.get("sole_drop"))
+            return body_from_urdf(Path(tmp) / URDF_FILE, opts)
+    raise InputError(f"body spec: unknown body kind {spec.kind!r} (bvh or urdf)")

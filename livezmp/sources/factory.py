@@ -1,0 +1,135 @@
+"""``open_source(spec)``: the source a path or URL names.
+
+- ``walk.bvh``: replay of a BVH file; ``motion.csv``: of a joint-trajectory CSV (with
+  ``robot``, its URDF); ``session.mcap``: of a livezmp recording's input frames;
+- ``udp://HOST:PORT[?allow=NET,...&max_bytes=N]``: livezmp frames over UDP;
+- ``tcp://HOST:PORT[?max_line=N]``: a BVH broadcast (one line per frame).
+
+Stream sources need their body: ``skeleton`` (a BVH file, for udp and tcp) or
+``robot`` (a URDF, for udp), and their frame rate: ``fps``, else the skeleton file's
+frame time (the estimator is tuned to it; frames still carry their own times).
+
+Servo links (``dynamixel:``, ``can:``, ``fw:``) plug in here as further schemes, each
+opening an adapter with the :class:`~livezmp.sources.interface.Source` attributes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
+
+import numpy as np
+
+from livezmp.body import BodyModel
+from livezmp.body_bvh import BvhBodyOptions
+from livezmp.body_urdf import UrdfBodyOptions
+from livezmp.errors import InputError
+from livezmp.motion_file import trajectory_frames
+from livezmp.sources.body_spec import BodySpec, read_skeleton, robot_body, skeleton_body
+from livezmp.sources.bvh_tcp import BvhTcpSource
+from livezmp.sources.file_replay import FileReplaySource
+from livezmp.sources.interface import Source
+from livezmp.sources.mcap_replay import McapReplaySource
+from livezmp.sources.udp import UdpSource, parse_allowlist
+from livezmp.trajectory_csv import read_joint_csv
+
+SCHEMES = ("udp", "tcp")
+QUERY_KEYS = {"udp": {"allow", "max_bytes"}, "tcp": {"max_line"}}
+
+
+@dataclass(frozen=True)
+class SourceOptions:
+    """``skeleton`` BVH file / ``robot`` URDF giving a stream's body (``robot`` also goes
+    with a CSV); ``fps`` a stream's frame rate (Hz); ``speed`` and ``loop`` for replays."""
+
+    bvh: BvhBodyOptions = field(default_factory=BvhBodyOptions)
+    urdf: UrdfBodyOptions = field(default_factory=UrdfBodyOptions)
+    robot: str | None = None
+    skeleton: str | None = None
+    fps: float | None = None
+    speed: float = 1.0
+    loop: bool = False
+
+
+def _replay(path: Path, o: SourceOptions) -> Source:
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        if o.loop:
+            raise InputError(f"{path}: --loop is for motion files, not recordings")
+        return McapReplaySource(str(path), o.speed)
+    if suffix == ".bvh":
+        sk = read_skeleton(path)
+        if not sk.has_motion:
+            raise InputError(f"{path}: a hierarchy without frames; nothing to replay")
+        body, spec = skeleton_body(sk, o.bvh)
+        times = np.arange(len(sk.motion.frames)) * sk.motion.frame_time
+        return FileReplaySource(str(path), body, spec, times, sk.motion.frames, o.speed, o.loop)
+    if suffix == ".csv":
+        if o.robot is None:
+            raise InputError(f"{path}: a joint-trajectory CSV needs --robot ROBOT.urdf")
+        body, spec = robot_body(o.robot, o.urdf)
+        traj = read_joint_csv(path, body.joint_names)
+        return FileReplaySource(str(path), body, spec, traj.t, trajectory_frames(body, traj), o.speed, o.loop)
+    raise InputError(f"{path}: unknown source file type {suffix!r} (.bvh, .csv with --robot, .mcap)")
+
+
+def _stream_body(spec: str, o: SourceOptions, robot_ok: bool) -> tuple[BodyModel, BodySpec, float | None]:
+    """Body, spec and frame period (s) of a stream source."""
+    if o.skeleton and o.robot:
+        raise InputError(f"{spec}: give --skeleton or --robot, not both")
+    dt = 1.0 / o.fps if o.fps else None
+    if o.skeleton:
+        sk = read_skeleton(o.skeleton)
+        body, bspec = skeleton_body(sk, o.bvh)
+        return body, bspec, dt or (sk.motion.frame_time if sk.has_motion else None)
+    if o.robot and robot_ok:
+        body, bspec = robot_body(o.robot, o.urdf)
+        return body, bspec, dt
+    need = "--skeleton FILE.bvh or --robot ROBOT.urdf" if robot_ok else "--skeleton FILE.bvh (its BVH hierarchy)"
+    raise InputError(f"{spec}: a stream needs the body it carries: {need}")
+
+
+def _int_param(query: dict, key: str, spec: str) -> int | None:
+    if key not in query:
+        return None
+    try:
+        v = int(query[key][-1])
+    except ValueError:
+        v = 0
+    if v <= 0:
+        raise InputError(f"{spec}: {key}: need a positive integer, got {query[key][-1]!r}")
+    return v
+
+
+def open_source(spec: str, options: SourceOptions | None = None) -> Source:
+    """Open the source ``spec`` names (see the module docstring)."""
+    o = options or SourceOptions()
+    if o.fps is not None and not o.fps > 0:
+        raise InputError(f"{spec}: --fps must be positive, got {o.fps}")
+    if "://" not in spec:
+        path = Path(spec)
+        if not path.exists():
+            raise InputError(f"{spec}: no such file (or give udp://HOST:PORT, tcp://HOST:PORT)")
+        return _replay(path, o)
+    url = urlsplit(spec)
+    if url.scheme not in SCHEMES:
+        raise InputError(f"{spec}: unknown source scheme {url.scheme!r} (udp://, tcp://, or a file)")
+    try:
+        host, port = url.hostname, url.port
+    except ValueError:
+        host, port = None, None
+    if not host or port is None:
+        raise InputError(f"{spec}: need HOST:PORT, e.g. {url.scheme}://127.0.0.1:9000")
+    query = parse_qs(url.query, keep_blank_values=True)
+    unknown = set(query) - QUERY_KEYS[url.scheme]
+    if unknown:
+        raise InputError(f"{spec}: unknown parameter {sorted(unknown)[0]!r} "
+                         f"(one of {', '.join(sorted(QUERY_KEYS[url.scheme]))})")
+    body, bspec, dt = _stream_body(spec, o, robot_ok=url.scheme == "udp")
+    if dt is None:
+        raise InputError(f"{spec}: the stream's frame rate is unknown (no frame time in a skeleton file); give --fps")
+    if url.scheme == "udp":
+        allow = parse_allowlist(",".join(query["allow"]), spec) if "allow" in query else None
+        return UdpSource(host, port, body, bspec, allow, _int_param(query, "max_bytes", spec), dt)
+    return BvhTcpSource(host, port, body, bspec, dt, _int_param(query, "max_line", spec))

@@ -1,0 +1,133 @@
+"""The one interface every frame source offers, and the small records it hands out.
+
+A source delivers the input frames of one body, in order: :meth:`Source.read` returns a
+:class:`SourceFrame` ``(t, channels, contacts)`` or None when nothing came within the
+timeout; :attr:`Source.finished` turns true when no frame will ever come again (a file
+played to its end). Faults of the link (bad packets, a dropped connection) never raise:
+they are counted in :class:`SourceStats` and reported, rate-limited, through the
+source's :class:`ErrorLog`, from which the monitor records them as device errors.
+
+Adapting a servo link (``dynamixel:``, ``can:``, ``fw:``) is a class with these
+attributes whose ``read`` polls the bus once per period and converts the present
+positions to the body's channels (base channels first for a robot), with the foot
+sensors, if any, as ``contacts``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import asdict, dataclass
+from typing import Protocol
+
+import numpy as np
+
+from livezmp.body import BodyModel
+from livezmp.sources.body_spec import BodySpec
+
+
+@dataclass(frozen=True)
+class SourceFrame:
+    """One input frame: ``t`` s on the source's clock (strictly increasing);
+    ``channels`` (nq,) raw values in the body's channel order and the input's units
+    (BVH: file length unit and degrees; robot: m and rad); ``contacts`` (left, right)
+    from foot sensors, None to detect them; ``received`` ``time.monotonic()`` s at arrival."""
+
+    t: float
+    channels: np.ndarray
+    contacts: tuple[bool, bool] | None = None
+    received: float = 0.0
+
+
+@dataclass
+class SourceStats:
+    """Counters of one source. ``delivered``: frames handed out. Dropped input:
+    ``malformed`` (fails the frame schema, wrong channel count, non-finite value, time
+    not increasing), ``oversized`` (longer than the limit), ``duplicate`` (a sequence
+    number already seen), ``late`` (older than one already delivered: out of order),
+    ``rejected`` (sender not on the allowlist). ``lost``: sequence numbers skipped and
+    never delivered in order. ``reconnects``: connections re-opened."""
+
+    delivered: int = 0
+    malformed: int = 0
+    oversized: int = 0
+    duplicate: int = 0
+    late: int = 0
+    rejected: int = 0
+    lost: int = 0
+    reconnects: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+    @property
+    def dropped(self) -> int:
+        """Packets or lines received and thrown away."""
+        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected
+
+
+@dataclass(frozen=True)
+class DeviceError:
+    """A fault of the source: ``wall`` time.time() s of the first occurrence, ``kind``
+    (a :class:`SourceStats` field name or "disconnected"), ``message`` one line, ``count``
+    occurrences folded into this report."""
+
+    wall: float
+    kind: str
+    message: str
+    count: int = 1
+
+
+class ErrorLog:
+    """Faults waiting to be recorded: at most one report per kind every ``interval`` s;
+    repeats within the interval are folded into the next report of that kind (or into
+    one made by :meth:`drain` once the interval has passed); at most ``maxlen`` reports
+    wait. A flood of bad packets so costs O(1) memory and a few records per second."""
+
+    def __init__(self, interval: float = 1.0, maxlen: int = 64):
+        self.interval = interval
+        self._out: deque[DeviceError] = deque(maxlen=maxlen)
+        self._last: dict[str, float] = {}
+        self._folded: dict[str, tuple[int, str]] = {}
+
+    def report(self, kind: str, message: str, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        last = self._last.get(kind)
+        if last is not None and now - last < self.interval:
+            self._folded[kind] = (self._folded.get(kind, (0, ""))[0] + 1, message)
+            return
+        self._last[kind] = now
+        count = 1 + self._folded.pop(kind, (0, ""))[0]
+        self._out.append(DeviceError(time.time(), kind, message, count))
+
+    def drain(self, now: float | None = None) -> list[DeviceError]:
+        """The reports since the last call, oldest first, with folded repeats whose
+        interval has passed reported under their latest message."""
+        now = time.monotonic() if now is None else now
+        for kind in [k for k, last in self._last.items() if now - last >= self.interval and k in self._folded]:
+            count, message = self._folded.pop(kind)
+            self._last[kind] = now
+            self._out.append(DeviceError(time.time(), kind, message, count))
+        out = list(self._out)
+        self._out.clear()
+        return out
+
+
+class Source(Protocol):
+    """Where frames come from (see the module docstring). ``name`` is shown to the
+    operator; ``nominal_dt`` s is the expected frame period, None if unknown."""
+
+    name: str
+    body: BodyModel
+    body_spec: BodySpec
+    nominal_dt: float | None
+    stats: SourceStats
+    errors: ErrorLog
+
+    @property
+    def finished(self) -> bool: ...
+
+    def read(self, timeout: float) -> SourceFrame | None:
+        """The next frame, or None if none arrived within ``timeout`` s."""
+
+    def close(self) -> None: ...
