@@ -25,7 +25,7 @@ import pinocchio as pin
 from livezmp.body import BodyModel
 from livezmp.correction import CorrectionLimits, zmp_target
 from livezmp.pipeline import FrameResult
-from livezmp.root_motion import RootMover
+from livezmp.root_motion import RootMover, hip_axes
 from livezmp.support import clamp_to_polygon
 
 
@@ -70,7 +70,8 @@ class OnlineCorrector:
         self.w_left = 0.5
 
     def sensitivity(self, q: np.ndarray) -> np.ndarray:
-        """S (2, 3): quasi-static ZMP (= CoM) shift per radian of δ, m/rad."""
+        """S (2, 3): quasi-static ZMP (= CoM) shift per radian of δ, m/rad; ``data`` must
+        hold the frame placements of ``q``."""
         model, data = self.body.model, self.data
         pin.centerOfMass(model, data, q, False)
         m = data.mass[0]
@@ -79,10 +80,11 @@ class OnlineCorrector:
         m_up = m - legs_m
         c_up = (m * data.com[0] - legs_mc) / m_up
         corr = self.body.correction
-        pivot = self.w_left * data.oMf[corr.hips["left"]].translation \
-            + (1 - self.w_left) * data.oMf[corr.hips["right"]].translation
+        h_left, h_right = data.oMf[corr.hips["left"]].translation, data.oMf[corr.hips["right"]].translation
+        pivot = self.w_left * h_left + (1 - self.w_left) * h_right
         r = c_up - pivot
-        return -(m_up / m) * pin.skew(r)[:2]
+        # δ is in hip axes (see RootMover): world rotation = H δ; CoM shift = ω × r = −skew(r) ω
+        return -(m_up / m) * (pin.skew(r) @ hip_axes(h_left, h_right))[:2]
 
     def step(self, result: FrameResult, q_command: np.ndarray) -> OnlineCorrection:
         """Update δ from an analysed frame and return offsets for ``q_command`` (SI, the

@@ -51,10 +51,20 @@ def _root_chain(body: BodyModel) -> _RootChain:
     return chain
 
 
+def hip_axes(h_left: np.ndarray, h_right: np.ndarray) -> np.ndarray:
+    """Columns: forward, the hip line (right hip → left hip), and up (world z made
+    orthogonal to the hip line). A pitch about the hip line moves neither hip."""
+    y = h_left - h_right
+    y = y / np.linalg.norm(y)
+    z = np.array([0.0, 0.0, 1.0]) - y[2] * y
+    z /= np.linalg.norm(z)
+    return np.column_stack([np.cross(y, z), y, z])
+
+
 class RootMover:
     """Applies root rotation offsets to configurations of ``body`` (see module docstring)."""
 
-    def __init__(self, body: BodyModel, ik_iterations: int = 6, ik_tolerance: float = 1e-7):
+    def __init__(self, body: BodyModel, ik_iterations: int = 10, ik_tolerance: float = 1e-7):
         self.body = body
         self.model = body.model
         self.data = body.model.createData()
@@ -85,16 +95,17 @@ class RootMover:
         return {s: [self.data.oMf[f].copy() for f in fs] for s, fs in self.body.correction.foot_frames.items()}
 
     def apply(self, q: np.ndarray, delta: np.ndarray, w_left: float) -> np.ndarray:
-        """New configuration for root rotation offset ``delta`` (rad, world axes) about the
+        """New configuration for root rotation offset ``delta`` (rad, hip axes) about the
         pivot ``w_left`` · left hip + (1 − w_left) · right hip; feet kept in place."""
         q_new = np.array(q, dtype=float)
         self._fk(q_new)
         corr = self.body.correction
         targets = self.foot_targets()
-        pivot = w_left * self.data.oMf[corr.hips["left"]].translation \
-            + (1.0 - w_left) * self.data.oMf[corr.hips["right"]].translation
+        h_left = self.data.oMf[corr.hips["left"]].translation
+        h_right = self.data.oMf[corr.hips["right"]].translation
+        pivot = w_left * h_left + (1.0 - w_left) * h_right
         root = self.data.oMf[corr.root_frame_id]
-        r = pin.exp3(np.asarray(delta, dtype=float))
+        r = pin.exp3(hip_axes(h_left, h_right) @ np.asarray(delta, dtype=float))
         new_root = pin.SE3(r @ root.rotation, pivot + r @ (root.translation - pivot))
         self.set_root_pose(q_new, new_root)
         err = 0.0
@@ -122,7 +133,7 @@ class RootMover:
                 break
             jac = np.vstack([pin.getFrameJacobian(self.model, self.data, f, ref)[: 6 if full else 3, cols]
                              for f in frames])
-            # damped, and each step bounded, so a leg that cannot reach exactly (a thigh alone
+            # damped, and every step bounded, so a leg that cannot reach exactly (a thigh alone
             # moving ankle and toe) settles at the nearby least-squares pose instead of
             # swinging to another branch; a robot's six-joint leg reaches exactly: damp lightly
             jtj = jac.T @ jac
