@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-from data_paths import BANDAI
+from data_paths import BANDAI, OP3_URDF
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -196,3 +196,28 @@ def test_online_corrections_never_exceed_limits(op3_body, frames, max_rot, max_r
         assert np.all(np.abs(c.delta - prev) <= np.radians(max_rate) * dt + 1e-12)
         assert np.all(np.isfinite(c.offsets))
         prev = c.delta
+
+
+def test_correct_cli_on_a_robot_csv(tmp_path, op3_body):
+    """A joint-trajectory CSV of the OP3 leaning past its toes, corrected offline: the
+    corrected CSV re-analysed is inside; only leg joints change; feet stay put."""
+    names = op3_body.joint_names
+    rate = 100.0
+    t = np.arange(int(4 * rate)) / rate
+    lean = 0.32 * (smooth_ramp(t, 0.3, 1.5) - smooth_ramp(t, 2.8, 3.8))
+    q = np.array([op3_pose(op3_body, lean=x) for x in lean])
+    src, out, rep, summ = (tmp_path / n for n in ("lean.csv", "fixed.csv", "r.json", "s.json"))
+    np.savetxt(src, np.column_stack([t, q]), delimiter=",", header=",".join(["time", *names]), comments="")
+    assert main(["analyze", str(src), "--robot", str(OP3_URDF), "--summary-json", str(summ)]) == 0
+    assert json.loads(summ.read_text())["out_of_support_frames"] > 50
+    assert main(["correct", str(src), "--robot", str(OP3_URDF), "-o", str(out), "--report", str(rep)]) == 0
+    assert main(["analyze", str(out), "--robot", str(OP3_URDF), "--summary-json", str(summ)]) == 0
+    after = json.loads(summ.read_text())
+    assert after["inside_fraction"] >= 0.99
+    fixed = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert fixed.shape == (len(t), 1 + len(names))
+    moved = {names[c] for c in np.nonzero(np.abs(fixed[:, 1:] - q).max(axis=0) > 1e-9)[0]}
+    legs = {names[c - 6] for cols in op3_body.correction.legs.values() for c in cols}
+    assert moved and moved <= legs
+    report = json.loads(rep.read_text())
+    assert report["max_foot_displacement_mm"] < 0.01  # six-joint legs: the feet are exact
