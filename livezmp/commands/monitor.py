@@ -1,0 +1,203 @@
+"""`livezmp monitor`, `livezmp replay`, `livezmp recover`: the live capture monitor, the
+re-run of a recorded session, and the repair of a recording cut short by a crash."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import threading
+from types import SimpleNamespace
+
+import numpy as np
+
+from livezmp.body_bvh import BvhBodyOptions
+from livezmp.body_urdf import UrdfBodyOptions
+from livezmp.commands.common import add_body_options, pipeline_config
+from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.errors import InputError
+from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
+from livezmp.monitor.dashboard import DashboardServer, parse_address
+from livezmp.monitor.loop import Monitor, MonitorSummary
+from livezmp.monitor.tui import TerminalView
+from livezmp.motion_file import trajectory_frames
+from livezmp.pipeline import FrameResult, default_config
+from livezmp.recording import Recorder, iter_messages, recover
+from livezmp.segments import load_mapping
+from livezmp.sources.body_spec import robot_body
+from livezmp.sources.factory import SourceOptions, open_source
+from livezmp.sources.file_replay import FileReplaySource
+from livezmp.sources.interface import Source
+from livezmp.sources.mcap_replay import McapReplaySource
+
+DEFAULT_DASHBOARD = "127.0.0.1:8765"
+
+
+@contextlib.contextmanager
+def _stop_on_signals(stop: threading.Event):
+    """Ctrl-C and SIGTERM set ``stop``: the loop finishes its frame and closes cleanly."""
+    handler = lambda *_: stop.set()  # noqa: E731
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _source(args: argparse.Namespace) -> Source:
+    urdf = UrdfBodyOptions(config=args.robot_config)
+    if args.motion is None:  # the built-in demo, as for `livezmp analyze`
+        body, spec = robot_body(demo_robot_path(), urdf)
+        traj = demo_trajectory(body.joint_names)
+        return FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), args.speed, args.loop)
+    bvh = BvhBodyOptions(total_mass=args.mass, units=args.units, up_axis=args.up,
+                         mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width)
+    opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
+                         speed=args.speed, loop=args.loop)
+    return open_source(args.motion, opts)
+
+
+def _print_summary(s: MonitorSummary) -> None:
+    st = s.source_stats
+    drops = ", ".join(f"{k} {v}" for k, v in st.items() if v and k != "delivered") or "none"
+    print(f"monitor: {s.inputs} frames in, {s.results} analysed, {s.out_of_support} out of support, "
+          f"{s.alarms} alarm(s) in {s.duration:.1f} s; source faults: {drops}", flush=True)
+
+
+def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners: list) -> MonitorSummary:
+    """Wire the sinks the options ask for, run the monitor until done or stopped."""
+    recorder = dashboard = view = command = None
+    try:
+        if args.alarm_command:
+            command = AlarmCommand(args.alarm_command)
+        if args.record:
+            recorder = Recorder(args.record, source.body_spec, session, source.body.channel_names)
+            print(f"recording: {args.record}", flush=True)
+        view = TerminalView() if args.tui else None
+        monitor = Monitor(source, cfg, alarm_after=session["alarm_after"], recorder=recorder, listeners=listeners,
+                          view=view, alarm_command=command, correct=session["correct"])
+        if args.dashboard:
+            host, port = parse_address(args.dashboard)
+            hello = {"source": source.name, "body": f"{source.body.kind} body, {source.body.nq} channels",
+                     "alarm_after": session["alarm_after"]}
+            dashboard = DashboardServer(host, port, monitor.status, hello, allow_remote=args.allow_remote,
+                                        token=args.token)
+            print(f"dashboard: {dashboard.start()}", flush=True)
+            monitor.listeners.append(dashboard)
+        stop = threading.Event()
+        with _stop_on_signals(stop):
+            summary = monitor.run(stop)
+    except BaseException:
+        source.close()
+        if recorder:
+            recorder.close()
+        raise
+    finally:
+        if dashboard:
+            dashboard.stop()
+    _print_summary(summary)
+    return summary
+
+
+def _sink_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dashboard", nargs="?", const=DEFAULT_DASHBOARD, metavar="HOST:PORT",
+                   help=f"serve the live dashboard (default address {DEFAULT_DASHBOARD})")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a dashboard address beyond loopback; a token is then generated and required")
+    p.add_argument("--token", action="store_true", help="require a generated token for the dashboard on loopback too")
+    p.add_argument("--record", metavar="FILE.mcap", help="record inputs, results, corrections, alarms, faults")
+    p.add_argument("--tui", action="store_true", help="live status table in the terminal")
+    p.add_argument("--alarm-command", metavar="CMD",
+                   help="run CMD on every alarm event (LIVEZMP_ALARM* environment variables)")
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    if not args.alarm_after >= 0:
+        raise InputError(f"--alarm-after must be ≥ 0 ms, got {args.alarm_after}")
+    source = _source(args)
+    fps = 1.0 / source.nominal_dt
+    cfg = pipeline_config(args, SimpleNamespace(body=source.body, fps=fps))  # it needs only the body and rate
+    session = {"source": source.name, "fps": fps, "mode": cfg.mode, "ground_z": cfg.ground_z,
+               "alarm_after": args.alarm_after / 1000.0, "correct": args.correct}
+    _run(source, cfg, args, session, [])
+    return 0
+
+
+class ReplayCheck:
+    """Compares re-run results with the recording's ``/result`` messages, frame by frame."""
+
+    def __init__(self, path: str):
+        self._recorded = iter_messages(path, "/result")
+        self._next = next(self._recorded, None)
+        self.compared = self.support_diff = 0
+        self.max_zmp_diff = 0.0
+        self.alarms: list[AlarmEvent] = []
+
+    def publish(self, r: FrameResult) -> None:
+        while self._next is not None and self._next["index"] < r.index:
+            self._next = next(self._recorded, None)
+        if self._next is None or self._next["index"] != r.index:
+            return
+        m = self._next
+        self.compared += 1
+        self.support_diff += m["support"] != r.support
+        if (m["zmp"] is None) != (r.zmp is None):
+            self.max_zmp_diff = float("inf")
+        elif r.zmp is not None:
+            z = m["zmp"]
+            self.max_zmp_diff = max(self.max_zmp_diff, float(np.max(np.abs(r.zmp - [z["x"], z["y"], z["z"]]))))
+
+    def alarm(self, ev: AlarmEvent) -> None:
+        self.alarms.append(ev)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    source = McapReplaySource(args.recording, args.speed)
+    s = source.recording.session
+    cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
+    check = ReplayCheck(args.recording)
+    recorded_alarms = sum(1 for m in iter_messages(args.recording, "/alarm") if m["event"] == "raised")
+    _run(source, cfg, args, {**s, "source": f"replay of {args.recording}"}, [check])
+    same = check.support_diff == 0 and check.max_zmp_diff <= 1e-9 and len(
+        [e for e in check.alarms if e.event == "raised"]) == recorded_alarms
+    print(f"replay: {check.compared} results compared with the recording: max ZMP difference "
+          f"{1000 * check.max_zmp_diff:.6f} mm, {check.support_diff} support differences, "
+          f"{recorded_alarms} alarm(s) recorded; {'same analysis' if same else 'DIFFERENT analysis'}", flush=True)
+    return 0 if same else 1
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    rep = recover(args.broken, args.out)
+    state = "complete file, nothing lost" if rep.complete else f"stopped: {rep.stopped or 'end of file'}"
+    print(f"{args.out}: {rep.messages} messages in {rep.chunks} chunks, {rep.attachments} attachments, "
+          f"{rep.metadata} metadata records recovered ({state})", flush=True)
+    return 0
+
+
+def add_monitor_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams")
+    p.add_argument("motion", nargs="?", metavar="SOURCE",
+                   help="motion file (.bvh, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
+                        "(livezmp frames), tcp://HOST:PORT (BVH broadcast); default: built-in demo")
+    p.add_argument("--skeleton", help="BVH file giving a stream's skeleton (hierarchy, optional frames)")
+    p.add_argument("--fps", type=float, help="a stream's frame rate, Hz (default: the skeleton file's)")
+    p.add_argument("--speed", type=float, default=1.0, help="replay speed factor for files (0 = as fast as possible)")
+    p.add_argument("--loop", action="store_true", help="replay a file over and over")
+    p.add_argument("--alarm-after", type=float, default=200.0, metavar="MS",
+                   help="alarm when the ZMP is out of support for this long, ms (default 200)")
+    p.add_argument("--correct", action="store_true", help="run the online balance correction and record it")
+    _sink_options(p)
+    add_body_options(p)
+    p.set_defaults(func=cmd_monitor)
+
+    p = sub.add_parser("replay", help="re-run the analysis of a recorded session (MCAP)")
+    p.add_argument("recording", help="session.mcap written by `livezmp monitor --record`")
+    p.add_argument("--speed", type=float, default=0.0, help="speed factor (default 0: as fast as possible)")
+    _sink_options(p)
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("recover", help="make a complete MCAP file of a recording cut short by a crash")
+    p.add_argument("broken", help="the unfinished recording")
+    p.add_argument("-o", "--out", required=True, help="the repaired file to write")
+    p.set_defaults(func=cmd_recover)

@@ -1,0 +1,212 @@
+"""The monitor loop: source → pipeline → alarms, correction → recording, dashboard, terminal.
+
+One thread runs it, frame by frame, at constant cost per frame: every input frame is
+recorded and analysed; each result goes to the alarm tracker, the optional online
+corrector, the recorder, the dashboard (a cheap hand-off) and the terminal view (rate
+limited). When the source is idle the loop still closes due recording chunks and
+records the source's faults. It stops when the source is finished or ``stop`` is set,
+then delivers the pipeline's last frames and closes the recording.
+Listeners (the dashboard, a replay check) get every result and alarm.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from livezmp.errors import InputError
+from livezmp.gait.channels import reference_channel, tag_channels
+from livezmp.gait.live import GaitLiveEstimator
+from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
+from livezmp.online_correction import OnlineCorrector
+from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig
+from livezmp.recording import Recorder, result_message
+from livezmp.sources.interface import Source
+
+RATE_WINDOW = 1.0  # s over which the input rate is measured
+
+
+@dataclass
+class MonitorSummary:
+    """Totals of a finished run: frames in and analysed, frames out of support, alarms
+    raised, source counters, wall-clock duration (s)."""
+
+    inputs: int
+    results: int
+    out_of_support: int
+    alarms: int
+    source_stats: dict
+    duration: float
+    events: list[AlarmEvent] = field(default_factory=list)
+
+
+class Listener(Protocol):
+    """Gets every analysed frame and alarm event, on the monitor thread; must be quick
+    (the dashboard only queues them)."""
+
+    def publish(self, r: FrameResult) -> None: ...
+
+    def alarm(self, ev: AlarmEvent) -> None: ...
+
+
+class Monitor:
+    """Runs ``source`` through a :class:`Pipeline` with ``config``. Optional sinks:
+    ``recorder``, ``listeners`` (e.g. the dashboard), ``view`` (update/alarm/close),
+    ``alarm_command``; ``alarm_after`` s out of support raises an alarm; ``correct``
+    runs the :class:`OnlineCorrector` and records its output."""
+
+    def __init__(self, source: Source, config: PipelineConfig, *, alarm_after: float = 0.2,
+                 recorder: Recorder | None = None, listeners: Sequence[Listener] = (), view=None,
+                 alarm_command: AlarmCommand | None = None, correct: bool = False, idle: float = 0.05):
+        self.source, self.recorder, self.listeners, self.view = source, recorder, list(listeners), view
+        self.alarm_command = alarm_command
+        self.pipeline = Pipeline(source.body, config, source.nominal_dt)
+        self.alarms = AlarmTracker(alarm_after)
+        dt = source.nominal_dt or 0.01
+        self.corrector = OnlineCorrector(source.body, dt) if correct else None
+        self.idle = idle
+        self.inputs = self.results = self.out_of_support = 0
+        self.last: FrameResult | None = None
+        self.events: list[AlarmEvent] = []
+        self._arrivals: deque[float] = deque()
+        self._gait: tuple[int, GaitLiveEstimator] | None = None
+        self._gait_tried = False
+        self.cadence: float | None = None
+
+    # -- status ---------------------------------------------------------------
+
+    def input_fps(self) -> float | None:
+        a = self._arrivals
+        if len(a) < 2 or a[-1] <= a[0]:
+            return None
+        return (len(a) - 1) / (a[-1] - a[0])
+
+    def status(self) -> dict:
+        """The live status (plain JSON values): source, rates, balance, alarms, drops."""
+        r, st = self.last, self.source.stats
+        return {
+            "source": self.source.name, "inputs": self.inputs, "results": self.results,
+            "input_fps": self.input_fps(), "support": r.support if r else None,
+            "margin": None if r is None or r.margin is None else float(r.margin),
+            "out_of_support": self.out_of_support,
+            "out_fraction": self.out_of_support / self.results if self.results else None,
+            "alarms": self.alarms.count, "alarm_active": self.alarms.raised,
+            "alarm_since": self.alarms.since if self.alarms.raised else None,
+            "lag_ms": None if self.source.nominal_dt is None else 1000.0 * self.pipeline.lag * self.source.nominal_dt,
+            "cadence": self.cadence, "dropped": st.dropped, "lost": st.lost, "source_stats": st.as_dict(),
+            "recording": str(self.recorder.path) if self.recorder else None,
+        }
+
+    # -- per frame ------------------------------------------------------------
+
+    def _track_gait(self, r: FrameResult) -> None:
+        """Cadence from the thigh flexion channel, when the body has one."""
+        if not self._gait_tried:
+            self._gait_tried = True
+            try:
+                tags = tag_channels(self.source.body, r.q, self.source.name)
+                ref = tags[reference_channel(tags, self.source.name)]
+                self._gait = (self.source.body.channel_names.index(ref.name), GaitLiveEstimator(1, 0))
+            except InputError:
+                self._gait = None
+        if self._gait is not None:
+            channel, est = self._gait
+            state = est.update(r.t, np.array([r.q[channel]]))
+            self.cadence = None if state is None else state.cadence
+
+    def _alarm(self, ev: AlarmEvent) -> None:
+        self.events.append(ev)
+        if self.recorder:
+            self.recorder.write("/alarm", ev.as_message())
+        for li in self.listeners:
+            li.alarm(ev)
+        if self.view:
+            self.view.alarm(ev)
+        else:
+            print(f"livezmp: {ev.message}", file=sys.stderr, flush=True)
+        if self.alarm_command:
+            self.alarm_command.run(ev)
+
+    def _result(self, r: FrameResult) -> None:
+        self.results += 1
+        self.last = r
+        if r.inside is False:
+            self.out_of_support += 1
+        self._track_gait(r)
+        ev = self.alarms.update(r)
+        if self.recorder:
+            self.recorder.write("/result", result_message(r))
+        if ev is not None:
+            self._alarm(ev)
+        if self.corrector is not None:
+            c = self.corrector.step(r, r.q)
+            if self.recorder:
+                names = self.source.body.channel_names
+                self.recorder.write("/correction", {
+                    "index": r.index, "t": r.t, "limited": c.limited,
+                    "delta": {"x": float(c.delta[0]), "y": float(c.delta[1]), "z": float(c.delta[2])},
+                    "offsets": {names[i]: float(c.offsets[i]) for i in np.flatnonzero(c.offsets)}})
+        for li in self.listeners:
+            li.publish(r)
+        if self.view:
+            self.view.update(self.status())
+
+    def _idle(self) -> None:
+        for err in self.source.errors.drain():
+            if self.recorder:
+                self.recorder.write("/device_error", {"wall_time": err.wall, "kind": err.kind,
+                                                      "message": err.message, "count": err.count})
+        if self.recorder:
+            self.recorder.tick()
+        if self.view:
+            self.view.update(self.status())
+
+    def step(self) -> bool:
+        """Read and process one frame (or do the idle work); False once the source is finished."""
+        frame = self.source.read(self.idle)
+        if frame is None:
+            self._idle()
+            return not self.source.finished
+        k = self.inputs
+        self.inputs += 1
+        self._arrivals.append(frame.received)
+        while self._arrivals[-1] - self._arrivals[0] > RATE_WINDOW:
+            self._arrivals.popleft()
+        if self.recorder:
+            self.recorder.input(k, frame.t, frame.channels, frame.contacts)
+        r = self.pipeline.step(frame.t, frame.channels, frame.contacts)
+        if r is not None:
+            self._result(r)
+        if k % 64 == 0:
+            self._idle()
+        return True
+
+    def run(self, stop: threading.Event | None = None) -> MonitorSummary:
+        """Process frames until the source is finished or ``stop`` is set."""
+        start = time.monotonic()
+        stop = stop or threading.Event()
+        try:
+            while not stop.is_set() and self.step():
+                pass
+            for r in self.pipeline.flush():
+                self._result(r)
+            self._idle()
+        finally:
+            self.source.close()
+            if self.alarm_command:
+                self.alarm_command.close()
+            if self.recorder:
+                self.recorder.close({"source_stats": self.source.stats.as_dict(), "inputs": self.inputs,
+                                     "results": self.results, "out_of_support": self.out_of_support,
+                                     "alarms": self.alarms.count})
+            if self.view:
+                self.view.close(self.status())
+        return MonitorSummary(self.inputs, self.results, self.out_of_support, self.alarms.count,
+                              self.source.stats.as_dict(), time.monotonic() - start, self.events)

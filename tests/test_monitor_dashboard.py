@@ -1,0 +1,175 @@
+"""The dashboard server with real clients (urllib, the websockets client, a raw socket):
+the page and its headers, the feed carrying every frame's plot point exactly once,
+alarms, a stalled client that never slows the pipeline, tokens and origins."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import socket
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import pytest
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
+
+from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.errors import InputError
+from livezmp.monitor.dashboard import DashboardServer, parse_address
+from livezmp.monitor.loop import Monitor
+from livezmp.motion_file import trajectory_frames
+from livezmp.pipeline import default_config
+from livezmp.sources.body_spec import robot_body
+from livezmp.sources.file_replay import FileReplaySource
+
+HELLO = {"source": "test", "body": "urdf", "alarm_after": 0.2}
+
+
+@pytest.fixture(scope="module")
+def demo():
+    body, spec = robot_body(demo_robot_path())
+    traj = demo_trajectory(body.joint_names)
+    return body, spec, traj.t, trajectory_frames(body, traj)
+
+
+def start_monitor(demo, speed: float = 0.0, loop: bool = False, **dash):
+    """A monitor over the demo in a thread, not started, with its dashboard serving."""
+    body, spec, times, frames = demo
+    src = FileReplaySource("<demo>", body, spec, times, frames, speed=speed, loop=loop)
+    mon = Monitor(src, default_config(body, 100.0), alarm_after=0.2)
+    server = DashboardServer("127.0.0.1", 0, mon.status, HELLO, **dash)
+    server.start()
+    mon.listeners.append(server)
+    stop = threading.Event()
+    return mon, server, stop, threading.Thread(target=mon.run, args=(stop,))
+
+
+def get(url: str, headers: dict | None = None):
+    try:
+        with urllib.request.urlopen(urllib.request.Request(url, headers=headers or {}), timeout=5) as r:
+            return r.status, dict(r.headers), r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, dict(e.headers), e.read()
+
+
+def test_page_and_static_files():
+    server = DashboardServer("127.0.0.1", 0, dict, HELLO)
+    base = server.start()
+    status, headers, body = get(base)
+    assert status == 200 and headers["Content-Type"].startswith("text/html")
+    assert b'<canvas id="top"' in body and b"dashboard.js" in body
+    assert "script-src 'self'" in headers["Content-Security-Policy"] and headers["X-Content-Type-Options"] == "nosniff"
+    assert get(base + "dashboard.js")[1]["Content-Type"].startswith("text/javascript")
+    assert get(base + "dashboard.css")[1]["Content-Type"].startswith("text/css")
+    assert get(base + "secrets.txt")[0] == 404
+    assert get(base + "../pyproject.toml")[0] == 404
+    server.stop()
+
+
+def test_feed_carries_every_frame_once_and_the_alarm(demo):
+    mon, server, stop, runner = start_monitor(demo)
+    with connect(f"ws://127.0.0.1:{server.port}/ws") as ws:
+        hello = json.loads(ws.recv(timeout=5))
+        assert hello["type"] == "hello" and hello["source"] == "test"
+        runner.start()
+        start = time.monotonic()
+        updates = []
+        while not updates or updates[-1]["frame"] is None or updates[-1]["frame"]["index"] < 1199:
+            updates.append(json.loads(ws.recv(timeout=10)))
+        elapsed = time.monotonic() - start
+    runner.join(10)
+    points = [p[0] for u in updates for p in u["points"]]
+    assert points == list(range(1200))  # each frame's plot point exactly once, in order
+    assert len(updates) < 1200 and len(updates) <= 60 * elapsed + 3  # decimated, at most 60 messages/s
+    alarms = [a for u in updates for a in u["alarms"]]
+    assert [a["event"] for a in alarms] == ["raised", "cleared"] and "ALARM" in alarms[0]["message"]
+    last = updates[-1]
+    assert last["status"]["results"] <= 1200 and last["frame"]["support"] in ("left", "right", "double")
+    assert len(last["frame"]["polygon"]) >= 3 and len(last["frame"]["soles"]["left"]) == 4
+    server.stop()
+
+
+def stalled_client(port: int) -> socket.socket:
+    """A WebSocket client that completes the handshake and then never reads."""
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.connect(("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    s.sendall((f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    assert s.recv(12) == b"HTTP/1.1 101"
+    return s
+
+
+def test_a_stalled_client_never_slows_the_pipeline(demo):
+    mon, server, stop, runner = start_monitor(demo, loop=True)
+    stalled = stalled_client(server.port)
+    stalled_peer = f"127.0.0.1:{stalled.getsockname()[1]}"
+    with connect(f"ws://127.0.0.1:{server.port}/ws") as ws:
+        ws.recv(timeout=5)
+        runner.start()
+        seen, early = [], None
+        while mon.inputs < 4000:
+            u = json.loads(ws.recv(timeout=10))
+            seen += [p[0] for p in u["points"]]
+            if early is None and mon.inputs >= 2500:
+                early = server.client_messages[stalled_peer]
+        late = server.client_messages[stalled_peer]
+        live = server.client_messages[f"127.0.0.1:{ws.local_address[1]}"]
+        stop.set()
+        runner.join(10)
+    assert mon.results >= 4000 - mon.pipeline.lag  # the loop kept going, frame after frame
+    assert seen == list(range(len(seen))) and len(seen) > 3000  # the live client missed no point
+    assert early == late < live / 2  # the stalled one filled its small buffers, then got nothing more
+    stalled.close()
+    server.stop()
+
+
+def test_token_required_when_asked_and_origins_checked():
+    server = DashboardServer("127.0.0.1", 0, dict, HELLO, token=True)
+    url = server.start()
+    assert "?token=" in url and len(server.token) >= 20
+    base = f"http://127.0.0.1:{server.port}/"
+    assert get(base)[0] == 403 and get(base + "?token=wrong")[0] == 403
+    assert get(url)[0] == 200
+    assert get(base + "dashboard.js")[0] == 200  # static code holds no data
+    ws_url = f"ws://127.0.0.1:{server.port}/ws"
+    with pytest.raises(InvalidStatus) as e:
+        connect(ws_url)
+    assert e.value.response.status_code == 403
+    with connect(f"{ws_url}?token={server.token}") as ws:
+        assert json.loads(ws.recv(timeout=5))["type"] == "hello"
+    with pytest.raises(InvalidStatus):
+        connect(f"{ws_url}?token={server.token}", origin="http://evil.example")
+    with connect(f"{ws_url}?token={server.token}", origin=f"http://127.0.0.1:{server.port}") as ws:
+        assert json.loads(ws.recv(timeout=5))["type"] == "hello"
+    server.stop()
+
+
+def test_beyond_loopback_needs_allow_remote_and_then_a_token():
+    with pytest.raises(InputError, match="--allow-remote"):
+        DashboardServer("0.0.0.0", 8765, dict, HELLO)
+    remote = DashboardServer("0.0.0.0", 8765, dict, HELLO, allow_remote=True)  # not started: nothing bound
+    assert remote.token and remote.url.endswith(f"?token={remote.token}")
+    assert DashboardServer("127.0.0.1", 8765, dict, HELLO).token is None
+
+
+def test_address_parsing():
+    assert parse_address("127.0.0.1:8765") == ("127.0.0.1", 8765)
+    assert parse_address("[::1]:80") == ("::1", 80)
+    for bad in ("8765", "host:", "host:99999", ":80"):
+        with pytest.raises(InputError, match="need HOST:PORT"):
+            parse_address(bad)
+
+
+def test_busy_port_is_a_one_line_error():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        server = DashboardServer("127.0.0.1", s.getsockname()[1], dict, HELLO)
+        with pytest.raises(InputError, match="cannot listen"):
+            server.start()
