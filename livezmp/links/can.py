@@ -1,0 +1,106 @@
+"""CAN servo link: firmware_protocol's CAN mapping over any python-can interface.
+
+    can:INTERFACE:CHANNEL[?bitrate=1000000&rate=100&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
+
+e.g. ``can:slcan:/dev/ttyACM0?bitrate=1000000``, ``can:socketcan:can0``. Other options go
+to ``can.Bus`` as keyword arguments (numbers converted), e.g. ``sleep_after_open=0`` for an
+slcan adapter that needs no settling time.
+
+One node per servo (SPEC.md §6: node id = the servo id of the robot config), or a board
+node owning several joints: each node is a firmware_protocol host session; joints are
+found by name in the nodes' HELLO_ACK. All sessions share one bus: `CanBoards` reads it
+once and hands each node's messages to its session. Everything else (handshake, watchdog,
+streams, reads, goals, errors) is `FirmwareLink`'s. ``rate`` defaults to 100 Hz: at
+1 Mbit/s twenty one-joint nodes fill the bus at about that rate (SPEC.md §6).
+"""
+
+from __future__ import annotations
+
+import select
+from collections import deque
+from collections.abc import Sequence
+
+import can
+
+import firmware_protocol as fp
+from livezmp.links.base import LinkError
+from livezmp.links.firmware import POLL_WAIT
+
+MAX_FRAMES_PER_POLL = 4096  # bounds one poll's cost
+INBOX_LIMIT = 256  # messages kept per node between polls (older ones are dropped)
+
+
+class _NodeTransport(fp.CanTransport):
+    """A host transport to one node that sends on the shared bus and receives what `CanBoards` routed to it."""
+
+    def __init__(self, boards: CanBoards, node: int) -> None:
+        super().__init__(boards.bus, node)
+        self._boards = boards
+        self._inbox: deque[fp.Received] = boards.inboxes[node]
+
+    def receive(self, timeout: float = 0.0) -> list[fp.Received]:
+        if not self._inbox and timeout > 0:
+            self._boards.pump(timeout)
+        out = list(self._inbox)
+        self._inbox.clear()
+        return out
+
+
+class CanBoards:
+    """The nodes ``nodes`` on one python-can bus (the `Boards` of a CAN `FirmwareLink`)."""
+
+    def __init__(self, interface: str, channel: str, nodes: Sequence[int], watchdog: float, **bus_options) -> None:
+        self.name = f"can:{interface}:{channel}"
+        try:
+            self.bus = can.Bus(interface=interface, channel=channel, **bus_options)
+        except (can.CanError, ValueError, TypeError, OSError, ImportError) as err:
+            raise LinkError(f"{self.name}: cannot open the CAN bus: {err}") from None
+        try:
+            self._fd: int | None = self.bus.fileno()
+        except NotImplementedError:
+            self._fd = None  # e.g. the virtual bus: wait inside recv instead
+        self._decoder = fp.CanDecoder("node", frozenset(nodes))
+        self._garbled = 0
+        self.inboxes = {node: deque(maxlen=INBOX_LIMIT) for node in nodes}
+        self.sessions = [fp.HostSession(_NodeTransport(self, node), watchdog_timeout=watchdog) for node in nodes]
+        self.pump(0.0)
+        for inbox in self.inboxes.values():
+            inbox.clear()  # what the nodes sent before we opened is stale
+
+    def pump(self, timeout: float) -> None:
+        """Read the frames available (waiting up to ``timeout`` s for the first) into the nodes' inboxes."""
+        bus, fd, decoder, inboxes = self.bus, self._fd, self._decoder, self.inboxes
+        try:
+            for _ in range(MAX_FRAMES_PER_POLL):
+                # With a file descriptor, select waits and recv(0) never blocks: python-can's slcan would
+                # otherwise wait its poll interval (1 ms) in every recv that finds nothing.
+                if fd is not None and not select.select([fd], [], [], timeout)[0]:
+                    return
+                try:
+                    frame = bus.recv(0.0 if fd is not None else timeout)
+                except (IndexError, ValueError):  # python-can could not parse a garbled line: that frame is lost
+                    self._garbled += 1
+                    continue
+                timeout = 0.0
+                if frame is None:
+                    if fd is None:
+                        return
+                    continue  # a partial line or an adapter acknowledgement: more bytes are coming
+                for received in decoder.feed(frame.arbitration_id, frame.data, is_extended=frame.is_extended_id,
+                                             is_error=frame.is_error_frame, is_remote=frame.is_remote_frame):
+                    inboxes[received.node].append(received)
+        except (can.CanError, OSError) as err:
+            raise fp.LinkError(f"{self.name}: CAN receive failed: {err}") from None
+
+    def poll(self) -> list[tuple[int, fp.Message]]:
+        self.pump(POLL_WAIT)
+        return [(k, msg) for k, session in enumerate(self.sessions) for msg in session.poll(0.0)]
+
+    def errors(self) -> dict[str, int]:
+        return {**self._decoder.errors, "garbled": self._garbled}
+
+    def close(self) -> None:
+        try:
+            self.bus.shutdown()
+        except (can.CanError, OSError, ValueError):
+            pass  # the adapter is gone already

@@ -1,0 +1,405 @@
+"""Dynamixel Protocol 2.0 servo link, through the ROBOTIS dynamixel-sdk.
+
+    dynamixel:PATH[?baud=1000000&fast=1&watchdog=0.1&timeout=0.034]
+
+One sync read per `read` (Present Current, Velocity and Position of every servo, addresses
+126-135 of the X-series control table), or a Fast Sync Read with ``fast=1`` (one status
+packet for all servos; X-series firmware 45+); one sync write of Goal Position per
+`write_goals`. Servo ids, zero offsets, directions and ticks per revolution come from the
+robot config (`ServoConfig`); currents and velocities use the XM/XH units (2.69 mA,
+0.229 rpm).
+
+`open` checks every servo answers and is in a position control mode, reads its position
+limits (in position mode 3 a servo ignores a goal beyond them, so `write_goals` refuses
+one with LinkError), sets Return Delay Time to 0 where it is not (an EEPROM write, so
+only on servos whose torque is off), arms the Bus Watchdog (``watchdog`` s, 20 ms units;
+0 leaves it off), enables torque, checks it came on and holds the present posture.
+
+Replies are received one status packet at a time with the sdk's packet handler, so a
+lost or corrupt reply does not swallow the others: ``stats.read_errors`` counts replies
+lost (``no_reply``, ``short_reply``) or rejected (``bad_crc``, ``bad_reply``), the same
+unit the simulated devices' fault counters use; any of them makes `read` raise
+`LinkReadError` and return nothing. A status packet with the alert bit set makes the link
+read that servo's Hardware Error Status, reported in ``LinkFrame.hardware_errors``.
+
+``timeout`` (s) bounds the wait for the replies of one transaction; by default the sdk's
+own (twice its USB latency timer, 16 ms, plus 2 ms). Known limit: Protocol 2.0 has no
+sequence numbers, so a reply delayed beyond the timeout that arrives during the next
+transaction would be taken for that transaction's; keep the timeout above the bus's worst
+reply latency.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import serial
+from dynamixel_sdk import (
+    BROADCAST_ID,
+    COMM_RX_CORRUPT,
+    COMM_RX_TIMEOUT,
+    COMM_SUCCESS,
+    GroupSyncRead,
+    GroupSyncWrite,
+    PacketHandler,
+    PortHandler,
+)
+
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.robot_config import ServoConfig
+
+# X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
+RETURN_DELAY_TIME = 9  # EEPROM, 2 us units
+OPERATING_MODE = 11  # EEPROM
+POSITION_LIMITS = 48  # EEPROM: Max Position Limit (4 bytes), Min Position Limit (4), in ticks
+TORQUE_ENABLE = 64  # RAM from here on
+HARDWARE_ERROR_STATUS = 70
+BUS_WATCHDOG = 98  # 20 ms units, 0 off; reads -1 once it tripped
+GOAL_POSITION = 116
+PRESENT_STATE = 126  # Present Current (2 bytes), Present Velocity (4), Present Position (4)
+PRESENT_STATE_LENGTH = 10
+POSITION_MODES = {3: "position", 4: "extended position", 5: "current-based position"}
+ALERT = 0x80  # status packet error bit: Hardware Error Status is not 0
+# Protocol 2.0 status packet (after un-stuffing): header FF FF FD 00, id, length (2), 0x55, error, data, CRC (2).
+PKT_ID, PKT_ERROR, PKT_DATA = 4, 8, 9
+VELOCITY_UNIT = 0.229 * 2.0 * math.pi / 60.0  # rad/s per unit
+CURRENT_UNIT = 2.69e-3  # A per unit
+WATCHDOG_UNIT = 0.020  # s per unit
+WATCHDOG_MAX = 127 * WATCHDOG_UNIT
+OPEN_TRIES = 3  # attempts of each read at open: a glitch should not fail the whole open
+
+_STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")])
+_PORT_ERRORS = (serial.SerialException, OSError)
+
+
+class DynamixelLink:
+    """Servos ``servos[i]`` drive joints ``joint_names[i]`` (see module docstring).
+
+    ``baud`` (bit/s), ``fast`` (Fast Sync Read), ``watchdog`` (s, 0: off), ``timeout``
+    (s per transaction, None: the sdk's). Construction does no I/O; `open` does.
+    """
+
+    def __init__(self, path: str, joint_names: Sequence[str], servos: Sequence[ServoConfig], *,
+                 baud: int = 1_000_000, fast: bool = False, watchdog: float = 0.1,
+                 timeout: float | None = None) -> None:
+        if len(servos) != len(joint_names):
+            raise ValueError(f"DynamixelLink: {len(joint_names)} joints but {len(servos)} servos")
+        ids = [s.id for s in servos]
+        if len(set(ids)) != len(ids) or not all(0 <= i <= 252 for i in ids):
+            raise ValueError(f"DynamixelLink: servo ids must be distinct, in 0..252, got {ids}")
+        if watchdog and not WATCHDOG_UNIT <= watchdog <= WATCHDOG_MAX:
+            raise ValueError(f"DynamixelLink: watchdog must be 0 or {WATCHDOG_UNIT}..{WATCHDOG_MAX:.2f} s, "
+                             f"got {watchdog}")
+        self.path = path
+        self.joint_names = list(joint_names)
+        self.ids = ids
+        self.baud = baud
+        self.fast = fast
+        self.watchdog = watchdog
+        self.timeout = timeout
+        self.stats = LinkStats()
+        direction = np.array([s.direction for s in servos], dtype=float)
+        ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
+        self._zero = np.array([s.zero for s in servos], dtype=float)
+        self._rad_per_tick = direction / ticks_per_rad
+        self._ticks_per_rad = direction * ticks_per_rad
+        self._rad_s_per_unit = direction * VELOCITY_UNIT
+        self._amp_per_unit = direction * CURRENT_UNIT
+        self._ph = PacketHandler(2.0)
+        self._port: PortHandler | None = None
+        self._readers: dict[tuple[int, int], GroupSyncRead] = {}
+        self._goal_writer: GroupSyncWrite | None = None
+        self._present: np.ndarray | None = None  # raw ticks of the last verified read
+        self._lowest = np.full(len(ids), -2.0**31)  # goal limits in ticks, from the servos at open
+        self._highest = np.full(len(ids), 2.0**31 - 1)
+
+    # -- Link -----------------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Open the port, check and configure every servo, enable torque, hold (see module docstring)."""
+        self._open_port()
+        try:
+            self._configure()
+        except LinkError:
+            self._release()
+            raise
+
+    def read(self) -> LinkFrame:
+        """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
+        self.stats.reads += 1
+        errors, data = self._sync_read(PRESENT_STATE, PRESENT_STATE_LENGTH, self.fast)
+        t = time.monotonic()
+        alerts = {i: self._hardware_error(i) for i, e in enumerate(errors) if e & ALERT}
+        state = np.frombuffer(data, dtype=_STATE)
+        self._present = state["position"].astype(np.int64)
+        return LinkFrame(
+            t=t,
+            positions=(self._present - self._zero) * self._rad_per_tick,
+            velocities=state["velocity"] * self._rad_s_per_unit,
+            currents=state["current"] * self._amp_per_unit,
+            hardware_errors={self.joint_names[i]: bits for i, bits in alerts.items() if bits},
+        )
+
+    def write_goals(self, positions: np.ndarray) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order, as one sync write."""
+        goals = np.asarray(positions, dtype=float)
+        if goals.shape != (len(self.ids),):
+            raise LinkError(f"{self.path}: write_goals needs {len(self.ids)} positions, got shape {goals.shape}")
+        ticks = np.rint(self._zero + goals * self._ticks_per_rad)
+        bad = ~((ticks >= self._lowest) & (ticks <= self._highest))  # also catches NaN
+        if bad.any():
+            i = int(np.argmax(bad))
+            ends = sorted([(self._lowest[i] - self._zero[i]) * self._rad_per_tick[i],
+                           (self._highest[i] - self._zero[i]) * self._rad_per_tick[i]])
+            raise LinkError(f"{self.path}: goal for joint '{self.joint_names[i]}' is {goals[i]!r} rad, outside its "
+                            f"servo's range [{ends[0]:.4f}, {ends[1]:.4f}] rad; nothing sent")
+        self._write_ticks(ticks.astype("<i4"))
+
+    def hold(self) -> None:
+        """Goals = the present positions, from a fresh read (exact ticks, no rounding)."""
+        self.read()
+        self._write_ticks(self._present.astype("<i4"))
+
+    def safe_stop(self, drop_torque: bool = False) -> None:
+        """Hold (or switch torque off); never raises: if the bus is gone the servos' Bus Watchdog stops them."""
+        if self._port is None:
+            return
+        try:
+            if drop_torque:
+                self._write_all(TORQUE_ENABLE, 1, 0)
+            else:
+                self.hold()
+        except LinkError:
+            pass  # counted where it happened; nothing more can be sent
+
+    def reconnect(self) -> bool:
+        """Reopen the port and redo `open`'s configuration (re-arming a tripped watchdog); True when back."""
+        self._release()
+        try:
+            self.open()
+        except LinkError:
+            return False
+        self.stats.reconnects += 1
+        return True
+
+    def close(self) -> None:
+        """Hold, then release the port (the Bus Watchdog then stops the servos where they are)."""
+        self.safe_stop()
+        self._release()
+
+    # -- open -----------------------------------------------------------------------------------
+
+    def _open_port(self) -> None:
+        port = PortHandler(self.path)
+        try:
+            ok = port.setBaudRate(self.baud)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: cannot open: {err}") from None
+        if not ok:
+            raise LinkError(f"{self.path}: baud rate {self.baud} is not supported by dynamixel-sdk")
+        if self.fast and not hasattr(GroupSyncRead, "fastSyncRead"):
+            port.closePort()
+            raise LinkError(f"{self.path}: this dynamixel-sdk has no Fast Sync Read: use fast=0 or upgrade it")
+        self._port = port
+        self._readers = {}
+        self._goal_writer = GroupSyncWrite(port, self._ph, GOAL_POSITION, 4)
+        for dxl_id in self.ids:
+            self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
+
+    def _configure(self) -> None:
+        eeprom = self._read_at_open(RETURN_DELAY_TIME, 3)  # return delay, drive mode, operating mode
+        limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
+        limited = np.frombuffer(eeprom, dtype=np.uint8)[2::3] == 3
+        self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
+        self._lowest = np.where(limited, limits[:, 1], -2.0**31)
+        ram = self._read_at_open(TORQUE_ENABLE, 1)
+        for i, (delay, mode) in enumerate(zip(eeprom[0::3], eeprom[2::3], strict=True)):
+            if mode not in POSITION_MODES:
+                raise LinkError(f"{self.path}: {self._who(i)} is in operating mode {mode}, not a position mode "
+                                f"({', '.join(f'{k} {v}' for k, v in POSITION_MODES.items())})")
+            if delay:
+                if ram[i]:
+                    raise LinkError(f"{self.path}: {self._who(i)} has Return Delay Time {2 * delay} us and torque "
+                                    "on, so it cannot be set to 0: switch its torque off and reopen")
+                self._write_one(i, RETURN_DELAY_TIME, 0)
+        if self.watchdog:
+            self._write_all(BUS_WATCHDOG, 1, 0)  # writing 0 first clears a tripped watchdog
+            self._write_all(BUS_WATCHDOG, 1, round(self.watchdog / WATCHDOG_UNIT))
+        self._write_all(TORQUE_ENABLE, 1, 1)
+        state = self._read_at_open(TORQUE_ENABLE, HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1)
+        stride = HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1
+        off = [i for i in range(len(self.ids)) if not state[i * stride]]
+        if off:
+            detail = ", ".join(f"{self._who(i)} (hardware error status {state[i * stride + stride - 1]:#04x})"
+                               for i in off)
+            raise LinkError(f"{self.path}: torque did not come on for {detail}: reboot or power-cycle the servo")
+        for _ in range(OPEN_TRIES):
+            try:
+                self.hold()
+                return
+            except LinkReadError:
+                continue
+        raise LinkError(f"{self.path}: could not read the servos to hold them after {OPEN_TRIES} tries")
+
+    def _read_at_open(self, address: int, length: int) -> bytes:
+        """One sync read of every servo, retried; the data in joint order. LinkError after OPEN_TRIES."""
+        for attempt in range(OPEN_TRIES):
+            try:
+                errors, data = self._sync_read(address, length, fast=False)
+            except LinkReadError as err:
+                if attempt == OPEN_TRIES - 1:
+                    raise LinkError(f"{err} ({OPEN_TRIES} tries; check power, ids, baud rate and Status Return "
+                                    "Level)") from None
+                continue
+            return data
+        raise AssertionError("unreachable")
+
+    # -- bus transactions -----------------------------------------------------------------------
+
+    def _reader(self, address: int, length: int) -> GroupSyncRead:
+        reader = self._readers.get((address, length))
+        if reader is None:
+            reader = self._readers[(address, length)] = GroupSyncRead(self._port, self._ph, address, length)
+            for dxl_id in self.ids:
+                reader.addParam(dxl_id)
+        return reader
+
+    def _sync_read(self, address: int, length: int, fast: bool) -> tuple[list[int], bytes]:
+        """(status error byte per servo, data of every servo concatenated), in joint order."""
+        port = self._require_port()
+        reader = self._reader(address, length)
+        try:
+            result = reader.fastSyncReadTxPacket() if fast else reader.txPacket()
+            if result != COMM_SUCCESS:
+                raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
+            if self.timeout is not None:
+                port.setPacketTimeoutMillis(self.timeout * 1000.0)
+            replies, failures = self._receive_fast(length) if fast else self._receive_each(length)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        finally:
+            port.is_using = False  # the sdk leaves it set when an exception cuts a transaction short
+        if failures:
+            self.stats.read_errors += sum(failures.values())
+            for kind, count in failures.items():
+                self.stats.errors_by_kind[kind] = self.stats.errors_by_kind.get(kind, 0) + count
+            missing = [self._who(i) for i, dxl_id in enumerate(self.ids) if dxl_id not in replies]
+            raise LinkReadError(f"{self.path}: sync read failed: "
+                                f"{', '.join(f'{n} {k}' for k, n in failures.items())}"
+                                + (f"; nothing usable from {', '.join(missing[:4])}"
+                                   + (f" and {len(missing) - 4} more" if len(missing) > 4 else "") if missing else ""))
+        return [replies[i][0] for i in self.ids], b"".join(replies[i][1] for i in self.ids)
+
+    def _receive_each(self, length: int) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """One status packet per servo, in any order, until all are in or the timeout passed."""
+        port, ph = self._port, self._ph
+        expected = len(self.ids)
+        wanted = set(self.ids)
+        size = PKT_DATA + length + 2
+        replies: dict[int, tuple[int, bytes]] = {}
+        failures: dict[str, int] = {}
+        while len(replies) + sum(failures.values()) < expected:
+            packet, result = ph.rxPacket(port, False)
+            if result == COMM_SUCCESS:
+                dxl_id = packet[PKT_ID]
+                if dxl_id in wanted and dxl_id not in replies and len(packet) == size and not packet[PKT_ERROR] & 0x7F:
+                    replies[dxl_id] = (packet[PKT_ERROR], bytes(packet[PKT_DATA: size - 2]))
+                else:
+                    failures["bad_reply"] = failures.get("bad_reply", 0) + 1
+            elif result == COMM_RX_CORRUPT and not port.isPacketTimeout():
+                failures["bad_crc"] = failures.get("bad_crc", 0) + 1  # framing intact: the next reply follows
+            else:
+                kind = "no_reply" if result == COMM_RX_TIMEOUT else "short_reply"
+                failures[kind] = failures.get(kind, 0) + expected - len(replies) - sum(failures.values())
+        return replies, failures
+
+    def _receive_fast(self, length: int) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """The one Fast Sync Read status packet: (error, id, data, crc) per servo, in instruction order."""
+        stride = length + 4
+        data, result, _ = self._ph.fastSyncReadRx(self._port, BROADCAST_ID, stride * len(self.ids))
+        if result != COMM_SUCCESS:
+            return {}, {"no_reply" if result == COMM_RX_TIMEOUT else "bad_crc": 1}
+        ids = data[1::stride]
+        if len(data) != stride * len(self.ids) or list(ids) != self.ids:
+            return {}, {"short_reply": 1}
+        replies = {}
+        for k, dxl_id in enumerate(self.ids):
+            error = data[k * stride]
+            if error & 0x7F:
+                return {}, {"bad_reply": 1}
+            replies[dxl_id] = (error, bytes(data[k * stride + 2: k * stride + 2 + length]))
+        return replies, {}
+
+    def _hardware_error(self, i: int) -> int:
+        """Hardware Error Status of servo ``i`` (its status packet had the alert bit)."""
+        try:
+            value, result, error = self._ph.read1ByteTxRx(self._port, self.ids[i], HARDWARE_ERROR_STATUS)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        if result != COMM_SUCCESS:
+            kind = "no_reply" if result == COMM_RX_TIMEOUT else "bad_crc"
+            self.stats.read_errors += 1
+            self.stats.count(kind)
+            raise LinkReadError(f"{self.path}: {self._who(i)} raised its alert bit, and reading its hardware error "
+                                f"status failed: {self._ph.getTxRxResult(result)}")
+        return value
+
+    def _write_ticks(self, ticks: np.ndarray) -> None:
+        raw = ticks.tobytes()
+        writer = self._goal_writer
+        for k, dxl_id in enumerate(self.ids):
+            writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
+        self._send(writer)
+
+    def _write_all(self, address: int, size: int, value: int) -> None:
+        """The same value to every servo, one sync write (no reply)."""
+        writer = GroupSyncWrite(self._require_port(), self._ph, address, size)
+        raw = value.to_bytes(size, "little", signed=value < 0)
+        for dxl_id in self.ids:
+            writer.addParam(dxl_id, raw)
+        self._send(writer)
+
+    def _write_one(self, i: int, address: int, value: int) -> None:
+        try:
+            result, error = self._ph.write1ByteTxRx(self._require_port(), self.ids[i], address, value)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        if result != COMM_SUCCESS or error:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: writing address {address} of {self._who(i)} failed: "
+                            f"{self._ph.getTxRxResult(result) if result != COMM_SUCCESS else f'error {error:#04x}'}")
+
+    def _send(self, writer: GroupSyncWrite) -> None:
+        port = self._require_port()
+        self.stats.writes += 1
+        try:
+            result = writer.txPacket()
+        except _PORT_ERRORS as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        finally:
+            port.is_using = False
+        if result != COMM_SUCCESS:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: sync write not sent: {self._ph.getTxRxResult(result)}")
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def _require_port(self) -> PortHandler:
+        if self._port is None:
+            raise LinkError(f"{self.path}: link is not open")
+        return self._port
+
+    def _release(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.closePort()
+            except _PORT_ERRORS:
+                pass  # already gone
+
+    def _who(self, i: int) -> str:
+        return f"servo {self.ids[i]} ({self.joint_names[i]})"

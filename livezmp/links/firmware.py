@@ -1,0 +1,335 @@
+"""Firmware-board link: firmware_protocol host sessions behind the Link interface.
+
+    fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
+
+``URL`` is anything pyserial's ``serial_for_url`` opens (a device path, ``socket://``...).
+The same `FirmwareLink` serves the CAN link (one session per servo node, see
+:mod:`livezmp.links.can`): only how the sessions are opened and polled differs (`Boards`).
+
+`open`: HELLO handshake with every board (schema checked), watchdog configured
+(``watchdog`` s, HOLD), stream rates set (JOINT_STATE at ``rate`` Hz, FOOT_SENSORS and IMU
+at the same rate when the board has them, HEARTBEAT 10 Hz), the link's joints mapped by
+name from HELLO_ACK, goals set to the present positions, torque enabled and checked.
+
+`read` returns when every board has sent a JOINT_STATE since the previous read (the host
+heartbeat goes out from the same polling, so a stalled loop trips the board's watchdog);
+positions (rad), velocities (rad/s), currents (A) as the board sends them, the latest foot
+sensors and IMU, and ``hardware_errors``: the JointError bits of joints with any bit but
+TORQUE_OFF. A joint flagged COMMS, STALE or ENCODER makes the read raise LinkReadError, as
+does no fresh state within ``timeout`` s. ``stats.read_errors`` counts board messages lost
+or rejected, from the gaps in their sequence numbers (a rejected frame leaves a gap), plus
+read timeouts; ``errors_by_kind`` breaks the rejections down (bad_crc, bad_transfer...).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
+import numpy as np
+
+import firmware_protocol as fp
+from livezmp.links.base import FootSensors, LinkError, LinkFrame, LinkReadError, LinkStats
+
+HEARTBEAT_HZ = 10
+POLL_WAIT = 0.005  # s: the one serial read timeout used (changing it reconfigures the port)
+CONNECT_TIMEOUT = 1.0  # s per board
+UNTRUSTED = fp.JointError.COMMS | fp.JointError.STALE | fp.JointError.ENCODER
+FOOT_SIDES = ("left", "right")  # FOOT_SENSORS foot_id 0 and 1
+
+
+class Boards(Protocol):
+    """The open transport of a link: one HostSession per board (or CAN servo node)."""
+
+    name: str
+    sessions: list[fp.HostSession]
+
+    def poll(self) -> list[tuple[int, fp.Message]]:
+        """(session index, message) for everything received now, waiting up to POLL_WAIT s for the first."""
+
+    def errors(self) -> dict[str, int]:
+        """Receive errors by kind (firmware_protocol decoder counters)."""
+
+    def close(self) -> None:
+        """Release the port or bus; never raises."""
+
+
+class SerialBoard:
+    """One board on a pyserial URL."""
+
+    def __init__(self, url: str, baud: int, watchdog: float) -> None:
+        self.name = url
+        try:
+            transport = fp.SerialTransport(url, baudrate=baud)
+            transport.port.reset_input_buffer()  # what the board sent before we opened is stale
+        except fp.ProtocolError as err:
+            raise LinkError(str(err)) from None
+        self.sessions = [fp.HostSession(transport, watchdog_timeout=watchdog)]
+
+    def poll(self) -> list[tuple[int, fp.Message]]:
+        return [(0, msg) for msg in self.sessions[0].poll(POLL_WAIT)]
+
+    def errors(self) -> dict[str, int]:
+        return self.sessions[0].transport.decoder.errors
+
+    def close(self) -> None:
+        try:
+            self.sessions[0].transport.close()
+        except OSError:
+            pass
+
+
+class _Board:
+    """What the link knows of one board: which of its joint ids are the link's joints, and where they go."""
+
+    def __init__(self, session: fp.HostSession, hello: fp.HelloAck, index_of: dict[str, int]) -> None:
+        self.session = session
+        self.capabilities = fp.Capability(hello.capabilities)
+        pairs = [(jid, index_of[name]) for jid, name in zip(hello.joint_ids, hello.joint_names, strict=True)
+                 if name in index_of]
+        self.ids = tuple(jid for jid, _ in pairs)
+        self.slots = [slot for _, slot in pairs]
+        self.slot_of = dict(pairs)
+        self._routes: dict[tuple[int, ...], list[tuple[int, int]] | None] = {}
+        self.fresh = False
+        self.time_us: int | None = None
+
+    def route(self, ids: tuple[int, ...]) -> list[tuple[int, int]] | None:
+        """(message index, link slot) of this board's joints in a JOINT_STATE with ``ids``; None if some is absent."""
+        route = self._routes.get(ids, False)
+        if route is False:
+            route = [(k, self.slot_of[jid]) for k, jid in enumerate(ids) if jid in self.slot_of]
+            route = route if len(route) == len(self.slot_of) else None
+            if len(self._routes) < 16:  # boards send one layout; bound the cache anyway
+                self._routes[ids] = route
+        return route
+
+
+class FirmwareLink:
+    """Joints ``joint_names`` on the boards ``connect()`` opens (see module docstring)."""
+
+    def __init__(self, name: str, joint_names: Sequence[str], connect: Callable[[], Boards], *, rate: int = 500,
+                 timeout: float = 0.1) -> None:
+        self.name = name
+        self.joint_names = list(joint_names)
+        self.rate = rate
+        self.timeout = timeout
+        self.stats = LinkStats()
+        self._connect = connect
+        self._boards: Boards | None = None
+        self._list: list[_Board] = []
+        n = len(self.joint_names)
+        self._position = np.zeros(n)
+        self._velocity = np.zeros(n)
+        self._current = np.zeros(n)
+        self._error = np.zeros(n, dtype=np.int64)
+        self._feet: FootSensors | None = None
+        self._imu: dict[str, np.ndarray] | None = None
+        self._carried: dict[str, int] = {}  # decoder counts of transports closed by reconnect
+        self._own: dict[str, int] = {}  # the link's own error kinds (timeout, partial_state, untrusted)
+        self._clock_offset = 0  # unwrapping of the single board's 32-bit microsecond clock
+        self._last_us: int | None = None
+
+    # -- Link -----------------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Handshake, configure and enable every board (see module docstring). LinkError on failure."""
+        self._boards = self._connect()
+        try:
+            self._configure()
+        except (LinkError, fp.ProtocolError) as err:
+            self._release()
+            raise LinkError(f"{self.name}: {err}") from None
+
+    def read(self) -> LinkFrame:
+        """The joint state every board sent since the previous read (see module docstring)."""
+        boards = self._require()
+        self.stats.reads += 1
+        deadline = time.monotonic() + self.timeout
+        try:
+            while True:
+                for k, msg in boards.poll():
+                    self._take(self._list[k], msg)
+                if all(b.fresh for b in self._list):
+                    break
+                if time.monotonic() > deadline:
+                    late = [b.session.transport.name for b in self._list if not b.fresh]
+                    self._own["timeout"] = self._own.get("timeout", 0) + 1
+                    self._account()
+                    raise LinkReadError(f"{self.name}: no joint state within {self.timeout} s from "
+                                        f"{', '.join(late[:4])}{' ...' if len(late) > 4 else ''}")
+        except fp.ProtocolError as err:
+            raise LinkError(f"{self.name}: {err}") from None
+        t = time.monotonic()
+        self._account()
+        for b in self._list:
+            b.fresh = False
+        untrusted = np.flatnonzero(self._error & UNTRUSTED)
+        if untrusted.size:
+            self._own["untrusted"] = self._own.get("untrusted", 0) + 1
+            self._account()
+            i = int(untrusted[0])
+            raise LinkReadError(f"{self.name}: joint '{self.joint_names[i]}' reported "
+                                f"{fp.JointError(int(self._error[i]) & UNTRUSTED)!r}: its state is not usable")
+        faults = np.flatnonzero(self._error & ~fp.JointError.TORQUE_OFF)
+        return LinkFrame(
+            t=t, positions=self._position.copy(), velocities=self._velocity.copy(), currents=self._current.copy(),
+            hardware_errors={self.joint_names[i]: int(self._error[i]) for i in faults},
+            feet=self._feet, imu=self._imu, device_time=self._device_time(),
+        )
+
+    def write_goals(self, positions: np.ndarray) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order: one SET_GOALS per board."""
+        goals = np.asarray(positions, dtype=float)
+        if goals.shape != self._position.shape:
+            raise LinkError(f"{self.name}: write_goals needs {len(self._position)} positions, got shape "
+                            f"{goals.shape}")
+        finite = np.isfinite(goals) & (np.abs(goals) < 3.0e38)  # must fit a float32
+        if not finite.all():
+            i = int(np.argmin(finite))
+            raise LinkError(f"{self.name}: goal for joint '{self.joint_names[i]}' is not finite: {goals[i]!r}; "
+                            "nothing sent")
+        self._require()
+        values = goals.tolist()
+        self.stats.writes += 1
+        try:
+            for b in self._list:
+                b.session.send_goals(b.ids, [values[slot] for slot in b.slots])
+        except fp.ProtocolError as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.name}: {err}") from None
+
+    def hold(self) -> None:
+        """Goals = the present positions, from a fresh read."""
+        self.write_goals(self.read().positions)
+
+    def safe_stop(self, drop_torque: bool = False) -> None:
+        """Hold (or switch torque off); never raises: the boards' watchdogs cover a dead link."""
+        if self._boards is None:
+            return
+        try:
+            if drop_torque:
+                for b in self._list:
+                    b.session.set_torque(b.ids, False)
+            else:
+                self.hold()
+        except (LinkError, fp.ProtocolError):
+            pass  # nothing more can be sent; the board watchdog holds
+
+    def reconnect(self) -> bool:
+        """Reopen and redo `open`; True when back."""
+        self._release()
+        try:
+            self.open()
+        except LinkError:
+            return False
+        self.stats.reconnects += 1
+        return True
+
+    def close(self) -> None:
+        """Hold, then release the port (the boards' watchdogs then hold)."""
+        self.safe_stop()
+        self._release()
+
+    # -- internals ------------------------------------------------------------------------------
+
+    def _configure(self) -> None:
+        boards = self._boards
+        index_of = {name: i for i, name in enumerate(self.joint_names)}
+        self._list = []
+        for session in boards.sessions:
+            hello = session.connect(CONNECT_TIMEOUT)
+            board = _Board(session, hello, index_of)
+            feet = self.rate if fp.Capability.FOOT_SENSORS in board.capabilities else 0
+            imu = self.rate if fp.Capability.IMU in board.capabilities else 0
+            session.set_rates(self.rate, feet, imu, HEARTBEAT_HZ)
+            self._list.append(board)
+        owners: dict[int, int] = {}
+        for b in self._list:
+            for slot in b.slots:
+                owners[slot] = owners.get(slot, 0) + 1
+        missing = [name for i, name in enumerate(self.joint_names) if i not in owners]
+        if missing:
+            raise LinkError(f"no board has joint(s) {', '.join(missing)}")
+        twice = [name for i, name in enumerate(self.joint_names) if owners[i] > 1]
+        if twice:
+            raise LinkError(f"joint(s) {', '.join(twice)} are on more than one board")
+        self._last_us = None
+        self._forget()  # only state sent after the handshake counts
+        self.hold()  # before torque: a board that enables torque at its old goal would jump
+        for b in self._list:
+            b.session.set_torque(b.ids, True)
+        self._forget()
+        frame = self.read()
+        off = [f"{name} ({fp.JointError(int(self._error[i]))!r})" for i, name in enumerate(self.joint_names)
+               if self._error[i] & fp.JointError.TORQUE_OFF]
+        if off:
+            raise LinkError(f"torque did not come on for joint(s) {', '.join(off)}")
+        self.write_goals(frame.positions)
+
+    def _forget(self) -> None:
+        """Drop the state received so far: each board sent it before what it acknowledged last, so the
+        next JOINT_STATE of every board is newer than our last command."""
+        for k, msg in self._boards.poll():
+            self._take(self._list[k], msg)
+        for b in self._list:
+            b.fresh = False
+
+    def _take(self, board: _Board, msg: fp.Message) -> None:
+        if isinstance(msg, fp.JointState):
+            route = board.route(msg.ids)
+            if route is None:
+                self._own["partial_state"] = self._own.get("partial_state", 0) + 1
+                return
+            for k, slot in route:
+                self._position[slot] = msg.position[k]
+                self._velocity[slot] = msg.velocity[k]
+                self._current[slot] = msg.current[k]
+                self._error[slot] = msg.error[k]
+            board.fresh = True
+            board.time_us = msg.board_time_us
+        elif isinstance(msg, fp.FootSensors):
+            forces = {FOOT_SIDES[f]: np.array(force) for f, force in zip(msg.foot_ids, msg.force, strict=True)
+                      if f < len(FOOT_SIDES)}
+            cop = {FOOT_SIDES[f]: (np.array([x, y]) if sum(force) > 0 else None)
+                   for f, force, x, y in zip(msg.foot_ids, msg.force, msg.cop_x, msg.cop_y, strict=True)
+                   if f < len(FOOT_SIDES)}
+            self._feet = FootSensors(forces, cop)
+        elif isinstance(msg, fp.Imu):
+            self._imu = {"orientation": np.array(msg.orientation), "angular_velocity": np.array(msg.angular_velocity),
+                         "acceleration": np.array(msg.acceleration)}
+
+    def _account(self) -> None:
+        """Refresh the error counters from the decoder(s) and the link's own counts."""
+        counts = dict(self._carried)
+        for kind, n in self._boards.errors().items():
+            if n and kind != "seq_restart":  # a restart is a rebooted board, not a lost message
+                counts[kind] = counts.get(kind, 0) + n
+        lost = counts.get("seq_gap", 0)
+        counts.update(self._own)
+        self.stats.errors_by_kind = counts
+        self.stats.read_errors = lost + self._own.get("timeout", 0)
+
+    def _device_time(self) -> float | None:
+        """The single board's clock (s), unwrapped; None with several boards (their clocks differ)."""
+        if len(self._list) != 1 or self._list[0].time_us is None:
+            return None
+        now = self._list[0].time_us
+        if self._last_us is not None and now < self._last_us - (1 << 31):
+            self._clock_offset += 1 << 32
+        self._last_us = now
+        return (now + self._clock_offset) * 1e-6
+
+    def _require(self) -> Boards:
+        if self._boards is None:
+            raise LinkError(f"{self.name}: link is not open")
+        return self._boards
+
+    def _release(self) -> None:
+        boards, self._boards = self._boards, None
+        if boards is not None:
+            for kind, n in boards.errors().items():
+                if n and kind != "seq_restart":
+                    self._carried[kind] = self._carried.get(kind, 0) + n
+            boards.close()

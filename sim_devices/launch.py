@@ -1,0 +1,123 @@
+"""Start a robot's simulated devices for one link kind: what ``livezmp sim --link KIND`` runs.
+
+    devices = start_devices("dynamixel", plant, robot_config, joint_names=names, faults="drop=0.01")
+    link = open_link(devices.url, names, robot_config)
+    ...
+    link.close()
+    devices.close()
+
+Plant joint ``i`` is ``joint_names[i]`` (default: the robot config's servo order); each
+needs a ``[servos.NAME]`` entry in the robot config. Per kind:
+
+* ``dynamixel``: one `DynamixelChain` of XM430s with the config's servo ids; each servo's
+  Homing Offset and Drive Mode are set so that its ticks follow the config's ``zero`` and
+  ``direction`` (``ticks_per_rev`` must be 4096). Return Delay Time is left at the factory
+  250 (500 us) for the link to fix at open;
+* ``can``: a `CanServoBus`, one node per servo (node id = servo id), behind an slcan adapter;
+* ``fw``: one `FirmwareBoard` with every joint (joint id = servo id).
+
+``foot_sensors`` / ``imu`` providers (see `firmware_board`) reach the host on ``fw`` and
+``can``; a Dynamixel chain has no such devices. ``faults`` is a fault spec (see `faults`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, fields
+
+from firmware_protocol import StreamRates
+from livezmp.errors import InputError
+from livezmp.robot_config import RobotConfig
+from sim_devices.can_servo import CanServoBus
+from sim_devices.dynamixel_chain import DynamixelChain
+from sim_devices.faults import FaultCounters, FaultSpec
+from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
+from sim_devices.pty_port import PtyPort
+from sim_devices.servo_plant import JointPlant
+
+KINDS = ("dynamixel", "can", "fw")
+XM430_TICKS_PER_REV = 4096
+XM430_ZERO = 2048  # the chain's tick at 0 rad before Homing Offset
+# Twenty nodes at the SPEC's power-up rates (100 Hz JOINT_STATE, 3 frames each) send 6 000 frames/s, twice
+# what python-can's slcan reader (one system call per byte) takes in on this kind of machine, so until the link
+# sets its own rates the simulated nodes stream slowly.
+CAN_POWER_UP_RATES = StreamRates(joint_state_hz=10, foot_sensors_hz=0, imu_hz=0, heartbeat_hz=2)
+
+
+@dataclass
+class SimDevices:
+    """Running simulated devices: ``url`` is the link URL to open, ``ports`` their ptys (to vanish/restore),
+    ``devices`` the device objects (a DynamixelChain, CanServoBus or FirmwareBoard)."""
+
+    kind: str
+    url: str
+    ports: list[PtyPort]
+    devices: list = field(default_factory=list)
+
+    @property
+    def fault_counters(self) -> FaultCounters:
+        """What the devices injected so far, summed."""
+        total = FaultCounters()
+        for device in self.devices:
+            for f in fields(FaultCounters):
+                setattr(total, f.name, getattr(total, f.name) + getattr(device.fault_counters, f.name))
+        return total
+
+    def close(self) -> None:
+        """Stop every device and remove its device path."""
+        for device in self.devices:
+            device.close()
+
+    def __enter__(self) -> SimDevices:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
+                  joint_names: Sequence[str] | None = None, faults: str | FaultSpec = "",
+                  foot_sensors: FootProvider | None = None, imu: ImuProvider | None = None,
+                  baud: int = 1_000_000) -> SimDevices:
+    """Start the devices of ``kind`` ("dynamixel", "can" or "fw") driving ``plant`` (see module docstring).
+
+    ``baud`` is the serial line rate (dynamixel, fw) or the CAN bitrate (can). InputError
+    on a bad kind, joint, servo entry or fault spec.
+    """
+    if kind not in KINDS:
+        raise InputError(f"simulated link kind '{kind}': expected one of {', '.join(KINDS)}")
+    names = list(robot_config.servos) if joint_names is None else list(joint_names)
+    if not names:
+        raise InputError(f"{robot_config.source}: no [servos] entries: nothing to simulate")
+    if len(plant.position) < len(names):
+        raise InputError(f"the plant has {len(plant.position)} joints for {len(names)} joint names")
+    servos = []
+    for name in names:
+        servo = robot_config.servos.get(name)
+        if servo is None:
+            raise InputError(f"{robot_config.source}: no [servos.{name}] entry for joint '{name}'")
+        if kind != "dynamixel" and not (1 <= len(name) <= 16 and name.isascii() and name.isprintable()):
+            raise InputError(f"joint '{name}': a firmware_protocol joint name is 1-16 printable ASCII characters")
+        servos.append(servo)
+    ids = [s.id for s in servos]
+    try:
+        if kind == "dynamixel":
+            for s in servos:
+                if s.ticks_per_rev != XM430_TICKS_PER_REV:
+                    raise InputError(f"{robot_config.source}: [servos.{s.joint}] ticks_per_rev {s.ticks_per_rev}: "
+                                     f"the simulated XM430 has {XM430_TICKS_PER_REV}")
+            chain = DynamixelChain(ids, plant, faults=faults, baud_rate=baud)
+            for s in servos:
+                chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)
+                chain.set_register(s.id, "drive_mode", 1 if s.direction < 0 else 0)  # bit 0: reverse
+            return SimDevices(kind, f"dynamixel:{chain.path}?baud={baud}", [chain.port], [chain])
+        if kind == "can":
+            bus = CanServoBus(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults, bitrate=baud,
+                              rates=CAN_POWER_UP_RATES)
+            return SimDevices(kind, f"can:slcan:{bus.path}?bitrate={baud}&sleep_after_open=0", [bus.port], [bus])
+        board = FirmwareBoard(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults)
+        return SimDevices(kind, f"fw:{board.path}?baud={baud}", [board.port], [board])
+    except ValueError as err:
+        if isinstance(err, InputError):
+            raise
+        raise InputError(str(err)) from None
