@@ -164,6 +164,7 @@ class Recorder:
             self.channels[topic] = self.writer.register_channel(topic, "json", sid)
         self.counts = dict.fromkeys(TOPICS, 0)
         self.chunks_flushed = 0
+        self.writer.flush()  # header, body and session on disk before the first frame
         self._last_flush = time.monotonic()
         self._closed = False
 

@@ -1,0 +1,156 @@
+"""`livezmp monitor / replay / recover` through the command's main and as a process:
+record then replay gives the same analysis, Ctrl-C closes a complete recording, user
+mistakes are one line with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from data_paths import BANDAI, ROOT
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from livezmp.cli import main
+from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.monitor.loop import Monitor
+from livezmp.motion_file import trajectory_frames
+from livezmp.pipeline import default_config
+from livezmp.recording import Recorder, iter_messages, open_recording
+from livezmp.sources.body_spec import robot_body
+from livezmp.sources.file_replay import FileReplaySource
+
+WALK = BANDAI / "walk_normal_001.bvh"
+
+
+def test_record_then_replay_gives_the_same_analysis(tmp_path, capsys):
+    path = tmp_path / "walk.mcap"
+    assert main(["monitor", str(WALK), "--speed", "0", "--record", str(path), "--alarm-after", "100"]) == 0
+    out = capsys.readouterr().out
+    assert "monitor: 273 frames in, 273 analysed" in out
+    rec = open_recording(path)
+    assert rec.counts["/input"] == rec.counts["/result"] == 273
+    assert rec.session["fps"] == pytest.approx(30.0, rel=1e-5) and rec.session["alarm_after"] == 0.1
+    assert main(["replay", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "273 results compared" in out and "max ZMP difference 0.000000 mm, 0 support differences" in out
+    assert "same analysis" in out
+    raised = sum(m["event"] == "raised" for m in iter_messages(path, "/alarm"))
+    assert f"{raised} alarm(s) recorded" in out and raised > 0
+
+
+def copy_with(src, dst, change) -> None:
+    """Copy a recording message by message (mcap reader and writer), passing each decoded
+    message through ``change(topic, message)``."""
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        reader = make_reader(f)
+        w = Writer(out)
+        w.start()
+        for a in reader.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        channels = {}
+        for schema, channel, msg in reader.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
+            data = json.dumps(change(channel.topic, json.loads(msg.data))).encode()
+            w.add_message(channels[channel.id], msg.log_time, data, msg.publish_time, msg.sequence)
+        w.finish()
+
+
+def test_replay_notices_a_different_analysis(tmp_path, capsys):
+    path, tampered = tmp_path / "demo.mcap", tmp_path / "tampered.mcap"
+    assert main(["monitor", "--speed", "0", "--record", str(path)]) == 0
+
+    def nudge(topic, m):
+        if topic == "/result" and m["index"] == 500:
+            m["zmp"]["x"] += 0.002
+        return m
+
+    copy_with(path, tampered, nudge)
+    capsys.readouterr()
+    assert main(["replay", str(tampered)]) == 1
+    out = capsys.readouterr().out
+    assert "max ZMP difference 2.000000 mm" in out and "DIFFERENT analysis" in out
+
+
+def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
+    path, broken, fixed = tmp_path / "demo.mcap", tmp_path / "broken.mcap", tmp_path / "fixed.mcap"
+    body, spec = robot_body(demo_robot_path())
+    traj = demo_trajectory(body.joint_names)
+    rec = Recorder(path, spec, {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False},
+                   body.channel_names, chunk_bytes=16384)  # many chunks
+    Monitor(FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), speed=0),
+            default_config(body, 100.0), recorder=rec).run()
+    total = sum(open_recording(path).counts.values())
+    data = path.read_bytes()
+    broken.write_bytes(data[: len(data) // 2])  # the summary and the last chunks are gone
+    capsys.readouterr()
+    assert main(["recover", str(broken), "-o", str(fixed)]) == 0
+    out = capsys.readouterr().out
+    kept = int(out.split(": ")[1].split()[0])
+    assert 0 < kept < total and "stopped" in out
+    assert main(["replay", str(fixed)]) == 0
+    out = capsys.readouterr().out
+    assert "same analysis" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["monitor", "--dashboard", "0.0.0.0:0"], "serving beyond loopback needs --allow-remote"),
+    (["monitor", "--dashboard", "nonsense"], "need HOST:PORT"),
+    (["monitor", "udp://127.0.0.1:0"], "needs the body it carries"),
+    (["monitor", "--alarm-after", "-5"], "--alarm-after must be ≥ 0"),
+    (["monitor", "--speed", "0", "--alarm-command", "no-such-command-livezmp"], "command not found"),
+    (["monitor", "--record", "/nonexistent-dir/x.mcap"], "cannot record"),
+    (["replay", "missing.mcap"], "missing.mcap: no such file"),
+    (["recover", "missing.mcap", "-o", "out.mcap"], "missing.mcap: no such file"),
+])
+def test_user_mistakes_are_one_line(argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err and err.startswith("livezmp: error:")
+
+
+def test_replay_of_an_unfinished_recording_points_to_recover(tmp_path, capsys):
+    path = tmp_path / "cut.mcap"
+    assert main(["monitor", "--speed", "0", "--record", str(path)]) == 0
+    path.write_bytes(path.read_bytes()[:-200])
+    capsys.readouterr()
+    assert main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "livezmp recover" in err and err.count("\n") == 1
+
+
+def wait_for(cond, deadline: float = 30.0) -> None:
+    end = time.monotonic() + deadline
+    while not cond():
+        if time.monotonic() > end:
+            raise TimeoutError("condition not met in time")
+        time.sleep(0.02)
+
+
+def test_ctrl_c_stops_cleanly_with_a_complete_recording(tmp_path):
+    path = tmp_path / "session.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "livezmp", "monitor", "--loop", "--speed", "4", "--tui",
+                             "--record", str(path)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "COLUMNS": "100"})
+    try:
+        wait_for(lambda: path.exists() and path.stat().st_size > 20000)  # some chunks are on disk
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "monitor:" in out and "frames in" in out
+    assert "livezmp monitor" in err  # the terminal view was drawn
+    rec = open_recording(path)  # finished: no recover needed
+    assert rec.counts["/input"] > 50
+    assert [m["index"] for m in iter_messages(path, "/input")] == list(range(rec.counts["/input"]))
