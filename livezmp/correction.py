@@ -394,10 +394,14 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     t0 = time.perf_counter()
     dt = nominal_dt or float(np.median(np.diff(times)))
 
-    def analyse(fr: np.ndarray) -> list[FrameResult]:
-        return Pipeline(body, config, dt).run(times, fr)
+    def analyse(fr: np.ndarray, contacts=None) -> list[FrameResult]:
+        return Pipeline(body, config, dt).run(times, fr, contacts)
 
     before = analyse(frames)
+    # while solving, the feet keep the contacts detected on the original motion: the
+    # corrected motion moves a swing foot by millimetres, which must not flip a contact
+    # (and with it the polygon) from one trial to the next; the final check re-detects
+    held = [(r.support in ("left", "double"), r.support in ("right", "double")) for r in before]
     f = len(frames)
     pipe = Pipeline(body, config, dt)
     model = pipe.model
@@ -424,16 +428,16 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
         jall = (jmat / limits.zmp_tolerance_m).tocsr()
         zall = np.array([current[k].zmp[:2] for k in judged])
         accepted = False
-        for _attempt in range(5):  # Levenberg-Marquardt: damp the step until the exact cost drops
+        for _attempt in range(6):  # Levenberg-Marquardt: damp the step until the exact cost drops
             cand = _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt)
             corrected = apply_delta(mover, body, frames, cand, w)
-            trial = analyse(corrected)
+            trial = analyse(corrected, held)
             trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)
             if trial_cost < cost:
                 delta, current, cost, accepted = cand, trial, trial_cost, True
                 mu = max(mu / 3, 1e-3)
                 break
-            mu *= 4
+            mu *= 10
         history.append(sum(1 for r in current if r.inside is False))
         if not accepted or history[-1] == 0:
             break

@@ -112,9 +112,15 @@ class Pipeline:
         self._outside_contacts.clear()
         return out
 
-    def run(self, times: np.ndarray, frames: np.ndarray) -> list[FrameResult]:
-        """Analyse a whole motion; one result per input frame, in order."""
-        out = [r for k in range(len(frames)) if (r := self.step(float(times[k]), frames[k])) is not None]
+    def run(self, times: np.ndarray, frames: np.ndarray,
+            contacts: list[tuple[bool, bool]] | None = None) -> list[FrameResult]:
+        """Analyse a whole motion; one result per input frame, in order. ``contacts``
+        (left, right) per frame replaces contact detection."""
+        out = []
+        for k in range(len(frames)):
+            r = self.step(float(times[k]), frames[k], None if contacts is None else contacts[k])
+            if r is not None:
+                out.append(r)
         return out + self.flush()
 
     def _analyse(self, est: Estimate) -> FrameResult:
