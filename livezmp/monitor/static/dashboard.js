@@ -110,13 +110,18 @@ function drawTop() {
   g.clearRect(0, 0, w, h);
   const f = state.frame;
   if (!f) { g.fillStyle = COLORS.text; g.fillText("waiting for frames…", 12, 20); return; }
+  // frame both feet, the CoM and the ZMP; zoom and pan smoothly (no jumps while walking)
   const sole = f.soles.left || f.soles.right;
   const soleLen = sole ? Math.hypot(sole[1][0] - sole[0][0], sole[1][1] - sole[0][1]) : 0.25;
-  const span = Math.min(2.5, Math.max(0.4, 6 * soleLen)); // metres across the canvas
-  const feet = [...(f.soles.left || []), ...(f.soles.right || [])];
-  const cx = feet.reduce((a, p) => a + p[0], 0) / feet.length, cy = feet.reduce((a, p) => a + p[1], 0) / feet.length;
-  if (!state.view || Math.hypot(state.view[0] - cx, state.view[1] - cy) > span) state.view = [cx, cy];
-  state.view = [state.view[0] + 0.15 * (cx - state.view[0]), state.view[1] + 0.15 * (cy - state.view[1])];
+  const pts = [...(f.soles.left || []), ...(f.soles.right || []), ...(f.com ? [f.com] : []), ...(f.zmp ? [f.zmp] : [])];
+  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  const [x0, x1, y0, y1] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+  const want = Math.min(3.0, Math.max(0.4, 4 * soleLen, 1.3 * Math.max(x1 - x0, y1 - y0)));
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  if (!state.view || Math.hypot(state.view[0] - cx, state.view[1] - cy) > state.view[2]) state.view = [cx, cy, want];
+  const v = state.view;
+  state.view = [v[0] + 0.5 * (cx - v[0]), v[1] + 0.5 * (cy - v[1]), v[2] + 0.1 * (want - v[2])];
+  const span = state.view[2]; // metres across the canvas
   const s = Math.min(w, h) / span, [vx, vy] = state.view;
   const tx = (p) => [w / 2 + (p[0] - vx) * s, h / 2 - (p[1] - vy) * s];
   // grid every 0.1 m, labelled every 0.5 m
@@ -155,11 +160,6 @@ function drawTop() {
     g.lineWidth = 1.5;
     g.beginPath(); g.moveTo(...a); g.lineTo(...b); g.stroke();
   }
-  if (f.com) {
-    const [x, y] = tx(f.com);
-    g.fillStyle = COLORS.com;
-    g.beginPath(); g.moveTo(x, y - 7); g.lineTo(x + 7, y); g.lineTo(x, y + 7); g.lineTo(x - 7, y); g.closePath(); g.fill();
-  }
   if (f.zmp) {
     const [x, y] = tx(f.zmp);
     if (f.clamped && !f.inside) {
@@ -172,6 +172,12 @@ function drawTop() {
     g.fillStyle = f.inside === false ? COLORS.bad : COLORS.ok;
     g.beginPath(); g.arc(x, y, 7, 0, 2 * Math.PI); g.fill();
     g.strokeStyle = "#0b1015"; g.lineWidth = 2; g.stroke();
+  }
+  if (f.com) { // on top: the CoM projection often sits close to the ZMP
+    const [x, y] = tx(f.com);
+    g.beginPath(); g.moveTo(x, y - 6); g.lineTo(x + 6, y); g.lineTo(x, y + 6); g.lineTo(x - 6, y); g.closePath();
+    g.fillStyle = COLORS.com; g.fill();
+    g.strokeStyle = "#0b1015"; g.lineWidth = 1.5; g.stroke();
   }
   // scale bar
   const bar = span > 1.2 ? 0.5 : 0.1;
