@@ -98,10 +98,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if take.body.kind == "bvh":
         motion = to_bvh(take, q)
         if args.balance:
-            try:
-                from livezmp.correction import correct_bvh  # the corrector is optional at import time
-            except ImportError:
-                raise InputError("--balance: the balance corrector (livezmp.correction) is not available") from None
+            from livezmp.correction import correct_bvh  # imported here: heavy, and only for --balance
+
             motion = correct_bvh(motion)
         write_bvh(motion, out)
         print(f"wrote {out}: {len(motion.frames)} frames at {motion.fps:g} fps, up {args.up}, "
