@@ -85,6 +85,7 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
                                         token=args.token)
             print(f"dashboard: {dashboard.start()}", flush=True)
             monitor.listeners.append(dashboard)
+        print(f"source: {source.name}", flush=True)
         stop = threading.Event()
         with _stop_on_signals(stop):
             summary = monitor.run(stop)

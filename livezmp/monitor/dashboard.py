@@ -6,22 +6,23 @@ the WebSocket; no web framework and no build step (the page is HTML, a canvas an
 small script). It is a maintained, dependency-free library already needed here.
 
 Threading: the server runs its own event loop in a background thread. The monitor
-thread only appends each result to a bounded ring and, at most once per wake-up, asks
-the loop to wake the client tasks: publishing costs it about a microsecond whatever
-the clients do. Each client task sends at most ``max_rate`` messages per second, each
-with the latest frame, the plot points since its previous message (at most
-``MAX_POINTS``) and alarms it has not seen. A slow client blocks only its own task
-(``send`` waits for its socket to drain) and so simply gets fewer, later frames. Each
-client's kernel send buffer is fixed small (``SEND_BUFFER``) rather than left to grow
-to megabytes: a slow page then shows the present a little less often, not a backlog
-seconds old.
+thread only appends each result to a bounded ring and, when a client task is waiting
+for news and no wake-up is pending, asks the loop to wake it: publishing costs about a
+microsecond whatever the clients do, and the loop thread wakes (taking the GIL from
+the monitor) at most once per message sent, not once per frame. Each client task
+sends at most ``max_rate`` messages per second, each with the latest frame, the plot
+points since its previous message (at most ``MAX_POINTS``) and the alarms it has not
+seen. A slow client blocks only its own task (``send`` waits for its socket to drain)
+and so simply gets fewer, later frames. Each client's kernel send buffer is fixed
+small (``SEND_BUFFER``) rather than left to grow to megabytes: a slow page then shows
+the present a little less often, not a backlog seconds old.
 
 Security: by default the server binds 127.0.0.1. Any other address needs
 ``allow_remote`` and then a token: the page and the WebSocket require ``?token=``
 (compared in constant time). ``token=True`` asks for one on loopback too (other users
-of a shared machine reach its loopback). WebSocket requests carrying a foreign ``Origin`` are
-refused. The feed is read-only: there is no control endpoint, and incoming messages
-are ignored.
+of a shared machine reach its loopback). WebSocket requests carrying a foreign
+``Origin`` are refused. The feed is read-only: there is no control endpoint, and
+incoming messages are ignored.
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ class DashboardServer:
         self._seq = 0
         self._alarm_id = 0
         self._wake_pending = False
+        self._waiting = 0  # client tasks waiting for news
         self.client_messages: dict[str, int] = {}  # "host:port" of each connected client → messages sent
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed: asyncio.Event | None = None
@@ -144,7 +146,7 @@ class DashboardServer:
         self._wake()
 
     def _wake(self) -> None:
-        if self._loop is not None and not self._wake_pending:
+        if self._waiting and not self._wake_pending:
             self._wake_pending = True
             self._loop.call_soon_threadsafe(self._notify)
 
@@ -213,11 +215,14 @@ class DashboardServer:
             last_seq, last_alarm = 0, 0
             while True:
                 changed = self._changed
-                if self._seq == last_seq and self._alarm_id == last_alarm:
-                    try:
+                self._waiting += 1  # before the check: a publish in between then sees it and wakes us
+                try:
+                    if self._seq == last_seq and self._alarm_id == last_alarm:
                         await asyncio.wait_for(changed.wait(), STATUS_EVERY)
-                    except TimeoutError:
-                        pass
+                except TimeoutError:
+                    pass
+                finally:
+                    self._waiting -= 1
                 text, last_seq, last_alarm = self._message(last_seq, last_alarm)
                 await ws.send(text)
                 self.client_messages[peer] += 1
