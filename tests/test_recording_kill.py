@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from data_paths import ROOT
 from mcap.exceptions import McapError
@@ -38,37 +39,57 @@ def messages_before_the_cut(data: bytes) -> int:
     return n
 
 
+# One process imports livezmp once and forks a `livezmp monitor` per run: five cold
+# start-ups on a busy 2-core machine would cost more than the whole rest of the suite.
+FORKER = """
+import os, sys
+from livezmp.cli import main
+for path in sys.argv[1:]:
+    pid = os.fork()
+    if pid == 0:
+        sys.stdout = open(os.devnull, "w")  # this pipe carries the parent's pid lines only
+        os._exit(main(["monitor", "--loop", "--speed", "2", "--record", path]))
+    print(pid, path, flush=True)
+for _ in sys.argv[1:]:
+    os.wait()
+"""
+
+
 def test_kill_9_while_recording(tmp_path):
     rng = random.Random(6)
-    procs = []
-    for i in range(RUNS):  # all at once: the whole test costs one start-up, not five
-        path = tmp_path / f"broken{i}.mcap"
-        cmd = [sys.executable, "-m", "livezmp", "monitor", "--loop", "--speed", "2", "--record", str(path)]
-        procs.append((path, subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)))
+    paths = [tmp_path / f"broken{i}.mcap" for i in range(RUNS)]
+    forker = subprocess.Popen([sys.executable, "-c", FORKER, *map(str, paths)], cwd=ROOT, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    pids = {}
+    for _ in range(RUNS):
+        pid, path = forker.stdout.readline().split()
+        pids[Path(path)] = int(pid)
     kills = {}
     end = time.monotonic() + 60
-    pending = {p: None for p, _ in procs}
-    while pending and time.monotonic() < end:
-        for path, proc in procs:
-            if path not in pending:
-                continue
-            if pending[path] is None and path.exists() and messages_before_the_cut(path.read_bytes()):
-                pending[path] = time.monotonic() + rng.uniform(0.0, 1.5)
-            elif pending[path] is not None and time.monotonic() >= pending[path]:
-                kills[path] = time.time_ns()
-                os.kill(proc.pid, signal.SIGKILL)
-                proc.wait(10)
-                del pending[path]
-        time.sleep(0.005)
-    for _, proc in procs:
-        proc.kill()
-        proc.wait(10)
+    due = {}
+    try:
+        while len(kills) < RUNS and time.monotonic() < end:
+            for path, pid in pids.items():
+                if path in kills:
+                    continue
+                if path not in due and path.exists() and messages_before_the_cut(path.read_bytes()):
+                    due[path] = time.monotonic() + rng.uniform(0.0, 1.5)  # a random moment after the first chunk
+                elif path in due and time.monotonic() >= due[path]:
+                    kills[path] = time.time_ns()
+                    os.kill(pid, signal.SIGKILL)
+            time.sleep(0.005)
+    finally:
+        for path, pid in pids.items():
+            if path not in kills:
+                os.kill(pid, signal.SIGKILL)
+        forker.wait(10)
     assert len(kills) == RUNS
     body, _ = robot_body(demo_robot_path())
     # results trail inputs by the estimator's lag, and by one more frame when a chunk closed
     # between an input and its step's result
     lag = Pipeline(body, default_config(body, 100.0), 0.01).lag + 1
-    for path, _ in procs:
+    for path in paths:
         fixed = path.with_name(path.stem + "_fixed.mcap")
         rep = recover(path, fixed)
         assert not rep.complete  # no footer after kill -9
