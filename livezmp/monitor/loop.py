@@ -31,12 +31,13 @@ from livezmp.recording import Recorder, result_message
 from livezmp.sources.interface import Source
 
 RATE_WINDOW = 1.0  # s over which the input rate is measured
+KEPT_EVENTS = 1000  # alarm events kept for the summary (a long session may raise many)
 
 
 @dataclass
 class MonitorSummary:
     """Totals of a finished run: frames in and analysed, frames out of support, alarms
-    raised, source counters, wall-clock duration (s)."""
+    raised, source counters, wall-clock duration (s), the last alarm events."""
 
     inputs: int
     results: int
@@ -74,7 +75,7 @@ class Monitor:
         self.idle = idle
         self.inputs = self.results = self.out_of_support = 0
         self.last: FrameResult | None = None
-        self.events: list[AlarmEvent] = []
+        self.events: deque[AlarmEvent] = deque(maxlen=KEPT_EVENTS)
         self._arrivals: deque[float] = deque()
         self._gait: tuple[int, GaitLiveEstimator] | None = None
         self._gait_tried = False
@@ -209,4 +210,4 @@ class Monitor:
             if self.view:
                 self.view.close(self.status())
         return MonitorSummary(self.inputs, self.results, self.out_of_support, self.alarms.count,
-                              self.source.stats.as_dict(), time.monotonic() - start, self.events)
+                              self.source.stats.as_dict(), time.monotonic() - start, list(self.events))
