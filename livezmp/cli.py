@@ -9,6 +9,7 @@ import sys
 from livezmp.commands.analyze import add_analyze_command
 from livezmp.commands.correct import add_correct_command
 from livezmp.commands.monitor import add_monitor_commands
+from livezmp.commands.run import add_run_commands
 from livezmp.errors import InputError
 from livezmp.gait.cli import add_gait_commands
 
@@ -19,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_analyze_command(sub)
     add_correct_command(sub)
     add_monitor_commands(sub)
+    add_run_commands(sub)
     add_gait_commands(sub)
     return p
 

@@ -46,6 +46,8 @@ import numpy as np
 
 from livezmp.base_placement import BasePlacer
 from livezmp.body import BodyModel
+from livezmp.correction import CorrectionLimits
+from livezmp.demo import smooth_ramp
 from livezmp.estimator import EstimatorConfig
 from livezmp.links.base import Link, LinkError, LinkFrame, LinkReadError
 from livezmp.loop_clock import LoopClock, Tick, TimingHistogram
@@ -62,15 +64,19 @@ class LoopConfig:
     """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_every``:
     run the corrector every N cycles; ``ramp_s``: blend time from the present posture
     to the command (s); ``estimator_*``: window, lag (s) and cutoff (Hz) of the
-    estimator; ``status_every_s``: period of the status callback."""
+    estimator; ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits
+    on the root rotation (its angular acceleration pushes the ZMP the other way first,
+    so it is kept gentle); ``status_every_s``: period of the status callback."""
 
     rate_hz: float = 500.0
     correct: bool = True
     correct_every: int = 2
     ramp_s: float = 0.5
     estimator_window_s: float = 0.2
-    estimator_lag_s: float = 0.05
+    estimator_lag_s: float = 0.03
     estimator_cutoff_hz: float = 8.0
+    trunk_accel_deg_s2: float = 100.0
+    correction_limits: CorrectionLimits = field(default_factory=CorrectionLimits)
     status_every_s: float = 1.0
     safety: SafetyConfig = field(default_factory=SafetyConfig)
 
@@ -81,7 +87,7 @@ class LoopCounters:
     those whose estimated ZMP was inside it."""
 
     cycles: int = 0
-    read_errors: int = 0
+    failed_reads: int = 0
     write_errors: int = 0
     stale_frames: int = 0
     corrupted_frames: int = 0
@@ -95,12 +101,6 @@ class LoopCounters:
     reconnects: int = 0
     resumes: int = 0
     hardware_errors: dict[str, int] = field(default_factory=dict)
-
-
-def _smooth(s: float) -> float:
-    """0 → 1 over s in [0, 1], zero slope at both ends."""
-    s = min(max(s, 0.0), 1.0)
-    return s * s * (3.0 - 2.0 * s)
 
 
 class LiveLoop:
@@ -141,6 +141,7 @@ class LiveLoop:
         self.nb = len(body.base_channels)
         self._nan = np.full(body.nq, np.nan)
         self._stop_reason: str | None = None
+        self._link_errors0 = link.stats.read_errors
         self._hold: np.ndarray | None = None
         self.halted: str | None = None
         self.torque_dropped = False
@@ -155,8 +156,10 @@ class LiveLoop:
         self.pipe = Pipeline(self.body, self.pipeline_config, nominal_dt=self.dt)
         self.placer = BasePlacer(self.body)
         self.command_placer = BasePlacer(self.body)
-        every = self.config.correct_every
-        self.corrector = OnlineCorrector(self.body, every * self.dt) if self.config.correct else None
+        cfg = self.config
+        every = cfg.correct_every
+        self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
+                                         max_accel_deg_s2=cfg.trunk_accel_deg_s2) if cfg.correct else None
         self.limiter.reset()
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
@@ -188,9 +191,10 @@ class LiveLoop:
         self._last_reconnect = -math.inf
         self._next_fell_check = 0.0
         self._next_status = self.config.status_every_s
+        self._link_errors0 = self.link.stats.read_errors
         tick = self.clock.start()
-        self.start_time = tick.woke
-        self.watchdog = Watchdog(self.config.safety.watchdog_s, tick.woke)
+        # a watchdog shorter than a few periods would trip on one late frame of a slow stream
+        self.watchdog = Watchdog(max(self.config.safety.watchdog_s, 3 * self.dt), tick.woke)
         try:
             while True:
                 t = tick.index * self.dt
@@ -235,7 +239,7 @@ class LiveLoop:
         t1 = now()
         self.times["read"].add(t1 - t0)
         if frame is not None:
-            verdict = self.guard.check(frame, t0, t1)
+            verdict = self.guard.check(frame, t1)
             if verdict is not None:
                 if verdict.kind == "stale":
                     self.counters.stale_frames += 1
@@ -248,7 +252,7 @@ class LiveLoop:
             self._check_watchdog(t, t1)
             return
         self.counters.good_frames += 1
-        if t1 - self.watchdog.last > self.config.safety.watchdog_s or self.stopped:
+        if t1 - self.watchdog.last > self.watchdog.timeout_s or self.stopped:
             self._resume(t)
         self.watchdog.feed(t1)
         if frame.hardware_errors:
@@ -281,9 +285,9 @@ class LiveLoop:
         try:
             return self.link.read()
         except LinkReadError:
-            self.counters.read_errors += 1
+            self.counters.failed_reads += 1
         except LinkError as e:
-            self.counters.read_errors += 1
+            self.counters.failed_reads += 1
             self.link_down = True
             self._event(t, f"link down: {e}")
         return None
@@ -291,7 +295,7 @@ class LiveLoop:
     def _fill_skipped(self, index: int) -> None:
         """Missing samples for the deadlines the clock skipped since the last cycle (not
         beyond the watchdog time: a longer gap restarts the estimator anyway)."""
-        if self._fed_until is not None and (index - self._fed_until) * self.dt <= self.config.safety.watchdog_s:
+        if self._fed_until is not None and (index - self._fed_until) * self.dt <= self.watchdog.timeout_s:
             for k in range(self._fed_until + 1, index):
                 self._missing_sample(k, k * self.dt)
 
@@ -325,7 +329,7 @@ class LiveLoop:
             if self._hold is None:
                 self._hold = present.copy()
         target = self._hold if self.command is None else np.asarray(self.command(t), dtype=float)
-        s = _smooth((t - self._ramp_t0) / self.config.ramp_s)
+        s = float(smooth_ramp(t, self._ramp_t0, self._ramp_t0 + self.config.ramp_s))
         return target if s >= 1.0 else self._ramp_from + s * (target - self._ramp_from)
 
     def _correct(self, command: np.ndarray) -> None:
@@ -361,6 +365,8 @@ class LiveLoop:
         if self.link.reconnect():
             self.counters.reconnects += 1
             self.link_down = False
+            if self.torque_dropped:  # reopening a link switches torque on: a limp robot stays limp
+                self.link.safe_stop(drop_torque=True)
             self._event(t, "link reconnected")
 
     def _resume(self, t: float) -> None:
@@ -390,7 +396,8 @@ class LiveLoop:
         return {"t": t, "hz": self.clock.stats().achieved_hz, "support": None if r is None else r.support,
                 "margin_mm": None if r is None or r.margin is None else 1e3 * r.margin,
                 "inside_fraction": c.inside / c.judged if c.judged else None,
-                "misses": self.clock.misses, "read_errors": c.read_errors, "corrections": c.corrections_sent,
+                "misses": self.clock.misses, "read_errors": self.link.stats.read_errors - self._link_errors0,
+                "corrections": c.corrections_sent,
                 "state": self.state}
 
     @property
@@ -400,7 +407,11 @@ class LiveLoop:
         return "stopped" if self.stopped or self.link_down else "running"
 
     def summary(self) -> dict:
-        """Counters, timing and rates of the run (JSON-ready; times in ms)."""
+        """Counters, timing and rates of the run (JSON-ready; times in ms). ``read_errors``:
+        what the link counted during the run, in its own unit (lost or rejected replies
+        or messages: what a simulated device injects); ``failed_reads``: cycles whose read
+        failed; ``stale_frames``/``corrupted_frames``: frames the guard rejected;
+        ``cycles``: cycles run (``clock.skipped_cycles`` were passed over)."""
         c = self.counters
         clock = self.clock.stats()
         stats = self.link.stats
@@ -408,7 +419,7 @@ class LiveLoop:
             "cycles": c.cycles,
             "achieved_hz": clock.achieved_hz,
             "deadline_misses": clock.deadline_misses,
-            "read_errors": c.read_errors,
+            "read_errors": stats.read_errors - self._link_errors0,
             "write_errors": c.write_errors,
             "stale_frames": c.stale_frames,
             "corrupted_frames": c.corrupted_frames,
@@ -424,6 +435,7 @@ class LiveLoop:
             "stopped_by": self._stop_reason,
             "state": self.state,
             "halted": self.halted,
+            "failed_reads": c.failed_reads,
             "good_frames": c.good_frames,
             "commands_sent": c.commands_sent,
             "corrections_limited": c.corrections_limited,

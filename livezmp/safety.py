@@ -2,9 +2,9 @@
 and when to stop commanding.
 
 * Frames (:class:`FrameGuard`). A link only returns frames it verified (CRC, lengths);
-  the guard adds the rules a link cannot know. *Stale*: the read took longer than
-  ``max_frame_age_s`` (the data is that old by the time a command could use it), or the
-  frame is not newer than the previous one (its host time, or the device's own
+  the guard adds the rules a link cannot know. *Stale*: the frame is older than
+  ``max_frame_age_s`` (by its host time stamp) when a command would be computed from
+  it, or it is not newer than the previous one (its host time, or the device's own
   timestamp, did not advance: a repeated frame). *Corrupted*: a non-finite or
   wrong-sized position vector, a joint beyond its URDF limits by more than
   ``position_tolerance_rad``, or a joint that moved faster than ``speed_factor`` times
@@ -14,7 +14,8 @@ and when to stop commanding.
   ``max_correction_rad`` per joint and may change by at most
   ``max_correction_rate_rad_s`` (rad/s); the goals (command + offsets) are clipped to
   the URDF joint limits less ``limit_margin_rad``.
-* Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` → the loop stops
+* Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` (at least three loop
+  periods) → the loop stops
   commanding and either holds the present posture or drops torque
   (``drop_torque``), and keeps trying to reconnect every ``reconnect_every_s``.
 * A servo that reports a hardware error (overload, overheating, ...) latches a safe
@@ -107,13 +108,12 @@ class FrameGuard:
     def reset(self) -> None:
         """Forget the last good frame (after a gap, the speed rule starts afresh)."""
         self._last_q: np.ndarray | None = None
-        self._last_read = -math.inf
         self._last_t = -math.inf
         self._last_device_t = -math.inf
 
-    def check(self, frame: LinkFrame, read_start: float, now: float) -> Verdict | None:
-        """None when ``frame`` may drive a command, else why not. ``read_start``: when the
-        read was asked for; ``now``: when it returned (s, the loop's clock)."""
+    def check(self, frame: LinkFrame, now: float) -> Verdict | None:
+        """None when ``frame`` may drive a command, else why not; ``now``: the present time
+        (s, the clock of the frames' host time stamps)."""
         cfg, lim = self.config, self.limits
         q = np.asarray(frame.positions, dtype=float)
         if q.shape != lim.lower.shape:
@@ -126,19 +126,19 @@ class FrameGuard:
             j = int(np.argmax(out))
             return Verdict("corrupted", f"joint {lim.names[j]}: {q[j]:.3f} rad is beyond its limits "
                                         f"[{lim.lower[j]:.3f}, {lim.upper[j]:.3f}]")
-        if now - read_start > cfg.max_frame_age_s:
-            return Verdict("stale", f"read took {1e3 * (now - read_start):.1f} ms "
+        if now - frame.t > cfg.max_frame_age_s:
+            return Verdict("stale", f"frame is {1e3 * (now - frame.t):.1f} ms old "
                                     f"(> {1e3 * cfg.max_frame_age_s:.1f} ms)")
         if frame.t <= self._last_t or (frame.device_time is not None and frame.device_time <= self._last_device_t):
             return Verdict("stale", "frame is not newer than the previous one")
         if self._last_q is not None:
             step = np.abs(q - self._last_q)
-            allowed = cfg.speed_factor * lim.velocity * (read_start - self._last_read) + tol
+            allowed = cfg.speed_factor * lim.velocity * (frame.t - self._last_t) + tol
             fast = step > allowed
             if fast.any():
                 j = int(np.argmax(fast))
                 return Verdict("corrupted", f"joint {lim.names[j]}: jumped {step[j]:.3f} rad since the last frame")
-        self._last_q, self._last_read, self._last_t = q.copy(), read_start, frame.t
+        self._last_q, self._last_t = q.copy(), frame.t
         if frame.device_time is not None:
             self._last_device_t = frame.device_time
         return None

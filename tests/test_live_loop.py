@@ -50,7 +50,7 @@ class ScriptedLink:
     """A Link over first-order servos (time constant 30 ms) on a :class:`SimTime`.
 
     ``fault(n, t)`` decides read number n's fate: None (good), "error" (LinkReadError),
-    "down" (LinkError: port gone), "nan", "jump", "slow" (takes 30 ms), "repeat" (the
+    "down" (LinkError: port gone), "nan", "jump", "slow" (delivered 30 ms late), "repeat" (the
     previous frame again), "hw" (an overload reported on l_knee). ``reconnect_ok(t)``
     says whether a reconnect at t succeeds. Every call is logged as (name, t)."""
 
@@ -86,7 +86,8 @@ class ScriptedLink:
             raise (LinkReadError if fate == "error" else LinkError)(f"scripted {fate} at read {n}")
         if fate == "repeat" and self.last_frame is not None:
             return self.last_frame
-        if fate == "slow":
+        sampled = self.time.t
+        if fate == "slow":  # delivered 30 ms after it was sampled
             self.time.t += 0.03
         q = self.q.copy()
         if fate == "nan":
@@ -94,7 +95,7 @@ class ScriptedLink:
         elif fate == "jump":
             q[5] += 0.5
         errors = {"l_knee": 0x20} if fate == "hw" else {}
-        self.last_frame = LinkFrame(self.time.t, q, hardware_errors=errors)
+        self.last_frame = LinkFrame(sampled, q, hardware_errors=errors)
         return self.last_frame
 
     def write_goals(self, positions: np.ndarray) -> None:
@@ -218,23 +219,23 @@ def _limits(n=3):
 def test_frame_guard_rules():
     guard = FrameGuard(_limits(), SafetyConfig())
     q = np.array([0.1, 0.2, 0.3])
-    assert guard.check(LinkFrame(1.0, q), 1.0, 1.0002) is None  # read asked at 1.0, back at 1.0002
-    cases = [  # frame, read start, read end, verdict kind, words of its reason
-        (LinkFrame(1.002, np.array([0.1, np.nan, 0.3])), 1.002, 1.0022, "corrupted", "joint j1: non-finite"),
-        (LinkFrame(1.002, np.array([0.1, 0.2])), 1.002, 1.0022, "corrupted", "2 positions for 3 joints"),
-        (LinkFrame(1.002, np.array([0.1, 1.2, 0.3])), 1.002, 1.0022, "corrupted",
+    assert guard.check(LinkFrame(1.0, q), 1.0002) is None
+    cases = [  # frame, time of the check, verdict kind, words of its reason
+        (LinkFrame(1.002, np.array([0.1, np.nan, 0.3])), 1.0022, "corrupted", "joint j1: non-finite"),
+        (LinkFrame(1.002, np.array([0.1, 0.2])), 1.0022, "corrupted", "2 positions for 3 joints"),
+        (LinkFrame(1.002, np.array([0.1, 1.2, 0.3])), 1.0022, "corrupted",
          "joint j1: 1.200 rad is beyond its limits [-1.000, 1.000]"),
-        # 2 ms after the last good read: 5 rad/s x 1.5 x 2 ms + 0.05 = 0.065 rad allowed
-        (LinkFrame(1.002, q + [0, 0, 0.07]), 1.002, 1.0022, "corrupted", "joint j2: jumped 0.070 rad"),
-        (LinkFrame(1.0, q), 1.002, 1.0022, "stale", "not newer than the previous one"),
-        (LinkFrame(1.045, q), 1.02, 1.045, "stale", "read took 25.0 ms (> 20.0 ms)"),
-        (LinkFrame(1.05, q, device_time=5.0), 1.05, 1.0502, None, None),
-        (LinkFrame(1.052, q, device_time=5.0), 1.052, 1.0522, "stale", "not newer than the previous one"),
+        # 2 ms after the last good frame: 5 rad/s x 1.5 x 2 ms + 0.05 = 0.065 rad allowed
+        (LinkFrame(1.002, q + [0, 0, 0.07]), 1.0022, "corrupted", "joint j2: jumped 0.070 rad"),
+        (LinkFrame(1.0, q), 1.0022, "stale", "not newer than the previous one"),
+        (LinkFrame(1.01, q), 1.035, "stale", "frame is 25.0 ms old (> 20.0 ms)"),
+        (LinkFrame(1.05, q, device_time=5.0), 1.0502, None, None),
+        (LinkFrame(1.052, q, device_time=5.0), 1.0522, "stale", "not newer than the previous one"),
         # 0.06 rad more after 10 ms is plausible
-        (LinkFrame(1.06, q + 0.06, device_time=5.01), 1.06, 1.0602, None, None),
+        (LinkFrame(1.06, q + 0.06, device_time=5.01), 1.0602, None, None),
     ]
-    for frame, start, end, kind, reason in cases:
-        v = guard.check(frame, start, end)
+    for frame, now, kind, reason in cases:
+        v = guard.check(frame, now)
         assert (v is None) if kind is None else (v.kind == kind and reason in v.reason), (frame, v)
 
 
@@ -292,7 +293,7 @@ def test_failed_and_rejected_frames_never_drive_a_command(mini):
     assert link.stats.writes == s["commands_sent"]
     assert _writes_follow_good_reads(link)
     assert any("corrupted frame dropped: joint l_hip_roll: non-finite" in e for e in events)
-    assert any("stale frame dropped: read took 30.2 ms" in e for e in events)
+    assert any("stale frame dropped: frame is 30.0 ms old" in e for e in events)
     assert link.calls[-1][0] == "safe_stop"
     assert s["stopped_by"] == "duration" and s["watchdog_trips"] == 0
 

@@ -1,0 +1,192 @@
+"""The live loop over the real clients — dynamixel-sdk, python-can's slcan, pyserial —
+talking to simulated devices on ptys, with the simulated humanoid behind them.
+
+What reached the device is read back from the device side (the humanoid's servo
+goals), so a command lost or garbled on the way would show. Faults are injected by the
+devices, whose counters are the truth the loop's counters are compared with."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from sim_support import short_gil_switch  # noqa: F401 - fixture
+
+from livezmp.body_urdf import body_from_urdf
+from livezmp.commands.run import SimProcess, make_scenario
+from livezmp.demo import demo_robot_path
+from livezmp.links import LinkError, open_link
+from livezmp.live_loop import LiveLoop, LoopConfig
+from livezmp.robot_config import find_robot_config
+from sim_devices.humanoid import SimHumanoid
+from sim_devices.launch import start_devices
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
+
+TICK = 2 * np.pi / 4096  # one Dynamixel position tick, rad
+
+
+@pytest.fixture(scope="module")
+def mini():
+    return body_from_urdf(demo_robot_path())
+
+
+@pytest.fixture(scope="module")
+def mini_config(mini):
+    return find_robot_config(demo_robot_path(), mini.model.name)
+
+
+class Spy:
+    """A link passed through, every call logged with its monotonic time:
+    ("read", t, frame), ("read_failed", t), ("write", t, goals), ("safe_stop", t), ("reconnect", t, ok)."""
+
+    def __init__(self, link):
+        self.link = link
+        self.joint_names, self.stats = link.joint_names, link.stats
+        self.rate = getattr(link, "rate", None)
+        self.calls: list[tuple] = []
+
+    def read(self):
+        try:
+            frame = self.link.read()
+        except LinkError:
+            self.calls.append(("read_failed", time.monotonic()))
+            raise
+        self.calls.append(("read", time.monotonic(), frame))
+        return frame
+
+    def write_goals(self, goals):
+        self.link.write_goals(goals)
+        self.calls.append(("write", time.monotonic(), goals.copy()))
+
+    def safe_stop(self, drop_torque=False):
+        self.calls.append(("safe_stop", time.monotonic()))
+        self.link.safe_stop(drop_torque)
+
+    def reconnect(self):
+        ok = self.link.reconnect()
+        self.calls.append(("reconnect", time.monotonic(), ok))
+        return ok
+
+    def of(self, kind: str) -> list[tuple]:
+        return [c for c in self.calls if c[0] == kind]
+
+
+def run_on_devices(body, config, kind: str, options: str = "", faults: str = "", rate: float | None = None,
+                   duration: float = 1.5):
+    """Stand for ``duration`` with the loop over ``kind``'s real client; (humanoid, spy, summary, injected)."""
+    scenario = make_scenario("stand", body)
+    humanoid = SimHumanoid(body, scenario.goals(0.0))
+    devices = start_devices(kind, humanoid, config, joint_names=body.joint_names, faults=faults)
+    try:
+        url = devices.url + ("&" if "?" in devices.url else "?") + options if options else devices.url
+        link = open_link(url, body.joint_names, config)
+        spy = Spy(link)
+        try:
+            injected_before = devices.fault_counters
+            errors_before = link.stats.read_errors
+            loop = LiveLoop(spy, body, LoopConfig(rate_hz=rate or spy.rate or 100.0), command=scenario.goals)
+            summary = loop.run(duration)
+            summary["link_read_errors"] = link.stats.read_errors - errors_before
+            after = devices.fault_counters
+            injected = {k: getattr(after, k) - getattr(injected_before, k)
+                        for k in ("dropped", "corrupted", "vanishes")}
+        finally:
+            link.close()
+    finally:
+        devices.close()
+    return humanoid, spy, summary, injected
+
+
+def writes_follow_good_reads(spy: Spy) -> bool:
+    kinds = [c[0] for c in spy.calls]
+    return all(i > 0 and kinds[i - 1] == "read" for i, k in enumerate(kinds) if k == "write")
+
+
+def check_drove(s: dict, spy: Spy, device_goals: np.ndarray, atol: float) -> None:
+    assert s["good_frames"] >= 0.8 * s["cycles"] > 0
+    assert s["commands_sent"] == s["good_frames"] == len(spy.of("write"))
+    assert writes_follow_good_reads(spy)
+    assert s["stopped_by"] == "duration"
+    # the device holds the goals of the loop's last write (the final safe stop holds right there)
+    last_goals = spy.of("write")[-1][2]
+    np.testing.assert_allclose(device_goals, last_goals, atol=atol)
+    # and the loop read what the servos were at
+    assert np.abs(spy.of("read")[-1][2].positions - last_goals).max() < 0.02
+    for key in ("cycles", "achieved_hz", "deadline_misses", "read_errors", "write_errors", "stale_frames",
+                "corrections_sent", "inside_fraction", "max_latency_ms", "p99_latency_ms", "fell"):
+        assert key in s
+
+
+def report(kind: str, s: dict) -> None:
+    print(f"{kind}: {s['cycles']} cycles at {s['achieved_hz']:.1f} Hz of {s['rate_hz']:g}, {s['good_frames']} good "
+          f"frames, {s['deadline_misses']} misses, p99 latency {s['p99_latency_ms']:.2f} ms")
+
+
+@pytest.mark.parametrize(("kind", "options", "atol"), [("dynamixel", "", 3 * TICK), ("fw", "rate=100", 1e-6)])
+def test_loop_drives_the_robot_through_dynamixel_sdk_and_pyserial(mini, mini_config, kind, options, atol):
+    humanoid, spy, s, _ = run_on_devices(mini, mini_config, kind, options)
+    report(kind, s)
+    check_drove(s, spy, humanoid.servo.goal, atol)
+    assert humanoid.fallen is None
+
+
+def test_loop_drives_the_robot_through_python_can_slcan(mini, mini_config):
+    """Twenty CAN servo nodes stream 3 frames each per state: more than python-can's slcan
+    reader takes in while sharing a process with them, so the simulator runs in its own
+    process here (as the demo's does)."""
+    scenario = make_scenario("stand", mini)
+    with SimProcess("can", ("stand", {})) as sim:
+        spy = Spy(open_link(sim.url + "&rate=20&timeout=0.5", mini.joint_names, mini_config))
+        try:
+            s = LiveLoop(spy, mini, LoopConfig(rate_hz=spy.rate), command=scenario.goals, fell=sim.fell).run(1.5)
+        finally:
+            spy.link.close()
+        servos = sim.servos()
+    report("can", s)
+    check_drove(s, spy, servos["goal"], 1e-6)
+    assert s["fell"] is False
+
+
+def test_dropped_and_corrupted_replies_are_counted_and_never_drive_a_command(mini, mini_config):
+    """1 % of the servos' replies dropped and 1 % corrupted: the link's error count equals
+    what the chain injected, the loop's failed reads are the reads with a fault, and no
+    write follows a failed read."""
+    humanoid, spy, s, injected = run_on_devices(mini, mini_config, "dynamixel", faults="drop=0.01,corrupt=0.01,seed=7",
+                                                rate=100.0, duration=3.0)
+    faults = injected["dropped"] + injected["corrupted"]
+    failed = len(spy.of("read_failed"))
+    print(f"injected {injected}; link read errors {s['link_read_errors']}, failed reads {failed} of "
+          f"{failed + len(spy.of('read'))}; {s['cycles']} cycles at {s['achieved_hz']:.1f} Hz")
+    assert faults > 20  # 20 replies a read, ~300 reads: about 120 expected
+    assert s["link_read_errors"] == faults
+    assert 0 < failed <= faults and failed == s["failed_reads"]
+    assert s["read_errors"] == s["link_read_errors"]
+    assert writes_follow_good_reads(spy)
+    assert s["commands_sent"] == s["good_frames"] == len(spy.of("write"))
+    assert humanoid.fallen is None and s["watchdog_trips"] == 0
+
+
+def test_port_vanishing_trips_the_watchdog_and_the_loop_reconnects(mini, mini_config):
+    """The port disappears for 1 s during the run: within the 100 ms watchdog the loop
+    stops commanding (hold), retries every 0.25 s, and commands again once the port is back."""
+    vanish_at, gone_for = 1.2, 1.0
+    humanoid, spy, s, injected = run_on_devices(mini, mini_config, "dynamixel",
+                                                faults=f"vanish={vanish_at}s+{gone_for}s", rate=100.0, duration=3.5)
+    assert injected["vanishes"] == 1
+    first_fail = spy.of("read_failed")[0][1]
+    last_good = max(c[1] for c in spy.of("read") if c[1] < first_fail)
+    stop = next(c[1] for c in spy.of("safe_stop") if c[1] > first_fail)
+    reconnected = next(c[1] for c in spy.of("reconnect") if c[2])
+    print(f"safe stop {1e3 * (stop - last_good):.1f} ms after the last good read; reconnected "
+          f"{1e3 * (reconnected - first_fail):.0f} ms after the port went; {s['events']}")
+    assert 0.1 <= stop - last_good <= 0.1 + 0.1  # the watchdog, within a cycle and scheduling slack
+    assert not [c for c in spy.of("write") if first_fail <= c[1] <= reconnected]
+    assert gone_for - 0.1 <= reconnected - first_fail <= gone_for + 0.25 + 0.5
+    assert s["watchdog_trips"] == 1 and s["resumes"] == 1 and s["reconnects"] >= 1
+    assert s["state"] == "running" and s["stopped_by"] == "duration"
+    after = [c for c in spy.of("write") if c[1] > reconnected]
+    assert len(after) > 50  # commanding again for the rest of the run
+    np.testing.assert_allclose(humanoid.servo.goal, after[-1][2], atol=3 * TICK)
+    assert humanoid.fallen is None
