@@ -138,6 +138,13 @@ def test_replay_of_an_unfinished_recording_points_to_recover(tmp_path, capsys):
     assert "livezmp recover" in err and err.count("\n") == 1
 
 
+def test_replay_needs_a_monitor_session(tmp_path, capsys):
+    body, spec = robot_body(demo_robot_path())
+    Recorder(tmp_path / "bare.mcap", spec, {}, body.channel_names).close()
+    assert main(["replay", str(tmp_path / "bare.mcap")]) == 2
+    assert "session has no frame rate" in capsys.readouterr().err
+
+
 def wait_for(cond, deadline: float = 30.0) -> None:
     end = time.monotonic() + deadline
     while not cond():

@@ -154,7 +154,7 @@ class ReplayCheck:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     source = McapReplaySource(args.recording, args.speed)
-    s = source.recording.session
+    s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
     check = ReplayCheck(args.recording)
     recorded_alarms = sum(1 for m in iter_messages(args.recording, "/alarm") if m["event"] == "raised")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from livezmp.errors import InputError
 from livezmp.recording import iter_messages, open_recording
 from livezmp.sources.body_spec import body_from_spec
 from livezmp.sources.file_replay import Pacer
@@ -24,7 +25,9 @@ class McapReplaySource:
         self.body_spec = self.recording.body_spec
         self.body = body_from_spec(self.body_spec)
         fps = self.recording.session.get("fps")
-        self.nominal_dt = 1.0 / fps if fps else None
+        if not isinstance(fps, int | float) or not fps > 0:
+            raise InputError(f"{path}: the recording's session has no frame rate (livezmp.session fps)")
+        self.nominal_dt = 1.0 / fps
         self.pacer = Pacer(speed, self.name)
         self.stats, self.errors = SourceStats(), ErrorLog()
         self._messages = iter_messages(path, "/input")
