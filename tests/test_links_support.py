@@ -32,8 +32,9 @@ def servo_config(n: int = 20) -> RobotConfig:
 
 
 def start_posture(n: int) -> np.ndarray:
-    """Distinct joint angles (rad) that fall between encoder ticks."""
-    return np.linspace(-0.6, 0.6, n) + 1e-4
+    """Distinct joint angles (rad) that fall between encoder ticks and are float32 numbers, so that a board
+    holding them (positions travel as float32) holds them exactly."""
+    return (np.linspace(-0.6, 0.6, n) + 1e-4).astype(np.float32).astype(float)
 
 
 @dataclass
@@ -51,9 +52,10 @@ def with_options(url: str, options: str) -> str:
 
 
 @contextlib.contextmanager
-def rig(kind: str, n: int = 20, faults: str = "", options: str | None = None) -> Iterator[Rig]:
-    """A plant at `start_posture`, its simulated devices of ``kind`` and an open link to them (``mock``: none)."""
-    plant = ServoPlant(n, position=start_posture(n))
+def rig(kind: str, n: int = 20, faults: str = "", options: str | None = None, **plant_options) -> Iterator[Rig]:
+    """A plant at `start_posture` (other `ServoPlant` parameters: ``plant_options``), its simulated devices of
+    ``kind`` and an open link to them (``mock``: none)."""
+    plant = ServoPlant(n, position=start_posture(n), **plant_options)
     config = servo_config(n)
     names = list(config.servos)
     if kind == "mock":

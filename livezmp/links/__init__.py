@@ -12,7 +12,7 @@ A bad URL or option is an `InputError` naming it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats
@@ -107,8 +107,8 @@ def make_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -
         from livezmp.links.firmware import FirmwareLink, SerialBoard
 
         _check_watchdog(url, opts["watchdog"], 65.535)
-        return FirmwareLink(url, names, lambda: SerialBoard(target, opts["baud"], opts["watchdog"]),
-                            rate=opts["rate"], timeout=opts["timeout"])
+        return FirmwareLink(url, names, lambda: SerialBoard(target, opts["baud"]), rate=opts["rate"],
+                            watchdog=opts["watchdog"], timeout=opts["timeout"])
     servos = []
     for joint in names:
         servo = robot_config.servos.get(joint)
@@ -136,9 +136,12 @@ def make_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -
     bus_options = {k: _bus_option(v) for k, v in extra.items()}
     if opts["bitrate"] is not None:
         bus_options["bitrate"] = opts["bitrate"]
-    connect: Callable[[], CanBoards] = lambda: CanBoards(interface, channel, nodes, opts["watchdog"],  # noqa: E731
-                                                         **bus_options)
-    return FirmwareLink(url, names, connect, rate=opts["rate"], timeout=opts["timeout"])
+    tids: dict[tuple[int, int], int] = {}
+
+    def connect() -> CanBoards:
+        return CanBoards(interface, channel, nodes, tids, **bus_options)
+
+    return FirmwareLink(url, names, connect, rate=opts["rate"], watchdog=opts["watchdog"], timeout=opts["timeout"])
 
 
 def open_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -> Link:

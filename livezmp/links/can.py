@@ -24,17 +24,22 @@ import can
 
 import firmware_protocol as fp
 from livezmp.links.base import LinkError
-from livezmp.links.firmware import POLL_WAIT
+from livezmp.links.firmware import OPEN_WATCHDOG, POLL_WAIT
 
 MAX_FRAMES_PER_POLL = 4096  # bounds one poll's cost
 INBOX_LIMIT = 256  # messages kept per node between polls (older ones are dropped)
 
 
 class _NodeTransport(fp.CanTransport):
-    """A host transport to one node that sends on the shared bus and receives what `CanBoards` routed to it."""
+    """A host transport to one node that sends on the shared bus and receives what `CanBoards` routed to it.
 
-    def __init__(self, boards: CanBoards, node: int) -> None:
+    Its transfer ids continue in ``tids`` across reconnects: a node tracks each of our streams by transfer id,
+    and a restarted count would have it drop up to four of our transfers (SET_GOALS, HEARTBEAT...) as stale.
+    """
+
+    def __init__(self, boards: CanBoards, node: int, tids: dict[tuple[int, int], int]) -> None:
         super().__init__(boards.bus, node)
+        self._tids = tids
         self._boards = boards
         self._inbox: deque[fp.Received] = boards.inboxes[node]
 
@@ -47,9 +52,11 @@ class _NodeTransport(fp.CanTransport):
 
 
 class CanBoards:
-    """The nodes ``nodes`` on one python-can bus (the `Boards` of a CAN `FirmwareLink`)."""
+    """The nodes ``nodes`` on one python-can bus (the `Boards` of a CAN `FirmwareLink`); ``tids``: the
+    transfer counters, kept by the caller from one connection to the next."""
 
-    def __init__(self, interface: str, channel: str, nodes: Sequence[int], watchdog: float, **bus_options) -> None:
+    def __init__(self, interface: str, channel: str, nodes: Sequence[int], tids: dict[tuple[int, int], int],
+                 **bus_options) -> None:
         self.name = f"can:{interface}:{channel}"
         try:
             self.bus = can.Bus(interface=interface, channel=channel, **bus_options)
@@ -62,7 +69,8 @@ class CanBoards:
         self._decoder = fp.CanDecoder("node", frozenset(nodes))
         self._garbled = 0
         self.inboxes = {node: deque(maxlen=INBOX_LIMIT) for node in nodes}
-        self.sessions = [fp.HostSession(_NodeTransport(self, node), watchdog_timeout=watchdog) for node in nodes]
+        self.sessions = [fp.HostSession(_NodeTransport(self, node, tids), watchdog_timeout=OPEN_WATCHDOG)
+                         for node in nodes]
         self.pump(0.0)
         for inbox in self.inboxes.values():
             inbox.clear()  # what the nodes sent before we opened is stale

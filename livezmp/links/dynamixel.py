@@ -32,6 +32,7 @@ reply latency.
 from __future__ import annotations
 
 import math
+import termios
 import time
 from collections.abc import Sequence
 
@@ -69,10 +70,10 @@ VELOCITY_UNIT = 0.229 * 2.0 * math.pi / 60.0  # rad/s per unit
 CURRENT_UNIT = 2.69e-3  # A per unit
 WATCHDOG_UNIT = 0.020  # s per unit
 WATCHDOG_MAX = 127 * WATCHDOG_UNIT
-OPEN_TRIES = 3  # attempts of each read at open: a glitch should not fail the whole open
+OPEN_TRIES = 5  # attempts of each read at open: a glitch should not fail the whole open
 
 _STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")])
-_PORT_ERRORS = (serial.SerialException, OSError)
+_PORT_ERRORS = (serial.SerialException, OSError, termios.error)  # termios: flushing a vanished pty
 
 
 class DynamixelLink:
@@ -154,8 +155,8 @@ class DynamixelLink:
             i = int(np.argmax(bad))
             ends = sorted([(self._lowest[i] - self._zero[i]) * self._rad_per_tick[i],
                            (self._highest[i] - self._zero[i]) * self._rad_per_tick[i]])
-            raise LinkError(f"{self.path}: goal for joint '{self.joint_names[i]}' is {goals[i]!r} rad, outside its "
-                            f"servo's range [{ends[0]:.4f}, {ends[1]:.4f}] rad; nothing sent")
+            raise LinkError(f"{self.path}: goal for joint '{self.joint_names[i]}' is {float(goals[i])} rad, outside "
+                            f"its servo's range [{ends[0]:.4f}, {ends[1]:.4f}] rad; nothing sent")
         self._write_ticks(ticks.astype("<i4"))
 
     def hold(self) -> None:
@@ -340,12 +341,15 @@ class DynamixelLink:
         except _PORT_ERRORS as err:
             raise LinkError(f"{self.path}: port failed: {err}") from None
         if result != COMM_SUCCESS:
-            kind = "no_reply" if result == COMM_RX_TIMEOUT else "bad_crc"
-            self.stats.read_errors += 1
-            self.stats.count(kind)
+            self._lost_reply(result)
             raise LinkReadError(f"{self.path}: {self._who(i)} raised its alert bit, and reading its hardware error "
                                 f"status failed: {self._ph.getTxRxResult(result)}")
         return value
+
+    def _lost_reply(self, result: int) -> None:
+        """Count the status packet of a unicast transaction that ended with ``result`` as lost or rejected."""
+        self.stats.read_errors += 1
+        self.stats.count("no_reply" if result == COMM_RX_TIMEOUT else "bad_crc")
 
     def _write_ticks(self, ticks: np.ndarray) -> None:
         raw = ticks.tobytes()
@@ -363,14 +367,23 @@ class DynamixelLink:
         self._send(writer)
 
     def _write_one(self, i: int, address: int, value: int) -> None:
-        try:
-            result, error = self._ph.write1ByteTxRx(self._require_port(), self.ids[i], address, value)
-        except _PORT_ERRORS as err:
-            raise LinkError(f"{self.path}: port failed: {err}") from None
-        if result != COMM_SUCCESS or error:
+        """One byte to servo ``i``, acknowledged; retried when the acknowledgement is lost (writing is idempotent)."""
+        port = self._require_port()
+        for _ in range(OPEN_TRIES):
+            try:
+                result, error = self._ph.write1ByteTxRx(port, self.ids[i], address, value)
+            except _PORT_ERRORS as err:
+                raise LinkError(f"{self.path}: port failed: {err}") from None
+            if result == COMM_SUCCESS:
+                break
+            self._lost_reply(result)
+        else:
             self.stats.write_errors += 1
-            raise LinkError(f"{self.path}: writing address {address} of {self._who(i)} failed: "
-                            f"{self._ph.getTxRxResult(result) if result != COMM_SUCCESS else f'error {error:#04x}'}")
+            raise LinkError(f"{self.path}: writing address {address} of {self._who(i)}: no valid answer in "
+                            f"{OPEN_TRIES} tries")
+        if error:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: writing address {address} of {self._who(i)} failed: error {error:#04x}")
 
     def _send(self, writer: GroupSyncWrite) -> None:
         port = self._require_port()

@@ -6,10 +6,10 @@
 The same `FirmwareLink` serves the CAN link (one session per servo node, see
 :mod:`livezmp.links.can`): only how the sessions are opened and polled differs (`Boards`).
 
-`open`: HELLO handshake with every board (schema checked), watchdog configured
-(``watchdog`` s, HOLD), stream rates set (JOINT_STATE at ``rate`` Hz, FOOT_SENSORS and IMU
-at the same rate when the board has them, HEARTBEAT 10 Hz), the link's joints mapped by
-name from HELLO_ACK, goals set to the present positions, torque enabled and checked.
+`open`: HELLO handshake with every board (schema checked), stream rates set (JOINT_STATE
+at ``rate`` Hz, FOOT_SENSORS and IMU at the same rate when the board has them, HEARTBEAT
+10 Hz), the link's joints mapped by name from HELLO_ACK, watchdog configured (``watchdog``
+s, HOLD; 0 disables it), goals set to the present positions, torque enabled and checked.
 
 `read` returns when every board has sent a JOINT_STATE since the previous read (the host
 heartbeat goes out from the same polling, so a stalled loop trips the board's watchdog);
@@ -35,6 +35,9 @@ from livezmp.links.base import FootSensors, LinkError, LinkFrame, LinkReadError,
 HEARTBEAT_HZ = 10
 POLL_WAIT = 0.005  # s: the one serial read timeout used (changing it reconfigures the port)
 CONNECT_TIMEOUT = 1.0  # s per board
+# Watchdog while the boards are set up one after the other (the ones done first get no heartbeat meanwhile);
+# the link's own goes on once they all are.
+OPEN_WATCHDOG = 1.0
 UNTRUSTED = fp.JointError.COMMS | fp.JointError.STALE | fp.JointError.ENCODER
 FOOT_SIDES = ("left", "right")  # FOOT_SENSORS foot_id 0 and 1
 
@@ -58,14 +61,14 @@ class Boards(Protocol):
 class SerialBoard:
     """One board on a pyserial URL."""
 
-    def __init__(self, url: str, baud: int, watchdog: float) -> None:
+    def __init__(self, url: str, baud: int) -> None:
         self.name = url
         try:
             transport = fp.SerialTransport(url, baudrate=baud)
             transport.port.reset_input_buffer()  # what the board sent before we opened is stale
         except fp.ProtocolError as err:
             raise LinkError(str(err)) from None
-        self.sessions = [fp.HostSession(transport, watchdog_timeout=watchdog)]
+        self.sessions = [fp.HostSession(transport, watchdog_timeout=OPEN_WATCHDOG)]
 
     def poll(self) -> list[tuple[int, fp.Message]]:
         return [(0, msg) for msg in self.sessions[0].poll(POLL_WAIT)]
@@ -110,10 +113,11 @@ class FirmwareLink:
     """Joints ``joint_names`` on the boards ``connect()`` opens (see module docstring)."""
 
     def __init__(self, name: str, joint_names: Sequence[str], connect: Callable[[], Boards], *, rate: int = 500,
-                 timeout: float = 0.1) -> None:
+                 watchdog: float = 0.2, timeout: float = 0.1) -> None:
         self.name = name
         self.joint_names = list(joint_names)
         self.rate = rate
+        self.watchdog = watchdog
         self.timeout = timeout
         self.stats = LinkStats()
         self._connect = connect
@@ -255,6 +259,8 @@ class FirmwareLink:
         twice = [name for i, name in enumerate(self.joint_names) if owners[i] > 1]
         if twice:
             raise LinkError(f"joint(s) {', '.join(twice)} are on more than one board")
+        for b in self._list:
+            b.session.configure_watchdog(self.watchdog, fp.WatchdogAction.HOLD)
         self._last_us = None
         self._forget()  # only state sent after the handshake counts
         self.hold()  # before torque: a board that enables torque at its old goal would jump

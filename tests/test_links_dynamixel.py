@@ -1,0 +1,180 @@
+"""The dynamixel: link (dynamixel-sdk, Protocol 2.0) against the simulated XM430 chain on a pty.
+
+Truth: the plant's joint angles, the servos' registers, and the fault injector's counters.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+
+import numpy as np
+import pytest
+from sim_support import short_gil_switch  # noqa: F401 - fixture
+from test_links_support import (
+    HALF_TICK,
+    TEST_OPTIONS,
+    plant_now,
+    read_until,
+    rig,
+    servo_config,
+    start_posture,
+    with_options,
+)
+
+from livezmp.links import make_link
+from livezmp.links.base import LinkError, LinkReadError
+from sim_devices.dynamixel_chain import DynamixelChain
+from sim_devices.dynamixel_control_table import OVERLOAD_ERROR
+from sim_devices.launch import start_devices
+from sim_devices.servo_plant import ServoPlant
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
+
+
+def chain_of(r):
+    return r.devices.devices[0]
+
+
+def true_ticks(r) -> np.ndarray:
+    """Present Position of every servo, read from the simulated servos themselves."""
+    return np.array([chain_of(r).register(s.id, "present_position") for s in r.config.servos.values()])
+
+
+def test_open_sets_return_delay_arms_watchdog_and_enables_torque():
+    with rig("dynamixel") as r:
+        chain = chain_of(r)
+        ids = [s.id for s in r.config.servos.values()]
+        assert [chain.register(i, "return_delay_time") for i in ids] == [0] * 20  # factory 250 before open
+        assert [chain.register(i, "bus_watchdog") for i in ids] == [5] * 20  # 0.1 s in 20 ms units
+        assert [chain.register(i, "torque_enable") for i in ids] == [1] * 20
+        assert r.plant.torque_on.all()
+
+
+def test_positions_follow_each_servos_zero_and_direction():
+    with rig("dynamixel") as r:
+        frame = r.link.read()
+        ticks = true_ticks(r)
+        expected = [s.to_rad(t) for s, t in zip(r.config.servos.values(), ticks, strict=True)]
+        np.testing.assert_array_equal(frame.positions, expected)
+        assert np.abs(frame.positions - start_posture(20)).max() <= HALF_TICK
+        reversed_ = [s.direction < 0 for s in r.config.servos.values()]
+        assert any(reversed_) and not all(reversed_)  # the config does exercise both directions
+
+
+def test_fast_sync_read_reads_the_same_as_sync_read():
+    with rig("dynamixel") as r:
+        slow = r.link.read()
+        fast_link = make_link(with_options(r.devices.url, "fast=1&timeout=0.1"), r.names, r.config)
+        fast_link.open()
+        try:
+            fast = fast_link.read()
+        finally:
+            fast_link.close()
+        np.testing.assert_array_equal(fast.positions, slow.positions)
+        assert fast.velocities.shape == fast.currents.shape == (20,)
+
+
+def test_overload_is_reported_as_hardware_error_of_that_joint():
+    with rig("dynamixel", faults="overload=7@0.3s") as r:
+        assert r.link.read().hardware_errors == {}
+        deadline = time.monotonic() + 3.0
+        while not (frame := r.link.read()).hardware_errors and time.monotonic() < deadline:
+            pass
+        assert frame.hardware_errors == {r.names[6]: OVERLOAD_ERROR}  # servo id 7
+        assert not r.plant.torque_on[6] and r.plant.torque_on[[0, 5, 7, 19]].all()  # its Shutdown dropped torque
+        assert chain_of(r).fault_counters.overloads == 1
+
+
+@pytest.mark.parametrize(("fast", "reads"), [(False, 60), (True, 300)])
+def test_lost_and_corrupt_replies_are_counted_and_never_read(fast, reads):
+    spec = "drop=0.01,corrupt=0.01,seed=4"
+    with rig("dynamixel", faults=spec, options=f"timeout=0.1&fast={int(fast)}") as r:
+        chain = chain_of(r)
+        truth = np.array([s.to_rad(round(s.zero + s.direction * q * 4096 / (2 * np.pi)))
+                          for s, q in zip(r.config.servos.values(), start_posture(20), strict=True)])
+        failed = 0
+        for _ in range(reads):
+            before = chain.fault_counters.dropped + chain.fault_counters.corrupted
+            try:
+                frame = r.link.read()
+            except LinkReadError:
+                failed += 1
+                assert chain.fault_counters.dropped + chain.fault_counters.corrupted > before
+                continue
+            assert chain.fault_counters.dropped + chain.fault_counters.corrupted == before
+            np.testing.assert_array_equal(frame.positions, truth)
+        injected = chain.fault_counters
+        assert injected.dropped > 0 and injected.corrupted > 0 and failed > 0
+        assert r.link.stats.read_errors == injected.dropped + injected.corrupted
+        kinds = r.link.stats.errors_by_kind
+        assert kinds.get("no_reply", 0) == injected.dropped and kinds.get("bad_crc", 0) == injected.corrupted
+
+
+def test_vanished_port_raises_then_reconnect_rearms_the_tripped_watchdog():
+    with rig("dynamixel") as r:
+        chain = chain_of(r)
+        chain.port.vanish()
+        with pytest.raises(LinkError):
+            r.link.read()
+        assert r.link.reconnect() is False
+        time.sleep(0.2)  # twice the bus watchdog: the servos stop and refuse goals until it is re-armed
+        assert chain.register(1, "bus_watchdog") == -1
+        chain.port.restore()
+        assert r.link.reconnect() is True
+        assert r.link.stats.reconnects == 1
+        assert chain.register(1, "bus_watchdog") == 5
+        assert np.abs(r.link.read().positions - start_posture(20)).max() <= HALF_TICK
+        target = start_posture(20) * 0.5
+        r.link.write_goals(target)
+        read_until(r.link, lambda p: np.abs(p - target).max() <= 2 * HALF_TICK)
+
+
+def test_bus_watchdog_stops_the_servos_when_the_host_goes_quiet():
+    with rig("dynamixel") as r:
+        target = start_posture(20) + 1.2
+        r.link.write_goals(target)
+        time.sleep(0.4)  # no traffic: the 0.1 s watchdog stops every servo short of its goal
+        position = plant_now(r).position
+        assert chain_of(r).register(1, "bus_watchdog") == -1
+        assert np.abs(position - target).min() > 0.3
+        assert np.abs(position - start_posture(20)).min() > 0.05
+
+
+def test_goal_beyond_a_servos_position_limits_is_refused():
+    with rig("dynamixel") as r:
+        goals = start_posture(20)
+        goals[2] = 2.5  # servo 3: zero 1620 + 2.5 rad * 652 ticks/rad = 3250 ticks: inside 0..4095
+        r.link.write_goals(goals)
+        goals[4] = -3.0  # servo 5: 1740 - 1956 < 0; its range is (0 - 1740, 4095 - 1740) * 2 pi / 4096 rad
+        with pytest.raises(LinkError, match=r"'r_el' is -3.0 rad, outside its servo's range \[-2.6691, 3.6125\]"):
+            r.link.write_goals(goals)
+
+
+@contextlib.contextmanager
+def devices_with(registers: dict):
+    """Simulated servos for the test config with ``registers`` written to servo 5; (devices, config), no link."""
+    config = servo_config(20)
+    with start_devices("dynamixel", ServoPlant(20), config) as devices:
+        for name, value in registers.items():
+            devices.devices[0].set_register(5, name, value)
+        yield devices, config
+
+
+@pytest.mark.parametrize(("registers", "message"), [
+    ({"operating_mode": 1}, r"servo 5 \(r_el\) is in operating mode 1, not a position mode"),
+    ({"torque_enable": 1}, r"servo 5 \(r_el\) has Return Delay Time 500 us and torque on"),
+])
+def test_open_refuses_servos_it_cannot_drive(registers, message):
+    with devices_with(registers) as (devices, config):
+        link = make_link(with_options(devices.url, TEST_OPTIONS["dynamixel"]), list(config.servos), config)
+        with pytest.raises(LinkError, match=message):
+            link.open()
+
+
+def test_open_names_a_servo_that_does_not_answer():
+    config = servo_config(20)
+    with DynamixelChain(range(1, 20), ServoPlant(19)) as chain:  # no servo 20
+        link = make_link(f"dynamixel:{chain.path}?timeout=0.05", list(config.servos), config)
+        with pytest.raises(LinkError, match=r"nothing usable from servo 20 \(head_tilt\).*check power, ids"):
+            link.open()
