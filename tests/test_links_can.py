@@ -7,8 +7,10 @@ Truth: the plant's joint angles, the nodes' engines, and the fault injector's co
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 
+import can
 import numpy as np
 import pytest
 from sim_support import short_gil_switch  # noqa: F401 - fixture
@@ -18,6 +20,7 @@ import firmware_protocol as fp
 from livezmp.links import make_link
 from livezmp.links.base import LinkError
 from sim_devices.can_servo import CanServoBus
+from sim_devices.firmware_board import PlantBackend, PlantJoints
 from sim_devices.servo_plant import ServoPlant
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
@@ -101,3 +104,37 @@ def test_open_names_a_node_that_does_not_answer():
         link = make_link(f"can:slcan:{bus.path}?{URL_OPTIONS}", list(config.servos), config)
         with pytest.raises(LinkError, match="node 8: no HELLO_ACK"):
             link.open()
+
+
+def test_link_over_python_cans_virtual_bus():
+    """The same link on an in-process python-can bus (no file descriptor to wait on: recv's own timeout)."""
+    channel = f"links-{time.monotonic_ns()}"
+    plant = ServoPlant(3, position=start_posture(3))
+    joints = PlantJoints(plant)
+    buses = [can.Bus(interface="virtual", channel=channel) for _ in range(3)]
+    engines = [fp.BoardEngine(fp.CanTransport(bus, node, role="board"), PlantBackend(joints, [node - 1], [node]),
+                              joint_ids=[node], joint_names=[NAMES[node - 1]])
+               for node, bus in enumerate(buses, start=1)]
+    stop = threading.Event()
+
+    def run_nodes():
+        while not stop.is_set():
+            for engine in engines:
+                engine.step(0.0)
+            time.sleep(0.001)
+
+    thread = threading.Thread(target=run_nodes, daemon=True)
+    thread.start()
+    link = make_link(f"can:virtual:{channel}?rate=200", NAMES[:3], servo_config(3))
+    try:
+        link.open()
+        np.testing.assert_array_equal(link.read().positions, start_posture(3))
+        target = np.array([0.2, -0.1, 0.05], dtype=np.float32).astype(float)
+        link.write_goals(target)
+        read_until(link, lambda p: np.abs(p - target).max() < 1e-6)
+        link.close()
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+        for bus in buses:
+            bus.shutdown()
