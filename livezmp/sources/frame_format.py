@@ -23,6 +23,7 @@ HEADER = struct.Struct("<4sBBHId")  # magic, flags, reserved, channel count, seq
 FLAG_CONTACTS, FLAG_LEFT, FLAG_RIGHT = 0x01, 0x02, 0x04
 SEQ_MOD = 1 << 32
 JSON_KEYS = {"v", "seq", "t", "channels", "contacts"}
+NUMBER_TYPES = {int, float}
 
 
 class FrameError(InputError):
@@ -108,7 +109,7 @@ def _decode_json(data: bytes, n_channels: int) -> WireFrame:
     if type(t) not in (int, float) or not math.isfinite(t):
         raise FrameError("malformed", "field t: need a finite number (s)")
     values = doc.get("channels")
-    if not isinstance(values, list) or not all(type(v) in (int, float) for v in values):
+    if not isinstance(values, list) or not set(map(type, values)) <= NUMBER_TYPES:  # bool is not a number here
         raise FrameError("malformed", "field channels: need an array of numbers")
     channels = np.array(values, dtype=float)
     _check_values(channels, n_channels)
