@@ -163,7 +163,6 @@ class Recorder:
             sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
             self.channels[topic] = self.writer.register_channel(topic, "json", sid)
         self.counts = dict.fromkeys(TOPICS, 0)
-        self.chunks_flushed = 0
         self.writer.flush()  # header, body and session on disk before the first frame
         self._last_flush = time.monotonic()
         self._closed = False
@@ -186,7 +185,6 @@ class Recorder:
         if now - self._last_flush >= self.chunk_seconds:
             self.writer.flush()
             self._last_flush = now
-            self.chunks_flushed += 1
 
     def close(self, totals: dict | None = None) -> None:
         """Finish the file: ``totals`` (plain JSON values, e.g. source counters) as the
