@@ -146,7 +146,9 @@ class Recorder:
                  chunk_seconds: float = CHUNK_SECONDS, chunk_bytes: int = CHUNK_BYTES):
         self.path = Path(path)
         try:
-            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+            self._file = open(self.path, "xb")  # noqa: SIM115 - closed in close(); never overwrite a session
+        except FileExistsError:
+            raise InputError(f"{self.path}: already exists; record to a new file") from None
         except OSError as e:
             raise InputError(f"{self.path}: cannot record: {e.strerror}") from None
         self.chunk_seconds = chunk_seconds
@@ -296,11 +298,11 @@ def recover(src: str | Path, dst: str | Path) -> RecoverReport:
     src, dst = Path(src), Path(dst)
     if not src.is_file():
         raise InputError(f"{src}: no such file")
-    if src.resolve() == dst.resolve():
-        raise InputError(f"{dst}: the output must be a different file from the input")
+    if dst.exists():
+        raise InputError(f"{dst}: already exists; write the recovered file to a new name")
     chunks = attachments = metadata = 0
     complete, stopped = False, ""
-    with open(src, "rb") as f, open(dst, "wb") as out:
+    with open(src, "rb") as f, open(dst, "xb") as out:
         writer = Writer(out, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD, enable_crcs=True)
         copier = _Copier(writer)
         started = False

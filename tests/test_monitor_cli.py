@@ -118,6 +118,7 @@ def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
     (["monitor", "--alarm-after", "-5"], "--alarm-after must be ≥ 0"),
     (["monitor", "--speed", "0", "--alarm-command", "no-such-command-livezmp"], "command not found"),
     (["monitor", "--record", "/nonexistent-dir/x.mcap"], "cannot record"),
+    (["monitor", "--record", "."], "already exists; record to a new file"),
     (["replay", "missing.mcap"], "missing.mcap: no such file"),
     (["recover", "missing.mcap", "-o", "out.mcap"], "missing.mcap: no such file"),
 ])

@@ -129,7 +129,7 @@ def test_recover_keeps_every_whole_chunk_wherever_the_file_is_cut(tmp_path, walk
     cuts = sorted({*edges, *(e - 1 for e in edges), ends[0][0] - 50, len(data) - 1, len(data),
                    *rng.integers(ends[0][0], len(data), 8).tolist()})
     for cut in cuts:
-        broken, fixed = tmp_path / "broken.mcap", tmp_path / "fixed.mcap"
+        broken, fixed = tmp_path / f"broken{cut}.mcap", tmp_path / f"fixed{cut}.mcap"
         broken.write_bytes(data[:cut])
         if cut < len(data):
             with pytest.raises(InputError, match="livezmp recover"):
@@ -164,7 +164,7 @@ def test_recover_refuses_non_mcap_and_in_place(tmp_path):
     with pytest.raises(InputError, match="not an MCAP file"):
         recover(junk, tmp_path / "out.mcap")
     assert not (tmp_path / "out.mcap").exists()
-    with pytest.raises(InputError, match="different file"):
+    with pytest.raises(InputError, match="already exists"):
         recover(junk, junk)
     with pytest.raises(InputError, match="no such file"):
         recover(tmp_path / "missing.mcap", tmp_path / "out.mcap")
