@@ -22,9 +22,12 @@ posture to the command over ``ramp_s``.
 
 A cycle whose read fails, or whose frame the guard rejects, writes nothing; the
 estimator is told the sample is missing (so its time grid stays uniform and short gaps
-are bridged by its Kalman prediction). Deadlines the clock skipped count as missing
-samples too. With no valid frame for the watchdog time the loop stops commanding (hold,
-or drop torque) and tries ``reconnect`` every ``reconnect_every_s``; the first valid
+are bridged by its Kalman prediction). Deadlines the clock skipped are not filled in:
+the estimator fits the uneven times instead, a bounded ~0.1 ms more a frame for one
+window, where analysing a missing sample per skipped deadline would add work exactly
+when the loop is already late. With no valid frame for the watchdog time the loop
+stops commanding (hold, or drop torque) and tries ``reconnect`` every
+``reconnect_every_s``; the first valid
 frame after a gap longer than the watchdog time restarts the estimator and corrector
 (a gap must not produce a velocity spike) and ramps back to the command. After
 dropping torque, or a servo's hardware error, the loop only monitors. On every way out
@@ -165,7 +168,7 @@ class LiveLoop:
         self.offsets = np.zeros(len(self.limits.names))
         self.result: FrameResult | None = None
         self._fresh = False  # a new result arrived this cycle
-        self._fed_until: int | None = None  # last grid index given to the estimator
+        self._started = False  # the estimator has had a real sample
         self._fed = 0  # samples given to this pipeline
         self._valid = np.zeros(self.pipe.lag + 1, dtype=bool)  # were the last lag + 1 samples real?
         self._since_correction = every
@@ -228,7 +231,6 @@ class LiveLoop:
         now = self.clock.now
         self.counters.cycles += 1
         self._fresh = False
-        self._fill_skipped(tick.index)
         if self.link_down or self.stopped:
             self._try_reconnect(t, tick.woke)
             if self.link_down:
@@ -248,7 +250,7 @@ class LiveLoop:
                 self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}")
                 frame = None
         if frame is None:
-            self._missing_sample(tick.index, t)
+            self._missing_sample(t)
             self._check_watchdog(t, t1)
             return
         self.counters.good_frames += 1
@@ -257,7 +259,7 @@ class LiveLoop:
         self.watchdog.feed(t1)
         if frame.hardware_errors:
             self._hardware_errors(t, frame)
-        self._estimate(tick.index, t, frame.positions)
+        self._estimate(t, frame.positions)
         t2 = now()
         self.times["estimate"].add(t2 - t1)
         if self.halted is not None:
@@ -292,27 +294,20 @@ class LiveLoop:
             self._event(t, f"link down: {e}")
         return None
 
-    def _fill_skipped(self, index: int) -> None:
-        """Missing samples for the deadlines the clock skipped since the last cycle (not
-        beyond the watchdog time: a longer gap restarts the estimator anyway)."""
-        if self._fed_until is not None and (index - self._fed_until) * self.dt <= self.watchdog.timeout_s:
-            for k in range(self._fed_until + 1, index):
-                self._missing_sample(k, k * self.dt)
+    def _missing_sample(self, t: float) -> None:
+        if self._started:
+            self._feed(t, self._nan, valid=False)
 
-    def _missing_sample(self, index: int, t: float) -> None:
-        if self._fed_until is not None and index > self._fed_until:
-            self._feed(index, t, self._nan, valid=False)
+    def _estimate(self, t: float, q: np.ndarray) -> None:
+        self._feed(t, np.concatenate([self.placer.update(q), q]), valid=True)
+        self._started = True
 
-    def _estimate(self, index: int, t: float, q: np.ndarray) -> None:
-        self._feed(index, t, np.concatenate([self.placer.update(q), q]), valid=True)
-
-    def _feed(self, index: int, t: float, channels: np.ndarray, valid: bool) -> None:
+    def _feed(self, t: float, channels: np.ndarray, valid: bool) -> None:
         """One sample into the pipeline; keep its result only when it is the analysis of
         a real sample, not of the estimator's prediction across a gap."""
         ring = self._valid
         ring[self._fed % len(ring)] = valid
         self._fed += 1
-        self._fed_until = index
         result = self.pipe.step(t, channels)
         if result is None or not ring[result.index % len(ring)]:
             return
@@ -348,7 +343,7 @@ class LiveLoop:
         if self.stopped or not self.watchdog.expired(now):
             return
         self.stopped = True
-        self._fed_until = None  # no more predicted samples: the estimator restarts on resume
+        self._started = False  # no more predicted samples: the estimator restarts on resume
         self.counters.watchdog_trips += 1
         drop = self.config.safety.drop_torque
         self.link.safe_stop(drop_torque=drop)

@@ -314,8 +314,8 @@ def test_watchdog_stops_commanding_and_resumes_without_a_velocity_spike(mini):
     speeds = []
     feed = loop._feed
 
-    def spy(index, t, channels, valid):
-        feed(index, t, channels, valid)
+    def spy(t, channels, valid):
+        feed(t, channels, valid)
         if loop._fresh:
             speeds.append(abs(loop.result.v[6 + arm]))
 

@@ -59,7 +59,7 @@ def balance(body, scenario, correct: bool) -> tuple[SimHumanoid, dict]:
     return humanoid, loop.run(scenario.duration)
 
 
-@pytest.mark.parametrize(("name", "options"), [("lean", {"hold_s": 1.5}), ("arm_swing", {"duration": 3.0})])
+@pytest.mark.parametrize(("name", "options"), [("lean", {"hold_s": 1.0}), ("arm_swing", {"duration": 3.0})])
 def test_corrections_keep_the_robot_up_and_without_them_it_falls(mini, name, options):
     scenario = make_scenario(name, mini, **options)
     off, s_off = balance(mini, scenario, correct=False)

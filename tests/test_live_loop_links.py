@@ -190,3 +190,16 @@ def test_port_vanishing_trips_the_watchdog_and_the_loop_reconnects(mini, mini_co
     assert len(after) > 50  # commanding again for the rest of the run
     np.testing.assert_allclose(humanoid.servo.goal, after[-1][2], atol=3 * TICK)
     assert humanoid.fallen is None
+
+
+def test_a_servo_overload_is_reported_and_latches_a_safe_stop(mini, mini_config):
+    """Servo 13 (r_knee) overloads 1 s after the chain starts: its shutdown drops its torque;
+    the loop reports the joint and its error bits and commands nothing more."""
+    humanoid, spy, s, _ = run_on_devices(mini, mini_config, "dynamixel", faults="overload=13@1.0s", rate=100.0,
+                                         duration=2.0)
+    overload = 0x20  # Hardware Error Status bit 5 (e-manual)
+    assert s["hardware_errors"] == {"r_knee": overload}
+    assert s["halted"] == "hardware error on r_knee" and s["state"] == "halted"
+    first = next(c[1] for c in spy.of("read") if c[2].hardware_errors)
+    assert not [c for c in spy.of("write") if c[1] > first]
+    assert len(spy.of("write")) > 20 and any("servo r_knee: hardware error 0x20" in e for e in s["events"])

@@ -41,6 +41,7 @@ from livezmp.report import write_json
 from livezmp.robot_config import RobotConfig, find_robot_config, load_robot_config
 from livezmp.safety import SafetyConfig
 from sim_devices import scenarios as sc
+from sim_devices.faults import parse_faults
 from sim_devices.humanoid import Push, RealtimeThread, SimHumanoid
 from sim_devices.launch import KINDS, start_devices
 
@@ -318,6 +319,7 @@ def sim_process_setup() -> None:
 def cmd_sim(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)
+    check_faults(args.fault)
     sim_process_setup()
     sim = start_sim(robot, args.link, scenario, args.fault)
     stop = threading.Event()
@@ -432,7 +434,7 @@ class SimProcess:
 
 def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """The mock link: the humanoid stepped by the loop's own reads, in this process."""
-    sim = start_sim(robot, "mock", scenario)
+    sim = start_sim(robot, "mock", scenario, args.fault)
     link = MockLink(sim.humanoid, robot.body.joint_names)
     link.open()
     try:
@@ -457,9 +459,18 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
         return {**summary, **sim.verdict(), "link_url": url}
 
 
+def check_faults(spec: str) -> None:
+    """A bad fault spec is a one-line error before anything starts."""
+    try:
+        parse_faults(spec)
+    except ValueError as e:
+        raise InputError(f"--fault: {e}") from None
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
+    check_faults(args.fault)
     try:
         summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario)
     except LinkError as e:

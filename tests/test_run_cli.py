@@ -1,0 +1,123 @@
+"""`livezmp run`, `livezmp sim` and `livezmp demo` as a user runs them: real processes,
+real signals, the summary JSON they write, one-line errors for mistakes."""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from livezmp.body_urdf import body_from_urdf
+from livezmp.cli import main
+from livezmp.commands.run import make_scenario
+from livezmp.demo import demo_robot_path
+from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
+
+SUMMARY_KEYS = ("cycles", "achieved_hz", "deadline_misses", "read_errors", "write_errors", "stale_frames",
+                "corrections_sent", "inside_fraction", "max_latency_ms", "p99_latency_ms", "fell")
+
+
+def livezmp(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "livezmp", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+def line_from(stream, deadline: float, wanted=lambda line: True) -> str:
+    """The first line of ``stream`` that ``wanted`` accepts, before ``deadline`` (monotonic s)."""
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([stream], [], [], max(0.0, deadline - time.monotonic()))
+        if ready:
+            line = stream.readline()
+            if not line:
+                break
+            if wanted(line):
+                return line
+    raise AssertionError("no such line before the deadline")
+
+
+def stop(proc: subprocess.Popen, sig=signal.SIGTERM, timeout: float = 20.0) -> tuple[int, str, str]:
+    proc.send_signal(sig)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise
+    return proc.returncode, out, err
+
+
+def test_sim_serves_a_robot_that_run_balances(tmp_path):
+    """`livezmp sim` in its own process; `livezmp run` on its URL with a motion CSV."""
+    sim = livezmp("sim", "--link", "dynamixel", "--scenario", "stand")
+    try:
+        hello = json.loads(line_from(sim.stdout, time.monotonic() + 30))
+        assert hello["link"] == "dynamixel" and os.path.exists(hello["ports"][0])
+        body = body_from_urdf(demo_robot_path())
+        stand = make_scenario("stand", body).goals(0.0)
+        arm = body.joint_names.index("l_sho_pitch")
+        t = np.linspace(0.0, 1.0, 11)
+        q = np.tile(stand, (len(t), 1))
+        q[:, arm] += 0.3 * t  # raise the left arm 0.3 rad over a second
+        motion = tmp_path / "raise.csv"
+        write_joint_csv(JointTrajectory(t, q, body.joint_names), motion)
+        summary_path = tmp_path / "s.json"
+        rc = main(["run", "--robot", str(demo_robot_path()), "--link", hello["url"], "--motion", str(motion),
+                   "--rate", "100", "--quiet", "--summary-json", str(summary_path)])
+        assert rc == 0
+        s = json.loads(summary_path.read_text())
+        assert all(k in s for k in SUMMARY_KEYS)
+        # the motion's 1 s at 100 Hz (deadlines a loaded machine made the loop skip are counted)
+        assert s["stopped_by"] == "duration" and s["cycles"] + s["clock"]["skipped_cycles"] == 100
+        assert s["commands_sent"] > 50 and s["fell"] is None  # another process's robot: run cannot know
+        assert s["watchdog_trips"] == 0
+    finally:
+        rc, _, err = stop(sim)
+    assert rc == 0 and "the robot did not fall" in err
+
+
+def test_demo_runs_until_sigterm_then_stops_safely(tmp_path):
+    summary_path = tmp_path / "demo.json"
+    demo = livezmp("demo", "--duration", "0", "--summary-json", str(summary_path))
+    try:
+        line_from(demo.stderr, time.monotonic() + 40, lambda line: line.startswith("t "))  # the status line
+    finally:
+        rc, out, err = stop(demo)
+    assert rc == 0, err
+    s = json.loads(summary_path.read_text())
+    assert all(k in s for k in SUMMARY_KEYS)
+    assert s["stopped_by"] == "SIGTERM" and s["fell"] is False and s["scenario"] == "demo"
+    assert s["link_url"].startswith("dynamixel:") and s["cycles"] > 0 and s["commands_sent"] > 0
+    assert "cycles at" in out and "simulator: did not fall" in out
+
+
+def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
+    path = tmp_path / "s.json"
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.5", "--rate", "200",
+                 "--quiet", "--summary-json", str(path)]) == 0
+    s = json.loads(path.read_text())
+    assert s["cycles"] == 100 and s["good_frames"] == 100 and s["commands_sent"] == 100
+    assert s["inside_fraction"] == 1.0 and s["state"] == "running"
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: cannot read URDF"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "serial:/dev/x"], "link URL 'serial:/dev/x': expected"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--scenario", "dance"], "unknown scenario 'dance'"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0"], "--rate 0.0: must be"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--watchdog-ms", "-5"], "--watchdog-ms -5.0"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--motion", "m.csv", "--scenario", "lean"],
+     "give --motion or --scenario, not both"),
+    (["demo", "--link", "mock", "--fault", "drop=0.1"], "the mock link has no devices"),
+    (["demo", "--fault", "drop=2"], "fault spec field 'drop': expected a probability in [0, 1], got '2'"),
+])
+def test_mistakes_are_one_line_errors(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
