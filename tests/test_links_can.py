@@ -57,7 +57,7 @@ def test_open_connects_every_node_and_configures_it():
 
 
 def test_overload_is_reported_on_its_joint():
-    with rig("can", n=N, faults="overload=7@0.3s") as r:
+    with rig("can", n=N, faults="overload=7@1.5s") as r:
         deadline = time.monotonic() + 3.0
         while not (frame := r.link.read()).hardware_errors and time.monotonic() < deadline:
             pass

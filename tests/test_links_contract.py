@@ -43,7 +43,7 @@ def test_goals_move_the_plant_to_them(kind):
         target = start_posture(N[kind])[::-1] * 0.5
         r.link.write_goals(target)
         read_until(r.link, lambda p: np.abs(p - target).max() <= 2 * tolerance(kind) + 1e-9)
-        assert np.abs(r.plant.position - target).max() <= 2 * tolerance(kind) + 1e-9
+        assert np.abs(plant_now(r).position - target).max() <= 2 * tolerance(kind) + 1e-9
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -59,7 +59,7 @@ def test_safe_stop_holds_where_the_robot_is_then_drops_torque(kind):
         while time.monotonic() < end:
             r.link.read()  # bus traffic: a Dynamixel bus watchdog would stop the servos, and hide a missing hold
         final = plant_now(r).position.copy()
-        assert np.abs(final - stopped_near).max() < 0.02
+        assert np.abs(final - stopped_near).max() < 0.05  # 0.1 s of motion: how old a CAN read at 20 Hz can be
         assert np.abs(final - target).min() > 0.6
         assert np.abs(r.plant.velocity).max() < 1e-3
         r.link.safe_stop()  # idempotent

@@ -6,6 +6,7 @@ Truth: the plant's joint angles, the servos' registers, and the fault injector's
 from __future__ import annotations
 
 import contextlib
+import struct
 import time
 
 import numpy as np
@@ -178,3 +179,38 @@ def test_open_names_a_servo_that_does_not_answer():
         link = make_link(f"dynamixel:{chain.path}?timeout=0.05", list(config.servos), config)
         with pytest.raises(LinkError, match=r"nothing usable from servo 20 \(head_tilt\).*check power, ids"):
             link.open()
+
+
+class FrozenPlant:
+    """A `JointPlant` that never moves: its state is what the test sets."""
+
+    def __init__(self, n: int) -> None:
+        self.position, self.velocity, self.current = np.zeros(n), np.zeros(n), np.zeros(n)
+
+    def set_goal(self, idx: int, position: float) -> None:
+        """Ignored."""
+
+    def set_torque(self, idx: int, on: bool) -> None:
+        """Ignored."""
+
+    def step(self, dt: float) -> None:
+        """Nothing moves."""
+
+
+def test_a_byte_stuffed_status_packet_is_read_correctly():
+    # Present Current -1 (FF FF) then Present Velocity -3 (FD FF FF FF): the servo stuffs FF FF FD into FF FF FD FD
+    assert b"\xff\xff\xfd" in struct.pack("<hi", -1, -3)
+    config = servo_config(20)
+    plant = FrozenPlant(20)
+    plant.current[1] = -2.69e-3  # servo 2 turns forwards (direction +1); units of the XM430 e-manual
+    plant.velocity[1] = -3 * 0.229 * 2 * np.pi / 60
+    with start_devices("dynamixel", plant, config) as devices:
+        link = make_link(with_options(devices.url, TEST_OPTIONS["dynamixel"]), list(config.servos), config)
+        link.open()
+        try:
+            frame = link.read()
+        finally:
+            link.close()
+    assert frame.currents[1] == pytest.approx(-2.69e-3)
+    assert frame.velocities[1] == pytest.approx(-3 * 0.229 * 2 * np.pi / 60)
+    assert link.stats.read_errors == 0

@@ -6,6 +6,7 @@ fault injector's counters.
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -15,7 +16,7 @@ from test_links_support import NAMES, read_until, rig, start_posture
 
 import firmware_protocol as fp
 from livezmp.links import make_link
-from livezmp.links.base import FootSensors, LinkError
+from livezmp.links.base import FootSensors, LinkError, LinkReadError
 from livezmp.robot_config import RobotConfig
 from sim_devices.firmware_board import FirmwareBoard
 from sim_devices.servo_plant import ServoPlant
@@ -100,6 +101,26 @@ def test_lost_and_corrupt_frames_are_counted_and_never_read():
         assert rejected == injected.corrupted  # each corrupt frame rejected once, by CRC or header checks
 
 
+def test_state_that_arrives_late_is_refused_until_the_link_catches_up():
+    with rig("fw", options="timeout=0.1") as r:
+        r.link.read()
+        board_of(r).set_faults("delay=1:150ms")  # every frame from now on reaches us 0.15 s late
+        errors = []
+        end = time.monotonic() + 0.6
+        while time.monotonic() < end:
+            with pytest.raises(LinkReadError) as info:  # no read may hand out such a state
+                r.link.read()
+            errors.append(str(info.value))
+        assert any("ms late: this host is not keeping up" in e for e in errors)
+        assert r.link.stats.errors_by_kind["stale"] > 0
+        board_of(r).set_faults("")
+        frame, deadline = None, time.monotonic() + 3.0
+        while frame is None and time.monotonic() < deadline:
+            with contextlib.suppress(LinkReadError):
+                frame = r.link.read()
+        np.testing.assert_array_equal(frame.positions, start_posture(20))
+
+
 def test_vanished_port_raises_then_reconnect_brings_the_board_back():
     with rig("fw") as r:
         board = board_of(r)
@@ -125,7 +146,12 @@ def test_board_watchdog_holds_when_the_loop_stops_polling():
         time.sleep(0.45)  # no reads, so no heartbeats: the 0.2 s watchdog holds every joint where it is
         engine = board_of(r).engine
         assert engine.state == fp.BoardState.HOLDING
-        position = r.link.read().positions
+        position, deadline = None, time.monotonic() + 3.0
+        while position is None and time.monotonic() < deadline:  # the first reads may find the board's backlog
+            try:
+                position = r.link.read().positions
+            except LinkReadError as err:
+                assert "ms late: this host is not keeping up" in str(err)
         assert np.abs(position - target).min() > 0.6  # 4.8 rad/s for 0.2 s at most
         r.link.write_goals(position)  # a valid command resumes
         read_until(r.link, lambda _: engine.state == fp.BoardState.ACTIVE)

@@ -26,8 +26,11 @@ import firmware_protocol as fp
 from livezmp.links.base import LinkError
 from livezmp.links.firmware import OPEN_WATCHDOG, POLL_WAIT
 
-MAX_FRAMES_PER_POLL = 4096  # bounds one poll's cost
+MAX_FRAMES_PER_POLL = 256  # bounds one poll's cost
 INBOX_LIMIT = 256  # messages kept per node between polls (older ones are dropped)
+# s per try of an acknowledged command: an ACK queues behind every node's streams on one bus, and python-can's
+# slcan reader takes about 3 000 frames/s
+ACK_TIMEOUT = 0.25
 
 
 class _NodeTransport(fp.CanTransport):
@@ -39,6 +42,7 @@ class _NodeTransport(fp.CanTransport):
 
     def __init__(self, boards: CanBoards, node: int, tids: dict[tuple[int, int], int]) -> None:
         super().__init__(boards.bus, node)
+        self.name = f"{boards.name} node {node}"
         self._tids = tids
         self._boards = boards
         self._inbox: deque[fp.Received] = boards.inboxes[node]
@@ -69,8 +73,8 @@ class CanBoards:
         self._decoder = fp.CanDecoder("node", frozenset(nodes))
         self._garbled = 0
         self.inboxes = {node: deque(maxlen=INBOX_LIMIT) for node in nodes}
-        self.sessions = [fp.HostSession(_NodeTransport(self, node, tids), watchdog_timeout=OPEN_WATCHDOG)
-                         for node in nodes]
+        self.sessions = [fp.HostSession(_NodeTransport(self, node, tids), watchdog_timeout=OPEN_WATCHDOG,
+                                        ack_timeout=ACK_TIMEOUT) for node in nodes]
         self.pump(0.0)
         for inbox in self.inboxes.values():
             inbox.clear()  # what the nodes sent before we opened is stale
@@ -103,6 +107,11 @@ class CanBoards:
     def poll(self) -> list[tuple[int, fp.Message]]:
         self.pump(POLL_WAIT)
         return [(k, msg) for k, session in enumerate(self.sessions) for msg in session.poll(0.0)]
+
+    def pending(self) -> bool:
+        if any(self.inboxes.values()):
+            return True
+        return self._fd is not None and bool(select.select([self._fd], [], [], 0.0)[0])
 
     def errors(self) -> dict[str, int]:
         return {**self._decoder.errors, "garbled": self._garbled}

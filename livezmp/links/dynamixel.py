@@ -64,8 +64,8 @@ PRESENT_STATE = 126  # Present Current (2 bytes), Present Velocity (4), Present 
 PRESENT_STATE_LENGTH = 10
 POSITION_MODES = {3: "position", 4: "extended position", 5: "current-based position"}
 ALERT = 0x80  # status packet error bit: Hardware Error Status is not 0
-# Protocol 2.0 status packet (after un-stuffing): header FF FF FD 00, id, length (2), 0x55, error, data, CRC (2).
-PKT_ID, PKT_ERROR, PKT_DATA = 4, 8, 9
+# Protocol 2.0 status packet: header FF FF FD 00, id, length (2: instruction to CRC), 0x55, error, data, CRC (2).
+PKT_ID, PKT_LENGTH, PKT_ERROR, PKT_DATA = 4, 5, 8, 9
 VELOCITY_UNIT = 0.229 * 2.0 * math.pi / 60.0  # rad/s per unit
 CURRENT_UNIT = 2.69e-3  # A per unit
 WATCHDOG_UNIT = 0.020  # s per unit
@@ -299,15 +299,17 @@ class DynamixelLink:
         port, ph = self._port, self._ph
         expected = len(self.ids)
         wanted = set(self.ids)
-        size = PKT_DATA + length + 2
+        size = length + 4  # the length field of a good reply: instruction, error, data, CRC
         replies: dict[int, tuple[int, bytes]] = {}
         failures: dict[str, int] = {}
         while len(replies) + sum(failures.values()) < expected:
             packet, result = ph.rxPacket(port, False)
             if result == COMM_SUCCESS:
+                # Un-stuffed by the sdk: the length field is exact, the list may run on past the CRC.
                 dxl_id = packet[PKT_ID]
-                if dxl_id in wanted and dxl_id not in replies and len(packet) == size and not packet[PKT_ERROR] & 0x7F:
-                    replies[dxl_id] = (packet[PKT_ERROR], bytes(packet[PKT_DATA: size - 2]))
+                if dxl_id in wanted and dxl_id not in replies and not packet[PKT_ERROR] & 0x7F \
+                        and packet[PKT_LENGTH] | packet[PKT_LENGTH + 1] << 8 == size:
+                    replies[dxl_id] = (packet[PKT_ERROR], bytes(packet[PKT_DATA: PKT_DATA + length]))
                 else:
                     failures["bad_reply"] = failures.get("bad_reply", 0) + 1
             elif result == COMM_RX_CORRUPT and not port.isPacketTimeout():

@@ -16,9 +16,11 @@ heartbeat goes out from the same polling, so a stalled loop trips the board's wa
 positions (rad), velocities (rad/s), currents (A) as the board sends them, the latest foot
 sensors and IMU, and ``hardware_errors``: the JointError bits of joints with any bit but
 TORQUE_OFF. A joint flagged COMMS, STALE or ENCODER makes the read raise LinkReadError, as
-does no fresh state within ``timeout`` s. ``stats.read_errors`` counts board messages lost
-or rejected, from the gaps in their sequence numbers (a rejected frame leaves a gap), plus
-read timeouts; ``errors_by_kind`` breaks the rejections down (bad_crc, bad_transfer...).
+does no fresh state within ``timeout`` s, or a state that reached us ``timeout`` s later
+than the board's usual delay (measured on its clock: the host fell behind the stream and
+reads a backlog). ``stats.read_errors`` counts board messages lost or rejected, from the
+gaps in their sequence numbers (a rejected frame leaves a gap), plus the reads that timed
+out or were late; ``errors_by_kind`` breaks them down (seq_gap, bad_crc, timeout, stale...).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ CONNECT_TIMEOUT = 1.0  # s per board
 # the link's own goes on once they all are.
 OPEN_WATCHDOG = 1.0
 UNTRUSTED = fp.JointError.COMMS | fp.JointError.STALE | fp.JointError.ENCODER
+CLOCK_DRIFT = 1e-3  # s/s: how fast a board clock may drift from ours (crystals: < 1e-4)
 FOOT_SIDES = ("left", "right")  # FOOT_SENSORS foot_id 0 and 1
 
 
@@ -50,6 +53,9 @@ class Boards(Protocol):
 
     def poll(self) -> list[tuple[int, fp.Message]]:
         """(session index, message) for everything received now, waiting up to POLL_WAIT s for the first."""
+
+    def pending(self) -> bool:
+        """True when more input is already waiting (a poll would not wait)."""
 
     def errors(self) -> dict[str, int]:
         """Receive errors by kind (firmware_protocol decoder counters)."""
@@ -72,6 +78,12 @@ class SerialBoard:
 
     def poll(self) -> list[tuple[int, fp.Message]]:
         return [(0, msg) for msg in self.sessions[0].poll(POLL_WAIT)]
+
+    def pending(self) -> bool:
+        try:
+            return self.sessions[0].transport.port.in_waiting > 0
+        except OSError as err:
+            raise fp.LinkError(f"{self.name}: {err}") from None
 
     def errors(self) -> dict[str, int]:
         return self.sessions[0].transport.decoder.errors
@@ -96,7 +108,27 @@ class _Board:
         self.slot_of = dict(pairs)
         self._routes: dict[tuple[int, ...], list[tuple[int, int]] | None] = {}
         self.fresh = False
-        self.time_us: int | None = None
+        self.time: float | None = None  # board clock of its last JOINT_STATE, unwrapped (s)
+        self.age = 0.0  # how much later than usual that JOINT_STATE reached us (s)
+        self._raw_us: int | None = None
+        self._wraps = 0
+        self._floor: float | None = None  # smallest (our clock - its clock) seen, allowed to drift up
+        self._floor_at = 0.0
+
+    def clock(self, board_time_us: int, now: float) -> None:
+        """Note a sample's board time (32-bit us, wrapping) received at our ``now`` (s): unwrap it and measure its
+        age, the delay beyond the best one seen, which grows when we fall behind the board's stream."""
+        if self._raw_us is not None and board_time_us < self._raw_us - (1 << 31):
+            self._wraps += 1
+        self._raw_us = board_time_us
+        self.time = (board_time_us + (self._wraps << 32)) * 1e-6
+        lag = now - self.time
+        if self._floor is None or lag < self._floor + CLOCK_DRIFT * (now - self._floor_at):
+            self._floor = lag
+        else:
+            self._floor += CLOCK_DRIFT * (now - self._floor_at)
+        self._floor_at = now
+        self.age = lag - self._floor
 
     def route(self, ids: tuple[int, ...]) -> list[tuple[int, int]] | None:
         """(message index, link slot) of this board's joints in a JOINT_STATE with ``ids``; None if some is absent."""
@@ -132,8 +164,6 @@ class FirmwareLink:
         self._imu: dict[str, np.ndarray] | None = None
         self._carried: dict[str, int] = {}  # decoder counts of transports closed by reconnect
         self._own: dict[str, int] = {}  # the link's own error kinds (timeout, partial_state, untrusted)
-        self._clock_offset = 0  # unwrapping of the single board's 32-bit microsecond clock
-        self._last_us: int | None = None
 
     # -- Link -----------------------------------------------------------------------------------
 
@@ -156,7 +186,9 @@ class FirmwareLink:
                 for k, msg in boards.poll():
                     self._take(self._list[k], msg)
                 if all(b.fresh for b in self._list):
-                    break
+                    if not boards.pending() or time.monotonic() > deadline:
+                        break  # the newest state: a stalled caller gets today's, not the backlog's first
+                    continue
                 if time.monotonic() > deadline:
                     late = [b.session.transport.name for b in self._list if not b.fresh]
                     self._own["timeout"] = self._own.get("timeout", 0) + 1
@@ -169,6 +201,13 @@ class FirmwareLink:
         self._account()
         for b in self._list:
             b.fresh = False
+        late = max(self._list, key=lambda b: b.age)
+        if late.age > self.timeout:
+            self._own["stale"] = self._own.get("stale", 0) + 1
+            self._account()
+            raise LinkReadError(f"{self.name}: the joint state of {late.session.transport.name} is "
+                                f"{late.age * 1e3:.0f} ms late: this host is not keeping up with its stream (lower "
+                                "the rate)")
         untrusted = np.flatnonzero(self._error & UNTRUSTED)
         if untrusted.size:
             self._own["untrusted"] = self._own.get("untrusted", 0) + 1
@@ -180,7 +219,7 @@ class FirmwareLink:
         return LinkFrame(
             t=t, positions=self._position.copy(), velocities=self._velocity.copy(), currents=self._current.copy(),
             hardware_errors={self.joint_names[i]: int(self._error[i]) for i in faults},
-            feet=self._feet, imu=self._imu, device_time=self._device_time(),
+            feet=self._feet, imu=self._imu, device_time=self._list[0].time if len(self._list) == 1 else None,
         )
 
     def write_goals(self, positions: np.ndarray) -> None:
@@ -212,14 +251,17 @@ class FirmwareLink:
         """Hold (or switch torque off); never raises: the boards' watchdogs cover a dead link."""
         if self._boards is None:
             return
-        try:
-            if drop_torque:
-                for b in self._list:
-                    b.session.set_torque(b.ids, False)
-            else:
+        if not drop_torque:
+            try:
                 self.hold()
-        except (LinkError, fp.ProtocolError):
-            pass  # nothing more can be sent; the board watchdog holds
+            except (LinkError, fp.ProtocolError):
+                pass  # nothing more can be sent; the boards' watchdogs hold
+            return
+        for b in self._list:  # every board, even when one does not answer
+            try:
+                b.session.set_torque(b.ids, False)
+            except (LinkError, fp.ProtocolError):
+                self.stats.write_errors += 1
 
     def reconnect(self) -> bool:
         """Reopen and redo `open`; True when back."""
@@ -261,7 +303,6 @@ class FirmwareLink:
             raise LinkError(f"joint(s) {', '.join(twice)} are on more than one board")
         for b in self._list:
             b.session.configure_watchdog(self.watchdog, fp.WatchdogAction.HOLD)
-        self._last_us = None
         self._forget()  # only state sent after the handshake counts
         self.hold()  # before torque: a board that enables torque at its old goal would jump
         for b in self._list:
@@ -294,7 +335,7 @@ class FirmwareLink:
                 self._current[slot] = msg.current[k]
                 self._error[slot] = msg.error[k]
             board.fresh = True
-            board.time_us = msg.board_time_us
+            board.clock(msg.board_time_us, time.monotonic())
         elif isinstance(msg, fp.FootSensors):
             forces = {FOOT_SIDES[f]: np.array(force) for f, force in zip(msg.foot_ids, msg.force, strict=True)
                       if f < len(FOOT_SIDES)}
@@ -315,17 +356,8 @@ class FirmwareLink:
         lost = counts.get("seq_gap", 0)
         counts.update(self._own)
         self.stats.errors_by_kind = counts
-        self.stats.read_errors = lost + self._own.get("timeout", 0)
+        self.stats.read_errors = lost + self._own.get("timeout", 0) + self._own.get("stale", 0)
 
-    def _device_time(self) -> float | None:
-        """The single board's clock (s), unwrapped; None with several boards (their clocks differ)."""
-        if len(self._list) != 1 or self._list[0].time_us is None:
-            return None
-        now = self._list[0].time_us
-        if self._last_us is not None and now < self._last_us - (1 << 31):
-            self._clock_offset += 1 << 32
-        self._last_us = now
-        return (now + self._clock_offset) * 1e-6
 
     def _require(self) -> Boards:
         if self._boards is None:

@@ -1,0 +1,238 @@
+"""Benchmark: sustainable read + write cycle rate of each servo link, 20 servos, simulated devices.
+
+One cycle = ``link.read()`` (verified joint state of all 20 joints) + ``link.write_goals``
+(a slow sine around the start posture), back to back, as the live loop does. Rows:
+
+* baseline: the bare client doing the same bus work without the link (dynamixel-sdk's
+  GroupSyncRead + GroupSyncWrite with getData / changeParam per servo; firmware_protocol's
+  HostSession polling for a JOINT_STATE and sending SET_GOALS), side by side with the link;
+* dynamixel: sync read and Fast Sync Read;
+* fw: JOINT_STATE streamed at 1000 Hz (the board's limit), so a cycle waits for the next one;
+* can: one node per servo behind an slcan adapter; JOINT_STATE at the link's default 30 Hz
+  and at 60 Hz; and the same link over python-can's in-process virtual bus (no serial line);
+* mock: the in-process plant, the link's own cost.
+
+The simulated devices run in a thread of this process (they share the GIL with the
+client) or, for the serial links, in a process of their own (the machine's other core).
+The GIL switch interval is 0.5 ms (the default 5 ms makes a thread's reply wait for the
+busy-polling client). Bytes cost no wire time in the simulators: the rows measure
+software. "failed" counts reads that raised LinkReadError.
+
+Run: python benchmarks/bench_link_rate.py [--seconds 1.5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import multiprocessing
+import os
+import sys
+import threading
+import time
+
+import can
+import numpy as np
+from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
+
+import firmware_protocol as fp
+from livezmp.links import make_link
+from livezmp.links.base import LinkReadError
+from livezmp.links.mock import MockLink
+from livezmp.robot_config import RobotConfig, ServoConfig
+from sim_devices.firmware_board import PlantBackend, PlantJoints
+from sim_devices.launch import start_devices
+from sim_devices.servo_plant import ServoPlant
+
+N = 20
+NAMES = [f"joint{i:02d}" for i in range(N)]
+CONFIG = RobotConfig(servos={name: ServoConfig(name, i + 1) for i, name in enumerate(NAMES)}, source="bench")
+START = np.linspace(-0.5, 0.5, N)
+WARMUP = 20
+
+
+def goals(k: int) -> np.ndarray:
+    return START + 0.2 * math.sin(0.01 * k)
+
+
+def measure(cycle, seconds: float) -> tuple[np.ndarray, int]:
+    """Cycle times (s) over ``seconds`` after a warm-up, and how many cycles raised LinkReadError."""
+    times, failed, k = [], 0, 0
+    end = math.inf
+    while time.perf_counter() < end:
+        start = time.perf_counter()
+        try:
+            cycle(k)
+        except LinkReadError:
+            failed += 1
+        times.append(time.perf_counter() - start)
+        k += 1
+        if k == WARMUP:
+            times.clear()
+            failed = 0
+            end = time.perf_counter() + seconds
+    return np.array(times), failed
+
+
+# -- devices: in this process, or served from another one -----------------------------------------
+
+def serve(kind: str, conn) -> None:
+    """Subprocess body: serve ``kind``'s devices until told to stop."""
+    sys.setswitchinterval(5e-4)
+    with start_devices(kind, ServoPlant(N, position=START), CONFIG) as devices:
+        conn.send(devices.url)
+        conn.recv()
+
+
+@contextlib.contextmanager
+def devices_url(kind: str, where: str):
+    if where == "same process":
+        with start_devices(kind, ServoPlant(N, position=START), CONFIG) as devices:
+            yield devices.url
+        return
+    context = multiprocessing.get_context("spawn")
+    parent, child = context.Pipe()
+    process = context.Process(target=serve, args=(kind, child), daemon=True)
+    process.start()
+    try:
+        yield parent.recv()
+    finally:
+        parent.send("stop")
+        process.join(timeout=10)
+
+
+@contextlib.contextmanager
+def virtual_can_nodes():
+    """Twenty BoardEngine nodes on python-can's virtual bus, stepped by a thread; yields the link URL."""
+    channel = f"bench-{time.monotonic_ns()}"
+    joints = PlantJoints(ServoPlant(N, position=START))
+    buses = [can.Bus(interface="virtual", channel=channel) for _ in range(N)]
+    engines = [fp.BoardEngine(fp.CanTransport(bus, node, role="board"), PlantBackend(joints, [node - 1], [node]),
+                              joint_ids=[node], joint_names=[NAMES[node - 1]]) for node, bus in enumerate(buses, 1)]
+    stop = threading.Event()
+
+    def run() -> None:
+        while not stop.is_set():
+            for engine in engines:
+                engine.step(0.0)
+            time.sleep(2e-4)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        yield f"can:virtual:{channel}"
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+        for bus in buses:
+            bus.shutdown()
+
+
+# -- the rows ---------------------------------------------------------------------------------------
+
+def run_link(url: str, seconds: float) -> tuple[np.ndarray, int]:
+    link = make_link(url, NAMES, CONFIG)
+    link.open()
+    try:
+        return measure(lambda k: (link.read(), link.write_goals(goals(k))), seconds)
+    finally:
+        link.close()
+
+
+def run_sdk(url: str, fast: bool, seconds: float) -> tuple[np.ndarray, int]:
+    """The bare dynamixel-sdk loop; a link configures the servos first (and leaves the bus watchdog off)."""
+    setup = make_link(url + "&timeout=0.1&watchdog=0", NAMES, CONFIG)
+    setup.open()  # torque on, return delay 0
+    setup.close()
+    port = PortHandler(url.partition(":")[2].partition("?")[0])
+    port.openPort()
+    ph = PacketHandler(2.0)
+    reader = GroupSyncRead(port, ph, 126, 10)
+    writer = GroupSyncWrite(port, ph, 116, 4)
+    for dxl_id in range(1, N + 1):
+        reader.addParam(dxl_id)
+        writer.addParam(dxl_id, [0, 8, 0, 0])
+    read = reader.fastSyncRead if fast else reader.txRxPacket
+
+    def cycle(k: int) -> None:
+        if read() != COMM_SUCCESS:
+            raise LinkReadError("sync read failed")
+        [reader.getData(i, 132, 4) for i in range(1, N + 1)]
+        ticks = np.rint(2048 + goals(k) * 4096 / (2 * math.pi)).astype("<i4").tobytes()
+        for i in range(N):
+            writer.changeParam(i + 1, ticks[4 * i: 4 * i + 4])
+        writer.txPacket()
+
+    try:
+        return measure(cycle, seconds)
+    finally:
+        port.closePort()
+
+
+def run_session(url: str, seconds: float) -> tuple[np.ndarray, int]:
+    """The bare firmware_protocol host session loop."""
+    transport = fp.SerialTransport(url.partition(":")[2].partition("?")[0])
+    session = fp.HostSession(transport)
+    hello = session.connect()
+    session.set_rates(1000, 0, 0, 10)
+    session.set_torque(hello.joint_ids, True)
+
+    def cycle(k: int) -> None:
+        while not any(isinstance(m, fp.JointState) for m in session.poll(0.005)):
+            pass
+        session.send_goals(hello.joint_ids, goals(k).tolist())
+
+    try:
+        return measure(cycle, seconds)
+    finally:
+        transport.close()
+
+
+def run_mock(seconds: float) -> tuple[np.ndarray, int]:
+    link = MockLink(ServoPlant(N, position=START), NAMES)
+    link.open()
+    return measure(lambda k: (link.read(), link.write_goals(goals(k))), seconds)
+
+
+def rows(seconds: float):
+    """(link, client, devices, where, measurement) per row, measured in turn."""
+    for where in ("same process", "own process"):
+        with devices_url("dynamixel", where) as url:
+            for fast in (False, True):
+                read = "fast sync read" if fast else "sync read"
+                yield "dynamixel", f"dynamixel-sdk, {read} (baseline)", "XM430 chain", where, \
+                    run_sdk(url, fast, seconds)
+                yield "dynamixel", f"link, {read}", "XM430 chain", where, \
+                    run_link(f"{url}&fast={int(fast)}&timeout=0.1", seconds)
+        with devices_url("fw", where) as url:
+            yield "fw", "HostSession (baseline)", "firmware board", where, run_session(url, seconds)
+            yield "fw", "link, 1000 Hz stream", "firmware board", where, run_link(f"{url}&rate=1000", seconds)
+    with devices_url("can", "same process") as url:
+        for rate in (30, 60):
+            yield "can", f"link, slcan, {rate} Hz streams", "20 servo nodes", "same process", \
+                run_link(f"{url}&rate={rate}&timeout=0.5", seconds)
+    with virtual_can_nodes() as url:
+        yield "can", "link, virtual bus, 200 Hz streams", "20 servo nodes", "same process", \
+            run_link(f"{url}?rate=200&timeout=0.5", seconds)
+    yield "mock", "link", "ServoPlant", "same process", run_mock(seconds)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=1.5, help="measured time per row (s)")
+    args = parser.parse_args()
+    sys.setswitchinterval(5e-4)
+    print(f"{N} servos, read + write_goals per cycle; {os.cpu_count()} CPUs, {args.seconds:g} s per row\n")
+    header = (f"| {'link':<9} | {'client':<37} | {'devices':<15} | {'where':<12} | {'cycles/s':>8} | "
+              f"{'p50 ms':>7} | {'p99 ms':>7} | {'failed':>6} |")
+    print(header)
+    print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|")
+    for link, client, devices, where, (times, failed) in rows(args.seconds):
+        p50, p99 = np.percentile(times, [50, 99]) * 1e3
+        print(f"| {link:<9} | {client:<37} | {devices:<15} | {where:<12} | {len(times) / times.sum():8.0f} | "
+              f"{p50:7.3f} | {p99:7.3f} | {failed:6d} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
