@@ -4,6 +4,8 @@ The simulated humanoid (livezmp_mini: 20 XM430s on one chain, true ZMP from its
 whole-body dynamics at 1 kHz) runs in its own process, as `livezmp demo` runs it; the
 loop runs here at the asked rate on absolute deadlines. Rows, side by side in one run:
 
+* loop work only: the live loop flat out over the mock link on plain servos (no bus,
+  no simulator, no sleeping): its own CPU cost per cycle;
 * bus only (baseline): the same clock and link, read + write of the present posture
   each cycle, no estimation or correction: what the bus and simulator alone allow;
 * the live loop (read → estimate → correct → write), sync read and fast sync read,
@@ -30,8 +32,10 @@ import time
 
 from livezmp.commands.run import SimProcess, load_robot, make_scenario
 from livezmp.links import LinkError, open_link
+from livezmp.links.mock import MockLink
 from livezmp.live_loop import LiveLoop, LoopConfig
 from livezmp.loop_clock import LoopClock, TimingHistogram
+from sim_devices.servo_plant import ServoPlant
 
 
 def bus_only(link, rate: float, seconds: float) -> dict:
@@ -74,6 +78,23 @@ def live(link, robot, sim, rate: float, seconds: float, every: int) -> dict:
             "stages": stages, "busy": sum(means), "fell": s["fell"], "failed": s["failed_reads"]}
 
 
+def compute_only(robot, rate: float, seconds: float, every: int) -> dict:
+    """The loop's own work, flat out: the mock link over plain servos (no bus, no
+    simulator, no sleeping), so each cycle is read → estimate → correct → write of CPU only."""
+    scenario = make_scenario("demo", robot.body)
+    link = MockLink(ServoPlant(len(robot.body.joint_names), position=scenario.goals(0.0)), robot.body.joint_names)
+    link.open()
+    clock = LoopClock(rate, sleep=lambda _: None)
+    t0 = time.perf_counter()
+    s = LiveLoop(link, robot.body, LoopConfig(rate_hz=rate, correct_every=every), command=scenario.goals,
+                 clock=clock).run(seconds)
+    wall = time.perf_counter() - t0
+    means = [s["timing"][k]["mean_ms"] or 0.0 for k in ("read", "estimate", "correct", "write")]
+    return {"cycles": s["cycles"], "achieved_hz": s["cycles"] / wall, "deadline_misses": 0, "skipped": 0,
+            "p50": s["p50_latency_ms"], "p99": s["p99_latency_ms"], "stages": " / ".join(f"{m:.2f}" for m in means),
+            "busy": sum(means), "fell": None, "failed": s["failed_reads"]}
+
+
 def row(options: str, rate: float, seconds: float, robot, every: int = 2, faults: str = "",
         baseline: bool = False) -> dict:
     with SimProcess("dynamixel", ("demo", {}), faults) as sim:
@@ -104,6 +125,11 @@ def main() -> None:
               "read / estimate / correct / write, mean ms | busy ms | fell | failed reads |")
     print(header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
+    for every in (2, 1):
+        x = compute_only(robot, r, min(sec, 10.0), every)
+        print(f"| {f'loop work only, correct every {every}':<38} | {x['achieved_hz']:7.1f} | {'-':>8} | {'-':>7} | "
+              f"{x['p50']:7.3f} | {x['p99']:7.3f} | {x['stages']:<41} | {x['busy']:7.3f} | {'-':>4} | {'-':>12} |",
+              flush=True)
     rows = [
         ("bus only, sync read (baseline)", "", r, sec, {"baseline": True}),
         ("bus only, fast sync read (baseline)", "fast=1", r, sec, {"baseline": True}),

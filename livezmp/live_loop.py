@@ -26,10 +26,11 @@ are bridged by its Kalman prediction). Deadlines the clock skipped are not fille
 the estimator fits the uneven times instead, a bounded ~0.1 ms more a frame for one
 window, where analysing a missing sample per skipped deadline would add work exactly
 when the loop is already late. With no valid frame for the watchdog time the loop
-stops commanding (hold, or drop torque) and tries ``reconnect`` every
-``reconnect_every_s``; the first valid
-frame after a gap longer than the watchdog time restarts the estimator and corrector
-(a gap must not produce a velocity spike) and ramps back to the command. After
+stops commanding (hold, or drop torque); while the link reports its port gone
+(:class:`~livezmp.links.base.LinkError`) it stops reading and tries ``reconnect`` every
+``reconnect_every_s`` instead. The first valid frame after a gap longer than the
+watchdog time restarts the estimator and corrector (a gap must not produce a velocity
+spike) and ramps back to the command. After
 dropping torque, or a servo's hardware error, the loop only monitors. On every way out
 — the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
 first call to the link.
@@ -231,7 +232,7 @@ class LiveLoop:
         now = self.clock.now
         self.counters.cycles += 1
         self._fresh = False
-        if self.link_down or self.stopped:
+        if self.link_down:
             self._try_reconnect(t, tick.woke)
             if self.link_down:
                 self._check_watchdog(t, now())
@@ -351,7 +352,7 @@ class LiveLoop:
             self.torque_dropped = True
             self.halted = "torque dropped by the watchdog"
         self._event(t, f"watchdog: no valid frame for {1e3 * (now - self.watchdog.last):.0f} ms; "
-                       f"{'torque dropped' if drop else 'holding'}; reconnecting")
+                       f"{'torque dropped' if drop else 'holding'}" + ("; reconnecting" if self.link_down else ""))
 
     def _try_reconnect(self, t: float, now: float) -> None:
         if now - self._last_reconnect < self.config.safety.reconnect_every_s:

@@ -17,7 +17,8 @@ and when to stop commanding.
 * Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` (at least three loop
   periods) → the loop stops
   commanding and either holds the present posture or drops torque
-  (``drop_torque``), and keeps trying to reconnect every ``reconnect_every_s``.
+  (``drop_torque``); while the port is gone it tries to reconnect every
+  ``reconnect_every_s``.
 * A servo that reports a hardware error (overload, overheating, ...) latches a safe
   stop when ``stop_on_hardware_error`` (the default): the loop keeps monitoring but no
   longer commands.
