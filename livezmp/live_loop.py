@@ -8,7 +8,7 @@ Every cycle of a :class:`~livezmp.loop_clock.LoopClock` (absolute deadlines):
    angles with the stance foot flat (:class:`~livezmp.base_placement.BasePlacer`);
    base + joints go through the per-frame :class:`~livezmp.pipeline.Pipeline`
    (results lag by the estimator's lag);
-3. correct: every ``correct_every`` cycles the
+3. correct: at ``correct_hz`` (every few cycles) the
    :class:`~livezmp.online_correction.OnlineCorrector` turns the newest result into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
    more than one 500 Hz period allows on every cycle);
@@ -52,6 +52,7 @@ from livezmp.base_placement import BasePlacer
 from livezmp.body import BodyModel
 from livezmp.correction import CorrectionLimits
 from livezmp.demo import smooth_ramp
+from livezmp.errors import InputError
 from livezmp.estimator import EstimatorConfig
 from livezmp.links.base import Link, LinkError, LinkFrame, LinkReadError
 from livezmp.loop_clock import LoopClock, Tick, TimingHistogram
@@ -65,8 +66,9 @@ FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes i
 
 @dataclass(frozen=True)
 class LoopConfig:
-    """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_every``:
-    run the corrector every N cycles; ``ramp_s``: blend time from the present posture
+    """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_hz``: the
+    corrector's rate (every round(rate_hz / correct_hz) cycles, at least every cycle;
+    measured: the balance is the same at 125 Hz as at 500 Hz); ``ramp_s``: blend time from the present posture
     to the command (s); ``estimator_*``: window, lag (s) and cutoff (Hz) of the
     estimator; ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits
     on the root rotation (its angular acceleration pushes the ZMP the other way first,
@@ -74,7 +76,7 @@ class LoopConfig:
 
     rate_hz: float = 500.0
     correct: bool = True
-    correct_every: int = 2
+    correct_hz: float = 125.0
     ramp_s: float = 0.5
     estimator_window_s: float = 0.2
     estimator_lag_s: float = 0.03
@@ -124,10 +126,11 @@ class LiveLoop:
         self.body = body
         self.config = config or LoopConfig()
         cfg = self.config
-        if cfg.correct_every < 1:
-            raise ValueError(f"correct_every = {cfg.correct_every}: must be at least 1")
+        if not (math.isfinite(cfg.correct_hz) and cfg.correct_hz > 0):
+            raise InputError(f"corrector rate {cfg.correct_hz!r} Hz: must be a positive number")
         self.clock = clock or LoopClock(cfg.rate_hz)
         self.dt = self.clock.period
+        self.correct_every = max(1, round(1.0 / (self.dt * cfg.correct_hz)))
         self.command = command
         self.fell = fell
         self.on_event = on_event
@@ -161,7 +164,7 @@ class LiveLoop:
         self.placer = BasePlacer(self.body)
         self.command_placer = BasePlacer(self.body)
         cfg = self.config
-        every = cfg.correct_every
+        every = self.correct_every
         self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
                                          max_accel_deg_s2=cfg.trunk_accel_deg_s2) if cfg.correct else None
         self.limiter.reset()
@@ -332,7 +335,7 @@ class LiveLoop:
         if self.corrector is None or not self._fresh:
             return
         self._since_correction += 1
-        if self._since_correction < self.config.correct_every:
+        if self._since_correction < self.correct_every:
             return
         self._since_correction = 0
         q_command = np.concatenate([self.command_placer.update(command), command])
@@ -427,7 +430,7 @@ class LiveLoop:
             "fell": bool(self.fell()) if self.fell is not None else None,
             "rate_hz": 1.0 / self.dt,
             "correct": self.config.correct,
-            "correct_every": self.config.correct_every,
+            "correct_every": self.correct_every,
             "stopped_by": self._stop_reason,
             "state": self.state,
             "halted": self.halted,

@@ -125,8 +125,8 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
     d, s = LoopConfig(), SafetyConfig()
     p.add_argument("--rate", type=float, help="loop rate, Hz (default: the link's stream rate, else 500)")
     p.add_argument("--no-correct", action="store_true", help="send the command only, no balance corrections")
-    p.add_argument("--correct-every", type=int, default=d.correct_every,
-                   help=f"run the corrector every N cycles (default {d.correct_every})")
+    p.add_argument("--correct-hz", type=float, default=d.correct_hz,
+                   help=f"corrector rate, Hz: every few loop cycles (default {d.correct_hz:g})")
     p.add_argument("--duration", type=float, help="seconds to run; 0 = until Ctrl-C")
     p.add_argument("--summary-json", help="write the run's summary here (JSON)")
     p.add_argument("--watchdog-ms", type=float, default=1e3 * s.watchdog_s,
@@ -139,15 +139,13 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
 
 
 def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
-    if args.correct_every < 1:
-        raise InputError(f"--correct-every {args.correct_every}: must be at least 1")
-    for name in ("watchdog_ms", "max_correction_deg"):
+    for name in ("correct_hz", "watchdog_ms", "max_correction_deg"):
         value = getattr(args, name)
         if not (np.isfinite(value) and value > 0):
             raise InputError(f"--{name.replace('_', '-')} {value}: must be a positive number")
     safety = replace(SafetyConfig(), watchdog_s=args.watchdog_ms / 1e3, drop_torque=args.on_timeout == "torque-off",
                      max_correction_rad=float(np.radians(args.max_correction_deg)))
-    return LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_every=args.correct_every, safety=safety)
+    return LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_hz=args.correct_hz, safety=safety)
 
 
 def loop_rate(args: argparse.Namespace, link) -> float:
