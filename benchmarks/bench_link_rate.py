@@ -8,8 +8,10 @@ One cycle = ``link.read()`` (verified joint state of all 20 joints) + ``link.wri
   HostSession polling for a JOINT_STATE and sending SET_GOALS), side by side with the link;
 * dynamixel: sync read and Fast Sync Read;
 * fw: JOINT_STATE streamed at 1000 Hz (the board's limit), so a cycle waits for the next one;
-* can: one node per servo behind an slcan adapter; JOINT_STATE at the link's default 30 Hz
-  and at 60 Hz; and the same link over python-can's in-process virtual bus (no serial line);
+* can: one node per servo behind an slcan adapter; JOINT_STATE at 20 Hz, the link's
+  default 30 Hz, and 60 Hz (where python-can's slcan reader, one system call per byte,
+  falls behind: the row shows how the link fails); and the same link over python-can's
+  in-process virtual bus (no serial line);
 * mock: the in-process plant, the link's own cost.
 
 The simulated devices run in a thread of this process (they share the GIL with the
@@ -38,7 +40,7 @@ from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHan
 
 import firmware_protocol as fp
 from livezmp.links import make_link
-from livezmp.links.base import LinkReadError
+from livezmp.links.base import LinkError, LinkReadError
 from livezmp.links.mock import MockLink
 from livezmp.robot_config import RobotConfig, ServoConfig
 from sim_devices.firmware_board import PlantBackend, PlantJoints
@@ -131,9 +133,13 @@ def virtual_can_nodes():
 
 # -- the rows ---------------------------------------------------------------------------------------
 
-def run_link(url: str, seconds: float) -> tuple[np.ndarray, int]:
+def run_link(url: str, seconds: float) -> tuple[np.ndarray, int] | LinkError:
+    """The link's cycle; the LinkError instead if it cannot open."""
     link = make_link(url, NAMES, CONFIG)
-    link.open()
+    try:
+        link.open()
+    except LinkError as err:
+        return err
     try:
         return measure(lambda k: (link.read(), link.write_goals(goals(k))), seconds)
     finally:
@@ -209,7 +215,7 @@ def rows(seconds: float):
             yield "fw", "HostSession (baseline)", "firmware board", where, run_session(url, seconds)
             yield "fw", "link, 1000 Hz stream", "firmware board", where, run_link(f"{url}&rate=1000", seconds)
     with devices_url("can", "same process") as url:
-        for rate in (30, 60):
+        for rate in (20, 30, 60):
             yield "can", f"link, slcan, {rate} Hz streams", "20 servo nodes", "same process", \
                 run_link(f"{url}&rate={rate}&timeout=0.5", seconds)
     with virtual_can_nodes() as url:
@@ -224,14 +230,23 @@ def main() -> None:
     args = parser.parse_args()
     sys.setswitchinterval(5e-4)
     print(f"{N} servos, read + write_goals per cycle; {os.cpu_count()} CPUs, {args.seconds:g} s per row\n")
-    header = (f"| {'link':<9} | {'client':<37} | {'devices':<15} | {'where':<12} | {'cycles/s':>8} | "
+    header = (f"| {'link':<9} | {'client':<40} | {'devices':<15} | {'where':<12} | {'cycles/s':>8} | "
               f"{'p50 ms':>7} | {'p99 ms':>7} | {'failed':>6} |")
     print(header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|")
-    for link, client, devices, where, (times, failed) in rows(args.seconds):
+    notes = []
+    for link, client, devices, where, result in rows(args.seconds):
+        if isinstance(result, LinkError):
+            notes.append(f"[{len(notes) + 1}] {client}: {result}")
+            print(f"| {link:<9} | {client:<40} | {devices:<15} | {where:<12} | {'-':>8} | {'-':>7} | {'-':>7} | "
+                  f"{f'[{len(notes)}]':>6} |", flush=True)
+            continue
+        times, failed = result
         p50, p99 = np.percentile(times, [50, 99]) * 1e3
-        print(f"| {link:<9} | {client:<37} | {devices:<15} | {where:<12} | {len(times) / times.sum():8.0f} | "
+        print(f"| {link:<9} | {client:<40} | {devices:<15} | {where:<12} | {len(times) / times.sum():8.0f} | "
               f"{p50:7.3f} | {p99:7.3f} | {failed:6d} |", flush=True)
+    for note in notes:
+        print(note)
 
 
 if __name__ == "__main__":

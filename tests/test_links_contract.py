@@ -78,3 +78,18 @@ def test_non_finite_goals_are_refused_and_nothing_is_sent(kind):
         assert np.abs(r.plant.goal - start_posture(N[kind])).max() <= tolerance(kind)
         with pytest.raises(LinkError, match="positions"):
             r.link.write_goals(np.zeros(3))
+
+
+@pytest.mark.parametrize("kind", ["dynamixel", "can", "fw"])
+def test_port_that_vanishes_and_returns_by_fault_spec_is_reconnected(kind):
+    with rig(kind, 4, faults="vanish=1s+0.3s") as r:
+        port = r.devices.ports[0]
+        deadline = time.monotonic() + 3.0
+        with pytest.raises(LinkError):  # some read fails once the port is gone...
+            while time.monotonic() < deadline:
+                r.link.read()
+        assert wait_until(lambda: r.devices.fault_counters.vanishes == 1)
+        while not r.link.reconnect() and time.monotonic() < deadline + 1.0:  # ...and the link is back with it
+            time.sleep(0.05)
+        assert port.present and r.link.stats.reconnects == 1
+        assert np.abs(r.link.read().positions - start_posture(4)).max() <= tolerance(kind)

@@ -1,7 +1,7 @@
 """Servo links: `open_link` picks and opens the backend a URL names (URL forms: :mod:`livezmp.links.base`).
 
     dynamixel:PATH[?baud=1000000&fast=0&watchdog=0.1&timeout=S]
-    can:INTERFACE:CHANNEL[?bitrate=1000000&rate=100&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
+    can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
     fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
     mock:
 

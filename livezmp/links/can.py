@@ -1,6 +1,6 @@
 """CAN servo link: firmware_protocol's CAN mapping over any python-can interface.
 
-    can:INTERFACE:CHANNEL[?bitrate=1000000&rate=100&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
+    can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
 
 e.g. ``can:slcan:/dev/ttyACM0?bitrate=1000000``, ``can:socketcan:can0``. Other options go
 to ``can.Bus`` as keyword arguments (numbers converted), e.g. ``sleep_after_open=0`` for an
@@ -10,8 +10,10 @@ One node per servo (SPEC.md §6: node id = the servo id of the robot config), or
 node owning several joints: each node is a firmware_protocol host session; joints are
 found by name in the nodes' HELLO_ACK. All sessions share one bus: `CanBoards` reads it
 once and hands each node's messages to its session. Everything else (handshake, watchdog,
-streams, reads, goals, errors) is `FirmwareLink`'s. ``rate`` defaults to 100 Hz: at
-1 Mbit/s twenty one-joint nodes fill the bus at about that rate (SPEC.md §6).
+streams, reads, goals, errors) is `FirmwareLink`'s. ``rate`` defaults to 30 Hz: twenty
+one-joint nodes send 60 frames per round of JOINT_STATE, and python-can's slcan reader (one
+system call per byte) takes about 3 000 frames/s; the bus itself (1 Mbit/s) carries about
+100 rounds/s (SPEC.md §6), so with an interface such as socketcan raise it.
 """
 
 from __future__ import annotations
@@ -75,7 +77,11 @@ class CanBoards:
         self.inboxes = {node: deque(maxlen=INBOX_LIMIT) for node in nodes}
         self.sessions = [fp.HostSession(_NodeTransport(self, node, tids), watchdog_timeout=OPEN_WATCHDOG,
                                         ack_timeout=ACK_TIMEOUT) for node in nodes]
-        self.pump(0.0)
+        try:
+            self.pump(0.0)
+        except fp.LinkError as err:
+            self.close()
+            raise LinkError(str(err)) from None
         for inbox in self.inboxes.values():
             inbox.clear()  # what the nodes sent before we opened is stale
 

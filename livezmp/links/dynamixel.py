@@ -172,7 +172,7 @@ class DynamixelLink:
             if drop_torque:
                 self._write_all(TORQUE_ENABLE, 1, 0)
             else:
-                self.hold()
+                self._hold_retrying()
         except LinkError:
             pass  # counted where it happened; nothing more can be sent
 
@@ -237,6 +237,10 @@ class DynamixelLink:
             detail = ", ".join(f"{self._who(i)} (hardware error status {state[i * stride + stride - 1]:#04x})"
                                for i in off)
             raise LinkError(f"{self.path}: torque did not come on for {detail}: reboot or power-cycle the servo")
+        self._hold_retrying()
+
+    def _hold_retrying(self) -> None:
+        """`hold`, retrying reads that fail (a lost reply should not leave the servos on their old goals)."""
         for _ in range(OPEN_TRIES):
             try:
                 self.hold()
@@ -247,16 +251,13 @@ class DynamixelLink:
 
     def _read_at_open(self, address: int, length: int) -> bytes:
         """One sync read of every servo, retried; the data in joint order. LinkError after OPEN_TRIES."""
-        for attempt in range(OPEN_TRIES):
+        failure = None
+        for _ in range(OPEN_TRIES):
             try:
-                errors, data = self._sync_read(address, length, fast=False)
+                return self._sync_read(address, length, fast=False)[1]
             except LinkReadError as err:
-                if attempt == OPEN_TRIES - 1:
-                    raise LinkError(f"{err} ({OPEN_TRIES} tries; check power, ids, baud rate and Status Return "
-                                    "Level)") from None
-                continue
-            return data
-        raise AssertionError("unreachable")
+                failure = err
+        raise LinkError(f"{failure} ({OPEN_TRIES} tries; check power, ids, baud rate and Status Return Level)")
 
     # -- bus transactions -----------------------------------------------------------------------
 
@@ -288,10 +289,11 @@ class DynamixelLink:
             for kind, count in failures.items():
                 self.stats.errors_by_kind[kind] = self.stats.errors_by_kind.get(kind, 0) + count
             missing = [self._who(i) for i, dxl_id in enumerate(self.ids) if dxl_id not in replies]
-            raise LinkReadError(f"{self.path}: sync read failed: "
-                                f"{', '.join(f'{n} {k}' for k, n in failures.items())}"
-                                + (f"; nothing usable from {', '.join(missing[:4])}"
-                                   + (f" and {len(missing) - 4} more" if len(missing) > 4 else "") if missing else ""))
+            detail = f"; nothing usable from {', '.join(missing[:4])}" if missing else ""
+            if len(missing) > 4:
+                detail += f" and {len(missing) - 4} more"
+            raise LinkReadError(f"{self.path}: sync read failed: {', '.join(f'{n} {k}' for k, n in failures.items())}"
+                                f"{detail}")
         return [replies[i][0] for i in self.ids], b"".join(replies[i][1] for i in self.ids)
 
     def _receive_each(self, length: int) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:

@@ -169,12 +169,15 @@ class FirmwareLink:
 
     def open(self) -> None:
         """Handshake, configure and enable every board (see module docstring). LinkError on failure."""
-        self._boards = self._connect()
+        self._boards = self._connect()  # LinkError if the port or bus cannot be opened
         try:
             self._configure()
-        except (LinkError, fp.ProtocolError) as err:
+        except LinkError:
             self._release()
-            raise LinkError(f"{self.name}: {err}") from None
+            raise
+        except fp.ProtocolError as err:  # names the port or node already
+            self._release()
+            raise LinkError(str(err)) from None
 
     def read(self) -> LinkFrame:
         """The joint state every board sent since the previous read (see module docstring)."""
@@ -196,7 +199,7 @@ class FirmwareLink:
                     raise LinkReadError(f"{self.name}: no joint state within {self.timeout} s from "
                                         f"{', '.join(late[:4])}{' ...' if len(late) > 4 else ''}")
         except fp.ProtocolError as err:
-            raise LinkError(f"{self.name}: {err}") from None
+            raise LinkError(str(err)) from None
         t = time.monotonic()
         self._account()
         for b in self._list:
@@ -241,7 +244,7 @@ class FirmwareLink:
                 b.session.send_goals(b.ids, [values[slot] for slot in b.slots])
         except fp.ProtocolError as err:
             self.stats.write_errors += 1
-            raise LinkError(f"{self.name}: {err}") from None
+            raise LinkError(str(err)) from None
 
     def hold(self) -> None:
         """Goals = the present positions, from a fresh read."""
@@ -297,10 +300,10 @@ class FirmwareLink:
                 owners[slot] = owners.get(slot, 0) + 1
         missing = [name for i, name in enumerate(self.joint_names) if i not in owners]
         if missing:
-            raise LinkError(f"no board has joint(s) {', '.join(missing)}")
+            raise LinkError(f"{self.name}: no board has joint(s) {', '.join(missing)}")
         twice = [name for i, name in enumerate(self.joint_names) if owners[i] > 1]
         if twice:
-            raise LinkError(f"joint(s) {', '.join(twice)} are on more than one board")
+            raise LinkError(f"{self.name}: joint(s) {', '.join(twice)} are on more than one board")
         for b in self._list:
             b.session.configure_watchdog(self.watchdog, fp.WatchdogAction.HOLD)
         self._forget()  # only state sent after the handshake counts
@@ -312,7 +315,7 @@ class FirmwareLink:
         off = [f"{name} ({fp.JointError(int(self._error[i]))!r})" for i, name in enumerate(self.joint_names)
                if self._error[i] & fp.JointError.TORQUE_OFF]
         if off:
-            raise LinkError(f"torque did not come on for joint(s) {', '.join(off)}")
+            raise LinkError(f"{self.name}: torque did not come on for joint(s) {', '.join(off)}")
         self.write_goals(frame.positions)
 
     def _forget(self) -> None:
@@ -357,7 +360,6 @@ class FirmwareLink:
         counts.update(self._own)
         self.stats.errors_by_kind = counts
         self.stats.read_errors = lost + self._own.get("timeout", 0) + self._own.get("stale", 0)
-
 
     def _require(self) -> Boards:
         if self._boards is None:
