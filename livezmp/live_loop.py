@@ -67,12 +67,13 @@ FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes i
 @dataclass(frozen=True)
 class LoopConfig:
     """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_hz``: the
-    corrector's rate (every round(rate_hz / correct_hz) cycles, at least every cycle;
-    measured: the balance is the same at 125 Hz as at 500 Hz); ``ramp_s``: blend time from the present posture
-    to the command (s); ``estimator_*``: window, lag (s) and cutoff (Hz) of the
-    estimator; ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits
-    on the root rotation (its angular acceleration pushes the ZMP the other way first,
-    so it is kept gentle); ``status_every_s``: period of the status callback."""
+    corrector's rate (every round(rate_hz / correct_hz) cycles' worth of loop time, at
+    least every cycle; measured: the balance is the same at 125 Hz as at 500 Hz);
+    ``ramp_s``: blend time from the present posture to the command (s);
+    ``estimator_*``: window, lag (s) and cutoff (Hz) of the estimator;
+    ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits on the root
+    rotation (its angular acceleration pushes the ZMP the other way first, so it is kept
+    gentle); ``status_every_s``: period of the status callback."""
 
     rate_hz: float = 500.0
     correct: bool = True
@@ -175,7 +176,7 @@ class LiveLoop:
         self._started = False  # the estimator has had a real sample
         self._fed = 0  # samples given to this pipeline
         self._valid = np.zeros(self.pipe.lag + 1, dtype=bool)  # were the last lag + 1 samples real?
-        self._since_correction = every
+        self._next_correction = -math.inf  # loop time of the next corrector step (s)
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
 
@@ -269,7 +270,7 @@ class LiveLoop:
         if self.halted is not None:
             return
         command = self._command(t, frame.positions)
-        self._correct(command)
+        self._correct(t, command)
         t3 = now()
         self.times["correct"].add(t3 - t2)
         goals, limited = self.limiter.apply(command, self.offsets)
@@ -331,13 +332,12 @@ class LiveLoop:
         s = float(smooth_ramp(t, self._ramp_t0, self._ramp_t0 + self.config.ramp_s))
         return target if s >= 1.0 else self._ramp_from + s * (target - self._ramp_from)
 
-    def _correct(self, command: np.ndarray) -> None:
-        if self.corrector is None or not self._fresh:
+    def _correct(self, t: float, command: np.ndarray) -> None:
+        # by loop time, not by counting cycles: when the loop falls behind and skips
+        # deadlines, the corrector still steps at the dt it was built for
+        if self.corrector is None or not self._fresh or t < self._next_correction - 0.5 * self.dt:
             return
-        self._since_correction += 1
-        if self._since_correction < self.correct_every:
-            return
-        self._since_correction = 0
+        self._next_correction = t + self.correct_every * self.dt
         q_command = np.concatenate([self.command_placer.update(command), command])
         self.offsets = self.corrector.step(self.result, q_command).offsets[self.nb:]
 
