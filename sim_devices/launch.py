@@ -18,6 +18,10 @@ needs a ``[servos.NAME]`` entry in the robot config. Per kind:
 
 ``foot_sensors`` / ``imu`` providers (see `firmware_board`) reach the host on ``fw`` and
 ``can``; a Dynamixel chain has no such devices. ``faults`` is a fault spec (see `faults`).
+`humanoid_sensors` makes them for a `SimHumanoid`:
+
+    feet, imu = humanoid_sensors(humanoid)
+    devices = start_devices("fw", humanoid, config, joint_names=body.joint_names, foot_sensors=feet, imu=imu)
 """
 
 from __future__ import annotations
@@ -25,13 +29,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 
+import numpy as np
+
 from firmware_protocol import StreamRates
 from livezmp.errors import InputError
+from livezmp.links.base import FootSensors
 from livezmp.robot_config import RobotConfig
 from sim_devices.can_servo import CanServoBus
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.faults import FaultCounters, FaultSpec
 from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
+from sim_devices.humanoid import SimHumanoid
 from sim_devices.pty_port import PtyPort
 from sim_devices.servo_plant import JointPlant
 
@@ -42,6 +50,44 @@ XM430_ZERO = 2048  # the chain's tick at 0 rad before Homing Offset
 # what python-can's slcan reader (one system call per byte) takes in on this kind of machine, so until the link
 # sets its own rates the simulated nodes stream slowly.
 CAN_POWER_UP_RATES = StreamRates(joint_state_hz=10, foot_sensors_hz=0, imu_hz=0, heartbeat_hz=2)
+
+
+def humanoid_sensors(humanoid: SimHumanoid) -> tuple[FootProvider, ImuProvider]:
+    """Foot-sensor and IMU providers reading ``humanoid`` in the devices' conventions.
+
+    Feet: its four force cells per sole reordered front-left, front-right, rear-left,
+    rear-right (x forward, y left in the foot link's frame), and their centre of pressure
+    (m) from the sole's centre in that frame, None without load. IMU: orientation as
+    (w, x, y, z), angular velocity (rad/s) and specific force (m/s^2) in the base link's axes.
+    InputError if a foot has no four-corner sole.
+    """
+    orders, offsets = {}, {}
+    for side, foot in humanoid.body.feet.items():
+        corners = None if foot.sole_local is None else np.asarray(foot.sole_local)[:, :2]
+        if corners is None or len(corners) != 4:
+            raise InputError(f"foot '{side}': the simulated foot cells need a sole of four corners")
+        rel = corners - corners.mean(axis=0)
+        order = []
+        for front, left in ((True, True), (True, False), (False, True), (False, False)):
+            hits = np.flatnonzero(((rel[:, 0] > 0) == front) & ((rel[:, 1] > 0) == left))
+            if len(hits) != 1:
+                raise InputError(f"foot '{side}': its sole corners are not one per quadrant around its centre")
+            order.append(int(hits[0]))
+        orders[side], offsets[side] = order, rel[order]
+
+    def foot_sensors() -> FootSensors:
+        cells = humanoid.foot_forces()
+        forces = {side: np.asarray(getattr(cells, side))[order] for side, order in orders.items()}
+        cop = {side: (f @ offsets[side] / f.sum() if f.sum() > 0 else None) for side, f in forces.items()}
+        return FootSensors(forces, cop)
+
+    def imu() -> dict[str, np.ndarray]:
+        reading = humanoid.imu()
+        x, y, z, w = reading.quaternion
+        return {"orientation": np.array([w, x, y, z]), "angular_velocity": np.asarray(reading.angular_velocity),
+                "acceleration": np.asarray(reading.specific_force)}
+
+    return foot_sensors, imu
 
 
 @dataclass
