@@ -12,7 +12,9 @@ One cycle = ``link.read()`` (verified joint state of all 20 joints) + ``link.wri
   default 30 Hz, and 60 Hz (where python-can's slcan reader, one system call per byte,
   falls behind: the row shows how the link fails); and the same link over python-can's
   in-process virtual bus (no serial line);
-* mock: the in-process plant, the link's own cost.
+* mock: the in-process plant, the link's own cost;
+* dynamixel with the simulated humanoid (livezmp_mini: whole-body dynamics every 1 ms of
+  simulated time) as the plant instead of 20 independent servos.
 
 The simulated devices run in a thread of this process (they share the GIL with the
 client) or, for the serial links, in a process of their own (the machine's other core).
@@ -33,18 +35,23 @@ import os
 import sys
 import threading
 import time
+from pathlib import Path
 
 import can
 import numpy as np
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
 import firmware_protocol as fp
+import livezmp
+from livezmp.body_urdf import body_from_urdf
 from livezmp.links import make_link
 from livezmp.links.base import LinkError, LinkReadError
 from livezmp.links.mock import MockLink
-from livezmp.robot_config import RobotConfig, ServoConfig
+from livezmp.robot_config import RobotConfig, ServoConfig, find_robot_config
 from sim_devices.firmware_board import PlantBackend, PlantJoints
+from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
+from sim_devices.scenarios import Poser
 from sim_devices.servo_plant import ServoPlant
 
 N = 20
@@ -52,10 +59,12 @@ NAMES = [f"joint{i:02d}" for i in range(N)]
 CONFIG = RobotConfig(servos={name: ServoConfig(name, i + 1) for i, name in enumerate(NAMES)}, source="bench")
 START = np.linspace(-0.5, 0.5, N)
 WARMUP = 20
+MINI_URDF = Path(livezmp.__file__).parent / "data" / "robots" / "livezmp_mini.urdf"
+MINI_CONFIG = find_robot_config(MINI_URDF, "livezmp_mini")
 
 
-def goals(k: int) -> np.ndarray:
-    return START + 0.2 * math.sin(0.01 * k)
+def goals(k: int, start: np.ndarray = START, amplitude: float = 0.2) -> np.ndarray:
+    return start + amplitude * math.sin(0.01 * k)
 
 
 def measure(cycle, seconds: float) -> tuple[np.ndarray, int]:
@@ -79,23 +88,31 @@ def measure(cycle, seconds: float) -> tuple[np.ndarray, int]:
 
 # -- devices: in this process, or served from another one -----------------------------------------
 
-def serve(kind: str, conn) -> None:
+def start(kind: str, humanoid: bool):
+    """Devices of ``kind`` over 20 servos, or over the simulated livezmp_mini humanoid."""
+    if not humanoid:
+        return start_devices(kind, ServoPlant(N, position=START), CONFIG)
+    body = body_from_urdf(MINI_URDF)
+    return start_devices(kind, SimHumanoid(body, Poser(body).standing()), MINI_CONFIG, joint_names=body.joint_names)
+
+
+def serve(kind: str, humanoid: bool, conn) -> None:
     """Subprocess body: serve ``kind``'s devices until told to stop."""
     sys.setswitchinterval(5e-4)
-    with start_devices(kind, ServoPlant(N, position=START), CONFIG) as devices:
+    with start(kind, humanoid) as devices:
         conn.send(devices.url)
         conn.recv()
 
 
 @contextlib.contextmanager
-def devices_url(kind: str, where: str):
+def devices_url(kind: str, where: str, humanoid: bool = False):
     if where == "same process":
-        with start_devices(kind, ServoPlant(N, position=START), CONFIG) as devices:
+        with start(kind, humanoid) as devices:
             yield devices.url
         return
     context = multiprocessing.get_context("spawn")
     parent, child = context.Pipe()
-    process = context.Process(target=serve, args=(kind, child), daemon=True)
+    process = context.Process(target=serve, args=(kind, humanoid, child), daemon=True)
     process.start()
     try:
         yield parent.recv()
@@ -133,15 +150,16 @@ def virtual_can_nodes():
 
 # -- the rows ---------------------------------------------------------------------------------------
 
-def run_link(url: str, seconds: float) -> tuple[np.ndarray, int] | LinkError:
-    """The link's cycle; the LinkError instead if it cannot open."""
-    link = make_link(url, NAMES, CONFIG)
+def run_link(url: str, seconds: float, names: list[str] = NAMES, config: RobotConfig = CONFIG,
+             start: np.ndarray = START, amplitude: float = 0.2) -> tuple[np.ndarray, int] | LinkError:
+    """The link's cycle (goals: a slow sine around ``start``); the LinkError instead if it cannot open."""
+    link = make_link(url, names, config)
     try:
         link.open()
     except LinkError as err:
         return err
     try:
-        return measure(lambda k: (link.read(), link.write_goals(goals(k))), seconds)
+        return measure(lambda k: (link.read(), link.write_goals(goals(k, start, amplitude))), seconds)
     finally:
         link.close()
 
@@ -222,6 +240,15 @@ def rows(seconds: float):
         yield "can", "link, virtual bus, 200 Hz streams", "20 servo nodes", "same process", \
             run_link(f"{url}?rate=200&timeout=0.5", seconds)
     yield "mock", "link", "ServoPlant", "same process", run_mock(seconds)
+    body = body_from_urdf(MINI_URDF)
+    posture = Poser(body).standing()
+    for where in ("same process", "own process"):
+        with devices_url("dynamixel", where, humanoid=True) as url:
+            for fast in (False, True):
+                read = "fast sync read" if fast else "sync read"
+                yield "dynamixel", f"link, {read}", "SimHumanoid", where, \
+                    run_link(f"{url}&fast={int(fast)}&timeout=0.1", seconds, body.joint_names, MINI_CONFIG, posture,
+                             amplitude=0.02)  # a gentle sway: a humanoid that fell would stop computing
 
 
 def main() -> None:
