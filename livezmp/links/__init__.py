@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats
-from livezmp.robot_config import RobotConfig
+from livezmp.robot_config import RobotConfig, ServoConfig
 
 __all__ = ["FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "make_link", "open_link",
            "parse_link_url"]
@@ -97,51 +97,65 @@ def make_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -
         raise InputError(f"link URL '{url}': unknown option '{name}' for {scheme}: (options: {listed})")
     opts = {name: (_value(url, name, kind, raw[name]) if name in raw else default)
             for name, (kind, default) in known.items()}
-    names = list(joint_names)
-    if scheme == "mock":
-        from livezmp.links.mock import MockLink
-        from sim_devices.servo_plant import ServoPlant
+    return _BUILDERS[scheme](url, target, list(joint_names), robot_config, opts, extra)
 
-        return MockLink(ServoPlant(len(names)), names)
-    if scheme == "fw":
-        from livezmp.links.firmware import FirmwareLink, SerialBoard
 
-        _check_watchdog(url, opts["watchdog"], 65.535)
-        return FirmwareLink(url, names, lambda: SerialBoard(target, opts["baud"]), rate=opts["rate"],
-                            watchdog=opts["watchdog"], timeout=opts["timeout"])
-    servos = []
-    for joint in names:
-        servo = robot_config.servos.get(joint)
-        if servo is None:
-            raise InputError(f"{robot_config.source}: no [servos.{joint}] entry: the {scheme}: link needs a servo "
-                             f"for every joint")
-        servos.append(servo)
-    if scheme == "dynamixel":
-        from livezmp.links.dynamixel import WATCHDOG_MAX, WATCHDOG_UNIT, DynamixelLink
+def _mock(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
+    from livezmp.links.mock import MockLink
+    from sim_devices.servo_plant import ServoPlant
 
-        if opts["watchdog"] and not WATCHDOG_UNIT <= opts["watchdog"] <= WATCHDOG_MAX:
-            raise InputError(f"link URL '{url}': option 'watchdog' must be 0 (off) or {WATCHDOG_UNIT}.."
-                             f"{WATCHDOG_MAX:.2f} s, got {raw['watchdog']}")
-        return DynamixelLink(target, names, servos, baud=opts["baud"], fast=opts["fast"], watchdog=opts["watchdog"],
-                             timeout=opts["timeout"])
+    return MockLink(ServoPlant(len(names)), names)
+
+
+def _fw(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
+    from livezmp.links.firmware import FirmwareLink, SerialBoard
+
+    _check_watchdog(url, opts["watchdog"], 65.535)
+    return FirmwareLink(url, names, lambda: SerialBoard(target, opts["baud"]), rate=opts["rate"],
+                        watchdog=opts["watchdog"], timeout=opts["timeout"])
+
+
+def _dynamixel(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
+    from livezmp.links.dynamixel import WATCHDOG_MAX, WATCHDOG_UNIT, DynamixelLink
+
+    if opts["watchdog"] and not WATCHDOG_UNIT <= opts["watchdog"] <= WATCHDOG_MAX:
+        raise InputError(f"link URL '{url}': option 'watchdog' must be 0 (off) or {WATCHDOG_UNIT}.."
+                         f"{WATCHDOG_MAX:.2f} s, got {opts['watchdog']:g}")
+    return DynamixelLink(target, names, _servos("dynamixel", names, config), baud=opts["baud"], fast=opts["fast"],
+                         watchdog=opts["watchdog"], timeout=opts["timeout"])
+
+
+def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
     from livezmp.links.can import CanBoards
     from livezmp.links.firmware import FirmwareLink
 
     _check_watchdog(url, opts["watchdog"], 65.535)
-    nodes = sorted({s.id for s in servos})
+    nodes = sorted({s.id for s in _servos("can", names, config)})
     bad = [n for n in nodes if not 1 <= n <= 127]
     if bad:
-        raise InputError(f"{robot_config.source}: servo id {bad[0]} cannot be a CAN node id (1..127)")
+        raise InputError(f"{config.source}: servo id {bad[0]} cannot be a CAN node id (1..127)")
     interface, _, channel = target.partition(":")
     bus_options = {k: _bus_option(v) for k, v in extra.items()}
     if opts["bitrate"] is not None:
         bus_options["bitrate"] = opts["bitrate"]
-    tids: dict[tuple[int, int], int] = {}
+    tids: dict[tuple[int, int], int] = {}  # kept from one connection to the next (see CanBoards)
 
     def connect() -> CanBoards:
         return CanBoards(interface, channel, nodes, tids, **bus_options)
 
     return FirmwareLink(url, names, connect, rate=opts["rate"], watchdog=opts["watchdog"], timeout=opts["timeout"])
+
+
+_BUILDERS = {"mock": _mock, "fw": _fw, "dynamixel": _dynamixel, "can": _can}
+
+
+def _servos(scheme: str, names: list[str], config: RobotConfig) -> list[ServoConfig]:
+    """The robot config's servo of each joint; InputError naming the first joint without one."""
+    missing = [joint for joint in names if joint not in config.servos]
+    if missing:
+        raise InputError(f"{config.source}: no [servos.{missing[0]}] entry: the {scheme}: link needs a servo for "
+                         "every joint")
+    return [config.servos[joint] for joint in names]
 
 
 def open_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -> Link:
