@@ -19,7 +19,8 @@ which goes on to the end of the run), so the corrector is working. Columns: achi
 rate, share of cycles that missed their deadline, skipped deadlines, sense-to-command
 latency (read start to goal write done), the mean time of each stage of a cycle and
 their sum (busy: 1000 / busy is the rate the loop could sustain), whether the
-simulated robot fell, and failed reads.
+simulated robot fell, the share of the simulator's 1 ms steps whose true ZMP was
+inside the support polygon, and failed reads.
 
 Run: python benchmarks/bench_live_loop.py [--seconds 60] [--rate 500]
 """
@@ -62,7 +63,7 @@ def bus_only(link, rate: float, seconds: float) -> dict:
     return {"cycles": st.cycles, "achieved_hz": st.achieved_hz, "deadline_misses": st.deadline_misses,
             "skipped": st.skipped, "p50": 1e3 * latency.quantile(0.5), "p99": 1e3 * latency.quantile(0.99),
             "stages": f"{1e3 * read.mean:.2f} / - / - / {1e3 * write.mean:.2f}", "busy": 1e3 * latency.mean,
-            "fell": None, "failed": failed}
+            "fell": None, "failed": failed, "inside": None}
 
 
 def live(link, robot, sim, rate: float, seconds: float, correct_hz: float) -> dict:
@@ -71,11 +72,12 @@ def live(link, robot, sim, rate: float, seconds: float, correct_hz: float) -> di
     loop = LiveLoop(link, robot.body, LoopConfig(rate_hz=rate, correct_hz=correct_hz), command=scenario.goals,
                     fell=sim.fell)
     s = loop.run(seconds)
+    truth = sim.verdict()["true_inside_fraction"]
     means = [s["timing"][k]["mean_ms"] or 0.0 for k in ("read", "estimate", "correct", "write")]
     stages = " / ".join(f"{m:.2f}" for m in means)
     return {"cycles": s["cycles"], "achieved_hz": s["achieved_hz"], "deadline_misses": s["deadline_misses"],
             "skipped": s["clock"]["skipped_cycles"], "p50": s["p50_latency_ms"], "p99": s["p99_latency_ms"],
-            "stages": stages, "busy": sum(means), "fell": s["fell"], "failed": s["failed_reads"]}
+            "stages": stages, "busy": sum(means), "fell": s["fell"], "failed": s["failed_reads"], "inside": truth}
 
 
 def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
@@ -92,7 +94,7 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
     means = [s["timing"][k]["mean_ms"] or 0.0 for k in ("read", "estimate", "correct", "write")]
     return {"cycles": s["cycles"], "achieved_hz": s["cycles"] / wall, "deadline_misses": 0, "skipped": 0,
             "p50": s["p50_latency_ms"], "p99": s["p99_latency_ms"], "stages": " / ".join(f"{m:.2f}" for m in means),
-            "busy": sum(means), "fell": None, "failed": s["failed_reads"]}
+            "busy": sum(means), "fell": None, "failed": s["failed_reads"], "inside": None}
 
 
 def row(options: str, rate: float, seconds: float, robot, correct_hz: float = 125.0, faults: str = "",
@@ -122,14 +124,14 @@ def main() -> None:
     print(f"livezmp_mini, 20 simulated XM430s (simulator in its own process); {os.cpu_count()} CPUs; "
           f"{sec:g} s per row; asked {r:g} Hz unless the row says otherwise\n")
     header = ("| loop                                   |      Hz | missed % | skipped |  p50 ms |  p99 ms | "
-              "read / estimate / correct / write, mean ms | busy ms | fell | failed reads |")
+              "read / estimate / correct / write, mean ms | busy ms | fell | inside % | failed reads |")
     print(header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
     for correct_hz in (125.0, r):
         x = compute_only(robot, r, min(sec, 10.0), correct_hz)
         label = f"loop work only, correct at {correct_hz:g} Hz"
         print(f"| {label:<38} | {x['achieved_hz']:7.1f} | {'-':>8} | {'-':>7} | {x['p50']:7.3f} | {x['p99']:7.3f} | "
-              f"{x['stages']:<41} | {x['busy']:7.3f} | {'-':>4} | {'-':>12} |", flush=True)
+              f"{x['stages']:<42} | {x['busy']:7.3f} | {'-':>4} | {'-':>8} | {'-':>12} |", flush=True)
     rows = [
         ("bus only, sync read (baseline)", "", r, sec, {"baseline": True}),
         ("bus only, fast sync read (baseline)", "fast=1", r, sec, {"baseline": True}),
@@ -144,9 +146,10 @@ def main() -> None:
     for label, options, rate, seconds, kw in rows:
         x = row(options, rate, seconds, robot, **kw)
         fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
+        inside = "-" if x["inside"] is None else f"{100 * x['inside']:.2f}"
         print(f"| {label:<38} | {x['achieved_hz']:7.1f} | {100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | "
-              f"{x['skipped']:7d} | {x['p50']:7.3f} | {x['p99']:7.3f} | {x['stages']:<41} | {x['busy']:7.3f} | "
-              f"{fell:>4} | {x['failed']:12d} |", flush=True)
+              f"{x['skipped']:7d} | {x['p50']:7.3f} | {x['p99']:7.3f} | {x['stages']:<42} | {x['busy']:7.3f} | "
+              f"{fell:>4} | {inside:>8} | {x['failed']:12d} |", flush=True)
     print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

@@ -62,6 +62,7 @@ from livezmp.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, join
 
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
+EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
 
 
 @dataclass(frozen=True)
@@ -146,6 +147,7 @@ class LiveLoop:
         self.times = {s: TimingHistogram() for s in STAGES}
         self.latency = TimingHistogram()
         self.events: deque[str] = deque(maxlen=100)
+        self._told: dict[str, tuple[float, int]] = {}  # event kind -> (last told at, untold since)
         self.nb = len(body.base_channels)
         self._nan = np.full(body.nq, np.nan)
         self._stop_reason: str | None = None
@@ -185,7 +187,17 @@ class LiveLoop:
         if self._stop_reason is None:
             self._stop_reason = reason
 
-    def _event(self, t: float, msg: str) -> None:
+    def _event(self, t: float, msg: str, kind: str | None = None) -> None:
+        """Note a state change; events of a repeating ``kind`` (rejected frames, failed
+        writes) at most once every EVENT_REPEAT_S, with how many were not told."""
+        if kind is not None:
+            last, untold = self._told.get(kind, (-math.inf, 0))
+            if t - last < EVENT_REPEAT_S:
+                self._told[kind] = (last, untold + 1)
+                return
+            self._told[kind] = (t, 0)
+            if untold:
+                msg += f" (and {untold} more in the {t - last:.1f} s before)"
         line = f"t={t:.3f}s: {msg}"
         self.events.append(line)
         if self.on_event is not None:
@@ -252,7 +264,7 @@ class LiveLoop:
                     self.counters.stale_frames += 1
                 else:
                     self.counters.corrupted_frames += 1
-                self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}")
+                self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}", kind=verdict.kind)
                 frame = None
         if frame is None:
             self._missing_sample(t)
@@ -278,7 +290,7 @@ class LiveLoop:
             self.link.write_goals(goals)
         except LinkError as e:
             self.counters.write_errors += 1
-            self._event(t, f"write failed: {e}")
+            self._event(t, f"write failed: {e}", kind="write")
             return
         t4 = now()
         self.times["write"].add(t4 - t3)

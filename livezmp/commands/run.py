@@ -135,7 +135,7 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
                    help="what the watchdog does: hold the posture (default) or drop torque")
     p.add_argument("--max-correction-deg", type=float, default=float(np.degrees(s.max_correction_rad)),
                    help="largest correction of any joint, degrees")
-    p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.add_argument("--quiet", action="store_true", help="no live status line (events are still told)")
 
 
 def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
@@ -181,8 +181,8 @@ class StatusLine:
         print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
 
     def event(self, msg: str) -> None:
-        if not self.quiet:
-            print(("\n" if self.tty else "") + f"livezmp: {msg}", file=sys.stderr, flush=True)
+        """State changes are told even with --quiet."""
+        print(("\n" if self.tty and not self.quiet else "") + f"livezmp: {msg}", file=sys.stderr, flush=True)
 
     def done(self) -> None:
         if self.tty and not self.quiet:
