@@ -47,12 +47,12 @@ class CorrectionLimits:
     """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""
 
     max_rotation_deg: tuple[float, float, float] = (15.0, 15.0, 10.0)  # about x, y, z (internal)
-    max_rate_deg_s: float = 90.0
+    max_rate_deg_s: float = 120.0
     margin_m: float = 0.005  # aim this far inside the polygon
     zmp_tolerance_m: float = 0.001  # σ_z
     rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
     accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
-    iterations: int = 15
+    iterations: int = 30
 
 
 @dataclass
@@ -330,6 +330,41 @@ def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str
     return -hi.ravel(), hi.ravel()
 
 
+def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs, half_width):
+    """Last resort for frames pushed out by a contact that changed: at touchdown a
+    corrected swing foot whose estimated speed lands a hair on the other side of a
+    contact threshold turns double support into single, a jump no gradient sees. For
+    each such frame outside, try small smooth changes of the correction around it (a
+    fade toward zero, and bumps of ±0.25° on each axis) and keep the first that leaves
+    fewer frames outside at no higher cost."""
+    f = len(delta)
+
+    def outside(results):
+        return sum(1 for x in results if x.inside is False)
+
+    for r in list(current):
+        k = r.index
+        if r.inside is not False or (r.support in ("left", "double"), r.support in ("right", "double")) == held[k]:
+            continue
+        lo, hi = max(0, k - half_width), min(f, k + half_width + 1)
+        bump = np.zeros(f)
+        bump[lo:hi] = np.hanning(hi - lo + 2)[1:-1]
+        candidates = [delta * (1 - (1 - keep) * bump)[:, None] for keep in (0.5, 0.0)]
+        for axis in range(3):
+            for sign in (1, -1):
+                step = np.zeros((f, 3))
+                step[:, axis] = sign * np.radians(0.25) * bump
+                candidates.append(delta + step)
+        for cand in candidates:
+            fr, cand = apply(cand)
+            trial = analyse(fr)
+            trial_cost = _cost(trial, cand, limits, *regs)
+            if outside(trial) < outside(current) and trial_cost <= 1.5 * cost:
+                delta, current, cost = cand, trial, trial_cost
+                break
+    return delta, current, cost
+
+
 def rate_limit(delta: np.ndarray, max_step: float) -> tuple[np.ndarray, list[int]]:
     """Project ``delta`` (F, 3) so no frame-to-frame step exceeds ``max_step`` (rad),
     moving values toward zero; returns the result and the frames changed."""
@@ -419,28 +454,37 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     cost = _cost(current, delta, limits, reg_size, reg_acc)
     history = []
     mu = 1.0
-    for _ in range(limits.iterations):
-        judged = [k for k, r in enumerate(current) if r.margin is not None]
-        if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
-            break
-        cjac = lin.channel_jacobians(q_base, delta, w)
-        jmat, load = lin.matrix(current, judged, cjac)
-        jall = (jmat / limits.zmp_tolerance_m).tocsr()
-        zall = np.array([current[k].zmp[:2] for k in judged])
-        accepted = False
-        for _attempt in range(6):  # Levenberg-Marquardt: damp the step until the exact cost drops
-            cand = _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt)
-            corrected = apply_delta(mover, body, frames, cand, w)
-            trial = analyse(corrected, held)
-            trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)
-            if trial_cost < cost:
-                delta, current, cost, accepted = cand, trial, trial_cost, True
-                mu = max(mu / 3, 1e-3)
+    # phase 1 with the original contacts held; phase 2 (a few iterations) re-detects them,
+    # as `livezmp analyze` will, to settle the frames where a moved swing foot changes them
+    for contacts, iterations in ((held, limits.iterations), (None, 5)):
+        if contacts is None:
+            current = analyse(apply_delta(mover, body, frames, delta, w))
+            cost = _cost(current, delta, limits, reg_size, reg_acc)
+        for _ in range(iterations):
+            judged = [k for k, r in enumerate(current) if r.margin is not None]
+            if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
                 break
-            mu *= 10
-        history.append(sum(1 for r in current if r.inside is False))
-        if not accepted or history[-1] == 0:
-            break
+            cjac = lin.channel_jacobians(q_base, delta, w)
+            jmat, load = lin.matrix(current, judged, cjac)
+            jall = (jmat / limits.zmp_tolerance_m).tocsr()
+            zall = np.array([current[k].zmp[:2] for k in judged])
+            accepted = False
+            for _attempt in range(6):  # Levenberg-Marquardt: damp the step until the exact cost drops
+                cand = _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc,
+                                   bounds, dt)
+                trial = analyse(apply_delta(mover, body, frames, cand, w), contacts)
+                trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)
+                if trial_cost < cost:
+                    delta, current, cost, accepted = cand, trial, trial_cost, True
+                    mu = max(mu / 3, 1e-3)
+                    break
+                mu *= 10
+            history.append(sum(1 for r in current if r.inside is False))
+            if not accepted or history[-1] == 0:
+                break
+    delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
+                                               lambda d: (apply_delta(mover, body, frames, d, w), d),
+                                               (reg_size, reg_acc), max(1, round(0.3 / dt)))
     delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt)
     corrected = apply_delta(mover, body, frames, delta, w)
     after = analyse(corrected)
