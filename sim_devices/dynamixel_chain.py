@@ -68,8 +68,8 @@ from sim_devices.dynamixel_packet import (
     encode_fast_status,
     encode_status,
 )
-from sim_devices.faults import FaultCounters, FaultInjector, FaultSpec
-from sim_devices.pty_port import PtyPort, Reply
+from sim_devices.faults import FaultInjector, FaultSpec
+from sim_devices.pty_port import PtyDevice, PtyPort, Reply
 from sim_devices.servo_plant import JointPlant, ServoPlant
 
 SUPPORTED_FAULTS = frozenset({"drop", "corrupt", "delay", "overload", "vanish"})
@@ -126,7 +126,7 @@ class _Servo:
         return self.table[9] * ct.RETURN_DELAY_UNIT
 
 
-class DynamixelChain:
+class DynamixelChain(PtyDevice):
     """Servos ``ids`` on one simulated bus, served at :attr:`path` (see module docstring).
 
     ``baud_rate`` (bit/s) sets every servo's Baud Rate register; ``settings`` maps
@@ -206,21 +206,6 @@ class DynamixelChain:
 
     # -- public API -------------------------------------------------------------------------------
 
-    @property
-    def path(self) -> str:
-        """Device path to open with the client (stable across vanish/return)."""
-        return self._port.path
-
-    @property
-    def port(self) -> PtyPort:
-        """The pty port, e.g. to `PtyPort.vanish` / `PtyPort.restore` by hand."""
-        return self._port
-
-    @property
-    def fault_counters(self) -> FaultCounters:
-        """What the fault injector actually injected so far."""
-        return self._faults.counters
-
     def register(self, dxl_id: int, name: str) -> int:
         """Current value of control-table field ``name`` of servo ``dxl_id`` (table units)."""
         with self._lock:
@@ -244,16 +229,6 @@ class DynamixelChain:
             now = time.monotonic()
             self._advance(now)
             self._trip(self._servo(dxl_id), bits)
-
-    def close(self) -> None:
-        """Stop serving and remove the device path."""
-        self._port.close()
-
-    def __enter__(self) -> DynamixelChain:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- ByteDevice -------------------------------------------------------------------------------
 

@@ -34,7 +34,7 @@ import firmware_protocol as fp
 from firmware_protocol.cobs import cobs_decode, cobs_encode
 from livezmp.links.base import FootSensors
 from sim_devices.faults import FaultCounters, FaultInjector, FaultSpec
-from sim_devices.pty_port import PtyPort, Reply
+from sim_devices.pty_port import PtyDevice, PtyPort, Reply
 from sim_devices.servo_plant import JointPlant
 
 SUPPORTED_FAULTS = frozenset({"drop", "corrupt", "delay", "overload", "vanish"})
@@ -198,7 +198,7 @@ class _Wire:
         """Nothing to release."""
 
 
-class FirmwareBoard:
+class FirmwareBoard(PtyDevice):
     """A board driving ``plant``'s joints, at :attr:`path` (see module docstring).
 
     ``joint_ids`` default to 1..n. ``status_period`` (s) and ``max_rate_hz`` go to the
@@ -231,21 +231,6 @@ class FirmwareBoard:
 
     # -- public API -------------------------------------------------------------------------------
 
-    @property
-    def path(self) -> str:
-        """Device path to open with the client (stable across vanish/return)."""
-        return self._port.path
-
-    @property
-    def port(self) -> PtyPort:
-        """The pty port, e.g. to `PtyPort.vanish` / `PtyPort.restore` by hand."""
-        return self._port
-
-    @property
-    def fault_counters(self) -> FaultCounters:
-        """What the current fault injector injected so far."""
-        return self._faults.counters
-
     def set_faults(self, faults: str | FaultSpec) -> FaultCounters:
         """Inject ``faults`` from now on (timed events counted from now; the old spec's pending ones are
         dropped, and a vanished port comes back); returns the previous injector's counters, final from here on."""
@@ -256,16 +241,6 @@ class FirmwareBoard:
             old, self._faults = self._faults, injector
         self._port.restore()  # outside our lock: the port thread holds the port's lock when it calls us
         return old.counters
-
-    def close(self) -> None:
-        """Stop serving and remove the device path."""
-        self._port.close()
-
-    def __enter__(self) -> FirmwareBoard:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- ByteDevice -------------------------------------------------------------------------------
 

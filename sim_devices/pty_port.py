@@ -246,3 +246,36 @@ class PtyPort:
         except BlockingIOError:
             return
         del self._out[:written]
+
+
+class PtyDevice:
+    """The shared front of a simulated device served on a `PtyPort`: its path, its port,
+    what its fault injector injected, ``close`` and the context manager. Subclasses set
+    ``_port`` (a `PtyPort`) and ``_faults`` (an injector with ``counters``)."""
+
+    _port: PtyPort
+
+    @property
+    def path(self) -> str:
+        """Device path to open with the client (stable across vanish/return)."""
+        return self._port.path
+
+    @property
+    def port(self) -> PtyPort:
+        """The pty port, e.g. to `PtyPort.vanish` / `PtyPort.restore` by hand."""
+        return self._port
+
+    @property
+    def fault_counters(self):
+        """What the (current) fault injector injected so far (a `FaultCounters`)."""
+        return self._faults.counters
+
+    def close(self) -> None:
+        """Stop serving and remove the device path."""
+        self._port.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -40,8 +40,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from sim_devices.can_node import CanFrame, CanNode
-from sim_devices.faults import FaultCounters, FaultInjector, FaultSpec
-from sim_devices.pty_port import PtyPort, Reply
+from sim_devices.faults import FaultInjector, FaultSpec
+from sim_devices.pty_port import PtyDevice, PtyPort, Reply
 
 SUPPORTED_FAULTS = frozenset({"drop", "corrupt", "delay", "vanish", "busoff"})
 BITRATES = (10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
@@ -92,7 +92,7 @@ def encode_frame(frame: CanFrame, timestamp_ms: int | None = None) -> bytes:
     return line.encode() + OK
 
 
-class SlcanAdapter:
+class SlcanAdapter(PtyDevice):
     """An slcan adapter at :attr:`path` bridging the host to ``nodes`` (see module docstring).
 
     ``tick_period`` (s) is how often the nodes' ``tick`` runs while the channel is open.
@@ -123,34 +123,9 @@ class SlcanAdapter:
     # -- public API -------------------------------------------------------------------------------
 
     @property
-    def path(self) -> str:
-        """Device path to open with the client (stable across vanish/return)."""
-        return self._port.path
-
-    @property
-    def port(self) -> PtyPort:
-        """The pty port, e.g. to `PtyPort.vanish` / `PtyPort.restore` by hand."""
-        return self._port
-
-    @property
-    def fault_counters(self) -> FaultCounters:
-        """What the fault injector actually injected so far."""
-        return self._faults.counters
-
-    @property
     def is_open(self) -> bool:
         """True while the CAN channel is open (after O or L)."""
         return self._open
-
-    def close(self) -> None:
-        """Stop serving and remove the device path."""
-        self._port.close()
-
-    def __enter__(self) -> SlcanAdapter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- ByteDevice -------------------------------------------------------------------------------
 

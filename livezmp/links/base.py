@@ -99,3 +99,27 @@ class Link(Protocol):
 
     def close(self) -> None:
         """safe_stop, then release the port."""
+
+
+class PortLink:
+    """What the port-backed links share: ``reconnect`` redoes ``open`` on a fresh port,
+    ``close`` stops then releases. Subclasses provide ``open``, ``safe_stop``,
+    ``_release`` (drop the port, never raises) and ``stats``."""
+
+    stats: LinkStats
+
+    def reconnect(self) -> bool:
+        """Reopen the port and redo `open`'s configuration (re-arming the device's
+        watchdog); True when the link is back."""
+        self._release()
+        try:
+            self.open()
+        except LinkError:
+            return False
+        self.stats.reconnects += 1
+        return True
+
+    def close(self) -> None:
+        """Hold, then release the port (the device's watchdog then holds)."""
+        self.safe_stop()
+        self._release()

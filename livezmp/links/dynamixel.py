@@ -49,7 +49,7 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, PortLink
 from livezmp.robot_config import ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
@@ -76,7 +76,7 @@ _STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")]
 _PORT_ERRORS = (serial.SerialException, OSError, termios.error)  # termios: flushing a vanished pty
 
 
-class DynamixelLink:
+class DynamixelLink(PortLink):
     """Servos ``servos[i]`` drive joints ``joint_names[i]`` (see module docstring).
 
     ``baud`` (bit/s), ``fast`` (Fast Sync Read), ``watchdog`` (s, 0: off), ``timeout``
@@ -175,21 +175,6 @@ class DynamixelLink:
                 self._hold_retrying()
         except LinkError:
             pass  # counted where it happened; nothing more can be sent
-
-    def reconnect(self) -> bool:
-        """Reopen the port and redo `open`'s configuration (re-arming a tripped watchdog); True when back."""
-        self._release()
-        try:
-            self.open()
-        except LinkError:
-            return False
-        self.stats.reconnects += 1
-        return True
-
-    def close(self) -> None:
-        """Hold, then release the port (the Bus Watchdog then stops the servos where they are)."""
-        self.safe_stop()
-        self._release()
 
     # -- open -----------------------------------------------------------------------------------
 

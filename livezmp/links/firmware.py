@@ -32,7 +32,7 @@ from typing import Protocol
 import numpy as np
 
 import firmware_protocol as fp
-from livezmp.links.base import FootSensors, LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.links.base import FootSensors, LinkError, LinkFrame, LinkReadError, LinkStats, PortLink
 
 HEARTBEAT_HZ = 10
 POLL_WAIT = 0.005  # s: the one serial read timeout used (changing it reconfigures the port)
@@ -141,7 +141,7 @@ class _Board:
         return route
 
 
-class FirmwareLink:
+class FirmwareLink(PortLink):
     """Joints ``joint_names`` on the boards ``connect()`` opens (see module docstring)."""
 
     def __init__(self, name: str, joint_names: Sequence[str], connect: Callable[[], Boards], *, rate: int = 500,
@@ -265,21 +265,6 @@ class FirmwareLink:
                 b.session.set_torque(b.ids, False)
             except (LinkError, fp.ProtocolError):
                 self.stats.write_errors += 1
-
-    def reconnect(self) -> bool:
-        """Reopen and redo `open`; True when back."""
-        self._release()
-        try:
-            self.open()
-        except LinkError:
-            return False
-        self.stats.reconnects += 1
-        return True
-
-    def close(self) -> None:
-        """Hold, then release the port (the boards' watchdogs then hold)."""
-        self.safe_stop()
-        self._release()
 
     # -- internals ------------------------------------------------------------------------------
 
