@@ -7,11 +7,13 @@ link, simulated devices on ptys, and the two together.
 * ``sim``: a simulated humanoid (:class:`sim_devices.humanoid.SimHumanoid`) behind
   simulated devices of one link kind; prints one JSON line (the link URL and port
   paths) and runs until stopped.
-* ``demo``: both in one process: ``livezmp_mini`` on a simulated Dynamixel bus, a
-  scenario (by default: lean past the toes and back, then swing the arms), a live
-  status line and the summary, with the simulator's own verdict (``fell``,
-  ``true_inside_fraction``: the share of its 1 ms steps whose true ZMP was inside the
-  support polygon).
+* ``demo``: both together: ``livezmp_mini`` on a simulated Dynamixel bus (or ``--link
+  can|fw``) served by a child process (:class:`SimProcess`: its own core and
+  interpreter, as a robot is another machine; ``--link mock`` steps the humanoid in
+  this process instead), a scenario (by default: lean past the toes and back, then
+  swing the arms), a live status line and the summary, with the simulator's own
+  verdict (``fell``, ``true_inside_fraction``: the share of its 1 ms steps whose true
+  ZMP was inside the support polygon).
 """
 
 from __future__ import annotations
