@@ -4,6 +4,9 @@ pipeline configuration and running it."""
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+from collections.abc import Callable
 
 import numpy as np
 
@@ -73,3 +76,16 @@ def run_pipeline(loaded: LoadedMotion, cfg: PipelineConfig, progress: bool = Fal
     return out + pipe.flush()
 
 
+
+
+@contextlib.contextmanager
+def stop_on_signals(stop: Callable[[str], None]):
+    """Ctrl-C and SIGTERM call ``stop(signal name)``: the loop ends its cycle or frame and
+    stops cleanly; the previous handlers come back on exit."""
+    handler = lambda signum, _frame: stop(signal.Signals(signum).name)  # noqa: E731
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

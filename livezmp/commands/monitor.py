@@ -4,8 +4,6 @@ re-run of a recorded session, and the repair of a recording cut short by a crash
 from __future__ import annotations
 
 import argparse
-import contextlib
-import signal
 import threading
 from types import SimpleNamespace
 
@@ -13,7 +11,7 @@ import numpy as np
 
 from livezmp.body_bvh import BvhBodyOptions
 from livezmp.body_urdf import UrdfBodyOptions
-from livezmp.commands.common import add_body_options, pipeline_config
+from livezmp.commands.common import add_body_options, pipeline_config, stop_on_signals
 from livezmp.demo import demo_robot_path, demo_trajectory
 from livezmp.errors import InputError
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
@@ -31,18 +29,6 @@ from livezmp.sources.interface import Source
 from livezmp.sources.mcap_replay import McapReplaySource
 
 DEFAULT_DASHBOARD = "127.0.0.1:8765"
-
-
-@contextlib.contextmanager
-def _stop_on_signals(stop: threading.Event):
-    """Ctrl-C and SIGTERM set ``stop``: the loop finishes its frame and closes cleanly."""
-    handler = lambda *_: stop.set()  # noqa: E731
-    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 def _source(args: argparse.Namespace) -> Source:
@@ -87,7 +73,7 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
             monitor.listeners.append(dashboard)
         print(f"source: {source.name}", flush=True)
         stop = threading.Event()
-        with _stop_on_signals(stop):
+        with stop_on_signals(lambda _name: stop.set()):
             summary = monitor.run(stop)
     except BaseException:
         source.close()

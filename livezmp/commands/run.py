@@ -22,7 +22,6 @@ import argparse
 import contextlib
 import json
 import multiprocessing
-import signal
 import sys
 import threading
 import time
@@ -34,6 +33,7 @@ import numpy as np
 
 from livezmp.body import BodyModel
 from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
+from livezmp.commands.common import stop_on_signals
 from livezmp.demo import demo_robot_path
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
@@ -109,18 +109,6 @@ def load_robot(urdf: str | None, config: str | None) -> Robot:
     body = body_from_urdf(path, UrdfBodyOptions(config=config))
     robot_config = load_robot_config(config) if config else find_robot_config(path, body.model.name)
     return Robot(path, body, robot_config)
-
-
-@contextlib.contextmanager
-def stop_on_signals(stop: Callable[[str], None]):
-    """Ctrl-C and SIGTERM call ``stop(signal name)``: the loop ends its cycle and stops safely."""
-    handler = lambda signum, _frame: stop(signal.Signals(signum).name)  # noqa: E731
-    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:
