@@ -30,16 +30,22 @@ class JointTrajectory:
     source: str = "<memory>"
 
 
+def read_csv_rows(path: Path, what: str = "file") -> list[list[str]]:
+    """All rows of a CSV file; a one-line InputError if it cannot be read or is empty."""
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except OSError as e:
+        raise InputError(f"{path}: cannot read {what}: {e.strerror}") from None
+    if not rows:
+        raise InputError(f"{path}:1: empty {what}")
+    return rows
+
+
 def read_joint_csv(path: str | Path, joint_names: list[str]) -> JointTrajectory:
     """Read a joint-trajectory CSV; every name in ``joint_names`` must be a column."""
     p = Path(path)
-    try:
-        with open(p, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except OSError as e:
-        raise InputError(f"{p}: cannot read: {e.strerror}") from None
-    if not rows:
-        raise InputError(f"{p}:1: empty file")
+    rows = read_csv_rows(p)
     header = [h.strip() for h in rows[0]]
     col = {h: i for i, h in enumerate(header)}
     if "time" not in col:

@@ -8,12 +8,12 @@ pattern reads ``walk_normal_001.bvh`` as condition "normal", subject unknown.
 
 from __future__ import annotations
 
-import csv
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from livezmp.errors import InputError
+from livezmp.trajectory_csv import read_csv_rows
 
 DEFAULT_PATTERN = r"(?:^|[_-])(?P<condition>[A-Za-z]+)[_-](?P<take>\d+)\.(?:bvh|csv)$"
 WALK_SUFFIXES = (".bvh", ".csv")
@@ -31,13 +31,7 @@ class TakeSpec:
 def read_manifest(path: str | Path) -> list[TakeSpec]:
     """Read a manifest CSV (see module doc)."""
     p = Path(path)
-    try:
-        with open(p, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except OSError as e:
-        raise InputError(f"{p}: cannot read manifest: {e.strerror}") from None
-    if not rows:
-        raise InputError(f"{p}:1: empty manifest")
+    rows = read_csv_rows(p, "manifest")
     header = [h.strip().lower() for h in rows[0]]
     missing = [c for c in ("path", "subject", "condition") if c not in header]
     if missing:
