@@ -108,7 +108,9 @@ def stalled_client(port: int) -> socket.socket:
 
 
 def test_a_stalled_client_never_slows_the_pipeline(demo):
-    mon, server, stop, runner = start_monitor(demo, loop=True)
+    # 1000 frames/s (the demo is 100 Hz, played 10x): the monitor's target rate; flat out, the
+    # monitor thread starves this test's own client thread of the GIL on a quiet machine
+    mon, server, stop, runner = start_monitor(demo, speed=10.0, loop=True)
     stalled = stalled_client(server.port)
     stalled_peer = f"127.0.0.1:{stalled.getsockname()[1]}"
     with connect(f"ws://127.0.0.1:{server.port}/ws") as ws:
