@@ -9,8 +9,8 @@ Stream sources need their body: ``skeleton`` (a BVH file, for udp and tcp) or
 ``robot`` (a URDF, for udp), and their frame rate: ``fps``, else the skeleton file's
 frame time (the estimator is tuned to it; frames still carry their own times).
 
-Servo links (``dynamixel:``, ``can:``, ``fw:``) plug in here as further schemes, each
-opening an adapter with the :class:`~livezmp.sources.interface.Source` attributes.
+- ``dynamixel:…``, ``can:…``, ``fw:…``: a servo link (``livezmp.links`` URL forms),
+  watched without commanding it at ``fps`` (100 Hz by default); needs ``robot``.
 """
 
 from __future__ import annotations
@@ -90,6 +90,25 @@ def _stream_body(spec: str, o: SourceOptions, robot_ok: bool) -> tuple[BodyModel
     raise InputError(f"{spec}: a stream needs the body it carries: {need}")
 
 
+LINK_SCHEMES = ("dynamixel", "can", "fw")
+
+
+def _link(spec: str, o: SourceOptions) -> Source:
+    """A servo link watched at ``--fps`` (default 100 Hz); needs ``--robot``."""
+    from livezmp.links.base import LinkError
+    from livezmp.robot_config import find_robot_config, load_robot_config
+    from livezmp.sources.link_source import LinkSource
+
+    if not o.robot:
+        raise InputError(f"{spec}: a servo link needs the robot it drives: --robot ROBOT.urdf")
+    body, bspec = robot_body(o.robot, o.urdf)
+    config = load_robot_config(o.urdf.config) if o.urdf.config else find_robot_config(o.robot, body.model.name)
+    try:
+        return LinkSource(spec, body, bspec, config, o.fps or 100.0)
+    except LinkError as e:
+        raise InputError(f"{spec}: cannot open the link: {e}") from None
+
+
 def _int_param(query: dict, key: str, spec: str) -> int | None:
     if key not in query:
         return None
@@ -107,6 +126,8 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
     o = options or SourceOptions()
     if o.fps is not None and not o.fps > 0:
         raise InputError(f"{spec}: --fps must be positive, got {o.fps}")
+    if spec.split(":", 1)[0] in LINK_SCHEMES:
+        return _link(spec, o)
     if "://" not in spec:
         path = Path(spec)
         if not path.exists():
