@@ -89,7 +89,7 @@ def test_port_that_vanishes_and_returns_by_fault_spec_is_reconnected(kind):
             while time.monotonic() < deadline:
                 r.link.read()
         assert wait_until(lambda: r.devices.fault_counters.vanishes == 1)
-        while not r.link.reconnect() and time.monotonic() < deadline + 1.0:  # ...and the link is back with it
-            time.sleep(0.05)
+        # ...and the link is back with it
+        wait_until(r.link.reconnect, timeout=max(deadline + 1.0 - time.monotonic(), 0.0), interval=0.05)
         assert port.present and r.link.stats.reconnects == 1
         assert np.abs(r.link.read().positions - start_posture(4)).max() <= tolerance(kind)

@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+from sim_support import wait_until  # noqa: F401 - shared with the link tests that import it from here
 
 from livezmp.links import make_link
 from livezmp.links.base import Link
@@ -98,10 +99,3 @@ def read_until(link: Link, done: Callable[[np.ndarray], bool], timeout: float = 
     raise AssertionError(f"condition not met within {timeout} s; last positions {positions}")
 
 
-def wait_until(condition: Callable[[], bool], timeout: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.005)
-    return condition()

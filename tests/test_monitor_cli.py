@@ -13,7 +13,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 
 import pytest
 from data_paths import BANDAI, ROOT
@@ -22,6 +21,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
+from sim_support import wait_until
 
 from livezmp.bvh import read_bvh
 from livezmp.cli import main
@@ -147,11 +147,8 @@ def test_replay_needs_a_monitor_session(tmp_path, capsys):
 
 
 def wait_for(cond, deadline: float = 30.0) -> None:
-    end = time.monotonic() + deadline
-    while not cond():
-        if time.monotonic() > end:
-            raise TimeoutError("condition not met in time")
-        time.sleep(0.02)
+    if not wait_until(cond, timeout=deadline, interval=0.02):
+        raise TimeoutError("condition not met in time")
 
 
 def test_ctrl_c_stops_cleanly_with_a_complete_recording(tmp_path):

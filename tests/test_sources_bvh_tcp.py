@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 from data_paths import BANDAI
+from sim_support import wait_until
 
 from livezmp.bvh import read_bvh
 from livezmp.errors import InputError
@@ -58,9 +59,7 @@ def test_bad_lines_are_dropped_and_a_lost_connection_is_reopened(motion):
     server = TcpStreamer(motion, speed=0, max_frames=0, impairments=Impairments())
     src = open_source(f"tcp://127.0.0.1:{server.port}?max_line=3000", SourceOptions(skeleton=str(WALK)))
     server.run_in_thread()  # accepts clients; sends no frames of its own (max_frames=0)
-    end = time.monotonic() + 5
-    while not server.clients and time.monotonic() < end:
-        time.sleep(0.01)
+    wait_until(lambda: server.clients, timeout=5)
     good = [server.line(motion.frames[k]) for k in range(3)]
     server.send_raw(good[0] + b"1 2 3\n" + b"9" * 5000 + b"\n" + b"0 x " * 66 + b"\n" + good[1])
     assert len(collect(src, 2)) == 2
