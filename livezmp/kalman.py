@@ -8,6 +8,14 @@ transition F and noise Q are two 3x3 matrices per step (cached while dt is
 unchanged) and the per-channel covariances (n, 3, 3) are updated with
 batched array operations.
 
+While every channel has the same noise parameters and is measured at every
+step, all channels have the same covariance: it is then kept once, as six
+floats (the 3x3 symmetric matrix), and only the states are updated per
+channel.  A step with some (not all) samples missing or some channels
+starting gives the channels their own covariances again (:attr:`P`); these
+converge to each other within some tens of steps, and once every entry agrees
+with the first channel's to ``SHARE_RTOL`` that one is shared again.
+
 Missing samples (NaN or inf, for some or all channels) only predict; a
 dropped frame is simply a larger dt.  Angle channels compare the measurement
 with the prediction modulo 2 pi (innovation wrapped to (-pi, pi]) so the
@@ -16,7 +24,12 @@ state stays continuous through +-pi.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+# Per-channel covariances this close (relative, entry by entry) are taken as one shared covariance.
+SHARE_RTOL = 1e-12
 
 
 def ca_transition(dt: float) -> np.ndarray:
@@ -61,21 +74,42 @@ class ConstantAccelerationKalman:
         self.meas_var = np.broadcast_to(np.asarray(meas_var, dtype=float), (n,)).copy()
         self.init_cov = np.diag(np.asarray(init_var, dtype=float))
         self.x = np.zeros((n, 3))
-        self.P = np.zeros((n, 3, 3))
+        self._P = np.zeros((n, 3, 3))
+        # Covariance shared by every channel, (P00, P01, P02, P11, P12, P22), or None when each channel has its own
+        # (self._P).  Possible only when all channels have the same noise parameters.
+        self._uniform = bool(np.all(self.jerk_psd == self.jerk_psd[0]) and np.all(self.meas_var == self.meas_var[0]))
+        self._shared: tuple[float, ...] | None = None
         self.started = np.zeros(n, dtype=bool)
         self.all_started = False
         self._any_angle = bool(self.angle_mask.any())
         self._dt = None
-        self._F = self._FF = self._Q = None
+        self._F = self._FF = self._Q = self._Q1 = self._h = None
+
+    @property
+    def P(self) -> np.ndarray:
+        """(n, 3, 3) covariance of each channel's state (unit^2, unit^2/s, ... as the state)."""
+        self._unshare()  # hand out the per-channel array: what the caller does with it, the next step sees
+        return self._P
+
+    @P.setter
+    def P(self, value: np.ndarray) -> None:
+        self._P = np.asarray(value, dtype=float)
+        self._shared = None
 
     def reset(self) -> None:
         """Forget all channels' state."""
         self.x[:] = 0.0
-        self.P[:] = 0.0
+        self._P[:] = 0.0
+        self._shared = None
         self.started[:] = False
         self.all_started = False
 
-    def _predict(self, dt: float) -> None:
+    def _unshare(self) -> None:
+        if self._shared is not None:
+            self._P[:] = _symmetric(self._shared)
+            self._shared = None
+
+    def _cache(self, dt: float) -> None:
         # Timestamps like i / rate differ in the last bits from step to step; F and Q for a dt within
         # 1e-9 of the cached one differ by far less than the filter's rounding, so reuse them.
         if self._dt is None or abs(dt - self._dt) > 1e-9 * self._dt:
@@ -85,9 +119,25 @@ class ConstantAccelerationKalman:
             # a stacked 3x3 matmul.  (np.kron itself is slow for 3x3.)
             self._FF = (self._F[:, None, :, None] * self._F[None, :, None, :]).reshape(9, 9).T
             self._Q = (self.jerk_psd * white_jerk_covariance(dt)).reshape(-1, 9)
+            q = self._Q[0].tolist()  # plain floats: faster than numpy scalars
+            self._Q1 = (q[0], q[1], q[2], q[4], q[5], q[8])
+            self._h = 0.5 * dt * dt
+
+    def _predict(self, dt: float) -> None:
+        self._cache(dt)
         n = self.x.shape[0]
         self.x = self.x @ self._F.T
-        self.P = (self.P.reshape(n, 9) @ self._FF + self._Q).reshape(n, 3, 3)
+        if self._shared is None:
+            self._P = (self._P.reshape(n, 9) @ self._FF + self._Q).reshape(n, 3, 3)
+            return
+        # F P F^T + Q on the six distinct entries; F = [[1, dt, h], [0, 1, dt], [0, 0, 1]].
+        a, b, c, d, e, f = self._shared
+        q00, q01, q02, q11, q12, q22 = self._Q1
+        dt, h = self._dt, self._h
+        r00, r01, r02 = a + dt * b + h * c, b + dt * d + h * e, c + dt * e + h * f
+        r11, r12 = d + dt * e, e + dt * f
+        self._shared = (r00 + dt * r01 + h * r02 + q00, r01 + dt * r02 + q01, r02 + q02,
+                        r11 + dt * r12 + q11, r12 + q12, f + q22)
 
     def step(self, dt: float | None, y: np.ndarray) -> np.ndarray:
         """Advance ``dt`` seconds (None for the first sample) and take the measurements ``y`` (n,).
@@ -97,20 +147,56 @@ class ConstantAccelerationKalman:
         covariance ``init_var``.  Returns the filtered positions (n,), a view
         of the state: angle channels are continuous, not wrapped.
         """
+        y = np.asarray(y, dtype=float)
+        if self._shared is None and self.all_started and self._uniform:
+            self._try_share()
+        if self._shared is not None:
+            if dt is not None:
+                self._predict(dt)
+            innovation = y - self.x[:, 0]
+            largest = np.abs(innovation).max()
+            if largest < math.inf:  # else some sample is missing (NaN or inf)
+                return self._update_shared(innovation, largest)
+            if not np.isfinite(y).any():
+                return self.x[:, 0]  # nothing measured: every channel only predicts, alike
+            self._unshare()
+            dt = None  # already predicted
+        return self._step_general(dt, y)
+
+    def _try_share(self) -> None:
+        P = self._P
+        if np.all(np.abs(P - P[0]) <= SHARE_RTOL * np.abs(P[0])):
+            (a, b, c), (_, d, e), (_, _, f) = P[0].tolist()
+            self._shared = (a, b, c, d, e, f)
+
+    def _update_shared(self, innovation: np.ndarray, largest: float) -> np.ndarray:
+        """Every channel measured, one covariance for all: the gain is one (3,) vector."""
+        a, b, c, d, e, f = self._shared
+        scale = 1.0 / (a + float(self.meas_var[0]))
+        k0, k1, k2 = a * scale, b * scale, c * scale
+        self._shared = (a - k0 * a, b - k0 * b, c - k0 * c, d - k1 * b, e - k1 * c, f - k2 * c)
+        # Innovations inside (-pi, pi) need no wrapping (the common case).
+        if self._any_angle and not largest < math.pi:
+            innovation = np.where(self.angle_mask, wrap_angle(innovation), innovation)
+        self.x += innovation[:, None] * np.array((k0, k1, k2))
+        return self.x[:, 0]
+
+    def _step_general(self, dt: float | None, y: np.ndarray) -> np.ndarray:
         valid = np.isfinite(y)
         if dt is not None:
             self._predict(dt)
+        P = self._P
         predicted = self.x[:, 0]
-        col = self.P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
+        col = P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
         scale = 1.0 / (col[:, 0] + self.meas_var)
         if valid.all() and self.all_started:
-            innovation = y - predicted  # the common case: every channel measured
+            innovation = y - predicted  # every channel measured
         else:
             fresh = valid & ~self.started
             if fresh.any():
                 self.x[fresh] = 0.0
                 self.x[fresh, 0] = y[fresh]
-                self.P[fresh] = self.init_cov
+                P[fresh] = self.init_cov
                 self.started |= fresh
                 self.all_started = bool(self.started.all())
             update = valid & ~fresh
@@ -120,5 +206,14 @@ class ConstantAccelerationKalman:
             innovation = np.where(self.angle_mask, wrap_angle(innovation), innovation)
         gain = col * scale[:, None]
         self.x += gain * innovation[:, None]
-        self.P -= gain[:, :, None] * col[:, None, :]
+        P -= gain[:, :, None] * col[:, None, :]
+        # Kept exactly symmetric: rounding in P - K H P leaves an antisymmetric part that the transition (a
+        # Jordan block) makes grow, so channels whose covariances once differed would never meet again.
+        self._P = 0.5 * (P + P.transpose(0, 2, 1))
         return self.x[:, 0]
+
+
+def _symmetric(p: tuple[float, ...]) -> np.ndarray:
+    """(3, 3) symmetric matrix from its entries (00, 01, 02, 11, 12, 22)."""
+    a, b, c, d, e, f = p
+    return np.array([[a, b, c], [b, d, e], [c, e, f]])
