@@ -36,14 +36,20 @@ class ZmpResult:
     force: np.ndarray
 
 
-def zmp_from_wrench(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground_z: float,
-                    min_fz: float) -> np.ndarray | None:
-    """ZMP on z = ground_z of a contact wrench (force, moment about ``com``); None if F_z < min_fz."""
+def _zmp_xy(com: tuple, force: tuple, moment: tuple, ground_z: float, min_fz: float) -> tuple | None:
+    """(x, y) of the ZMP on z = ground_z, plain floats (three-float tuples in); None if F_z < min_fz."""
     fz = force[2]
     if not fz >= min_fz:  # also catches NaN
         return None
     h = com[2] - ground_z
-    return np.array([com[0] - (moment[1] + h * force[0]) / fz, com[1] + (moment[0] - h * force[1]) / fz, ground_z])
+    return com[0] - (moment[1] + h * force[0]) / fz, com[1] + (moment[0] - h * force[1]) / fz
+
+
+def zmp_from_wrench(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground_z: float,
+                    min_fz: float) -> np.ndarray | None:
+    """ZMP on z = ground_z of a contact wrench (force, moment about ``com``); None if F_z < min_fz."""
+    xy = _zmp_xy(tuple(map(float, com)), tuple(map(float, force)), tuple(map(float, moment)), ground_z, min_fz)
+    return None if xy is None else np.array((xy[0], xy[1], ground_z))
 
 
 def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -53,15 +59,19 @@ def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, 
     Pass the body's ``model`` for the full ZMP, its ``point_model`` for the seed's.
     Leaves ``data`` with kinematics of (q, v, a) computed (joint placements, CoM)."""
     pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
+    # Plain floats from here: a handful of 3-vectors, where numpy's per-call cost would dominate.
     mass = data.mass[0]
-    dh = data.dhg
-    force = dh.linear - mass * model.gravity.linear  # the model's gravity points down (−z)
-    com = data.com[0].copy()
-    zmp = zmp_from_wrench(com, force, dh.angular, ground_z, flight_fraction * mass * float(-model.gravity.linear[2]))
-    return ZmpResult(zmp, com, dh.linear / mass, force)
+    lx, ly, lz, mx, my, mz = data.dhg.vector.tolist()  # linear, then angular
+    gx, gy, gz = model.gravity.linear.tolist()  # the model's gravity points down (−z)
+    force = (lx - mass * gx, ly - mass * gy, lz - mass * gz)
+    com = tuple(data.com[0].tolist())
+    xy = _zmp_xy(com, force, (mx, my, mz), ground_z, flight_fraction * mass * -gz)
+    zmp = None if xy is None else np.array((xy[0], xy[1], ground_z))
+    return ZmpResult(zmp, np.array(com), np.array((lx / mass, ly / mass, lz / mass)), np.array(force))
 
 
 def zmp_on_plane(zmp0: np.ndarray, force: np.ndarray, ground_z: float) -> np.ndarray:
     """Move a ZMP computed on z = 0 to the plane z = ground_z along the line of action of
     the contact force: p(h) = p(0) + h · F_xy / F_z (m, internal frame)."""
-    return np.array([zmp0[0] + ground_z * force[0] / force[2], zmp0[1] + ground_z * force[1] / force[2], ground_z])
+    fx, fy, fz = float(force[0]), float(force[1]), float(force[2])
+    return np.array((float(zmp0[0]) + ground_z * fx / fz, float(zmp0[1]) + ground_z * fy / fz, ground_z))
