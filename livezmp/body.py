@@ -12,6 +12,7 @@ such joints (x, y, z, then yaw, pitch, roll: R = Rz·Ry·Rx), singular only at �
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,28 +108,33 @@ def foot_soles(body: BodyModel, data: pin.Data) -> dict[str, np.ndarray]:
     for side, foot in body.feet.items():
         m = data.oMf[foot.frame_id]
         if foot.sole_local is not None:
-            out[side] = foot.sole_local @ m.rotation.T + m.translation
+            sole = foot.sole_local.dot(m.rotation.T)  # ndarray.dot: the same product as @, less overhead
+            sole += m.translation
+            out[side] = sole
             continue
-        a = m.translation
-        t = data.oMf[foot.toe_frame_id].translation
-        d = t[:2] - a[:2]
-        n = float(np.hypot(d[0], d[1]))
-        u = d / n if n > 1e-9 else np.array([1.0, 0.0])
-        w = np.array([-u[1], u[0]]) * (foot.width / 2)
-        heel = a[:2] - u * foot.heel_back
-        tip = t[:2] + u * foot.toe_front
-        zh, zt = a[2] - foot.ankle_height, t[2] - foot.toe_height
+        # A handful of coordinates: plain floats beat numpy's per-call cost.
+        ax, ay, az = m.translation.tolist()
+        tx, ty, tz = data.oMf[foot.toe_frame_id].translation.tolist()
+        dx, dy = tx - ax, ty - ay
+        n = math.hypot(dx, dy)
+        ux, uy = (dx / n, dy / n) if n > 1e-9 else (1.0, 0.0)
+        half = foot.width / 2
+        wx, wy = -uy * half, ux * half
+        hx, hy = ax - ux * foot.heel_back, ay - uy * foot.heel_back
+        px, py = tx + ux * foot.toe_front, ty + uy * foot.toe_front
+        zh, zt = az - foot.ankle_height, tz - foot.toe_height
         out[side] = np.array(
-            [[*(heel - w), zh], [*(tip - w), zt], [*(tip + w), zt], [*(heel + w), zh]]
+            ((hx - wx, hy - wy, zh), (px - wx, py - wy, zt), (px + wx, py + wy, zt), (hx + wx, hy + wy, zh))
         )
     return out
 
 
-def _point_velocity(model: pin.Model, data: pin.Data, frame_id: int, points: np.ndarray) -> np.ndarray:
-    """Velocity (k, 3) of points rigidly attached to a frame, m/s, world axes."""
-    v = pin.getFrameVelocity(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
-    # ω × r for every row r, as one product with the skew matrix (np.cross is slow on small arrays)
-    return v.linear + (points - data.oMf[frame_id].translation) @ pin.skew(v.angular).T
+def _velocity_field(model: pin.Model, data: pin.Data, frame_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """(W, v0) such that points p (k, 3) rigidly attached to the frame move at ``p @ W + v0`` (m/s,
+    world axes; p in world coordinates, m): v0 is the velocity of the body point at the world
+    origin, W the transposed skew matrix of the angular velocity (p @ W = ω × p)."""
+    vx, vy, vz, wx, wy, wz = pin.getFrameVelocity(model, data, frame_id, pin.WORLD).vector.tolist()
+    return np.array(((0.0, wz, -wy), (-wz, 0.0, wx), (wy, -wx, 0.0))), np.array((vx, vy, vz))
 
 
 def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: dict[str, np.ndarray]) -> dict:
@@ -138,10 +144,11 @@ def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: di
     out = {}
     for side, foot in body.feet.items():
         sole = soles[side]
-        if foot.sole_local is not None:
-            out[side] = _point_velocity(model, data, foot.frame_id, sole)
-        else:
-            heel = _point_velocity(model, data, foot.frame_id, sole[[0, 3]])
-            toe = _point_velocity(model, data, foot.toe_frame_id, sole[[1, 2]])
-            out[side] = np.array([heel[0], toe[0], toe[1], heel[1]])
+        w, v0 = _velocity_field(model, data, foot.frame_id)
+        vel = sole.dot(w)
+        vel += v0
+        if foot.sole_local is None:  # corners heel, toe, toe, heel
+            w, v0 = _velocity_field(model, data, foot.toe_frame_id)
+            vel[1:3] = sole[1:3].dot(w) + v0
+        out[side] = vel
     return out

@@ -29,6 +29,7 @@ Memory and per-frame cost are constant: the only buffer is the warm-up window.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -120,12 +121,27 @@ class GroundConfig:
             _check_number(self, "override", low=-math.inf)
 
 
+def percentile_of_sorted(values: list[float], percentile: float) -> float:
+    """The ``percentile`` (0-100) of the ascending, non-empty, finite ``values``, interpolated linearly
+    between the closest ranks: numpy.percentile's default method with the same arithmetic (equal results),
+    without its per-call cost (some 30 µs, paid on every warm-up frame)."""
+    index = (len(values) - 1) * (percentile / 100)
+    if index >= len(values) - 1:
+        return values[-1]
+    low = math.floor(index)
+    a, b = values[low], values[low + 1]
+    gamma = index - low
+    diff = b - a
+    # numpy interpolates from the nearer end
+    return b - diff * (1 - gamma) if gamma >= 0.5 else a + diff * gamma
+
+
 class GroundEstimator:
     """Streaming ground height (z of the ground plane, metres, world frame) from the feet's lowest points."""
 
     def __init__(self, config: GroundConfig | None = None) -> None:
         self.config = config or GroundConfig()
-        self._window = np.empty(self.config.warmup_frames)
+        self._sorted: list[float] = []  # the warm-up frames' lowest points, ascending
         self._count = 0
         self._height = self.config.override
 
@@ -142,9 +158,11 @@ class GroundEstimator:
         if not math.isfinite(lowest_z):
             raise ContactError(f"ground: lowest sole point z must be finite, got {lowest_z}")
         if self._count < cfg.warmup_frames:
-            self._window[self._count] = lowest_z
+            bisect.insort(self._sorted, lowest_z)
             self._count += 1
-            self._height = float(np.percentile(self._window[: self._count], cfg.percentile))
+            self._height = percentile_of_sorted(self._sorted, cfg.percentile)
+            if self._count == cfg.warmup_frames:
+                self._sorted = []  # not needed any more
         else:
             p = cfg.percentile / 100.0
             self._height += cfg.track_step * (p - 1.0 if lowest_z < self._height else p)
@@ -186,38 +204,49 @@ def support_label(left: bool, right: bool) -> str:
     return SUPPORT_LABELS[(3, 1, 0, 2)[2 * bool(left) + bool(right)]]
 
 
-def _sole_bottom(sole, name: str) -> tuple[float, int, int]:
-    """Lowest z (metres) of a (k, 3) sole, the index of that corner, and k; validated."""
+def _sole_bottom(sole, frame: int, name: str) -> tuple[float, int, int]:
+    """Lowest z (metres) of a (k, 3) sole, the index of that corner, and k; validated.
+
+    ``frame`` and ``name`` only word the error. The rows are few: plain floats beat numpy's per-call cost."""
     try:
         a = np.asarray(sole, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ContactError(f"{name}: not an array of numbers ({exc})") from None
+        raise ContactError(f"frame {frame}: {name}: not an array of numbers ({exc})") from None
     if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0:
-        raise ContactError(f"{name}: expected (k, 3) corner points in metres, k >= 1, got shape {a.shape}")
-    if not np.isfinite(a).all():
         raise ContactError(
-            f"{name}: row {int(np.argmin(np.isfinite(a).all(axis=1)))} has a non-finite coordinate"
+            f"frame {frame}: {name}: expected (k, 3) corner points in metres, k >= 1, got shape {a.shape}"
         )
-    lowest = int(np.argmin(a[:, 2]))
-    return float(a[lowest, 2]), lowest, a.shape[0]
+    flat = a.ravel().tolist()
+    total = sum(flat)
+    # A finite sum means finite coordinates; otherwise look closer (the sum may just have overflowed).
+    if total - total != 0.0 and not np.isfinite(a).all():
+        raise ContactError(
+            f"frame {frame}: {name}: row {int(np.argmin(np.isfinite(a).all(axis=1)))} has a non-finite coordinate"
+        )
+    heights = flat[2::3]
+    low = min(heights)
+    return low, heights.index(low), a.shape[0]
 
 
-def _horizontal_speed(velocity, sole_rows: int, lowest: int, name: str) -> float:
-    """Horizontal speed (m/s) of the foot: of its lowest sole corner when given per-corner velocities."""
+def _horizontal_speed(velocity, sole_rows: int, lowest: int, frame: int, name: str) -> float:
+    """Horizontal speed (m/s) of the foot: of its lowest sole corner when given per-corner velocities.
+
+    ``frame`` and ``name`` only word the error."""
     try:
         v = np.asarray(velocity, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ContactError(f"{name}: not a velocity array ({exc})") from None
+        raise ContactError(f"frame {frame}: {name}: not a velocity array ({exc})") from None
     if v.shape == (sole_rows, 3):
         v = v[lowest]
     elif v.shape not in ((2,), (3,)):
         raise ContactError(
-            f"{name}: expected (vx, vy[, vz]) or one row per sole corner ({sole_rows}, 3) in m/s, "
+            f"frame {frame}: {name}: expected (vx, vy[, vz]) or one row per sole corner ({sole_rows}, 3) in m/s, "
             f"got shape {v.shape}"
         )
-    if not np.isfinite(v).all():
-        raise ContactError(f"{name}: non-finite component {v.tolist()}")
-    return math.hypot(float(v[0]), float(v[1]))
+    components = v.tolist()
+    if not all(map(math.isfinite, components)):
+        raise ContactError(f"frame {frame}: {name}: non-finite component {components}")
+    return math.hypot(components[0], components[1])
 
 
 class ContactDetector:
@@ -254,18 +283,18 @@ class ContactDetector:
         the ground estimate is still updated, and detection resumes from these states.
         Raises ContactError naming the frame and field on malformed input.
         """
-        where = f"frame {self.frame}"
-        left_z, left_low, left_k = _sole_bottom(left_sole, f"{where}: left sole")
-        right_z, right_low, right_k = _sole_bottom(right_sole, f"{where}: right sole")
-        left_speed = _horizontal_speed(left_velocity, left_k, left_low, f"{where}: left velocity")
-        right_speed = _horizontal_speed(right_velocity, right_k, right_low, f"{where}: right velocity")
+        frame = self.frame
+        left_z, left_low, left_k = _sole_bottom(left_sole, frame, "left sole")
+        right_z, right_low, right_k = _sole_bottom(right_sole, frame, "right sole")
+        left_speed = _horizontal_speed(left_velocity, left_k, left_low, frame, "left velocity")
+        right_speed = _horizontal_speed(right_velocity, right_k, right_low, frame, "right velocity")
         ground = self.ground.update(min(left_z, right_z))
         if contacts is None:
             self.left = step_foot(self.left, left_z - ground, left_speed, self.config)
             self.right = step_foot(self.right, right_z - ground, right_speed, self.config)
         else:
             if not isinstance(contacts, tuple | list) or len(contacts) != 2:
-                raise ContactError(f"{where}: contacts: expected (left, right) booleans, got {contacts!r}")
+                raise ContactError(f"frame {frame}: contacts: expected (left, right) booleans, got {contacts!r}")
             self.left, self.right = FootContact(bool(contacts[0])), FootContact(bool(contacts[1]))
         self.frame += 1
         return support_label(self.left.in_contact, self.right.in_contact)
