@@ -129,12 +129,17 @@ def foot_soles(body: BodyModel, data: pin.Data) -> dict[str, np.ndarray]:
     return out
 
 
-def _velocity_field(model: pin.Model, data: pin.Data, frame_id: int) -> tuple[np.ndarray, np.ndarray]:
-    """(W, v0) such that points p (k, 3) rigidly attached to the frame move at ``p @ W + v0`` (m/s,
-    world axes; p in world coordinates, m): v0 is the velocity of the body point at the world
-    origin, W the transposed skew matrix of the angular velocity (p @ W = ω × p)."""
-    vx, vy, vz, wx, wy, wz = pin.getFrameVelocity(model, data, frame_id, pin.WORLD).vector.tolist()
-    return np.array(((0.0, wz, -wy), (-wz, 0.0, wx), (wy, -wx, 0.0))), np.array((vx, vy, vz))
+def _twist(model: pin.Model, data: pin.Data, frame_id: int) -> list[float]:
+    """[vx, vy, vz, wx, wy, wz] of the frame's body, world axes: the velocity (m/s) of its point at the world
+    origin, then the angular velocity (rad/s)."""
+    return pin.getFrameVelocity(model, data, frame_id, pin.WORLD).vector.tolist()
+
+
+def _rigid_velocities(twist: list[float], points: list) -> list[tuple[float, float, float]]:
+    """Velocities (m/s, world axes) of points (world coordinates, m) moving with a body of this twist:
+    v0 + ω × p. Plain floats: the points are few."""
+    vx, vy, vz, wx, wy, wz = twist
+    return [(vx + (wy * z - wz * y), vy + (wz * x - wx * z), vz + (wx * y - wy * x)) for x, y, z in points]
 
 
 def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: dict[str, np.ndarray]) -> dict:
@@ -143,12 +148,12 @@ def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: di
     toe corners with the toe joint, so a heel the foot rolls over stands still."""
     out = {}
     for side, foot in body.feet.items():
-        sole = soles[side]
-        w, v0 = _velocity_field(model, data, foot.frame_id)
-        vel = sole.dot(w)
-        vel += v0
-        if foot.sole_local is None:  # corners heel, toe, toe, heel
-            w, v0 = _velocity_field(model, data, foot.toe_frame_id)
-            vel[1:3] = sole[1:3].dot(w) + v0
-        out[side] = vel
+        corners = soles[side].tolist()
+        twist = _twist(model, data, foot.frame_id)
+        if foot.sole_local is not None:
+            out[side] = np.array(_rigid_velocities(twist, corners))
+        else:  # corners heel, toe, toe, heel
+            heel = _rigid_velocities(twist, corners[::3])
+            toe = _rigid_velocities(_twist(model, data, foot.toe_frame_id), corners[1:3])
+            out[side] = np.array((heel[0], toe[0], toe[1], heel[1]))
     return out
