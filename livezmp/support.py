@@ -56,10 +56,12 @@ def _xy_rows(points, name: str) -> list[list[float]]:
     if a.ndim != 2 or a.shape[1] not in (2, 3):
         raise SupportError(f"{name}: expected (k, 2) or (k, 3) points in metres, got shape {a.shape}")
     rows = a[:, :2].tolist()
-    # Plain floats: faster than numpy on a handful of rows. The comparisons are False for NaN too.
-    for i, (x, y) in enumerate(rows):
-        if not (-_MAX_COORD <= x <= _MAX_COORD and -_MAX_COORD <= y <= _MAX_COORD):
-            raise SupportError(f"{name}: row {i} has a non-finite or implausible coordinate [{x}, {y}] m")
+    # Plain floats: faster than numpy on a handful of rows. One sum bounds every coordinate (it is NaN if
+    # any is); only when it does not, look row by row (the comparisons are False for NaN too).
+    if not sum(abs(x) + abs(y) for x, y in rows) <= _MAX_COORD:
+        for i, (x, y) in enumerate(rows):
+            if not (-_MAX_COORD <= x <= _MAX_COORD and -_MAX_COORD <= y <= _MAX_COORD):
+                raise SupportError(f"{name}: row {i} has a non-finite or implausible coordinate [{x}, {y}] m")
     return rows
 
 
@@ -70,7 +72,7 @@ def _point(p_xy, name: str = "point") -> tuple[float, float]:
         raise SupportError(f"{name}: not a number pair ({exc})") from None
     if a.shape != (2,):
         raise SupportError(f"{name}: expected (x, y) in metres, got shape {a.shape}")
-    x, y = float(a[0]), float(a[1])
+    x, y = a.tolist()
     if not (abs(x) <= _MAX_COORD and abs(y) <= _MAX_COORD):
         raise SupportError(f"{name}: non-finite or implausible coordinate ({x}, {y}) m")
     return x, y
@@ -99,8 +101,10 @@ def _drop_slivers(hull: list, tol: float) -> list:
         triples = zip(hull[-1:] + hull[:-1], hull, hull[1:] + hull[:1], strict=True)
         for i, ((ax, ay), (bx, by), (cx, cy)) in enumerate(triples):
             ex, ey = cx - ax, cy - ay
-            # Distance to the line first (cheap), to the segment only when that is small.
-            if abs(ex * (by - ay) - ey * (bx - ax)) <= tol * math.hypot(ex, ey) and (
+            # Distance to the line first (cheap), to the segment only when that is small; |ex| + |ey| >= the
+            # hypotenuse, so most vertices are cleared without computing it.
+            cross = abs(ex * (by - ay) - ey * (bx - ax))
+            if cross <= tol * (abs(ex) + abs(ey)) and cross <= tol * math.hypot(ex, ey) and (
                 _nearest_on_segment(bx, by, ax, ay, cx, cy)[2] <= tol
             ):
                 del hull[i]
@@ -119,6 +123,32 @@ def _hull_rows(rows: list[list[float]]) -> list[tuple[float, float]]:
     scale = max(abs(pts[0][0]), abs(pts[-1][0]), abs(min(ys)), abs(max(ys)))
     hull = _half_hull(pts)[:-1] + _half_hull(pts[::-1])[:-1]
     return _drop_slivers(hull, _COLLINEAR_REL_TOL * scale)
+
+
+def _quad_hull(rows: list[list[float]]) -> list[tuple[float, float]] | None:
+    """:func:`_hull_rows` of four points that, in the given order, go round a strictly convex quadrilateral
+    (a sole rectangle seen from above); None when they do not clearly do so (then use :func:`_hull_rows`).
+
+    Every three of four such points are consecutive on the cycle, so when each vertex stands off the line
+    through its neighbours by far more than the sliver tolerance (and rounding), the general hull keeps all
+    four: it is this cycle, counter-clockwise from the lowest (x, y)."""
+    (ax, ay), (bx, by), (cx, cy), (dx, dy) = rows
+    tol = 4.0 * _COLLINEAR_REL_TOL * max(abs(ax), abs(ay), abs(bx), abs(by), abs(cx), abs(cy), abs(dx), abs(dy))
+    # (next - previous) x (vertex - previous) at each vertex: all < 0 counter-clockwise, all > 0 clockwise;
+    # |ex| + |ey| bounds the distance between the neighbours, as in _drop_slivers' test.
+    sign = 0.0
+    for (px, py), (vx, vy), (nx, ny) in (((dx, dy), (ax, ay), (bx, by)), ((ax, ay), (bx, by), (cx, cy)),
+                                         ((bx, by), (cx, cy), (dx, dy)), ((cx, cy), (dx, dy), (ax, ay))):
+        ex, ey = nx - px, ny - py
+        cross = ex * (vy - py) - ey * (vx - px)
+        if not abs(cross) > tol * (abs(ex) + abs(ey)) or cross * sign < 0.0:
+            return None
+        sign = cross
+    cycle = [(ax, ay), (bx, by), (cx, cy), (dx, dy)]
+    if sign > 0.0:
+        cycle.reverse()
+    start = cycle.index(min(cycle))
+    return cycle[start:] + cycle[:start]
 
 
 def convex_hull(points_xy) -> np.ndarray:
@@ -147,14 +177,17 @@ def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
     """
     if support not in SUPPORT_LABELS:
         raise SupportError(f"support: unknown label {support!r}, expected one of {', '.join(SUPPORT_LABELS)}")
-    needed = {"left": ("left",), "right": ("right",), "double": ("left", "right"), "none": ()}[support]
+    if support == "none":
+        return np.empty((0, 2))
+    needed = ("left", "right") if support == "double" else (support,)
     soles = {"left": left_sole_xy, "right": right_sole_xy}
     rows: list[list[float]] = []
     for foot in needed:
         if soles[foot] is None:
             raise SupportError(f"support {support!r} needs the {foot} sole, got None")
         rows += _xy_rows(soles[foot], f"{foot} sole")
-    return np.array(_hull_rows(rows), dtype=float).reshape(-1, 2)
+    hull = _quad_hull(rows) if len(rows) == 4 else None
+    return np.array(_hull_rows(rows) if hull is None else hull, dtype=float).reshape(-1, 2)
 
 
 def _nearest_on_segment(px: float, py: float, ax: float, ay: float, bx: float, by: float):
