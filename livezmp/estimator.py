@@ -194,13 +194,14 @@ class StreamingEstimator:
             raise EstimatorError(f"step(): time {t!r} is not a finite number of seconds")
         if t <= self._t_last:
             raise EstimatorError(f"step(): time {t!r} s is not after the previous sample's {self._t_last!r} s")
-        valid = np.isfinite(y)
-        newly = None if self.kalman.all_started else valid & ~self.kalman.started
+        missing = self._missing[self._count % (self.lag + 1)]
+        np.isfinite(y, out=missing)
+        np.logical_not(missing, out=missing)
+        newly = None if self.kalman.all_started else ~missing & ~self.kalman.started
         position = self.kalman.step(t - self._t_last if self._count else None, y)
         if newly is not None and self._count and newly.any():
             self.spline.backfill(newly, position)
         self.spline.push(t, position)
-        self._missing[self._count % (self.lag + 1)] = ~valid
         self._t_last = t
         self._count += 1
         if self._count <= self.lag:

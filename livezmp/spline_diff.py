@@ -198,5 +198,5 @@ class SlidingSplineDifferentiator:
         if lag is None:
             lag = self.lag
             if k == self.window and self._last_irregular < self.count - self.window + 1:
-                return self.weights @ samples
+                return self.weights.dot(samples)  # the same product as @, with less call overhead
         return window_weights(self._t[end - k : end], self.lam, k - 1 - lag) @ samples
