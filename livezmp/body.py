@@ -157,3 +157,22 @@ def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: di
             toe = _rigid_velocities(_twist(model, data, foot.toe_frame_id), corners[1:3])
             out[side] = np.array((heel[0], toe[0], toe[1], heel[1]))
     return out
+
+
+def lowest_sole_points(body: BodyModel, model: pin.Model, data: pin.Data,
+                       soles: dict[str, np.ndarray]) -> dict[str, tuple[float, float]]:
+    """Per foot, the height z (m, internal world frame) of its lowest sole corner (the first of equal
+    ones) and that corner's horizontal speed (m/s): what contact detection needs
+    (:meth:`livezmp.contacts.ContactDetector.update_lowest`), without every corner's velocity. Equal to
+    the lowest row of ``soles`` and of :func:`sole_velocities`; ``data`` as for that function."""
+    out = {}
+    for side, foot in body.feet.items():
+        corners = soles[side].tolist()
+        heights = [c[2] for c in corners]
+        z = min(heights)
+        i = heights.index(z)
+        # a skeleton's toe corners (1, 2) move with the toe joint, its heel corners with the ankle
+        frame = foot.toe_frame_id if foot.sole_local is None and i in (1, 2) else foot.frame_id
+        ((vx, vy, _),) = _rigid_velocities(_twist(model, data, frame), [corners[i]])
+        out[side] = (z, math.hypot(vx, vy))
+    return out

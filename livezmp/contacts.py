@@ -288,6 +288,32 @@ class ContactDetector:
         right_z, right_low, right_k = _sole_bottom(right_sole, frame, "right sole")
         left_speed = _horizontal_speed(left_velocity, left_k, left_low, frame, "left velocity")
         right_speed = _horizontal_speed(right_velocity, right_k, right_low, frame, "right velocity")
+        return self._step(left_z, left_speed, right_z, right_speed, contacts)
+
+    def update_lowest(
+        self,
+        left_height: float,
+        left_speed: float,
+        right_height: float,
+        right_speed: float,
+        contacts: tuple[bool, bool] | None = None,
+    ) -> str:
+        """:meth:`update` given what it takes from each foot: the height z of its lowest sole point
+        (metres, world frame) and that point's horizontal speed (m/s), e.g. from
+        :func:`livezmp.body.lowest_sole_points`. Raises ContactError if one is not finite."""
+        values = (left_height, left_speed, right_height, right_speed)
+        try:
+            finite = all(map(math.isfinite, values))
+        except TypeError:  # not numbers
+            finite = False
+        if not finite:
+            raise ContactError(f"frame {self.frame}: lowest sole point heights and speeds must be finite, got "
+                               f"{list(values)}")
+        return self._step(*values, contacts)
+
+    def _step(self, left_z: float, left_speed: float, right_z: float, right_speed: float,
+              contacts: tuple[bool, bool] | None) -> str:
+        frame = self.frame
         ground = self.ground.update(min(left_z, right_z))
         if contacts is None:
             self.left = step_foot(self.left, left_z - ground, left_speed, self.config)

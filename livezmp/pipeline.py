@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel, foot_soles, sole_velocities
+from livezmp.body import BodyModel, foot_soles, lowest_sole_points
 from livezmp.contacts import ContactConfig, ContactDetector, GroundConfig
 from livezmp.errors import InputError
 from livezmp.estimator import Estimate, EstimatorConfig, StreamingEstimator
@@ -128,20 +128,22 @@ class Pipeline:
         z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
-        vel = sole_velocities(self.body, model, data, soles)
-        outside = self._outside_contacts.pop(est.index, None)
-        support = self.contacts.update(soles["left"], vel["left"], soles["right"], vel["right"], outside)
+        low = lowest_sole_points(self.body, model, data, soles)
+        outside = self._outside_contacts.pop(est.index, None) if self._outside_contacts else None
+        support = self.contacts.update_lowest(*low["left"], *low["right"], outside)
+        left, right = soles["left"], soles["right"]
         ground = self.contacts.ground_height
         zmp = None
         if z.zmp is not None:
             # the ZMP was computed on z = 0; move it onto the detected ground plane
             zmp = zmp_on_plane(z.zmp, z.force, ground)
-        poly = support_polygon(soles["left"][:, :2], soles["right"][:, :2], support)
+        poly = support_polygon(left, right, support)  # the polygon lies on the ground: the z column is ignored
+        fz = float(z.force[2])
         res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground,
-                          load=float(z.force[2] / (data.mass[0] * -model.gravity.linear[2])))
+                          load=fz / (data.mass[0] * -float(model.gravity.linear[2])))
         if zmp is not None and len(poly):
             c = clamp_to_polygon(zmp[:2], poly)
             res.inside, res.margin = c.inside, c.margin
-            res.clamped = np.array([c.point[0], c.point[1], ground])
+            x, y = c.point.tolist()
+            res.clamped = np.array((x, y, ground))
         return res
-

@@ -3,10 +3,12 @@ robot foot, and the rigid-body formula v_o + ω × (p − o) at the frame origin
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import foot_soles, sole_velocities
+from livezmp.body import foot_soles, lowest_sole_points, sole_velocities
 from livezmp.body_bvh import body_from_bvh
 
 
@@ -43,3 +45,17 @@ def test_skeleton_heel_corners_move_with_the_ankle_and_toe_corners_with_the_toe(
                 m = pin.getFrameVelocity(body.model, data, frame, pin.LOCAL_WORLD_ALIGNED)
                 expected = m.linear + np.cross(m.angular, soles[side][rows] - data.oMf[frame].translation)
                 np.testing.assert_allclose(vel[side][rows], expected, rtol=1e-12, atol=1e-12)
+
+
+def test_lowest_sole_points_are_the_lowest_rows_of_the_soles_and_their_velocities(op3_body, bandai_walk):
+    rng = np.random.default_rng(2)
+    for body in (op3_body, body_from_bvh(bandai_walk)):
+        for _ in range(30):
+            q, v = rng.normal(size=body.nq) * 0.4, rng.normal(size=body.nq)
+            data = kinematics(body, q, v)
+            soles = foot_soles(body, data)
+            vel = sole_velocities(body, body.model, data, soles)
+            low = lowest_sole_points(body, body.model, data, soles)
+            for side in soles:
+                i = int(np.argmin(soles[side][:, 2]))
+                assert low[side] == (soles[side][i, 2], math.hypot(vel[side][i, 0], vel[side][i, 1]))

@@ -58,3 +58,32 @@ def test_non_finite_sole_coordinate_names_its_row(bad):
     sole[2, 0] = bad
     with pytest.raises(ContactError, match="frame 0: right sole: row 2 has a non-finite coordinate"):
         det.update(np.zeros((4, 3)), np.zeros(3), sole, np.zeros(3))
+
+
+def test_update_lowest_equals_update_on_a_noisy_two_foot_sequence():
+    rng = np.random.default_rng(4)
+    a, b = ContactDetector(), ContactDetector()  # warm-up ground estimate, debouncing, hysteresis
+    for k in range(400):
+        phase = (k % 60) / 60
+        feet = []
+        for side in (0, 1):
+            lift = max(0.0, math.sin(2 * math.pi * (phase + 0.5 * side))) * 0.08
+            sole = np.array([[0.0, 0.1 * side, 0.0], [0.25, 0.1 * side, 0.0], [0.25, 0.1 * side + 0.1, 0.01],
+                             [0.0, 0.1 * side + 0.1, 0.01]]) + [0.0, 0.0, lift]
+            sole += rng.normal(scale=0.003, size=sole.shape)
+            feet += [sole, rng.normal(scale=0.3 + 5 * lift, size=(4, 3))]
+        lowest = []
+        for sole, vel in zip(feet[::2], feet[1::2], strict=True):
+            i = int(np.argmin(sole[:, 2]))
+            lowest += [sole[i, 2], math.hypot(vel[i, 0], vel[i, 1])]
+        outside = (True, False) if k % 97 == 5 else None
+        assert a.update(*feet, contacts=outside) == b.update_lowest(*lowest, contacts=outside)
+        assert a.ground_height == b.ground_height and (a.left, a.right) == (b.left, b.right)
+
+
+@pytest.mark.parametrize("values", [(math.nan, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, math.inf), (0.0, "fast", 0.0, 0.0)])
+def test_update_lowest_rejects_non_finite_values(values):
+    det = ContactDetector()
+    with pytest.raises(ContactError, match="frame 0: lowest sole point heights and speeds must be finite"):
+        det.update_lowest(*values)
+    assert det.frame == 0
