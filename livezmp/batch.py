@@ -1,0 +1,222 @@
+"""Offline analysis of a whole take over arrays: the per-frame pipeline's results, fast.
+
+:meth:`livezmp.pipeline.Pipeline.run_batch` (and ``run``, ``livezmp analyze``) come
+here. The take goes through in chunks of frames; every stage works on a chunk's arrays
+and carries its state to the next chunk, so memory stays bounded whatever the take's
+length, and the results equal those of stepping the per-frame pipeline over the take
+(to rounding, about 1e-12 relative):
+
+1. estimator (:mod:`livezmp.batch_estimator`): settled Kalman filter as a recursion,
+   sliding spline as block matrix products;
+2. kinematics and centroidal dynamics (:mod:`livezmp.batch_kinematics`), sole corners
+   and their velocities;
+3. contacts and ground (:mod:`livezmp.batch_contacts`), support polygons and the clamp
+   of the ZMP (:mod:`livezmp.batch_support`).
+
+The batch path needs uniformly sampled, complete input from the start of a stream:
+irregular timestamps, missing samples (non-finite values), contacts from outside, a
+take shorter than two spline windows, or an angle whose Kalman innovation reaches ±π
+raise :class:`NotBatchable`, and the pipeline then runs frame by frame.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from livezmp.batch_contacts import detect_contacts
+from livezmp.batch_estimator import NotBatchable, estimate_chunks
+from livezmp.batch_kinematics import (
+    BatchKinematics,
+    UnsupportedModel,
+    batch_sole_velocities,
+    batch_soles,
+    body_frame_ids,
+)
+from livezmp.batch_support import support_clamp
+from livezmp.body import BodyModel
+from livezmp.contacts import ContactDetector
+from livezmp.estimator import StreamingEstimator
+from livezmp.pipeline import FrameResult, PipelineConfig
+from livezmp.support import SUPPORT_LABELS, support_polygon
+
+__all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch"]
+
+DEFAULT_CHUNK = 8192  # frames per chunk: a few tens of MB of working arrays for a 132-channel skeleton
+_NONE = SUPPORT_LABELS.index("none")
+
+
+@dataclass
+class BatchResult:
+    """The analysis of N frames as arrays, internal frame (z up, metres); row i is frame ``index[i]``.
+
+    ``zmp`` (N, 3) is valid where ``has_zmp`` (else zeros: flight); ``support`` (N,) int8
+    indexes ``SUPPORT_LABELS`` ("left", "right", "double", "none"); ``inside``, ``clamped``
+    (N, 3) and ``margin`` (N,) are valid where ``judged`` (a ZMP and some support; else
+    False / zeros); ``soles`` {side: (N, k, 3)}; ``q``, ``v``, ``a`` (N, nq) only when kept
+    (else None). See :class:`livezmp.pipeline.FrameResult` for each field."""
+
+    index: np.ndarray
+    t: np.ndarray
+    zmp: np.ndarray
+    has_zmp: np.ndarray
+    com: np.ndarray
+    support: np.ndarray
+    judged: np.ndarray
+    inside: np.ndarray
+    clamped: np.ndarray
+    margin: np.ndarray
+    ground_z: np.ndarray
+    load: np.ndarray
+    soles: dict[str, np.ndarray]
+    q: np.ndarray | None = None
+    v: np.ndarray | None = None
+    a: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @property
+    def labels(self) -> np.ndarray:
+        """Support labels (N,) as strings."""
+        return np.array(SUPPORT_LABELS)[self.support]
+
+    def frame(self, i: int) -> FrameResult:
+        """Row ``i`` as the per-frame pipeline's :class:`FrameResult` (needs the kept states)."""
+        if self.q is None:
+            raise ValueError("this BatchResult has no q, v, a: run it with keep_states=True")
+        label = SUPPORT_LABELS[self.support[i]]
+        soles = {side: s[i] for side, s in self.soles.items()}
+        ground = float(self.ground_z[i])
+        res = FrameResult(int(self.index[i]), float(self.t[i]), self.q[i], self.v[i], self.a[i],
+                          self.zmp[i].copy() if self.has_zmp[i] else None, self.com[i].copy(), label,
+                          support_polygon(soles["left"], soles["right"], label), soles, ground,
+                          load=float(self.load[i]))
+        if self.judged[i]:
+            res.inside, res.margin, res.clamped = bool(self.inside[i]), float(self.margin[i]), self.clamped[i].copy()
+        return res
+
+    def frames(self) -> list[FrameResult]:
+        """Every row as a :class:`FrameResult`."""
+        return [self.frame(i) for i in range(len(self))]
+
+    @classmethod
+    def from_frames(cls, results: list[FrameResult], keep_states: bool = True) -> BatchResult:
+        """Pack per-frame results (in frame order) into arrays."""
+        nan3 = np.zeros(3)
+        sides = list(results[0].soles) if results else ["left", "right"]
+
+        def stack(values, shape=(0,)):
+            return np.array(values) if results else np.zeros(shape)
+
+        return cls(
+            index=np.array([r.index for r in results], dtype=np.int64),
+            t=stack([r.t for r in results]),
+            zmp=stack([nan3 if r.zmp is None else r.zmp for r in results], (0, 3)),
+            has_zmp=np.array([r.zmp is not None for r in results], dtype=bool),
+            com=stack([r.com for r in results], (0, 3)),
+            support=np.array([SUPPORT_LABELS.index(r.support) for r in results], dtype=np.int8),
+            judged=np.array([r.inside is not None for r in results], dtype=bool),
+            inside=np.array([bool(r.inside) for r in results], dtype=bool),
+            clamped=stack([nan3 if r.clamped is None else r.clamped for r in results], (0, 3)),
+            margin=stack([0.0 if r.margin is None else r.margin for r in results]),
+            ground_z=stack([r.ground_z for r in results]),
+            load=stack([r.load for r in results]),
+            soles={s: stack([r.soles[s] for r in results], (0, 0, 3)) for s in sides},
+            q=stack([r.q for r in results], (0, 0)) if keep_states else None,
+            v=stack([r.v for r in results], (0, 0)) if keep_states else None,
+            a=stack([r.a for r in results], (0, 0)) if keep_states else None,
+        )
+
+
+def _empty(count: int, body: BodyModel, keep_states: bool) -> BatchResult:
+    states = (np.empty((count, body.nq)) if keep_states else None for _ in range(3))
+    return BatchResult(
+        index=np.arange(count), t=np.empty(count), zmp=np.zeros((count, 3)), has_zmp=np.zeros(count, dtype=bool),
+        com=np.empty((count, 3)), support=np.empty(count, dtype=np.int8), judged=np.zeros(count, dtype=bool),
+        inside=np.zeros(count, dtype=bool), clamped=np.zeros((count, 3)), margin=np.zeros(count),
+        ground_z=np.empty(count), load=np.empty(count),
+        soles={side: np.empty((count, 4 if f.sole_local is None else len(f.sole_local), 3))
+               for side, f in body.feet.items()},
+        q=next(states), v=next(states), a=next(states),
+    )
+
+
+def _lowest(sole: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """z (C,) of each frame's lowest sole corner (the first of equals) and its horizontal speed (C,)."""
+    rows = np.arange(len(sole))
+    low = np.argmin(sole[:, :, 2], axis=1)
+    v = velocity[rows, low]
+    return sole[rows, low, 2], np.hypot(v[:, 0], v[:, 1])
+
+
+def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingEstimator, detector: ContactDetector,
+                  times: np.ndarray, frames: np.ndarray, chunk: int = DEFAULT_CHUNK,
+                  keep_states: bool = False) -> tuple[BatchResult, ContactDetector]:
+    """Analyse a whole take (``times`` (N,) s, ``frames`` (N, nq) raw channels) as the per-frame
+    pipeline would, chunk by chunk (see the module docstring).
+
+    ``estimator``: the pipeline's fresh estimator (used for the first frames, reset at the
+    end); ``detector``: the pipeline's contact detector, left as it was. Returns the result and
+    a copy of the detector in the state the per-frame pipeline would leave it.
+    ``keep_states`` keeps q, v, a of every frame (N × nq × 3 floats).
+    Raises :class:`NotBatchable` when the take needs the per-frame path."""
+    times = np.asarray(times, dtype=float)
+    frames = np.asarray(frames, dtype=float)
+    count = len(times)
+    if frames.ndim != 2 or frames.shape != (count, body.nq):
+        raise NotBatchable(f"frames of shape {frames.shape} for {count} times and {body.nq} channels")
+    if not all(np.isfinite(frames[i:i + chunk]).all() for i in range(0, count, chunk)):
+        raise NotBatchable("missing samples")
+    model = body.model if config.mode == "full" else body.point_model
+    try:
+        kin = BatchKinematics(model, body_frame_ids(body))
+    except UnsupportedModel as e:
+        raise NotBatchable(str(e)) from None
+    gravity = np.array(model.gravity.linear)
+    weight = kin.mass * -gravity[2]
+    out = _empty(count, body, keep_states)
+    out.t[:] = times
+    detector = copy.deepcopy(detector)
+    chunks = estimate_chunks(estimator, times, frames, body.channel_scale, chunk)
+    try:
+        for start, est in chunks:
+            rows = slice(start, start + est.shape[2])
+            dyn = kin.dynamics(*est)
+            soles = batch_soles(body, dyn.frames)
+            vel = batch_sole_velocities(body, dyn.frames, soles)
+            codes, ground = detect_contacts(detector, *_lowest(soles["left"], vel["left"]),
+                                            *_lowest(soles["right"], vel["right"]))
+            force = dyn.momentum_rate - kin.mass * gravity
+            zmp, has = _zmp(dyn.com, force, dyn.moment, ground, config.flight_fraction * weight)
+            judged = has & (codes != _NONE)
+            clamped, inside, margin = support_clamp(zmp[:, :2], codes, soles, judged)
+            out.zmp[rows], out.has_zmp[rows], out.com[rows], out.support[rows] = zmp, has, dyn.com, codes
+            out.judged[rows], out.inside[rows], out.margin[rows] = judged, inside, margin
+            out.clamped[rows, :2], out.clamped[rows, 2] = clamped, np.where(judged, ground, 0.0)
+            out.ground_z[rows], out.load[rows] = ground, force[:, 2] / weight
+            for side, s in soles.items():
+                out.soles[side][rows] = s
+            if keep_states:
+                out.q[rows], out.v[rows], out.a[rows] = (x.T for x in est)
+    finally:
+        chunks.close()
+    return out, detector
+
+
+def _zmp(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground: np.ndarray,
+         min_fz: float) -> tuple[np.ndarray, np.ndarray]:
+    """ZMP (C, 3) on the ground plane z = ``ground`` (C,) of the contact wrench (``force`` (C, 3) N,
+    ``moment`` (C, 3) N·m about the CoM ``com`` (C, 3)) and where there is one (F_z >= ``min_fz``):
+    :func:`livezmp.zmp.compute_zmp` on z = 0, then :func:`livezmp.zmp.zmp_on_plane`."""
+    fz = force[:, 2]
+    has = fz >= min_fz
+    fz = np.where(has, fz, 1.0)
+    h = com[:, 2]
+    x = com[:, 0] - (moment[:, 1] + h * force[:, 0]) / fz
+    y = com[:, 1] + (moment[:, 0] - h * force[:, 1]) / fz
+    zmp = np.stack([x + ground * force[:, 0] / fz, y + ground * force[:, 1] / fz, ground], axis=1)
+    zmp[~has] = 0.0
+    return zmp, has
