@@ -17,7 +17,7 @@ from livezmp.body import BodyModel, foot_soles, lowest_sole_points
 from livezmp.contacts import ContactConfig, ContactDetector, GroundConfig
 from livezmp.errors import InputError
 from livezmp.estimator import Estimate, EstimatorConfig, StreamingEstimator
-from livezmp.support import clamp_to_polygon, support_polygon
+from livezmp.support import support_and_clamp
 from livezmp.zmp import compute_zmp, zmp_on_plane
 
 MODES = ("full", "seed")
@@ -176,12 +176,12 @@ class Pipeline:
         if z.zmp is not None:
             # the ZMP was computed on z = 0; move it onto the detected ground plane
             zmp = zmp_on_plane(z.zmp, z.force, ground)
-        poly = support_polygon(left, right, support)  # the polygon lies on the ground: the z column is ignored
+        # the polygon lies on the ground: the soles' z column is ignored
+        poly, c = support_and_clamp(left, right, support, None if zmp is None else zmp[:2])
         fz = float(z.force[2])
         res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground,
                           load=fz / (data.mass[0] * -float(model.gravity.linear[2])))
-        if zmp is not None and len(poly):
-            c = clamp_to_polygon(zmp[:2], poly)
+        if c is not None:
             res.inside, res.margin = c.inside, c.margin
             x, y = c.point.tolist()
             res.clamped = np.array((x, y, ground))

@@ -165,6 +165,23 @@ def convex_hull(points_xy) -> np.ndarray:
     return np.array(_hull_rows(_xy_rows(points_xy, "points")), dtype=float).reshape(-1, 2)
 
 
+def _support_rows(left_sole_xy, right_sole_xy, support: str) -> list:
+    """Vertices of the support polygon (see :func:`support_polygon`) as (x, y) float pairs."""
+    if support not in SUPPORT_LABELS:
+        raise SupportError(f"support: unknown label {support!r}, expected one of {', '.join(SUPPORT_LABELS)}")
+    if support == "none":
+        return []
+    needed = ("left", "right") if support == "double" else (support,)
+    soles = {"left": left_sole_xy, "right": right_sole_xy}
+    rows: list[list[float]] = []
+    for foot in needed:
+        if soles[foot] is None:
+            raise SupportError(f"support {support!r} needs the {foot} sole, got None")
+        rows += _xy_rows(soles[foot], f"{foot} sole")
+    hull = _quad_hull(rows) if len(rows) == 4 else None
+    return _hull_rows(rows) if hull is None else hull
+
+
 def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
     """Support polygon for one frame, on the ground plane, in metres.
 
@@ -175,19 +192,19 @@ def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
     support, or an empty (0, 2) array in flight.
     Raises SupportError on an unknown label or when a needed sole is None or malformed.
     """
-    if support not in SUPPORT_LABELS:
-        raise SupportError(f"support: unknown label {support!r}, expected one of {', '.join(SUPPORT_LABELS)}")
-    if support == "none":
-        return np.empty((0, 2))
-    needed = ("left", "right") if support == "double" else (support,)
-    soles = {"left": left_sole_xy, "right": right_sole_xy}
-    rows: list[list[float]] = []
-    for foot in needed:
-        if soles[foot] is None:
-            raise SupportError(f"support {support!r} needs the {foot} sole, got None")
-        rows += _xy_rows(soles[foot], f"{foot} sole")
-    hull = _quad_hull(rows) if len(rows) == 4 else None
-    return np.array(_hull_rows(rows) if hull is None else hull, dtype=float).reshape(-1, 2)
+    return np.array(_support_rows(left_sole_xy, right_sole_xy, support), dtype=float).reshape(-1, 2)
+
+
+def support_and_clamp(left_sole_xy, right_sole_xy, support: str, p_xy) -> tuple[np.ndarray, Clamp | None]:
+    """:func:`support_polygon` and :func:`clamp_to_polygon` of ``p_xy`` to it, in one call (the polygon is
+    not checked again). Clamp is None in flight or when ``p_xy`` is None (no ZMP)."""
+    rows = _support_rows(left_sole_xy, right_sole_xy, support)
+    poly = np.array(rows, dtype=float).reshape(-1, 2)
+    if p_xy is None or not rows:
+        return poly, None
+    px, py = _point(p_xy)
+    qx, qy, inside, margin = _clamp_rows(px, py, rows)
+    return poly, Clamp(np.array((qx, qy)), inside, margin)
 
 
 def _nearest_on_segment(px: float, py: float, ax: float, ay: float, bx: float, by: float):

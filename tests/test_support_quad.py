@@ -1,5 +1,6 @@
 """The closed-form hull of a single sole (four corners round a convex quadrilateral) equals the general
-hull, vertex for vertex, on rotated rectangles, arbitrary four-point sets and degenerate ones."""
+hull, vertex for vertex, on rotated rectangles, arbitrary four-point sets and degenerate ones; the
+combined support_and_clamp equals support_polygon then clamp_to_polygon."""
 
 import math
 
@@ -7,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.support import _quad_hull, convex_hull, support_polygon
+from livezmp.support import _quad_hull, clamp_to_polygon, convex_hull, support_and_clamp, support_polygon
 
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
 size = st.floats(1e-3, 0.4, allow_nan=False)
@@ -69,3 +70,18 @@ def test_sliver_and_collinear_quadrilaterals_fall_back():
     assert _quad_hull([[0.0, 0.0], [1.0, 1e-12], [2.0, 0.0], [1.0, 1.0]]) is None  # a sliver vertex
     assert _quad_hull([[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]) is None  # a bow tie
     assert _quad_hull([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]) is None  # a repeated corner
+
+
+@settings(max_examples=300, deadline=None)
+@given(soles(), soles(), st.sampled_from(["left", "right", "double", "none"]),
+       st.one_of(st.none(), st.tuples(st.floats(-2e4, 2e4), st.floats(-2e4, 2e4))))
+def test_support_and_clamp_equals_polygon_then_clamp(left, right, support, p):
+    poly, clamp = support_and_clamp(left, right, support, p)
+    expected = support_polygon(left, right, support)
+    np.testing.assert_array_equal(poly, expected)
+    if p is None or support == "none":
+        assert clamp is None
+    else:
+        point, inside, margin = clamp_to_polygon(p, expected)
+        np.testing.assert_array_equal(clamp.point, point)
+        assert (clamp.inside, clamp.margin) == (inside, margin)
