@@ -68,6 +68,7 @@ class OnlineCorrector:
         self.delta = np.zeros(3)
         self.prev_step = np.zeros(3)
         self.w_left = 0.5
+        self._last_offsets = np.zeros(self.body.nq)  # the IK's warm start
 
     def sensitivity(self, q: np.ndarray) -> np.ndarray:
         """S (2, 3): quasi-static ZMP (= CoM) shift per radian of δ, m/rad; ``data`` must
@@ -114,6 +115,7 @@ class OnlineCorrector:
         self.delta = new
         offsets = np.zeros(self.body.nq)
         if np.any(self.delta):
-            q_new = self.mover.apply(q_command, self.delta, self.w_left)
+            q_new = self.mover.apply(q_command, self.delta, self.w_left, self._last_offsets)
             offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
+        self._last_offsets = offsets
         return OnlineCorrection(self.delta.copy(), offsets, limited)

@@ -233,14 +233,19 @@ class SimHumanoid:
     joint limits); ``dt``: the internal step (s); ``goal_window_s``, ``goal_lag_s``: the
     goal shaping (s, 0 = none; see the module docstring); ``clock``: a time source (s)
     for wall-clock stepping, e.g. ``time.monotonic``; ``torque_on``: initial torque of
-    every joint. The cost of a call is proportional to the simulated time it covers
-    (about 0.1 ms per step, see benchmarks/bench_sim_humanoid.py), so a clocked humanoid
-    is best kept up to date by a :class:`RealtimeThread`."""
+    every joint; ``device_steps``: whether :meth:`step`, the call a simulated device
+    makes at every packet, advances the simulation (False when a :class:`RealtimeThread`
+    alone keeps a clocked humanoid current, so a device's reply never waits for physics
+    steps: the reply reports the state of the last step, at most one thread period old,
+    as a real servo samples its encoder on its own clock). The cost of a call is
+    proportional to the simulated time it covers (about 0.1 ms per step, see
+    benchmarks/bench_sim_humanoid.py), so a clocked humanoid is best kept up to date by a
+    :class:`RealtimeThread`."""
 
     def __init__(self, body: BodyModel, posture: Array | None = None, *, servo: ServoPlant | None = None,
                  dt: float = 1e-3, goal_window_s: float = 0.008, goal_lag_s: float = 0.01,
                  fall_after_s: float = 0.2, contact_tolerance: float = 1e-3, clock: Callable[[], float] | None = None,
-                 torque_on: bool = False) -> None:
+                 torque_on: bool = False, device_steps: bool = True) -> None:
         if body.kind != "urdf" or len(body.base_channels) != 6:
             raise InputError("SimHumanoid: needs a URDF robot body with a floating base (body_from_urdf)")
         if not (dt > 0 and min(goal_window_s, goal_lag_s, fall_after_s, contact_tolerance) >= 0):
@@ -272,6 +277,7 @@ class SimHumanoid:
         self.fall_after_s = fall_after_s
         self.contact_tolerance = contact_tolerance
         self.clock = clock
+        self.device_steps = device_steps
         self._clock_zero = clock() if clock is not None else 0.0
         self.fallen: FallEvent | None = None
         self.counters = BalanceCounters()
@@ -316,7 +322,12 @@ class SimHumanoid:
             self.servo.set_torque(idx, on)
 
     def step(self, dt: float) -> None:
-        """Advance by ``dt`` seconds of simulated time, or, with a ``clock``, to the clock's time."""
+        """Advance by ``dt`` seconds of simulated time, or, with a ``clock``, to the clock's time;
+        nothing when the humanoid is not ``device_steps`` (its thread steps it)."""
+        if self.device_steps:
+            self._step(dt)
+
+    def _step(self, dt: float) -> None:
         with self._lock:
             if self.clock is not None:
                 self._advance(self.clock() - self._clock_zero)
@@ -340,7 +351,7 @@ class SimHumanoid:
         """Advance to the clock's time (needs a ``clock``)."""
         if self.clock is None:
             raise InputError("SimHumanoid.sync: this humanoid has no clock; use advance_to(t)")
-        self.step(0.0)
+        self._step(0.0)
 
     def push(self, push: Push) -> None:
         """Schedule a push (its ``start`` is simulated time, s)."""

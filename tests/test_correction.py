@@ -10,6 +10,7 @@ import pytest
 from data_paths import BANDAI, OP3_URDF
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from livezmp.base_placement import BasePlacer
 from livezmp.bvh import read_bvh
@@ -18,7 +19,7 @@ from livezmp.correction import CorrectionLimits, rate_limit
 from livezmp.demo import smooth_ramp
 from livezmp.online_correction import OnlineCorrector
 from livezmp.pipeline import FrameResult, Pipeline, default_config
-from livezmp.root_motion import RootMover, hip_axes
+from livezmp.root_motion import RootMover, euler_from_matrix, hip_axes
 
 # rotations about world +y; the OP3's pitch axes are ±y per side (URDF), hence the signs
 OP3_FLEX = (("l_hip_pitch", -1, 1), ("l_knee", 2, 1), ("l_ank_pitch", -1, -1),
@@ -221,3 +222,34 @@ def test_correct_cli_on_a_robot_csv(tmp_path, op3_body):
     assert moved and moved <= legs
     report = json.loads(rep.read_text())
     assert report["max_foot_displacement_mm"] < 0.01  # six-joint legs: the feet are exact
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])
+def test_euler_from_matrix_matches_scipy(seq):
+    rng = np.random.default_rng(7)
+    rotations = Rotation.random(300, random_state=rng)
+    for r in [*rotations, Rotation.from_euler(seq, [1.0, -np.pi / 2 + 1e-3, 0.5])]:
+        angles = euler_from_matrix(r.as_matrix(), seq)
+        np.testing.assert_allclose(Rotation.from_euler(seq, angles).as_matrix(), r.as_matrix(), atol=1e-12)
+        np.testing.assert_allclose(angles, r.as_euler(seq), atol=1e-9)
+    # within 1e-6 of gimbal lock the angles are scipy's (which only keeps the rotation to ~1e-8)
+    locked = Rotation.from_euler(seq, [0.3, np.pi / 2 - 1e-8, -0.2])
+    with pytest.warns(UserWarning, match="Gimbal"):
+        angles = euler_from_matrix(locked.as_matrix(), seq)
+    np.testing.assert_allclose(Rotation.from_euler(seq, angles).as_matrix(), locked.as_matrix(), atol=1e-7)
+
+
+def test_root_mover_warm_start_gives_the_same_legs(op3_body):
+    # the live corrector starts the leg IK from its last solution: same answer, fewer iterations
+    mover = RootMover(op3_body)
+    q = full_q(op3_body, op3_pose(op3_body))
+    cold = mover.apply(q, np.radians([2.0, -3.0, 0.5]), 0.5)
+    mover.ik_iterations = 2  # from the previous solution for a nearby δ, two iterations suffice
+    nearby = mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5, leg_start=cold - q)
+    assert mover.last_foot_error < 1e-7
+    mover.ik_iterations = 10
+    reference = mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5)
+    np.testing.assert_allclose(nearby, reference, atol=1e-6)
+    mover.ik_iterations = 2  # and without the warm start two iterations are not enough
+    mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5)
+    assert mover.last_foot_error > 1e-7

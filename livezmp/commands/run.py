@@ -285,11 +285,12 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "") 
         raise InputError(f"--link {kind}: expected one of {', '.join((*KINDS, 'mock'))}")
     if kind == "mock" and faults:
         raise InputError("--fault: the mock link has no devices to inject faults into")
-    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic)
+    # the mock link steps the humanoid at each read; behind devices, only its thread does,
+    # once per physics step, so no device reply waits for physics
+    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock")
     if kind == "mock":
         return SimRobot(humanoid, None, None, scenario)
-    # the devices step the humanoid at every packet; the thread keeps it going when none come
-    thread = RealtimeThread(humanoid, period=0.02).start()
+    thread = RealtimeThread(humanoid, period=humanoid.dt).start()
     try:
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults)
     except BaseException:
@@ -299,9 +300,9 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "") 
 
 
 def sim_process_setup() -> None:
-    """The simulator's threads (port server, physics) hand the GIL over within 0.5 ms
+    """The simulator's threads (port server, physics) hand the GIL over within 0.1 ms
     rather than 5 ms, so a reply is not held up behind a physics step."""
-    sys.setswitchinterval(5e-4)
+    sys.setswitchinterval(1e-4)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:

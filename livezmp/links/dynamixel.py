@@ -32,6 +32,7 @@ reply latency.
 from __future__ import annotations
 
 import math
+import select
 import termios
 import time
 from collections.abc import Sequence
@@ -74,6 +75,22 @@ OPEN_TRIES = 5  # attempts of each read at open: a glitch should not fail the wh
 
 _STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")])
 _PORT_ERRORS = (serial.SerialException, OSError, termios.error)  # termios: flushing a vanished pty
+
+
+class WaitingPortHandler(PortHandler):
+    """The sdk's port handler, but a read that finds no bytes waits for them (select on
+    the port, up to the packet's timeout) instead of polling again at once: the sdk's
+    own loop spins a whole CPU core for every reply, which on a small computer is the
+    core the servos' other work (and here the simulator) needs."""
+
+    def readPort(self, length):
+        data = self.ser.read(length)
+        if not data:
+            remaining_ms = self.packet_timeout - self.getTimeSinceStart()
+            if remaining_ms > 0:
+                select.select([self.ser.fileno()], [], [], remaining_ms / 1000.0)
+                data = self.ser.read(length)
+        return data
 
 
 class DynamixelLink(PortLink):
@@ -179,7 +196,7 @@ class DynamixelLink(PortLink):
     # -- open -----------------------------------------------------------------------------------
 
     def _open_port(self) -> None:
-        port = PortHandler(self.path)
+        port = WaitingPortHandler(self.path)
         try:
             ok = port.setBaudRate(self.baud)
         except _PORT_ERRORS as err:
