@@ -82,9 +82,10 @@ def _half_hull(pts: list) -> list:
     """One chain of Andrew's monotone-chain hull over sorted points, keeping only left turns."""
     chain: list = []
     for p in pts:
+        px, py = p
         while len(chain) >= 2:
             (ox, oy), (ax, ay) = chain[-2], chain[-1]
-            if (ax - ox) * (p[1] - oy) - (ay - oy) * (p[0] - ox) > 0.0:
+            if (ax - ox) * (py - oy) - (ay - oy) * (px - ox) > 0.0:
                 break
             chain.pop()
         chain.append(p)
@@ -98,8 +99,10 @@ def _drop_slivers(hull: list, tol: float) -> list:
     itself would not do, since for a near-vertical line the x order is not the order along it.
     """
     while len(hull) > 1:
-        triples = zip(hull[-1:] + hull[:-1], hull, hull[1:] + hull[:1], strict=True)
-        for i, ((ax, ay), (bx, by), (cx, cy)) in enumerate(triples):
+        m = len(hull)
+        (ax, ay), (bx, by) = hull[-1], hull[0]
+        for i in range(m):
+            cx, cy = hull[i + 1] if i + 1 < m else hull[0]
             ex, ey = cx - ax, cy - ay
             # Distance to the line first (cheap), to the segment only when that is small; |ex| + |ey| >= the
             # hypotenuse, so most vertices are cleared without computing it.
@@ -109,6 +112,7 @@ def _drop_slivers(hull: list, tol: float) -> list:
             ):
                 del hull[i]
                 break  # rare: start over with the new neighbours
+            ax, ay, bx, by = bx, by, cx, cy
         else:
             return hull
     return hull
