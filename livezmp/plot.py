@@ -11,17 +11,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from livezmp.batch import BatchResult  # noqa: E402
 from livezmp.body import BodyModel  # noqa: E402
-from livezmp.pipeline import FrameResult  # noqa: E402
 
 
-def plot_analysis(body: BodyModel, results: list[FrameResult], path: str | Path, title: str = "") -> None:
+def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title: str = "") -> None:
     """Write the figure to ``path`` (PNG). Axes are in the input's world frame, metres."""
-    nan3 = np.full(3, np.nan)
-    t = np.array([r.t for r in results])
-    zmp = body.to_input_frame(np.array([r.zmp if r.zmp is not None else nan3 for r in results]))
-    clamped = body.to_input_frame(np.array([r.clamped if r.clamped is not None else nan3 for r in results]))
-    com = body.to_input_frame(np.array([r.com for r in results]))
+    t = result.t
+    zmp = body.to_input_frame(np.where(result.has_zmp[:, None], result.zmp, np.nan))
+    clamped = body.to_input_frame(np.where(result.judged[:, None], result.clamped, np.nan))
+    com = body.to_input_frame(result.com)
+    labels = result.labels
     up = "xyz".index(body.up_axis)
     g = [k for k in range(3) if k != up]
     names = ["x", "y", "z"]
@@ -32,7 +32,7 @@ def plot_analysis(body: BodyModel, results: list[FrameResult], path: str | Path,
         ax.plot(t, zmp[:, k], lw=1, label="ZMP")
         ax.plot(t, clamped[:, k], lw=1, ls="--", label="ZMP clamped to support")
         ax.plot(t, com[:, k], lw=0.8, color="gray", label="CoM")
-        out = np.array([r.inside is False for r in results])
+        out = result.judged & ~result.inside
         ax.scatter(t[out], zmp[out, k], s=4, color="red", label="outside support", zorder=3)
         ax.set_ylabel(f"{names[k]} (m)")
         ax.grid(alpha=0.3)
@@ -42,11 +42,11 @@ def plot_analysis(body: BodyModel, results: list[FrameResult], path: str | Path,
         else:
             ax.set_xlabel("time (s)")
     top = fig.add_subplot(grid[:, 1])
-    step = max(1, len(results) // 150)
-    for r in results[::step]:
-        for side, sole in r.soles.items():
-            if r.support in (side, "double"):
-                s = body.to_input_frame(sole)[:, g]
+    step = max(1, len(result) // 150)
+    for i in range(0, len(result), step):
+        for side, soles in result.soles.items():
+            if labels[i] in (side, "double"):
+                s = body.to_input_frame(soles[i])[:, g]
                 s = np.vstack([s, s[:1]])
                 top.plot(s[:, 0], s[:, 1], lw=0.5, color="tab:green" if side == "left" else "tab:purple")
     top.plot(zmp[:, g[0]], zmp[:, g[1]], lw=0.8, label="ZMP")

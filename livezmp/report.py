@@ -1,35 +1,53 @@
-"""Per-frame tables and summaries of analysed frames, in the input's world frame."""
+"""Per-frame tables and summaries of an analysis (a :class:`livezmp.batch.BatchResult`), in the input's world frame."""
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
 import numpy as np
 
+from livezmp.batch import BatchResult
 from livezmp.body import BodyModel
-from livezmp.pipeline import FrameResult
+from livezmp.support import SUPPORT_LABELS
 
 ZMP_COLUMNS = ("frame", "time", "zmp_x", "zmp_y", "zmp_z", "com_x", "com_y", "com_z", "support", "inside",
                "clamped_x", "clamped_y", "clamped_z", "margin")
+CSV_ROWS = 20_000  # rows formatted per write: bounds the memory of the formatting
 
 
-def _xyz(body: BodyModel, p: np.ndarray | None) -> list[str]:
-    return ["", "", ""] if p is None else [f"{v:.6f}" for v in body.to_input_frame(p)]
+def _row_template(has_zmp: bool, judged: bool, label: str) -> str:
+    """printf template of one zmp.csv row; flight frames (and frames without support) leave the
+    ZMP / clamp cells empty."""
+    return ("%d,%.6f," + ("%.6f,%.6f,%.6f," if has_zmp else ",,,") + f"%.6f,%.6f,%.6f,{label},"
+            + ("%d,%.6f,%.6f,%.6f,%.6f" if judged else ",,,,") + "\r\n")
 
 
-def write_zmp_csv(body: BodyModel, results: list[FrameResult], path: str | Path) -> None:
+# templates indexed by 8 * has_zmp + 4 * judged + support code
+_TEMPLATES = np.array([_row_template(z, j, label) for z in (False, True) for j in (False, True)
+                       for label in SUPPORT_LABELS])
+
+
+def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path) -> None:
     """One row per frame; positions in metres in the input's world frame; flight frames
-    (and frames without support) leave the ZMP/clamp cells empty."""
+    (and frames without support) leave the ZMP/clamp cells empty.
+
+    Rows are formatted many at a time, each through a printf template chosen by which of
+    its cells are filled (the same text as Python's ``%.6f``), CRLF line ends as ``csv``."""
+    count = len(result)
+    values = np.column_stack([result.index, result.t, body.to_input_frame(result.zmp),
+                              body.to_input_frame(result.com), result.inside, body.to_input_frame(result.clamped),
+                              result.margin])
+    filled = np.ones(values.shape, dtype=bool)
+    filled[:, 2:5] = result.has_zmp[:, None]
+    filled[:, 8:13] = result.judged[:, None]
+    kind = 8 * result.has_zmp + 4 * result.judged + result.support
     with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
-        w.writerow(ZMP_COLUMNS)
-        for r in results:
-            inside = "" if r.inside is None else int(r.inside)
-            margin = "" if r.margin is None else f"{r.margin:.6f}"
-            w.writerow([r.index, f"{r.t:.6f}", *_xyz(body, r.zmp), *_xyz(body, r.com), r.support, inside,
-                        *_xyz(body, r.clamped), margin])
+        f.write(",".join(ZMP_COLUMNS) + "\r\n")
+        for lo in range(0, count, CSV_ROWS):
+            rows = slice(lo, lo + CSV_ROWS)
+            template = "".join(_TEMPLATES[kind[rows]].tolist())
+            f.write(template % tuple(values[rows][filled[rows]].tolist()))
 
 
 def ground_plane(body: BodyModel) -> str:
@@ -37,31 +55,32 @@ def ground_plane(body: BodyModel) -> str:
     return f"{axes[0]}{axes[1]} ({body.up_axis} = ground height)"
 
 
-def summarize(body: BodyModel, results: list[FrameResult], fps: float, mode: str) -> dict:
+def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str) -> dict:
     """The summary figures of an analysis (see README for each field)."""
-    n = len(results)
-    flight = sum(1 for r in results if r.zmp is None or r.support == "none")
-    judged = [r for r in results if r.inside is not None]
-    inside = sum(1 for r in judged if r.inside)
-    excursion = max((-r.margin for r in judged if not r.inside), default=0.0)
-    counts = {k: sum(1 for r in results if r.support == k) for k in ("left", "right", "double", "none")}
+    n = len(result)
+    none = SUPPORT_LABELS.index("none")
+    judged = int(result.judged.sum())
+    inside = int(result.inside[result.judged].sum())
+    out = result.judged & ~result.inside
+    excursion = float(np.max(-result.margin[out])) if out.any() else 0.0
+    counts = np.bincount(result.support, minlength=len(SUPPORT_LABELS))
     return {
         "frames": n,
         "fps": round(fps, 6),
-        "duration_s": round(results[-1].t - results[0].t, 6) if n else 0.0,
+        "duration_s": round(float(result.t[-1] - result.t[0]), 6) if n else 0.0,
         "up_axis": body.up_axis,
         "ground_plane": ground_plane(body),
         "units": body.units,
         "output_units": "m",
         "mode": mode,
         "total_mass_kg": round(body.total_mass, 4),
-        "support_frames": len(judged),
-        "flight_frames": flight,
-        "out_of_support_frames": len(judged) - inside,
-        "inside_fraction": round(inside / len(judged), 6) if judged else None,
-        "max_excursion_m": round(float(excursion), 6),
-        "support_counts": counts,
-        "ground_height_m": round(float(results[-1].ground_z), 6) if n else None,
+        "support_frames": judged,
+        "flight_frames": int(np.sum(~result.has_zmp | (result.support == none))),
+        "out_of_support_frames": judged - inside,
+        "inside_fraction": round(inside / judged, 6) if judged else None,
+        "max_excursion_m": round(excursion, 6),
+        "support_counts": {label: int(c) for label, c in zip(SUPPORT_LABELS, counts, strict=True)},
+        "ground_height_m": round(float(result.ground_z[-1]), 6) if n else None,
     }
 
 

@@ -4,6 +4,8 @@ chunk boundaries; and the fallbacks (missing samples, irregular times, mid-strea
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 import pytest
 from data_paths import BANDAI
@@ -14,6 +16,7 @@ from livezmp.batch import BatchResult, NotBatchable, analyse_batch
 from livezmp.body_bvh import body_from_bvh
 from livezmp.bvh import read_bvh
 from livezmp.pipeline import FrameResult, Pipeline, default_config
+from livezmp.report import ZMP_COLUMNS, write_zmp_csv
 
 CHUNK = 61  # small, so that a take crosses many chunk boundaries
 
@@ -155,3 +158,29 @@ def test_missing_samples_irregular_times_and_mid_stream_fall_back(bandai_walk):
     want = stepped(b, times[50:], bandai_walk.frames[50:])
     assert got.index[0] == 50 - a.lag
     assert_same(got, want, tol=0.0)
+
+
+def test_zmp_csv_is_the_row_by_row_text(tmp_path):
+    """The vectorised writer gives byte for byte what csv.writer gives row by row (empty ZMP and clamp
+    cells in flight), from the per-frame results of a walk with a hop."""
+    motion = read_bvh(BANDAI / "walk_normal_002.bvh")
+    body = body_from_bvh(motion)
+    times = np.arange(len(motion.frames)) * motion.frame_time
+    results = stepped(Pipeline(body, default_config(body, motion.fps), motion.frame_time), times,
+                      with_hop(motion, times, motion.frames))
+
+    def xyz(p):
+        return ["", "", ""] if p is None else [f"{v:.6f}" for v in body.to_input_frame(p)]
+
+    want = tmp_path / "want.csv"
+    with open(want, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(ZMP_COLUMNS)
+        for r in results:
+            w.writerow([r.index, f"{r.t:.6f}", *xyz(r.zmp), *xyz(r.com), r.support,
+                        "" if r.inside is None else int(r.inside), *xyz(r.clamped),
+                        "" if r.margin is None else f"{r.margin:.6f}"])
+    got = tmp_path / "got.csv"
+    write_zmp_csv(body, BatchResult.from_frames(results, keep_states=False), got)
+    assert got.read_bytes() == want.read_bytes()
+    assert ",,,," in want.read_text()  # flight rows were compared too
