@@ -1,12 +1,19 @@
-"""The per-frame pipeline (estimate → ZMP → contacts → support → clamp): latency,
-offline throughput and memory, with the naive baseline side by side.
+"""The pipeline (estimate → ZMP → contacts → support → clamp): offline throughput of the
+per-frame path and the batch path side by side on a one-hour 120 Hz take, per-frame
+latency and streaming memory, with the naive baseline side by side.
 
-Baseline (what the seed paper's chain does naively): at every frame re-fit a scipy
-cubic spline through the whole history of every channel and differentiate it for
+Offline take: the Bandai walk resampled to 120 Hz (a cubic spline through each channel,
+angles unwrapped first), played forth and back (so every channel stays continuous)
+until one hour long: 432,000 frames. The per-frame path is ``Pipeline.step`` on every
+frame then ``flush``; the batch path is ``Pipeline.run_batch`` (chunks over arrays).
+Both run on the same take in the same process, and their results are compared.
+
+Latency baseline (what the seed paper's chain does naively): at every frame re-fit a
+scipy cubic spline through the whole history of every channel and differentiate it for
 velocity and acceleration, then the same ZMP/support code.
 
-    python benchmarks/bench_pipeline.py                 # about two minutes
-    python benchmarks/bench_pipeline.py --rss-frames 1000000 --hour   # the full memory / one-hour runs
+    python benchmarks/bench_pipeline.py                  # about four minutes (the per-frame hour: 1-2 min)
+    python benchmarks/bench_pipeline.py --minutes 10     # a shorter take (the printout says so)
 """
 
 from __future__ import annotations
@@ -15,17 +22,21 @@ import argparse
 import os
 import resource
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from livezmp.batch import BatchResult
 from livezmp.body_bvh import body_from_bvh
 from livezmp.body_urdf import body_from_urdf
 from livezmp.bvh import read_bvh
 from livezmp.estimator import Estimate
 from livezmp.pipeline import Pipeline, default_config
+from livezmp.report import write_zmp_csv
+from livezmp.support import SUPPORT_LABELS
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 OP3 = DATA / "robots" / "robotis_op3.urdf"
@@ -81,16 +92,108 @@ def rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def load_average() -> str:
+    """The 1-minute load average."""
+    return Path("/proc/loadavg").read_text().split()[0]
+
+
+def long_take(motion, rate: float, minutes: float) -> tuple[np.ndarray, np.ndarray]:
+    """The walk resampled to ``rate`` Hz (cubic spline per channel, angles unwrapped), played forth
+    and back until ``minutes`` long: (times (N,), frames (N, channels))."""
+    t = np.arange(len(motion.frames)) * motion.frame_time
+    rot = np.array([c.endswith("rotation") for c in motion.channel_labels()])
+    frames = motion.frames.copy()
+    frames[:, rot] = np.unwrap(frames[:, rot], period=360.0, axis=0)
+    clip = CubicSpline(t, frames, axis=0)(np.arange(int(t[-1] * rate) + 1) / rate)
+    loop = np.concatenate([clip, clip[-2:0:-1]])  # forth and back: no jump where it repeats
+    n = int(round(minutes * 60 * rate))
+    return np.arange(n) / rate, np.tile(loop, (n // len(loop) + 1, 1))[:n]
+
+
+def per_frame_take(body, cfg, rate: float, times: np.ndarray, frames: np.ndarray) -> tuple[float, BatchResult]:
+    """Seconds for ``step`` on every frame then ``flush``, and the results (key fields only)."""
+    n = len(times)
+    zmp, has, support = np.zeros((n, 3)), np.zeros(n, bool), np.zeros(n, np.int8)
+    judged, inside, margin = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n)
+    label = {s: i for i, s in enumerate(SUPPORT_LABELS)}
+
+    def keep(r) -> None:
+        i = r.index
+        if r.zmp is not None:
+            zmp[i], has[i] = r.zmp, True
+        support[i] = label[r.support]
+        if r.inside is not None:
+            judged[i], inside[i], margin[i] = True, r.inside, r.margin
+
+    pipe = Pipeline(body, cfg, 1 / rate)
+    start = time.perf_counter()
+    for k in range(n):
+        r = pipe.step(float(times[k]), frames[k])
+        if r is not None:
+            keep(r)
+    for r in pipe.flush():
+        keep(r)
+    elapsed = time.perf_counter() - start
+    empty = np.zeros((n, 3))
+    return elapsed, BatchResult(np.arange(n), times, zmp, has, empty, support, judged, inside, empty, margin,
+                                np.zeros(n), np.zeros(n), {})
+
+
+def offline(motion, walk, minutes: float, repeats: int, per_frame: bool) -> None:
+    rate = 120.0
+    times, frames = long_take(motion, rate, minutes)
+    n = len(times)
+    cfg = default_config(walk, rate)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    Pipeline(walk, cfg, 1 / rate).run_batch(times[:2000], frames[:2000])  # imports and first-call costs
+    runs = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        batch = Pipeline(walk, cfg, 1 / rate).run_batch(times, frames)
+        runs.append((time.perf_counter() - start, load_average()))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        write_zmp_csv(walk, batch, Path(tmp) / "zmp.csv")
+        csv_s = time.perf_counter() - start
+        csv_mb = (Path(tmp) / "zmp.csv").stat().st_size / 2**20
+    secs = sorted(r[0] for r in runs)
+    median = secs[len(secs) // 2]
+    label = f"{minutes:g} min" + ("" if minutes == 60 else " (not one hour: --minutes)")
+    print(f"\noffline: Bandai walk at {rate:.0f} Hz, forth and back, {label}: {n:,} frames, 132 channels, full ZMP")
+    print(f"{'path':44s} {'seconds':>9s} {'frames/s':>11s}  runs (s @ 1-min load average)")
+    print(f"{'batch: Pipeline.run_batch':44s} {median:9.2f} {n / median:11,.0f}  "
+          + ", ".join(f"{s:.2f} @ {ld}" for s, ld in runs))
+    if per_frame:
+        el, ref = per_frame_take(walk, cfg, rate, times, frames)
+        load = load_average()
+        print(f"{'per-frame: step on every frame, then flush':44s} {el:9.2f} {n / el:11,.0f}  1 run @ {load}"
+              f"  (batch {el / median:.0f}x faster)")
+        both = batch.has_zmp & ref.has_zmp
+        print(f"batch vs per-frame: max |ZMP difference| {np.abs(batch.zmp[both] - ref.zmp[both]).max():.1e} m, "
+              f"max |margin difference| {np.abs(batch.margin - ref.margin).max():.1e} m; frames differing in "
+              f"support label {int(np.sum(batch.support != ref.support))}, "
+              f"in flight {int(np.sum(batch.has_zmp != ref.has_zmp))}, "
+              f"in inside flag {int(np.sum(batch.inside != ref.inside))}")
+    print(f"batch peak RSS {peak:.0f} MB (before the take's analysis {before:.0f} MB; the take's input array "
+          f"{frames.nbytes / 2**20:.0f} MB)")
+    print(f"zmp.csv of the take ({n:,} rows, {csv_mb:.0f} MB) written in {csv_s:.2f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=4000, help="frames per latency run")
     ap.add_argument("--rss-frames", type=int, default=200_000, help="frames streamed for the memory figure")
-    ap.add_argument("--hour", action="store_true", help="time a full one-hour take (else 10 minutes, scaled)")
+    ap.add_argument("--minutes", type=float, default=60.0, help="length of the offline take (default one hour)")
+    ap.add_argument("--repeats", type=int, default=3, help="batch runs of the offline take (the median is shown)")
+    ap.add_argument("--no-per-frame", action="store_true", help="skip the per-frame run of the offline take")
     args = ap.parse_args()
 
     op3 = body_from_urdf(OP3)
     motion = read_bvh(WALK)
     walk = body_from_bvh(motion)
+    # the offline take first: the process's peak RSS is then the batch run's
+    offline(motion, walk, args.minutes, args.repeats, not args.no_per_frame)
     rows = []
     rate = 200.0
     t, q = op3_stream(op3, args.frames, rate)
@@ -111,18 +214,6 @@ def main() -> None:
     for name, p50, p99 in rows:
         print(f"{name:62s} {p50:10.1f} {p99:10.1f}")
     print(f"speed-up over the baseline at 60 s of history (p50): {rows[2][1] / rows[0][1]:.0f}x")
-
-    # offline throughput on a long take: the walk repeated to one hour (or 10 minutes)
-    seconds = 3600 if args.hour else 600
-    n = int(seconds * motion.fps)
-    frames = np.tile(motion.frames, (int(np.ceil(n / len(motion.frames))), 1))[:n]
-    times = np.arange(n) * motion.frame_time
-    pipe = Pipeline(walk, default_config(walk, motion.fps), motion.frame_time)
-    s = time.perf_counter()
-    pipe.run(times, frames)
-    el = time.perf_counter() - s
-    print(f"\noffline: {seconds / 60:.0f} min Bandai take ({n} frames at 30 Hz) in {el:.1f} s = {n / el:,.0f} frames/s"
-          f"; a one-hour 120 Hz take (432,000 frames) would take {432000 / (n / el):.0f} s")
 
     # memory over a long stream
     pipe = Pipeline(op3, default_config(op3, rate), 1 / rate)
