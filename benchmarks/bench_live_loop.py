@@ -12,7 +12,10 @@ loop runs here at the asked rate on absolute deadlines. Rows, side by side in on
   the corrector at 125 Hz (the default: every 4th cycle at 500 Hz) and every cycle;
 * the live loop asked for twice the rate (1 kHz by default);
 * faults: fast sync read with 1 % of replies dropped and 1 % corrupted, the reply
-  timeout cut to 12 ms (a drop costs one timeout).
+  timeout cut to 12 ms (a drop costs one timeout);
+* the live loop and simulator at normal scheduling priority: every other row runs the
+  loop under SCHED_FIFO (as `livezmp run` does by default) and the simulator's devices
+  just below it (they stand in for servo hardware, which nothing on the computer delays).
 
 The command is the `demo` scenario (lean past the toes and back, then the arm swing,
 which goes on to the end of the run), so the corrector is working. Columns: achieved
@@ -36,6 +39,7 @@ from livezmp.links import LinkError, open_link
 from livezmp.links.mock import MockLink
 from livezmp.live_loop import LiveLoop, LoopConfig
 from livezmp.loop_clock import LoopClock, TimingHistogram
+from livezmp.realtime import LOOP_PRIORITY, realtime_priority
 from sim_devices.servo_plant import ServoPlant
 
 
@@ -98,8 +102,9 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 
 
 def row(options: str, rate: float, seconds: float, robot, correct_hz: float = 125.0, faults: str = "",
-        baseline: bool = False) -> dict:
-    with SimProcess("dynamixel", ("demo", {}), faults) as sim:
+        baseline: bool = False, priority: int = LOOP_PRIORITY) -> dict:
+    with SimProcess("dynamixel", ("demo", {}), faults, realtime_priority=max(priority - 1, 0)) as sim, \
+            realtime_priority(priority):
         url = f"{sim.url}&{options}" if options else sim.url
         for attempt in range(3):  # with faults injected from the start, opening may fail: try again
             try:
@@ -121,8 +126,12 @@ def main() -> None:
     args = parser.parse_args()
     robot = load_robot(None, None)
     r, sec = args.rate, args.seconds
+    with realtime_priority(LOOP_PRIORITY) as refused:
+        scheduling = (f"SCHED_FIFO {LOOP_PRIORITY} for the loop, {LOOP_PRIORITY - 1} for the simulator"
+                      if refused is None else f"normal scheduling (real-time priority {refused})")
     print(f"livezmp_mini, 20 simulated XM430s (simulator in its own process); {os.cpu_count()} CPUs; "
-          f"{sec:g} s per row; asked {r:g} Hz unless the row says otherwise\n")
+          f"{sec:g} s per row; asked {r:g} Hz unless the row says otherwise; {scheduling} unless the row says "
+          "otherwise\n")
     header = ("| loop                                   |      Hz | missed % | skipped |  p50 ms |  p99 ms | "
               "read / estimate / correct / write, mean ms | busy ms | fell | inside % | failed reads |")
     print(header)
@@ -139,6 +148,7 @@ def main() -> None:
         ("live loop, fast sync read", "fast=1", r, sec, {}),
         ("live loop, fast, correct every cycle", "fast=1", r, sec, {"correct_hz": r}),
         ("live loop, fast sync read, 1 kHz", "fast=1", 2 * r, sec, {}),
+        ("live loop, fast, normal priority", "fast=1", r, sec, {"priority": 0}),
         # 12 ms: the servos' factory return delays (20 x 0.5 ms) must fit while the link opens
         ("live loop, fast, 1% drop + 1% corrupt", "fast=1&timeout=0.012", r, sec,
          {"faults": "drop=0.01,corrupt=0.01"}),

@@ -104,6 +104,8 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     s = json.loads(path.read_text())
     assert s["cycles"] == 100 and s["good_frames"] == 100 and s["commands_sent"] == 100
     assert s["inside_fraction"] == 1.0 and s["state"] == "running"
+    # the loop asked for SCHED_FIFO by default; granted or not, the summary says which
+    assert s["realtime_priority"] in (0, 50)
 
 
 @pytest.mark.parametrize(("argv", "message"), [
@@ -116,6 +118,8 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
      "give --motion or --scenario, not both"),
     (["demo", "--link", "mock", "--fault", "drop=0.1"], "the mock link has no devices"),
     (["demo", "--fault", "drop=2"], "fault spec field 'drop': expected a probability in [0, 1], got '2'"),
+    (["demo", "--realtime-priority", "120"], "--realtime-priority 120: must be 1-99"),
+    (["sim", "--link", "dynamixel", "--realtime-priority", "-1"], "--realtime-priority -1: must be 1-99"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):
     assert main(argv) == 2

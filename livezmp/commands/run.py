@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import json
 import multiprocessing
+import os
 import sys
 import threading
 import time
@@ -39,6 +40,7 @@ from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
 from livezmp.links.mock import MockLink
 from livezmp.live_loop import LiveLoop, LoopConfig
+from livezmp.realtime import LOOP_PRIORITY, check_priority, realtime_priority
 from livezmp.report import write_json
 from livezmp.robot_config import RobotConfig, find_robot_config, load_robot_config
 from livezmp.safety import SafetyConfig
@@ -126,6 +128,9 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-correction-deg", type=float, default=float(np.degrees(s.max_correction_rad)),
                    help="largest correction of any joint, degrees")
     p.add_argument("--quiet", action="store_true", help="no live status line (events are still told)")
+    p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY,
+                   help=f"run the loop under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY}; "
+                        "0 = normal scheduling); if refused it runs at normal priority and says so")
 
 
 def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
@@ -199,10 +204,12 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
     status = StatusLine(args.quiet)
     loop = LiveLoop(link, robot.body, loop_config(args, loop_rate(args, link)), command=command, fell=fell,
                     on_event=status.event, on_status=status)
-    with stop_on_signals(loop.request_stop):
+    with stop_on_signals(loop.request_stop), realtime_priority(args.realtime_priority) as refused:
+        if refused not in (None, "off"):
+            status.event(f"real-time priority {refused}: the loop runs at normal priority")
         summary = loop.run(duration)
     status.done()
-    return summary
+    return {**summary, "realtime_priority": args.realtime_priority if refused is None else 0}
 
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
@@ -216,6 +223,7 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    check_priority(args.realtime_priority)
     robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")
@@ -306,43 +314,57 @@ def sim_process_setup() -> None:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    check_priority(args.realtime_priority)
     robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
     sim_process_setup()
-    sim = start_sim(robot, args.link, scenario, args.fault)
     stop = threading.Event()
-    try:
-        sim.start_scenario()
-        print(json.dumps({"link": args.link, "url": sim.devices.url, "ports": [p.path for p in sim.devices.ports],
-                          "robot": str(robot.urdf), "scenario": scenario.name, "faults": args.fault}), flush=True)
-        with stop_on_signals(lambda _name: stop.set()):
-            while not stop.wait(0.2):
-                pass
-    finally:
-        sim.close()
+    # the devices' threads inherit the priority: they stand in for hardware, which no other
+    # program on the computer delays
+    with realtime_priority(args.realtime_priority) as refused:
+        sim = start_sim(robot, args.link, scenario, args.fault)
+        try:
+            sim.start_scenario()
+            print(json.dumps({"link": args.link, "url": sim.devices.url, "ports": [p.path for p in sim.devices.ports],
+                              "robot": str(robot.urdf), "scenario": scenario.name, "faults": args.fault,
+                              "realtime_priority": args.realtime_priority if refused is None else 0}), flush=True)
+            with stop_on_signals(lambda _name: stop.set()):
+                while not stop.wait(0.2):
+                    pass
+        finally:
+            sim.close()
     v = sim.verdict()
     print(f"livezmp sim: stopped; the robot {'fell: ' + v['fall'] if v['fell'] else 'did not fall'}",
           file=sys.stderr, flush=True)
     return 0
 
 
-def _sim_child(conn, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
-               faults: str) -> None:
-    """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``."""
+FELL_FLAG_EVERY_S = 0.02  # how often a SimProcess's child looks for a fall to flag
+
+
+def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
+               faults: str, priority: int) -> None:
+    """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
+    ``fell_flag`` (a multiprocessing Event) once the robot has fallen."""
     sim = None
     try:
         sim_process_setup()
+        if priority:  # the devices stand in for hardware, which no other program delays
+            with contextlib.suppress(OSError):  # refused: they run at normal priority
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
         robot = load_robot(urdf, config)
         sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults)
         conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
         while True:
+            if not conn.poll(FELL_FLAG_EVERY_S):
+                if sim.fell():
+                    fell_flag.set()
+                continue
             request = conn.recv()
             if request == "start":
                 sim.start_scenario()
                 conn.send(None)
-            elif request == "fell":
-                conn.send(sim.fell())
             elif request == "verdict":
                 conn.send({**sim.verdict(), "injected_faults": vars(sim.devices.fault_counters)})
             elif request == "servos":
@@ -363,13 +385,18 @@ class SimProcess:
     """The simulated humanoid and its devices in a child process — its own core and
     interpreter, as a real robot is another machine — driven over a pipe: ``url`` and
     ``ports`` of its devices; :meth:`start_scenario`, :meth:`fell`, :meth:`verdict`;
-    :meth:`vanish` / :meth:`restore` its ports. ``scenario``: (name, keyword arguments)."""
+    :meth:`vanish` / :meth:`restore` its ports. ``scenario``: (name, keyword arguments);
+    ``realtime_priority``: SCHED_FIFO priority of the child's threads (0: normal; if refused,
+    normal)."""
 
     def __init__(self, kind: str, scenario: tuple[str, dict], faults: str = "", urdf: str | None = None,
-                 config: str | None = None, start_timeout: float = 60.0):
+                 config: str | None = None, start_timeout: float = 60.0, realtime_priority: int = 0):
         ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no threads or locks inherited
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_sim_child, args=(child, urdf, config, kind, scenario, faults),
+        # the fall is a flag the child raises, so the loop's frequent question costs no round trip
+        self._fell = ctx.Event()
+        self._proc = ctx.Process(target=_sim_child, args=(child, self._fell, urdf, config, kind, scenario, faults,
+                                                             realtime_priority),
                                  name="livezmp-sim", daemon=True)
         self._proc.start()
         child.close()
@@ -393,7 +420,8 @@ class SimProcess:
         self._ask("start")
 
     def fell(self) -> bool:
-        return self._ask("fell")
+        """Whether the robot fell (seen within FELL_FLAG_EVERY_S of the fall)."""
+        return self._fell.is_set()
 
     def verdict(self) -> dict:
         return self._ask("verdict")
@@ -436,7 +464,8 @@ def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenari
 
 def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
-    with SimProcess(args.link, (args.scenario, {}), args.fault) as sim:
+    with SimProcess(args.link, (args.scenario, {}), args.fault,
+                    realtime_priority=max(args.realtime_priority - 1, 0)) as sim:
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -457,6 +486,7 @@ def check_faults(spec: str) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    check_priority(args.realtime_priority)
     robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
@@ -489,6 +519,9 @@ def add_run_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default="stand",
                    help=f"initial posture and pushes ({', '.join(SCENARIOS)}; default stand)")
     p.add_argument("--fault", default="", help="fault spec, e.g. drop=0.01,corrupt=0.01,vanish=3s+1s")
+    p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY - 1,
+                   help=f"run the devices under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY - 1}, "
+                        "just below the loop's; 0 = normal scheduling)")
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("demo", help="the live loop on the built-in simulated humanoid")
