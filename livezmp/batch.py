@@ -105,7 +105,7 @@ class BatchResult:
     @classmethod
     def from_frames(cls, results: list[FrameResult], keep_states: bool = True) -> BatchResult:
         """Pack per-frame results (in frame order) into arrays."""
-        nan3 = np.zeros(3)
+        zero3 = np.zeros(3)
         sides = list(results[0].soles) if results else ["left", "right"]
 
         def stack(values, shape=(0,)):
@@ -114,13 +114,13 @@ class BatchResult:
         return cls(
             index=np.array([r.index for r in results], dtype=np.int64),
             t=stack([r.t for r in results]),
-            zmp=stack([nan3 if r.zmp is None else r.zmp for r in results], (0, 3)),
+            zmp=stack([zero3 if r.zmp is None else r.zmp for r in results], (0, 3)),
             has_zmp=np.array([r.zmp is not None for r in results], dtype=bool),
             com=stack([r.com for r in results], (0, 3)),
             support=np.array([SUPPORT_LABELS.index(r.support) for r in results], dtype=np.int8),
             judged=np.array([r.inside is not None for r in results], dtype=bool),
             inside=np.array([bool(r.inside) for r in results], dtype=bool),
-            clamped=stack([nan3 if r.clamped is None else r.clamped for r in results], (0, 3)),
+            clamped=stack([zero3 if r.clamped is None else r.clamped for r in results], (0, 3)),
             margin=stack([0.0 if r.margin is None else r.margin for r in results]),
             ground_z=stack([r.ground_z for r in results]),
             load=stack([r.load for r in results]),
