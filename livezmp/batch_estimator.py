@@ -214,12 +214,14 @@ def _estimates(pos: np.ndarray, first: int, start: int, end: int, total: int, ti
                lag: int, win: int, matrix: np.ndarray) -> np.ndarray:
     """(3, n, end - start) estimates of frames [start, end) from the filtered positions ``pos``
     of frames [first, first + pos.shape[1])."""
-    out = np.empty((3, pos.shape[0], end - start))
 
     def window(lo: int, hi: int) -> np.ndarray:
         return pos[:, lo - first:hi - first]
 
     regular_lo, regular_hi = max(start, win - lag - 1), min(end, total - lag)
+    if (regular_lo, regular_hi) == (start, end):  # the common case: a full window for every frame
+        return _sliding(window(start + lag - win + 1, end + lag), matrix, end - start)[:, :, :end - start]
+    out = np.empty((3, pos.shape[0], end - start))
     for i in range(start, regular_lo):  # the window still filling: fits on the first i + lag + 1 samples
         out[:, :, i - start] = (window(0, i + lag + 1) @ window_weights(times[:i + lag + 1], lam, i).T).T
     if regular_hi > regular_lo:
