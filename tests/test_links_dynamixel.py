@@ -25,6 +25,7 @@ from test_links_support import (
 
 from livezmp.links import make_link
 from livezmp.links.base import LinkError, LinkReadError
+from livezmp.links.dynamixel import FAST_SYNC_READ_FIRMWARE
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.dynamixel_control_table import OVERLOAD_ERROR
 from sim_devices.launch import start_devices
@@ -64,7 +65,8 @@ def test_positions_follow_each_servos_zero_and_direction():
 
 
 def test_fast_sync_read_reads_the_same_as_sync_read():
-    with rig("dynamixel") as r:
+    with rig("dynamixel", options="timeout=0.1&fast=0") as r:
+        assert not r.link.fast_read
         slow = r.link.read()
         fast_link = make_link(with_options(r.devices.url, "fast=1&timeout=0.1"), r.names, r.config)
         fast_link.open()
@@ -74,6 +76,20 @@ def test_fast_sync_read_reads_the_same_as_sync_read():
             fast_link.close()
         np.testing.assert_array_equal(fast.positions, slow.positions)
         assert fast.velocities.shape == fast.currents.shape == (20,)
+
+
+def test_fast_sync_read_by_default_only_where_every_servo_has_it():
+    with rig("dynamixel") as r:  # fast=auto: the simulated XM430s run firmware 46
+        assert r.link.fast_read
+        chain = chain_of(r)
+        chain.set_register(9, "firmware_version", FAST_SYNC_READ_FIRMWARE - 1)  # one servo too old
+        old = make_link(with_options(r.devices.url, "timeout=0.1"), r.names, r.config)
+        old.open()
+        try:
+            assert not old.fast_read
+            np.testing.assert_array_equal(old.read().positions, r.link.read().positions)
+        finally:
+            old.close()
 
 
 def test_overload_is_reported_as_hardware_error_of_that_joint():

@@ -50,7 +50,7 @@ def test_options_reach_the_backends():
     ("fw:/dev/x?fast=1", "unknown option 'fast' for fw: (options: baud, rate, watchdog, timeout)"),
     ("mock:?rate=3", "unknown option 'rate' for mock: (options: none)"),
     ("dynamixel:/dev/x?baud=fast", "option 'baud' must be a positive integer, got 'fast'"),
-    ("dynamixel:/dev/x?fast=2", "option 'fast' must be 0 or 1, got '2'"),
+    ("dynamixel:/dev/x?fast=2", "option 'fast' must be 0, 1 or auto, got '2'"),
     ("fw:/dev/x?timeout=0", "option 'timeout' must be seconds > 0, got '0'"),
     ("fw:/dev/x?watchdog=-1", "option 'watchdog' must be seconds >= 0, got '-1'"),
     ("fw:/dev/x?watchdog=70", "option 'watchdog' must be at most 65.535 s, got 70.0"),

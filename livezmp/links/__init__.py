@@ -1,6 +1,6 @@
 """Servo links: `open_link` picks and opens the backend a URL names (URL forms: :mod:`livezmp.links.base`).
 
-    dynamixel:PATH[?baud=1000000&fast=0&watchdog=0.1&timeout=S]
+    dynamixel:PATH[?baud=1000000&fast=auto&watchdog=0.1&timeout=S]
     can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
     fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
     mock:
@@ -23,7 +23,7 @@ __all__ = ["FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "Li
 
 FORMS = "dynamixel:PATH, can:INTERFACE:CHANNEL, fw:URL or mock:"
 _OPTIONS = {  # scheme -> option -> (parser, default)
-    "dynamixel": {"baud": ("rate", 1_000_000), "fast": ("flag", False), "watchdog": ("time", 0.1),
+    "dynamixel": {"baud": ("rate", 1_000_000), "fast": ("auto_flag", None), "watchdog": ("time", 0.1),
                   "timeout": ("positive", None)},
     "can": {"bitrate": ("rate", None), "rate": ("rate", 30), "watchdog": ("time", 0.2),
             "timeout": ("positive", 0.1)},
@@ -60,7 +60,9 @@ def parse_link_url(url: str) -> tuple[str, str, dict[str, str]]:
 
 def _value(url: str, name: str, kind: str, text: str):
     try:
-        if kind == "flag":
+        if kind in ("flag", "auto_flag"):
+            if text == "auto" and kind == "auto_flag":
+                return None
             if text not in ("0", "1", "true", "false"):
                 raise ValueError
             return text in ("1", "true")
@@ -71,7 +73,7 @@ def _value(url: str, name: str, kind: str, text: str):
                                 "positive": lambda v: 0 < v < 1e4}[kind](value)
     if not ok:
         want = {"rate": "a positive integer", "time": "seconds >= 0", "positive": "seconds > 0",
-                "flag": "0 or 1"}[kind]
+                "flag": "0 or 1", "auto_flag": "0, 1 or auto"}[kind]
         raise InputError(f"link URL '{url}': option '{name}' must be {want}, got '{text}'")
     return value
 

@@ -1,10 +1,12 @@
 """Dynamixel Protocol 2.0 servo link, through the ROBOTIS dynamixel-sdk.
 
-    dynamixel:PATH[?baud=1000000&fast=1&watchdog=0.1&timeout=0.034]
+    dynamixel:PATH[?baud=1000000&fast=auto&watchdog=0.1&timeout=0.034]
 
 One sync read per `read` (Present Current, Velocity and Position of every servo, addresses
-126-135 of the X-series control table), or a Fast Sync Read with ``fast=1`` (one status
-packet for all servos; X-series firmware 45+); one sync write of Goal Position per
+126-135 of the X-series control table), or a Fast Sync Read (one status packet for all
+servos: about half the bytes and one reply to parse instead of one per servo) with
+``fast=1``, or by default (``fast=auto``) when every servo's firmware is 45 or later (the
+X-series firmware that has it) and the installed dynamixel-sdk has it; one sync write of Goal Position per
 `write_goals`. Servo ids, zero offsets, directions and ticks per revolution come from the
 robot config (`ServoConfig`); currents and velocities use the XM/XH units (2.69 mA,
 0.229 rpm).
@@ -54,6 +56,8 @@ from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, P
 from livezmp.robot_config import ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
+FIRMWARE_VERSION = 6  # EEPROM
+FAST_SYNC_READ_FIRMWARE = 45  # X-series firmware with Fast Sync Read (ROBOTIS e-manual)
 RETURN_DELAY_TIME = 9  # EEPROM, 2 us units
 OPERATING_MODE = 11  # EEPROM
 POSITION_LIMITS = 48  # EEPROM: Max Position Limit (4 bytes), Min Position Limit (4), in ticks
@@ -96,12 +100,13 @@ class WaitingPortHandler(PortHandler):
 class DynamixelLink(PortLink):
     """Servos ``servos[i]`` drive joints ``joint_names[i]`` (see module docstring).
 
-    ``baud`` (bit/s), ``fast`` (Fast Sync Read), ``watchdog`` (s, 0: off), ``timeout``
+    ``baud`` (bit/s), ``fast`` (Fast Sync Read; None: where every servo has it, see
+    ``fast_read`` after `open`), ``watchdog`` (s, 0: off), ``timeout``
     (s per transaction, None: the sdk's). Construction does no I/O; `open` does.
     """
 
     def __init__(self, path: str, joint_names: Sequence[str], servos: Sequence[ServoConfig], *,
-                 baud: int = 1_000_000, fast: bool = False, watchdog: float = 0.1,
+                 baud: int = 1_000_000, fast: bool | None = None, watchdog: float = 0.1,
                  timeout: float | None = None) -> None:
         if len(servos) != len(joint_names):
             raise ValueError(f"DynamixelLink: {len(joint_names)} joints but {len(servos)} servos")
@@ -116,6 +121,7 @@ class DynamixelLink(PortLink):
         self.ids = ids
         self.baud = baud
         self.fast = fast
+        self.fast_read = bool(fast)  # what `read` uses: decided at open when fast is None
         self.watchdog = watchdog
         self.timeout = timeout
         self.stats = LinkStats()
@@ -148,7 +154,7 @@ class DynamixelLink(PortLink):
     def read(self) -> LinkFrame:
         """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
         self.stats.reads += 1
-        errors, data = self._sync_read(PRESENT_STATE, PRESENT_STATE_LENGTH, self.fast)
+        errors, data = self._sync_read(PRESENT_STATE, PRESENT_STATE_LENGTH, self.fast_read)
         t = time.monotonic()
         alerts = {i: self._hardware_error(i) for i, e in enumerate(errors) if e & ALERT}
         state = np.frombuffer(data, dtype=_STATE)
@@ -213,13 +219,19 @@ class DynamixelLink(PortLink):
             self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
 
     def _configure(self) -> None:
-        eeprom = self._read_at_open(RETURN_DELAY_TIME, 3)  # return delay, drive mode, operating mode
+        # firmware version, id, baud rate, return delay, drive mode, operating mode
+        eeprom = self._read_at_open(FIRMWARE_VERSION, OPERATING_MODE - FIRMWARE_VERSION + 1)
+        stride = OPERATING_MODE - FIRMWARE_VERSION + 1
+        firmware, delays, modes = eeprom[0::stride], eeprom[RETURN_DELAY_TIME - FIRMWARE_VERSION::stride], \
+            eeprom[OPERATING_MODE - FIRMWARE_VERSION::stride]
+        if self.fast is None:
+            self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
-        limited = np.frombuffer(eeprom, dtype=np.uint8)[2::3] == 3
+        limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
         self._lowest = np.where(limited, limits[:, 1], -2.0**31)
         ram = self._read_at_open(TORQUE_ENABLE, 1)
-        for i, (delay, mode) in enumerate(zip(eeprom[0::3], eeprom[2::3], strict=True)):
+        for i, (delay, mode) in enumerate(zip(delays, modes, strict=True)):
             if mode not in POSITION_MODES:
                 raise LinkError(f"{self.path}: {self._who(i)} is in operating mode {mode}, not a position mode "
                                 f"({', '.join(f'{k} {v}' for k, v in POSITION_MODES.items())})")
