@@ -22,6 +22,7 @@ raise :class:`NotBatchable`, and the pipeline then runs frame by frame.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -154,15 +155,16 @@ def _lowest(sole: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingEstimator, detector: ContactDetector,
                   times: np.ndarray, frames: np.ndarray, chunk: int = DEFAULT_CHUNK,
-                  keep_states: bool = False) -> tuple[BatchResult, ContactDetector]:
+                  keep_states: bool = False,
+                  progress: Callable[[int], None] | None = None) -> tuple[BatchResult, ContactDetector]:
     """Analyse a whole take (``times`` (N,) s, ``frames`` (N, nq) raw channels) as the per-frame
     pipeline would, chunk by chunk (see the module docstring).
 
     ``estimator``: the pipeline's fresh estimator (used for the first frames, reset at the
     end); ``detector``: the pipeline's contact detector, left as it was. Returns the result and
     a copy of the detector in the state the per-frame pipeline would leave it.
-    ``keep_states`` keeps q, v, a of every frame (N × nq × 3 floats).
-    Raises :class:`NotBatchable` when the take needs the per-frame path."""
+    ``keep_states`` keeps q, v, a of every frame (N × nq × 3 floats); ``progress(frames_done)``
+    is called after each chunk. Raises :class:`NotBatchable` when the take needs the per-frame path."""
     times = np.asarray(times, dtype=float)
     frames = np.asarray(frames, dtype=float)
     count = len(times)
@@ -201,6 +203,8 @@ def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingE
                 out.soles[side][rows] = s
             if keep_states:
                 out.q[rows], out.v[rows], out.a[rows] = (x.T for x in est)
+            if progress is not None:
+                progress(rows.stop)
     finally:
         chunks.close()
     return out, detector

@@ -8,6 +8,7 @@ last ones at the end of a file.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -21,6 +22,7 @@ from livezmp.support import support_and_clamp
 from livezmp.zmp import compute_zmp, zmp_on_plane
 
 MODES = ("full", "seed")
+PROGRESS_EVERY = 500  # frames between progress reports of the per-frame path
 
 
 @dataclass(frozen=True)
@@ -126,7 +128,7 @@ class Pipeline:
         return self._run_steps(times, frames, contacts)
 
     def run_batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None,
-                  keep_states: bool = False):
+                  keep_states: bool = False, progress: Callable[[int], None] | None = None):
         """Analyse a whole motion into a :class:`livezmp.batch.BatchResult` (arrays, one row per frame).
 
         On uniformly sampled, complete input at the start of a stream the take is analysed in
@@ -134,13 +136,17 @@ class Pipeline:
         rounding, at a small fraction of the cost, in bounded memory. Otherwise (irregular
         timestamps, missing samples, frames already stepped, a model the batch pass does not
         handle) the frames are stepped one by one and packed. ``keep_states`` keeps q, v, a
-        (N × nq each), which :meth:`BatchResult.frames` needs."""
+        (N × nq each), which :meth:`BatchResult.frames` needs. ``progress(frames_done)`` is
+        called as the work goes on (for a progress bar)."""
         from livezmp.batch import BatchResult  # livezmp.batch builds on this module
 
-        batch = self._batch(times, frames, chunk, keep_states)
-        return batch if batch is not None else BatchResult.from_frames(self._run_steps(times, frames), keep_states)
+        batch = self._batch(times, frames, chunk, keep_states, progress)
+        if batch is not None:
+            return batch
+        return BatchResult.from_frames(self._run_steps(times, frames, progress=progress), keep_states)
 
-    def _batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None, keep_states: bool = False):
+    def _batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None, keep_states: bool = False,
+               progress: Callable[[int], None] | None = None):
         """The batch path's result, or None when the take needs the per-frame path."""
         from livezmp.batch import DEFAULT_CHUNK, NotBatchable, analyse_batch
 
@@ -148,18 +154,20 @@ class Pipeline:
             return None
         try:
             result, self.contacts = analyse_batch(self.body, self.config, self.estimator, self.contacts, times,
-                                                  frames, chunk or DEFAULT_CHUNK, keep_states)
+                                                  frames, chunk or DEFAULT_CHUNK, keep_states, progress)
         except NotBatchable:
             return None
         return result
 
-    def _run_steps(self, times: np.ndarray, frames: np.ndarray,
-                   contacts: list[tuple[bool, bool]] | None = None) -> list[FrameResult]:
+    def _run_steps(self, times: np.ndarray, frames: np.ndarray, contacts: list[tuple[bool, bool]] | None = None,
+                   progress: Callable[[int], None] | None = None) -> list[FrameResult]:
         out = []
         for k in range(len(frames)):
             r = self.step(float(times[k]), frames[k], None if contacts is None else contacts[k])
             if r is not None:
                 out.append(r)
+            if progress is not None and k % PROGRESS_EVERY == 0:
+                progress(k)
         return out + self.flush()
 
     def _analyse(self, est: Estimate) -> FrameResult:

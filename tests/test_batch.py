@@ -160,6 +160,20 @@ def test_missing_samples_irregular_times_and_mid_stream_fall_back(bandai_walk):
     assert_same(got, want, tol=0.0)
 
 
+def test_progress_is_reported_up_to_the_whole_take(bandai_walk):
+    body = body_from_bvh(bandai_walk)
+    dt = bandai_walk.frame_time
+    n = len(bandai_walk.frames)
+    times = np.arange(n) * dt
+    gappy = bandai_walk.frames.copy()
+    gappy[100, 10] = np.nan  # the per-frame path
+    for frames, last in ((bandai_walk.frames, n), (gappy, (n - 1) // 500 * 500)):
+        seen = []
+        Pipeline(body, default_config(body, bandai_walk.fps), dt).run_batch(times, frames, chunk=64,
+                                                                            progress=seen.append)
+        assert seen and seen == sorted(seen) and seen[-1] == last
+
+
 def test_zmp_csv_is_the_row_by_row_text(tmp_path):
     """The vectorised writer gives byte for byte what csv.writer gives row by row (empty ZMP and clamp
     cells in flight), from the per-frame results of a walk with a hop."""

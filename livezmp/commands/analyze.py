@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import argparse
 
+from rich.progress import Progress
+
 from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
 from livezmp.errors import InputError
 from livezmp.pipeline import Pipeline
 from livezmp.plot import plot_analysis
 from livezmp.report import summarize, write_json, write_zmp_csv
+
+PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -21,7 +25,14 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if len(loaded.frames) < 2:
         raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
     cfg = pipeline_config(args, loaded)
-    results = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps).run_batch(loaded.times, loaded.frames)
+    pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
+    if len(loaded.frames) < PROGRESS_FRAMES:
+        results = pipe.run_batch(loaded.times, loaded.frames)
+    else:  # a long take: show how far the analysis is
+        with Progress(transient=True) as bar:
+            task = bar.add_task("analysing", total=len(loaded.frames))
+            results = pipe.run_batch(loaded.times, loaded.frames,
+                                     progress=lambda done: bar.update(task, completed=done))
     summary = {"source": loaded.source, **summarize(loaded.body, results, loaded.fps, cfg.mode)}
     if args.out:
         write_zmp_csv(loaded.body, results, args.out)

@@ -14,7 +14,7 @@ from livezmp.body_bvh import BvhBodyOptions
 from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
 from livezmp.demo import demo_robot_path, demo_trajectory
 from livezmp.motion_file import LoadedMotion, load_motion, trajectory_frames
-from livezmp.pipeline import Pipeline, PipelineConfig, default_config
+from livezmp.pipeline import PipelineConfig, default_config
 from livezmp.segments import load_mapping
 
 
@@ -54,28 +54,6 @@ def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineC
         p[up] = args.ground
         ground = float((loaded.body.world_from_input @ p)[2])
     return default_config(loaded.body, loaded.fps, args.mode, ground)
-
-
-def run_pipeline(loaded: LoadedMotion, cfg: PipelineConfig, progress: bool = False) -> list:
-    """All frames of ``loaded`` through one :class:`Pipeline`; a progress bar if asked."""
-    dt = 1.0 / loaded.fps if loaded.fps > 0 else None
-    pipe = Pipeline(loaded.body, cfg, nominal_dt=dt)
-    if not progress:
-        return pipe.run(loaded.times, loaded.frames)
-    from rich.progress import Progress
-
-    out = []
-    with Progress(transient=True) as bar:
-        task = bar.add_task("analysing", total=len(loaded.frames))
-        for k in range(len(loaded.frames)):
-            r = pipe.step(float(loaded.times[k]), loaded.frames[k])
-            if r is not None:
-                out.append(r)
-            if k % 500 == 0:
-                bar.update(task, completed=k)
-    return out + pipe.flush()
-
-
 
 
 @contextlib.contextmanager
