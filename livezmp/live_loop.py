@@ -7,7 +7,11 @@ Every cycle of a :class:`~livezmp.loop_clock.LoopClock` (absolute deadlines):
 2. estimate: the robot has no base sensor, so the base pose comes from the joint
    angles with the stance foot flat (:class:`~livezmp.base_placement.BasePlacer`);
    base + joints go through the per-frame :class:`~livezmp.pipeline.Pipeline`
-   (results lag by the estimator's lag);
+   (results lag by the estimator's lag). Where the link reads foot sensors
+   (``LoopConfig.contacts``), they say which feet are down instead of the kinematic
+   detection; and each analysed sample is paired with the sensor reading of the same
+   sample, whose centre of pressure, placed on the result's soles, is compared with the
+   computed ZMP (:mod:`livezmp.foot_sensors`; summary ``cop_vs_zmp``);
 3. correct: at ``correct_hz`` (every few cycles) the
    :class:`~livezmp.online_correction.OnlineCorrector` turns the newest result into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
@@ -35,6 +39,10 @@ dropping torque, or a servo's hardware error, the loop only monitors. On every w
 — the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
 first call to the link.
 
+With a ``recorder`` (:class:`~livezmp.loop_recording.LoopRecorder`) every good sample,
+analysed result, foot-sensor reading and command's correction is queued for its
+background writer: the loop only appends objects to a bounded queue.
+
 Memory is bounded (histograms, a short event list) and each cycle costs the same
 whatever the length of the run.
 """
@@ -54,8 +62,10 @@ from livezmp.correction import CorrectionLimits
 from livezmp.demo import smooth_ramp
 from livezmp.errors import InputError
 from livezmp.estimator import EstimatorConfig
-from livezmp.links.base import Link, LinkError, LinkFrame, LinkReadError
+from livezmp.foot_sensors import CONTACT_FRACTION, CopLocator, CopVsZmp, contact_force, sensor_contacts
+from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError
 from livezmp.loop_clock import LoopClock, Tick, TimingHistogram
+from livezmp.loop_recording import LoopRecorder
 from livezmp.online_correction import OnlineCorrector
 from livezmp.pipeline import FrameResult, Pipeline, default_config
 from livezmp.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
@@ -63,6 +73,7 @@ from livezmp.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, join
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
 EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
+CONTACT_MODES = ("auto", "sensors", "kinematics")
 
 
 @dataclass(frozen=True)
@@ -74,7 +85,13 @@ class LoopConfig:
     ``estimator_*``: window, lag (s) and cutoff (Hz) of the estimator;
     ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits on the root
     rotation (its angular acceleration pushes the ZMP the other way first, so it is kept
-    gentle); ``status_every_s``: period of the status callback."""
+    gentle); ``status_every_s``: period of the status callback.
+    ``contacts``: where the feet's contacts come from: ``"sensors"`` (the link's foot
+    sensors: a foot is down when its cells carry more than ``contact_fraction`` of the
+    body's weight; a frame without a reading falls back to kinematic detection, counted
+    and told), ``"kinematics"`` (detected from the sole heights and speeds, sensors
+    ignored), ``"auto"`` (sensors whenever the frame has them, silently kinematics
+    otherwise). Sensor readings are compared with the ZMP in every mode."""
 
     rate_hz: float = 500.0
     correct: bool = True
@@ -87,6 +104,8 @@ class LoopConfig:
     correction_limits: CorrectionLimits = field(default_factory=CorrectionLimits)
     status_every_s: float = 1.0
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    contacts: str = "auto"
+    contact_fraction: float = CONTACT_FRACTION
 
 
 @dataclass
@@ -108,6 +127,8 @@ class LoopCounters:
     watchdog_trips: int = 0
     reconnects: int = 0
     resumes: int = 0
+    sensor_contacts: int = 0  # good frames whose contacts came from the foot sensors
+    no_sensor_frames: int = 0  # good frames without a foot-sensor reading, with contacts="sensors"
     hardware_errors: dict[str, int] = field(default_factory=dict)
 
 
@@ -118,18 +139,21 @@ class LiveLoop:
     frame's posture. ``clock``: a :class:`LoopClock` (default: real time at
     ``config.rate_hz``). ``fell()``: the simulator's fall flag, when there is one.
     ``on_event(msg)`` gets one-line notes of state changes; ``on_status(dict)`` a status
-    every ``config.status_every_s``."""
+    every ``config.status_every_s``. ``recorder``: where to record the run (it is not
+    closed here)."""
 
     def __init__(self, link: Link, body: BodyModel, config: LoopConfig | None = None,
                  command: Callable[[float], np.ndarray] | None = None, clock: LoopClock | None = None,
                  fell: Callable[[], bool] | None = None, on_event: Callable[[str], None] | None = None,
-                 on_status: Callable[[dict], None] | None = None):
+                 on_status: Callable[[dict], None] | None = None, recorder: LoopRecorder | None = None):
         self.link = link
         self.body = body
         self.config = config or LoopConfig()
         cfg = self.config
         if not (math.isfinite(cfg.correct_hz) and cfg.correct_hz > 0):
             raise InputError(f"corrector rate {cfg.correct_hz!r} Hz: must be a positive number")
+        if cfg.contacts not in CONTACT_MODES:
+            raise InputError(f"contacts {cfg.contacts!r}: expected one of {', '.join(CONTACT_MODES)}")
         self.clock = clock or LoopClock(cfg.rate_hz)
         self.dt = self.clock.period
         self.correct_every = max(1, round(1.0 / (self.dt * cfg.correct_hz)))
@@ -137,6 +161,10 @@ class LiveLoop:
         self.fell = fell
         self.on_event = on_event
         self.on_status = on_status
+        self.recorder = recorder
+        self.min_force = contact_force(body, cfg.contact_fraction)
+        self.cop_locator = CopLocator(body, self.min_force)
+        self.cop_vs_zmp = CopVsZmp()
         self.limits = joint_limits(body)
         self.guard = FrameGuard(self.limits, cfg.safety)
         self.limiter = GoalLimiter(self.limits, cfg.safety, self.dt)
@@ -157,6 +185,8 @@ class LiveLoop:
         self.torque_dropped = False
         self.stopped = False  # the watchdog stopped commanding
         self.link_down = False
+        self._samples = 0  # samples given to the estimators over the whole run
+        self._reading: tuple[tuple[bool, bool] | None, FootSensors | None] = (None, None)  # the sample's sensors
         self._restart_estimation()
 
     # -- state ---------------------------------------------------------------------------------
@@ -177,7 +207,10 @@ class LiveLoop:
         self._fresh = False  # a new result arrived this cycle
         self._started = False  # the estimator has had a real sample
         self._fed = 0  # samples given to this pipeline
+        self._index0 = self._samples  # run-wide number of this pipeline's first sample
         self._valid = np.zeros(self.pipe.lag + 1, dtype=bool)  # were the last lag + 1 samples real?
+        self._feet: list[FootSensors | None] = [None] * (self.pipe.lag + 1)  # ... and their foot sensors
+        self._delta = np.zeros(3)  # the corrector's latest root rotation (rad)
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
@@ -213,6 +246,8 @@ class LiveLoop:
         self._next_status = self.config.status_every_s
         self._link_errors0 = self.link.stats.read_errors
         tick = self.clock.start()
+        if self.recorder is not None:
+            self.recorder.start()
         # a watchdog shorter than a few periods would trip on one late frame of a slow stream
         self.watchdog = Watchdog(max(self.config.safety.watchdog_s, 3 * self.dt), tick.woke)
         try:
@@ -276,7 +311,7 @@ class LiveLoop:
         self.watchdog.feed(t1)
         if frame.hardware_errors:
             self._hardware_errors(t, frame)
-        self._estimate(t, frame.positions)
+        self._estimate(t, frame)
         t2 = now()
         self.times["estimate"].add(t2 - t1)
         if self.halted is not None:
@@ -299,6 +334,8 @@ class LiveLoop:
         if np.any(self.limiter.offsets):
             self.counters.corrections_sent += 1
         self.counters.corrections_limited += limited
+        if self.recorder is not None and self.corrector is not None:
+            self.recorder.correction(self._index0 + self._fed - 1, t, self._delta, limited, self.limiter.offsets)
 
     def _read(self, t: float) -> LinkFrame | None:
         try:
@@ -315,17 +352,40 @@ class LiveLoop:
         if self._started:
             self._feed(t, self._nan, valid=False)
 
-    def _estimate(self, t: float, q: np.ndarray) -> None:
+    def _estimate(self, t: float, frame: LinkFrame) -> None:
+        q = frame.positions
+        self._reading = (self._contacts(t, frame.feet), frame.feet)
         self._feed(t, np.concatenate([self.placer.update(q), q]), valid=True)
         self._started = True
 
+    def _contacts(self, t: float, feet: FootSensors | None) -> tuple[bool, bool] | None:
+        """(left, right) from the foot sensors, or None for kinematic detection (see LoopConfig.contacts)."""
+        mode = self.config.contacts
+        if mode == "kinematics":
+            return None
+        contacts = sensor_contacts(feet, self.min_force)
+        if contacts is not None:
+            self.counters.sensor_contacts += 1
+        elif mode == "sensors":
+            self.counters.no_sensor_frames += 1
+            self._event(t, "no foot-sensor reading of both feet: contacts detected from the kinematics",
+                        kind="no_sensors")
+        return contacts
+
     def _feed(self, t: float, channels: np.ndarray, valid: bool) -> None:
-        """One sample into the pipeline; keep its result only when it is the analysis of
-        a real sample, not of the estimator's prediction across a gap."""
+        """One sample into the pipeline, with the contacts and foot sensors of a real one
+        (``_reading``); keep its result only when it is the analysis of a real sample, not
+        of the estimator's prediction across a gap."""
+        contacts, feet = self._reading if valid else (None, None)
         ring = self._valid
-        ring[self._fed % len(ring)] = valid
+        slot = self._fed % len(ring)
+        ring[slot] = valid
+        self._feet[slot] = feet
+        if valid and self.recorder is not None:
+            self.recorder.input(self._index0 + self._fed, t, channels, contacts)
         self._fed += 1
-        result = self.pipe.step(t, channels)
+        self._samples += 1
+        result = self.pipe.step(t, channels, contacts)
         if result is None or not ring[result.index % len(ring)]:
             return
         self.result = result
@@ -333,6 +393,19 @@ class LiveLoop:
         if result.inside is not None:
             self.counters.judged += 1
             self.counters.inside += bool(result.inside)
+        self._compare_sensors(result)
+
+    def _compare_sensors(self, result: FrameResult) -> None:
+        """The foot sensors read with ``result``'s sample against its ZMP; both recorded."""
+        feet = self._feet[result.index % len(self._feet)]
+        if feet is not None:
+            cop = self.cop_locator.locate(feet, result.soles)
+            distance = self.cop_vs_zmp.add(cop, result.zmp, result.clamped)
+        if self.recorder is not None:
+            index = self._index0 + result.index
+            self.recorder.result(index, result)
+            if feet is not None:
+                self.recorder.feet(index, result.t, feet, cop, distance)
 
     def _command(self, t: float, present: np.ndarray) -> np.ndarray:
         """The command at t, blended in from the posture where commanding (re)started."""
@@ -351,7 +424,8 @@ class LiveLoop:
             return
         self._next_correction = t + self.correct_every * self.dt
         q_command = np.concatenate([self.command_placer.update(command), command])
-        self.offsets = self.corrector.step(self.result, q_command).offsets[self.nb:]
+        step = self.corrector.step(self.result, q_command)
+        self.offsets, self._delta = step.offsets[self.nb:], step.delta
 
     # -- faults --------------------------------------------------------------------------------
 
@@ -455,6 +529,9 @@ class LiveLoop:
             "reconnects": c.reconnects,
             "resumes": c.resumes,
             "hardware_errors": dict(c.hardware_errors),
+            "contacts": {"mode": self.config.contacts, "from_sensors": c.sensor_contacts,
+                         "frames_without_sensors": c.no_sensor_frames},
+            "cop_vs_zmp": self.cop_vs_zmp.summary() if self.cop_vs_zmp.readings else None,
             "clock": clock.as_dict(),
             "timing": {s: h.summary_ms() for s, h in self.times.items()},
             "link": {"reads": stats.reads, "read_errors": stats.read_errors, "writes": stats.writes,

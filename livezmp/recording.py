@@ -10,6 +10,9 @@ opens it and plots any field):
 - ``/alarm``: out-of-support alarms raised and cleared;
 - ``/device_error``: faults of the source (bad packets, lost connections).
 
+The live loop (``livezmp run --record``) adds ``/foot_sensors`` (:data:`LOOP_SCHEMAS`):
+the robot's foot forces and measured centre of pressure beside the computed ZMP.
+
 The body the session analysed is stored as attachments (``body/<file>``) plus the
 ``livezmp.body`` metadata record, and the monitor settings as ``livezmp.session``, so
 ``livezmp replay`` rebuilds the same body and re-runs the same analysis.
@@ -18,14 +21,20 @@ Crash safety: chunks (zstd, CRC of each chunk's data) are closed and handed to t
 kernel at least every ``chunk_seconds`` (0.5 s), so a killed monitor loses at most
 that much. Such a file has no summary; :func:`recover` copies every intact record
 into a complete file and stops at the first truncated or corrupt one.
+
+A real-time thread hands its messages to a :class:`BackgroundWriter`, which encodes and
+writes them in a thread of its own from a bounded queue, and counts what a full queue
+turned away.
 """
 
 from __future__ import annotations
 
 import json
 import struct
+import threading
 import time
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,6 +131,30 @@ SCHEMAS = {
     }),
 }
 TOPICS = tuple(SCHEMAS)
+_FORCES = {"type": "object",
+           "properties": {s: {"type": "array", "items": {"type": "number"}} for s in ("left", "right")}}
+LOOP_SCHEMAS = {
+    "/foot_sensors": ("livezmp.FootSensors", {
+        "type": "object",
+        "description": "The robot's foot sensors at one analysed input sample, beside the ZMP computed for it "
+                       "(the /result of the same index); points in that result's frame: z up, metres.",
+        "properties": {
+            "index": {"type": "integer", "description": "input sample number, as in /input and /result"},
+            "t": {"type": "number", "description": "sample time, s"},
+            "forces": {**_FORCES, "description": "vertical force of each sole cell, N, in the device's order "
+                                                 "(firmware boards: front-left, front-right, rear-left, rear-right)"},
+            "cop_sole": {"type": "object", "description": "the board's centre of pressure per foot in its sole frame "
+                                                          "(x forward, y left, from the sole's centre), m",
+                         "properties": {s: {"anyOf": [_POINT2, {"type": "null"}]} for s in ("left", "right")}},
+            "load": {"type": "number", "description": "sum of the forces, N"},
+            "cop": {**_MAYBE_POINT, "description": "measured centre of pressure in the result's world frame, m; "
+                                                   "null in flight"},
+            "zmp_distance": {"type": ["number", "null"],
+                             "description": "horizontal distance from the measured CoP to the computed ZMP, m"},
+        },
+        "required": ["index", "t", "forces"],
+    }),
+}
 
 
 def _point(p) -> dict | None:
@@ -138,12 +171,20 @@ def result_message(r) -> dict:
     }
 
 
+def input_message(index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> dict:
+    """The ``/input`` message of one frame: raw ``channels``, sensor ``contacts`` or None."""
+    return {"index": index, "t": t, "channels": channels.tolist(),
+            "contacts": None if contacts is None else list(contacts)}
+
+
 class Recorder:
     """Writes one session to ``path`` (see the module docstring). ``session`` holds the
-    monitor settings (plain JSON values); ``channel_names`` the body's input channels."""
+    monitor settings (plain JSON values); ``channel_names`` the body's input channels;
+    ``extra_schemas`` further topics (e.g. :data:`LOOP_SCHEMAS`)."""
 
     def __init__(self, path: str | Path, body_spec: BodySpec, session: dict, channel_names: list[str],
-                 chunk_seconds: float = CHUNK_SECONDS, chunk_bytes: int = CHUNK_BYTES):
+                 chunk_seconds: float = CHUNK_SECONDS, chunk_bytes: int = CHUNK_BYTES,
+                 extra_schemas: dict[str, tuple[str, dict]] | None = None):
         self.path = Path(path)
         try:
             self._file = open(self.path, "xb")  # noqa: SIM115 - closed in close(); never overwrite a session
@@ -161,25 +202,25 @@ class Recorder:
         self.writer.add_metadata("livezmp.session", {k: json.dumps(v) for k, v in
                                                      {**session, "channel_names": channel_names}.items()})
         self.channels = {}
-        for topic, (name, schema) in SCHEMAS.items():
+        for topic, (name, schema) in {**SCHEMAS, **(extra_schemas or {})}.items():
             sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
             self.channels[topic] = self.writer.register_channel(topic, "json", sid)
-        self.counts = dict.fromkeys(TOPICS, 0)
+        self.counts = dict.fromkeys(self.channels, 0)
         self.writer.flush()  # header, body and session on disk before the first frame
         self._last_flush = time.monotonic()
         self._closed = False
 
-    def write(self, topic: str, message: dict) -> None:
-        """Add one message (JSON-able) on ``topic``, logged at the current wall time."""
-        now = time.time_ns()
+    def write(self, topic: str, message: dict, log_time_ns: int | None = None) -> None:
+        """Add one message (JSON-able) on ``topic``, logged at ``log_time_ns`` (Unix ns;
+        default: the current wall time)."""
+        now = time.time_ns() if log_time_ns is None else log_time_ns
         self.writer.add_message(self.channels[topic], now, json.dumps(message, separators=(",", ":")).encode(), now,
                                 sequence=self.counts[topic])
         self.counts[topic] += 1
         self.tick()
 
     def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> None:
-        self.write("/input", {"index": index, "t": t, "channels": channels.tolist(),
-                              "contacts": None if contacts is None else list(contacts)})
+        self.write("/input", input_message(index, t, channels, contacts))
 
     def tick(self) -> None:
         """Close the chunk in progress if it is ``chunk_seconds`` old; call it when idle too."""
@@ -198,6 +239,72 @@ class Recorder:
             self.writer.add_metadata("livezmp.totals", {k: json.dumps(v) for k, v in totals.items()})
         self.writer.finish()
         self._file.close()
+
+
+class BackgroundWriter:
+    """Writes messages to a :class:`Recorder` from a thread of its own, so that a real-time
+    thread only hands them over (:meth:`put`: an append, no encoding, never blocks).
+
+    The queue holds at most ``capacity`` messages; a message that finds it full is not
+    queued and is counted in ``dropped`` (per topic). Every ``period_s`` the writer thread
+    wakes, encodes and writes what is queued (in batches: fewer wake-ups, each giving the
+    GIL back between messages as the interpreter switches threads) and lets the recorder
+    close a chunk that is due, so a crash loses about as much as the monitor's recording.
+    A message whose encoding or writing fails is counted in ``failed`` and the first error
+    kept in ``error``; the others are still written."""
+
+    def __init__(self, recorder: Recorder, capacity: int = 8192, period_s: float = 0.02):
+        if capacity < 1 or not period_s > 0:
+            raise InputError(f"recording queue: capacity {capacity} must be >= 1 and period {period_s} s > 0")
+        self.recorder = recorder
+        self.capacity = capacity
+        self.period_s = period_s
+        self.dropped = dict.fromkeys(recorder.channels, 0)
+        self.failed = 0
+        self.error: str | None = None
+        self._queue: deque[tuple] = deque()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="livezmp-recorder", daemon=True)
+        self._thread.start()
+
+    def put(self, topic: str, log_time_ns: int, encode: Callable[..., dict], *args) -> bool:
+        """Queue ``encode(*args)`` (run in the writer thread: it must not depend on state the
+        caller changes later) for ``topic`` at ``log_time_ns``; False when the queue was full."""
+        if len(self._queue) >= self.capacity:  # only the writer thread takes out: the length can only fall
+            self.dropped[topic] += 1
+            return False
+        self._queue.append((topic, log_time_ns, encode, args))
+        return True
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period_s):
+            self._drain()
+
+    def _drain(self) -> None:
+        queue, rec = self._queue, self.recorder
+        for _ in range(len(queue)):  # what is there now; later puts wait for the next wake-up
+            topic, log_time_ns, encode, args = queue.popleft()
+            try:
+                rec.write(topic, encode(*args), log_time_ns)
+            except Exception as e:  # noqa: BLE001 - counted and told in the totals, never silent
+                self.failed += 1
+                self.error = self.error or f"{topic}: {type(e).__name__}: {e}"
+        rec.tick()
+
+    def totals(self) -> dict:
+        """What was written per topic, dropped (full queue) and failed, and the first error."""
+        return {"written": dict(self.recorder.counts), "dropped": dict(self.dropped),
+                "dropped_total": sum(self.dropped.values()), "failed": self.failed, "error": self.error}
+
+    def close(self, totals: dict | None = None) -> dict:
+        """Write what is queued, stop the thread, finish the file with ``totals`` and this
+        writer's own counts (``recording`` key of the ``livezmp.totals`` record); those counts."""
+        self._stop.set()
+        self._thread.join()
+        self._drain()
+        mine = self.totals()
+        self.recorder.close({**(totals or {}), "recording": mine})
+        return mine
 
 
 @dataclass
@@ -239,7 +346,7 @@ def open_recording(path: str | Path) -> Recording:
     spec = BodySpec(body["kind"], files, json.loads(body["options"]))
     session = {k: json.loads(v) for k, v in meta["livezmp.session"].items()}
     topic_of = {c.id: c.topic for c in summary.channels.values()}
-    counts = dict.fromkeys(TOPICS, 0)
+    counts = dict.fromkeys(TOPICS, 0) | dict.fromkeys(topic_of.values(), 0)
     stats = summary.statistics
     for cid, n in (stats.channel_message_counts.items() if stats else ()):
         counts[topic_of[cid]] = n

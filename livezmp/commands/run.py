@@ -14,6 +14,12 @@ link, simulated devices on ptys, and the two together.
   swing the arms), a live status line and the summary, with the simulator's own
   verdict (``fell``, ``true_inside_fraction``: the share of its 1 ms steps whose true
   ZMP was inside the support polygon).
+
+``run`` and ``demo`` take ``--contacts auto|sensors|kinematics`` (where the feet's
+contacts come from, see :class:`~livezmp.live_loop.LoopConfig`) and ``--record
+FILE.mcap`` (:mod:`livezmp.loop_recording`: inputs, results, foot sensors, corrections,
+written by a background thread; the file is finished after the safe stop, on every way
+out).
 """
 
 from __future__ import annotations
@@ -33,21 +39,23 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.body import BodyModel
-from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
+from livezmp.body_urdf import UrdfBodyOptions
 from livezmp.commands.common import stop_on_signals
 from livezmp.demo import demo_robot_path
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
 from livezmp.links.mock import MockLink
-from livezmp.live_loop import LiveLoop, LoopConfig
+from livezmp.live_loop import CONTACT_MODES, LiveLoop, LoopConfig
+from livezmp.loop_recording import LoopRecorder
 from livezmp.realtime import LOOP_PRIORITY, check_priority, realtime_priority
 from livezmp.report import write_json
 from livezmp.robot_config import RobotConfig, find_robot_config, load_robot_config
 from livezmp.safety import SafetyConfig
+from livezmp.sources.body_spec import BodySpec, robot_body
 from sim_devices import scenarios as sc
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import Push, RealtimeThread, SimHumanoid
-from sim_devices.launch import KINDS, start_devices
+from sim_devices.launch import KINDS, humanoid_sensors, start_devices
 
 # The demo's arm swing: 0.6 rad at 0.8 Hz, leaning to 8 mm inside the toes. Uncorrected the
 # ZMP stays past the toes long enough to fall; the loop's corrector (estimator lag 30 ms)
@@ -99,18 +107,20 @@ def make_scenario(name: str, body: BodyModel, **options) -> sc.Scenario:
 
 @dataclass
 class Robot:
-    """A robot's body model and its config (feet, servos), from ``--robot`` / ``--robot-config``."""
+    """A robot's body model and its config (feet, servos), from ``--robot`` / ``--robot-config``;
+    ``spec`` what the body was built from (for a recording)."""
 
     urdf: Path
     body: BodyModel
     config: RobotConfig
+    spec: BodySpec
 
 
 def load_robot(urdf: str | None, config: str | None) -> Robot:
     path = Path(urdf) if urdf else demo_robot_path()
-    body = body_from_urdf(path, UrdfBodyOptions(config=config))
+    body, spec = robot_body(path, UrdfBodyOptions(config=config))
     robot_config = load_robot_config(config) if config else find_robot_config(path, body.model.name)
-    return Robot(path, body, robot_config)
+    return Robot(path, body, robot_config, spec)
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:
@@ -131,6 +141,12 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY,
                    help=f"run the loop under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY}; "
                         "0 = normal scheduling); if refused it runs at normal priority and says so")
+    p.add_argument("--contacts", choices=CONTACT_MODES, default=d.contacts,
+                   help="where the feet's contacts come from: the link's foot sensors (a foot is down above "
+                        f"{100 * d.contact_fraction:g} %% of the body weight), the kinematics, or auto: the sensors "
+                        f"when the link has them (default {d.contacts})")
+    p.add_argument("--record", metavar="FILE.mcap",
+                   help="record inputs, results, foot sensors and corrections (MCAP, a new file)")
 
 
 def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
@@ -140,7 +156,24 @@ def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
             raise InputError(f"--{name.replace('_', '-')} {value}: must be a positive number")
     safety = replace(SafetyConfig(), watchdog_s=args.watchdog_ms / 1e3, drop_torque=args.on_timeout == "torque-off",
                      max_correction_rad=float(np.radians(args.max_correction_deg)))
-    return LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_hz=args.correct_hz, safety=safety)
+    return LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_hz=args.correct_hz, safety=safety,
+                      contacts=args.contacts)
+
+
+def check_record(args: argparse.Namespace) -> None:
+    """A --record file that exists is a one-line error before anything starts (it is never overwritten)."""
+    if args.record and Path(args.record).exists():
+        raise InputError(f"{args.record}: already exists; record to a new file")
+
+
+def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, source: str) -> LoopRecorder:
+    """The --record file, with the loop's settings as its session."""
+    est = {"window_s": config.estimator_window_s, "lag_s": config.estimator_lag_s,
+           "cutoff_hz": config.estimator_cutoff_hz}
+    session = {"source": source, "fps": config.rate_hz, "mode": "full", "ground_z": None, "correct": config.correct,
+               "live_loop": {"rate_hz": config.rate_hz, "correct_hz": config.correct_hz, "contacts": config.contacts,
+                             "contact_fraction": config.contact_fraction, "estimator": est}}
+    return LoopRecorder(args.record, robot.spec, session, robot.body.channel_names, robot.body.joint_names)
 
 
 def loop_rate(args: argparse.Namespace, link) -> float:
@@ -199,17 +232,33 @@ def print_summary(s: dict) -> None:
 
 
 def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: float | None,
-             fell: Callable[[], bool] | None = None) -> dict:
-    """The loop on an open ``link`` with the command line's settings; the summary."""
+             fell: Callable[[], bool] | None = None, source: str = "") -> dict:
+    """The loop on an open ``link`` (``source``: its URL) with the command line's settings;
+    the summary. With --record the file is finished after the loop's safe stop, whichever
+    way the loop ended, and the summary's ``recording`` says what it holds and dropped."""
     status = StatusLine(args.quiet)
-    loop = LiveLoop(link, robot.body, loop_config(args, loop_rate(args, link)), command=command, fell=fell,
-                    on_event=status.event, on_status=status)
-    with stop_on_signals(loop.request_stop), realtime_priority(args.realtime_priority) as refused:
-        if refused not in (None, "off"):
-            status.event(f"real-time priority {refused}: the loop runs at normal priority")
-        summary = loop.run(duration)
+    config = loop_config(args, loop_rate(args, link))
+    # made here, its writer thread keeps normal scheduling when this thread asks for SCHED_FIFO
+    recorder = open_recorder(args, robot, config, source) if args.record else None
+    try:
+        loop = LiveLoop(link, robot.body, config, command=command, fell=fell, on_event=status.event,
+                        on_status=status, recorder=recorder)
+        with stop_on_signals(loop.request_stop), realtime_priority(args.realtime_priority) as refused:
+            if refused not in (None, "off"):
+                status.event(f"real-time priority {refused}: the loop runs at normal priority")
+            summary = loop.run(duration)
+    except BaseException as e:
+        if recorder is not None:
+            recorder.close({"stopped_by": f"error: {type(e).__name__}: {e}"})
+        raise
     status.done()
-    return {**summary, "realtime_priority": args.realtime_priority if refused is None else 0}
+    summary = {**summary, "realtime_priority": args.realtime_priority if refused is None else 0}
+    if recorder is not None:
+        summary["recording"] = recorder.close(summary)
+        if summary["recording"]["dropped_total"] or summary["recording"]["failed"]:
+            status.event(f"recording {args.record}: {summary['recording']['dropped_total']} messages dropped "
+                         f"(queue full), {summary['recording']['failed']} failed ({summary['recording']['error']})")
+    return summary
 
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
@@ -224,6 +273,7 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
+    check_record(args)
     robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")
@@ -239,7 +289,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 1
     try:
         summary = run_loop(link, robot, args, scenario.goals if scenario else None,
-                           duration_of(args, scenario.duration if scenario else None))
+                           duration_of(args, scenario.duration if scenario else None), source=args.link)
     finally:
         link.close()
     return finish(summary, args)
@@ -452,11 +502,13 @@ class SimProcess:
 def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """The mock link: the humanoid stepped by the loop's own reads, in this process."""
     sim = start_sim(robot, "mock", scenario, args.fault)
-    link = MockLink(sim.humanoid, robot.body.joint_names)
+    feet, _ = humanoid_sensors(sim.humanoid)
+    link = MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet)
     link.open()
     try:
         sim.start_scenario()
-        summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration), fell=sim.fell)
+        summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration), fell=sim.fell,
+                           source="mock:")
     finally:
         link.close()
     return {**summary, **sim.verdict(), "link_url": "mock:"}
@@ -471,7 +523,7 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
         try:
             sim.start_scenario()
             summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration),
-                               fell=sim.fell)
+                               fell=sim.fell, source=url)
         finally:
             link.close()
         return {**summary, **sim.verdict(), "link_url": url}
@@ -487,6 +539,7 @@ def check_faults(spec: str) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
+    check_record(args)
     robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)

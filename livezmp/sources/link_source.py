@@ -5,8 +5,9 @@ Each :meth:`LinkSource.read` waits for the next period, reads one verified frame
 the link, places the base from the joint angles (stance foot flat, as the live loop
 does) and hands out ``[base x, y, z, yaw, pitch, roll, joints]``. Foot sensors, when the
 device has them, give the contacts: a foot bears weight when its cells carry more than
-``contact_fraction`` of the body's weight. A failed read is counted as malformed and
-reported; a lost port is reported as "disconnected" and retried with ``reconnect``.
+``contact_fraction`` of the body's weight (:func:`livezmp.foot_sensors.sensor_contacts`).
+A failed read is counted as malformed and reported; a lost port is reported as
+"disconnected" and retried with ``reconnect``.
 The monitor never writes goals: the link holds the posture it found at open.
 """
 
@@ -18,20 +19,19 @@ import numpy as np
 
 from livezmp.base_placement import BasePlacer
 from livezmp.body import BodyModel
+from livezmp.foot_sensors import CONTACT_FRACTION, contact_force, sensor_contacts
 from livezmp.links import open_link
 from livezmp.links.base import Link, LinkError, LinkReadError
 from livezmp.robot_config import RobotConfig
 from livezmp.sources.body_spec import BodySpec
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
-GRAVITY = 9.81
-
 
 class LinkSource:
     """Frames read from a servo link (see module docstring); ``rate_hz`` the polling rate."""
 
     def __init__(self, url: str, body: BodyModel, body_spec: BodySpec, robot_config: RobotConfig,
-                 rate_hz: float = 100.0, contact_fraction: float = 0.05, link: Link | None = None):
+                 rate_hz: float = 100.0, contact_fraction: float = CONTACT_FRACTION, link: Link | None = None):
         self.name = url
         self.body = body
         self.body_spec = body_spec
@@ -40,7 +40,7 @@ class LinkSource:
         self.errors = ErrorLog()
         self.link = link or open_link(url, body.joint_names, robot_config)
         self._placer = BasePlacer(body)
-        self._min_force = contact_fraction * body.total_mass * GRAVITY
+        self._min_force = contact_force(body, contact_fraction)
         self._next = time.monotonic()
         self._t_last = -np.inf
 
@@ -73,10 +73,7 @@ class LinkSource:
             return None
         self._t_last = frame.t
         joints = np.asarray(frame.positions, dtype=float)
-        contacts = None
-        if frame.feet is not None and {"left", "right"} <= set(frame.feet.forces):
-            f = frame.feet.forces
-            contacts = (float(np.sum(f["left"])) > self._min_force, float(np.sum(f["right"])) > self._min_force)
+        contacts = sensor_contacts(frame.feet, self._min_force)
         self.stats.delivered += 1
         return SourceFrame(frame.t, np.concatenate([self._placer.update(joints), joints]), contacts,
                            time.monotonic())
