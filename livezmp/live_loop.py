@@ -110,8 +110,8 @@ class LoopConfig:
 
 @dataclass
 class LoopCounters:
-    """Per-run counts; ``judged``/``inside``: analysed frames with a support polygon and
-    those whose estimated ZMP was inside it."""
+    """Per-run counts; ``analysed``: results of real samples; ``judged``/``inside``: those
+    with a support polygon and those whose estimated ZMP was inside it."""
 
     cycles: int = 0
     failed_reads: int = 0
@@ -122,6 +122,7 @@ class LoopCounters:
     commands_sent: int = 0
     corrections_sent: int = 0
     corrections_limited: int = 0
+    analysed: int = 0
     judged: int = 0
     inside: int = 0
     watchdog_trips: int = 0
@@ -259,6 +260,8 @@ class LiveLoop:
                 if self._stop_reason is not None:
                     break
                 self._cycle(tick, t)
+                if self.recorder is not None:  # the recording's writer works while the loop sleeps
+                    self.recorder.idle(self.clock.deadline(tick.index + 1) - self.clock.now())
                 tick = self.clock.wait()
         except BaseException as e:
             self.request_stop(f"error: {type(e).__name__}: {e}")
@@ -390,6 +393,7 @@ class LiveLoop:
             return
         self.result = result
         self._fresh = True
+        self.counters.analysed += 1
         if result.inside is not None:
             self.counters.judged += 1
             self.counters.inside += bool(result.inside)
@@ -524,6 +528,7 @@ class LiveLoop:
             "good_frames": c.good_frames,
             "commands_sent": c.commands_sent,
             "corrections_limited": c.corrections_limited,
+            "analysed_frames": c.analysed,
             "judged_frames": c.judged,
             "watchdog_trips": c.watchdog_trips,
             "reconnects": c.reconnects,

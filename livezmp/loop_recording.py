@@ -18,8 +18,9 @@ Messages of one sample share its log time (the run's start on the wall clock plu
 sample's loop time), so the ``/result`` and ``/foot_sensors`` of a sample, written
 ``lag`` samples after its ``/input``, line up with it. The loop's thread only queues
 Python objects; a :class:`~livezmp.recording.BackgroundWriter` encodes them in its own
-thread. Everything queued must stay unchanged afterwards: the loop hands over arrays it
-makes fresh every cycle, and results and sensor readings it never modifies.
+thread, while the loop sleeps between cycles. Everything queued must stay unchanged
+afterwards: the loop hands over arrays it makes fresh every cycle, and results and sensor
+readings it never modifies.
 """
 
 from __future__ import annotations
@@ -83,6 +84,10 @@ class LoopRecorder:
                             offsets: np.ndarray) -> dict:
         return {"index": index, "t": t, "delta": _point(delta), "limited": limited,
                 "offsets": dict(zip(self.joint_names, offsets.tolist(), strict=True))}
+
+    def idle(self, seconds: float) -> None:
+        """The loop sleeps for ``seconds``: the writer's window (see :meth:`BackgroundWriter.idle`)."""
+        self.writer.idle(seconds)
 
     def close(self, totals: dict | None = None) -> dict:
         """Write what is queued and finish the file (``totals``: e.g. the run's summary);

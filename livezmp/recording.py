@@ -30,6 +30,7 @@ turned away.
 from __future__ import annotations
 
 import json
+import math
 import struct
 import threading
 import time
@@ -50,6 +51,7 @@ from livezmp.errors import InputError
 from livezmp.sources.body_spec import BodySpec
 
 CHUNK_SECONDS = 0.5
+IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
 CHUNK_BYTES = 1 << 20
 BODY_PREFIX = "body/"
 PROFILE = ""  # no ROS profile: plain JSON channels
@@ -247,11 +249,15 @@ class BackgroundWriter:
 
     The queue holds at most ``capacity`` messages; a message that finds it full is not
     queued and is counted in ``dropped`` (per topic). Every ``period_s`` the writer thread
-    wakes, encodes and writes what is queued (in batches: fewer wake-ups, each giving the
-    GIL back between messages as the interpreter switches threads) and lets the recorder
-    close a chunk that is due, so a crash loses about as much as the monitor's recording.
-    A message whose encoding or writing fails is counted in ``failed`` and the first error
-    kept in ``error``; the others are still written."""
+    wakes, lets the recorder close a chunk that is due (so a crash loses about as much as
+    the monitor's recording) and encodes and writes what is queued. A message whose
+    encoding or writing fails is counted in ``failed`` and the first error kept in
+    ``error``; the others are still written.
+
+    Paced: once the producer calls :meth:`idle` (a fixed-rate loop, about to sleep until
+    its next deadline), the writer writes only in those windows, so it does not hold the
+    interpreter (the GIL) while the loop works: a loop woken while another thread runs
+    Python code waits for it up to the interpreter's switch interval."""
 
     def __init__(self, recorder: Recorder, capacity: int = 8192, period_s: float = 0.02):
         if capacity < 1 or not period_s > 0:
@@ -263,6 +269,8 @@ class BackgroundWriter:
         self.failed = 0
         self.error: str | None = None
         self._queue: deque[tuple] = deque()
+        self._until = math.inf  # monotonic time (s) until which the writer may work
+        self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="livezmp-recorder", daemon=True)
         self._thread.start()
@@ -276,20 +284,33 @@ class BackgroundWriter:
         self._queue.append((topic, log_time_ns, encode, args))
         return True
 
-    def _run(self) -> None:
-        while not self._stop.wait(self.period_s):
-            self._drain()
+    def idle(self, seconds: float) -> None:
+        """The producer will not run for ``seconds``: write in that window, up to
+        IDLE_GUARD_S before its end (and from now on, only in such windows)."""
+        self._until = time.monotonic() + seconds - IDLE_GUARD_S
+        self._wake.set()
 
-    def _drain(self) -> None:
-        queue, rec = self._queue, self.recorder
+    def _run(self) -> None:
+        while True:
+            self._wake.wait(self.period_s)
+            if self._stop.is_set():
+                return
+            self._wake.clear()
+            self._drain(self._until)
+
+    def _drain(self, until: float = math.inf) -> None:
+        """Close a chunk that is due, then write what is queued now until ``until`` (monotonic s)."""
+        queue, rec, clock = self._queue, self.recorder, time.monotonic
+        rec.tick()
         for _ in range(len(queue)):  # what is there now; later puts wait for the next wake-up
+            if clock() >= until:
+                return
             topic, log_time_ns, encode, args = queue.popleft()
             try:
                 rec.write(topic, encode(*args), log_time_ns)
             except Exception as e:  # noqa: BLE001 - counted and told in the totals, never silent
                 self.failed += 1
                 self.error = self.error or f"{topic}: {type(e).__name__}: {e}"
-        rec.tick()
 
     def totals(self) -> dict:
         """What was written per topic, dropped (full queue) and failed, and the first error."""
@@ -300,6 +321,7 @@ class BackgroundWriter:
         """Write what is queued, stop the thread, finish the file with ``totals`` and this
         writer's own counts (``recording`` key of the ``livezmp.totals`` record); those counts."""
         self._stop.set()
+        self._wake.set()
         self._thread.join()
         self._drain()
         mine = self.totals()
