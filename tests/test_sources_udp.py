@@ -173,7 +173,9 @@ def test_monitor_survives_a_flood_of_junk(tmp_path, robot_frames):
                 junk += 1
             if k % 50 == 0:
                 time.sleep(0.005)  # let the receiver keep up; the kernel buffer is large anyway
-        wait_until(lambda: mon.inputs >= n_valid, timeout=10)
+        # every packet seen, the junk after the last valid frame too, before stopping
+        wait_until(lambda: mon.inputs >= n_valid and src.stats.delivered + src.stats.dropped >= n_valid + junk,
+                   timeout=10)
     stop.set()
     runner.join(10)
     assert not runner.is_alive()
