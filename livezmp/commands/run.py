@@ -62,9 +62,11 @@ from sim_devices.launch import KINDS, humanoid_sensors, start_devices
 # holds it. (The scenario's own default, 2.5 Hz, is faster than the loop can follow.)
 ARM_SWING = {"amplitude": 0.6, "frequency": 0.8, "toe_margin": 0.008}
 BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
-# While recording, the recording's writer thread shares the GIL with the loop: the loop, woken for its next
-# cycle, waits for the GIL until the interpreter's switch interval has passed (5 ms by default, more than a
-# 500 Hz cycle); within 0.1 ms instead (measured: deadline misses of a 20 s demo rose 8x at 5 ms).
+# While recording, the recording's writer thread shares the GIL with the loop. It writes while the loop sleeps
+# (LoopRecorder.idle), but closing a chunk (about 1 ms of Python every 0.5 s) can run past the loop's wake-up,
+# and the woken loop waits for the GIL up to the interpreter's switch interval: 5 ms by default, more than a
+# 500 Hz cycle; 0.1 ms here. (Measured, 20 s demo: an unpaced writer at 5 ms raised deadline misses from ~160
+# to ~1200; paced, misses are within the run-to-run noise of runs without recording.)
 RECORD_SWITCH_INTERVAL_S = 1e-4
 
 
