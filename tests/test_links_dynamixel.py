@@ -38,6 +38,16 @@ def chain_of(r):
     return r.devices.devices[0]
 
 
+def test_a_short_read_timeout_does_not_stop_the_open():
+    # the servos come with factory return delays (20 x 0.5 ms for one sync read): open waits the
+    # sdk's own timeout, and only the reads after it are cut to 3 ms
+    with rig("dynamixel", options="timeout=0.003&fast=0") as r:
+        ids = [s.id for s in r.config.servos.values()]
+        assert [chain_of(r).register(i, "return_delay_time") for i in ids] == [0] * 20
+        r.link.read()
+        assert r.link._port.packet_timeout == pytest.approx(3.0)  # ms, as the sdk keeps it
+
+
 def true_ticks(r) -> np.ndarray:
     """Present Position of every servo, read from the simulated servos themselves."""
     return np.array([chain_of(r).register(s.id, "present_position") for s in r.config.servos.values()])

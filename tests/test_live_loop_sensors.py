@@ -334,3 +334,16 @@ def test_ctrl_c_finishes_the_recording(tmp_path):
     s = json.loads(summary.read_text())
     assert s["stopped_by"] == "SIGINT" and s["recording"]["dropped_total"] == 0
     assert open_recording(path).counts["/input"] == s["good_frames"] > 100
+
+
+def test_replay_of_a_loop_recording_is_the_same_analysis(tmp_path, capsys):
+    """`livezmp replay` re-runs a `demo --record` file with the loop's own estimator settings and
+    the recorded sensor contacts: the same results."""
+    from livezmp.cli import main
+
+    path = tmp_path / "loop.mcap"
+    assert main(["demo", "--link", "mock", "--duration", "1", "--quiet", "--record", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "same analysis" in out and "0 support differences" in out

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import threading
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,6 +15,7 @@ from livezmp.body_urdf import UrdfBodyOptions
 from livezmp.commands.common import add_body_options, pipeline_config, stop_on_signals
 from livezmp.demo import demo_robot_path, demo_trajectory
 from livezmp.errors import InputError
+from livezmp.estimator import EstimatorConfig
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
 from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
@@ -142,6 +144,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     source = McapReplaySource(args.recording, args.speed)
     s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
+    if "live_loop" in s:  # recorded by `livezmp run/demo --record`: the loop's own estimator settings
+        cfg = replace(cfg, estimator=EstimatorConfig(rate_hz=s["fps"], **s["live_loop"]["estimator"]))
     check = ReplayCheck(args.recording)
     recorded_alarms = sum(1 for m in iter_messages(args.recording, "/alarm") if m["event"] == "raised")
     _run(source, cfg, args, {**s, "source": f"replay of {args.recording}"}, [check])

@@ -24,8 +24,11 @@ unit the simulated devices' fault counters use; any of them makes `read` raise
 `LinkReadError` and return nothing. A status packet with the alert bit set makes the link
 read that servo's Hardware Error Status, reported in ``LinkFrame.hardware_errors``.
 
-``timeout`` (s) bounds the wait for the replies of one transaction; by default the sdk's
-own (twice its USB latency timer, 16 ms, plus 2 ms). Known limit: Protocol 2.0 has no
+``timeout`` (s) bounds the wait for the replies of one transaction once the link is open;
+by default the sdk's own (twice its USB latency timer, 16 ms, plus 2 ms), which is also
+what `open` waits (servos may still have their factory return delays then: 0.5 ms each).
+A lost reply costs the loop one timeout: with return delays at 0 and a low-latency
+adapter a few milliseconds are enough. Known limit: Protocol 2.0 has no
 sequence numbers, so a reply delayed beyond the timeout that arrives during the next
 transaction would be taken for that transaction's; keep the timeout above the bus's worst
 reply latency.
@@ -124,6 +127,7 @@ class DynamixelLink(PortLink):
         self.fast_read = bool(fast)  # what `read` uses: decided at open when fast is None
         self.watchdog = watchdog
         self.timeout = timeout
+        self._opening = False  # while open() configures the servos: the sdk's own timeout
         self.stats = LinkStats()
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
@@ -145,11 +149,14 @@ class DynamixelLink(PortLink):
     def open(self) -> None:
         """Open the port, check and configure every servo, enable torque, hold (see module docstring)."""
         self._open_port()
+        self._opening = True
         try:
             self._configure()
         except LinkError:
             self._release()
             raise
+        finally:
+            self._opening = False
 
     def read(self) -> LinkFrame:
         """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
@@ -291,7 +298,7 @@ class DynamixelLink(PortLink):
             result = reader.fastSyncReadTxPacket() if fast else reader.txPacket()
             if result != COMM_SUCCESS:
                 raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
-            if self.timeout is not None:
+            if self.timeout is not None and not self._opening:
                 port.setPacketTimeoutMillis(self.timeout * 1000.0)
             replies, failures = self._receive_fast(length) if fast else self._receive_each(length)
         except _PORT_ERRORS as err:
