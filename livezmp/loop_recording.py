@@ -32,7 +32,7 @@ import numpy as np
 
 from livezmp.links.base import FootSensors
 from livezmp.pipeline import FrameResult
-from livezmp.recording import LOOP_SCHEMAS, BackgroundWriter, Recorder, _point, input_message, result_message
+from livezmp.recording import LOOP_SCHEMAS, BackgroundWriter, Recorder, input_message, point_message, result_message
 from livezmp.sources.body_spec import BodySpec
 
 
@@ -45,7 +45,7 @@ def foot_message(index: int, t: float, feet: FootSensors, cop: np.ndarray | None
     return {"index": index, "t": t, "forces": {s: np.asarray(f, dtype=float).tolist() for s, f in feet.forces.items()},
             "cop_sole": {s: None if c is None else {"x": float(c[0]), "y": float(c[1])} for s, c in feet.cop.items()},
             "load": float(sum(float(np.sum(f)) for f in feet.forces.values())),
-            "cop": _point(cop), "zmp_distance": distance}
+            "cop": point_message(cop), "zmp_distance": distance}
 
 
 class LoopRecorder:
@@ -82,7 +82,7 @@ class LoopRecorder:
 
     def _correction_message(self, index: int, t: float, delta: np.ndarray, limited: bool,
                             offsets: np.ndarray) -> dict:
-        return {"index": index, "t": t, "delta": _point(delta), "limited": limited,
+        return {"index": index, "t": t, "delta": point_message(delta), "limited": limited,
                 "offsets": dict(zip(self.joint_names, offsets.tolist(), strict=True))}
 
     def idle(self, seconds: float) -> None:

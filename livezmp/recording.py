@@ -159,17 +159,19 @@ LOOP_SCHEMAS = {
 }
 
 
-def _point(p) -> dict | None:
+def point_message(p) -> dict | None:
+    """A point (3,) as a JSON message {x, y, z}; None stays None."""
     return None if p is None else {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
 
 
 def result_message(r) -> dict:
     """The ``/result`` message of a :class:`~livezmp.pipeline.FrameResult`."""
     return {
-        "index": r.index, "t": r.t, "support": r.support, "zmp": _point(r.zmp), "clamped": _point(r.clamped),
-        "com": _point(r.com), "inside": r.inside, "margin": r.margin, "ground_z": float(r.ground_z),
+        "index": r.index, "t": r.t, "support": r.support, "zmp": point_message(r.zmp),
+        "clamped": point_message(r.clamped),
+        "com": point_message(r.com), "inside": r.inside, "margin": r.margin, "ground_z": float(r.ground_z),
         "polygon": [{"x": float(x), "y": float(y)} for x, y in r.polygon],
-        "soles": {s: [_point(p) for p in pts] for s, pts in r.soles.items()},
+        "soles": {s: [point_message(p) for p in pts] for s, pts in r.soles.items()},
     }
 
 
