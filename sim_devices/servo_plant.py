@@ -98,6 +98,7 @@ class ServoPlant:
         self.goal = self.position.copy()
         self.torque_on = np.zeros(n, dtype=bool)
         self.external_torque = np.zeros(n)  #: N m applied by the load, e.g. gravity
+        self.steps = 0  #: `step` calls that advanced the plant (observers wait on it, not on the clock)
 
     def set_goal(self, idx: int, position: float) -> None:
         """Set joint ``idx``'s goal position (rad)."""
@@ -111,6 +112,7 @@ class ServoPlant:
         """Advance all joints by ``dt`` seconds (dt <= 0 does nothing)."""
         if dt <= 0.0:
             return
+        self.steps += 1
         count = min(self.max_substeps, max(1, math.ceil(dt / self.max_substep)))
         h = dt / count
         for _ in range(count):

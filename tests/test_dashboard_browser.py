@@ -67,7 +67,9 @@ def test_dashboard_in_a_browser(live_demo, tmp_path):
                 if index is not None and text != "–":
                     shown[index] = text
                 pictures.add(page.evaluate("() => document.getElementById('top').toDataURL().length"))
-                time.sleep(0.1)
+                page.wait_for_function(  # the next frame drawn, or the alarm
+                    "i => document.querySelector('#alarm-list li.raised') || "
+                    "(window.livezmp.frame && window.livezmp.frame.index !== i)", arg=index, timeout=10_000)
             alarm = page.query_selector("#alarm-list li.raised")
             assert alarm is not None and "ALARM: ZMP out of support" in alarm.text_content()
             assert len(set(shown.values())) >= 4, shown  # the ZMP readout moved

@@ -17,6 +17,7 @@ import tty
 import can
 import pytest
 import serial
+from sim_support import wait_until
 
 import firmware_protocol as fp
 from firmware_protocol import BoardState, FaultCode, JointError, NackCode, WatchdogAction
@@ -231,7 +232,8 @@ def test_watchdog_trips_when_the_host_goes_quiet_and_recovers(action):
         while time.monotonic() - t0 < 0.3:  # a healthy control loop: polls (and so heartbeats) keep it alive
             host.poll(timeout=0.01)
         assert board.state == BoardState.ACTIVE and backend.holds == backend.drops == 0
-        time.sleep(0.4)  # the control loop stalls: no poll, no heartbeat
+        # the control loop stalls: no poll, no heartbeat; the board's 0.2 s watchdog acts
+        assert wait_until(lambda: board.state != BoardState.ACTIVE, timeout=3.0)
         seen = wait_for(host, lambda ms: any(isinstance(m, fp.Fault) for m in ms))
         fault = next(m for m in seen if isinstance(m, fp.Fault))
         assert fault.code == FaultCode.WATCHDOG_EXPIRED and fault.value >= 0.2
@@ -251,7 +253,8 @@ def test_without_the_watchdog_a_stalled_host_leaves_the_robot_moving():
         host = fp.HostSession(host_t, watchdog_timeout=0.0)
         host.connect()
         host.set_torque(JOINTS, True)
-        time.sleep(0.4)
+        # 0.4 s without a heartbeat, twice a watchdog's 0.2 s: nothing stops the servos
+        assert not wait_until(lambda: board.state != BoardState.ACTIVE or backend.holds or backend.drops, timeout=0.4)
         assert board.state == BoardState.ACTIVE and backend.holds == backend.drops == 0
 
 

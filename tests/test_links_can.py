@@ -13,7 +13,7 @@ import time
 import can
 import numpy as np
 import pytest
-from sim_support import short_gil_switch  # noqa: F401 - fixture
+from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 from test_links_support import NAMES, read_until, rig, servo_config, start_posture
 
 import firmware_protocol as fp
@@ -100,8 +100,8 @@ def test_vanished_adapter_raises_then_reconnect_brings_every_node_back():
         with pytest.raises(LinkError):
             link.read()
         assert link.reconnect() is False
-        time.sleep(0.3)
-        assert {node.engine.state for node in bus.nodes} == {fp.BoardState.HOLDING}  # their watchdogs
+        # their watchdogs: no host, so every node holds
+        assert wait_until(lambda: {node.engine.state for node in bus.nodes} == {fp.BoardState.HOLDING}, timeout=3.0)
         bus.port.restore()
         assert link.reconnect() is True
         read_until(link, lambda _: {node.engine.state for node in bus.nodes} == {fp.BoardState.ACTIVE})
@@ -131,10 +131,9 @@ def test_link_over_python_cans_virtual_bus():
     stop = threading.Event()
 
     def run_nodes():
-        while not stop.is_set():
+        while not stop.wait(0.001):  # nodes poll their bus every millisecond until stopped
             for engine in engines:
                 engine.step(0.0)
-            time.sleep(0.001)
 
     thread = threading.Thread(target=run_nodes, daemon=True)
     thread.start()

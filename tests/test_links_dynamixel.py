@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from sim_support import short_gil_switch  # noqa: F401 - fixture
+from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 from test_links_support import (
     HALF_TICK,
     TEST_OPTIONS,
@@ -145,8 +145,8 @@ def test_vanished_port_raises_then_reconnect_rearms_the_tripped_watchdog():
         with pytest.raises(LinkError):
             r.link.read()
         assert r.link.reconnect() is False
-        time.sleep(0.2)  # twice the bus watchdog: the servos stop and refuse goals until it is re-armed
-        assert chain.register(1, "bus_watchdog") == -1
+        # the bus watchdog (0.1 s) trips: the servos stop and refuse goals until it is re-armed
+        assert wait_until(lambda: chain.register(1, "bus_watchdog") == -1, timeout=2.0)
         chain.port.restore()
         assert r.link.reconnect() is True
         assert r.link.stats.reconnects == 1
@@ -161,9 +161,11 @@ def test_bus_watchdog_stops_the_servos_when_the_host_goes_quiet():
     with rig("dynamixel") as r:
         target = start_posture(20) + 1.2
         r.link.write_goals(target)
-        time.sleep(0.4)  # no traffic: the 0.1 s watchdog stops every servo short of its goal
-        position = plant_now(r).position
-        assert chain_of(r).register(1, "bus_watchdog") == -1
+        chain = chain_of(r)
+        # no traffic: the 0.1 s watchdog trips on every servo, and each brakes to a stop short of its goal
+        assert wait_until(lambda: all(chain.register(s.id, "bus_watchdog") == -1 for s in r.config.servos.values())
+                          and np.abs(plant_now(r).velocity).max() < 1e-3, timeout=3.0)
+        position = r.plant.position
         assert np.abs(position - target).min() > 0.3
         assert np.abs(position - start_posture(20)).min() > 0.05
 

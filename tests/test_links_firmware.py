@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from sim_support import short_gil_switch  # noqa: F401 - fixture
+from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 from test_links_support import NAMES, read_until, rig, start_posture
 
 import firmware_protocol as fp
@@ -128,8 +128,8 @@ def test_vanished_port_raises_then_reconnect_brings_the_board_back():
         with pytest.raises(LinkError):
             r.link.read()
         assert r.link.reconnect() is False
-        time.sleep(0.3)
-        assert board.engine.state == fp.BoardState.HOLDING  # its watchdog: no host for 0.2 s
+        # its watchdog: no host for 0.2 s
+        assert wait_until(lambda: board.engine.state == fp.BoardState.HOLDING, timeout=3.0)
         board.port.restore()
         assert r.link.reconnect() is True
         assert board.engine.state == fp.BoardState.ACTIVE
@@ -143,9 +143,9 @@ def test_board_watchdog_holds_when_the_loop_stops_polling():
     with rig("fw") as r:
         target = start_posture(20) + 2.0
         r.link.write_goals(target)
-        time.sleep(0.45)  # no reads, so no heartbeats: the 0.2 s watchdog holds every joint where it is
         engine = board_of(r).engine
-        assert engine.state == fp.BoardState.HOLDING
+        # no reads, so no heartbeats: the 0.2 s watchdog holds every joint where it is
+        assert wait_until(lambda: engine.state == fp.BoardState.HOLDING, timeout=3.0)
         position, deadline = None, time.monotonic() + 3.0
         while position is None and time.monotonic() < deadline:  # the first reads may find the board's backlog
             try:

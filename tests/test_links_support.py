@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from sim_support import wait_until  # noqa: F401 - shared with the link tests that import it from here
+from sim_support import wait_until  # also imported from here by the link tests
 
 from livezmp.links import make_link
 from livezmp.links.base import Link
@@ -82,8 +82,9 @@ def plant_now(r: Rig) -> ServoPlant:
         r.devices.devices[0].register(1, "present_position")
     elif r.kind == "mock":
         r.link.read()
-    else:
-        time.sleep(0.05)
+    else:  # two more steps: one that started after this call has run whole
+        steps = r.plant.steps
+        assert wait_until(lambda: r.plant.steps >= steps + 2, timeout=2.0)
     return r.plant
 
 

@@ -33,7 +33,8 @@ def mini():
 
 
 class SimTime:
-    """A clock that only moves when slept on or charged for work; sleeps overshoot by ``overshoot`` s."""
+    """A clock that only moves when advanced (the loop's sleeps) or charged for work; advances
+    overshoot by ``overshoot`` s."""
 
     def __init__(self, overshoot: float = 0.0):
         self.t = 1000.0
@@ -42,7 +43,7 @@ class SimTime:
     def now(self) -> float:
         return self.t
 
-    def sleep(self, d: float) -> None:
+    def advance(self, d: float) -> None:
         self.t += max(d, 0.0) + self.overshoot
 
 
@@ -135,7 +136,7 @@ def scripted_loop(body, fault=None, reconnect_ok=None, config: LoopConfig | None
     def now() -> float:
         return clock_time.t
 
-    clock = LoopClock(RATE, now=now, sleep=lambda d: clock_time.sleep(d - work))
+    clock = LoopClock(RATE, now=now, sleep=lambda d: clock_time.advance(d - work))
     events: list[str] = []
     loop = LiveLoop(link, body, config or LoopConfig(rate_hz=RATE), command=command, clock=clock,
                     on_event=events.append)
@@ -147,7 +148,7 @@ def scripted_loop(body, fault=None, reconnect_ok=None, config: LoopConfig | None
 def test_clock_keeps_absolute_deadlines_despite_sleep_overshoot():
     """Sleeps that overshoot by 0.3 ms do not accumulate: every cycle wakes 0.3 ms after its own deadline."""
     time = SimTime(overshoot=3e-4)
-    clock = LoopClock(RATE, now=time.now, sleep=time.sleep)
+    clock = LoopClock(RATE, now=time.now, sleep=time.advance)
     start = clock.start().woke
     for _ in range(1000):
         time.t += 5e-4  # the cycle's work
@@ -164,7 +165,7 @@ def test_clock_keeps_absolute_deadlines_despite_sleep_overshoot():
 
 def test_clock_counts_misses_and_skips_overrun_deadlines():
     time = SimTime()
-    clock = LoopClock(RATE, now=time.now, sleep=time.sleep)
+    clock = LoopClock(RATE, now=time.now, sleep=time.advance)
     clock.start()
     # 2.5 ms of work ends in cycle 2's slot; 7.1 ms from cycle 3's start ends in cycle 6's slot
     work = [1e-3, 2.5e-3, 1e-3, 7.1e-3, 0.5e-3]

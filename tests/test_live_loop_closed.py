@@ -55,7 +55,7 @@ def balance(body, scenario, correct: bool) -> tuple[SimHumanoid, dict]:
     mock = MockLink(humanoid, body.joint_names, clock=time.now)
     mock.open()
     loop = LiveLoop(BusTime(mock, time), body, LoopConfig(correct=correct), command=scenario.goals,
-                    clock=LoopClock(500.0, now=time.now, sleep=time.sleep), fell=lambda: humanoid.fallen is not None)
+                    clock=LoopClock(500.0, now=time.now, sleep=time.advance), fell=lambda: humanoid.fallen is not None)
     return humanoid, loop.run(scenario.duration)
 
 

@@ -66,7 +66,7 @@ def on_sim_time(body, scenario, foot_sensors=None, config=None, recorder=None, d
                     foot_sensors=foot_sensors(humanoid) if foot_sensors else None)
     mock.open()
     loop = LiveLoop(BusTime(mock, clock), body, config or LoopConfig(), command=scenario.goals,
-                    clock=LoopClock(500.0, now=clock.now, sleep=clock.sleep), recorder=recorder)
+                    clock=LoopClock(500.0, now=clock.now, sleep=clock.advance), recorder=recorder)
     results = {}
     feed = loop._feed
 

@@ -109,7 +109,7 @@ def test_alarm_command_gets_the_event(tmp_path):
     cmd.run(ev)
     cmd.close()
     assert out.read_text() == "raised 0.25\n"
-    slow = AlarmCommand(f"{sys.executable} -c \"import time; time.sleep(30)\"")
+    slow = AlarmCommand(f"{sys.executable} -c \"import signal; signal.pause()\"")
     slow.run(ev)
     slow.run(ev)  # the first is still running: skipped, not piled up
     assert (slow.started, slow.skipped) == (1, 1)

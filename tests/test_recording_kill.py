@@ -19,6 +19,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
+from sim_support import wait_until
 
 from livezmp.demo import demo_robot_path
 from livezmp.pipeline import Pipeline, default_config
@@ -66,19 +67,22 @@ def test_kill_9_while_recording(tmp_path):
         pid, path = forker.stdout.readline().split()
         pids[Path(path)] = int(pid)
     kills = {}
-    end = time.monotonic() + 60
     due = {}
+
+    def kill_those_due() -> bool:
+        """Kill each recorder at a random moment after its first chunk; True once all are killed."""
+        for path, pid in pids.items():
+            if path in kills:
+                continue
+            if path not in due and path.exists() and messages_before_the_cut(path.read_bytes()):
+                due[path] = time.monotonic() + rng.uniform(0.0, 1.5)
+            elif path in due and time.monotonic() >= due[path]:
+                kills[path] = time.time_ns()
+                os.kill(pid, signal.SIGKILL)
+        return len(kills) == RUNS
+
     try:
-        while len(kills) < RUNS and time.monotonic() < end:
-            for path, pid in pids.items():
-                if path in kills:
-                    continue
-                if path not in due and path.exists() and messages_before_the_cut(path.read_bytes()):
-                    due[path] = time.monotonic() + rng.uniform(0.0, 1.5)  # a random moment after the first chunk
-                elif path in due and time.monotonic() >= due[path]:
-                    kills[path] = time.time_ns()
-                    os.kill(pid, signal.SIGKILL)
-            time.sleep(0.005)
+        wait_until(kill_those_due, timeout=60.0)
     finally:
         for path, pid in pids.items():
             if path not in kills:

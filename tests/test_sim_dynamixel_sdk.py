@@ -161,18 +161,19 @@ def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(rig):
     assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
     assert ph.write1ByteTxRx(port, 1, 98, 5) == (COMM_SUCCESS, 0)  # 5 x 20 ms
     start = ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0]
-    for _ in range(15):  # talking every 10 ms keeps the watchdog fed
-        time.sleep(0.01)
+    end = time.monotonic() + 0.15
+    while time.monotonic() < end:  # talking (for 150 ms, longer than the 100 ms watchdog) keeps it fed
         assert ph.read1ByteTxRx(port, 1, 98) == (5, COMM_SUCCESS, 0)
     assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start + 2000) == (COMM_SUCCESS, 0)
-    time.sleep(0.15)  # silence longer than 100 ms: the watchdog fires mid-move
+    # silence on the bus (the simulator's registers are read directly): the watchdog fires mid-move
+    assert wait_until(lambda: chain.register(1, "bus_watchdog") == -1, timeout=2.0)
     assert ph.read1ByteTxRx(port, 1, 98) == (0xFF, COMM_SUCCESS, 0)  # -1: Bus Watchdog Error
     assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start) == (COMM_SUCCESS, 4)  # goals read-only
-    time.sleep(0.1)  # let it brake to a standstill
+    assert wait_until(lambda: chain.register(1, "present_velocity") == 0, timeout=2.0)  # braked to a standstill
     stopped = ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0]
     assert start + 100 < stopped < start + 1500  # stopped on the way, well short of the goal
-    time.sleep(0.05)
-    assert abs(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0] - stopped) <= 1  # and stays there
+    # and stays there
+    assert not wait_until(lambda: abs(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0] - stopped) > 1, timeout=0.05)
     assert ph.write1ByteTxRx(port, 1, 98, 0) == (COMM_SUCCESS, 0)  # clears the error
     assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start) == (COMM_SUCCESS, 0)
     assert wait_until(lambda: abs(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0] - start) <= 1)

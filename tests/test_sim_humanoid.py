@@ -395,15 +395,19 @@ def test_goals_set_from_other_threads_while_a_realtime_thread_steps():
         except BaseException as e:  # reported below
             errors.append(e)
 
+    goals_done = threading.Event()
+
     def set_goals():
         for k in range(3000):
             h.set_goal(k % 20, stand[k % 20] + 0.001 * (k % 7))
         h.set_goals(target)
+        goals_done.set()
 
-    def bus_steps():  # a servo bus stepping the plant lazily, as DynamixelChain does
+    def bus_steps():  # a servo bus stepping the plant lazily, as DynamixelChain does, while goals change
         for _ in range(300):
             h.step(0.004)
-            time.sleep(0.0005)
+            if goals_done.wait(0.0005):
+                break
 
     with RealtimeThread(h, period=0.002):
         workers = [threading.Thread(target=hammer, args=(w,)) for w in (set_goals, bus_steps)]

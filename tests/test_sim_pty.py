@@ -23,8 +23,10 @@ class Echo:
         self.message_at = message_at
         self.burst = burst
         self.polls: list[float] = []
+        self.received: list[bytes] = []
 
     def on_bytes(self, data: bytes, now: float):
+        self.received.append(data)
         if self.burst:
             return [(now, bytes(65536))] * self.burst
         return [(now + self.delay, data.upper())]
@@ -57,7 +59,7 @@ def test_replies_are_written_in_due_order_at_their_due_time():
     with PtyPort(device) as port, serial.Serial(port.path, 115200, timeout=1.0) as client:
         start = time.perf_counter()
         client.write(b"a")
-        time.sleep(0.005)
+        assert wait_until(lambda: device.received)  # "a" is in before "b" is written: due first
         client.write(b"b")
         assert client.read(1) == b"A"
         assert time.perf_counter() - start >= 0.03
