@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from bench_pipeline import OP3, WALK, op3_stream
+from bench_pipeline import OP3, WALK, latencies, op3_stream
 
 from livezmp.body import foot_soles, lowest_sole_points, sole_velocities
 from livezmp.body_bvh import body_from_bvh
@@ -69,12 +69,7 @@ def record(pipe: Pipeline, t: np.ndarray, frames: np.ndarray, warm: int) -> tupl
         seen.zmps.append(res.zmp)
         return res
 
-    lat = np.empty(len(t))
-    clock = time.perf_counter
-    for k in range(len(t)):
-        s = clock()
-        pipe.step(float(t[k]), frames[k])
-        lat[k] = clock() - s
+    lat = latencies(pipe, t, frames, warm)
     # a second pass with the spy records the parts' inputs (the first pass is timed without it)
     pipe.flush()
     pipe.contacts = ContactDetector(pipe.config.contacts, GroundConfig(
@@ -83,7 +78,7 @@ def record(pipe: Pipeline, t: np.ndarray, frames: np.ndarray, warm: int) -> tupl
     for k in range(len(t)):
         pipe.step(float(t[k]), frames[k])
     pipe._analyse = analyse
-    return lat[warm:], seen
+    return lat, seen
 
 
 def parts(pipe: Pipeline, t: np.ndarray, frames: np.ndarray, seen: Seen, warm: int) -> list[tuple[str, np.ndarray]]:

@@ -1,4 +1,4 @@
-"""Shared fixtures over the real data (see data_paths.py)."""
+"""Shared fixtures: the real data (see data_paths.py) and the built-in demo robot."""
 
 from __future__ import annotations
 
@@ -18,3 +18,21 @@ def bandai_walk():
     from livezmp.bvh import read_bvh
 
     return read_bvh(BANDAI / "walk_normal_001.bvh")
+
+
+@pytest.fixture(scope="session")
+def mini():
+    """The built-in livezmp_mini robot's body."""
+    from livezmp.body_urdf import body_from_urdf
+    from livezmp.demo import demo_robot_path
+
+    return body_from_urdf(demo_robot_path())
+
+
+@pytest.fixture(scope="session")
+def mini_config(mini):
+    """The livezmp_mini robot config (servos, feet)."""
+    from livezmp.demo import demo_robot_path
+    from livezmp.robot_config import find_robot_config
+
+    return find_robot_config(demo_robot_path(), mini.model.name)

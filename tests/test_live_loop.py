@@ -15,7 +15,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.body_urdf import body_from_urdf
 from livezmp.demo import demo_robot_path
 from livezmp.errors import InputError
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
@@ -25,11 +24,6 @@ from livezmp.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, W
 
 RATE = 500.0
 T = 1.0 / RATE
-
-
-@pytest.fixture(scope="module")
-def mini():
-    return body_from_urdf(demo_robot_path())
 
 
 class SimTime:

@@ -11,20 +11,13 @@ from __future__ import annotations
 import pytest
 from test_live_loop import SimTime
 
-from livezmp.body_urdf import body_from_urdf
 from livezmp.commands.run import make_scenario
-from livezmp.demo import demo_robot_path
 from livezmp.links.mock import MockLink
 from livezmp.live_loop import LiveLoop, LoopConfig
 from livezmp.loop_clock import LoopClock
 from sim_devices.humanoid import SimHumanoid
 
 READ_S, WRITE_S = 6e-4, 2e-4
-
-
-@pytest.fixture(scope="module")
-def mini():
-    return body_from_urdf(demo_robot_path())
 
 
 class BusTime:

@@ -13,28 +13,15 @@ import numpy as np
 import pytest
 from sim_support import short_gil_switch  # noqa: F401 - fixture
 
-from livezmp.body_urdf import body_from_urdf
 from livezmp.commands.run import SimProcess, make_scenario
-from livezmp.demo import demo_robot_path
 from livezmp.links import LinkError, open_link
 from livezmp.live_loop import LiveLoop, LoopConfig
-from livezmp.robot_config import find_robot_config
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
 TICK = 2 * np.pi / 4096  # one Dynamixel position tick, rad
-
-
-@pytest.fixture(scope="module")
-def mini():
-    return body_from_urdf(demo_robot_path())
-
-
-@pytest.fixture(scope="module")
-def mini_config(mini):
-    return find_robot_config(demo_robot_path(), mini.model.name)
 
 
 class Spy:
