@@ -28,7 +28,6 @@ import argparse
 import contextlib
 import json
 import multiprocessing
-import os
 import sys
 import threading
 import time
@@ -421,37 +420,36 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
     """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
     ``fell_flag`` (a multiprocessing Event) once the robot has fallen."""
     sim = None
-    try:
-        sim_process_setup()
-        if priority:  # the devices stand in for hardware, which no other program delays
-            with contextlib.suppress(OSError):  # refused: they run at normal priority
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        robot = load_robot(urdf, config)
-        sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults)
-        conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
-        while True:
-            if not conn.poll(FELL_FLAG_EVERY_S):
-                if sim.fell():
-                    fell_flag.set()
-                continue
-            request = conn.recv()
-            if request == "start":
-                sim.start_scenario()
-                conn.send(None)
-            elif request == "verdict":
-                conn.send({**sim.verdict(), "injected_faults": vars(sim.devices.fault_counters)})
-            elif request == "servos":
-                servo = sim.humanoid.servo
-                conn.send({"goal": servo.goal.copy(), "position": servo.position.copy()})
-            else:
-                break
-    except (InputError, ValueError) as e:
-        conn.send({"error": str(e)})
-    except (EOFError, KeyboardInterrupt):
-        pass
-    finally:
-        if sim is not None:
-            sim.close()
+    # the devices stand in for hardware, which no other program delays (refused: normal priority)
+    with realtime_priority(priority):
+        try:
+            sim_process_setup()
+            robot = load_robot(urdf, config)
+            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults)
+            conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
+            while True:
+                if not conn.poll(FELL_FLAG_EVERY_S):
+                    if sim.fell():
+                        fell_flag.set()
+                    continue
+                request = conn.recv()
+                if request == "start":
+                    sim.start_scenario()
+                    conn.send(None)
+                elif request == "verdict":
+                    conn.send({**sim.verdict(), "injected_faults": vars(sim.devices.fault_counters)})
+                elif request == "servos":
+                    servo = sim.humanoid.servo
+                    conn.send({"goal": servo.goal.copy(), "position": servo.position.copy()})
+                else:
+                    break
+        except (InputError, ValueError) as e:
+            conn.send({"error": str(e)})
+        except (EOFError, KeyboardInterrupt):
+            pass
+        finally:
+            if sim is not None:
+                sim.close()
 
 
 class SimProcess:
