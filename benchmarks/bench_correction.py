@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.body_bvh import body_from_bvh
-from livezmp.bvh import read_bvh
-from livezmp.correction import apply_delta, correct_motion, seed_grid_search, stance_weights
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.root_motion import RootMover
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.correct.correction import apply_delta, correct_motion, seed_grid_search, stance_weights
+from livezmp.correct.root_motion import RootMover
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import body_from_bvh
 
 BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh" / "bandai"
 

@@ -18,7 +18,7 @@ import time
 import numpy as np
 from scipy.interpolate import CubicSpline, make_interp_spline
 
-from livezmp.estimator import EstimatorConfig, StreamingEstimator, estimate_offline
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator, estimate_offline
 
 RATE = 120.0
 

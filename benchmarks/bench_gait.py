@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.bvh import read_bvh
 from livezmp.gait import harmonics as hm
 from livezmp.gait.channels import reference_channel
 from livezmp.gait.cycles import detect_cycles
 from livezmp.gait.features import walk_features
 from livezmp.gait.live import GaitLiveEstimator
 from livezmp.gait.take import take_from_bvh
+from livezmp.model.bvh import read_bvh
 
 BANDAI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "bvh" / "bandai"
 WINDOW = 4.0  # s of history the baseline re-analyses each frame (about 3.5 cycles)

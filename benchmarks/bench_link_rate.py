@@ -43,11 +43,11 @@ from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHan
 
 import firmware_protocol as fp
 import livezmp
-from livezmp.body_urdf import body_from_urdf
 from livezmp.links import make_link
 from livezmp.links.base import LinkError, LinkReadError
 from livezmp.links.mock import MockLink
-from livezmp.robot_config import RobotConfig, ServoConfig, find_robot_config
+from livezmp.model.robot_config import RobotConfig, ServoConfig, find_robot_config
+from livezmp.model.urdf_body import body_from_urdf
 from sim_devices.firmware_board import PlantBackend, PlantJoints
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices

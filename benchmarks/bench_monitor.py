@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 from websockets.sync.client import connect
 
-from livezmp.bvh import read_bvh
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.sources.body_spec import read_skeleton, skeleton_body
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.model.body_spec import read_skeleton, skeleton_body
+from livezmp.model.bvh import read_bvh
 from livezmp.sources.frame_format import WireFrame, encode_json
 
 ROOT = Path(__file__).resolve().parents[1]

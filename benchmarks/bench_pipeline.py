@@ -29,15 +29,15 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from livezmp.batch import BatchResult
-from livezmp.body_bvh import body_from_bvh
-from livezmp.body_urdf import body_from_urdf
-from livezmp.bvh import read_bvh
-from livezmp.estimator import Estimate
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.realtime import LOOP_PRIORITY, realtime_priority
-from livezmp.report import write_zmp_csv
-from livezmp.support import SUPPORT_LABELS
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.balance.support import SUPPORT_LABELS
+from livezmp.estimate.estimator import Estimate
+from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import body_from_bvh
+from livezmp.model.urdf_body import body_from_urdf
+from livezmp.offline.batch import BatchResult
+from livezmp.offline.report import write_zmp_csv
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 OP3 = DATA / "robots" / "robotis_op3.urdf"

@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 import livezmp
-from livezmp.base_placement import BasePlacer
-from livezmp.body_urdf import body_from_urdf
-from livezmp.zmp import compute_zmp
+from livezmp.balance.zmp import compute_zmp
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.urdf_body import body_from_urdf
 from sim_devices import scenarios as sc
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.servo_plant import ServoPlant

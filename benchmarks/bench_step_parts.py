@@ -23,16 +23,16 @@ import numpy as np
 import pinocchio as pin
 from bench_pipeline import OP3, WALK, latencies, op3_stream
 
-from livezmp.body import foot_soles, lowest_sole_points, sole_velocities
-from livezmp.body_bvh import body_from_bvh
-from livezmp.body_urdf import body_from_urdf
-from livezmp.bvh import read_bvh
-from livezmp.contacts import ContactDetector, GroundConfig
-from livezmp.estimator import StreamingEstimator
-from livezmp.kalman import ConstantAccelerationKalman
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.support import clamp_to_polygon, convex_hull, support_and_clamp
-from livezmp.zmp import compute_zmp
+from livezmp.balance.contacts import ContactDetector, GroundConfig
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.balance.support import clamp_to_polygon, convex_hull, support_and_clamp
+from livezmp.balance.zmp import compute_zmp
+from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.estimate.kalman import ConstantAccelerationKalman
+from livezmp.model.body import foot_soles, lowest_sole_points, sole_velocities
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import body_from_bvh
+from livezmp.model.urdf_body import body_from_urdf
 
 
 @dataclass

@@ -20,8 +20,8 @@ import numpy as np
 from matplotlib.path import Path
 from scipy.spatial import ConvexHull
 
-from livezmp.contacts import ContactDetector
-from livezmp.support import clamp_to_polygon, convex_hull, support_polygon
+from livezmp.balance.contacts import ContactDetector
+from livezmp.balance.support import clamp_to_polygon, convex_hull, support_polygon
 
 LEFT = np.array([[0.0, 0.1], [0.25, 0.1], [0.25, 0.2], [0.0, 0.2]])
 RIGHT = np.array([[0.3, -0.2], [0.55, -0.2], [0.55, -0.1], [0.3, -0.1]])

@@ -14,7 +14,7 @@ The live loop (``livezmp run --record``) adds ``/foot_sensors`` (:data:`LOOP_SCH
 the robot's foot forces and measured centre of pressure beside the computed ZMP.
 
 The body the session analysed is stored as attachments (``body/<file>``) plus the
-``livezmp.body`` metadata record, and the monitor settings as ``livezmp.session``, so
+``livezmp.model.body`` metadata record, and the monitor settings as ``livezmp.session``, so
 ``livezmp replay`` rebuilds the same body and re-runs the same analysis.
 
 Crash safety: chunks (zstd, CRC of each chunk's data) are closed and handed to the
@@ -48,7 +48,7 @@ from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
 from livezmp.errors import InputError
-from livezmp.sources.body_spec import BodySpec
+from livezmp.model.body_spec import BodySpec
 
 CHUNK_SECONDS = 0.5
 IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
@@ -165,7 +165,7 @@ def point_message(p) -> dict | None:
 
 
 def result_message(r) -> dict:
-    """The ``/result`` message of a :class:`~livezmp.pipeline.FrameResult`."""
+    """The ``/result`` message of a :class:`~livezmp.balance.pipeline.FrameResult`."""
     return {
         "index": r.index, "t": r.t, "support": r.support, "zmp": point_message(r.zmp),
         "clamped": point_message(r.clamped),
@@ -365,7 +365,7 @@ def open_recording(path: str | Path) -> Recording:
     except (McapError, struct.error, OSError, ValueError) as e:
         raise _broken(p, str(e) or type(e).__name__) from None
     if "livezmp.body" not in meta or "livezmp.session" not in meta:
-        raise InputError(f"{p}: not a livezmp recording (no livezmp.body / livezmp.session metadata)")
+        raise InputError(f"{p}: not a livezmp recording (no livezmp.model.body / livezmp.session metadata)")
     body = meta["livezmp.body"]
     spec = BodySpec(body["kind"], files, json.loads(body["options"]))
     session = {k: json.loads(v) for k, v in meta["livezmp.session"].items()}

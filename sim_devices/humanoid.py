@@ -15,10 +15,10 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
   their linear interpolation, and the lag keeps the acceleration finite on any jump.
   With torque off both follow the joint, so switching torque on holds it where it is;
 * base: the stance foot is flat on the ground, the base follows from the leg
-  (:class:`livezmp.base_placement.BasePlacer`): the servos prescribe the whole motion
+  (:class:`livezmp.model.base_placement.BasePlacer`): the servos prescribe the whole motion
   and the feet neither slip nor tip;
 * true ZMP: exact rigid-body dynamics of the whole body
-  (:func:`livezmp.zmp.compute_zmp`) in the state (q, v, a). v and a are second-order
+  (:func:`livezmp.balance.zmp.compute_zmp`) in the state (q, v, a). v and a are second-order
   central differences of the last three whole-body configurations (base coordinates
   from the placer, joint angles from the plant), evaluated at the middle one: for the
   joints this is exactly the plant's own velocity (the mean of its two step
@@ -29,7 +29,7 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
   the jump of the anchor;
 * contacts: a foot is in contact when its lowest sole corner is within
   ``contact_tolerance`` (1 mm) of the ground; the support polygon is the hull of the
-  soles in contact (:mod:`livezmp.support`);
+  soles in contact (:mod:`livezmp.balance.support`);
 * push: a horizontal force F (N, world x, y) applied at height h (m) above the ground
   is an external force, so the ground's share of the wrench loses it: contact force
   = dḣ − m g − F, contact moment about the CoM c = τ − (r − c) × F with r at height
@@ -62,12 +62,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from livezmp.base_placement import BasePlacer, base_coordinates
-from livezmp.body import BodyModel, foot_soles
-from livezmp.contacts import support_label
+from livezmp.balance.contacts import support_label
+from livezmp.balance.support import clamp_to_polygon, convex_hull, support_polygon
+from livezmp.balance.zmp import compute_zmp, zmp_from_wrench
 from livezmp.errors import InputError
-from livezmp.support import clamp_to_polygon, convex_hull, support_polygon
-from livezmp.zmp import compute_zmp, zmp_from_wrench
+from livezmp.model.base_placement import BasePlacer, base_coordinates
+from livezmp.model.body import BodyModel, foot_soles
 from sim_devices.servo_plant import Array, ServoPlant
 
 FLIGHT_FRACTION = 0.05  # contact force below this share of the weight: nothing holds the robot up

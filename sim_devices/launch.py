@@ -34,7 +34,7 @@ import numpy as np
 from firmware_protocol import StreamRates
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors
-from livezmp.robot_config import RobotConfig
+from livezmp.model.robot_config import RobotConfig
 from sim_devices.can_servo import CanServoBus
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.faults import FaultCounters, FaultSpec

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livezmp.bvh import BvhMotion, read_bvh
 from livezmp.errors import InputError
+from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.sources.file_replay import Pacer
 from livezmp.sources.frame_format import WireFrame, encode_binary, encode_json
 

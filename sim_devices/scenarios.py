@@ -26,11 +26,11 @@ import numpy as np
 import pinocchio as pin
 from scipy.optimize import brentq
 
-from livezmp.base_placement import BasePlacer
-from livezmp.body import BodyModel, foot_soles
+from livezmp.balance.support import clamp_to_polygon, support_polygon
 from livezmp.errors import InputError
-from livezmp.support import clamp_to_polygon, support_polygon
-from livezmp.trajectory_csv import read_joint_csv
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.body import BodyModel, foot_soles
+from livezmp.model.trajectory_csv import read_joint_csv
 from sim_devices.humanoid import Push, SimHumanoid
 
 SIDES = ("l", "r")
@@ -207,7 +207,7 @@ def squat(body: BodyModel, depth: float = 0.3, period: float = 2.0, cycles: int 
 
 
 def walk(body: BodyModel, path: str | Path) -> Scenario:
-    """Replay a joint-trajectory CSV (:func:`livezmp.trajectory_csv.read_joint_csv`),
+    """Replay a joint-trajectory CSV (:func:`livezmp.model.trajectory_csv.read_joint_csv`),
     linearly interpolated, holding its first and last frames outside its time span;
     its base columns, if any, are ignored (the humanoid places its own base)."""
     traj = read_joint_csv(path, list(body.joint_names))

@@ -13,7 +13,7 @@ from data_paths import BANDAI, OP3_URDF
 from test_body import make_bvh
 
 from livezmp.cli import main
-from livezmp.report import ZMP_COLUMNS
+from livezmp.offline.report import ZMP_COLUMNS
 
 
 def test_bvh_outputs(tmp_path):

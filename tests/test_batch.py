@@ -11,12 +11,12 @@ import pytest
 from data_paths import BANDAI
 from scipy.interpolate import CubicSpline
 
-from livezmp.base_placement import place_base
-from livezmp.batch import BatchResult, NotBatchable, analyse_batch
-from livezmp.body_bvh import body_from_bvh
-from livezmp.bvh import read_bvh
-from livezmp.pipeline import FrameResult, Pipeline, default_config
-from livezmp.report import ZMP_COLUMNS, write_zmp_csv
+from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
+from livezmp.model.base_placement import place_base
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import body_from_bvh
+from livezmp.offline.batch import BatchResult, NotBatchable, analyse_batch
+from livezmp.offline.report import ZMP_COLUMNS, write_zmp_csv
 
 CHUNK = 61  # small, so that a take crosses many chunk boundaries
 

@@ -6,15 +6,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from livezmp.batch_kinematics import (
+from livezmp.model.body import foot_soles, point_mass_copy, sole_velocities
+from livezmp.model.bvh_body import body_from_bvh
+from livezmp.offline.kinematics import (
     BatchKinematics,
     UnsupportedModel,
     batch_sole_velocities,
     batch_soles,
     body_frame_ids,
 )
-from livezmp.body import foot_soles, point_mass_copy, sole_velocities
-from livezmp.body_bvh import body_from_bvh
 
 FRAMES = 12
 

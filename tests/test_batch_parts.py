@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from livezmp.batch_contacts import detect_contacts, foot_contacts
-from livezmp.batch_estimator import NotBatchable, estimate_chunks
-from livezmp.batch_support import support_clamp
-from livezmp.contacts import ContactConfig, ContactDetector, FootContact, GroundConfig, step_foot
-from livezmp.estimator import EstimatorConfig, StreamingEstimator
-from livezmp.support import SUPPORT_LABELS, clamp_to_polygon, support_polygon
+from livezmp.balance.contacts import ContactConfig, ContactDetector, FootContact, GroundConfig, step_foot
+from livezmp.balance.support import SUPPORT_LABELS, clamp_to_polygon, support_polygon
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
+from livezmp.offline.contacts import detect_contacts, foot_contacts
+from livezmp.offline.estimator import NotBatchable, estimate_chunks
+from livezmp.offline.support import support_clamp
 
 
 def per_frame_estimates(cfg: EstimatorConfig, angles: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:

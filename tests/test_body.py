@@ -7,12 +7,12 @@ import pinocchio as pin
 import pytest
 from data_paths import OP3_URDF
 
-from livezmp.body import foot_soles
-from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
-from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
-from livezmp.bvh import parse_bvh
 from livezmp.errors import InputError
-from livezmp.segments import classify, load_mapping
+from livezmp.model.body import foot_soles
+from livezmp.model.bvh import parse_bvh
+from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
+from livezmp.model.segments import classify, load_mapping
+from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
 def make_bvh(scale: float = 1.0, up: str = "y", names: dict | None = None, frames: int = 3) -> str:

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import foot_soles, lowest_sole_points, sole_velocities
-from livezmp.body_bvh import body_from_bvh
+from livezmp.model.body import foot_soles, lowest_sole_points, sole_velocities
+from livezmp.model.bvh_body import body_from_bvh
 
 
 def kinematics(body, q, v):

@@ -6,7 +6,7 @@ from itertools import groupby
 import numpy as np
 import pytest
 
-from livezmp.contacts import (
+from livezmp.balance.contacts import (
     ContactConfig,
     ContactDetector,
     ContactError,

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.contacts import ContactDetector, ContactError, GroundConfig, GroundEstimator, percentile_of_sorted
+from livezmp.balance.contacts import ContactDetector, ContactError, GroundConfig, GroundEstimator, percentile_of_sorted
 
 heights = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False)
 

@@ -12,14 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from livezmp.base_placement import BasePlacer
-from livezmp.bvh import read_bvh
+from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.cli import main
-from livezmp.correction import CorrectionLimits, rate_limit
-from livezmp.demo import smooth_ramp
-from livezmp.online_correction import OnlineCorrector
-from livezmp.pipeline import FrameResult, Pipeline, default_config
-from livezmp.root_motion import RootMover, euler_from_matrix, hip_axes
+from livezmp.correct.correction import CorrectionLimits, rate_limit
+from livezmp.correct.online import OnlineCorrector
+from livezmp.correct.root_motion import RootMover, euler_from_matrix, hip_axes
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.bvh import read_bvh
+from livezmp.model.demo_robot import smooth_ramp
 
 # rotations about world +y; the OP3's pitch axes are ±y per side (URDF), hence the signs
 OP3_FLEX = (("l_hip_pitch", -1, 1), ("l_knee", 2, 1), ("l_ank_pitch", -1, -1),
@@ -68,7 +68,7 @@ def test_root_mover_keeps_robot_feet_exactly(op3_body, w_left):
 
 
 def test_root_mover_skeleton_keeps_stance_foot(bandai_walk):
-    from livezmp.body_bvh import body_from_bvh
+    from livezmp.model.bvh_body import body_from_bvh
 
     body = body_from_bvh(bandai_walk)
     mover = RootMover(body)

@@ -10,12 +10,12 @@ import time
 import pytest
 from playwright.sync_api import sync_playwright
 
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.model.body_spec import robot_body
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.dashboard import DashboardServer
 from livezmp.monitor.loop import Monitor
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.sources.body_spec import robot_body
 from livezmp.sources.file_replay import FileReplaySource
 
 CHROMIUM = "/usr/bin/chromium"

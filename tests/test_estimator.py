@@ -8,9 +8,9 @@ import pytest
 from scipy.interpolate import make_smoothing_spline
 from test_spline_diff import interior_response
 
-from livezmp.estimator import EstimatorConfig, EstimatorError, StreamingEstimator, estimate_offline
-from livezmp.kalman import wrap_angle
-from livezmp.spline_diff import smoothing_lambda
+from livezmp.estimate.estimator import EstimatorConfig, EstimatorError, StreamingEstimator, estimate_offline
+from livezmp.estimate.kalman import wrap_angle
+from livezmp.estimate.spline_diff import smoothing_lambda
 
 CFG = EstimatorConfig()  # 120 Hz, window 0.4 s, lag 0.1 s, cutoff 6 Hz
 

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from data_paths import BANDAI
 
-from livezmp.bvh import read_bvh, write_bvh
 from livezmp.cli import main
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -17,6 +16,7 @@ from livezmp.gait.synth import synth_take
 from livezmp.gait.tables import write_outputs
 from livezmp.gait.take import take_from_bvh
 from livezmp.gait.takeset import takes_from_paths
+from livezmp.model.bvh import read_bvh, write_bvh
 
 VARIANTS = {"slow": "elderly", "fast": "active"}
 README_SPEED = {"normal": 1.14, "active": 1.46, "elderly": 0.78}  # m/s, data/README.md (whole dataset)

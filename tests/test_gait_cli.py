@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from data_paths import OP3_URDF
 
-from livezmp.body_urdf import body_from_urdf
-from livezmp.bvh import read_bvh, write_bvh
 from livezmp.cli import main
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
 from livezmp.gait.sinewalk import sine_bvh, sine_trajectory, walk_spec
 from livezmp.gait.tables import read_features
 from livezmp.gait.take import load_take
-from livezmp.trajectory_csv import read_joint_csv, write_joint_csv
+from livezmp.model.bvh import read_bvh, write_bvh
+from livezmp.model.trajectory_csv import read_joint_csv, write_joint_csv
+from livezmp.model.urdf_body import body_from_urdf
 
 # subject: (frequency, speed, hip amplitude) of the normal walk; the fast walk is ×1.1, ×1.32, ×1.25
 PEOPLE = {"01": (0.90, 1.10, 20.0), "02": (0.95, 1.20, 22.0), "03": (0.86, 1.05, 19.0)}

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 from data_paths import OP3_URDF
 
-from livezmp.bvh import parse_bvh, write_bvh
 from livezmp.errors import InputError
 from livezmp.gait import harmonics as hm
 from livezmp.gait.channels import robot_joint_kind
@@ -13,7 +12,8 @@ from livezmp.gait.cycles import detect_cycles
 from livezmp.gait.features import walk_features
 from livezmp.gait.sinewalk import sine_bvh, sine_trajectory, walk_spec
 from livezmp.gait.take import load_take, take_from_bvh
-from livezmp.trajectory_csv import write_joint_csv
+from livezmp.model.bvh import parse_bvh, write_bvh
+from livezmp.model.trajectory_csv import write_joint_csv
 
 OP3_JOINTS = ["head_pan", "head_tilt", "l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ank_pitch",
               "l_ank_roll", "l_sho_pitch", "l_sho_roll", "l_el", "r_hip_yaw", "r_hip_roll", "r_hip_pitch",

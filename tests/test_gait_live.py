@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from data_paths import BANDAI
 
-from livezmp.bvh import read_bvh
 from livezmp.errors import InputError
 from livezmp.gait.channels import reference_channel
 from livezmp.gait.features import walk_features
 from livezmp.gait.live import GaitLiveEstimator
 from livezmp.gait.take import take_from_bvh
+from livezmp.model.bvh import read_bvh
 
 DC = np.array([0.1, 3.1, -0.5])  # rad; channel 1 sits near +π and wraps
 AMP = np.array([0.35, 0.2, 0.05])

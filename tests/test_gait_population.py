@@ -6,7 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from livezmp.bvh import write_bvh
 from livezmp.errors import InputError
 from livezmp.gait.features import walk_features
 from livezmp.gait.population import analyze, change_stat
@@ -14,6 +13,7 @@ from livezmp.gait.sinewalk import sine_bvh, walk_spec
 from livezmp.gait.tables import read_features, write_outputs
 from livezmp.gait.take import take_from_bvh
 from livezmp.gait.takeset import TakeSpec, read_manifest, takes_from_paths
+from livezmp.model.bvh import write_bvh
 
 # Per subject: (frequency Hz, speed m/s, hip amplitude °, knee DC °) for base and fast walks.
 SUBJECTS = {

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from data_paths import OP3_URDF
 
-from livezmp.body_urdf import body_from_urdf
 from livezmp.errors import InputError
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -15,6 +14,7 @@ from livezmp.gait.sinewalk import sine_bvh, sine_trajectory, walk_spec
 from livezmp.gait.synth import match_channels, synth_take, to_bvh, to_trajectory
 from livezmp.gait.take import take_from_bvh, take_from_trajectory
 from livezmp.gait.takeset import TakeSpec
+from livezmp.model.urdf_body import body_from_urdf
 
 # Two subjects whose fast walk is exactly: frequency ×1.1, stride ×1.2, hip amplitude ×1.25,
 # knee DC ×1.2, elbow amplitude ×0.8; so μ is exactly those changes, σ = 0, CV = 0.

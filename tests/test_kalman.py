@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import quad_vec
 from scipy.linalg import expm, solve_discrete_are
 
-from livezmp.kalman import ConstantAccelerationKalman, ca_transition, white_jerk_covariance, wrap_angle
+from livezmp.estimate.kalman import ConstantAccelerationKalman, ca_transition, white_jerk_covariance, wrap_angle
 
 DT = 1.0 / 120.0
 DIFFUSE = [1e-4, 1e6, 1e10]

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from livezmp.kalman import ConstantAccelerationKalman, wrap_angle
+from livezmp.estimate.kalman import ConstantAccelerationKalman, wrap_angle
 
 DT = 1.0 / 200.0
 Q, R, INIT = (2 * math.pi * 20) ** 6 * DT, 1.0, [1.0, 1e4 / DT**2, 1e4 / DT**4]

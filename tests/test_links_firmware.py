@@ -17,7 +17,7 @@ from test_links_support import NAMES, read_until, rig, start_posture
 import firmware_protocol as fp
 from livezmp.links import make_link
 from livezmp.links.base import FootSensors, LinkError, LinkReadError
-from livezmp.robot_config import RobotConfig
+from livezmp.model.robot_config import RobotConfig
 from sim_devices.firmware_board import FirmwareBoard
 from sim_devices.servo_plant import ServoPlant
 

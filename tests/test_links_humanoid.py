@@ -11,9 +11,9 @@ from sim_support import short_gil_switch  # noqa: F401 - fixture
 from test_links_support import with_options
 
 import livezmp
-from livezmp.body_urdf import body_from_urdf
 from livezmp.links import open_link
-from livezmp.robot_config import find_robot_config
+from livezmp.model.robot_config import find_robot_config
+from livezmp.model.urdf_body import body_from_urdf
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import humanoid_sensors, start_devices
 from sim_devices.scenarios import Poser

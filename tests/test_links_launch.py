@@ -11,7 +11,7 @@ from test_links_support import NAMES, servo_config, wait_until
 
 from livezmp.errors import InputError
 from livezmp.links import parse_link_url
-from livezmp.robot_config import RobotConfig, ServoConfig
+from livezmp.model.robot_config import RobotConfig, ServoConfig
 from sim_devices.launch import start_devices
 from sim_devices.servo_plant import ServoPlant
 

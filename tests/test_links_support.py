@@ -14,7 +14,7 @@ from sim_support import wait_until  # also imported from here by the link tests
 from livezmp.links import make_link
 from livezmp.links.base import Link
 from livezmp.links.mock import MockLink
-from livezmp.robot_config import RobotConfig, ServoConfig
+from livezmp.model.robot_config import RobotConfig, ServoConfig
 from sim_devices.launch import SimDevices, start_devices
 from sim_devices.servo_plant import ServoPlant
 

@@ -10,7 +10,7 @@ from livezmp.links import make_link, parse_link_url
 from livezmp.links.dynamixel import DynamixelLink
 from livezmp.links.firmware import FirmwareLink
 from livezmp.links.mock import MockLink
-from livezmp.robot_config import RobotConfig, ServoConfig
+from livezmp.model.robot_config import RobotConfig, ServoConfig
 
 
 @pytest.mark.parametrize(("url", "parsed"), [

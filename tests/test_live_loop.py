@@ -15,12 +15,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.demo import demo_robot_path
 from livezmp.errors import InputError
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
-from livezmp.live_loop import LiveLoop, LoopConfig
-from livezmp.loop_clock import LoopClock, TimingHistogram
-from livezmp.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, Watchdog, joint_limits
+from livezmp.live.clock import LoopClock, TimingHistogram
+from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, Watchdog, joint_limits
+from livezmp.model.demo_robot import demo_robot_path
 
 RATE = 500.0
 T = 1.0 / RATE

@@ -13,8 +13,8 @@ from test_live_loop import SimTime
 
 from livezmp.commands.run import make_scenario
 from livezmp.links.mock import MockLink
-from livezmp.live_loop import LiveLoop, LoopConfig
-from livezmp.loop_clock import LoopClock
+from livezmp.live.clock import LoopClock
+from livezmp.live.loop import LiveLoop, LoopConfig
 from sim_devices.humanoid import SimHumanoid
 
 READ_S, WRITE_S = 6e-4, 2e-4

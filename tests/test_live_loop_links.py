@@ -15,7 +15,7 @@ from sim_support import short_gil_switch  # noqa: F401 - fixture
 
 from livezmp.commands.run import SimProcess, make_scenario
 from livezmp.links import LinkError, open_link
-from livezmp.live_loop import LiveLoop, LoopConfig
+from livezmp.live.loop import LiveLoop, LoopConfig
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
 

@@ -24,19 +24,19 @@ from test_live_loop import SimTime
 from test_live_loop_closed import BusTime
 from test_run_cli import line_from, livezmp, stop
 
+from livezmp.balance.contacts import support_label
+from livezmp.balance.foot_sensors import GRAVITY
 from livezmp.cli import build_parser
 from livezmp.commands.run import load_robot, make_scenario, run_loop
-from livezmp.contacts import support_label
-from livezmp.demo import demo_robot_path
-from livezmp.foot_sensors import GRAVITY
 from livezmp.links import open_link
 from livezmp.links.base import FootSensors
 from livezmp.links.mock import MockLink
-from livezmp.live_loop import LiveLoop, LoopConfig
-from livezmp.loop_clock import LoopClock
-from livezmp.loop_recording import LoopRecorder
+from livezmp.live.clock import LoopClock
+from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.recorder import LoopRecorder
+from livezmp.model.body_spec import robot_body
+from livezmp.model.demo_robot import demo_robot_path
 from livezmp.recording import iter_messages, open_recording
-from livezmp.sources.body_spec import robot_body
 from sim_devices.humanoid import Push, SimHumanoid
 from sim_devices.launch import humanoid_sensors, start_devices
 

@@ -23,14 +23,14 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 from sim_support import wait_until
 
-from livezmp.bvh import read_bvh
+from livezmp.balance.pipeline import default_config
 from livezmp.cli import main
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.model.body_spec import robot_body
+from livezmp.model.bvh import read_bvh
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.loop import Monitor
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import default_config
 from livezmp.recording import Recorder, iter_messages, open_recording
-from livezmp.sources.body_spec import robot_body
 from livezmp.sources.file_replay import FileReplaySource
 from sim_devices.mocap_streamer import Impairments, UdpStreamer
 

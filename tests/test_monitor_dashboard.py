@@ -18,13 +18,13 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.balance.pipeline import default_config
 from livezmp.errors import InputError
+from livezmp.model.body_spec import robot_body
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.dashboard import MAX_POINTS, DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import default_config
-from livezmp.sources.body_spec import robot_body
 from livezmp.sources.file_replay import FileReplaySource
 
 HELLO = {"source": "test", "body": "urdf", "alarm_after": 0.2}

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.errors import InputError
+from livezmp.model.body_spec import robot_body
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
 from livezmp.monitor.loop import Monitor
 from livezmp.monitor.tui import TerminalView
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import FrameResult, Pipeline, default_config
 from livezmp.recording import Recorder, iter_messages
-from livezmp.sources.body_spec import robot_body
 from livezmp.sources.file_replay import FileReplaySource
 
 

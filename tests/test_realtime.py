@@ -7,7 +7,7 @@ import os
 import pytest
 
 from livezmp.errors import InputError
-from livezmp.realtime import check_priority, realtime_priority
+from livezmp.live.realtime import check_priority, realtime_priority
 
 
 def test_priority_zero_asks_for_nothing():

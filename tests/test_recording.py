@@ -16,10 +16,10 @@ from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.errors import InputError
-from livezmp.pipeline import Pipeline, default_config
+from livezmp.model.body_spec import body_from_spec, read_skeleton, skeleton_body
 from livezmp.recording import SCHEMAS, Recorder, iter_messages, open_recording, recover, result_message
-from livezmp.sources.body_spec import body_from_spec, read_skeleton, skeleton_body
 
 WALK = BANDAI / "walk_normal_001.bvh"
 

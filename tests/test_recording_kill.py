@@ -21,10 +21,10 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from sim_support import wait_until
 
-from livezmp.demo import demo_robot_path
-from livezmp.pipeline import Pipeline, default_config
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.model.body_spec import robot_body
+from livezmp.model.demo_robot import demo_robot_path
 from livezmp.recording import CHUNK_SECONDS, open_recording, recover
-from livezmp.sources.body_spec import robot_body
 
 RUNS = 5
 

@@ -14,11 +14,11 @@ import time
 import numpy as np
 import pytest
 
-from livezmp.body_urdf import body_from_urdf
 from livezmp.cli import main
 from livezmp.commands.run import make_scenario
-from livezmp.demo import demo_robot_path
-from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.demo_robot import demo_robot_path
+from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.urdf_body import body_from_urdf
 
 SUMMARY_KEYS = ("cycles", "achieved_hz", "deadline_misses", "read_errors", "write_errors", "stale_frames",
                 "corrections_sent", "inside_fraction", "max_latency_ms", "p99_latency_ms", "fell")

@@ -20,14 +20,14 @@ from scipy.spatial.transform import Rotation
 from sim_support import sdk_latency_timer, short_gil_switch, wait_until  # noqa: F401 - fixtures
 
 import livezmp
-from livezmp.base_placement import BasePlacer
-from livezmp.body import sole_velocities
-from livezmp.body_urdf import body_from_urdf
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.balance.support import clamp_to_polygon
+from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
-from livezmp.online_correction import OnlineCorrector
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.support import clamp_to_polygon
-from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.body import sole_velocities
+from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.urdf_body import body_from_urdf
 from sim_devices import scenarios as sc
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.humanoid import Push, RealtimeThread, SimHumanoid, cop_weights

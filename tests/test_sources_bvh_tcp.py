@@ -10,8 +10,8 @@ import pytest
 from data_paths import BANDAI
 from sim_support import wait_until
 
-from livezmp.bvh import read_bvh
 from livezmp.errors import InputError
+from livezmp.model.bvh import read_bvh
 from livezmp.sources.bvh_tcp import parse_frame_line
 from livezmp.sources.factory import SourceOptions, open_source
 from sim_devices.mocap_streamer import Impairments, TcpStreamer

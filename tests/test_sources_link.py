@@ -8,11 +8,11 @@ import threading
 import numpy as np
 import pytest
 
-from livezmp.demo import demo_robot_path
+from livezmp.balance.pipeline import default_config
 from livezmp.errors import InputError
+from livezmp.model.demo_robot import demo_robot_path
+from livezmp.model.robot_config import find_robot_config
 from livezmp.monitor.loop import Monitor
-from livezmp.pipeline import default_config
-from livezmp.robot_config import find_robot_config
 from livezmp.sources.factory import SourceOptions, open_source
 from sim_devices.launch import start_devices
 from sim_devices.servo_plant import ServoPlant
@@ -31,7 +31,7 @@ def bent_knees(names: list[str]) -> np.ndarray:
 
 @pytest.mark.parametrize("kind", ["dynamixel", "fw"])
 def test_monitor_watches_a_robot_through_its_link(kind):
-    from livezmp.body_urdf import body_from_urdf
+    from livezmp.model.urdf_body import body_from_urdf
 
     body = body_from_urdf(URDF)
     names = body.joint_names

@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from data_paths import BANDAI, OP3_URDF
 
-from livezmp.body_bvh import BvhBodyOptions
-from livezmp.body_urdf import UrdfBodyOptions
-from livezmp.bvh import read_bvh
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.errors import InputError
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import Pipeline, default_config
-from livezmp.sources.body_spec import body_from_spec, read_skeleton, robot_body, skeleton_body
+from livezmp.model.body_spec import body_from_spec, read_skeleton, robot_body, skeleton_body
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.sources.factory import SourceOptions, open_source
-from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
 
 WALK = BANDAI / "walk_normal_001.bvh"
 

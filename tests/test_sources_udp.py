@@ -14,12 +14,12 @@ import pytest
 from data_paths import BANDAI
 from sim_support import wait_until
 
-from livezmp.bvh import read_bvh
-from livezmp.demo import demo_robot_path, demo_trajectory
+from livezmp.balance.pipeline import default_config
 from livezmp.errors import InputError
+from livezmp.model.bvh import read_bvh
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.loop import Monitor
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import default_config
 from livezmp.recording import Recorder, iter_messages
 from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.frame_format import WireFrame, encode_binary, encode_json

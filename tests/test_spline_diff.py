@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import make_smoothing_spline
 
-from livezmp.spline_diff import SlidingSplineDifferentiator, smoothing_lambda, uniform_weights, window_weights
+from livezmp.estimate.spline_diff import SlidingSplineDifferentiator, smoothing_lambda, uniform_weights, window_weights
 
 DT = 1.0 / 120.0
 LAM = smoothing_lambda(DT, 6.0)

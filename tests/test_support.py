@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from matplotlib.path import Path
 from scipy.spatial import ConvexHull
 
+from livezmp.balance.support import SupportError, clamp_to_polygon, convex_hull, support_polygon
 from livezmp.errors import InputError
-from livezmp.support import SupportError, clamp_to_polygon, convex_hull, support_polygon
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 TRIANGLE = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]])  # 3-4-5 right triangle, incircle r = 1 at (1, 1)

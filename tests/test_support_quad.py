@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.support import _quad_hull, clamp_to_polygon, convex_hull, support_and_clamp, support_polygon
+from livezmp.balance.support import _quad_hull, clamp_to_polygon, convex_hull, support_and_clamp, support_polygon
 
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
 size = st.floats(1e-3, 0.4, allow_nan=False)

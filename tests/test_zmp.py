@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from livezmp.estimator import EstimatorConfig, StreamingEstimator
-from livezmp.zmp import compute_zmp, zmp_from_wrench
+from livezmp.balance.zmp import compute_zmp, zmp_from_wrench
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
 
 G = 9.81
 

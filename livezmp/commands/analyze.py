@@ -11,11 +11,11 @@ import argparse
 
 from rich.progress import Progress
 
+from livezmp.balance.pipeline import Pipeline
 from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
 from livezmp.errors import InputError
-from livezmp.pipeline import Pipeline
-from livezmp.plot import plot_analysis
-from livezmp.report import summarize, write_json, write_zmp_csv
+from livezmp.offline.plot import plot_analysis
+from livezmp.offline.report import summarize, write_json, write_zmp_csv
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 

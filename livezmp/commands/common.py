@@ -10,12 +10,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from livezmp.body_bvh import BvhBodyOptions
-from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
-from livezmp.demo import demo_robot_path, demo_trajectory
-from livezmp.motion_file import LoadedMotion, load_motion, trajectory_frames
-from livezmp.pipeline import PipelineConfig, default_config
-from livezmp.segments import load_mapping
+from livezmp.balance.pipeline import PipelineConfig, default_config
+from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import LoadedMotion, load_motion, trajectory_frames
+from livezmp.model.segments import load_mapping
+from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
 def add_body_options(p: argparse.ArgumentParser) -> None:

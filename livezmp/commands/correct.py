@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from livezmp.bvh import write_bvh
 from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
-from livezmp.correction import CorrectionLimits, correct_motion
+from livezmp.correct.correction import CorrectionLimits, correct_motion
 from livezmp.errors import InputError
-from livezmp.report import write_json
-from livezmp.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.bvh import write_bvh
+from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.offline.report import write_json
 
 
 def add_limit_options(p: argparse.ArgumentParser) -> None:

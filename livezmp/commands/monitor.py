@@ -10,21 +10,21 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from livezmp.body_bvh import BvhBodyOptions
-from livezmp.body_urdf import UrdfBodyOptions
+from livezmp.balance.pipeline import FrameResult, default_config
 from livezmp.commands.common import add_body_options, pipeline_config, stop_on_signals
-from livezmp.demo import demo_robot_path, demo_trajectory
 from livezmp.errors import InputError
-from livezmp.estimator import EstimatorConfig
+from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.model.body_spec import robot_body
+from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.segments import load_mapping
+from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
 from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
-from livezmp.motion_file import trajectory_frames
-from livezmp.pipeline import FrameResult, default_config
 from livezmp.recording import Recorder, iter_messages, recover
-from livezmp.segments import load_mapping
-from livezmp.sources.body_spec import robot_body
 from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source

@@ -2,7 +2,7 @@
 link, simulated devices on ptys, and the two together.
 
 * ``run``: open the link, then read → estimate → correct → write at a fixed rate (see
-  :mod:`livezmp.live_loop`) until ``--duration``, the end of the motion, or Ctrl-C /
+  :mod:`livezmp.live.loop`) until ``--duration``, the end of the motion, or Ctrl-C /
   SIGTERM; a summary JSON at exit.
 * ``sim``: a simulated humanoid (:class:`sim_devices.humanoid.SimHumanoid`) behind
   simulated devices of one link kind; prints one JSON line (the link URL and port
@@ -16,8 +16,8 @@ link, simulated devices on ptys, and the two together.
   ZMP was inside the support polygon).
 
 ``run`` and ``demo`` take ``--contacts auto|sensors|kinematics`` (where the feet's
-contacts come from, see :class:`~livezmp.live_loop.LoopConfig`) and ``--record
-FILE.mcap`` (:mod:`livezmp.loop_recording`: inputs, results, foot sensors, corrections,
+contacts come from, see :class:`~livezmp.live.loop.LoopConfig`) and ``--record
+FILE.mcap`` (:mod:`livezmp.live.recorder`: inputs, results, foot sensors, corrections,
 written by a background thread; the file is finished after the safe stop, on every way
 out).
 """
@@ -37,20 +37,20 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.body import BodyModel
-from livezmp.body_urdf import UrdfBodyOptions
 from livezmp.commands.common import stop_on_signals
-from livezmp.demo import demo_robot_path
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
 from livezmp.links.mock import MockLink
-from livezmp.live_loop import CONTACT_MODES, LiveLoop, LoopConfig
-from livezmp.loop_recording import LoopRecorder
-from livezmp.realtime import LOOP_PRIORITY, check_priority, realtime_priority
-from livezmp.report import write_json
-from livezmp.robot_config import RobotConfig, find_robot_config, load_robot_config
-from livezmp.safety import SafetyConfig
-from livezmp.sources.body_spec import BodySpec, robot_body
+from livezmp.live.loop import CONTACT_MODES, LiveLoop, LoopConfig
+from livezmp.live.realtime import LOOP_PRIORITY, check_priority, realtime_priority
+from livezmp.live.recorder import LoopRecorder
+from livezmp.live.safety import SafetyConfig
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec, robot_body
+from livezmp.model.demo_robot import demo_robot_path
+from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
+from livezmp.model.urdf_body import UrdfBodyOptions
+from livezmp.offline.report import write_json
 from sim_devices import scenarios as sc
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import Push, RealtimeThread, SimHumanoid

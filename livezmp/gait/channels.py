@@ -18,9 +18,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel
 from livezmp.errors import InputError
-from livezmp.segments import classify, tag_joints
+from livezmp.model.body import BodyModel
+from livezmp.model.segments import classify, tag_joints
 
 AXES = ("lateral", "vertical", "forward")
 GIMBAL_COS = np.cos(np.deg2rad(20.0))  # axes closer than 20° count as degenerate

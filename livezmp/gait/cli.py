@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.bvh import write_bvh
 from livezmp.errors import InputError
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -22,7 +21,8 @@ from livezmp.gait.synth import synth_take, to_bvh, to_trajectory
 from livezmp.gait.tables import read_features, write_outputs
 from livezmp.gait.take import GaitTake, load_take
 from livezmp.gait.takeset import DEFAULT_PATTERN, read_manifest, takes_from_paths
-from livezmp.trajectory_csv import write_joint_csv
+from livezmp.model.bvh import write_bvh
+from livezmp.model.trajectory_csv import write_joint_csv
 
 GROUND = {"y": "xz", "z": "xy"}
 
@@ -98,7 +98,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if take.body.kind == "bvh":
         motion = to_bvh(take, q)
         if args.balance:
-            from livezmp.correction import correct_bvh  # imported here: heavy, and only for --balance
+            from livezmp.correct.correction import correct_bvh  # imported here: heavy, and only for --balance
 
             motion = correct_bvh(motion)
         write_bvh(motion, out)

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from livezmp.bvh import BvhJoint, BvhMotion
-from livezmp.trajectory_csv import JointTrajectory
+from livezmp.model.bvh import BvhJoint, BvhMotion
+from livezmp.model.trajectory_csv import JointTrajectory
 
 ROT = ["Zrotation", "Xrotation", "Yrotation"]
 # name, parent, offset (cm)

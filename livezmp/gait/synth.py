@@ -22,13 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from livezmp.bvh import BvhMotion
 from livezmp.errors import InputError
 from livezmp.gait.channels import ChannelTag
 from livezmp.gait.features import WalkFeatures, walk_features
 from livezmp.gait.population import ChangeStat, GaitAnalysis, VariantChange
 from livezmp.gait.take import GaitTake, turn_root
-from livezmp.trajectory_csv import BASE_COLUMNS, JointTrajectory
+from livezmp.model.bvh import BvhMotion
+from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory
 
 
 @dataclass

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from livezmp.body import BodyModel
-from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
-from livezmp.body_urdf import body_from_urdf
-from livezmp.bvh import BvhMotion, read_bvh
 from livezmp.errors import InputError
 from livezmp.gait.channels import ChannelTag, tag_channels
-from livezmp.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
+from livezmp.model.body import BodyModel
+from livezmp.model.bvh import BvhMotion, read_bvh
+from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
+from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
+from livezmp.model.urdf_body import body_from_urdf
 
 
 @dataclass

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from livezmp.errors import InputError
-from livezmp.trajectory_csv import read_csv_rows
+from livezmp.model.trajectory_csv import read_csv_rows
 
 DEFAULT_PATTERN = r"(?:^|[_-])(?P<condition>[A-Za-z]+)[_-](?P<take>\d+)\.(?:bvh|csv)$"
 WALK_SUFFIXES = (".bvh", ".csv")

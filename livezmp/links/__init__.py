@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats
-from livezmp.robot_config import RobotConfig, ServoConfig
+from livezmp.model.robot_config import RobotConfig, ServoConfig
 
 __all__ = ["FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "make_link", "open_link",
            "parse_link_url"]

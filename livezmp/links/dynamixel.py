@@ -56,7 +56,7 @@ from dynamixel_sdk import (
 )
 
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, PortLink
-from livezmp.robot_config import ServoConfig
+from livezmp.model.robot_config import ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
 FIRMWARE_VERSION = 6  # EEPROM

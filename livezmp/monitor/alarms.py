@@ -16,8 +16,8 @@ import shutil
 import subprocess
 from dataclasses import asdict, dataclass
 
+from livezmp.balance.pipeline import FrameResult
 from livezmp.errors import InputError
-from livezmp.pipeline import FrameResult
 
 
 @dataclass(frozen=True)

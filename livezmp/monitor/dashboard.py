@@ -44,10 +44,10 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
+from livezmp.balance.pipeline import FrameResult
 from livezmp.errors import InputError
 from livezmp.monitor.alarms import AlarmEvent
 from livezmp.monitor.snapshot import frame_snapshot, plot_point
-from livezmp.pipeline import FrameResult
 from livezmp.sources.udp import is_loopback
 
 RING = 1024  # recent results kept for the plot points of slow clients

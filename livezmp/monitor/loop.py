@@ -21,12 +21,12 @@ from typing import Protocol
 
 import numpy as np
 
+from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig
+from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.gait.channels import reference_channel, tag_channels
 from livezmp.gait.live import GaitLiveEstimator
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
-from livezmp.online_correction import OnlineCorrector
-from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig
 from livezmp.recording import Recorder, result_message
 from livezmp.sources.interface import Source
 

@@ -7,7 +7,7 @@ time plots (ZMP against the support polygon's extent along x and y).
 
 from __future__ import annotations
 
-from livezmp.pipeline import FrameResult
+from livezmp.balance.pipeline import FrameResult
 
 
 def _xy(p) -> list[float] | None:

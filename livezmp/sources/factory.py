@@ -21,18 +21,18 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from livezmp.body import BodyModel
-from livezmp.body_bvh import BvhBodyOptions
-from livezmp.body_urdf import UrdfBodyOptions
 from livezmp.errors import InputError
-from livezmp.motion_file import trajectory_frames
-from livezmp.sources.body_spec import BodySpec, read_skeleton, robot_body, skeleton_body
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec, read_skeleton, robot_body, skeleton_body
+from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.trajectory_csv import read_joint_csv
+from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.sources.bvh_tcp import BvhTcpSource
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source
 from livezmp.sources.mcap_replay import McapReplaySource
 from livezmp.sources.udp import UdpSource, parse_allowlist
-from livezmp.trajectory_csv import read_joint_csv
 
 SCHEMES = ("udp", "tcp")
 QUERY_KEYS = {"udp": {"allow", "max_bytes"}, "tcp": {"max_line"}}
@@ -96,7 +96,7 @@ LINK_SCHEMES = ("dynamixel", "can", "fw")
 def _link(spec: str, o: SourceOptions) -> Source:
     """A servo link watched at ``--fps`` (default 100 Hz); needs ``--robot``."""
     from livezmp.links.base import LinkError
-    from livezmp.robot_config import find_robot_config, load_robot_config
+    from livezmp.model.robot_config import find_robot_config, load_robot_config
     from livezmp.sources.link_source import LinkSource
 
     if not o.robot:

@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from livezmp.body import BodyModel
 from livezmp.errors import InputError
-from livezmp.sources.body_spec import BodySpec
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 

@@ -22,8 +22,8 @@ from typing import Protocol
 
 import numpy as np
 
-from livezmp.body import BodyModel
-from livezmp.sources.body_spec import BodySpec
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Each :meth:`LinkSource.read` waits for the next period, reads one verified frame
 the link, places the base from the joint angles (stance foot flat, as the live loop
 does) and hands out ``[base x, y, z, yaw, pitch, roll, joints]``. Foot sensors, when the
 device has them, give the contacts: a foot bears weight when its cells carry more than
-``contact_fraction`` of the body's weight (:func:`livezmp.foot_sensors.sensor_contacts`).
+``contact_fraction`` of the body's weight (:func:`livezmp.balance.foot_sensors.sensor_contacts`).
 A failed read is counted as malformed and reported; a lost port is reported as
 "disconnected" and retried with ``reconnect``.
 The monitor never writes goals: the link holds the posture it found at open.
@@ -17,13 +17,13 @@ import time
 
 import numpy as np
 
-from livezmp.base_placement import BasePlacer
-from livezmp.body import BodyModel
-from livezmp.foot_sensors import CONTACT_FRACTION, contact_force, sensor_contacts
+from livezmp.balance.foot_sensors import CONTACT_FRACTION, contact_force, sensor_contacts
 from livezmp.links import open_link
 from livezmp.links.base import Link, LinkError, LinkReadError
-from livezmp.robot_config import RobotConfig
-from livezmp.sources.body_spec import BodySpec
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec
+from livezmp.model.robot_config import RobotConfig
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from livezmp.errors import InputError
+from livezmp.model.body_spec import body_from_spec
 from livezmp.recording import iter_messages, open_recording
-from livezmp.sources.body_spec import body_from_spec
 from livezmp.sources.file_replay import Pacer
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 

@@ -18,9 +18,9 @@ import select
 import socket
 import time
 
-from livezmp.body import BodyModel
 from livezmp.errors import InputError
-from livezmp.sources.body_spec import BodySpec
+from livezmp.model.body import BodyModel
+from livezmp.model.body_spec import BodySpec
 from livezmp.sources.frame_format import SEQ_MOD, FrameError, decode_frame, max_packet_bytes
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.base_placement import place_base
-from livezmp.body import BodyModel
-from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
-from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
-from livezmp.bvh import BvhMotion, read_bvh
 from livezmp.errors import InputError
-from livezmp.trajectory_csv import JointTrajectory, read_joint_csv
+from livezmp.model.base_placement import place_base
+from livezmp.model.body import BodyModel
+from livezmp.model.bvh import BvhMotion, read_bvh
+from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
+from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv
+from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
 @dataclass

@@ -11,7 +11,7 @@ velocity (ω, v) and spatial acceleration (α, a) in the joint's local frame, wi
 a taken at the joint origin, as in Pinocchio's ``data.v`` / ``data.a``; the world
 placement as the world coordinates of the joint's three axes and of its origin. Joints
 are one-degree-of-freedom revolute or prismatic joints along x, y, z or any fixed axis
-(what :mod:`livezmp.body_bvh` and :mod:`livezmp.body_urdf` build); a model with any
+(what :mod:`livezmp.model.bvh_body` and :mod:`livezmp.model.urdf_body` build); a model with any
 other joint raises :class:`UnsupportedModel`.
 
 Units: SI (m, rad, s, kg), world frame of the model (internal frame: z up). Arrays are
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel
+from livezmp.model.body import BodyModel
 
 # Layout of the per-joint state block Z (3, 7, C): for local axis k, Z[k, 0:4] are the k-th local
 # components of ω, v, α, a, and Z[k, 4:7] the world coordinates of that axis (column k of the world
@@ -131,7 +131,7 @@ class FrameMotion:
 
 @dataclass
 class Dynamics:
-    """Centroidal quantities over C frames, as :func:`livezmp.zmp.compute_zmp` uses them.
+    """Centroidal quantities over C frames, as :func:`livezmp.balance.zmp.compute_zmp` uses them.
 
     ``com`` (C, 3) m; ``momentum_rate`` (C, 3) N: rate of linear momentum (Pinocchio's
     ``dhg.linear``); ``moment`` (C, 3) N·m: rate of angular momentum about the CoM
@@ -305,7 +305,7 @@ def body_frame_ids(body: BodyModel) -> list[int]:
 
 
 def batch_soles(body: BodyModel, frames: dict[int, FrameMotion]) -> dict[str, np.ndarray]:
-    """Sole corners (C, k, 3) of each foot, internal world frame, m: :func:`livezmp.body.foot_soles`
+    """Sole corners (C, k, 3) of each foot, internal world frame, m: :func:`livezmp.model.body.foot_soles`
     over C frames."""
     out = {}
     for side, foot in body.feet.items():
@@ -333,7 +333,7 @@ def batch_soles(body: BodyModel, frames: dict[int, FrameMotion]) -> dict[str, np
 
 def batch_sole_velocities(body: BodyModel, frames: dict[int, FrameMotion],
                           soles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Velocity (C, k, 3) of each sole corner, m/s: :func:`livezmp.body.sole_velocities` over C frames
+    """Velocity (C, k, 3) of each sole corner, m/s: :func:`livezmp.model.body.sole_velocities` over C frames
     (a skeleton's heel corners move with the ankle, its toe corners with the toe joint)."""
     out = {}
     for side, foot in body.feet.items():

@@ -1,8 +1,8 @@
 """Streaming estimate of position, velocity and acceleration for every channel of a pose stream.
 
 The chain of the source paper, run per frame: an online Kalman filter
-(:mod:`livezmp.kalman`) bridges missing samples and unwraps angle channels,
-then a sliding-window smoothing spline (:mod:`livezmp.spline_diff`) gives the
+(:mod:`livezmp.estimate.kalman`) bridges missing samples and unwraps angle channels,
+then a sliding-window smoothing spline (:mod:`livezmp.estimate.spline_diff`) gives the
 position, velocity and acceleration ``lag`` frames behind the newest input.
 Offline runs (:func:`estimate_offline`) go through the very same per-frame
 code, so live and offline results agree.
@@ -53,8 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livezmp.kalman import ConstantAccelerationKalman
-from livezmp.spline_diff import SlidingSplineDifferentiator, smoothing_lambda
+from livezmp.estimate.kalman import ConstantAccelerationKalman
+from livezmp.estimate.spline_diff import SlidingSplineDifferentiator, smoothing_lambda
 
 
 class EstimatorError(ValueError):

@@ -1,5 +1,5 @@
 """Support polygons and the clamp of the ZMP to them over many frames at once:
-:func:`livezmp.support.support_polygon` then :func:`livezmp.support.clamp_to_polygon`,
+:func:`livezmp.balance.support.support_polygon` then :func:`livezmp.balance.support.clamp_to_polygon`,
 frame by frame, with the same results.
 
 Each frame's polygon is the convex hull of a few sole corners (4 in single support,
@@ -18,7 +18,7 @@ import itertools
 
 import numpy as np
 
-from livezmp.support import clamp_to_polygon, support_polygon
+from livezmp.balance.support import clamp_to_polygon, support_polygon
 
 NEAR_LINE = 1e-7  # relative to the largest coordinate: closer to a line leaves the frame to the per-frame code
 MAX_COORD = 1e12  # m: larger coordinates are the per-frame code's to reject
@@ -58,7 +58,7 @@ def clamp_batch(zmp_xy: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.
     """Clamp F points (F, 2) to the convex hulls of F point sets (F, k, 2), k >= 3.
 
     Returns (clamped (F, 2), inside (F,), margin (F,), unclear (F,)) as
-    :func:`livezmp.support.clamp_to_polygon` defines them; rows where ``unclear`` is True
+    :func:`livezmp.balance.support.clamp_to_polygon` defines them; rows where ``unclear`` is True
     are not computed (the caller runs the per-frame code there)."""
     start, end, is_edge, unclear = _edges(points)
     p = zmp_xy[:, None, :]

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.balance.pipeline import FrameResult
 from livezmp.links.base import FootSensors
-from livezmp.pipeline import FrameResult
+from livezmp.model.body_spec import BodySpec
 from livezmp.recording import LOOP_SCHEMAS, BackgroundWriter, Recorder, input_message, point_message, result_message
-from livezmp.sources.body_spec import BodySpec
 
 
 def _result_at(index: int, r: FrameResult) -> dict:

@@ -1,4 +1,4 @@
-"""Foot contacts and ground height over many frames at once: :class:`livezmp.contacts.ContactDetector`
+"""Foot contacts and ground height over many frames at once: :class:`livezmp.balance.contacts.ContactDetector`
 for a chunk of frames, with the same results and the same state afterwards.
 
 The ground estimate is a per-frame recurrence (warm-up percentile, then a bounded
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from livezmp.contacts import ContactConfig, ContactDetector, FootContact
-from livezmp.support import SUPPORT_LABELS
+from livezmp.balance.contacts import ContactConfig, ContactDetector, FootContact
+from livezmp.balance.support import SUPPORT_LABELS
 
 # support label code (index into SUPPORT_LABELS) from 2 * left + right
 _CODE = np.array([SUPPORT_LABELS.index(s) for s in ("none", "right", "left", "double")], dtype=np.int8)
@@ -31,7 +31,7 @@ def _run_lengths(flags: np.ndarray) -> np.ndarray:
 def foot_contacts(state: FootContact, height: np.ndarray, speed: np.ndarray,
                   cfg: ContactConfig) -> tuple[np.ndarray, FootContact]:
     """In-contact flags (C,) of one foot over C frames and its state after them:
-    :func:`livezmp.contacts.step_foot` applied frame after frame.
+    :func:`livezmp.balance.contacts.step_foot` applied frame after frame.
 
     height (C,): lowest sole point above the ground, m; speed (C,): its horizontal speed, m/s."""
     count = len(height)

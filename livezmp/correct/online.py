@@ -22,11 +22,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel
-from livezmp.correction import CorrectionLimits, zmp_target
-from livezmp.pipeline import FrameResult
-from livezmp.root_motion import RootMover, hip_axes
-from livezmp.support import clamp_to_polygon
+from livezmp.balance.pipeline import FrameResult
+from livezmp.balance.support import clamp_to_polygon
+from livezmp.correct.correction import CorrectionLimits, zmp_target
+from livezmp.correct.root_motion import RootMover, hip_axes
+from livezmp.model.body import BodyModel
 
 
 @dataclass

@@ -163,7 +163,7 @@ def lowest_sole_points(body: BodyModel, model: pin.Model, data: pin.Data,
                        soles: dict[str, np.ndarray]) -> dict[str, tuple[float, float]]:
     """Per foot, the height z (m, internal world frame) of its lowest sole corner (the first of equal
     ones) and that corner's horizontal speed (m/s): what contact detection needs
-    (:meth:`livezmp.contacts.ContactDetector.update_lowest`), without every corner's velocity. Equal to
+    (:meth:`livezmp.balance.contacts.ContactDetector.update_lowest`), without every corner's velocity. Equal to
     the lowest row of ``soles`` and of :func:`sole_velocities`; ``data`` as for that function."""
     out = {}
     for side, foot in body.feet.items():

@@ -11,7 +11,7 @@ axes as the foot link's.
 * :func:`sensor_contacts`: a foot is in contact when its cells carry more than
   ``fraction`` of the body's weight (:func:`contact_force`);
 * :class:`CopLocator`: the board's per-foot CoPs placed on the soles of a
-  :class:`~livezmp.pipeline.FrameResult` (its estimated foot placements) and combined,
+  :class:`~livezmp.balance.pipeline.FrameResult` (its estimated foot placements) and combined,
   weighted by each foot's load, into one point in that result's world frame (z up, m);
 * :class:`CopVsZmp`: constant-memory statistics of the horizontal distance between that
   point and the result's computed ZMP.
@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from livezmp.body import BodyModel
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors
-from livezmp.loop_clock import TimingHistogram
+from livezmp.live.clock import TimingHistogram
+from livezmp.model.body import BodyModel
 
 GRAVITY = 9.81  # m/s²
 CONTACT_FRACTION = 0.05  # of the body's weight: what a foot carries to count as down

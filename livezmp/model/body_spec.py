@@ -3,10 +3,10 @@
 A live source knows its body before the first frame (a skeleton BVH, or a URDF and its
 robot config). :class:`BodySpec` keeps those inputs as text plus the resolved options
 (length unit and up axis as detected, not as guessed again), so ``livezmp replay`` on
-another machine builds exactly the same :class:`~livezmp.body.BodyModel`.
+another machine builds exactly the same :class:`~livezmp.model.body.BodyModel`.
 
 A skeleton spec keeps the BVH hierarchy lines verbatim and only the frames that body
-building reads (the first :data:`~livezmp.body_bvh.CALIBRATION_S` seconds calibrate the
+building reads (the first :data:`~livezmp.model.bvh_body.CALIBRATION_S` seconds calibrate the
 feet; the first frame gives the up axis), written at full precision.
 """
 
@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.body import BodyModel
-from livezmp.body_bvh import CALIBRATION_S, BvhBodyOptions, body_from_bvh
-from livezmp.body_urdf import UrdfBodyOptions, body_from_urdf
-from livezmp.bvh import BvhMotion, parse_bvh, parse_hierarchy
 from livezmp.errors import InputError
-from livezmp.segments import SegmentTag
+from livezmp.model.body import BodyModel
+from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
+from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.model.segments import SegmentTag
+from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 SKELETON_FILE = "skeleton.bvh"
 URDF_FILE = "robot.urdf"

@@ -1,6 +1,6 @@
 """The streaming estimator's output for a whole take, computed chunk by chunk over arrays.
 
-On uniformly sampled, complete input the per-frame chain of :mod:`livezmp.estimator`
+On uniformly sampled, complete input the per-frame chain of :mod:`livezmp.estimate.estimator`
 is linear and, once the Kalman gain has settled, time-invariant:
 
 * Kalman filter: every channel has the same noise and is measured at every step, so
@@ -27,9 +27,9 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.signal import lfilter, lfiltic, ss2tf
 
-from livezmp.estimator import StreamingEstimator
-from livezmp.kalman import ConstantAccelerationKalman, ca_transition
-from livezmp.spline_diff import window_weights
+from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.estimate.kalman import ConstantAccelerationKalman, ca_transition
+from livezmp.estimate.spline_diff import window_weights
 
 GAIN_TOL = 1e-12  # relative change per step below which the Kalman gain counts as settled
 SETTLE_STEPS = 5  # ... for this many steps in a row

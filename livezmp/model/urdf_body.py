@@ -1,7 +1,7 @@
 """Body model of a URDF robot on Pinocchio: a six-joint floating base, then the URDF.
 
 Masses and inertias come from the URDF's ``<inertial>`` tags. Feet and soles come from
-the robot config (:mod:`livezmp.robot_config`); without one, the feet are the two
+the robot config (:mod:`livezmp.model.robot_config`); without one, the feet are the two
 lowest leaf links in the zero pose (left = +y) and each sole a box under the link's
 centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin,
 by default 0.5 × / 0.28 × / 0.12 × the hip-to-foot height.
@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.errors import InputError
-from livezmp.robot_config import RobotConfig, find_robot_config, load_robot_config
+from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
 BASE_JOINTS = (
     ("base_x", pin.JointModelPX), ("base_y", pin.JointModelPY), ("base_z", pin.JointModelPZ),

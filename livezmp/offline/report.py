@@ -1,4 +1,4 @@
-"""Per-frame tables and summaries of an analysis (a :class:`livezmp.batch.BatchResult`), in the input's world frame."""
+"""Per-frame tables and summaries of an analysis (a :class:`~livezmp.offline.batch.BatchResult`), input world frame."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.batch import BatchResult
-from livezmp.body import BodyModel
-from livezmp.support import SUPPORT_LABELS
+from livezmp.balance.support import SUPPORT_LABELS
+from livezmp.model.body import BodyModel
+from livezmp.offline.batch import BatchResult
 
 ZMP_COLUMNS = ("frame", "time", "zmp_x", "zmp_y", "zmp_z", "com_x", "com_y", "com_z", "support", "inside",
                "clamped_x", "clamped_y", "clamped_z", "margin")

@@ -14,12 +14,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel, foot_soles, lowest_sole_points
-from livezmp.contacts import ContactConfig, ContactDetector, GroundConfig
+from livezmp.balance.contacts import ContactConfig, ContactDetector, GroundConfig
+from livezmp.balance.support import support_and_clamp
+from livezmp.balance.zmp import compute_zmp, zmp_on_plane
 from livezmp.errors import InputError
-from livezmp.estimator import Estimate, EstimatorConfig, StreamingEstimator
-from livezmp.support import support_and_clamp
-from livezmp.zmp import compute_zmp, zmp_on_plane
+from livezmp.estimate.estimator import Estimate, EstimatorConfig, StreamingEstimator
+from livezmp.model.body import BodyModel, foot_soles, lowest_sole_points
 
 MODES = ("full", "seed")
 PROGRESS_EVERY = 500  # frames between progress reports of the per-frame path
@@ -129,16 +129,16 @@ class Pipeline:
 
     def run_batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None,
                   keep_states: bool = False, progress: Callable[[int], None] | None = None):
-        """Analyse a whole motion into a :class:`livezmp.batch.BatchResult` (arrays, one row per frame).
+        """Analyse a whole motion into a :class:`livezmp.offline.batch.BatchResult` (arrays, one row per frame).
 
         On uniformly sampled, complete input at the start of a stream the take is analysed in
-        chunks of ``chunk`` frames over arrays (:mod:`livezmp.batch`): the per-frame results to
+        chunks of ``chunk`` frames over arrays (:mod:`livezmp.offline.batch`): the per-frame results to
         rounding, at a small fraction of the cost, in bounded memory. Otherwise (irregular
         timestamps, missing samples, frames already stepped, a model the batch pass does not
         handle) the frames are stepped one by one and packed. ``keep_states`` keeps q, v, a
         (N × nq each), which :meth:`BatchResult.frames` needs. ``progress(frames_done)`` is
         called as the work goes on (for a progress bar)."""
-        from livezmp.batch import BatchResult  # livezmp.batch builds on this module
+        from livezmp.offline.batch import BatchResult  # livezmp.offline.batch builds on this module
 
         batch = self._batch(times, frames, chunk, keep_states, progress)
         if batch is not None:
@@ -148,7 +148,7 @@ class Pipeline:
     def _batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None, keep_states: bool = False,
                progress: Callable[[int], None] | None = None):
         """The batch path's result, or None when the take needs the per-frame path."""
-        from livezmp.batch import DEFAULT_CHUNK, NotBatchable, analyse_batch
+        from livezmp.offline.batch import DEFAULT_CHUNK, NotBatchable, analyse_batch
 
         if self._count:  # mid-stream: only stepping continues the stream
             return None

@@ -11,8 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from livezmp.batch import BatchResult  # noqa: E402
-from livezmp.body import BodyModel  # noqa: E402
+from livezmp.model.body import BodyModel  # noqa: E402
+from livezmp.offline.batch import BatchResult  # noqa: E402
 
 
 def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title: str = "") -> None:

@@ -32,14 +32,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import lsq_linear
 
-from livezmp.body import BodyModel
-from livezmp.body_bvh import BvhBodyOptions, body_from_bvh
-from livezmp.bvh import BvhMotion
-from livezmp.estimator import StreamingEstimator
-from livezmp.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
-from livezmp.root_motion import RootMover
-from livezmp.support import clamp_to_polygon
-from livezmp.zmp import compute_zmp
+from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
+from livezmp.balance.support import clamp_to_polygon
+from livezmp.balance.zmp import compute_zmp
+from livezmp.correct.root_motion import RootMover
+from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.model.body import BodyModel
+from livezmp.model.bvh import BvhMotion
+from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 
 
 @dataclass(frozen=True)

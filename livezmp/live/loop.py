@@ -1,23 +1,23 @@
 """The live balance loop: read → estimate → correct → write, at a fixed rate.
 
-Every cycle of a :class:`~livezmp.loop_clock.LoopClock` (absolute deadlines):
+Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
 
-1. read one verified frame from the link; the :class:`~livezmp.safety.FrameGuard`
+1. read one verified frame from the link; the :class:`~livezmp.live.safety.FrameGuard`
    rejects stale and corrupted ones;
 2. estimate: the robot has no base sensor, so the base pose comes from the joint
-   angles with the stance foot flat (:class:`~livezmp.base_placement.BasePlacer`);
-   base + joints go through the per-frame :class:`~livezmp.pipeline.Pipeline`
+   angles with the stance foot flat (:class:`~livezmp.model.base_placement.BasePlacer`);
+   base + joints go through the per-frame :class:`~livezmp.balance.pipeline.Pipeline`
    (results lag by the estimator's lag). Where the link reads foot sensors
    (``LoopConfig.contacts``), they say which feet are down instead of the kinematic
    detection; and each analysed sample is paired with the sensor reading of the same
    sample, whose centre of pressure, placed on the result's soles, is compared with the
-   computed ZMP (:mod:`livezmp.foot_sensors`; summary ``cop_vs_zmp``);
+   computed ZMP (:mod:`livezmp.balance.foot_sensors`; summary ``cop_vs_zmp``);
 3. correct: at ``correct_hz`` (every few cycles) the
-   :class:`~livezmp.online_correction.OnlineCorrector` turns the newest result into
+   :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
    more than one 500 Hz period allows on every cycle);
 4. write: goals = command + offsets, through the
-   :class:`~livezmp.safety.GoalLimiter`.
+   :class:`~livezmp.live.safety.GoalLimiter`.
 
 The command comes from a scenario or motion (``command(t)``: joint goals, rad, at loop
 time t in s) or, without one, is the posture of the first frame (hold and balance). At
@@ -39,7 +39,7 @@ dropping torque, or a servo's hardware error, the loop only monitors. On every w
 — the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
 first call to the link.
 
-With a ``recorder`` (:class:`~livezmp.loop_recording.LoopRecorder`) every good sample,
+With a ``recorder`` (:class:`~livezmp.live.recorder.LoopRecorder`) every good sample,
 analysed result, foot-sensor reading and command's correction is queued for its
 background writer: the loop only appends objects to a bounded queue.
 
@@ -56,19 +56,19 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from livezmp.base_placement import BasePlacer
-from livezmp.body import BodyModel
-from livezmp.correction import CorrectionLimits
-from livezmp.demo import smooth_ramp
+from livezmp.balance.foot_sensors import CONTACT_FRACTION, CopLocator, CopVsZmp, contact_force, sensor_contacts
+from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
+from livezmp.correct.correction import CorrectionLimits
+from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
-from livezmp.estimator import EstimatorConfig
-from livezmp.foot_sensors import CONTACT_FRACTION, CopLocator, CopVsZmp, contact_force, sensor_contacts
+from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError
-from livezmp.loop_clock import LoopClock, Tick, TimingHistogram
-from livezmp.loop_recording import LoopRecorder
-from livezmp.online_correction import OnlineCorrector
-from livezmp.pipeline import FrameResult, Pipeline, default_config
-from livezmp.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
+from livezmp.live.clock import LoopClock, Tick, TimingHistogram
+from livezmp.live.recorder import LoopRecorder
+from livezmp.live.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.body import BodyModel
+from livezmp.model.demo_robot import smooth_ramp
 
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)

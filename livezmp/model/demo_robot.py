@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.trajectory_csv import JointTrajectory
+from livezmp.model.trajectory_csv import JointTrajectory
 
 
 def demo_robot_path() -> Path:

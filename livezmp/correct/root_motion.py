@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
-from livezmp.body import BodyModel
+from livezmp.model.body import BodyModel
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 MAX_IK_STEP = 0.1  # rad per Gauss-Newton iteration and joint

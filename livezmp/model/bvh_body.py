@@ -3,7 +3,7 @@
 Each rotation channel becomes a revolute joint and each position channel a prismatic
 joint, in the file's channel order; a joint's position channels replace its offset.
 Segment masses, centres of mass and radii of gyration come from de Leva (1996), see
-:mod:`livezmp.anthropometry`; stature is estimated from the leg bones (thigh + shank
+:mod:`livezmp.model.anthropometry`; stature is estimated from the leg bones (thigh + shank
 ≈ 49.2 % of stature in de Leva's table). The input's world frame is rotated into the
 internal z-up frame at the root.
 """
@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from livezmp.anthropometry import DE_LEVA_MALE
-from livezmp.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.bvh import UNIT_SCALES, BvhMotion, detect_length_unit
 from livezmp.errors import InputError
-from livezmp.segments import SegmentTag, tag_joints
+from livezmp.model.anthropometry import DE_LEVA_MALE
+from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.model.bvh import UNIT_SCALES, BvhMotion, detect_length_unit
+from livezmp.model.segments import SegmentTag, tag_joints
 
 # input world → internal z-up: for y-up, internal (x, y, z) = input (z, x, y)
 WORLD_FROM_INPUT = {

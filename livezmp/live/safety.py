@@ -33,9 +33,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from livezmp.body import BodyModel
 from livezmp.errors import InputError
 from livezmp.links.base import LinkFrame
+from livezmp.model.body import BodyModel
 
 
 @dataclass(frozen=True)

@@ -1,17 +1,17 @@
 """Offline analysis of a whole take over arrays: the per-frame pipeline's results, fast.
 
-:meth:`livezmp.pipeline.Pipeline.run_batch` (and ``run``, ``livezmp analyze``) come
+:meth:`livezmp.balance.pipeline.Pipeline.run_batch` (and ``run``, ``livezmp analyze``) come
 here. The take goes through in chunks of frames; every stage works on a chunk's arrays
 and carries its state to the next chunk, so memory stays bounded whatever the take's
 length, and the results equal those of stepping the per-frame pipeline over the take
 (to rounding, about 1e-12 relative):
 
-1. estimator (:mod:`livezmp.batch_estimator`): settled Kalman filter as a recursion,
+1. estimator (:mod:`livezmp.offline.estimator`): settled Kalman filter as a recursion,
    sliding spline as block matrix products;
-2. kinematics and centroidal dynamics (:mod:`livezmp.batch_kinematics`), sole corners
+2. kinematics and centroidal dynamics (:mod:`livezmp.offline.kinematics`), sole corners
    and their velocities;
-3. contacts and ground (:mod:`livezmp.batch_contacts`), support polygons and the clamp
-   of the ZMP (:mod:`livezmp.batch_support`).
+3. contacts and ground (:mod:`livezmp.offline.contacts`), support polygons and the clamp
+   of the ZMP (:mod:`livezmp.offline.support`).
 
 The batch path needs uniformly sampled, complete input from the start of a stream:
 irregular timestamps, missing samples (non-finite values), contacts from outside, a
@@ -27,21 +27,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livezmp.batch_contacts import detect_contacts
-from livezmp.batch_estimator import NotBatchable, estimate_chunks
-from livezmp.batch_kinematics import (
+from livezmp.balance.contacts import ContactDetector
+from livezmp.balance.pipeline import FrameResult, PipelineConfig
+from livezmp.balance.support import SUPPORT_LABELS, support_polygon
+from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.model.body import BodyModel
+from livezmp.offline.contacts import detect_contacts
+from livezmp.offline.estimator import NotBatchable, estimate_chunks
+from livezmp.offline.kinematics import (
     BatchKinematics,
     UnsupportedModel,
     batch_sole_velocities,
     batch_soles,
     body_frame_ids,
 )
-from livezmp.batch_support import support_clamp
-from livezmp.body import BodyModel
-from livezmp.contacts import ContactDetector
-from livezmp.estimator import StreamingEstimator
-from livezmp.pipeline import FrameResult, PipelineConfig
-from livezmp.support import SUPPORT_LABELS, support_polygon
+from livezmp.offline.support import support_clamp
 
 __all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch"]
 
@@ -57,7 +57,7 @@ class BatchResult:
     indexes ``SUPPORT_LABELS`` ("left", "right", "double", "none"); ``inside``, ``clamped``
     (N, 3) and ``margin`` (N,) are valid where ``judged`` (a ZMP and some support; else
     False / zeros); ``soles`` {side: (N, k, 3)}; ``q``, ``v``, ``a`` (N, nq) only when kept
-    (else None). See :class:`livezmp.pipeline.FrameResult` for each field."""
+    (else None). See :class:`livezmp.balance.pipeline.FrameResult` for each field."""
 
     index: np.ndarray
     t: np.ndarray
@@ -214,7 +214,7 @@ def _zmp(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground: np.ndar
          min_fz: float) -> tuple[np.ndarray, np.ndarray]:
     """ZMP (C, 3) on the ground plane z = ``ground`` (C,) of the contact wrench (``force`` (C, 3) N,
     ``moment`` (C, 3) N·m about the CoM ``com`` (C, 3)) and where there is one (F_z >= ``min_fz``):
-    :func:`livezmp.zmp.compute_zmp` on z = 0, then :func:`livezmp.zmp.zmp_on_plane`."""
+    :func:`livezmp.balance.zmp.compute_zmp` on z = 0, then :func:`livezmp.balance.zmp.zmp_on_plane`."""
     fz = force[:, 2]
     has = fz >= min_fz
     fz = np.where(has, fz, 1.0)

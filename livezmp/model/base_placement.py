@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from livezmp.body import BodyModel
+from livezmp.model.body import BodyModel
 
 
 def _rz(yaw: float) -> np.ndarray:

@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.errors import InputError
-from livezmp.support import SUPPORT_LABELS
 
 
 class ContactError(InputError):
@@ -300,7 +300,7 @@ class ContactDetector:
     ) -> str:
         """:meth:`update` given what it takes from each foot: the height z of its lowest sole point
         (metres, world frame) and that point's horizontal speed (m/s), e.g. from
-        :func:`livezmp.body.lowest_sole_points`. Raises ContactError if one is not finite."""
+        :func:`livezmp.model.body.lowest_sole_points`. Raises ContactError if one is not finite."""
         values = (left_height, left_speed, right_height, right_speed)
         try:
             finite = all(map(math.isfinite, values))

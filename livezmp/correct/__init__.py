@@ -1,0 +1,1 @@
+"""Balance corrections: root (waist) rotations and the leg joints that keep the feet, offline and online."""
