@@ -19,8 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, default_config
-from livezmp.correct.correction import apply_delta, correct_motion, seed_grid_search, stance_weights
+from livezmp.correct.edit import apply_delta
+from livezmp.correct.limits import stance_weights
 from livezmp.correct.root_motion import RootMover
+from livezmp.correct.seed_search import seed_grid_search
+from livezmp.correct.solver import correct_motion
 from livezmp.model.bvh import read_bvh
 from livezmp.model.bvh_body import body_from_bvh
 

@@ -5,7 +5,7 @@ latency and streaming memory, with the naive baseline side by side.
 Offline take: the Bandai walk resampled to 120 Hz (a cubic spline through each channel,
 angles unwrapped first), played forth and back (so every channel stays continuous)
 until one hour long: 432,000 frames. The per-frame path is ``Pipeline.step`` on every
-frame then ``flush``; the batch path is ``Pipeline.run_batch`` (chunks over arrays).
+frame then ``flush``; the batch path is ``livezmp.offline.batch.run_batch`` (chunks over arrays).
 Both run on the same take in the same process, and their results are compared.
 
 Latency baseline (what the seed paper's chain does naively): at every frame re-fit a
@@ -36,7 +36,7 @@ from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
 from livezmp.model.bvh import read_bvh
 from livezmp.model.bvh_body import body_from_bvh
 from livezmp.model.urdf_body import body_from_urdf
-from livezmp.offline.batch import BatchResult
+from livezmp.offline.batch import BatchResult, run_batch
 from livezmp.offline.report import write_zmp_csv
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -146,11 +146,11 @@ def offline(motion, walk, minutes: float, repeats: int, per_frame: bool) -> None
     n = len(times)
     cfg = default_config(walk, rate)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    Pipeline(walk, cfg, 1 / rate).run_batch(times[:2000], frames[:2000])  # imports and first-call costs
+    run_batch(Pipeline(walk, cfg, 1 / rate), times[:2000], frames[:2000])  # imports and first-call costs
     runs = []
     for _ in range(repeats):
         start = time.perf_counter()
-        batch = Pipeline(walk, cfg, 1 / rate).run_batch(times, frames)
+        batch = run_batch(Pipeline(walk, cfg, 1 / rate), times, frames)
         runs.append((time.perf_counter() - start, load_average()))
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     with tempfile.TemporaryDirectory() as tmp:
@@ -163,7 +163,7 @@ def offline(motion, walk, minutes: float, repeats: int, per_frame: bool) -> None
     label = f"{minutes:g} min" + ("" if minutes == 60 else " (not one hour: --minutes)")
     print(f"\noffline: Bandai walk at {rate:.0f} Hz, forth and back, {label}: {n:,} frames, 132 channels, full ZMP")
     print(f"{'path':44s} {'seconds':>9s} {'frames/s':>11s}  runs (s @ 1-min load average)")
-    print(f"{'batch: Pipeline.run_batch':44s} {median:9.2f} {n / median:11,.0f}  "
+    print(f"{'batch: run_batch':44s} {median:9.2f} {n / median:11,.0f}  "
           + ", ".join(f"{s:.2f} @ {ld}" for s, ld in runs))
     if per_frame:
         el, ref = per_frame_take(walk, cfg, rate, times, frames)

@@ -15,7 +15,7 @@ from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.model.base_placement import place_base
 from livezmp.model.bvh import read_bvh
 from livezmp.model.bvh_body import body_from_bvh
-from livezmp.offline.batch import BatchResult, NotBatchable, analyse_batch
+from livezmp.offline.batch import BatchResult, NotBatchable, analyse_batch, analyse_frames, run_batch
 from livezmp.offline.report import ZMP_COLUMNS, write_zmp_csv
 
 CHUNK = 61  # small, so that a take crosses many chunk boundaries
@@ -77,7 +77,8 @@ def test_bandai_walk_equals_per_frame(mode):
     frames = with_hop(motion, times, motion.frames)
     cfg = default_config(body, motion.fps, mode)
     want = stepped(Pipeline(body, cfg, motion.frame_time), times, frames)
-    got = Pipeline(body, cfg, motion.frame_time).run_batch(times, frames, chunk=CHUNK, keep_states=True)
+    got = run_batch(Pipeline(body, cfg, motion.frame_time), times, frames, chunk=CHUNK, keep_states=True)
+    assert got.path == "batch"
     worst = assert_same(got, want)
     labels = set(got.labels)
     assert labels == {"left", "right", "double", "none"}  # every support, flight included
@@ -91,7 +92,7 @@ def test_bandai_walk_at_120_hz_equals_per_frame():
     times, frames = resampled(motion, 120.0)
     cfg = default_config(body, 120.0)
     want = stepped(Pipeline(body, cfg, 1 / 120), times, frames)
-    got = Pipeline(body, cfg, 1 / 120).run_batch(times, frames, chunk=150, keep_states=True)
+    got = run_batch(Pipeline(body, cfg, 1 / 120), times, frames, chunk=150, keep_states=True)
     worst = assert_same(got, want)
     assert len(set(got.labels)) >= 3
     print(f"\n120 Hz: largest batch - per-frame differences {worst}")
@@ -112,20 +113,20 @@ def test_robot_trajectory_equals_per_frame(op3_body):
     frames = np.hstack([place_base(body, q), q])
     cfg = default_config(body, rate)
     want = stepped(Pipeline(body, cfg, 1 / rate), t, frames)
-    got = Pipeline(body, cfg, 1 / rate).run_batch(t, frames, chunk=CHUNK, keep_states=True)
+    got = run_batch(Pipeline(body, cfg, 1 / rate), t, frames, chunk=CHUNK, keep_states=True)
     assert_same(got, want)
     assert got.judged.sum() > 100
 
 
-def test_run_is_the_batch_path_and_keeps_the_detector_state(bandai_walk):
-    """``run`` twice on one pipeline: the second take starts from the contact state the first left."""
+def test_analyse_frames_is_the_batch_path_and_keeps_the_detector_state(bandai_walk):
+    """``analyse_frames`` twice on one pipeline: the second take starts from the contact state the first left."""
     body = body_from_bvh(bandai_walk)
     times = np.arange(len(bandai_walk.frames)) * bandai_walk.frame_time
     cfg = default_config(body, bandai_walk.fps)
     ref, pipe = Pipeline(body, cfg, bandai_walk.frame_time), Pipeline(body, cfg, bandai_walk.frame_time)
     for frames in (bandai_walk.frames, bandai_walk.frames[::-1]):
         want = stepped(ref, times, frames)
-        got = pipe.run(times, frames)
+        got = analyse_frames(pipe, times, frames)
         assert all(isinstance(r, FrameResult) for r in got)
         assert_same(BatchResult.from_frames(got), want)
         assert (pipe.contacts.left, pipe.contacts.right, pipe.contacts.frame) == \
@@ -146,7 +147,8 @@ def test_missing_samples_irregular_times_and_mid_stream_fall_back(bandai_walk):
         with pytest.raises(NotBatchable):
             analyse_batch(body, cfg, pipe.estimator, pipe.contacts, t, f)
         want = stepped(Pipeline(body, cfg, dt), t, f)
-        got = Pipeline(body, cfg, dt).run_batch(t, f, keep_states=True)
+        got = run_batch(Pipeline(body, cfg, dt), t, f, keep_states=True)
+        assert got.path.startswith("per-frame: ")  # the choice is named
         assert_same(got, want, tol=0.0)  # the per-frame path itself
         assert not np.isnan(got.zmp).any()
     # frames already stepped: the rest of the stream continues frame by frame
@@ -154,7 +156,8 @@ def test_missing_samples_irregular_times_and_mid_stream_fall_back(bandai_walk):
     for t, f in zip(times[:50], bandai_walk.frames[:50], strict=True):
         a.step(float(t), f)
         b.step(float(t), f)
-    got = a.run_batch(times[50:], bandai_walk.frames[50:], keep_states=True)
+    got = run_batch(a, times[50:], bandai_walk.frames[50:], keep_states=True)
+    assert got.path == "per-frame: the stream was already stepped"
     want = stepped(b, times[50:], bandai_walk.frames[50:])
     assert got.index[0] == 50 - a.lag
     assert_same(got, want, tol=0.0)
@@ -169,7 +172,7 @@ def test_progress_is_reported_up_to_the_whole_take(bandai_walk):
     gappy[100, 10] = np.nan  # the per-frame path
     for frames, last in ((bandai_walk.frames, n), (gappy, (n - 1) // 500 * 500)):
         seen = []
-        Pipeline(body, default_config(body, bandai_walk.fps), dt).run_batch(times, frames, chunk=64,
+        run_batch(Pipeline(body, default_config(body, bandai_walk.fps), dt), times, frames, chunk=64,
                                                                             progress=seen.append)
         assert seen and seen == sorted(seen) and seen[-1] == last
 

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.cli import main
-from livezmp.correct.correction import CorrectionLimits, rate_limit
+from livezmp.correct.limits import CorrectionLimits, rate_limit
 from livezmp.correct.online import OnlineCorrector
 from livezmp.correct.root_motion import RootMover, euler_from_matrix, hip_axes
 from livezmp.model.base_placement import BasePlacer

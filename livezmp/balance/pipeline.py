@@ -1,7 +1,8 @@
 """The per-frame pipeline: estimate → ZMP → contacts → support polygon → clamp.
 
 The same :class:`Pipeline` serves live streams (``step`` per frame) and files
-(``run`` over a whole motion), so live and offline results agree. Results come out
+(``run`` over a whole motion, or :func:`livezmp.offline.batch.run_batch`, its vectorised
+twin), so live and offline results agree. Results come out
 ``lag`` frames behind the input (the estimator's fixed lag); ``flush`` delivers the
 last ones at the end of a file.
 """
@@ -114,53 +115,19 @@ class Pipeline:
         self._outside_contacts.clear()
         return out
 
-    def run(self, times: np.ndarray, frames: np.ndarray,
-            contacts: list[tuple[bool, bool]] | None = None) -> list[FrameResult]:
-        """Analyse a whole motion; one result per input frame, in order: what stepping every
-        frame and flushing gives. ``contacts`` (left, right) per frame replaces contact detection.
+    @property
+    def frames_in(self) -> int:
+        """Frames stepped into the current stream (0: a fresh stream)."""
+        return self._count
 
-        Uniform, complete input without ``contacts`` goes through the batch path (see
-        :meth:`run_batch`; equal to rounding); anything else frame by frame."""
-        if contacts is None:
-            batch = self._batch(times, frames, keep_states=True)
-            if batch is not None:
-                return batch.frames()
-        return self._run_steps(times, frames, contacts)
+    def run(self, times: np.ndarray, frames: np.ndarray, contacts: list[tuple[bool, bool]] | None = None,
+            progress: Callable[[int], None] | None = None) -> list[FrameResult]:
+        """Step every frame of a whole motion (``times`` (N,) s, ``frames`` (N, nq) raw channels)
+        and flush: one result per input frame, in order. ``contacts`` (left, right) per frame
+        replaces contact detection; ``progress(frames_done)`` is called every 500 frames.
 
-    def run_batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None,
-                  keep_states: bool = False, progress: Callable[[int], None] | None = None):
-        """Analyse a whole motion into a :class:`livezmp.offline.batch.BatchResult` (arrays, one row per frame).
-
-        On uniformly sampled, complete input at the start of a stream the take is analysed in
-        chunks of ``chunk`` frames over arrays (:mod:`livezmp.offline.batch`): the per-frame results to
-        rounding, at a small fraction of the cost, in bounded memory. Otherwise (irregular
-        timestamps, missing samples, frames already stepped, a model the batch pass does not
-        handle) the frames are stepped one by one and packed. ``keep_states`` keeps q, v, a
-        (N × nq each), which :meth:`BatchResult.frames` needs. ``progress(frames_done)`` is
-        called as the work goes on (for a progress bar)."""
-        from livezmp.offline.batch import BatchResult  # livezmp.offline.batch builds on this module
-
-        batch = self._batch(times, frames, chunk, keep_states, progress)
-        if batch is not None:
-            return batch
-        return BatchResult.from_frames(self._run_steps(times, frames, progress=progress), keep_states)
-
-    def _batch(self, times: np.ndarray, frames: np.ndarray, chunk: int | None = None, keep_states: bool = False,
-               progress: Callable[[int], None] | None = None):
-        """The batch path's result, or None when the take needs the per-frame path."""
-        from livezmp.offline.batch import DEFAULT_CHUNK, NotBatchable, analyse_batch
-
-        if self._count:  # mid-stream: only stepping continues the stream
-            return None
-        try:
-            result, self.contacts = analyse_batch(self.body, self.config, self.estimator, self.contacts, times,
-                                                  frames, chunk or DEFAULT_CHUNK, keep_states, progress)
-        except NotBatchable:
-            return None
-        return result
-
-    def _run_steps(self, times: np.ndarray, frames: np.ndarray, contacts: list[tuple[bool, bool]] | None = None,
-                   progress: Callable[[int], None] | None = None) -> list[FrameResult]:
+        Always frame by frame; the faster whole-take path, equal to rounding, is
+        :func:`livezmp.offline.batch.run_batch`."""
         out = []
         for k in range(len(frames)):
             r = self.step(float(times[k]), frames[k], None if contacts is None else contacts[k])

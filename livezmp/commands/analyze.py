@@ -1,6 +1,6 @@
 """`livezmp analyze`: run the pipeline over a motion file and write the results.
 
-The take goes through :meth:`Pipeline.run_batch`: in chunks over arrays when it is
+The take goes through :func:`livezmp.offline.batch.run_batch`: in chunks over arrays when it is
 uniformly sampled and complete (an hour at 120 Hz in seconds), frame by frame otherwise;
 the results are the same.
 """
@@ -14,6 +14,7 @@ from rich.progress import Progress
 from livezmp.balance.pipeline import Pipeline
 from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
 from livezmp.errors import InputError
+from livezmp.offline.batch import run_batch
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import summarize, write_json, write_zmp_csv
 
@@ -27,11 +28,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     cfg = pipeline_config(args, loaded)
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     if len(loaded.frames) < PROGRESS_FRAMES:
-        results = pipe.run_batch(loaded.times, loaded.frames)
+        results = run_batch(pipe, loaded.times, loaded.frames)
     else:  # a long take: show how far the analysis is
         with Progress(transient=True) as bar:
             task = bar.add_task("analysing", total=len(loaded.frames))
-            results = pipe.run_batch(loaded.times, loaded.frames,
+            results = run_batch(pipe, loaded.times, loaded.frames,
                                      progress=lambda done: bar.update(task, completed=done))
     summary = {"source": loaded.source, **summarize(loaded.body, results, loaded.fps, cfg.mode)}
     if args.out:

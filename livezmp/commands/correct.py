@@ -6,7 +6,8 @@ import argparse
 from dataclasses import replace
 
 from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
-from livezmp.correct.correction import CorrectionLimits, correct_motion
+from livezmp.correct.limits import CorrectionLimits
+from livezmp.correct.solver import correct_motion
 from livezmp.errors import InputError
 from livezmp.model.bvh import write_bvh
 from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv

@@ -24,7 +24,7 @@ import pinocchio as pin
 
 from livezmp.balance.pipeline import FrameResult
 from livezmp.balance.support import clamp_to_polygon
-from livezmp.correct.correction import CorrectionLimits, zmp_target
+from livezmp.correct.limits import CorrectionLimits, zmp_target
 from livezmp.correct.root_motion import RootMover, hip_axes
 from livezmp.model.body import BodyModel
 

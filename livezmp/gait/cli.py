@@ -98,7 +98,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if take.body.kind == "bvh":
         motion = to_bvh(take, q)
         if args.balance:
-            from livezmp.correct.correction import correct_bvh  # imported here: heavy, and only for --balance
+            from livezmp.correct.solver import correct_bvh  # imported here: heavy, and only for --balance
 
             motion = correct_bvh(motion)
         write_bvh(motion, out)

@@ -58,7 +58,7 @@ import numpy as np
 
 from livezmp.balance.foot_sensors import CONTACT_FRACTION, CopLocator, CopVsZmp, contact_force, sensor_contacts
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
-from livezmp.correct.correction import CorrectionLimits
+from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig

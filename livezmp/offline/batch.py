@@ -1,10 +1,9 @@
 """Offline analysis of a whole take over arrays: the per-frame pipeline's results, fast.
 
-:meth:`livezmp.balance.pipeline.Pipeline.run_batch` (and ``run``, ``livezmp analyze``) come
-here. The take goes through in chunks of frames; every stage works on a chunk's arrays
-and carries its state to the next chunk, so memory stays bounded whatever the take's
-length, and the results equal those of stepping the per-frame pipeline over the take
-(to rounding, about 1e-12 relative):
+:func:`run_batch` (``livezmp analyze``, ``livezmp correct``) comes here. The take goes
+through in chunks of frames; every stage works on a chunk's arrays and carries its state
+to the next chunk, so memory stays bounded whatever the take's length, and the results
+equal those of stepping the per-frame pipeline over the take (to rounding, about 1e-12 relative):
 
 1. estimator (:mod:`livezmp.offline.estimator`): settled Kalman filter as a recursion,
    sliding spline as block matrix products;
@@ -16,7 +15,8 @@ length, and the results equal those of stepping the per-frame pipeline over the 
 The batch path needs uniformly sampled, complete input from the start of a stream:
 irregular timestamps, missing samples (non-finite values), contacts from outside, a
 take shorter than two spline windows, or an angle whose Kalman innovation reaches ±π
-raise :class:`NotBatchable`, and the pipeline then runs frame by frame.
+raise :class:`NotBatchable`, and :func:`run_batch` then steps the pipeline frame by frame,
+naming why in the result's ``path``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from livezmp.balance.contacts import ContactDetector
-from livezmp.balance.pipeline import FrameResult, PipelineConfig
+from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig
 from livezmp.balance.support import SUPPORT_LABELS, support_polygon
 from livezmp.estimate.estimator import StreamingEstimator
 from livezmp.model.body import BodyModel
@@ -43,7 +43,7 @@ from livezmp.offline.kinematics import (
 )
 from livezmp.offline.support import support_clamp
 
-__all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch"]
+__all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch", "analyse_frames", "run_batch"]
 
 DEFAULT_CHUNK = 8192  # frames per chunk: a few tens of MB of working arrays for a 132-channel skeleton
 _NONE = SUPPORT_LABELS.index("none")
@@ -57,7 +57,8 @@ class BatchResult:
     indexes ``SUPPORT_LABELS`` ("left", "right", "double", "none"); ``inside``, ``clamped``
     (N, 3) and ``margin`` (N,) are valid where ``judged`` (a ZMP and some support; else
     False / zeros); ``soles`` {side: (N, k, 3)}; ``q``, ``v``, ``a`` (N, nq) only when kept
-    (else None). See :class:`livezmp.balance.pipeline.FrameResult` for each field."""
+    (else None); ``path`` which path made it: "batch", or "per-frame: WHY". See
+    :class:`livezmp.balance.pipeline.FrameResult` for each field."""
 
     index: np.ndarray
     t: np.ndarray
@@ -75,6 +76,7 @@ class BatchResult:
     q: np.ndarray | None = None
     v: np.ndarray | None = None
     a: np.ndarray | None = None
+    path: str = "batch"
 
     def __len__(self) -> int:
         return len(self.index)
@@ -151,6 +153,41 @@ def _lowest(sole: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndar
     low = np.argmin(sole[:, :, 2], axis=1)
     v = velocity[rows, low]
     return sole[rows, low, 2], np.hypot(v[:, 0], v[:, 1])
+
+
+def run_batch(pipeline: Pipeline, times: np.ndarray, frames: np.ndarray, chunk: int | None = None,
+              keep_states: bool = False, progress: Callable[[int], None] | None = None) -> BatchResult:
+    """Analyse a whole motion (``times`` (N,) s, ``frames`` (N, nq) raw channels) on ``pipeline``
+    into arrays, one row per frame: what stepping every frame and flushing gives.
+
+    At the start of a stream, uniformly sampled complete input goes through the batch path in
+    chunks of ``chunk`` frames (the per-frame results to rounding, at a small fraction of the
+    cost, in bounded memory); anything else (:class:`NotBatchable`, or frames already stepped)
+    is stepped frame by frame, and the result's ``path`` says why. ``keep_states`` keeps q, v, a
+    (N × nq each), which :meth:`BatchResult.frames` needs; ``progress(frames_done)`` is called as
+    the work goes on. The pipeline's contact detector is left as stepping would leave it."""
+    if pipeline.frames_in:
+        reason = "the stream was already stepped"
+    else:
+        try:
+            result, pipeline.contacts = analyse_batch(pipeline.body, pipeline.config, pipeline.estimator,
+                                                      pipeline.contacts, times, frames, chunk or DEFAULT_CHUNK,
+                                                      keep_states, progress)
+            return result
+        except NotBatchable as e:
+            reason = str(e)
+    result = BatchResult.from_frames(pipeline.run(times, frames, progress=progress), keep_states)
+    result.path = f"per-frame: {reason}"
+    return result
+
+
+def analyse_frames(pipeline: Pipeline, times: np.ndarray, frames: np.ndarray,
+                   contacts: list[tuple[bool, bool]] | None = None) -> list[FrameResult]:
+    """:func:`run_batch` as a list of :class:`FrameResult`; with ``contacts`` (left, right) per
+    frame from outside, which only the per-frame path takes, :meth:`Pipeline.run`."""
+    if contacts is not None:
+        return pipeline.run(times, frames, contacts)
+    return run_batch(pipeline, times, frames, keep_states=True).frames()
 
 
 def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingEstimator, detector: ContactDetector,

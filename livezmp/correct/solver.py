@@ -14,13 +14,10 @@ Gauss-Newton: each iteration linearises ZMP_k in δ_j with
 (∂ZMP/∂q, ∂ZMP/∂q̇, ∂ZMP/∂q̈ at frame k) × (the estimator's impulse response from j to k)
 × (∂channels/∂δ at frame j), solves the bounded linear least-squares problem
 (scipy's ``lsq_linear``) and re-analyses the corrected motion exactly with the same
-per-frame pipeline that ``livezmp analyze`` runs. The rate limit is applied last as a
+analysis that ``livezmp analyze`` runs. The rate limit is applied last as a
 projection; frames still outside, and frames whose correction was cut by a limit,
-are reported.
-
-:func:`seed_grid_search` is the seed paper's method for comparison: per frame, search
-the three rotations in fixed steps for the smallest that puts the ZMP inside, holding
-the frame's velocities and accelerations.
+are reported. The seed paper's fixed-step search, for comparison, is
+:func:`livezmp.correct.seed_search.seed_grid_search`.
 """
 
 from __future__ import annotations
@@ -35,24 +32,14 @@ from scipy.optimize import lsq_linear
 from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.balance.zmp import compute_zmp
+from livezmp.correct.edit import apply_delta, changed_channels, foot_displacement
+from livezmp.correct.limits import CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
 from livezmp.correct.root_motion import RootMover
 from livezmp.estimate.estimator import StreamingEstimator
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
-
-
-@dataclass(frozen=True)
-class CorrectionLimits:
-    """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""
-
-    max_rotation_deg: tuple[float, float, float] = (15.0, 15.0, 10.0)  # about x, y, z (internal)
-    max_rate_deg_s: float = 120.0
-    margin_m: float = 0.005  # aim this far inside the polygon
-    zmp_tolerance_m: float = 0.001  # σ_z
-    rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
-    accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
-    iterations: int = 30
+from livezmp.offline.batch import analyse_frames
 
 
 @dataclass
@@ -95,33 +82,6 @@ class CorrectionResult:
     def _fps(self) -> float:
         ts = [r.t for r in self.before]
         return (len(ts) - 1) / (ts[-1] - ts[0]) if len(ts) > 1 else 0.0
-
-
-def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:
-    """Weight of the left hip as the rotation pivot per frame (1 left stance, 0 right,
-    ½ double/none), smoothed over ``ramp_frames`` so the pivot never jumps."""
-    raw = np.array([{"left": 1.0, "right": 0.0}.get(r.support, 0.5) for r in results])
-    if ramp_frames <= 1 or len(raw) < 2:
-        return raw
-    kernel = np.hanning(ramp_frames + 2)[1:-1]
-    kernel /= kernel.sum()
-    pad = ramp_frames
-    padded = np.concatenate([np.full(pad, raw[0]), raw, np.full(pad, raw[-1])])
-    return np.convolve(padded, kernel, mode="same")[pad:-pad]
-
-
-def _inset(p: np.ndarray, poly: np.ndarray, margin: float) -> np.ndarray:
-    """``p`` (on or in the polygon) moved up to ``margin`` toward the polygon's centre."""
-    d = poly.mean(axis=0) - p
-    n = np.linalg.norm(d)
-    return p + d / n * min(margin, n) if n > 1e-12 and len(poly) > 2 else p
-
-
-def zmp_target(r: FrameResult, margin: float) -> np.ndarray | None:
-    """The ZMP target (2,) for a frame that is outside or within ``margin`` of the edge."""
-    if r.zmp is None or r.margin is None or r.margin >= margin:
-        return None
-    return _inset(r.clamped[:2] if not r.inside else r.zmp[:2], r.polygon, margin)
 
 
 def estimator_matrices(pipe: Pipeline, times: np.ndarray, edge: int) -> list[sp.csr_matrix]:
@@ -283,7 +243,7 @@ def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, 
             if c.margin < limits.margin_m:
                 # let it move, but no further than the margin: aim at the predicted point
                 # brought back inside
-                hold[i] = _inset(c.point, current[k].polygon, limits.margin_m)
+                hold[i] = inset(c.point, current[k].polygon, limits.margin_m)
                 grew = True
         inc = np.diff(x.reshape(f, 3), axis=0).ravel()
         for c in np.nonzero(np.abs(inc) > max_step * 1.001)[0]:
@@ -365,63 +325,6 @@ def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs
     return delta, current, cost
 
 
-def rate_limit(delta: np.ndarray, max_step: float) -> tuple[np.ndarray, list[int]]:
-    """Project ``delta`` (F, 3) so no frame-to-frame step exceeds ``max_step`` (rad),
-    moving values toward zero; returns the result and the frames changed."""
-    out = delta.copy()
-    changed = set()
-    for _ in range(len(out)):
-        moved = False
-        for k in range(1, len(out)):
-            step = out[k] - out[k - 1]
-            bad = np.abs(step) > max_step + 1e-12
-            if bad.any():
-                # shrink the larger-magnitude end toward the other
-                for a in np.nonzero(bad)[0]:
-                    hi = k if abs(out[k, a]) > abs(out[k - 1, a]) else k - 1
-                    lo = k - 1 if hi == k else k
-                    out[hi, a] = out[lo, a] + np.sign(out[hi, a] - out[lo, a]) * max_step
-                    changed.add(hi)
-                moved = True
-        if not moved:
-            break
-    return out, sorted(changed)
-
-
-def apply_delta(mover: RootMover, body: BodyModel, frames: np.ndarray, delta: np.ndarray,
-                w: np.ndarray) -> np.ndarray:
-    """Corrected raw channels (F, nq): only the root and leg correction channels change."""
-    out = frames.copy()
-    cols = _changed_channels(body)
-    for k in range(len(frames)):
-        if np.any(delta[k]):
-            q = mover.apply(body.channels_to_q(frames[k]), delta[k], w[k])
-            out[k, cols] = q[cols] / body.channel_scale[cols]
-    return out
-
-
-def _changed_channels(body: BodyModel) -> list[int]:
-    corr = body.correction
-    return sorted(set(corr.root_channels) | {c for cols in corr.legs.values() for c in cols})
-
-
-def foot_displacement(body: BodyModel, a: np.ndarray, b: np.ndarray, stance: list[str]) -> dict[str, float]:
-    """Largest world displacement (m) of the foot frames between two takes of raw channels,
-    split into feet in stance (per the support labels) and feet in swing."""
-    data_a, data_b = body.model.createData(), body.model.createData()
-    import pinocchio as pin
-
-    worst = {"stance": 0.0, "swing": 0.0}
-    for k in range(len(a)):
-        pin.framesForwardKinematics(body.model, data_a, body.channels_to_q(a[k]))
-        pin.framesForwardKinematics(body.model, data_b, body.channels_to_q(b[k]))
-        for side, frames in body.correction.foot_frames.items():
-            d = max(np.linalg.norm(data_a.oMf[f].translation - data_b.oMf[f].translation) for f in frames)
-            key = "stance" if stance[k] in (side, "double") else "swing"
-            worst[key] = max(worst[key], float(d))
-    return worst
-
-
 def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
                    limits: CorrectionLimits | None = None, nominal_dt: float | None = None) -> CorrectionResult:
     """Correct a whole take (raw channels ``frames`` (F, nq) at ``times``); see module docstring."""
@@ -430,7 +333,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     dt = nominal_dt or float(np.median(np.diff(times)))
 
     def analyse(fr: np.ndarray, contacts=None) -> list[FrameResult]:
-        return Pipeline(body, config, dt).run(times, fr, contacts)
+        return analyse_frames(Pipeline(body, config, dt), times, fr, contacts)
 
     before = analyse(frames)
     # while solving, the feet keep the contacts detected on the original motion: the
@@ -441,7 +344,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     pipe = Pipeline(body, config, dt)
     model = pipe.model
     mover = RootMover(body)
-    changed = _changed_channels(body)
+    changed = changed_channels(body)
     w = stance_weights(before, max(1, round(0.1 / dt)))
     est = estimator_matrices(pipe, times, edge=3 * pipe.estimator.config.window + pipe.estimator.lag)
     lin = _Linearisation(model, mover, changed, est)
@@ -491,45 +394,6 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     solver_s = time.perf_counter() - t0
     feet = foot_displacement(body, frames, corrected, [r.support for r in before])
     return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history)
-
-
-def seed_grid_search(body: BodyModel, config: PipelineConfig, results: list[FrameResult], frames_idx: list[int],
-                     step_deg: float = 0.5, limits: CorrectionLimits | None = None) -> dict[int, np.ndarray]:
-    """The seed paper's search, as a baseline: for each frame in ``frames_idx`` that is
-    outside, try root rotations on a fixed grid (``step_deg``; roll and pitch, in square
-    shells of growing size) holding the frame's velocities and accelerations, and keep
-    the smallest that puts the ZMP inside. Returns δ (rad) per frame; frames where no
-    grid point within the limits works are left out."""
-    limits = limits or CorrectionLimits()
-    model = body.model if config.mode == "full" else body.point_model
-    data = model.createData()
-    mover = RootMover(body)
-    w = stance_weights(results, 1)
-    n = [int(limits.max_rotation_deg[a] / step_deg) for a in range(2)]
-    out: dict[int, np.ndarray] = {}
-    for k in frames_idx:
-        r = results[k]
-        if r.inside is not False:
-            continue
-        found = None
-        for shell in range(1, max(n) + 1):
-            best = None
-            for i in range(-min(shell, n[0]), min(shell, n[0]) + 1):
-                for j in range(-min(shell, n[1]), min(shell, n[1]) + 1):
-                    if max(abs(i), abs(j)) != shell:
-                        continue
-                    d = np.radians([i * step_deg, j * step_deg, 0.0])
-                    q = mover.apply(r.q, d, w[k])
-                    z = compute_zmp(model, data, q, r.v, r.a, r.ground_z).zmp
-                    if z is not None and clamp_to_polygon(z[:2], r.polygon).inside:
-                        if best is None or np.linalg.norm(d) < np.linalg.norm(best):
-                            best = d
-            if best is not None:
-                found = best
-                break
-        if found is not None:
-            out[k] = found
-    return out
 
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",

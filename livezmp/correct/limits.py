@@ -1,0 +1,73 @@
+"""What a correction may do and aims for, shared by the offline solver and the online
+corrector: rotation and rate limits, the ZMP target inside the polygon, the stance pivot."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from livezmp.balance.pipeline import FrameResult
+
+
+@dataclass(frozen=True)
+class CorrectionLimits:
+    """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""
+
+    max_rotation_deg: tuple[float, float, float] = (15.0, 15.0, 10.0)  # about x, y, z (internal)
+    max_rate_deg_s: float = 120.0
+    margin_m: float = 0.005  # aim this far inside the polygon
+    zmp_tolerance_m: float = 0.001  # σ_z
+    rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
+    accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
+    iterations: int = 30
+
+
+def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:
+    """Weight of the left hip as the rotation pivot per frame (1 left stance, 0 right,
+    ½ double/none), smoothed over ``ramp_frames`` so the pivot never jumps."""
+    raw = np.array([{"left": 1.0, "right": 0.0}.get(r.support, 0.5) for r in results])
+    if ramp_frames <= 1 or len(raw) < 2:
+        return raw
+    kernel = np.hanning(ramp_frames + 2)[1:-1]
+    kernel /= kernel.sum()
+    pad = ramp_frames
+    padded = np.concatenate([np.full(pad, raw[0]), raw, np.full(pad, raw[-1])])
+    return np.convolve(padded, kernel, mode="same")[pad:-pad]
+
+
+def inset(p: np.ndarray, poly: np.ndarray, margin: float) -> np.ndarray:
+    """``p`` (on or in the polygon) moved up to ``margin`` toward the polygon's centre."""
+    d = poly.mean(axis=0) - p
+    n = np.linalg.norm(d)
+    return p + d / n * min(margin, n) if n > 1e-12 and len(poly) > 2 else p
+
+
+def zmp_target(r: FrameResult, margin: float) -> np.ndarray | None:
+    """The ZMP target (2,) for a frame that is outside or within ``margin`` of the edge."""
+    if r.zmp is None or r.margin is None or r.margin >= margin:
+        return None
+    return inset(r.clamped[:2] if not r.inside else r.zmp[:2], r.polygon, margin)
+
+
+def rate_limit(delta: np.ndarray, max_step: float) -> tuple[np.ndarray, list[int]]:
+    """Project ``delta`` (F, 3) so no frame-to-frame step exceeds ``max_step`` (rad),
+    moving values toward zero; returns the result and the frames changed."""
+    out = delta.copy()
+    changed = set()
+    for _ in range(len(out)):
+        moved = False
+        for k in range(1, len(out)):
+            step = out[k] - out[k - 1]
+            bad = np.abs(step) > max_step + 1e-12
+            if bad.any():
+                # shrink the larger-magnitude end toward the other
+                for a in np.nonzero(bad)[0]:
+                    hi = k if abs(out[k, a]) > abs(out[k - 1, a]) else k - 1
+                    lo = k - 1 if hi == k else k
+                    out[hi, a] = out[lo, a] + np.sign(out[hi, a] - out[lo, a]) * max_step
+                    changed.add(hi)
+                moved = True
+        if not moved:
+            break
+    return out, sorted(changed)
