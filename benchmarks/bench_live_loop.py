@@ -35,9 +35,10 @@ import os
 import time
 
 from livezmp.commands.run import SimProcess, load_robot, make_scenario
+from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
 from livezmp.links.mock import MockLink
-from livezmp.live.clock import LoopClock, TimingHistogram
+from livezmp.live.clock import LoopClock
 from livezmp.live.loop import LiveLoop, LoopConfig
 from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
 from sim_devices.servo_plant import ServoPlant

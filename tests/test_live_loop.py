@@ -16,8 +16,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from livezmp.errors import InputError
+from livezmp.histogram import TimingHistogram
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
-from livezmp.live.clock import LoopClock, TimingHistogram
+from livezmp.live.clock import LoopClock
 from livezmp.live.loop import LiveLoop, LoopConfig
 from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, Watchdog, joint_limits
 from livezmp.model.demo_robot import demo_robot_path

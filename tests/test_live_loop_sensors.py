@@ -36,7 +36,7 @@ from livezmp.live.loop import LiveLoop, LoopConfig
 from livezmp.live.recorder import LoopRecorder
 from livezmp.model.body_spec import robot_body
 from livezmp.model.demo_robot import demo_robot_path
-from livezmp.recording import iter_messages, open_recording
+from livezmp.recording.reader import iter_messages, open_recording
 from sim_devices.humanoid import Push, SimHumanoid
 from sim_devices.launch import humanoid_sensors, start_devices
 

@@ -30,7 +30,8 @@ from livezmp.model.bvh import read_bvh
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.loop import Monitor
-from livezmp.recording import Recorder, iter_messages, open_recording
+from livezmp.recording.reader import iter_messages, open_recording
+from livezmp.recording.writer import Recorder
 from livezmp.sources.file_replay import FileReplaySource
 from sim_devices.mocap_streamer import Impairments, UdpStreamer
 

@@ -20,7 +20,8 @@ from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
 from livezmp.monitor.loop import Monitor
 from livezmp.monitor.tui import TerminalView
-from livezmp.recording import Recorder, iter_messages
+from livezmp.recording.reader import iter_messages
+from livezmp.recording.writer import Recorder
 from livezmp.sources.file_replay import FileReplaySource
 
 

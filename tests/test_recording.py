@@ -19,7 +19,10 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.errors import InputError
 from livezmp.model.body_spec import body_from_spec, read_skeleton, skeleton_body
-from livezmp.recording import SCHEMAS, Recorder, iter_messages, open_recording, recover, result_message
+from livezmp.recording.reader import iter_messages, open_recording
+from livezmp.recording.recover import recover
+from livezmp.recording.schemas import SCHEMAS, result_message
+from livezmp.recording.writer import Recorder
 
 WALK = BANDAI / "walk_normal_001.bvh"
 

@@ -24,7 +24,9 @@ from sim_support import wait_until
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.model.body_spec import robot_body
 from livezmp.model.demo_robot import demo_robot_path
-from livezmp.recording import CHUNK_SECONDS, open_recording, recover
+from livezmp.recording.reader import open_recording
+from livezmp.recording.recover import recover
+from livezmp.recording.writer import CHUNK_SECONDS
 
 RUNS = 5
 

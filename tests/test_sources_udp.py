@@ -20,7 +20,8 @@ from livezmp.model.bvh import read_bvh
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.loop import Monitor
-from livezmp.recording import Recorder, iter_messages
+from livezmp.recording.reader import iter_messages
+from livezmp.recording.writer import Recorder
 from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.frame_format import WireFrame, encode_binary, encode_json
 from livezmp.sources.udp import SequenceFilter

@@ -24,8 +24,8 @@ import math
 import numpy as np
 
 from livezmp.errors import InputError
+from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors
-from livezmp.live.clock import TimingHistogram
 from livezmp.model.body import BodyModel
 
 GRAVITY = 9.81  # m/s²

@@ -24,7 +24,9 @@ from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
 from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
-from livezmp.recording import Recorder, iter_messages, recover
+from livezmp.recording.reader import iter_messages
+from livezmp.recording.recover import recover
+from livezmp.recording.writer import Recorder
 from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source

@@ -8,7 +8,7 @@ more than a whole period late skips the deadlines it overran (they are counted) 
 than running cycles back to back: samples stay on the k·T grid and the loop never
 bursts.
 
-Statistics live in bounded memory (:class:`TimingHistogram`): the clock's cost and
+Statistics live in bounded memory (:class:`~livezmp.histogram.TimingHistogram`): the clock's cost and
 memory do not grow with the length of the run. Times in seconds, from the clock's
 ``now`` (default ``time.monotonic``).
 """
@@ -20,49 +20,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
-
 from livezmp.errors import InputError
-
-
-class TimingHistogram:
-    """Durations (s) in fixed bins of ``bin_s`` up to ``span_s`` (longer ones share the
-    last bin), plus exact count, sum, min and max: the mean exactly and quantiles to
-    within one bin, in constant memory and constant time per sample."""
-
-    def __init__(self, bin_s: float = 1e-5, span_s: float = 0.1):
-        self.bin_s = bin_s
-        self.counts = np.zeros(int(math.ceil(span_s / bin_s)) + 1, dtype=np.int64)
-        self.count = 0
-        self.total = 0.0
-        self.min = math.inf
-        self.max = -math.inf
-
-    def add(self, x: float) -> None:
-        """Record one duration (s); negative values count as 0 in the bins."""
-        self.counts[min(max(int(x / self.bin_s), 0), len(self.counts) - 1)] += 1
-        self.count += 1
-        self.total += x
-        self.min = min(self.min, x)
-        self.max = max(self.max, x)
-
-    @property
-    def mean(self) -> float:
-        return self.total / self.count if self.count else math.nan
-
-    def quantile(self, q: float) -> float:
-        """The q-quantile (0 ≤ q ≤ 1, s): upper edge of the bin holding it, capped at the max."""
-        if not self.count:
-            return math.nan
-        k = int(np.searchsorted(np.cumsum(self.counts), max(1, math.ceil(q * self.count))))
-        return min((k + 1) * self.bin_s, self.max)
-
-    def summary_ms(self) -> dict[str, float | None]:
-        """mean, p50, p99 and max in milliseconds (None when empty)."""
-        if not self.count:
-            return {"mean_ms": None, "p50_ms": None, "p99_ms": None, "max_ms": None}
-        return {"mean_ms": 1e3 * self.mean, "p50_ms": 1e3 * self.quantile(0.5),
-                "p99_ms": 1e3 * self.quantile(0.99), "max_ms": 1e3 * self.max}
+from livezmp.histogram import TimingHistogram
 
 
 @dataclass(frozen=True)

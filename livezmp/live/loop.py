@@ -62,8 +62,9 @@ from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError
-from livezmp.live.clock import LoopClock, Tick, TimingHistogram
+from livezmp.live.clock import LoopClock, Tick
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer

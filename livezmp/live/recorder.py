@@ -6,7 +6,7 @@ the computed ZMP side by side:
   and the joint positions (m, rad, the body's channel order) as the estimator got them,
   ``contacts`` from the foot sensors when they were used, else null. ``index`` counts
   the loop's samples from 0 over the whole run (a cycle whose read failed leaves a gap);
-- ``/result``: every analysed sample (:func:`~livezmp.recording.result_message`), same
+- ``/result``: every analysed sample (:func:`~livezmp.recording.schemas.result_message`), same
   ``index`` as its input;
 - ``/foot_sensors``: the foot sensors read with that sample, the measured CoP in the
   result's world frame and its distance to the computed ZMP (:data:`LOOP_SCHEMAS`);
@@ -17,7 +17,7 @@ the computed ZMP side by side:
 Messages of one sample share its log time (the run's start on the wall clock plus the
 sample's loop time), so the ``/result`` and ``/foot_sensors`` of a sample, written
 ``lag`` samples after its ``/input``, line up with it. The loop's thread only queues
-Python objects; a :class:`~livezmp.recording.BackgroundWriter` encodes them in its own
+Python objects; a :class:`~livezmp.recording.writer.BackgroundWriter` encodes them in its own
 thread, while the loop sleeps between cycles. Everything queued must stay unchanged
 afterwards: the loop hands over arrays it makes fresh every cycle, and results and sensor
 readings it never modifies.
@@ -33,7 +33,8 @@ import numpy as np
 from livezmp.balance.pipeline import FrameResult
 from livezmp.links.base import FootSensors
 from livezmp.model.body_spec import BodySpec
-from livezmp.recording import LOOP_SCHEMAS, BackgroundWriter, Recorder, input_message, point_message, result_message
+from livezmp.recording.schemas import LOOP_SCHEMAS, input_message, point_message, result_message
+from livezmp.recording.writer import BackgroundWriter, Recorder
 
 
 def _result_at(index: int, r: FrameResult) -> dict:

@@ -27,7 +27,8 @@ from livezmp.errors import InputError
 from livezmp.gait.channels import reference_channel, tag_channels
 from livezmp.gait.live import GaitLiveEstimator
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
-from livezmp.recording import Recorder, result_message
+from livezmp.recording.schemas import result_message
+from livezmp.recording.writer import Recorder
 from livezmp.sources.interface import Source
 
 RATE_WINDOW = 1.0  # s over which the input rate is measured

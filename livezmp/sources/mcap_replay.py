@@ -11,7 +11,7 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.model.body_spec import body_from_spec
-from livezmp.recording import iter_messages, open_recording
+from livezmp.recording.reader import iter_messages, open_recording
 from livezmp.sources.file_replay import Pacer
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
