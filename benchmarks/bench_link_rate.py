@@ -45,13 +45,13 @@ import firmware_protocol as fp
 import livezmp
 from livezmp.links import make_link
 from livezmp.links.base import LinkError, LinkReadError
-from livezmp.links.mock import MockLink
+from livezmp.live.scenarios import Poser
 from livezmp.model.robot_config import RobotConfig, ServoConfig, find_robot_config
 from livezmp.model.urdf_body import body_from_urdf
 from sim_devices.firmware_board import PlantBackend, PlantJoints
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
-from sim_devices.scenarios import Poser
+from sim_devices.mock_link import MockLink
 from sim_devices.servo_plant import ServoPlant
 
 N = 20

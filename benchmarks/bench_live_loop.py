@@ -34,13 +34,16 @@ import argparse
 import os
 import time
 
-from livezmp.commands.run import SimProcess, load_robot, make_scenario
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
-from livezmp.links.mock import MockLink
 from livezmp.live.clock import LoopClock
-from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.config import LoopConfig
+from livezmp.live.loop import LiveLoop
 from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
+from livezmp.live.scenarios import make_scenario
+from livezmp.model.robot import load_robot
+from sim_devices.mock_link import MockLink
+from sim_devices.process import SimProcess
 from sim_devices.servo_plant import ServoPlant
 
 

@@ -27,10 +27,11 @@ import numpy as np
 
 import livezmp
 from livezmp.balance.zmp import compute_zmp
+from livezmp.live import scenarios as sc
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.urdf_body import body_from_urdf
-from sim_devices import scenarios as sc
 from sim_devices.humanoid import SimHumanoid
+from sim_devices.scenario_player import ScenarioPlayer
 from sim_devices.servo_plant import ServoPlant
 
 ROBOTS = {
@@ -55,7 +56,7 @@ def scenario_step_us(body, scenario: sc.Scenario, steps: int, repeats: int) -> f
     times = []
     for _ in range(repeats):
         h = SimHumanoid(body, scenario.goals(0.0), fall_after_s=1e9)  # never fall: keep the full cost
-        player = sc.ScenarioPlayer(h, scenario, rate_hz=125.0)
+        player = ScenarioPlayer(h, scenario, rate_hz=125.0)
         player.run(0.5)
         start = time.perf_counter()
         player.run(steps * H)
@@ -88,7 +89,7 @@ def rows_for(name: str, steps: int, repeats: int) -> list[tuple[str, float]]:
         rows.append((f"{name}: SimHumanoid step, {scenario.name}", scenario_step_us(body, scenario, steps, repeats)))
     swing = sc.arm_swing(body)
     h = SimHumanoid(body, swing.goals(0.0), fall_after_s=1e9)
-    sc.ScenarioPlayer(h, swing).run(1.0)
+    ScenarioPlayer(h, swing).run(1.0)
 
     def forces(n):
         for _ in range(n):

@@ -1,39 +1,260 @@
-"""The `livezmp` command. Each subcommand lives in the module of its idea; user
-mistakes (:class:`InputError`) print one line and exit with code 2."""
+"""The `livezmp` command: its grammar, and the dispatch to the module that runs each subcommand.
+
+Parsing imports only what the grammar needs (the standard library and a few small
+modules of defaults): each subcommand names its handler as ``"module:function"`` under
+:mod:`livezmp.commands`, imported after the arguments are parsed, so ``livezmp --help``
+and ``livezmp SUBCOMMAND --help`` never load the numerics, Pinocchio or plotting.
+User mistakes (:class:`InputError`) print one line and exit with code 2.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import math
 import sys
+from importlib.metadata import PackageNotFoundError, version
 
-from livezmp.commands.analyze import add_analyze_command
-from livezmp.commands.correct import add_correct_command
-from livezmp.commands.monitor import add_monitor_commands
-from livezmp.commands.run import add_run_commands
+from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
-from livezmp.gait.cli import add_gait_commands
+from livezmp.gait.takeset import DEFAULT_PATTERN
+from livezmp.live.config import CONTACT_MODES, LoopConfig, SafetyConfig
+from livezmp.live.realtime import LOOP_PRIORITY
+
+# Names the grammar offers before anything heavy is imported; tests check them against
+# livezmp.live.scenarios.SCENARIOS, sim_devices.launch.KINDS and the dashboard's default.
+SCENARIO_NAMES = ("stand", "lean", "arm_swing", "squat", "push", "demo")
+SIM_LINKS = ("dynamixel", "can", "fw")
+DEFAULT_DASHBOARD = "127.0.0.1:8765"
+
+
+def package_version() -> str:
+    try:
+        return version("livezmp")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown"
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="livezmp", description="Real-time balance monitor for humanoid motion.")
+    p.add_argument("--version", action="version", version=f"livezmp {package_version()}")
     sub = p.add_subparsers(dest="command", required=True)
-    add_analyze_command(sub)
-    add_correct_command(sub)
-    add_monitor_commands(sub)
-    add_run_commands(sub)
-    add_gait_commands(sub)
+    _analysis_commands(sub)
+    _monitor_commands(sub)
+    _loop_commands(sub)
+    _gait_commands(sub)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    module, _, function = args.handler.partition(":")
     try:
-        return int(args.func(args) or 0)
+        return int(getattr(importlib.import_module(module), function)(args) or 0)
     except InputError as e:
         print(f"livezmp: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+
+
+# -- analyze, correct -----------------------------------------------------------------------------
+
+
+def add_body_options(p: argparse.ArgumentParser) -> None:
+    """Options shared by every command that loads a motion."""
+    p.add_argument("--robot", help="URDF of the robot (for a joint-trajectory CSV)")
+    p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
+    p.add_argument("--mass", type=float, default=70.0, help="total body mass for a BVH skeleton, kg (default 70)")
+    p.add_argument("--units", choices=["m", "cm", "mm", "in"], help="BVH length unit (default: detected)")
+    p.add_argument("--up", choices=["y", "z"], help="BVH up axis (default: detected)")
+    p.add_argument("--mapping", help="TOML file mapping unknown joint names to segments")
+    p.add_argument("--sole-width", type=float, help="sole width for a BVH skeleton, m (default 5.5%% of stature)")
+    p.add_argument("--ground", type=float, help="ground height in the input frame, m (default: detected)")
+    p.add_argument("--mode", choices=["full", "seed"], default="full",
+                   help="ZMP of rigid segments (full) or point masses as in the seed paper (seed)")
+
+
+def _analysis_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, or CSV + URDF)")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot); default: built-in demo")
+    p.add_argument("--out", help="per-frame CSV (zmp.csv)")
+    p.add_argument("--summary-json", help="summary JSON")
+    p.add_argument("--plot", help="figure (PNG)")
+    add_body_options(p)
+    p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
+
+    d = CorrectionLimits()
+    p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot)")
+    p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
+    p.add_argument("--report", help="report JSON")
+    add_body_options(p)
+    p.add_argument("--max-rotation-deg", type=float, nargs=3, metavar=("ROLL", "PITCH", "YAW"),
+                   default=list(d.max_rotation_deg), help="largest root rotation per axis, degrees")
+    p.add_argument("--max-rate-deg-s", type=float, default=d.max_rate_deg_s, help="largest root rotation rate, deg/s")
+    p.add_argument("--margin-mm", type=float, default=1000 * d.margin_m,
+                   help="how far inside the support polygon to aim, mm")
+    p.set_defaults(handler="livezmp.commands.correct:cmd_correct")
+
+
+# -- monitor, replay, recover ---------------------------------------------------------------------
+
+
+def _sink_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dashboard", nargs="?", const=DEFAULT_DASHBOARD, metavar="HOST:PORT",
+                   help=f"serve the live dashboard (default address {DEFAULT_DASHBOARD})")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a dashboard address beyond loopback; a token is then generated and required")
+    p.add_argument("--token", action="store_true", help="require a generated token for the dashboard on loopback too")
+    p.add_argument("--record", metavar="FILE.mcap", help="record inputs, results, corrections, alarms, faults")
+    p.add_argument("--tui", action="store_true", help="live status table in the terminal")
+    p.add_argument("--alarm-command", metavar="CMD",
+                   help="run CMD on every alarm event (LIVEZMP_ALARM* environment variables)")
+
+
+def _monitor_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams")
+    p.add_argument("motion", nargs="?", metavar="SOURCE",
+                   help="motion file (.bvh, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
+                        "(livezmp frames), tcp://HOST:PORT (BVH broadcast); default: built-in demo")
+    p.add_argument("--skeleton", help="BVH file giving a stream's skeleton (hierarchy, optional frames)")
+    p.add_argument("--fps", type=float, help="a stream's frame rate, Hz (default: the skeleton file's)")
+    p.add_argument("--speed", type=float, default=1.0, help="replay speed factor for files (0 = as fast as possible)")
+    p.add_argument("--loop", action="store_true", help="replay a file over and over")
+    p.add_argument("--alarm-after", type=float, default=200.0, metavar="MS",
+                   help="alarm when the ZMP is out of support for this long, ms (default 200)")
+    p.add_argument("--correct", action="store_true", help="run the online balance correction and record it")
+    _sink_options(p)
+    add_body_options(p)
+    p.set_defaults(handler="livezmp.commands.monitor:cmd_monitor")
+
+    p = sub.add_parser("replay", help="re-run the analysis of a recorded session (MCAP)")
+    p.add_argument("recording", help="session.mcap written by `livezmp monitor --record`")
+    p.add_argument("--speed", type=float, default=0.0, help="speed factor (default 0: as fast as possible)")
+    _sink_options(p)
+    p.set_defaults(handler="livezmp.commands.monitor:cmd_replay")
+
+    p = sub.add_parser("recover", help="make a complete MCAP file of a recording cut short by a crash")
+    p.add_argument("broken", help="the unfinished recording")
+    p.add_argument("-o", "--out", required=True, help="the repaired file to write")
+    p.set_defaults(handler="livezmp.commands.monitor:cmd_recover")
+
+
+# -- run, sim, demo -------------------------------------------------------------------------------
+
+
+def add_loop_options(p: argparse.ArgumentParser) -> None:
+    d, s = LoopConfig(), SafetyConfig()
+    p.add_argument("--rate", type=float, help="loop rate, Hz (default: the link's stream rate, else 500)")
+    p.add_argument("--no-correct", action="store_true", help="send the command only, no balance corrections")
+    p.add_argument("--correct-hz", type=float, default=d.correct_hz,
+                   help=f"corrector rate, Hz: every few loop cycles (default {d.correct_hz:g})")
+    p.add_argument("--duration", type=float, help="seconds to run; 0 = until Ctrl-C")
+    p.add_argument("--summary-json", help="write the run's summary here (JSON)")
+    p.add_argument("--watchdog-ms", type=float, default=1e3 * s.watchdog_s,
+                   help=f"no valid read for this long → stop commanding (default {1e3 * s.watchdog_s:g})")
+    p.add_argument("--on-timeout", choices=["hold", "torque-off"], default="hold",
+                   help="what the watchdog does: hold the posture (default) or drop torque")
+    p.add_argument("--max-correction-deg", type=float, default=math.degrees(s.max_correction_rad),
+                   help="largest correction of any joint, degrees")
+    p.add_argument("--quiet", action="store_true", help="no live status line (events are still told)")
+    p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY,
+                   help=f"run the loop under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY}; "
+                        "0 = normal scheduling); if refused it runs at normal priority and says so")
+    p.add_argument("--contacts", choices=CONTACT_MODES, default=d.contacts,
+                   help="where the feet's contacts come from: the link's foot sensors (a foot is down above "
+                        f"{100 * d.contact_fraction:g} %% of the body weight), the kinematics, or auto: the sensors "
+                        f"when the link has them (default {d.contacts})")
+    p.add_argument("--record", metavar="FILE.mcap",
+                   help="record inputs, results, foot sensors and corrections (MCAP, a new file)")
+
+
+def _loop_commands(sub: argparse._SubParsersAction) -> None:
+    scenarios = ", ".join(SCENARIO_NAMES)
+    p = sub.add_parser("run", help="the live balance loop on a servo link")
+    p.add_argument("--robot", required=True, help="URDF of the robot")
+    p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
+    p.add_argument("--link", required=True, help="dynamixel:PATH, can:INTERFACE:CHANNEL, fw:URL or mock:")
+    p.add_argument("--motion", help="joint-trajectory CSV to play as the command (default: hold the first posture)")
+    p.add_argument("--scenario", help=f"built-in scenario as the command ({scenarios})")
+    add_loop_options(p)
+    p.set_defaults(handler="livezmp.commands.run:cmd_run")
+
+    p = sub.add_parser("sim", help="simulated humanoid behind simulated devices on ptys, until stopped")
+    p.add_argument("--robot", help="URDF of the robot (default: the built-in livezmp_mini)")
+    p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
+    p.add_argument("--link", required=True, choices=SIM_LINKS, help="which devices to simulate")
+    p.add_argument("--scenario", default="stand", help=f"initial posture and pushes ({scenarios}; default stand)")
+    p.add_argument("--fault", default="", help="fault spec, e.g. drop=0.01,corrupt=0.01,vanish=3s+1s")
+    p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY - 1,
+                   help=f"run the devices under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY - 1}, "
+                        "just below the loop's; 0 = normal scheduling)")
+    p.set_defaults(handler="livezmp.commands.sim:cmd_sim")
+
+    p = sub.add_parser("demo", help="the live loop on the built-in simulated humanoid")
+    p.add_argument("--link", default="dynamixel", choices=[*SIM_LINKS, "mock"],
+                   help="simulated link (default dynamixel)")
+    p.add_argument("--link-options", default="", help="extra link URL options, e.g. fast=1&timeout=0.005")
+    p.add_argument("--scenario", default="demo", help=f"{scenarios} (default demo: lean, then arm swing)")
+    p.add_argument("--fault", default="", help="fault spec for the simulated devices")
+    add_loop_options(p)
+    p.set_defaults(handler="livezmp.commands.demo:cmd_demo")
+
+
+# -- gait -----------------------------------------------------------------------------------------
+
+
+def _gait_input_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--up", choices=("y", "z"), default="y", help="BVH up axis (default y; ground = the other two)")
+    p.add_argument("--units", choices=("m", "cm", "mm", "in"), help="BVH length unit (default: detect)")
+    p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
+
+
+def _variant(text: str) -> tuple[str, str]:
+    label, sep, cond = text.partition("=")
+    if not sep or not label or not cond:
+        raise argparse.ArgumentTypeError(f"expected LABEL=CONDITION (e.g. fast=active), got {text!r}")
+    return label, cond
+
+
+def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
+    gait = subparsers.add_parser("gait", help="walking analysis and speed control (paper 003)",
+                                 description="Gait features across people, and walking-speed control.")
+    sub = gait.add_subparsers(dest="gait_command", required=True)
+
+    p = sub.add_parser("analyze", help="features common across people: K, μ, σ, CV, feature parts")
+    p.add_argument("inputs", nargs="*", help="walk files or directories (labelled by --pattern)")
+    p.add_argument("--manifest", help="CSV with columns path,subject,condition instead of inputs")
+    p.add_argument("--pattern", default=DEFAULT_PATTERN,
+                   help="regex on file names with groups (?P<condition>) and optionally (?P<subject>)")
+    p.add_argument("--base", required=True, help="base condition, e.g. normal")
+    p.add_argument("--variant", type=_variant, action="append", required=True, metavar="LABEL=CONDITION",
+                   help="a variant, e.g. fast=active (repeatable)")
+    p.add_argument("--out", required=True, help="output directory for tables, plot and features.json")
+    p.add_argument("--threshold", type=float, default=250.0, help="feature parts: |CV| ≤ this, %% (default 250)")
+    p.add_argument("--min-base", type=float, default=1.0,
+                   help="DC or amplitude below this (deg) in the base: no ratio (default 1)")
+    p.add_argument("--min-change", type=float, default=1.0,
+                   help="feature parts also need |μ| ≥ this, %% (default 1; 0 = the paper's rule)")
+    _gait_input_options(p)
+    p.set_defaults(handler="livezmp.commands.gait:cmd_analyze")
+
+    p = sub.add_parser("synth", help="change a base walk towards a variant using only its feature parts")
+    p.add_argument("base_walk", help="BVH file, or joint-trajectory CSV with --urdf")
+    p.add_argument("--features", required=True, help="features.json from gait analyze")
+    p.add_argument("--to", required=True, help="variant label, e.g. fast")
+    p.add_argument("--amount", type=float, default=1.0, help="0 = base walk … 1 = the variant (default 1)")
+    p.add_argument("-o", "--output", required=True, help="output walk (same format as the input)")
+    p.add_argument("--balance", action="store_true", help="pass the result through the balance correction")
+    _gait_input_options(p)
+    p.set_defaults(handler="livezmp.commands.gait:cmd_synth")
+
+    p = sub.add_parser("compare", help="cycle-normalised joint-angle RMS error of walk A against walks B")
+    p.add_argument("walk", help="walk A")
+    p.add_argument("others", nargs="+", help="walk(s) B; with several, the mean error is the last number")
+    _gait_input_options(p)
+    p.set_defaults(handler="livezmp.commands.gait:cmd_compare")
 
 
 if __name__ == "__main__":

@@ -66,32 +66,12 @@ from livezmp.balance.contacts import support_label
 from livezmp.balance.support import clamp_to_polygon, convex_hull, support_polygon
 from livezmp.balance.zmp import compute_zmp, zmp_from_wrench
 from livezmp.errors import InputError
+from livezmp.live.scenarios import Push
 from livezmp.model.base_placement import BasePlacer, base_coordinates
 from livezmp.model.body import BodyModel, foot_soles
 from sim_devices.servo_plant import Array, ServoPlant
 
 FLIGHT_FRACTION = 0.05  # contact force below this share of the weight: nothing holds the robot up
-
-
-@dataclass(frozen=True)
-class Push:
-    """A horizontal force ``force`` (N, world x and y) at ``height`` (m above the ground),
-    applied from ``start`` (s) for ``duration`` (s)."""
-
-    force: tuple[float, float]
-    height: float
-    start: float
-    duration: float
-
-    def __post_init__(self) -> None:
-        values = (*self.force, self.height, self.start, self.duration)
-        if len(self.force) != 2 or not all(math.isfinite(v) for v in values):
-            raise InputError(f"push: force must be two finite numbers (N) and height, start, duration finite, "
-                             f"got force={self.force!r} height={self.height!r} start={self.start!r} "
-                             f"duration={self.duration!r}")
-        if self.height < 0 or self.duration <= 0:
-            raise InputError(f"push: height must be >= 0 m and duration > 0 s, got {self.height} m, "
-                             f"{self.duration} s")
 
 
 @dataclass(frozen=True)

@@ -12,11 +12,11 @@ from test_links_support import with_options
 
 import livezmp
 from livezmp.links import open_link
+from livezmp.live.scenarios import Poser
 from livezmp.model.robot_config import find_robot_config
 from livezmp.model.urdf_body import body_from_urdf
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import humanoid_sensors, start_devices
-from sim_devices.scenarios import Poser
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 MINI_URDF = Path(livezmp.__file__).parent / "data" / "robots" / "livezmp_mini.urdf"

@@ -7,8 +7,8 @@ import pytest
 from test_links_support import NAMES
 
 from livezmp.links import FootSensors, LinkError, make_link
-from livezmp.links.mock import MockLink
 from livezmp.model.robot_config import RobotConfig
+from sim_devices.mock_link import MockLink
 from sim_devices.servo_plant import ServoPlant
 
 

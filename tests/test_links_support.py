@@ -13,9 +13,9 @@ from sim_support import wait_until  # also imported from here by the link tests
 
 from livezmp.links import make_link
 from livezmp.links.base import Link
-from livezmp.links.mock import MockLink
 from livezmp.model.robot_config import RobotConfig, ServoConfig
 from sim_devices.launch import SimDevices, start_devices
+from sim_devices.mock_link import MockLink
 from sim_devices.servo_plant import ServoPlant
 
 NAMES = ["r_sho_pitch", "l_sho_pitch", "r_sho_roll", "l_sho_roll", "r_el", "l_el", "r_hip_yaw", "l_hip_yaw",

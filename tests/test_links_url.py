@@ -9,8 +9,8 @@ from livezmp.errors import InputError
 from livezmp.links import make_link, parse_link_url
 from livezmp.links.dynamixel import DynamixelLink
 from livezmp.links.firmware import FirmwareLink
-from livezmp.links.mock import MockLink
 from livezmp.model.robot_config import RobotConfig, ServoConfig
+from sim_devices.mock_link import MockLink
 
 
 @pytest.mark.parametrize(("url", "parsed"), [

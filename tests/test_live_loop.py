@@ -19,8 +19,9 @@ from livezmp.errors import InputError
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
 from livezmp.live.clock import LoopClock
-from livezmp.live.loop import LiveLoop, LoopConfig
-from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, SafetyConfig, Watchdog, joint_limits
+from livezmp.live.config import LoopConfig, SafetyConfig
+from livezmp.live.loop import LiveLoop
+from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, Watchdog, joint_limits
 from livezmp.model.demo_robot import demo_robot_path
 
 RATE = 500.0

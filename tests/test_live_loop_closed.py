@@ -11,11 +11,12 @@ from __future__ import annotations
 import pytest
 from test_live_loop import SimTime
 
-from livezmp.commands.run import make_scenario
-from livezmp.links.mock import MockLink
 from livezmp.live.clock import LoopClock
-from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.config import LoopConfig
+from livezmp.live.loop import LiveLoop
+from livezmp.live.scenarios import make_scenario
 from sim_devices.humanoid import SimHumanoid
+from sim_devices.mock_link import MockLink
 
 READ_S, WRITE_S = 6e-4, 2e-4
 

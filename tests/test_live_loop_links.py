@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 from sim_support import short_gil_switch  # noqa: F401 - fixture
 
-from livezmp.commands.run import SimProcess, make_scenario
 from livezmp.links import LinkError, open_link
-from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.config import LoopConfig
+from livezmp.live.loop import LiveLoop
+from livezmp.live.scenarios import make_scenario
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
+from sim_devices.process import SimProcess
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 

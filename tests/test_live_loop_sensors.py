@@ -27,18 +27,21 @@ from test_run_cli import line_from, livezmp, stop
 from livezmp.balance.contacts import support_label
 from livezmp.balance.foot_sensors import GRAVITY
 from livezmp.cli import build_parser
-from livezmp.commands.run import load_robot, make_scenario, run_loop
+from livezmp.commands.run import run_loop
 from livezmp.links import open_link
 from livezmp.links.base import FootSensors
-from livezmp.links.mock import MockLink
 from livezmp.live.clock import LoopClock
-from livezmp.live.loop import LiveLoop, LoopConfig
+from livezmp.live.config import LoopConfig
+from livezmp.live.loop import LiveLoop
 from livezmp.live.recorder import LoopRecorder
+from livezmp.live.scenarios import Push, make_scenario
 from livezmp.model.body_spec import robot_body
 from livezmp.model.demo_robot import demo_robot_path
+from livezmp.model.robot import load_robot
 from livezmp.recording.reader import iter_messages, open_recording
-from sim_devices.humanoid import Push, SimHumanoid
+from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import humanoid_sensors, start_devices
+from sim_devices.mock_link import MockLink
 
 
 def recorder_for(body, path, **kw) -> LoopRecorder:

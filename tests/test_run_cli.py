@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from livezmp.cli import main
-from livezmp.commands.run import make_scenario
+from livezmp.live.scenarios import make_scenario
 from livezmp.model.demo_robot import demo_robot_path
 from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
 from livezmp.model.urdf_body import body_from_urdf

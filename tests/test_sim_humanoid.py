@@ -24,13 +24,15 @@ from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
+from livezmp.live import scenarios as sc
+from livezmp.live.scenarios import Push
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import sole_velocities
 from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
-from sim_devices import scenarios as sc
 from sim_devices.dynamixel_chain import DynamixelChain
-from sim_devices.humanoid import Push, RealtimeThread, SimHumanoid, cop_weights
+from sim_devices.humanoid import RealtimeThread, SimHumanoid, cop_weights
+from sim_devices.scenario_player import ScenarioPlayer
 
 MINI_URDF = Path(livezmp.__file__).parent / "data" / "robots" / "livezmp_mini.urdf"
 G = 9.81
@@ -51,7 +53,7 @@ def body(request):
 
 def record(humanoid: SimHumanoid, scenario: sc.Scenario, seconds: float, stop_on_fall: bool = True) -> list:
     """Play with a goal update every internal step and keep every dynamic state."""
-    player = sc.ScenarioPlayer(humanoid, scenario, rate_hz=1.0 / H)
+    player = ScenarioPlayer(humanoid, scenario, rate_hz=1.0 / H)
     states = []
     while player.t < seconds - 1e-9 and not (stop_on_fall and humanoid.fallen):
         player.tick()
@@ -179,7 +181,7 @@ def test_imu_follows_the_base_motion_during_a_lean(body):
     """Specific force = Rᵀ(p̈ − g) with p̈ from the base origin's recorded positions, and
     ω from consecutive base rotations (built here from yaw, pitch, roll)."""
     h = SimHumanoid(body, sc.Poser(body).standing())
-    player = sc.ScenarioPlayer(h, sc.lean(body), rate_hz=1.0 / H)
+    player = ScenarioPlayer(h, sc.lean(body), rate_hz=1.0 / H)
     player.run(1.0)  # mid-ramp: leaning faster and faster
     states, imus = [], []
     for _ in range(3):
@@ -215,7 +217,7 @@ def test_contact_force_matches_the_com_acceleration_from_its_positions(body, mak
 def test_squat_foot_forces_carry_the_weight_plus_the_vertical_inertia_and_soles_stay_put(body):
     scenario = sc.squat(body, period=1.0)
     h = SimHumanoid(body, scenario.goals(0.0))
-    player = sc.ScenarioPlayer(h, scenario, rate_hz=1.0 / H)
+    player = ScenarioPlayer(h, scenario, rate_hz=1.0 / H)
     model, data = body.model, body.model.createData()
     com, totals, sole_speed = [], [], 0.0
     while player.t < 1.0:
@@ -264,7 +266,7 @@ def test_a_lean_past_the_toes_falls_after_fall_after_s_and_then_holds(body, fall
     assert states[since - 1].supported
     # it holds: the joints stay frozen while the goals keep changing
     frozen = h.position.copy()
-    player = sc.ScenarioPlayer(h, scenario, rate_hz=125.0)
+    player = ScenarioPlayer(h, scenario, rate_hz=125.0)
     player.run(0.5)
     assert np.array_equal(h.position, frozen) and not np.any(h.velocity)
     assert np.abs(h.state().v).max() == 0.0 and h.fallen is fall
@@ -273,7 +275,7 @@ def test_a_lean_past_the_toes_falls_after_fall_after_s_and_then_holds(body, fall
 def test_a_lean_that_stays_inside_does_not_fall(body):
     scenario = sc.lean(body, beyond=-0.008)  # static CoM 8 mm inside the toes at the hold
     h = SimHumanoid(body, scenario.goals(0.0))
-    sc.ScenarioPlayer(h, scenario).run()
+    ScenarioPlayer(h, scenario).run()
     assert h.fallen is None and h.counters.unsupported_steps == 0
     assert 0.0 < h.counters.worst_margin < 0.008
 
@@ -373,7 +375,7 @@ def test_runs_are_deterministic():
     for _ in range(2):
         scenario = sc.arm_swing(body)
         h = SimHumanoid(body, scenario.goals(0.0))
-        sc.ScenarioPlayer(h, scenario).run(0.5)
+        ScenarioPlayer(h, scenario).run(0.5)
         runs.append((h.state(), h.foot_forces(), h.imu()))
     (a, fa, ia), (b, fb, ib) = runs
     for x, y in [(a.q, b.q), (a.v, b.v), (a.a, b.a), (a.zmp, b.zmp), (fa.left, fb.left), (ia.specific_force,
@@ -493,7 +495,7 @@ def _closed_loop_lean(body, correct: bool, rate: float = 125.0):
         deltas.append(c.delta)
         return goals + c.offsets[6:]
 
-    sc.ScenarioPlayer(h, scenario, rate_hz=rate, correct=corrected if correct else None).run()
+    ScenarioPlayer(h, scenario, rate_hz=rate, correct=corrected if correct else None).run()
     return h, np.array(deltas)
 
 

@@ -20,13 +20,16 @@ axes as the foot link's.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors
-from livezmp.model.body import BodyModel
+
+if TYPE_CHECKING:  # a type only: this module stays light for the command line's defaults
+    from livezmp.model.body import BodyModel
 
 GRAVITY = 9.81  # m/s²
 CONTACT_FRACTION = 0.05  # of the body's weight: what a foot carries to count as down

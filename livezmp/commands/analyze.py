@@ -12,7 +12,7 @@ import argparse
 from rich.progress import Progress
 
 from livezmp.balance.pipeline import Pipeline
-from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
+from livezmp.commands.common import load_from_args, pipeline_config
 from livezmp.errors import InputError
 from livezmp.offline.batch import run_batch
 from livezmp.offline.plot import plot_analysis
@@ -48,13 +48,3 @@ def cmd_analyze(args: argparse.Namespace) -> int:
           f"{'n/a' if inside is None else f'{100 * inside:.1f} %'}, "
           f"max excursion {1000 * summary['max_excursion_m']:.1f} mm")
     return 0
-
-
-def add_analyze_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, or CSV + URDF)")
-    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot); default: built-in demo")
-    p.add_argument("--out", help="per-frame CSV (zmp.csv)")
-    p.add_argument("--summary-json", help="summary JSON")
-    p.add_argument("--plot", help="figure (PNG)")
-    add_body_options(p)
-    p.set_defaults(func=cmd_analyze)

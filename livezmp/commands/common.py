@@ -18,20 +18,6 @@ from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
-def add_body_options(p: argparse.ArgumentParser) -> None:
-    """Options shared by every command that loads a motion."""
-    p.add_argument("--robot", help="URDF of the robot (for a joint-trajectory CSV)")
-    p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
-    p.add_argument("--mass", type=float, default=70.0, help="total body mass for a BVH skeleton, kg (default 70)")
-    p.add_argument("--units", choices=["m", "cm", "mm", "in"], help="BVH length unit (default: detected)")
-    p.add_argument("--up", choices=["y", "z"], help="BVH up axis (default: detected)")
-    p.add_argument("--mapping", help="TOML file mapping unknown joint names to segments")
-    p.add_argument("--sole-width", type=float, help="sole width for a BVH skeleton, m (default 5.5%% of stature)")
-    p.add_argument("--ground", type=float, help="ground height in the input frame, m (default: detected)")
-    p.add_argument("--mode", choices=["full", "seed"], default="full",
-                   help="ZMP of rigid segments (full) or point masses as in the seed paper (seed)")
-
-
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
     """The motion named on the command line, or the built-in demo when there is none."""
     urdf_opts = UrdfBodyOptions(config=args.robot_config)

@@ -5,22 +5,13 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from livezmp.commands.common import add_body_options, load_from_args, pipeline_config
+from livezmp.commands.common import load_from_args, pipeline_config
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.solver import correct_motion
 from livezmp.errors import InputError
 from livezmp.model.bvh import write_bvh
 from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
 from livezmp.offline.report import write_json
-
-
-def add_limit_options(p: argparse.ArgumentParser) -> None:
-    d = CorrectionLimits()
-    p.add_argument("--max-rotation-deg", type=float, nargs=3, metavar=("ROLL", "PITCH", "YAW"),
-                   default=list(d.max_rotation_deg), help="largest root rotation per axis, degrees")
-    p.add_argument("--max-rate-deg-s", type=float, default=d.max_rate_deg_s, help="largest root rotation rate, deg/s")
-    p.add_argument("--margin-mm", type=float, default=1000 * d.margin_m,
-                   help="how far inside the support polygon to aim, mm")
 
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
@@ -57,13 +48,3 @@ def cmd_correct(args: argparse.Namespace) -> int:
     if report["infeasible_frames"]:
         print(f"not fully corrected within the limits: frames {report['infeasible_frames']}")
     return 0
-
-
-def add_correct_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
-    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot)")
-    p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
-    p.add_argument("--report", help="report JSON")
-    add_body_options(p)
-    add_limit_options(p)
-    p.set_defaults(func=cmd_correct)

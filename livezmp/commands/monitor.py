@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
-from livezmp.commands.common import add_body_options, pipeline_config, stop_on_signals
+from livezmp.commands.common import pipeline_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.model.body_spec import robot_body
@@ -31,8 +31,6 @@ from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source
 from livezmp.sources.mcap_replay import McapReplaySource
-
-DEFAULT_DASHBOARD = "127.0.0.1:8765"
 
 
 def _source(args: argparse.Namespace) -> Source:
@@ -89,18 +87,6 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
             dashboard.stop()
     _print_summary(summary)
     return summary
-
-
-def _sink_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dashboard", nargs="?", const=DEFAULT_DASHBOARD, metavar="HOST:PORT",
-                   help=f"serve the live dashboard (default address {DEFAULT_DASHBOARD})")
-    p.add_argument("--allow-remote", action="store_true",
-                   help="allow a dashboard address beyond loopback; a token is then generated and required")
-    p.add_argument("--token", action="store_true", help="require a generated token for the dashboard on loopback too")
-    p.add_argument("--record", metavar="FILE.mcap", help="record inputs, results, corrections, alarms, faults")
-    p.add_argument("--tui", action="store_true", help="live status table in the terminal")
-    p.add_argument("--alarm-command", metavar="CMD",
-                   help="run CMD on every alarm event (LIVEZMP_ALARM* environment variables)")
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
@@ -164,31 +150,3 @@ def cmd_recover(args: argparse.Namespace) -> int:
     print(f"{args.out}: {rep.messages} messages in {rep.chunks} chunks, {rep.attachments} attachments, "
           f"{rep.metadata} metadata records recovered ({state})", flush=True)
     return 0
-
-
-def add_monitor_commands(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams")
-    p.add_argument("motion", nargs="?", metavar="SOURCE",
-                   help="motion file (.bvh, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
-                        "(livezmp frames), tcp://HOST:PORT (BVH broadcast); default: built-in demo")
-    p.add_argument("--skeleton", help="BVH file giving a stream's skeleton (hierarchy, optional frames)")
-    p.add_argument("--fps", type=float, help="a stream's frame rate, Hz (default: the skeleton file's)")
-    p.add_argument("--speed", type=float, default=1.0, help="replay speed factor for files (0 = as fast as possible)")
-    p.add_argument("--loop", action="store_true", help="replay a file over and over")
-    p.add_argument("--alarm-after", type=float, default=200.0, metavar="MS",
-                   help="alarm when the ZMP is out of support for this long, ms (default 200)")
-    p.add_argument("--correct", action="store_true", help="run the online balance correction and record it")
-    _sink_options(p)
-    add_body_options(p)
-    p.set_defaults(func=cmd_monitor)
-
-    p = sub.add_parser("replay", help="re-run the analysis of a recorded session (MCAP)")
-    p.add_argument("recording", help="session.mcap written by `livezmp monitor --record`")
-    p.add_argument("--speed", type=float, default=0.0, help="speed factor (default 0: as fast as possible)")
-    _sink_options(p)
-    p.set_defaults(func=cmd_replay)
-
-    p = sub.add_parser("recover", help="make a complete MCAP file of a recording cut short by a crash")
-    p.add_argument("broken", help="the unfinished recording")
-    p.add_argument("-o", "--out", required=True, help="the repaired file to write")
-    p.set_defaults(func=cmd_recover)

@@ -4,10 +4,12 @@ corrector: rotation and rate limits, the ZMP target inside the polygon, the stan
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from livezmp.balance.pipeline import FrameResult
+if TYPE_CHECKING:  # a type only: this module stays light for the command line's defaults
+    from livezmp.balance.pipeline import FrameResult
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,12 @@
     dynamixel:PATH[?baud=1000000&fast=auto&watchdog=0.1&timeout=S]
     can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
     fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
-    mock:
+    mock:                       (registered by sim_devices: an in-process simulated robot)
+
+Backends are :class:`Backend` entries: the three above are built in; more are registered
+through the ``livezmp.links`` entry-point group (``name = "module:BACKEND"`` in a
+package's metadata), as python-can finds its interfaces, so a package such as
+``sim_devices`` adds ``mock:`` without livezmp importing it.
 
 Options follow the last ``?`` (a pyserial URL with options of its own keeps them before
 it: ``fw:socket://host:5000?logging=debug?rate=200``). Times in seconds, rates in Hz.
@@ -12,32 +17,40 @@ A bad URL or option is an `InputError` naming it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats
 from livezmp.model.robot_config import RobotConfig, ServoConfig
 
-__all__ = ["FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "make_link", "open_link",
-           "parse_link_url"]
+__all__ = ["Backend", "FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "make_link",
+           "open_link", "parse_link_url"]
 
-FORMS = "dynamixel:PATH, can:INTERFACE:CHANNEL, fw:URL or mock:"
-_OPTIONS = {  # scheme -> option -> (parser, default)
-    "dynamixel": {"baud": ("rate", 1_000_000), "fast": ("auto_flag", None), "watchdog": ("time", 0.1),
-                  "timeout": ("positive", None)},
-    "can": {"bitrate": ("rate", None), "rate": ("rate", 30), "watchdog": ("time", 0.2),
-            "timeout": ("positive", 0.1)},
-    "fw": {"baud": ("rate", 1_000_000), "rate": ("rate", 500), "watchdog": ("time", 0.2),
-           "timeout": ("positive", 0.1)},
-    "mock": {},
-}
+ENTRY_POINT_GROUP = "livezmp.links"
+Builder = Callable[[str, str, list[str], RobotConfig, dict, dict], Link]
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One link scheme: ``build(url, target, joint_names, robot_config, options, extra)`` makes the
+    (unopened) link; ``options`` name -> (kind, default), kind one of "rate", "time", "positive",
+    "flag", "auto_flag"; ``target``: whether the URL names a device after the scheme;
+    ``extra_options``: unknown options are passed on (``extra``) rather than refused."""
+
+    build: Builder
+    options: dict[str, tuple[str, object]] = field(default_factory=dict)
+    target: bool = True
+    extra_options: bool = False
 
 
 def parse_link_url(url: str) -> tuple[str, str, dict[str, str]]:
     """(scheme, target, raw options) of a link URL; InputError if malformed."""
     scheme, colon, rest = url.partition(":")
-    if not colon or scheme not in _OPTIONS:
-        raise InputError(f"link URL '{url}': expected {FORMS}")
+    backend = _backend(scheme) if colon else None
+    if backend is None:
+        raise InputError(f"link URL '{url}': expected {_forms()}")
     target, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
     options: dict[str, str] = {}
     for item in query.split("&"):
@@ -49,10 +62,10 @@ def parse_link_url(url: str) -> tuple[str, str, dict[str, str]]:
         if name in options:
             raise InputError(f"link URL '{url}': option '{name}' given twice")
         options[name] = value
-    if scheme == "mock" and target:
-        raise InputError(f"link URL '{url}': mock: takes no device")
-    if scheme != "mock" and not target:
-        raise InputError(f"link URL '{url}': {scheme}: needs a device (expected {FORMS})")
+    if not backend.target and target:
+        raise InputError(f"link URL '{url}': {scheme}: takes no device")
+    if backend.target and not target:
+        raise InputError(f"link URL '{url}': {scheme}: needs a device (expected {_forms()})")
     if scheme == "can" and not all(target.partition(":")[::2]):
         raise InputError(f"link URL '{url}': expected can:INTERFACE:CHANNEL, e.g. can:slcan:/dev/ttyACM0")
     return scheme, target, options
@@ -91,22 +104,16 @@ def make_link(url: str, joint_names: Sequence[str], robot_config: RobotConfig) -
     """The link a URL names for ``joint_names`` (no I/O yet: call ``open()``). InputError on a bad URL,
     option, or a joint the robot config has no servo for (dynamixel:, can:)."""
     scheme, target, raw = parse_link_url(url)
-    known = _OPTIONS[scheme]
+    backend = _backend(scheme)
+    known = backend.options
     extra = {k: v for k, v in raw.items() if k not in known}
-    if extra and scheme != "can":
+    if extra and not backend.extra_options:
         name = next(iter(extra))
         listed = ", ".join(known) or "none"
         raise InputError(f"link URL '{url}': unknown option '{name}' for {scheme}: (options: {listed})")
     opts = {name: (_value(url, name, kind, raw[name]) if name in raw else default)
             for name, (kind, default) in known.items()}
-    return _BUILDERS[scheme](url, target, list(joint_names), robot_config, opts, extra)
-
-
-def _mock(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
-    from livezmp.links.mock import MockLink
-    from sim_devices.servo_plant import ServoPlant
-
-    return MockLink(ServoPlant(len(names)), names)
+    return backend.build(url, target, list(joint_names), robot_config, opts, extra)
 
 
 def _fw(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
@@ -148,7 +155,37 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
     return FirmwareLink(url, names, connect, rate=opts["rate"], watchdog=opts["watchdog"], timeout=opts["timeout"])
 
 
-_BUILDERS = {"mock": _mock, "fw": _fw, "dynamixel": _dynamixel, "can": _can}
+_BUILT_IN = {
+    "dynamixel": Backend(_dynamixel, {"baud": ("rate", 1_000_000), "fast": ("auto_flag", None),
+                                      "watchdog": ("time", 0.1), "timeout": ("positive", None)}),
+    "can": Backend(_can, {"bitrate": ("rate", None), "rate": ("rate", 30), "watchdog": ("time", 0.2),
+                          "timeout": ("positive", 0.1)}, extra_options=True),  # the rest go to python-can's Bus
+    "fw": Backend(_fw, {"baud": ("rate", 1_000_000), "rate": ("rate", 500), "watchdog": ("time", 0.2),
+                        "timeout": ("positive", 0.1)}),
+}
+_FORMS = {"dynamixel": "dynamixel:PATH", "can": "can:INTERFACE:CHANNEL", "fw": "fw:URL"}
+
+
+def _registered() -> dict[str, object]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in _BUILT_IN}
+
+
+def _backend(scheme: str) -> Backend | None:
+    """The built-in or registered backend of ``scheme``; None if there is none."""
+    if scheme in _BUILT_IN:
+        return _BUILT_IN[scheme]
+    ep = _registered().get(scheme)
+    if ep is None:
+        return None
+    backend = ep.load()
+    if not isinstance(backend, Backend):
+        raise InputError(f"link backend {scheme}: ({ep.value}) is not a livezmp.links.Backend")
+    return backend
+
+
+def _forms() -> str:
+    forms = [*_FORMS.values(), *(f"{name}:" for name in sorted(_registered()))]
+    return ", ".join(forms[:-1]) + " or " + forms[-1]
 
 
 def _servos(scheme: str, names: list[str], config: RobotConfig) -> list[ServoConfig]:

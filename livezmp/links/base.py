@@ -3,7 +3,7 @@
     dynamixel:/dev/ttyUSB0?baud=1000000     Dynamixel Protocol 2.0 bus (dynamixel-sdk)
     can:slcan:/dev/ttyACM0?bitrate=1000000  CAN servos (python-can, any interface)
     fw:/dev/ttyACM0                         a firmware board (firmware_protocol over pyserial)
-    mock:                                   an in-process simulated robot, no bus
+    mock:                                   an in-process simulated robot, no bus (registered by sim_devices)
 
 A link reads the robot's joint state (and, where the device has them, foot sensors and
 IMU) and writes goal positions, in radians, in the robot's joint-name order. Ticks,

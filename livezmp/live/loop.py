@@ -56,17 +56,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from livezmp.balance.foot_sensors import CONTACT_FRACTION, CopLocator, CopVsZmp, contact_force, sensor_contacts
+from livezmp.balance.foot_sensors import CopLocator, CopVsZmp, contact_force, sensor_contacts
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
-from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError
 from livezmp.live.clock import LoopClock, Tick
+from livezmp.live.config import CONTACT_MODES, LoopConfig
 from livezmp.live.recorder import LoopRecorder
-from livezmp.live.safety import FrameGuard, GoalLimiter, SafetyConfig, Watchdog, joint_limits
+from livezmp.live.safety import FrameGuard, GoalLimiter, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.demo_robot import smooth_ramp
@@ -74,41 +74,6 @@ from livezmp.model.demo_robot import smooth_ramp
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
 EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
-CONTACT_MODES = ("auto", "sensors", "kinematics")
-
-
-@dataclass(frozen=True)
-class LoopConfig:
-    """``rate_hz``: loop rate; ``correct``: add balance corrections; ``correct_hz``: the
-    corrector's rate (every round(rate_hz / correct_hz) cycles' worth of loop time, at
-    least every cycle; measured: the balance is the same at 125 Hz as at 500 Hz);
-    ``ramp_s``: blend time from the present posture to the command (s);
-    ``estimator_*``: window, lag (s) and cutoff (Hz) of the estimator;
-    ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits on the root
-    rotation (its angular acceleration pushes the ZMP the other way first, so it is kept
-    gentle); ``status_every_s``: period of the status callback.
-    ``contacts``: where the feet's contacts come from: ``"sensors"`` (the link's foot
-    sensors: a foot is down when its cells carry more than ``contact_fraction`` of the
-    body's weight; a frame without a reading falls back to kinematic detection, counted
-    and told), ``"kinematics"`` (detected from the sole heights and speeds, sensors
-    ignored), ``"auto"`` (sensors whenever the frame has them, silently kinematics
-    otherwise). Sensor readings are compared with the ZMP in every mode."""
-
-    rate_hz: float = 500.0
-    correct: bool = True
-    correct_hz: float = 125.0
-    ramp_s: float = 0.5
-    estimator_window_s: float = 0.2
-    estimator_lag_s: float = 0.03
-    estimator_cutoff_hz: float = 8.0
-    trunk_accel_deg_s2: float = 100.0
-    correction_limits: CorrectionLimits = field(default_factory=CorrectionLimits)
-    status_every_s: float = 1.0
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
-    contacts: str = "auto"
-    contact_fraction: float = CONTACT_FRACTION
-
-
 @dataclass
 class LoopCounters:
     """Per-run counts; ``analysed``: results of real samples; ``judged``/``inside``: those

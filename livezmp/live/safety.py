@@ -29,37 +29,13 @@ Units: rad, rad/s, s.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-from livezmp.errors import InputError
 from livezmp.links.base import LinkFrame
+from livezmp.live.config import SafetyConfig
 from livezmp.model.body import BodyModel
-
-
-@dataclass(frozen=True)
-class SafetyConfig:
-    """Safety settings (see the module docstring); every number must be positive."""
-
-    watchdog_s: float = 0.1
-    drop_torque: bool = False
-    reconnect_every_s: float = 0.25
-    max_frame_age_s: float = 0.02
-    position_tolerance_rad: float = 0.05
-    speed_factor: float = 1.5
-    max_correction_rad: float = 0.5
-    max_correction_rate_rad_s: float = 3.0
-    limit_margin_rad: float = 0.01
-    stop_on_hardware_error: bool = True
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool):
-                continue
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise InputError(f"safety setting {f.name} = {value!r}: must be a positive number")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,5 @@
-"""``livezmp gait analyze | synth | compare``: the command-line front end of :mod:`livezmp.gait`.
-
-:func:`add_gait_commands` registers the ``gait`` command on an argparse subparsers
-object (``livezmp.cli`` does); each leaf sets ``func(args) -> int`` and raises
+"""``livezmp gait analyze | synth | compare``: the command-line front end of :mod:`livezmp.gait`
+(grammar in :mod:`livezmp.cli`). Each handler returns the exit code and raises
 :class:`InputError` for user mistakes, which the ``livezmp`` command prints as one line
 with exit code 2.
 """
@@ -20,24 +18,11 @@ from livezmp.gait.population import analyze
 from livezmp.gait.synth import synth_take, to_bvh, to_trajectory
 from livezmp.gait.tables import read_features, write_outputs
 from livezmp.gait.take import GaitTake, load_take
-from livezmp.gait.takeset import DEFAULT_PATTERN, read_manifest, takes_from_paths
+from livezmp.gait.takeset import read_manifest, takes_from_paths
 from livezmp.model.bvh import write_bvh
 from livezmp.model.trajectory_csv import write_joint_csv
 
 GROUND = {"y": "xz", "z": "xy"}
-
-
-def _input_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--up", choices=("y", "z"), default="y", help="BVH up axis (default y; ground = the other two)")
-    p.add_argument("--units", choices=("m", "cm", "mm", "in"), help="BVH length unit (default: detect)")
-    p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
-
-
-def _variant(text: str) -> tuple[str, str]:
-    label, sep, cond = text.partition("=")
-    if not sep or not label or not cond:
-        raise argparse.ArgumentTypeError(f"expected LABEL=CONDITION (e.g. fast=active), got {text!r}")
-    return label, cond
 
 
 def _load(path: str | Path, args: argparse.Namespace) -> GaitTake:
@@ -130,44 +115,3 @@ def cmd_compare(args: argparse.Namespace) -> int:
     mean_total = float(np.mean([r.total for r in results]))
     print(f"total RMS error (deg){f', mean over {len(results)} walks' if several else ''}: {mean_total:.2f}")
     return 0
-
-
-def add_gait_commands(subparsers) -> argparse.ArgumentParser:
-    """Register ``gait analyze|synth|compare`` on an argparse ``subparsers`` object."""
-    gait = subparsers.add_parser("gait", help="walking analysis and speed control (paper 003)",
-                                 description="Gait features across people, and walking-speed control.")
-    sub = gait.add_subparsers(dest="gait_command", required=True)
-
-    p = sub.add_parser("analyze", help="features common across people: K, μ, σ, CV, feature parts")
-    p.add_argument("inputs", nargs="*", help="walk files or directories (labelled by --pattern)")
-    p.add_argument("--manifest", help="CSV with columns path,subject,condition instead of inputs")
-    p.add_argument("--pattern", default=DEFAULT_PATTERN,
-                   help="regex on file names with groups (?P<condition>) and optionally (?P<subject>)")
-    p.add_argument("--base", required=True, help="base condition, e.g. normal")
-    p.add_argument("--variant", type=_variant, action="append", required=True, metavar="LABEL=CONDITION",
-                   help="a variant, e.g. fast=active (repeatable)")
-    p.add_argument("--out", required=True, help="output directory for tables, plot and features.json")
-    p.add_argument("--threshold", type=float, default=250.0, help="feature parts: |CV| ≤ this, %% (default 250)")
-    p.add_argument("--min-base", type=float, default=1.0,
-                   help="DC or amplitude below this (deg) in the base: no ratio (default 1)")
-    p.add_argument("--min-change", type=float, default=1.0,
-                   help="feature parts also need |μ| ≥ this, %% (default 1; 0 = the paper's rule)")
-    _input_options(p)
-    p.set_defaults(func=cmd_analyze)
-
-    p = sub.add_parser("synth", help="change a base walk towards a variant using only its feature parts")
-    p.add_argument("base_walk", help="BVH file, or joint-trajectory CSV with --urdf")
-    p.add_argument("--features", required=True, help="features.json from gait analyze")
-    p.add_argument("--to", required=True, help="variant label, e.g. fast")
-    p.add_argument("--amount", type=float, default=1.0, help="0 = base walk … 1 = the variant (default 1)")
-    p.add_argument("-o", "--output", required=True, help="output walk (same format as the input)")
-    p.add_argument("--balance", action="store_true", help="pass the result through the balance correction")
-    _input_options(p)
-    p.set_defaults(func=cmd_synth)
-
-    p = sub.add_parser("compare", help="cycle-normalised joint-angle RMS error of walk A against walks B")
-    p.add_argument("walk", help="walk A")
-    p.add_argument("others", nargs="+", help="walk(s) B; with several, the mean error is the last number")
-    _input_options(p)
-    p.set_defaults(func=cmd_compare)
-    return gait

@@ -2,7 +2,8 @@
 
     mock:
 
-``open_link("mock:", ...)`` makes a `ServoPlant` at rest at 0 rad; build a `MockLink`
+Registered as the ``mock:`` link URL through the ``livezmp.links`` entry points
+(:data:`BACKEND`). ``open_link("mock:", ...)`` makes a `ServoPlant` at rest at 0 rad; build a `MockLink`
 yourself to drive another plant (e.g. a simulated humanoid) or to step it on a clock of
 your own (e.g. a fixed step per read, for loop tests that must not depend on wall time).
 """
@@ -14,8 +15,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from livezmp.links import Backend
 from livezmp.links.base import FootSensors, LinkError, LinkFrame, LinkStats
-from sim_devices.servo_plant import JointPlant
+from livezmp.model.robot_config import RobotConfig
+from sim_devices.servo_plant import JointPlant, ServoPlant
 
 
 class MockLink:
@@ -96,3 +99,10 @@ class MockLink:
         now = self._clock()
         self.plant.step(now - self._time)
         self._time = now
+
+
+def _build(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> MockLink:
+    return MockLink(ServoPlant(len(names)), names)
+
+
+BACKEND = Backend(_build, target=False)

@@ -1,4 +1,4 @@
-"""Scenarios for the simulated humanoid: goal joint angles as functions of time.
+"""Scenarios: a humanoid's goal joint angles as functions of time, and the disturbances that go with them.
 
 A scenario is the robot's base command, what it is asked to do; a live loop's balance
 corrector adds its offsets to the leg joints on top. Scenarios work for any body with
@@ -13,13 +13,16 @@ left), which keeps each sole parallel to the pelvis (flat on the ground) and the
 away from their straight-knee singularity; arms hang down, turned out a little by the
 shoulder roll (OP3's zero posture holds them out sideways).
 
-Angles in rad, times in s, world frame z up, x forward, y left.
+Angles in rad, times in s, world frame z up, x forward, y left. ``livezmp run --scenario``
+sends them to a robot; ``livezmp sim``/``demo`` also play them on the simulated humanoid,
+which applies their pushes (:class:`sim_devices.scenario_player.ScenarioPlayer`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +34,30 @@ from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.trajectory_csv import read_joint_csv
-from sim_devices.humanoid import Push, SimHumanoid
 
 SIDES = ("l", "r")
 X, Y, Z = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class Push:
+    """A horizontal force ``force`` (N, world x and y) at ``height`` (m above the ground),
+    applied from ``start`` (s) for ``duration`` (s)."""
+
+    force: tuple[float, float]
+    height: float
+    start: float
+    duration: float
+
+    def __post_init__(self) -> None:
+        values = (*self.force, self.height, self.start, self.duration)
+        if len(self.force) != 2 or not all(math.isfinite(v) for v in values):
+            raise InputError(f"push: force must be two finite numbers (N) and height, start, duration finite, "
+                             f"got force={self.force!r} height={self.height!r} start={self.start!r} "
+                             f"duration={self.duration!r}")
+        if self.height < 0 or self.duration <= 0:
+            raise InputError(f"push: height must be >= 0 m and duration > 0 s, got {self.height} m, "
+                             f"{self.duration} s")
 
 
 @dataclass(frozen=True)
@@ -233,43 +256,48 @@ def push(body: BodyModel, force: tuple[float, float] = (5.0, 0.0), at: float = 1
     return Scenario("push", lambda t: q0.copy(), total, (Push(tuple(force), height, at, duration),))
 
 
-class ScenarioPlayer:
-    """Feeds a scenario's goals to a humanoid ``rate_hz`` times a second of simulated
-    time, without any servo bus: switches every joint's torque on, schedules the
-    scenario's pushes, and steps the humanoid between goal updates. ``correct(t,
-    goals) -> goals`` (optional) may change each goal vector before it is sent, as a
-    live loop's corrector does. Scenario time 0 is the humanoid's time at creation."""
+# -- the scenarios by name (livezmp run/sim/demo --scenario) ------------------------------------------
 
-    def __init__(self, humanoid: SimHumanoid, scenario: Scenario, rate_hz: float = 125.0,
-                 correct: Callable[[float, np.ndarray], np.ndarray] | None = None):
-        self.humanoid = humanoid
-        self.scenario = scenario
-        self.period = 1.0 / rate_hz
-        self.correct = correct
-        self.start = humanoid.t
-        self.ticks = 0
-        for i in range(len(humanoid.position)):
-            humanoid.set_torque(i, True)
-        for p in scenario.pushes:
-            humanoid.push(Push(p.force, p.height, self.start + p.start, p.duration))
+# The demo's arm swing: 0.6 rad at 0.8 Hz, leaning to 8 mm inside the toes. Uncorrected the
+# ZMP stays past the toes long enough to fall; the loop's corrector (estimator lag 30 ms)
+# holds it. (The scenario's own default, 2.5 Hz, is faster than the loop can follow.)
+ARM_SWING = {"amplitude": 0.6, "frequency": 0.8, "toe_margin": 0.008}
+BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
 
-    @property
-    def t(self) -> float:
-        """Scenario time of the next goal update (s)."""
-        return self.ticks * self.period
 
-    def tick(self) -> None:
-        """Send the goals for the current time and simulate one goal period."""
-        t = self.t
-        goals = self.scenario.goals(t)
-        if self.correct is not None:
-            goals = self.correct(t, goals)
-        self.humanoid.set_goals(goals)
-        self.ticks += 1
-        self.humanoid.advance_to(self.start + self.ticks * self.period)
+def sequence(name: str, parts: list[Scenario], blend_s: float = BLEND_S) -> Scenario:
+    """Scenarios one after the other; each part's goals are blended in from where the
+    previous one ended over ``blend_s`` seconds (smooth, so no goal jumps)."""
+    starts = np.cumsum([0.0] + [p.duration for p in parts])
+    ends = [p.goals(p.duration) for p in parts]
 
-    def run(self, duration: float | None = None) -> None:
-        """Play ``duration`` seconds (default: the rest of the scenario)."""
-        end = self.scenario.duration if duration is None else self.t + duration
-        while self.t < end - 1e-9:
-            self.tick()
+    def goals(t: float) -> np.ndarray:
+        k = int(np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(parts) - 1))
+        local = t - starts[k]
+        q = parts[k].goals(local)
+        if k == 0 or local >= blend_s:
+            return q
+        s = smooth_step(local / blend_s)
+        return ends[k - 1] + s * (q - ends[k - 1])
+
+    pushes = tuple(replace(p, start=p.start + starts[k]) for k, part in enumerate(parts) for p in part.pushes)
+    return Scenario(name, goals, float(starts[-1]), pushes)
+
+
+SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
+    "stand": stand,
+    "lean": lean,
+    "arm_swing": lambda body, **kw: arm_swing(body, **{**ARM_SWING, **kw}),
+    "squat": squat,
+    "push": push,
+    "demo": lambda body, **kw: sequence("demo", [lean(body, hold_s=2.0),
+                                                  arm_swing(body, duration=3.0, **ARM_SWING)], **kw),
+}
+
+
+def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
+    """A scenario by name (``SCENARIOS``) for ``body``, with its keyword ``options``;
+    InputError naming the choices."""
+    if name not in SCENARIOS:
+        raise InputError(f"unknown scenario '{name}' (choose from {', '.join(SCENARIOS)})")
+    return SCENARIOS[name](body, **options)

@@ -1,0 +1,70 @@
+"""`livezmp demo`: the live loop on the built-in simulated humanoid.
+
+``livezmp_mini`` on a simulated Dynamixel bus (or ``--link can|fw``) served by a child
+process (:class:`sim_devices.process.SimProcess`: its own core and interpreter, as a
+robot is another machine; ``--link mock`` steps the humanoid in this process instead), a
+scenario (by default: lean past the toes and back, then swing the arms), a live status
+line and the summary, with the simulator's own verdict (``fell``,
+``true_inside_fraction``: the share of its 1 ms steps whose true ZMP was inside the
+support polygon).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from livezmp.commands.run import check_record, duration_of, finish, run_loop
+from livezmp.links import LinkError, open_link
+from livezmp.live import scenarios as sc
+from livezmp.live.realtime import check_priority
+from livezmp.live.scenarios import make_scenario
+from livezmp.model.robot import Robot, load_robot
+from sim_devices.launch import humanoid_sensors
+from sim_devices.mock_link import MockLink
+from sim_devices.process import SimProcess, check_faults, start_sim
+
+
+def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
+    """The mock link: the humanoid stepped by the loop's own reads, in this process."""
+    sim = start_sim(robot, "mock", scenario, args.fault)
+    feet, _ = humanoid_sensors(sim.humanoid)
+    link = MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet)
+    link.open()
+    try:
+        sim.start_scenario()
+        summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration), fell=sim.fell,
+                           source="mock:")
+    finally:
+        link.close()
+    return {**summary, **sim.verdict(), "link_url": "mock:"}
+
+
+def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
+    """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
+    with SimProcess(args.link, (args.scenario, {}), args.fault,
+                    realtime_priority=max(args.realtime_priority - 1, 0)) as sim:
+        url = sim.url + (f"&{args.link_options}" if args.link_options else "")
+        link = open_link(url, robot.body.joint_names, robot.config)
+        try:
+            sim.start_scenario()
+            summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration),
+                               fell=sim.fell, source=url)
+        finally:
+            link.close()
+        return {**summary, **sim.verdict(), "link_url": url}
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    check_priority(args.realtime_priority)
+    check_record(args)
+    robot = load_robot(None, None)
+    scenario = make_scenario(args.scenario, robot.body)
+    check_faults(args.fault)
+    try:
+        summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario)
+    except LinkError as e:
+        print(f"livezmp: error: {e}", file=sys.stderr)
+        return 1
+    summary["scenario"] = scenario.name
+    return finish(summary, args)

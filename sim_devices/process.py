@@ -1,0 +1,210 @@
+"""A simulated humanoid behind its simulated devices, in this process or in a child process.
+
+:func:`start_sim` starts the humanoid stepping in real time behind devices of one link
+kind (``livezmp sim``, the in-process ``mock`` demo); :class:`SimProcess` runs the same in
+a child process — its own core and interpreter, as a real robot is another machine — for
+``livezmp demo``, the tests and the benchmarks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import sys
+import time
+from dataclasses import dataclass
+
+from livezmp.errors import InputError
+from livezmp.links import LinkError
+from livezmp.live import scenarios as sc
+from livezmp.live.realtime import realtime_priority
+from livezmp.live.scenarios import Push, make_scenario
+from livezmp.model.robot import Robot, load_robot
+from sim_devices.faults import parse_faults
+from sim_devices.humanoid import RealtimeThread, SimHumanoid
+from sim_devices.launch import KINDS, humanoid_sensors, start_devices
+
+
+@dataclass
+class SimRobot:
+    """A simulated humanoid stepping in real time, and the devices that serve it."""
+
+    humanoid: SimHumanoid
+    thread: RealtimeThread | None
+    devices: object | None  # sim_devices.launch.SimDevices; None for the in-process mock link
+    scenario: sc.Scenario
+
+    def start_scenario(self) -> None:
+        """Scenario time 0 is now: schedule its pushes, count the balance from here."""
+        now = self.humanoid.t
+        for p in self.scenario.pushes:
+            self.humanoid.push(Push(p.force, p.height, now + p.start, p.duration))
+        c = self.humanoid.counters
+        self._since = (c.steps, c.unsupported_steps)
+
+    def fell(self) -> bool:
+        return self.humanoid.fallen is not None
+
+    def verdict(self) -> dict:
+        """``fell`` (and why), and the share of simulator steps since :meth:`start_scenario`
+        whose true ZMP was inside the support polygon."""
+        c = self.humanoid.counters
+        steps0, unsupported0 = getattr(self, "_since", (0, 0))
+        steps = c.steps - steps0
+        fall = self.humanoid.fallen
+        return {"fell": fall is not None, "fall": None if fall is None else fall.reason,
+                "true_inside_fraction": 1.0 - (c.unsupported_steps - unsupported0) / steps if steps else None}
+
+    def close(self) -> None:
+        if self.thread is not None:
+            self.thread.stop()
+        if self.devices is not None:
+            self.devices.close()
+
+
+def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "") -> SimRobot:
+    """The humanoid at the scenario's first posture (torque off until a link opens it),
+    stepping in real time, behind devices of ``kind`` (a firmware board with its foot
+    sensors). For ``mock`` there are no devices and no stepping thread: the in-process
+    mock link steps it at each read."""
+    if kind not in (*KINDS, "mock"):
+        raise InputError(f"--link {kind}: expected one of {', '.join((*KINDS, 'mock'))}")
+    if kind == "mock" and faults:
+        raise InputError("--fault: the mock link has no devices to inject faults into")
+    # the mock link steps the humanoid at each read; behind devices, only its thread does,
+    # once per physics step, so no device reply waits for physics
+    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock")
+    if kind == "mock":
+        return SimRobot(humanoid, None, None, scenario)
+    thread = RealtimeThread(humanoid, period=humanoid.dt).start()
+    try:
+        # the firmware board reads the humanoid's foot cells (its true centre of pressure)
+        feet = humanoid_sensors(humanoid)[0] if kind == "fw" else None
+        devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
+                                foot_sensors=feet)
+    except BaseException:
+        thread.stop()
+        raise
+    return SimRobot(humanoid, thread, devices, scenario)
+
+
+def sim_process_setup() -> None:
+    """The simulator's threads (port server, physics) hand the GIL over within 0.1 ms
+    rather than 5 ms, so a reply is not held up behind a physics step."""
+    sys.setswitchinterval(1e-4)
+
+
+def check_faults(spec: str) -> None:
+    """A bad fault spec is a one-line error before anything starts."""
+    try:
+        parse_faults(spec)
+    except ValueError as e:
+        raise InputError(f"--fault: {e}") from None
+
+
+
+FELL_FLAG_EVERY_S = 0.02  # how often a SimProcess's child looks for a fall to flag
+
+
+def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
+               faults: str, priority: int) -> None:
+    """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
+    ``fell_flag`` (a multiprocessing Event) once the robot has fallen."""
+    sim = None
+    # the devices stand in for hardware, which no other program delays (refused: normal priority)
+    with realtime_priority(priority):
+        try:
+            sim_process_setup()
+            robot = load_robot(urdf, config)
+            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults)
+            conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
+            while True:
+                if not conn.poll(FELL_FLAG_EVERY_S):
+                    if sim.fell():
+                        fell_flag.set()
+                    continue
+                request = conn.recv()
+                if request == "start":
+                    sim.start_scenario()
+                    conn.send(None)
+                elif request == "verdict":
+                    conn.send({**sim.verdict(), "injected_faults": vars(sim.devices.fault_counters)})
+                elif request == "servos":
+                    servo = sim.humanoid.servo
+                    conn.send({"goal": servo.goal.copy(), "position": servo.position.copy()})
+                else:
+                    break
+        except (InputError, ValueError) as e:
+            conn.send({"error": str(e)})
+        except (EOFError, KeyboardInterrupt):
+            pass
+        finally:
+            if sim is not None:
+                sim.close()
+
+
+class SimProcess:
+    """The simulated humanoid and its devices in a child process — its own core and
+    interpreter, as a real robot is another machine — driven over a pipe: ``url`` and
+    ``ports`` of its devices; :meth:`start_scenario`, :meth:`fell`, :meth:`verdict`;
+    :meth:`vanish` / :meth:`restore` its ports. ``scenario``: (name, keyword arguments);
+    ``realtime_priority``: SCHED_FIFO priority of the child's threads (0: normal; if refused,
+    normal)."""
+
+    def __init__(self, kind: str, scenario: tuple[str, dict], faults: str = "", urdf: str | None = None,
+                 config: str | None = None, start_timeout: float = 60.0, realtime_priority: int = 0):
+        ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no threads or locks inherited
+        self._conn, child = ctx.Pipe()
+        # the fall is a flag the child raises, so the loop's frequent question costs no round trip
+        self._fell = ctx.Event()
+        self._proc = ctx.Process(target=_sim_child, args=(child, self._fell, urdf, config, kind, scenario, faults,
+                                                             realtime_priority),
+                                 name="livezmp-sim", daemon=True)
+        self._proc.start()
+        child.close()
+        try:
+            if not self._conn.poll(start_timeout):
+                raise LinkError(f"the simulator did not start within {start_timeout:g} s")
+            hello = self._conn.recv()
+        except (LinkError, EOFError) as e:
+            self.close()
+            raise LinkError(str(e) or "the simulator process exited before it started (its error is above)") from None
+        if "error" in hello:
+            self.close()
+            raise InputError(hello["error"])
+        self.url, self.ports = hello["url"], hello["ports"]
+
+    def _ask(self, request: str):
+        self._conn.send(request)
+        return self._conn.recv()
+
+    def start_scenario(self) -> None:
+        self._ask("start")
+
+    def fell(self) -> bool:
+        """Whether the robot fell (seen within FELL_FLAG_EVERY_S of the fall)."""
+        return self._fell.is_set()
+
+    def verdict(self) -> dict:
+        return self._ask("verdict")
+
+    def servos(self) -> dict:
+        return self._ask("servos")
+
+    def close(self) -> None:
+        """Stop the child (politely, then by force after 5 s)."""
+        with contextlib.suppress(OSError, BrokenPipeError):
+            self._conn.send("stop")
+        self._proc.join(5.0)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join()
+        self._conn.close()
+
+    def __enter__(self) -> SimProcess:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+

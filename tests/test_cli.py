@@ -1,0 +1,51 @@
+"""The command line's grammar: light to parse, in step with what the commands run."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from livezmp.cli import DEFAULT_DASHBOARD, SCENARIO_NAMES, SIM_LINKS, build_parser
+from livezmp.live.scenarios import SCENARIOS
+from livezmp.monitor.dashboard import parse_address
+from sim_devices.launch import KINDS
+
+HEAVY = ("scipy", "pinocchio", "matplotlib", "mcap", "websockets", "serial", "can", "dynamixel_sdk", "sim_devices")
+
+
+def test_grammar_names_match_the_commands():
+    assert SCENARIO_NAMES == tuple(SCENARIOS)
+    assert SIM_LINKS == tuple(KINDS)
+    assert parse_address(DEFAULT_DASHBOARD) == ("127.0.0.1", 8765)
+
+
+def test_every_subcommand_names_a_handler_that_exists():
+    import importlib
+
+    parser = build_parser()
+    actions = [a for a in parser._actions if a.dest == "command"][0].choices
+    seen = 0
+    for name, sub in actions.items():
+        subs = [a for a in sub._actions if getattr(a, "choices", None) and a.dest == "gait_command"]
+        for p in (subs[0].choices.values() if subs else [sub]):
+            module, _, function = p.get_default("handler").partition(":")
+            assert callable(getattr(importlib.import_module(module), function)), (name, module, function)
+            seen += 1
+    assert seen == 11  # analyze correct monitor replay recover run sim demo + gait analyze/synth/compare
+
+
+def test_help_and_every_subcommand_help_import_nothing_heavy():
+    code = ("import sys, contextlib, io\nfrom livezmp.cli import build_parser\n"
+            "for argv in ([], ['analyze'], ['correct'], ['monitor'], ['run'], ['sim'], ['demo'], ['gait', 'synth']):\n"
+            "    with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+            "        build_parser().parse_args([*argv, '--help'])\n"
+            "import json; print(json.dumps(sorted(m for m in sys.modules if '.' not in m)))")
+    loaded = set(json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                           check=True).stdout))
+    assert not loaded & set(HEAVY), loaded & set(HEAVY)
+
+
+def test_version():
+    out = subprocess.run([sys.executable, "-m", "livezmp", "--version"], capture_output=True, text=True, check=True)
+    assert out.stdout.startswith("livezmp ") and out.stdout.split()[1][0].isdigit()
