@@ -1,8 +1,8 @@
 """Whole-take batch analysis: the numpy kinematics pass against Pinocchio called frame by frame.
 
-The batch path (:func:`livezmp.batch.analyse_batch`) gets each chunk's kinematics and centroidal
+The batch path (:func:`livezmp.offline.batch.run_batch`) gets each chunk's kinematics and centroidal
 dynamics (CoM, rate of centroidal momentum, the foot frames' placements and velocities) from
-:class:`livezmp.batch_kinematics.BatchKinematics`, a forward pass in numpy vectorised over the
+:class:`livezmp.offline.kinematics.BatchKinematics`, a forward pass in numpy vectorised over the
 chunk's frames. Is that twin of Pinocchio worth its code? Rows, in the same run on the same take:
 
 - (a) the batch path as it is (numpy pass);
@@ -40,13 +40,13 @@ import numpy as np
 import pinocchio as pin
 from bench_pipeline import OP3, WALK, load_average, long_take, op3_stream
 
-import livezmp.batch
-from livezmp.batch import DEFAULT_CHUNK, BatchResult, analyse_batch
-from livezmp.batch_kinematics import BatchKinematics, Dynamics, FrameMotion, body_frame_ids
-from livezmp.body_bvh import body_from_bvh
-from livezmp.body_urdf import body_from_urdf
-from livezmp.bvh import read_bvh
-from livezmp.pipeline import Pipeline, default_config
+import livezmp.offline.batch
+from livezmp.balance.pipeline import Pipeline, default_config
+from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh_body import body_from_bvh
+from livezmp.model.urdf_body import body_from_urdf
+from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
+from livezmp.offline.kinematics import BatchKinematics, Dynamics, FrameMotion, body_frame_ids
 
 RATE = 120.0
 
@@ -84,20 +84,23 @@ class PinocchioPerFrame:
 @contextmanager
 def kinematics_stage(cls: type) -> Iterator[None]:
     """The batch path with its kinematics stage computed by ``cls`` (restored on the way out)."""
-    original = livezmp.batch.BatchKinematics
-    livezmp.batch.BatchKinematics = cls
+    original = livezmp.offline.batch.BatchKinematics
+    livezmp.offline.batch.BatchKinematics = cls
     try:
         yield
     finally:
-        livezmp.batch.BatchKinematics = original
+        livezmp.offline.batch.BatchKinematics = original
 
 
-def batch_run(body, cfg, times: np.ndarray, frames: np.ndarray) -> tuple[float, BatchResult]:
-    """Seconds for the batch analysis of the take (never the per-frame fallback: that raises)."""
+def batch_run(body, cfg, times: np.ndarray, frames: np.ndarray, keep_states: bool = False) -> tuple[float, BatchResult]:
+    """Seconds for :func:`run_batch` on the take, and its result (the batch path, never the fallback)."""
     pipe = Pipeline(body, cfg, 1 / RATE)
     start = time.perf_counter()
-    result, _ = analyse_batch(body, cfg, pipe.estimator, pipe.contacts, times, frames, DEFAULT_CHUNK)
-    return time.perf_counter() - start, result
+    result = run_batch(pipe, times, frames, keep_states=keep_states)
+    elapsed = time.perf_counter() - start
+    if result.path != "batch":
+        raise SystemExit(f"the take went {result.path}")
+    return elapsed, result
 
 
 def step_run(body, cfg, times: np.ndarray, frames: np.ndarray) -> float:
@@ -149,9 +152,8 @@ def take_table(title: str, body, times: np.ndarray, frames: np.ndarray, repeats:
 def stage_table(title: str, body, times: np.ndarray, frames: np.ndarray) -> None:
     """The kinematics stage alone on one chunk of the take's estimated states."""
     cfg = default_config(body, RATE)
-    pipe = Pipeline(body, cfg, 1 / RATE)
     n = min(DEFAULT_CHUNK, len(times))
-    kept, _ = analyse_batch(body, cfg, pipe.estimator, pipe.contacts, times[:n], frames[:n], keep_states=True)
+    _, kept = batch_run(body, cfg, times[:n], frames[:n], keep_states=True)
     q, v, a = (np.ascontiguousarray(x.T) for x in (kept.q, kept.v, kept.a))  # (nq, C), as the stage gets them
     model, ids = body.model, body_frame_ids(body)
     pool = pin.ModelPool(model, 2)
