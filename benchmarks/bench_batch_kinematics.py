@@ -25,6 +25,22 @@ motion at 120 Hz (:func:`bench_pipeline.op3_stream`).
 
     python benchmarks/bench_batch_kinematics.py                 # 10-minute takes, about 2 minutes
     python benchmarks/bench_batch_kinematics.py --minutes 60    # the one-hour take
+
+Measured (2026-11-25, pinocchio 4.1.0, 2 CPUs shared with other jobs; median of 3 runs unless said):
+
+    take                          load   (a) numpy pass        (b) Pinocchio per frame  (b)/(a)  step loop
+    Bandai 60 min (1 run, no OP3) 1.6    5.59 s   77,300 f/s   21.75 s  19,900 f/s      3.9
+    Bandai 10 min                 1.7    1.53 s   47,000 f/s    3.85 s  18,700 f/s      2.5      7.61 s
+    OP3 10 min                    1.6    0.28 s  261,000 f/s    1.19 s  60,800 f/s      4.3      5.27 s
+    Bandai 10 min, 5 runs         2-4    2.90 s   24,800 f/s    8.85 s   8,100 f/s      3.1      20.0 s
+    OP3 10 min, 5 runs            4-5    1.48 s   48,500 f/s    3.85 s  18,700 f/s      2.6       9.6 s
+
+(b) gives (a)'s ZMP, CoM and margins to 4e-15 m, with no support, flight or inside flag differing.
+The stage alone on one 8192-frame Bandai chunk (load 1.6): numpy pass 30 ms; Pinocchio per frame
+294 ms, of which the bare ``computeCentroidalMomentumTimeVariation`` calls are 165 ms (5x the whole
+numpy stage); ``rneaInParallel`` 160 ms on 1 thread, 112 ms on 2, for torques alone. So no leaner
+per-frame Pinocchio stage comes within 2x on the skeleton: with nothing read back at all, the hour
+would take 5.59 - 1.61 + 8.72 = 12.7 s (2.3x). Decision: the numpy pass stays.
 """
 
 from __future__ import annotations

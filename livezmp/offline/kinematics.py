@@ -3,7 +3,10 @@
 The per-frame pipeline asks Pinocchio for one state at a time (13-20 µs a call on a
 132-joint skeleton). Offline, a whole chunk of frames goes through one forward pass
 instead: every quantity is an array over the chunk's frames, and each joint costs a
-few numpy operations, whatever the chunk length.
+few numpy operations, whatever the chunk length. End to end through
+:func:`livezmp.offline.batch.run_batch` that makes a take 2.5-4x faster than the same
+path calling Pinocchio per frame (``benchmarks/bench_batch_kinematics.py``); the results
+agree to 4e-15 m.
 
 The pass reads the Pinocchio model's own structure (``parents``, ``jointPlacements``,
 ``inertias``, ``frames``) and follows Pinocchio's conventions: per joint, the spatial
