@@ -26,7 +26,8 @@ motion at 120 Hz (:func:`bench_pipeline.op3_stream`).
     python benchmarks/bench_batch_kinematics.py                 # 10-minute takes, about 2 minutes
     python benchmarks/bench_batch_kinematics.py --minutes 60    # the one-hour take
 
-Measured (2026-11-25, pinocchio 4.1.0, 2 CPUs shared with other jobs; median of 3 runs unless said):
+Measured (2026-11-25, pinocchio 4.1.0, 2 CPUs shared with other jobs; median of 3 runs unless said;
+the first three rows on the flat layout just before the package move, same code):
 
     take                          load   (a) numpy pass        (b) Pinocchio per frame  (b)/(a)  step loop
     Bandai 60 min (1 run, no OP3) 1.6    5.59 s   77,300 f/s   21.75 s  19,900 f/s      3.9
