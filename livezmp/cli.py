@@ -20,6 +20,7 @@ from livezmp.errors import InputError
 from livezmp.gait.takeset import DEFAULT_PATTERN
 from livezmp.live.config import CONTACT_MODES, LoopConfig, SafetyConfig
 from livezmp.live.realtime import LOOP_PRIORITY
+from livezmp.offline.validated import VALIDATED_P95_MM
 
 # Names the grammar offers before anything heavy is imported; tests check them against
 # livezmp.live.scenarios.SCENARIOS, sim_devices.launch.KINDS and the dashboard's default.
@@ -65,7 +66,7 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
     """Options shared by every command that loads a motion."""
     p.add_argument("--robot", help="URDF of the robot (for a joint-trajectory CSV)")
     p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
-    p.add_argument("--mass", type=float, default=70.0, help="total body mass for a BVH skeleton, kg (default 70)")
+    p.add_argument("--mass", type=float, help="total body mass, kg (default: BVH 70; C3D the plates', else the file's)")
     p.add_argument("--units", choices=["m", "cm", "mm", "in"], help="BVH length unit (default: detected)")
     p.add_argument("--up", choices=["y", "z"], help="BVH up axis (default: detected)")
     p.add_argument("--mapping", help="TOML file mapping unknown joint names to segments")
@@ -76,13 +77,22 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
 
 
 def _analysis_commands(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, or CSV + URDF)")
-    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot); default: built-in demo")
+    p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, C3D, or CSV + URDF)")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, .c3d, or .csv with --robot); default: built-in demo")
     p.add_argument("--out", help="per-frame CSV (zmp.csv)")
     p.add_argument("--summary-json", help="summary JSON")
     p.add_argument("--plot", help="figure (PNG)")
+    p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
+                   help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
+    p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D: HAT mass and centre of mass)")
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
+
+    p = sub.add_parser("calibrate", help="subject parameters (HAT mass and centre of mass) from force-plate C3D trials")
+    p.add_argument("trials", nargs="+", help="C3D trials of one subject with force plates")
+    p.add_argument("-o", "--output", default="subject.toml", help="subject file to write (default subject.toml)")
+    p.add_argument("--mass", type=float, help="body mass, kg (default: the plates', else the file's)")
+    p.set_defaults(handler="livezmp.commands.calibrate:cmd_calibrate")
 
     d = CorrectionLimits()
     p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")

@@ -32,7 +32,7 @@ def test_every_subcommand_names_a_handler_that_exists():
             module, _, function = p.get_default("handler").partition(":")
             assert callable(getattr(importlib.import_module(module), function)), (name, module, function)
             seen += 1
-    assert seen == 11  # analyze correct monitor replay recover run sim demo + gait analyze/synth/compare
+    assert seen == 12  # analyze calibrate correct monitor replay recover run sim demo + gait analyze/synth/compare
 
 
 def test_help_and_every_subcommand_help_import_nothing_heavy():

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 
 from livezmp.balance.pipeline import PipelineConfig, default_config
-from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, load_motion, trajectory_frames
 from livezmp.model.segments import load_mapping
@@ -26,9 +26,9 @@ def load_from_args(args: argparse.Namespace) -> LoadedMotion:
         traj = demo_trajectory(body.joint_names)
         return LoadedMotion(body, traj.t, trajectory_frames(body, traj), "<demo>", trajectory=traj)
     mapping = load_mapping(args.mapping) if args.mapping else None
-    bvh_opts = BvhBodyOptions(total_mass=args.mass, units=args.units, up_axis=args.up, mapping=mapping,
+    bvh_opts = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up, mapping=mapping,
                               sole_width=args.sole_width)
-    return load_motion(args.motion, args.robot, bvh_opts, urdf_opts)
+    return load_motion(args.motion, args.robot, bvh_opts, urdf_opts, c3d_mass=args.mass)
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:

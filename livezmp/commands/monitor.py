@@ -15,7 +15,7 @@ from livezmp.commands.common import pipeline_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.model.body_spec import robot_body
-from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.segments import load_mapping
@@ -39,7 +39,7 @@ def _source(args: argparse.Namespace) -> Source:
         body, spec = robot_body(demo_robot_path(), urdf)
         traj = demo_trajectory(body.joint_names)
         return FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), args.speed, args.loop)
-    bvh = BvhBodyOptions(total_mass=args.mass, units=args.units, up_axis=args.up,
+    bvh = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up,
                          mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
                          speed=args.speed, loop=args.loop)

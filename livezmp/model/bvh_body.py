@@ -29,6 +29,7 @@ WORLD_FROM_INPUT = {
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 _NEXT = {"upper_arm": "forearm", "forearm": "hand", "thigh": "shank", "shank": "foot", "foot": "toe"}
 _TRUNK = ("pelvis", "spine", "neck", "head")
+DEFAULT_MASS = 70.0  # kg, when nothing gives the body's mass
 CALIBRATION_S = 2.0  # s of motion that calibrate the feet
 LEG_FRACTION_OF_STATURE = (422.2 + 434.0) / 1741  # de Leva thigh + shank over stature
 
@@ -39,7 +40,7 @@ class BvhBodyOptions:
 
     Foot dimensions default to fractions of the estimated stature (``None``)."""
 
-    total_mass: float = 70.0
+    total_mass: float = DEFAULT_MASS
     units: str | None = None  # 'm', 'cm', 'mm', 'in'; None = detect
     up_axis: str | None = None  # 'y' or 'z'; None = detect
     mapping: dict[str, SegmentTag] | None = None

@@ -1,5 +1,5 @@
-"""Load a motion file into a body model plus its frames: a BVH, or a robot
-joint-trajectory CSV with its URDF."""
+"""Load a motion file into a body model plus its frames: a BVH, a gait-lab C3D (markers), or a
+robot joint-trajectory CSV with its URDF."""
 
 from __future__ import annotations
 
@@ -12,7 +12,9 @@ from livezmp.errors import InputError
 from livezmp.model.base_placement import place_base
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh
-from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
+from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
+from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
@@ -27,6 +29,7 @@ class LoadedMotion:
     source: str
     bvh: BvhMotion | None = None
     trajectory: JointTrajectory | None = None
+    c3d: C3dTrial | None = None
 
     @property
     def fps(self) -> float:
@@ -34,8 +37,10 @@ class LoadedMotion:
 
 
 def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: BvhBodyOptions | None = None,
-                urdf_options: UrdfBodyOptions | None = None) -> LoadedMotion:
-    """Load ``path``: ``.bvh`` on its own, ``.csv`` with ``robot`` (a URDF)."""
+                urdf_options: UrdfBodyOptions | None = None, c3d_mass: float | None = None) -> LoadedMotion:
+    """Load ``path``: ``.bvh`` or ``.c3d`` on its own, ``.csv`` with ``robot`` (a URDF). A C3D's body
+    weighs ``c3d_mass`` kg, else the file's subject mass, else 70 kg (plates are for
+    :mod:`livezmp.offline.gaitlab`)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")
@@ -45,13 +50,18 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         body = body_from_bvh(motion, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time
         return LoadedMotion(body, times, motion.frames, str(p), bvh=motion)
+    if suffix == ".c3d":
+        trial = read_c3d(p)
+        take = body_from_markers(trial, MarkerBodyOptions(total_mass=c3d_mass or trial.mass_kg or DEFAULT_MASS))
+        times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
+        return LoadedMotion(take.body, times, take.frames, str(p), c3d=trial)
     if suffix == ".csv":
         if robot is None:
             raise InputError(f"{p}: a joint-trajectory CSV needs --robot ROBOT.urdf")
         body = body_from_urdf(robot, urdf_options)
         traj = read_joint_csv(p, body.joint_names)
         return LoadedMotion(body, traj.t, trajectory_frames(body, traj), str(p), trajectory=traj)
-    raise InputError(f"{p}: unknown motion format {suffix!r} (.bvh, or .csv with --robot)")
+    raise InputError(f"{p}: unknown motion format {suffix!r} (.bvh, .c3d, or .csv with --robot)")
 
 
 def trajectory_frames(body: BodyModel, traj: JointTrajectory) -> np.ndarray:

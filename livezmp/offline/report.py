@@ -10,6 +10,8 @@ import numpy as np
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.model.body import BodyModel
 from livezmp.offline.batch import BatchResult
+from livezmp.offline.plausibility import plausibility
+from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_COLUMNS = ("frame", "time", "zmp_x", "zmp_y", "zmp_z", "com_x", "com_y", "com_z", "support", "inside",
                "clamped_x", "clamped_y", "clamped_z", "margin")
@@ -28,9 +30,11 @@ _TEMPLATES = np.array([_row_template(z, j, label) for z in (False, True) for j i
                        for label in SUPPORT_LABELS])
 
 
-def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path) -> None:
+def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path,
+                  extra: dict[str, np.ndarray] | None = None) -> None:
     """One row per frame; positions in metres in the input's world frame; flight frames
-    (and frames without support) leave the ZMP/clamp cells empty.
+    (and frames without support) leave the ZMP/clamp cells empty. ``extra`` columns (name ->
+    (N,) values) follow, ``%.6f``, empty where not finite.
 
     Rows are formatted many at a time, each through a printf template chosen by which of
     its cells are filled (the same text as Python's ``%.6f``), CRLF line ends as ``csv``."""
@@ -42,12 +46,17 @@ def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path) -> Non
     filled[:, 2:5] = result.has_zmp[:, None]
     filled[:, 8:13] = result.judged[:, None]
     kind = 8 * result.has_zmp + 4 * result.judged + result.support
+    extra = extra or {}
     with open(path, "w", newline="", encoding="utf-8") as f:
-        f.write(",".join(ZMP_COLUMNS) + "\r\n")
+        f.write(",".join((*ZMP_COLUMNS, *extra)) + "\r\n")
         for lo in range(0, count, CSV_ROWS):
             rows = slice(lo, lo + CSV_ROWS)
-            template = "".join(_TEMPLATES[kind[rows]].tolist())
-            f.write(template % tuple(values[rows][filled[rows]].tolist()))
+            text = "".join(_TEMPLATES[kind[rows]].tolist()) % tuple(values[rows][filled[rows]].tolist())
+            if extra:
+                cells = [["" if not np.isfinite(v) else f"{v:.6f}" for v in col[rows]] for col in extra.values()]
+                text = "".join(line + "," + ",".join(c) + "\r\n"
+                               for line, c in zip(text.split("\r\n")[:-1], zip(*cells, strict=True), strict=True))
+            f.write(text)
 
 
 def ground_plane(body: BodyModel) -> str:
@@ -55,9 +64,12 @@ def ground_plane(body: BodyModel) -> str:
     return f"{axes[0]}{axes[1]} ({body.up_axis} = ground height)"
 
 
-def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str) -> dict:
-    """The summary figures of an analysis (see README for each field)."""
+def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str,
+              tolerance_mm: float = VALIDATED_P95_MM) -> dict:
+    """The summary figures of an analysis (see README for each field). ``inside_fraction_tol``: the
+    judged frames whose ZMP is inside the support polygon or less than ``tolerance_mm`` outside it."""
     n = len(result)
+    inside_tol = int(np.sum(result.judged & (result.margin >= -tolerance_mm / 1000)))
     none = SUPPORT_LABELS.index("none")
     judged = int(result.judged.sum())
     inside = int(result.inside[result.judged].sum())
@@ -78,9 +90,14 @@ def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str) -> di
         "flight_frames": int(np.sum(~result.has_zmp | (result.support == none))),
         "out_of_support_frames": judged - inside,
         "inside_fraction": round(inside / judged, 6) if judged else None,
+        "inside_fraction_tol": round(inside_tol / judged, 6) if judged else None,
+        "tolerance_mm": tolerance_mm,
+        "tolerance_source": ("ZMP error p95 against force plates, median over the shared gait trials "
+                             "(docs/validation.md)" if tolerance_mm == VALIDATED_P95_MM else "--tolerance-mm"),
         "max_excursion_m": round(excursion, 6),
         "support_counts": {label: int(c) for label, c in zip(SUPPORT_LABELS, counts, strict=True)},
         "ground_height_m": round(float(result.ground_z[-1]), 6) if n else None,
+        "plausibility": plausibility(result.com, result.zmp, result.has_zmp, 1.0 / fps) if n else None,
     }
 
 

@@ -1,0 +1,126 @@
+"""ZMP against force-plate centre of pressure on the shared C3D gait trials, step by step.
+
+Each row adds one change to the one above, so each error source shows its share:
+
+  0  CoM ground projection alone (no dynamics)
+  1  live estimator settings (0.4 s window, 0.1 s ahead), HAT rigid on the pelvis, raw plates
+  2  + HAT upright (moves with the mid-hip, turns with the pelvis' heading)
+  3  + plates low-passed like the kinematics (zero-phase, at the estimator's cutoff)
+  4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)  [livezmp analyze default]
+  5  + plates' delay behind the markers measured and undone             [livezmp analyze default]
+
+then the estimator's cutoff around the default, and the estimator's own gain and delay on sinusoids
+(why row 4 matters). Figures: over each trial's complete frames (every loaded foot on a plate);
+lag > 0: the ZMP comes after the CoP; bias: mean ZMP - CoP along the walk and to its left.
+
+    python benchmarks/bench_forceplates.py
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.balance.plates import G
+from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
+from livezmp.model.c3d import read_c3d
+from livezmp.model.markers import MarkerBodyOptions
+from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
+from livezmp.offline.plausibility import com_accelerations
+from livezmp.offline.validation import cop_vs_zmp, walking_axes
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "c3d"
+TRIALS = ("walk_plugingait_forceplates.c3d", "cgm24_walking01_forceplate.c3d")
+LIVE = {"window_s": 0.4, "lag_s": 0.1}
+RIGID = MarkerBodyOptions(hat_follows_pelvis=True)
+RAW_PLATES = 1e9  # Hz: no low-pass
+STEPS = [
+    ("1 live window, HAT rigid, raw plates", LabOptions(markers=RIGID, estimator=LIVE, plate_cutoff_hz=RAW_PLATES,
+                                                         plate_delay_s=0.0)),
+    ("2 + HAT upright", LabOptions(estimator=LIVE, plate_cutoff_hz=RAW_PLATES, plate_delay_s=0.0)),
+    ("3 + plates low-passed as kinematics", LabOptions(estimator=LIVE, plate_delay_s=0.0)),
+    ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(plate_delay_s=0.0)),
+    ("5 + plate delay undone  [default]", LabOptions()),
+]
+
+
+def row(name: str, cv: dict, extra: str = "") -> str:
+    if not cv["frames"]:
+        return f"{name:40s} {'-':>6s}"
+    fa, lat = cv["bias_mm"]
+    return (f"{name:40s} {cv['frames']:6d} {cv['rms_mm']:7.1f} {cv['p95_mm']:7.1f} {fa:+7.1f} {lat:+7.1f} "
+            f"{cv['lag_ms']:+7.1f}  {extra}")
+
+
+def header() -> str:
+    return f"{'':40s} {'frames':>6s} {'RMS':>7s} {'p95':>7s} {'biasFA':>7s} {'biasLat':>7s} {'lag ms':>7s}"
+
+
+def trial_table(path: Path) -> list[dict]:
+    trial = read_c3d(path)
+    print(f"\n{path.name}  ({len(trial.points)} frames at {trial.rate:g} Hz, {len(trial.plates)} plates)  mm")
+    print(header())
+    out = []
+    final = analyse_lab_take(trial)
+    r, p = final.result, final.plates
+    com = cop_vs_zmp(r.com, np.ones(len(r), dtype=bool), p.cop, final.complete, r.com, 1.0 / trial.rate)
+    print(row("0 CoM projection (no dynamics)", com))
+    for name, opts in STEPS:
+        a = analyse_lab_take(trial, opts)
+        delay = a.summary["time_alignment"]
+        out.append({"step": name, **a.summary["cop_vs_zmp"]})
+        print(row(name, a.summary["cop_vs_zmp"], f"plate delay measured {delay['plate_delay_measured_ms']:+.1f} ms, "
+                                              f"applied {delay['plate_delay_applied_ms']:+.1f} ms"))
+    for hz in (4.0, 5.0, 8.0, 10.0):
+        a = analyse_lab_take(trial, LabOptions(estimator={"cutoff_hz": hz}))
+        print(row(f"  default but cutoff {hz:g} Hz", a.summary["cop_vs_zmp"]))
+    fwd, left = walking_axes(r.com)
+    c = final.complete
+    plate = p.force[c] / final.summary["mass"]["used_kg"] - [0.0, 0.0, G]
+    kin = com_accelerations(r.com, 1.0 / trial.rate)
+    p99 = [[float(np.percentile(np.abs(x @ ax if ax is not None else x[:, 2]), 99)) for ax in (fwd, left, None)]
+           for x in (plate, kin[c])]
+    dist = np.percentile(np.linalg.norm(p.cop[c, :2] - r.com[c, :2], axis=1), 99)
+    print(f"plausibility references: CoM acceleration p99 (fore-aft, lateral, vertical) m/s2: plates "
+          f"{np.round(p99[0], 2).tolist()}, markers {np.round(p99[1], 2).tolist()}; CoP-CoM p99 {dist:.3f} m")
+    m, acc = final.summary["mass"], final.summary["com_acc_vs_plates"]
+    print(f"mass: file {m['file_kg']} kg, plates {m['plates_kg']} kg over {m['plate_cycles']} cycle(s), used "
+          f"{m['used_kg']} kg ({m['source']}); CoM acceleration vs plates r = {acc['r']}, RMS {acc['rms_mps2']} m/s2")
+    return out
+
+
+def estimator_response(rate: float, freq: float, window: float, lag: float, cutoff: float) -> tuple[float, float]:
+    """Gain and delay (ms) of the estimator's acceleration of a unit sinusoid at ``freq`` Hz."""
+    t = np.arange(int(8 * rate)) / rate
+    x = np.sin(2 * np.pi * freq * t)[:, None]
+    _, _, qdd = estimate_offline(t, x, None, EstimatorConfig(rate_hz=rate, cutoff_hz=cutoff, window_s=window,
+                                                             lag_s=lag))
+    true = -((2 * np.pi * freq) ** 2) * x[:, 0]
+    sel = (t > 2) & (t < 6)
+    c = np.exp(-2j * np.pi * freq * t[sel])
+    ratio = (qdd[sel, 0] @ c) / (true[sel] @ c)
+    return abs(ratio), -np.angle(ratio) / (2 * np.pi * freq) * 1000
+
+
+def main() -> None:
+    t0 = time.perf_counter()
+    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
+    results = {name: trial_table(DATA / name) for name in TRIALS}
+    print("\nmedian RMS over the trials per step (mm):")
+    for k, (name, _) in enumerate(STEPS):
+        print(f"  {name:40s} {np.median([results[t][k]['rms_mm'] for t in TRIALS]):7.1f}")
+    print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
+    print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")
+    for rate in (50.0, 100.0, 240.0):
+        for f in (1.0, 2.0, 4.0):
+            live = estimator_response(rate, f, 0.4, 0.1, 6.0)
+            lab = estimator_response(rate, f, 0.8, 0.4, 6.0)
+            print(f"{rate:8.0f} {f:8.1f} {live[0]:9.3f} {live[1]:+7.1f} {lab[0]:9.3f} {lab[1]:+7.1f}")
+    print(f"\n({time.perf_counter() - t0:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,158 @@
+"""Force plates: unloaded offsets, the plates' signals at the marker frames, combined centre of
+pressure, and the frames where the plates saw the whole body.
+
+Frames: the internal one (z up, metres). The centre of pressure (CoP) is where the combined
+ground reaction's moment has no horizontal component, on the plates' top surface; on a flat
+floor it is the ZMP the motion implies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+from livezmp.model.c3d import PlateRecord
+
+QUIET_WINDOW_S = 0.1  # s: an unloaded stretch this long gives a plate's offset
+QUIET_STD_N = 3.0  # N: vertical force this steady (std) is "quiet"
+UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not an offset
+CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
+G = 9.81
+
+
+@dataclass
+class PlateFrames:
+    """The plates at the marker frames (F rows), internal frame. ``force`` (F, 3) N, summed over
+    plates; ``cop`` (F, 3) m, NaN where the vertical force is below ``min_fz``; ``outlines``
+    [(4, 3)] m; ``offsets`` per plate (force N, moment N·m) removed, or None when the plate never
+    rested unloaded."""
+
+    force: np.ndarray
+    moment: np.ndarray  # (F, 3) N·m about the world origin
+    cop: np.ndarray
+    outlines: list[np.ndarray]
+    offsets: list[tuple[np.ndarray, np.ndarray] | None]
+    surface_z: float
+
+
+def unloaded_offset(plate: PlateRecord, analog_rate: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """The plate's reading at rest: mean force (3,) N and moment (3,) N·m over its quietest unloaded
+    stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| < ``UNLOADED_MAX_N``,
+    the smallest |mean| among those); None when there is none (loaded all along)."""
+    n = max(2, round(QUIET_WINDOW_S * analog_rate))
+    fz = plate.force[:, 2]
+    if len(fz) < n:
+        return None
+    starts = np.arange(0, len(fz) - n + 1, max(1, n // 4))
+    windows = fz[starts[:, None] + np.arange(n)]
+    mean, std = windows.mean(axis=1), windows.std(axis=1)
+    ok = (std < QUIET_STD_N) & (np.abs(mean) < UNLOADED_MAX_N)
+    if not ok.any():
+        return None
+    k = starts[np.flatnonzero(ok)[np.argmin(np.abs(mean[ok]))]]
+    return plate.force[k:k + n].mean(axis=0), plate.moment[k:k + n].mean(axis=0)
+
+
+def lowpass(x: np.ndarray, rate: float, cutoff_hz: float | None) -> np.ndarray:
+    """Zero-phase 4th-order Butterworth low-pass along axis 0 (no time shift); ``cutoff_hz`` None: as is."""
+    if cutoff_hz is None or cutoff_hz >= rate / 2 or len(x) < 16:
+        return x
+    sos = butter(2, cutoff_hz, fs=rate, output="sos")  # 2nd order, run forward and back: 4th
+    return sosfiltfilt(sos, x, axis=0)
+
+
+def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, frames: np.ndarray,
+                 world_from_input: np.ndarray, cutoff_hz: float | None, min_fz: float = 20.0,
+                 shift_s: float = 0.0) -> PlateFrames:
+    """The plates' combined wrench and CoP at marker frames ``frames`` (C3D frame indices), offsets
+    removed, low-passed (zero phase) at ``cutoff_hz`` before the CoP is formed.
+
+    Analog sample k is at time k / analog_rate, marker frame i at i / rate (the C3D convention: a
+    frame's first analog sample is simultaneous with it); ``shift_s`` samples the plates that much
+    later (time alignment)."""
+    r = world_from_input
+    force = np.zeros((len(plates[0].force) if plates else 0, 3))
+    moment = np.zeros_like(force)
+    offsets, outlines = [], []
+    for p in plates:
+        off = unloaded_offset(p, analog_rate)
+        offsets.append(off)
+        f, mom = p.force, p.moment
+        if off is not None:
+            f, mom = f - off[0], mom - off[1]
+        f, mom, c = f @ r.T, mom @ r.T, r @ p.centre
+        force += f
+        moment += mom + np.cross(c, f)  # about the world origin
+        outlines.append(p.corners @ r.T)
+    surface = float(np.mean([o[:, 2].mean() for o in outlines])) if outlines else 0.0
+    wrench = lowpass(np.hstack([force, moment]), analog_rate, cutoff_hz)
+    t = (np.asarray(frames, dtype=float) / rate + shift_s) * analog_rate
+    idx = np.clip(t, 0, len(wrench) - 1)
+    lo = np.floor(idx).astype(int)
+    hi = np.minimum(lo + 1, len(wrench) - 1)
+    w = (idx - lo)[:, None]
+    at = wrench[lo] * (1 - w) + wrench[hi] * w
+    fr, mo = at[:, :3], at[:, 3:]
+    cop = np.full_like(fr, np.nan)
+    ok = fr[:, 2] > min_fz
+    cop[ok, 0] = (surface * fr[ok, 0] - mo[ok, 1]) / fr[ok, 2]
+    cop[ok, 1] = (mo[ok, 0] + surface * fr[ok, 1]) / fr[ok, 2]
+    cop[ok, 2] = surface
+    return PlateFrames(fr, mo, cop, outlines, offsets, surface)
+
+
+def _inside(points: np.ndarray, outline: np.ndarray, margin: float) -> np.ndarray:
+    """(..., ) whether horizontal ``points`` (..., 3) lie in the convex ``outline`` (4, 3) grown by ``margin``."""
+    c = outline[:, :2].mean(axis=0)
+    ok = np.ones(points.shape[:-1], dtype=bool)
+    for a, b in zip(outline, np.roll(outline, -1, axis=0), strict=True):
+        e = b[:2] - a[:2]
+        n = np.array([e[1], -e[0]]) / np.hypot(*e)
+        if np.dot(c - a[:2], n) > 0:
+            n = -n  # outward normal
+        ok &= (points[..., :2] - a[:2]) @ n <= margin
+    return ok
+
+
+def complete_frames(soles: dict[str, np.ndarray], in_contact: dict[str, np.ndarray], outlines: list[np.ndarray],
+                    loaded: np.ndarray, margin: float = CONTACT_MARGIN_M) -> np.ndarray:
+    """(F,) frames where some foot is in contact, the plates are loaded, and every foot in contact
+    has all its sole corners (``soles`` {side: (F, k, 3)}) on some plate: there the plates measured
+    the whole ground reaction."""
+    complete = loaded.copy()
+    any_contact = np.zeros_like(loaded)
+    for side, sole in soles.items():
+        on = np.zeros(sole.shape[:2], dtype=bool)
+        for o in outlines:
+            on |= _inside(sole, o, margin)
+        complete &= ~in_contact[side] | on.all(axis=1)
+        any_contact |= in_contact[side]
+    return complete & any_contact
+
+
+def gait_cycles(strikes: dict[str, list[float]]) -> list[tuple[float, float]]:
+    """(start, end) s of every whole gait cycle: one foot strike to the same foot's next."""
+    out = []
+    for times in strikes.values():
+        t = sorted(times)
+        out += list(zip(t[:-1], t[1:], strict=True))
+    return out
+
+
+def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: list[tuple[float, float]],
+               min_complete: float = 0.95) -> tuple[float | None, int]:
+    """Body mass (kg) from the plates: mean vertical force over whole gait cycles ÷ g (over a cycle the
+    centre of mass returns to its height, so its mean vertical acceleration is zero). Only cycles
+    whose frames are at least ``min_complete`` complete count (their complete frames are averaged).
+    Returns (mass or None, cycles used)."""
+    total, n, used = 0.0, 0, 0
+    for a, b in cycles:
+        rows = (times >= a) & (times < b)
+        if rows.sum() < 3 or complete[rows].mean() < min_complete:
+            continue
+        total += float(fz[rows & complete].sum())
+        n += int((rows & complete).sum())
+        used += 1
+    return (total / n / G if n else None), used

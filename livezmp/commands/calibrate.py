@@ -1,0 +1,26 @@
+"""`livezmp calibrate`: a subject's head-arms-trunk parameters from force-plate trials, written to a
+subject file that `livezmp analyze --subject` uses (see :mod:`livezmp.offline.calibrate`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from livezmp.model.c3d import read_c3d
+from livezmp.offline.calibrate import calibrate, write_subject
+from livezmp.offline.gaitlab import LabOptions
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    trials = [read_c3d(p) for p in args.trials]
+    subject, report = calibrate(trials, LabOptions(mass=args.mass))
+    write_subject(subject, args.output, report)
+    print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "
+          f"{1000 * subject.hat_offset[0]:+.0f} mm forward, {1000 * subject.hat_offset[1]:+.0f} mm left, "
+          f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip")
+    print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
+          f"{report['rms_fitted_mm']:.1f} mm; on held-out halves: table {report['rms_held_out_table_mm']:.1f} mm, "
+          f"fitted {report['rms_held_out_fitted_mm']:.1f} mm")
+    if report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
+        print("  the fit does not beat the table on held-out frames: more plate trials are needed; "
+              "the table's values are the safer choice")
+    return 0

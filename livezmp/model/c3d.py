@@ -1,0 +1,165 @@
+"""Read a C3D gait trial (ezc3d): marker trajectories, force platforms, subject parameters, events.
+
+Everything comes out in SI units in the file's own world frame (metres, newtons, N·m, seconds).
+Marker labels lose their subject prefix (``Subject:LASI`` -> ``LASI``). Force platforms are
+taken from ezc3d's platform filter: per analog sample, the force the plate exerts on the
+subject (N, world axes) and its moment (N·m) about the centre of the plate's top surface (the
+mean of its four corners), plus the plate outline. Nothing here filters or zeroes; see
+:mod:`livezmp.balance.plates` for that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.errors import InputError
+
+_LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+_MOMENT = {"nmm": 1e-3, "n.mm": 1e-3, "nm": 1.0, "n.m": 1.0}
+
+
+@dataclass
+class PlateRecord:
+    """One force platform at the analog rate, world frame of the file.
+
+    ``force`` (S, 3) N on the subject; ``moment`` (S, 3) N·m about ``centre`` (3,) m, the centre of the
+    top surface; ``corners`` (4, 3) m."""
+
+    force: np.ndarray
+    moment: np.ndarray
+    centre: np.ndarray
+    corners: np.ndarray
+
+
+@dataclass
+class C3dTrial:
+    """A C3D trial. ``points`` (F, P, 3) m with NaN where a marker was not seen; ``rate`` Hz of the
+    points; ``analog_rate`` Hz of the plates; ``start_time`` s, the time of frame 0 in the
+    capture (events are given on the same clock); ``parameters`` the subject's
+    (``Bodymass`` kg, ``Height`` m, ``LKneeWidth`` ... m) when the file has them."""
+
+    source: str
+    labels: list[str]
+    points: np.ndarray
+    rate: float
+    analog_rate: float
+    start_time: float
+    plates: list[PlateRecord]
+    mass_kg: float | None = None
+    mass_field: str = ""
+    height_m: float | None = None
+    widths_m: dict[str, float] = field(default_factory=dict)
+    events: list[tuple[str, str, float]] = field(default_factory=list)  # (context, label, time s)
+
+    def marker(self, label: str) -> np.ndarray | None:
+        """(F, 3) trajectory of ``label`` (m), or None when the file has no such marker."""
+        try:
+            return self.points[:, self.labels.index(label)]
+        except ValueError:
+            return None
+
+
+def strip_prefix(label: str) -> str:
+    """``Subject:LASI`` -> ``LASI``; surrounding blanks removed."""
+    return label.split(":")[-1].strip()
+
+
+def _param(groups: dict, group: str, name: str):
+    try:
+        return groups[group][name]["value"]
+    except KeyError:
+        return None
+
+
+def _first_number(value) -> float | None:
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=float).ravel()
+    return float(a[0]) if a.size and np.isfinite(a[0]) and a[0] > 0 else None
+
+
+def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, float]]:
+    """Mass (kg) and where it came from, height (m), knee/ankle widths (m) from PROCESSING (Vicon) or
+    SUBJECT/SUBJECTS."""
+    mass, where = None, ""
+    for g, n in (("PROCESSING", "Bodymass"), ("SUBJECT", "WEIGHT"), ("SUBJECTS", "WEIGHT")):
+        m = _first_number(_param(groups, g, n))
+        if m is not None:
+            mass, where = m, f"{g}:{n}"
+            break
+    height = None
+    for g, n in (("PROCESSING", "Height"), ("SUBJECT", "HEIGHT"), ("SUBJECTS", "HEIGHT")):
+        h = _first_number(_param(groups, g, n))
+        if h is not None:
+            height = h / 1000.0 if h > 3.0 else h  # Vicon writes mm, others m
+            break
+    widths = {}
+    for n in ("LKneeWidth", "RKneeWidth", "LAnkleWidth", "RAnkleWidth"):
+        w = _first_number(_param(groups, "PROCESSING", n))
+        if w is not None:
+            widths[n] = w / 1000.0
+    return mass, where, height, widths
+
+
+def _events(groups: dict, source: str) -> list[tuple[str, str, float]]:
+    times = _param(groups, "EVENT", "TIMES")
+    labels = _param(groups, "EVENT", "LABELS")
+    contexts = _param(groups, "EVENT", "CONTEXTS")
+    if times is None or labels is None:
+        return []
+    t = np.asarray(times, dtype=float)
+    t = t[0] * 60.0 + t[1] if t.ndim == 2 and t.shape[0] == 2 else t.ravel()  # (minutes, seconds)
+    contexts = contexts or [""] * len(labels)
+    return [(str(c).strip(), str(lab).strip(), float(s)) for c, lab, s in zip(contexts, labels, t, strict=True)]
+
+
+def _plates(c3d: dict, source: str) -> list[PlateRecord]:
+    out = []
+    for k, p in enumerate(c3d["data"].get("platform", [])):
+        length = _LENGTH.get(str(p["unit_position"]).strip().lower())
+        moment = _MOMENT.get(str(p["unit_moment"]).strip().lower().replace(" ", ""))
+        if length is None or moment is None:
+            raise InputError(f"{source}: force platform {k + 1}: unknown units "
+                             f"{p['unit_position']!r} / {p['unit_moment']!r}")
+        corners = np.asarray(p["corners"], dtype=float).T * length
+        force = np.asarray(p["force"], dtype=float).T
+        mom = np.asarray(p["moment"], dtype=float).T * moment
+        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners))
+    return out
+
+
+def read_c3d(path: str | Path) -> C3dTrial:
+    """Read ``path`` (see module docstring). Raises InputError for files ezc3d cannot read."""
+    import ezc3d  # imported here: only C3D input needs it
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    try:
+        c3d = ezc3d.c3d(str(p), extract_forceplat_data=True)
+    except Exception as e:  # ezc3d raises plain RuntimeError/ValueError with a C++ message  # noqa: BLE001
+        raise InputError(f"{p}: not a readable C3D file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") \
+            from None
+    groups = c3d["parameters"]
+    unit = str((_param(groups, "POINT", "UNITS") or ["mm"])[0]).strip().lower()
+    if unit not in _LENGTH:
+        raise InputError(f"{p}: POINT:UNITS {unit!r} is not a length unit (mm, cm, m)")
+    rate = _first_number(_param(groups, "POINT", "RATE"))
+    if rate is None:
+        raise InputError(f"{p}: POINT:RATE is missing or zero")
+    pts = np.asarray(c3d["data"]["points"][:3], dtype=float)  # (3, P, F)
+    labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
+    labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]
+    residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=float)[0]  # (P, F); < 0: not seen
+    pts = np.where(residual[None] < 0, np.nan, pts) * _LENGTH[unit]
+    first = _first_number(_param(groups, "TRIAL", "ACTUAL_START_FIELD"))
+    mass, where, height, widths = _subject(groups)
+    return C3dTrial(
+        source=str(p), labels=labels, points=pts.transpose(2, 1, 0), rate=rate,
+        analog_rate=_first_number(_param(groups, "ANALOG", "RATE")) or rate,
+        start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p)), mass_kg=mass, mass_field=where,
+        height_m=height, widths_m=widths, events=_events(groups, str(p)),
+    )

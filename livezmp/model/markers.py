@@ -1,0 +1,420 @@
+"""A body model from gait-lab markers: marker set -> joint centres -> segment frames -> body.
+
+Supported by their standard labels (prefixes already stripped): Vicon Plug-in Gait lower body
+and its full-body superset (upper-body markers are not used yet), Helen Hayes / modified Helen
+Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb. Needed: LASI, RASI, LPSI+RPSI or SACR, and per side
+KNE, ANK, TOE; optional THI/TIB wands (chord function), medial knee/ankle markers, HEE.
+
+- Hip joint centres: Harrington et al. 2007 (J Biomech 40:595-602), the pelvic-width-only
+  regression in the ASIS/PSIS pelvis frame (x anterior, z lateral, y superior; mm):
+  x = -0.24 PD - 9.9, y = -0.30 PW - 10.9, z = ±(0.33 PW + 7.3).
+- Knee / ankle centres: the mid-point of the lateral and medial markers when both exist; else
+  Plug-in Gait's chord rule: the centre lies half the knee (ankle) width plus a marker radius
+  from the lateral marker, in the plane of the proximal joint centre, the wand and the marker,
+  with the proximal centre–joint centre–marker angle 90°; without a wand, medially along the
+  pelvis' lateral axis.
+- Segments: pelvis (lower trunk), thighs, shanks, feet, each a rigid body with six
+  degrees of freedom (three prismatic, then yaw, pitch, roll) placed on its own markers every frame
+  (no joint constraints: soft-tissue motion cannot break a chain). Masses, centres of mass and
+  radii of gyration from de Leva (1996); the foot's centre of mass at the middle of ankle centre
+  to toe marker (Winter 2009, table 4.1).
+- Head, arms and trunk (HAT) of a lower-body set are placed from the pelvis: de Leva's head,
+  trunk and arm segments stacked upright above the mid-hip (arms hanging from the cervicale),
+  their combined centre of mass straight above the mid-hip. The HAT moves with the mid-hip and
+  turns with the pelvis' heading but stays upright: the trunk does not follow the pelvis'
+  obliquity and tilt in walking (the spine takes them up). ``hat_follows_pelvis`` rigidly
+  attaches it to the pelvis instead (at the take's mean tilt), for comparison.
+
+Short marker gaps (up to ``max_gap_s``) are filled by cubic interpolation; longer gaps are
+reported and the take is cut to the longest stretch where every needed marker is present.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+from scipy.interpolate import CubicSpline
+
+from livezmp.errors import InputError
+from livezmp.model.anthropometry import DE_LEVA_MALE
+from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE, WORLD_FROM_INPUT
+from livezmp.model.c3d import C3dTrial
+
+MARKER_RADIUS = 0.007  # m: Plug-in Gait's default 14 mm markers
+KNEE_WIDTH_OF_STATURE = 0.064  # typical knee / ankle widths (m / m) when the file gives none
+ANKLE_WIDTH_OF_STATURE = 0.040
+FOOT_LENGTH_OF_STATURE = 258.1 / 1741  # de Leva foot length over stature
+SOLE_WIDTH_OF_STATURE = 0.055
+_MEDIAL = {"KNE": ("KNM", "MKNE", "KNEM", "MFC", "MEPI"), "ANK": ("MED", "MMA", "ANKM", "MANK", "MMAL")}
+_SEGMENTS = ("pelvis", "hat", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
+_CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
+_SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
+
+
+@dataclass(frozen=True)
+class MarkerBodyOptions:
+    """``total_mass`` kg; ``hat_offset`` m, the HAT centre of mass in the pelvis' upright frame
+    (forward, left, up from the mid-hip) replacing the table's (0, 0, h); ``hat_fraction`` of
+    total mass replacing de Leva's; ``floor_z`` m (internal frame) where the soles are, None =
+    from the lowest foot markers; ``max_gap_s`` s, the longest gap filled."""
+
+    total_mass: float = DEFAULT_MASS
+    hat_offset: tuple[float, float, float] | None = None
+    hat_fraction: float | None = None
+    floor_z: float | None = None
+    max_gap_s: float = 0.1
+    hat_follows_pelvis: bool = False
+
+
+@dataclass
+class MarkerTake:
+    """A body and its frames (F, 6 per segment): x, y, z (m), yaw, pitch, roll (rad), internal frame."""
+
+    body: BodyModel
+    frames: np.ndarray
+    first_frame: int  # index in the C3D of frames[0]
+    notes: dict = field(default_factory=dict)
+    centres: dict = field(default_factory=dict)  # joint -> side -> (F, 3) m, internal frame
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Fill runs of NaN rows in ``x`` (F, 3) of up to ``max_gap`` frames by a cubic spline through
+    the seen samples; return the filled copy and the (first, last) frames of the gaps left open."""
+    bad = ~np.isfinite(x).all(axis=1)
+    if not bad.any():
+        return x, []
+    out = x.copy()
+    good = np.flatnonzero(~bad)
+    edges = np.flatnonzero(np.diff(np.r_[0, bad.astype(np.int8), 0]))
+    spline = CubicSpline(good, x[good]) if len(good) >= 4 else None
+    left_open = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        inner = a > 0 and b < len(x)
+        if inner and b - a <= max_gap and spline is not None:
+            out[a:b] = spline(np.arange(a, b))
+        else:
+            left_open.append((int(a), int(b - 1)))
+    return out, left_open
+
+
+def _need(trial: C3dTrial) -> dict[str, str | None]:
+    """Marker roles -> labels found; raises InputError naming what a usable set lacks."""
+    have = set(trial.labels)
+    roles: dict[str, str | None] = {"LASI": "LASI", "RASI": "RASI"}
+    missing = [m for m in ("LASI", "RASI") if m not in have]
+    if {"LPSI", "RPSI"} <= have:
+        roles.update(LPSI="LPSI", RPSI="RPSI")
+    elif "SACR" in have:
+        roles["SACR"] = "SACR"
+    else:
+        missing.append("LPSI+RPSI or SACR")
+    for s in "LR":
+        for m in ("KNE", "ANK", "TOE"):
+            if s + m in have:
+                roles[s + m] = s + m
+            else:
+                missing.append(s + m)
+        for m in ("THI", "TIB", "HEE"):
+            roles[s + m] = s + m if s + m in have else None
+        for m, alts in _MEDIAL.items():
+            roles[s + m + "_med"] = next((s + a for a in alts if s + a in have), None)
+    if missing:
+        seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
+        raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
+                         f"(markers in the file: {seen})")
+    return roles
+
+
+def _up_rotation(m: dict[str, np.ndarray], source: str) -> tuple[str, np.ndarray]:
+    """The input's up axis (pelvis above the feet) and the rotation into the internal z-up frame."""
+    v = np.nanmean((m["LASI"] + m["RASI"]) / 2 - (m["LANK"] + m["RANK"]) / 2, axis=0)
+    ax = int(np.argmax(np.abs(v)))
+    if ax == 2 and v[2] > 0:
+        return "z", WORLD_FROM_INPUT["z"]
+    if ax == 1 and v[1] > 0:
+        return "y", WORLD_FROM_INPUT["y"]
+    raise InputError(f"{source}: cannot tell the up axis (pelvis-to-ankle vector {np.round(v, 3)} m)")
+
+
+def input_rotation(trial: C3dTrial) -> tuple[str, np.ndarray]:
+    """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
+    return _up_rotation({k: trial.marker(v) for k, v in _need(trial).items() if v}, trial.source)
+
+
+def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: float,
+           medial: np.ndarray) -> np.ndarray:
+    """Plug-in Gait's chord rule: the point J at ``delta`` from ``marker``, in the plane of the three
+    points, with angle P-J-marker 90°; of the two such points, the one further along ``medial`` (F, 3)."""
+    d = proximal - marker
+    e1 = _unit(d)
+    w = wand - marker
+    e2 = _unit(w - np.sum(w * e1, axis=-1, keepdims=True) * e1)
+    c = np.clip(delta / np.linalg.norm(d, axis=-1, keepdims=True), -1.0, 1.0)
+    s = np.sqrt(1.0 - c * c) * np.sign(np.sum(e2 * medial, axis=-1, keepdims=True))
+    return marker + delta * (c * e1 + s * e2)
+
+
+def _frame(z_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) rotations with z along ``z_dir`` and y as close to ``y_ref`` as allowed; columns x, y, z."""
+    z = _unit(z_dir)
+    x = _unit(np.cross(y_ref, z))
+    return np.stack([x, np.cross(z, x), z], axis=-1)
+
+
+def _foot_frame(x_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
+    x = _unit(x_dir)
+    z = _unit(np.cross(x, y_ref))
+    return np.stack([x, np.cross(z, x), z], axis=-1)
+
+
+def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Median position (3,) of points ``p`` (F, 3) in the moving frames (rot, origin)."""
+    return np.median(np.einsum("fji,fj->fi", rot, p - origin), axis=0)
+
+
+def _euler_zyx(rot: np.ndarray) -> np.ndarray:
+    """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames."""
+    yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
+    pitch = np.arcsin(np.clip(-rot[:, 2, 0], -1.0, 1.0))
+    roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
+    return np.unwrap(np.column_stack([yaw, pitch, roll]), axis=0)
+
+
+def hat_table(stature: float) -> tuple[float, float, np.ndarray]:
+    """Head-arms-trunk above the lower trunk, from de Leva (1996): mass fraction, height (m) of its
+    centre of mass above the mid-hip, and its inertia (3, 3) per kg of HAT about that point
+    (x forward, y left, z up). Segments stacked upright: lower, middle, upper trunk, head; each arm
+    hangs from the cervicale (the top of the upper trunk) along the body's side."""
+    t = DE_LEVA_MALE
+    h = stature / 1741.0  # de Leva lengths are mm for a 1741 mm man
+    parts = []  # (mass fraction, CoM height m, segment, length m)
+    base = 145.7 * h  # omphalion above the mid-hip: the lower trunk's length
+    for name, length_mm in (("middle_trunk", 215.5), ("upper_trunk", 170.7)):
+        top = base + length_mm * h  # proximal end is the top
+        parts.append((t[name].mass_fraction, top - t[name].com_fraction * length_mm * h, name, length_mm * h))
+        base = top
+    head_len = 242.9 * h
+    parts.append((t["head"].mass_fraction, base + head_len * (1 - t["head"].com_fraction), "head", head_len))
+    joint = base  # shoulders at the cervicale
+    for name in ("upper_arm", "forearm", "hand"):
+        length = t[name].length_fraction * stature
+        parts += [(t[name].mass_fraction, joint - t[name].com_fraction * length, name, length)] * 2
+        joint -= length
+    mass = sum(p[0] for p in parts)
+    height = sum(p[0] * p[1] for p in parts) / mass
+    inertia = np.zeros((3, 3))
+    for frac, z, name, length in parts:
+        rs, rt, rl = (g * length for g in t[name].gyration)
+        inertia += frac / mass * (np.diag([rs * rs, rt * rt, rl * rl]) + (z - height) ** 2 * np.diag([1.0, 1.0, 0.0]))
+    return mass, height, inertia
+
+
+def _trim(markers: dict[str, np.ndarray], max_gap: int, rate: float) -> tuple[slice, list[dict]]:
+    """Fill short gaps in place; the longest stretch of frames where every marker is present, and
+    the gaps left open (label, first and last time s)."""
+    open_gaps = []
+    ok = np.ones(len(next(iter(markers.values()))), dtype=bool)
+    for label, x in markers.items():
+        markers[label], gaps = fill_gaps(x, max_gap)
+        for a, b in gaps:
+            ok[a:b + 1] = False
+            open_gaps.append({"marker": label, "from_s": round(a / rate, 4), "to_s": round(b / rate, 4)})
+    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+    if len(edges) == 0:
+        raise InputError("no frame has every needed marker")
+    runs = list(zip(edges[::2], edges[1::2], strict=True))
+    a, b = max(runs, key=lambda r: r[1] - r[0])
+    return slice(int(a), int(b)), open_gaps
+
+
+def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> MarkerTake:
+    """Build the body and its frames from ``trial``'s markers (see the module docstring)."""
+    opts = opts or MarkerBodyOptions()
+    if not opts.total_mass > 0:
+        raise InputError(f"total mass must be positive, got {opts.total_mass}")
+    roles = _need(trial)
+    raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
+    try:
+        keep, open_gaps = _trim(raw, max(1, round(opts.max_gap_s * trial.rate)), trial.rate)
+    except InputError as e:
+        raise InputError(f"{trial.source}: {e}") from None
+    if keep.stop - keep.start < 4:
+        raise InputError(f"{trial.source}: only {keep.stop - keep.start} frames have every needed marker")
+    up, r_in = _up_rotation(raw, trial.source)
+    m = {k: v[keep] @ r_in.T for k, v in raw.items()}
+    seg, centres, notes = _segments(m, trial)
+    body, frames = _build(seg, m, opts, up, r_in, notes)
+    notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
+    return MarkerTake(body, frames, keep.start, notes, centres)
+
+
+def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, dict]:
+    """Segment frames: name -> (origin (F, 3), rotation (F, 3, 3)); joint centres; notes."""
+    mid_asis = (m["LASI"] + m["RASI"]) / 2
+    back = (m["LPSI"] + m["RPSI"]) / 2 if "LPSI" in m else m["SACR"]
+    y = _unit(m["LASI"] - m["RASI"])
+    fwd = mid_asis - back
+    x = _unit(fwd - np.sum(fwd * y, axis=1, keepdims=True) * y)
+    z = np.cross(x, y)
+    pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
+    pd = float(np.median(np.linalg.norm(fwd, axis=1)))
+    hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
+           for side, (_, sign, _) in _SIDES.items()}
+    stature = trial.height_m
+    centres = {"hip": hjc, "knee": {}, "ankle": {}}
+    rules = {}
+    for side, (s, sign, _) in _SIDES.items():
+        for joint, mk, wand, prox, frac in (("knee", "KNE", "THI", "hip", KNEE_WIDTH_OF_STATURE),
+                                            ("ankle", "ANK", "TIB", "knee", ANKLE_WIDTH_OF_STATURE)):
+            lateral = m[s + mk]
+            medial = m.get(s + mk + "_med")
+            if medial is not None:
+                centres[joint][side] = (lateral + medial) / 2
+                rules[f"{side}_{joint}"] = "mid-point of lateral and medial markers"
+                continue
+            width = trial.widths_m.get(f"{s}{joint.capitalize()}Width")
+            if width is None:
+                if stature is None:  # leg length from the hip to the lateral markers, before any centre
+                    leg = np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1))
+                    stature = float(leg / LEG_FRACTION_OF_STATURE)
+                width = frac * stature
+            delta = width / 2 + MARKER_RADIUS
+            if s + wand in m:
+                centres[joint][side] = _chord(centres[prox][side], m[s + wand], lateral, delta, -sign * y)
+                rules[f"{side}_{joint}"] = f"chord rule ({s}{wand} wand, width {1000 * width:.0f} mm)"
+            else:
+                centres[joint][side] = lateral - sign * delta * y
+                rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
+    pelvis_origin = (hjc["left"] + hjc["right"]) / 2
+    heading = np.arctan2(x[:, 1], x[:, 0])
+    c, sn, zero, one = np.cos(heading), np.sin(heading), np.zeros_like(heading), np.ones_like(heading)
+    upright = np.stack([np.stack([c, -sn, zero], -1), np.stack([sn, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
+    seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1)), "hat": (pelvis_origin, upright)}
+    for side, (s, sign, t) in _SIDES.items():
+        hip, knee, ankle = centres["hip"][side], centres["knee"][side], centres["ankle"][side]
+        thigh = _frame(hip - knee, sign * (m[s + "KNE"] - knee))
+        shank = _frame(knee - ankle, sign * (m[s + "ANK"] - ankle))
+        heel = m.get(s + "HEE", ankle)
+        foot = _foot_frame(m[s + "TOE"] - heel, shank[:, :, 1])
+        seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
+    notes = {"marker_set": "Plug-in Gait / Helen Hayes lower body (standard labels)",
+             "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
+             "joint_centres": rules, "stature_m": None if stature is None else round(stature, 4)}
+    return seg, centres, notes
+
+
+def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarray,
+           notes: dict) -> tuple[BodyModel, np.ndarray]:
+    t = DE_LEVA_MALE
+    lengths = {name: float(np.median(np.linalg.norm(seg[name][0] - seg[nxt][0], axis=1)))
+               for name, nxt in (("thigh_l", "shank_l"), ("shank_l", "foot_l"), ("thigh_r", "shank_r"),
+                                 ("shank_r", "foot_r"))}
+    stature = notes["stature_m"] or (lengths["thigh_l"] + lengths["shank_l"] + lengths["thigh_r"]
+                                     + lengths["shank_r"]) / 2 / LEG_FRACTION_OF_STATURE
+    notes["stature_m"] = round(stature, 4)
+    hat_mass, hat_height, hat_inertia = hat_table(stature)
+    hat_fraction = opts.hat_fraction if opts.hat_fraction is not None else hat_mass
+    lower = t["lower_trunk"]
+    pelvis_len = 145.7 / 1741 * stature
+    # the pelvis' mean tilt about its lateral axis, for a HAT riding on the pelvis
+    rot_p = seg["pelvis"][1]
+    tilt = float(np.median(np.arctan2(rot_p[:, 2, 0], rot_p[:, 2, 2])))  # forward lean of the pelvis z axis
+    upright = pin.utils.rotate("y", tilt) if opts.hat_follows_pelvis else np.eye(3)
+    hat_up = np.array(opts.hat_offset) if opts.hat_offset is not None else np.array([0.0, 0.0, hat_height])
+    scale_rest = (1.0 - hat_fraction) / (1.0 - hat_mass)  # keep the total at 1 when the HAT fraction is set
+    model = pin.Model()
+    model.name = "markers"
+    frames = []
+    body_frame = {}
+    for name in _SEGMENTS:
+        origin, rot = seg[name]
+        parent = 0
+        for ch, jm in zip(_CHANNELS, (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRZ,
+                                      pin.JointModelRY, pin.JointModelRX), strict=True):
+            parent = model.addJoint(parent, jm(), pin.SE3.Identity(), f"{name}.{ch}")
+        frames.append(np.hstack([origin, _euler_zyx(rot)]))
+        body_frame[name] = model.addFrame(pin.Frame(name, parent, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        kind = name.split("_")[0]
+        if name == "hat":
+            hat_m = opts.total_mass * hat_fraction
+            inertia = pin.Inertia(hat_m, upright @ hat_up, hat_m * upright @ hat_inertia @ upright.T)
+            model.appendBodyToJoint(body_frame["pelvis_joint"] if opts.hat_follows_pelvis else parent, inertia,
+                                    pin.SE3.Identity())
+            continue
+        if name == "pelvis":
+            mass = opts.total_mass * lower.mass_fraction * scale_rest
+            r = [g * pelvis_len for g in lower.gyration]
+            com = np.array([0.0, 0.0, (1 - lower.com_fraction) * pelvis_len])
+            model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * np.diag(np.square(r))), pin.SE3.Identity())
+            body_frame["pelvis_joint"] = parent
+            continue
+        p = t[kind]
+        mass = opts.total_mass * p.mass_fraction * scale_rest
+        if kind == "foot":
+            side = name[-1].upper()
+            toe = _local(rot, origin, m[side + "TOE"])
+            length = float(np.linalg.norm(toe))
+            com = toe / 2  # Winter: half-way from the ankle to the 2nd metatarsal head
+            rot_in = pin.utils.rotate("y", -np.arctan2(toe[2], toe[0]))  # long axis along ankle -> toe
+        else:
+            length = lengths[name]
+            com = np.array([0.0, 0.0, -p.com_fraction * length])
+            rot_in = np.eye(3)
+        r = np.array([g * length for g in p.gyration])
+        model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * rot_in @ np.diag(r * r) @ rot_in.T),
+                                pin.SE3.Identity())
+    feet, named = _feet(model, body_frame, seg, m, opts, stature)
+    nq = model.nq
+    correction = CorrectionJoints(
+        root_channels=list(range(6)), root_frame_id=body_frame["pelvis"],
+        legs={s: list(range(6 * i + 3, 6 * i + 6)) for s, i in (("left", 2), ("right", 5))},
+        hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
+        foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
+    notes["hat"] = (f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
+                    f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
+                    + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
+                    + ("; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
+                       f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed"))
+    names = [f"{s}.{c}" for s in _SEGMENTS for c in _CHANNELS]
+    body = BodyModel(
+        kind="markers", model=model, point_model=point_mass_copy(model), channel_names=names,
+        channel_scale=np.ones(nq), angle_mask=np.array([c in ("yaw", "pitch", "roll") for c in _CHANNELS] * 8),
+        feet=feet, world_from_input=r_in, up_axis=up, units="m", total_mass=opts.total_mass,
+        correction=correction, named_points=named)
+    return body, np.hstack(frames)
+
+
+def _feet(model: pin.Model, body_frame: dict, seg: dict, m: dict, opts: MarkerBodyOptions,
+          stature: float) -> tuple[dict[str, Foot], dict[str, int]]:
+    """Heel-to-toe soles: ankle frame at the ankle centre, toe frame at the toe marker; heel behind the
+    heel marker's surface, toe tip a foot length from the heel; heights above the floor from the
+    take's lowest ankle and toe positions."""
+    foot_len = FOOT_LENGTH_OF_STATURE * stature
+    lows = []
+    for s, _, _ in _SIDES.values():
+        lows += [np.percentile(m[s + "HEE"][:, 2] if s + "HEE" in m else m[s + "TOE"][:, 2], 2),
+                 np.percentile(m[s + "TOE"][:, 2], 2)]
+    floor = opts.floor_z if opts.floor_z is not None else float(min(lows)) - MARKER_RADIUS - 0.005
+    feet, named = {}, {}
+    for side, (s, _, t) in _SIDES.items():
+        origin, rot = seg[f"foot_{t}"]
+        fid = body_frame[f"foot_{t}"]
+        toe_local = _local(rot, origin, m[s + "TOE"])
+        heel_back = (-_local(rot, origin, m[s + "HEE"])[0] + MARKER_RADIUS) if s + "HEE" in m else 0.25 * foot_len
+        toe_frame = model.addFrame(pin.Frame(f"{side}_toe", model.frames[fid].parentJoint,
+                                             pin.SE3(np.eye(3), toe_local), pin.FrameType.OP_FRAME))
+        feet[side] = Foot(side, fid, toe_frame_id=toe_frame, heel_back=max(heel_back, 0.02),
+                          toe_front=max(foot_len - heel_back - toe_local[0], 0.01),
+                          width=SOLE_WIDTH_OF_STATURE * stature,
+                          ankle_height=max(float(np.percentile(origin[:, 2], 2)) - floor, 0.0),
+                          toe_height=max(float(np.percentile(m[s + "TOE"][:, 2], 2)) - floor, 0.0))
+        named[f"{side}_ankle"] = fid
+        named[f"{side}_toe"] = toe_frame
+    return feet, named

@@ -1,0 +1,182 @@
+"""A subject's head-arms-trunk (HAT) parameters identified from force-plate trials.
+
+A lower-body marker set does not see the trunk, so the table places the HAT (about half the body
+mass) straight above the mid-hip. Its mass fraction and centre of mass (forward, left, up from the
+mid-hip in the pelvis' heading frame) are found here by least squares on the plates: ZMP − CoP and
+the CoM's horizontal acceleration against (GRF − m g) / m (weighted by h / g, in metres of ZMP),
+over the complete frames. The kinematics do not depend on these parameters, so the take is analysed
+once: the rest of the body's wrench is computed once, and the HAT adds a point mass moving with
+the HAT frame (x, y, z, heading channels), exactly as in the body model.
+
+Cross-validation: the complete frames of every trial are split into their first and second halves;
+parameters fitted on one half are scored on the other.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from scipy.optimize import least_squares
+
+from livezmp.balance.plates import G
+from livezmp.errors import InputError
+from livezmp.model.c3d import C3dTrial
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
+from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
+
+HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
+ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP shift it causes (h / g)
+PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05])  # fraction, m, m, m: what subjects plausibly differ by
+PRIOR_MM = 10.0
+BOUNDS = ([0.30, -0.15, -0.10, 0.10], [0.70, 0.15, 0.10, 0.60])  # fraction, forward, left, up (m)
+
+
+@dataclass(frozen=True)
+class Subject:
+    """HAT mass fraction of the body and its centre of mass (forward, left, up) m from the mid-hip."""
+
+    hat_fraction: float
+    hat_offset: tuple[float, float, float]
+
+    def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
+        return replace(base or MarkerBodyOptions(), hat_fraction=self.hat_fraction, hat_offset=self.hat_offset)
+
+
+def load_subject(path: str | Path) -> Subject:
+    """Read a subject file (TOML ``[subject]`` with ``hat_fraction`` and ``hat_offset_m = [fwd, left, up]``)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise InputError(f"{p}: cannot read subject file: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{p}: bad TOML: {e}") from None
+    s = data.get("subject")
+    if not isinstance(s, dict):
+        raise InputError(f"{p}: missing [subject] table")
+    f, off = s.get("hat_fraction"), s.get("hat_offset_m")
+    if not isinstance(f, int | float) or not 0.0 < f < 1.0:
+        raise InputError(f"{p}: subject.hat_fraction must be a number between 0 and 1, got {f!r}")
+    if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
+            and all(abs(v) < 1.5 for v in off)):
+        raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
+    return Subject(float(f), tuple(float(v) for v in off))
+
+
+def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
+    lines = ["# livezmp subject file (livezmp calibrate)", "[subject]",
+             f"hat_fraction = {subject.hat_fraction:.5f}",
+             "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
+             "", "[calibration]"]
+    for k, v in report.items():
+        lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
+    Path(path).write_text("\n".join(lines).replace("None", '"n/a"') + "\n", encoding="utf-8")
+
+
+@dataclass
+class _Terms:
+    """Per complete frame: the rest of the body's wrench for the whole mass (F (n, 3) N, moment about
+    the origin (n, 3) N·m), the HAT frame's origin o, acceleration a_o, heading A and its second
+    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3)."""
+
+    f_rest: np.ndarray
+    m_rest: np.ndarray
+    o: np.ndarray
+    a_o: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    cop: np.ndarray
+    plate_acc: np.ndarray
+    mass: float
+    floor: float
+
+
+def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> _Terms:
+    mass = lab.summary["mass"]["used_kg"]
+    rest = body_from_markers(trial, replace(MarkerBodyOptions(), total_mass=mass, hat_fraction=0.0)).body.model
+    data = rest.createData()
+    r = lab.result
+    idx = np.flatnonzero(rows)
+    f_rest, m_rest = np.empty((len(idx), 3)), np.empty((len(idx), 3))
+    for k, i in enumerate(idx):
+        pin.computeCentroidalMomentumTimeVariation(rest, data, r.q[i], r.v[i], r.a[i])
+        f = data.dhg.linear - mass * rest.gravity.linear
+        f_rest[k], m_rest[k] = f, data.dhg.angular + np.cross(data.com[0], f)
+    q, v, a = r.q[idx, HAT], r.v[idx, HAT], r.a[idx, HAT]
+    c, s = np.cos(q[:, 3]), np.sin(q[:, 3])
+    zero, one = np.zeros_like(c), np.ones_like(c)
+    A = np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
+    d1 = np.stack([np.stack([-s, -c, zero], -1), np.stack([c, -s, zero], -1), np.stack([zero] * 3, -1)], 1)
+    d2 = np.stack([np.stack([-c, s, zero], -1), np.stack([-s, -c, zero], -1), np.stack([zero] * 3, -1)], 1)
+    B = a[:, 3, None, None] * d1 + (v[:, 3] ** 2)[:, None, None] * d2
+    plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
+    return _Terms(f_rest, m_rest, q[:, :3], a[:, :3], A, B, lab.plates.cop[idx, :2], plate_acc, mass,
+                  lab.plates.surface_z)
+
+
+def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ZMP (n, 2) m and CoM acceleration (n, 3) m/s² for parameters (fraction, forward, left, up)."""
+    f_h, r = theta[0], theta[1:]
+    rest = 1.0 - f_h  # the rest's wrench was computed with no HAT, i.e. the rest carrying the whole mass
+    m_h = f_h * t.mass
+    p = t.o + t.A @ r
+    acc = t.a_o + t.B @ r - np.array([0.0, 0.0, -G])
+    force = rest * t.f_rest + m_h * acc
+    moment = rest * t.m_rest + m_h * np.cross(p, acc)
+    z0 = t.floor
+    zmp = np.column_stack([(z0 * force[:, 0] - moment[:, 1]) / force[:, 2],
+                           (moment[:, 0] + z0 * force[:, 1]) / force[:, 2]])
+    return zmp, force / t.mass + np.array([0.0, 0.0, -G])
+
+
+def _residuals(theta: np.ndarray, terms: list[_Terms], prior: np.ndarray) -> np.ndarray:
+    out = []
+    for t in terms:
+        zmp, acc = _model(t, theta)
+        out += [(zmp - t.cop).ravel(), ACC_WEIGHT * (acc[:, :2] - t.plate_acc[:, :2]).ravel()]
+    n = sum(len(t.cop) for t in terms)
+    # the table as a prior: a parameter PRIOR_SD away from it costs like PRIOR_MM of ZMP error on every frame
+    out.append(np.sqrt(n) * PRIOR_MM / 1000 * (theta - prior) / PRIOR_SD)
+    return np.concatenate(out)
+
+
+def _rms_mm(theta: np.ndarray, terms: list[_Terms]) -> float:
+    d = np.vstack([_model(t, theta)[0] - t.cop for t in terms])
+    return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def _fit(terms: list[_Terms], start: np.ndarray) -> np.ndarray:
+    return least_squares(_residuals, start, bounds=BOUNDS, args=(terms, start), x_scale=PRIOR_SD).x
+
+
+def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[Subject, dict]:
+    """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
+    (RMS ZMP − CoP before, fitted, and cross-validated on held-out halves, mm)."""
+    whole, halves = [], ([], [])
+    for trial in trials:
+        if not trial.plates:
+            raise InputError(f"{trial.source}: no force plates: nothing to calibrate against")
+        lab = analyse_lab_take(trial, opts)
+        rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
+        if rows.sum() < 20:
+            raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need 20")
+        whole.append(_terms(trial, lab, rows))
+        stature = lab.summary["markers"]["stature_m"]
+        idx = np.flatnonzero(rows)
+        cut = idx[len(idx) // 2]
+        for k, part in enumerate((rows & (np.arange(len(rows)) < cut), rows & (np.arange(len(rows)) >= cut))):
+            halves[k].append(_terms(trial, lab, part))
+    fraction, height, _ = hat_table(stature)
+    start = np.array([fraction, 0.0, 0.0, height])
+    fitted = _fit(whole, start)
+    held_out = [_rms_mm(_fit(halves[k], start), halves[1 - k]) for k in (0, 1)]
+    table_held = [_rms_mm(start, halves[1 - k]) for k in (0, 1)]
+    report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
+              "rms_table_mm": round(_rms_mm(start, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
+              "rms_held_out_table_mm": round(float(np.mean(table_held)), 2),
+              "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2)}
+    return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:])), report

@@ -1,0 +1,184 @@
+"""A gait-lab take analysed against its force plates: body mass, the pipeline over the marker body,
+the plates at the marker frames, the frames they saw whole, and the comparison.
+
+Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
+they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
+else 70 kg. The ZMP does not depend on the total mass (every segment scales with it); the
+flight threshold and the plate-side CoM acceleration do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+
+from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
+from livezmp.balance.plates import G, PlateFrames, complete_frames, gait_cycles, plate_frames, plate_mass
+from livezmp.balance.support import SUPPORT_LABELS
+from livezmp.model.bvh_body import DEFAULT_MASS
+from livezmp.model.c3d import C3dTrial
+from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, input_rotation
+from livezmp.offline.batch import BatchResult, run_batch
+from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, plate_delay
+
+MASS_DISAGREE = 0.03
+LOADED_HEIGHT_M = 0.04  # m: a sole corner this low ...
+LOADED_SPEED_MPS = 1.0  # m/s: ... and this slow may carry load (completeness check)
+# A whole take needs no low latency: a symmetric spline window (look as far ahead as back). The live
+# default (0.4 s window, 0.1 s ahead) delays a 6 Hz-smoothed acceleration by up to ~20 ms at gait
+# frequencies and bends its gain; this one has no delay (docs/validation.md).
+LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4}
+FORCE_SEEN = 0.75  # complete frames: the plates carry at least this part of m (g + CoM vertical acceleration)
+
+
+@dataclass
+class LabAnalysis:
+    """``result`` the pipeline's; ``plates`` at its frames (None without plates); ``complete`` (N,)."""
+
+    take: MarkerTake
+    rate: float  # Hz of the marker frames
+    times: np.ndarray
+    config: PipelineConfig
+    result: BatchResult
+    plates: PlateFrames | None
+    complete: np.ndarray
+    summary: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LabOptions:
+    """``mass`` kg (None: decide, see module docstring); ``mode`` ZMP mode; ``plate_cutoff_hz``: the
+    plates' zero-phase low-pass (None: the estimator's cutoff, so both sides see the same band);
+    ``plate_delay_s``: the plates' delay behind the markers (s; they are sampled that much later), None =
+    measured from the CoM acceleration and applied when at least half a frame; ``markers``: body options
+    (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults)."""
+
+    mass: float | None = None
+    mode: str = "full"
+    plate_cutoff_hz: float | None = None
+    plate_delay_s: float | None = None
+    markers: MarkerBodyOptions = MarkerBodyOptions()
+    estimator: dict | None = None
+
+
+def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
+    """Foot-strike times (s, from C3D frame 0) per side: the file's events, else contact onsets."""
+    out: dict[str, list[float]] = {"left": [], "right": []}
+    for context, label, t in trial.events:
+        side = context.lower()
+        if side in out and label.lower().replace("-", " ") == "foot strike":
+            out[side].append(t - trial.start_time)
+    if any(out.values()):
+        return out
+    labels = np.asarray(SUPPORT_LABELS)[result.support]
+    for side in out:
+        on = np.isin(labels, (side, "double"))
+        out[side] = result.t[1:][on[1:] & ~on[:-1]].tolist()
+    return out
+
+
+def _run(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
+    take = body_from_markers(trial, replace(opts.markers, total_mass=mass, floor_z=floor))
+    times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
+    cfg = default_config(take.body, trial.rate, opts.mode, floor)
+    cfg = replace(cfg, estimator=replace(cfg.estimator, **{**LAB_ESTIMATOR, **(opts.estimator or {})}))
+    result = run_batch(Pipeline(take.body, cfg, nominal_dt=1.0 / trial.rate), times, take.frames, keep_states=True)
+    return take, times, cfg, result
+
+
+def may_bear_weight(sole: np.ndarray, floor: float, dt: float) -> np.ndarray:
+    """(F,) whether a foot (sole corners (F, k, 3), m) may carry load: some corner lower than
+    ``LOADED_HEIGHT_M`` above the floor and slower than ``LOADED_SPEED_MPS``. Looser than contact
+    detection, which is late at toe-off: a complete frame must not miss a loaded foot."""
+    speed = np.linalg.norm(np.gradient(sole[:, :, :2], dt, axis=0), axis=2)
+    return (((sole[:, :, 2] - floor) < LOADED_HEIGHT_M) & (speed < LOADED_SPEED_MPS)).any(axis=1)
+
+
+def com_accelerations(take: MarkerTake, result: BatchResult) -> np.ndarray:
+    """(N, 3) CoM acceleration (m/s², internal frame) from the estimated q, v, a."""
+    model = take.body.model
+    data = model.createData()
+    out = np.empty((len(result), 3))
+    for i in range(len(result)):
+        pin.centerOfMass(model, data, result.q[i], result.v[i], result.a[i])
+        out[i] = data.acom[0]
+    return out
+
+
+def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult, times: np.ndarray,
+                         cfg: PipelineConfig, floor: float, cutoff: float, shift: float, com_acc: np.ndarray,
+                         mass: float) -> tuple[PlateFrames, np.ndarray]:
+    frames = np.rint(times * trial.rate).astype(int)
+    plates = plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input,
+                          cutoff, shift_s=shift)
+    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
+    # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
+    needed = mass * (G + com_acc[:, 2])
+    complete = complete_frames(result.soles, contact, plates.outlines, plates.force[:, 2] > FORCE_SEEN * needed)
+    # half a spline window from either end of the take the estimate is one-sided (and the plates' filter too);
+    # at least the lab window's, so that estimator settings are compared on the same frames
+    edge = max(cfg.estimator.window_s, LAB_ESTIMATOR["window_s"]) / 2
+    return plates, complete & (times >= times[0] + edge) & (times <= times[-1] - edge)
+
+
+def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float) -> dict:
+    info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
+            "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles}
+    if opts.mass:
+        used, source = opts.mass, "--mass"
+    elif m_plates is not None:
+        used, source = m_plates, "plates"
+    else:
+        used, source = first, "file" if trial.mass_kg else "default"
+    info.update(used_kg=round(used, 2), source=source)
+    if trial.mass_kg and m_plates and abs(m_plates - trial.mass_kg) > MASS_DISAGREE * m_plates:
+        info["note"] = (f"the file says {trial.mass_kg:.1f} kg, the plates {m_plates:.1f} kg "
+                        f"({100 * (trial.mass_kg / m_plates - 1):+.1f} %); using the {source}")
+    return info
+
+
+def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnalysis:
+    """Run the pipeline over ``trial``'s marker body and, with plates, compare (see module docstring)."""
+    opts = opts or LabOptions()
+    first = opts.mass or trial.mass_kg or DEFAULT_MASS
+    floor = None
+    if trial.plates:
+        r_in = input_rotation(trial)[1]
+        floor = float(np.mean([(c @ r_in.T)[:, 2].mean() for c in (p.corners for p in trial.plates)]))
+    take, times, cfg, result = _run(trial, opts, first, floor)
+    if not trial.plates:
+        mass_info = _decide_mass(trial, opts, None, 0, first)
+        return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
+                           {"markers": take.notes, "mass": mass_info, "plates": None})
+    cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
+    com_acc = com_accelerations(take, result)
+    shift = opts.plate_delay_s or 0.0
+    plates, complete = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
+    m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
+    mass_info = _decide_mass(trial, opts, m_plates, cycles, first)
+    used = mass_info["used_kg"]
+    if abs(used - first) > 0.005:
+        take, times, cfg, result = _run(trial, opts, used, floor)
+        com_acc = com_accelerations(take, result)
+    # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
+    measured = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete, 1.0 / trial.rate)
+    applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
+    if applied:
+        shift = measured
+        plates, complete = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, used)
+    summary = {
+        "markers": take.notes,
+        "mass": mass_info,
+        "plates": {"count": len(trial.plates), "surface_z_m": round(plates.surface_z, 4),
+                   "offsets_removed_n": [None if o is None else [round(float(v), 2) for v in o[0]]
+                                         for o in plates.offsets],
+                   "lowpass_hz": cutoff, "complete_frames": int(complete.sum())},
+        "time_alignment": {"plate_delay_measured_ms": None if measured is None else round(1000 * measured, 1),
+                           "plate_delay_applied_ms": round(1000 * shift, 1),
+                           "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
+        "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate),
+        "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
+    }
+    return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)

@@ -1,0 +1,94 @@
+"""Validation of a take's ZMP and centre-of-mass motion against force plates.
+
+On a flat floor the ZMP of the whole body is the centre of pressure (CoP) the plates measure,
+and the centre of mass accelerates by (GRF - m g) / m: both are independent truths for what
+livezmp computes from the motion alone. Positions in metres, internal frame (z up).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from livezmp.balance.plates import G
+
+MAX_LAG_S = 0.1  # s: the lag search covers ± this
+
+
+def walking_axes(com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit horizontal (3,) fore-aft (the CoM's net travel; +x when it barely moves) and lateral
+    (left of it) directions."""
+    d = com[-1, :2] - com[0, :2]
+    fwd = d / np.linalg.norm(d) if np.linalg.norm(d) > 0.1 else np.array([1.0, 0.0])
+    return np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
+
+
+def _errors(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shift: int) -> np.ndarray:
+    """a(t + shift frames) − b(t) over the rows where both are valid."""
+    idx = np.flatnonzero(rows)
+    idx = idx[(idx + shift >= 0) & (idx + shift < len(a))]
+    d = a[idx + shift] - b[idx]
+    return d[np.isfinite(d).all(axis=1)]
+
+
+def best_lag(a: np.ndarray, b: np.ndarray, rows: np.ndarray, dt: float) -> float | None:
+    """The shift (s) of signal ``a`` (N, k) that minimises its RMS distance to ``b`` (N, k) over ``rows``,
+    refined between frames by a parabola; positive: ``a`` lags (comes after) ``b``."""
+    k = int(round(MAX_LAG_S / dt))
+    shifts = np.arange(-k, k + 1)
+    rms = np.array([np.sqrt(np.mean(np.sum(e * e, axis=1))) if len(e := _errors(a, b, rows, s)) else np.inf
+                    for s in shifts])
+    if not np.isfinite(rms).any():
+        return None
+    i = int(np.argmin(rms))
+    frac = 0.0
+    if 0 < i < len(rms) - 1 and np.isfinite(rms[i - 1 : i + 2]).all():
+        a, b, c = rms[i - 1 : i + 2]
+        den = a - 2 * b + c
+        frac = 0.5 * (a - c) / den if den > 0 else 0.0
+    return float((shifts[i] + frac) * dt)
+
+
+def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: np.ndarray, com: np.ndarray,
+               dt: float) -> dict:
+    """ZMP against plate CoP over the complete frames that have a ZMP: count, RMS, p95 and max of the
+    horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left (mm), and
+    the lag (ms, see :func:`best_lag`; reported, not applied)."""
+    rows = complete & has_zmp & np.isfinite(cop).all(axis=1)
+    d = zmp[rows, :2] - cop[rows, :2]
+    if not len(d):
+        return {"frames": 0, "rms_mm": None, "p95_mm": None, "max_mm": None, "bias_mm": None, "lag_ms": None}
+    dist = np.hypot(d[:, 0], d[:, 1])
+    mean = d.mean(axis=0)
+    fwd, left = walking_axes(com)
+    lag = best_lag(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
+    return {
+        "frames": int(rows.sum()),
+        "rms_mm": round(1000 * float(np.sqrt(np.mean(dist ** 2))), 2),
+        "p95_mm": round(1000 * float(np.percentile(dist, 95)), 2),
+        "max_mm": round(1000 * float(dist.max()), 2),
+        "bias_mm": [round(1000 * float(mean @ fwd[:2]), 2), round(1000 * float(mean @ left[:2]), 2)],
+        "lag_ms": None if lag is None else round(1000 * lag, 1),
+    }
+
+
+def plate_delay(com_acc: np.ndarray, plate_acc: np.ndarray, rows: np.ndarray, dt: float) -> float | None:
+    """How late (s) the plates' acceleration (GRF − m g) / m (N, 3) comes after the kinematic CoM
+    acceleration (N, 3) over ``rows``: the plates' clock against the markers'. Both sides measure the
+    whole body's acceleration, so a shift between them is timing, not the body model."""
+    lag = best_lag(com_acc, plate_acc, rows, dt)
+    return None if lag is None else -lag
+
+
+def com_acc_vs_plates(com_acc: np.ndarray, force: np.ndarray, mass: float, complete: np.ndarray) -> dict:
+    """The CoM acceleration from the kinematics (F, 3) against (GRF − m g) / m from the plates over the
+    complete frames: Pearson r and RMS difference (m/s²) per axis x, y, z (internal frame)."""
+    rows = complete & np.isfinite(com_acc).all(axis=1)
+    if rows.sum() < 3:
+        return {"frames": int(rows.sum()), "r": None, "rms_mps2": None}
+    plates = force[rows] / mass - np.array([0.0, 0.0, G])
+    kin = com_acc[rows]
+    r = [float(np.corrcoef(kin[:, k], plates[:, k])[0, 1]) if kin[:, k].std() > 0 and plates[:, k].std() > 0
+         else None for k in range(3)]
+    rms = np.sqrt(np.mean((kin - plates) ** 2, axis=0))
+    return {"frames": int(rows.sum()), "r": [None if v is None else round(v, 4) for v in r],
+            "rms_mps2": [round(float(v), 4) for v in rms]}
