@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.errors import InputError
+from livezmp.tomlfile import read_toml
 
 
 @dataclass
@@ -84,13 +85,7 @@ def _parse(data: dict, source: str) -> RobotConfig:
 
 def load_robot_config(path: str | Path) -> RobotConfig:
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"{p}: cannot read robot config: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{p}: bad TOML: {e}") from None
-    return _parse(data, str(p))
+    return _parse(read_toml(p, "robot config"), str(p))
 
 
 def find_robot_config(urdf: str | Path, robot_name: str) -> RobotConfig:

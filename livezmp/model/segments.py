@@ -14,11 +14,11 @@ as CMU's LHipJoint).
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from livezmp.errors import InputError
+from livezmp.tomlfile import read_toml
 
 KINDS = (
     "root", "link", "pelvis", "spine", "neck", "head", "collar", "upper_arm", "forearm", "hand",
@@ -96,12 +96,7 @@ def classify(name: str) -> SegmentTag | None:
 def load_mapping(path: str | Path) -> dict[str, SegmentTag]:
     """Read an explicit mapping file: TOML ``[segments]`` table of joint = "kind[:side]"."""
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"{p}: cannot read mapping: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{p}: bad TOML: {e}") from None
+    data = read_toml(p, "mapping")
     table = data.get("segments")
     if not isinstance(table, dict):
         raise InputError(f"{p}: missing [segments] table")

@@ -14,7 +14,6 @@ parameters fitted on one half are scored on the other.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -27,6 +26,7 @@ from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
+from livezmp.tomlfile import read_toml
 
 HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
 ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP shift it causes (h / g)
@@ -49,13 +49,7 @@ class Subject:
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction`` and ``hat_offset_m = [fwd, left, up]``)."""
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"{p}: cannot read subject file: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{p}: bad TOML: {e}") from None
-    s = data.get("subject")
+    s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
         raise InputError(f"{p}: missing [subject] table")
     f, off = s.get("hat_fraction"), s.get("hat_offset_m")
