@@ -16,6 +16,7 @@ from ezc3d import ezc3d as ezc3d_swig
 from livezmp.balance import plates as plates_mod
 from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
+from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
 from livezmp.offline import calibrate as calibration
@@ -28,12 +29,17 @@ RATE, ANALOG, SECONDS, MASS = 100, 1000, 4.0, 75.0
 LEFT = {"ASI": (0.05, 0.12, 0.95), "PSI": (-0.10, 0.05, 0.98), "THI": (0.0, 0.16, 0.70), "KNE": (0.0, 0.14, 0.50),
         "TIB": (0.0, 0.13, 0.30), "ANK": (0.0, 0.12, 0.08), "HEE": (-0.06, 0.10, 0.04), "TOE": (0.15, 0.10, 0.03)}
 FOOT = ("ANK", "HEE", "TOE")
+UPPER_LEFT = {"FHD": (0.07, 0.06, 1.65), "BHD": (-0.08, 0.06, 1.64), "SHO": (0.0, 0.18, 1.43),
+              "ELB": (-0.01, 0.22, 1.15), "WRA": (0.03, 0.23, 0.90), "WRB": (-0.02, 0.21, 0.90),
+              "FIN": (0.02, 0.22, 0.80)}
+CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
 PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # centres (m); 0.5 x 0.3 plates
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
 
-def _markers(t: np.ndarray) -> dict[str, np.ndarray]:
-    """(F, 3) m per label: the body above the ankles sways fore-aft and sideways about the ankle line."""
+def _markers(t: np.ndarray, full_body: bool = False) -> dict[str, np.ndarray]:
+    """(F, 3) m per label: the body above the ankles sways fore-aft and sideways about the ankle line;
+    ``full_body`` adds Plug-in Gait's trunk, head and arm markers (the arms also swing)."""
     pitch = 0.05 * np.sin(2 * np.pi * 0.4 * t)
     roll = 0.03 * np.sin(2 * np.pi * 0.3 * t + 1.0)
     rot = np.array([pin.utils.rpyToMatrix(r, p, 0.0) for r, p in zip(roll, pitch, strict=True)])
@@ -43,21 +49,34 @@ def _markers(t: np.ndarray) -> dict[str, np.ndarray]:
         for side, sign in (("L", 1.0), ("R", -1.0)):
             q = np.array([p[0], sign * p[1], p[2]])
             out[side + name] = np.repeat(q[None], len(t), 0) if name in FOOT else (rot @ (q - pivot)) + pivot
+    if full_body:
+        for name, p in CENTRE.items():
+            out[name] = (rot @ (np.array(p) - pivot)) + pivot
+        for name, p in UPPER_LEFT.items():
+            for side, sign in (("L", 1.0), ("R", -1.0)):
+                q = np.array([p[0], sign * p[1], p[2]])
+                if name in ("ELB", "WRA", "WRB", "FIN"):  # the arm swings about the shoulder, opposite sides
+                    shoulder = np.array([0.0, sign * 0.18, 1.39])
+                    a = 0.25 * sign * np.sin(2 * np.pi * 0.5 * t)
+                    arm = np.array([pin.utils.rotate("y", v) for v in a]) @ (q - shoulder) + shoulder
+                    out[side + name] = np.einsum("fij,fj->fi", rot, arm - pivot) + pivot
+                else:
+                    out[side + name] = (rot @ (q - pivot)) + pivot
     return out
 
 
-def _trial(t: np.ndarray, rate: float) -> C3dTrial:
-    m = _markers(t)
+def _trial(t: np.ndarray, rate: float, full_body: bool = False) -> C3dTrial:
+    m = _markers(t, full_body)
     return C3dTrial("synthetic", list(m), np.stack(list(m.values()), axis=1), rate, rate, 0.0, [], MASS,
                     "PROCESSING:Bodymass", 1.75)
 
 
-def _true_wrench(body: MarkerBodyOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _true_wrench(body: MarkerBodyOptions, full_body: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
     marker body's own rigid-body dynamics driven by the motion sampled at 10 kHz (central differences)."""
     fine = 10
     t = np.arange(int(SECONDS * ANALOG) * fine + 2 * fine) / (ANALOG * fine) - 1.0 / ANALOG
-    take = body_from_markers(_trial(t, ANALOG * fine), replace(body, total_mass=MASS))
+    take = body_from_markers(_trial(t, ANALOG * fine, full_body), replace(body, total_mass=MASS))
     q = take.frames
     h = 1.0 / (ANALOG * fine)
     model, data = take.body.model, take.body.model.createData()
@@ -82,14 +101,14 @@ def _add_int(c3d, group: str, name: str, value) -> None:
 
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
-                  delay_samples: int = 0, body: MarkerBodyOptions | None = None) -> np.ndarray:
+                  delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
     true CoP (S, 2) m at the analog rate."""
-    force, moment, cop = _true_wrench(body or MarkerBodyOptions())
+    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(SECONDS * RATE)) / RATE
-    m = _markers(t)
+    m = _markers(t, full_body)
     m["LTHI"][150:155] = np.nan  # a short gap (filled)
     m["RTOE"][:30] = np.nan  # a long gap at the start (the take is cut)
     c3d = ezc3d.c3d()
@@ -174,6 +193,21 @@ def test_offset_removal_gives_the_unoffset_cop_and_without_it_the_cop_moves(lab,
     assert np.abs(with_offsets - without).max() < 1e-6
     monkeypatch.setattr(plates_mod, "unloaded_offset", lambda plate, rate: None)
     assert np.linalg.norm(cop("on.c3d") - without, axis=1).min() > 0.01  # the spare plate's 30 N pulls it
+
+
+def test_full_body_set_tracks_trunk_head_and_arms(tmp_path):
+    """Plug-in Gait full body with swinging arms: every upper segment is a body of its own, and the ZMP
+    matches the plates (written from that body's exact dynamics) to a millimetre."""
+    path = tmp_path / "full.c3d"
+    write_lab_c3d(path, PLATES, full_body=True)
+    a = analyse_lab_take(read_c3d(path))
+    names = {n.split(".")[0] for n in a.take.body.channel_names}
+    assert {"thorax", "head", "upperarm_l", "forearm_r", "hand_l"} <= names and "hat" not in names
+    assert a.summary["markers"]["marker_set"].startswith("Plug-in Gait full body")
+    assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    with pytest.raises(InputError, match="full-body"):
+        calibration.calibrate([read_c3d(path)])
 
 
 def test_late_plates_are_measured_and_realigned(lab):

@@ -49,7 +49,12 @@ ANKLE_WIDTH_OF_STATURE = 0.040
 FOOT_LENGTH_OF_STATURE = 258.1 / 1741  # de Leva foot length over stature
 SOLE_WIDTH_OF_STATURE = 0.055
 _MEDIAL = {"KNE": ("KNM", "MKNE", "KNEM", "MFC", "MEPI"), "ANK": ("MED", "MMA", "ANKM", "MANK", "MMAL")}
-_SEGMENTS = ("pelvis", "hat", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
+_LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
+# Plug-in Gait full body: trunk, head and arm markers (FIN optional); all present or the HAT is placed
+_UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
+          "LWRB", "RWRB")
+SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
+ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 
@@ -125,6 +130,10 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
             roles[s + m] = s + m if s + m in have else None
         for m, alts in _MEDIAL.items():
             roles[s + m + "_med"] = next((s + a for a in alts if s + a in have), None)
+    upper = [u for u in _UPPER if u in have]
+    if len(upper) == len(_UPPER):
+        roles.update({u: u for u in _UPPER})
+        roles.update({s + "FIN": s + "FIN" for s in "LR" if s + "FIN" in have})
     if missing:
         seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
         raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
@@ -267,7 +276,9 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
     pd = float(np.median(np.linalg.norm(fwd, axis=1)))
     hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
            for side, (_, sign, _) in _SIDES.items()}
-    stature = trial.height_m
+    # stature: the file's, else from the leg (hip centre to the lateral ankle marker)
+    stature = trial.height_m or float(np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1))
+                                      / LEG_FRACTION_OF_STATURE)
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
     for side, (s, sign, _) in _SIDES.items():
@@ -279,12 +290,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
                 centres[joint][side] = (lateral + medial) / 2
                 rules[f"{side}_{joint}"] = "mid-point of lateral and medial markers"
                 continue
-            width = trial.widths_m.get(f"{s}{joint.capitalize()}Width")
-            if width is None:
-                if stature is None:  # leg length from the hip to the lateral markers, before any centre
-                    leg = np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1))
-                    stature = float(leg / LEG_FRACTION_OF_STATURE)
-                width = frac * stature
+            width = trial.widths_m.get(f"{s}{joint.capitalize()}Width") or frac * stature
             delta = width / 2 + MARKER_RADIUS
             if s + wand in m:
                 centres[joint][side] = _chord(centres[prox][side], m[s + wand], lateral, delta, -sign * y)
@@ -296,7 +302,13 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
     heading = np.arctan2(x[:, 1], x[:, 0])
     c, sn, zero, one = np.cos(heading), np.sin(heading), np.zeros_like(heading), np.ones_like(heading)
     upright = np.stack([np.stack([c, -sn, zero], -1), np.stack([sn, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
-    seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1)), "hat": (pelvis_origin, upright)}
+    seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1))}
+    full = "C7" in m
+    if full:
+        seg.update(_upper_segments(m, stature))
+        rules["elbows"] = f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
+    else:
+        seg["hat"] = (pelvis_origin, upright)
     for side, (s, sign, t) in _SIDES.items():
         hip, knee, ankle = centres["hip"][side], centres["knee"][side], centres["ankle"][side]
         thigh = _frame(hip - knee, sign * (m[s + "KNE"] - knee))
@@ -304,23 +316,63 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
         heel = m.get(s + "HEE", ankle)
         foot = _foot_frame(m[s + "TOE"] - heel, shank[:, :, 1])
         seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
-    notes = {"marker_set": "Plug-in Gait / Helen Hayes lower body (standard labels)",
+    notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
+             "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
-             "joint_centres": rules, "stature_m": None if stature is None else round(stature, 4)}
+             "joint_centres": rules, "stature_m": round(stature, 4)}
     return seg, centres, notes
+
+
+def _upper_note(m: dict, trial: C3dTrial) -> str:
+    have = [u for u in _UPPER if u in trial.labels]
+    if not have:
+        return ""
+    return f"; upper-body markers incomplete (missing {', '.join(u for u in _UPPER if u not in have)}): not used"
+
+
+def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
+    """Thorax (origin between C7 and CLAV, z up the trunk), head (origin at the centre of its four
+    markers, x forward) and each arm: shoulder centre ``SHOULDER_DROP`` below SHO along the thorax,
+    wrist centre between WRA and WRB, elbow centre by the chord rule, hand towards FIN (else along the
+    forearm)."""
+    top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
+    fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
+    thorax = _frame(top - bottom, np.cross(top - bottom, fwd))
+    front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
+    head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
+    out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
+    ty, tz = thorax[:, :, 1], thorax[:, :, 2]
+    for s, sign, t in _SIDES.values():
+        sjc = m[s + "SHO"] - SHOULDER_DROP * tz
+        wjc = (m[s + "WRA"] + m[s + "WRB"]) / 2
+        ejc = _chord(sjc, wjc, m[s + "ELB"], ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS, -sign * ty)
+        hand_axis = wjc - m[s + "FIN"] if s + "FIN" in m else ejc - wjc
+        out[f"upperarm_{t}"] = (sjc, _frame(sjc - ejc, ty))
+        out[f"forearm_{t}"] = (ejc, _frame(ejc - wjc, ty))
+        out[f"hand_{t}"] = (wjc, _frame(hand_axis, ty))
+    return out
+
+
+def trunk_com_below_cervicale(stature: float) -> float:
+    """Depth (m) of the middle + upper trunk's combined centre of mass below the cervicale (de Leva:
+    the upper trunk from the cervicale down to the xiphion, the middle trunk on to the omphalion)."""
+    t = DE_LEVA_MALE
+    h = stature / 1741.0
+    upt, mpt = 170.7 * h, 215.5 * h
+    mu, mm = t["upper_trunk"].mass_fraction, t["middle_trunk"].mass_fraction
+    return (mu * t["upper_trunk"].com_fraction * upt + mm * (upt + t["middle_trunk"].com_fraction * mpt)) / (mu + mm)
 
 
 def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarray,
            notes: dict) -> tuple[BodyModel, np.ndarray]:
     t = DE_LEVA_MALE
-    lengths = {name: float(np.median(np.linalg.norm(seg[name][0] - seg[nxt][0], axis=1)))
-               for name, nxt in (("thigh_l", "shank_l"), ("shank_l", "foot_l"), ("thigh_r", "shank_r"),
-                                 ("shank_r", "foot_r"))}
-    stature = notes["stature_m"] or (lengths["thigh_l"] + lengths["shank_l"] + lengths["thigh_r"]
-                                     + lengths["shank_r"]) / 2 / LEG_FRACTION_OF_STATURE
-    notes["stature_m"] = round(stature, 4)
+    chain = (("thigh", "shank"), ("shank", "foot"), ("upperarm", "forearm"), ("forearm", "hand"))
+    lengths = {f"{a}_{t}": float(np.median(np.linalg.norm(seg[f"{a}_{t}"][0] - seg[f"{b}_{t}"][0], axis=1)))
+               for a, b in chain for t in "lr" if f"{a}_{t}" in seg}
+    stature = notes["stature_m"]
     hat_mass, hat_height, hat_inertia = hat_table(stature)
-    hat_fraction = opts.hat_fraction if opts.hat_fraction is not None else hat_mass
+    full = "hat" not in seg
+    hat_fraction = hat_mass if full or opts.hat_fraction is None else opts.hat_fraction
     lower = t["lower_trunk"]
     pelvis_len = 145.7 / 1741 * stature
     # the pelvis' mean tilt about its lateral axis, for a HAT riding on the pelvis
@@ -333,8 +385,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     model.name = "markers"
     frames = []
     body_frame = {}
-    for name in _SEGMENTS:
-        origin, rot = seg[name]
+    for name, (origin, rot) in seg.items():
         parent = 0
         for ch, jm in zip(_CHANNELS, (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRZ,
                                       pin.JointModelRY, pin.JointModelRX), strict=True):
@@ -355,7 +406,12 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * np.diag(np.square(r))), pin.SE3.Identity())
             body_frame["pelvis_joint"] = parent
             continue
-        p = t[kind]
+        if kind in ("thorax", "head", "hand"):
+            mass, com, inertia = _upper_inertia(kind, name, seg, m, stature)
+            model.appendBodyToJoint(parent, pin.Inertia(opts.total_mass * mass, com, opts.total_mass * inertia),
+                                    pin.SE3.Identity())
+            continue
+        p = t[{"upperarm": "upper_arm"}.get(kind, kind)]
         mass = opts.total_mass * p.mass_fraction * scale_rest
         if kind == "foot":
             side = name[-1].upper()
@@ -374,21 +430,44 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     nq = model.nq
     correction = CorrectionJoints(
         root_channels=list(range(6)), root_frame_id=body_frame["pelvis"],
-        legs={s: list(range(6 * i + 3, 6 * i + 6)) for s, i in (("left", 2), ("right", 5))},
+        legs={s: [6 * list(seg).index(f"thigh_{s[0]}") + k for k in (3, 4, 5)] for s in ("left", "right")},
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
-    notes["hat"] = (f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
+    notes["hat"] = ("head, arms and trunk tracked by their own markers" if full else
+                    f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
                     + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
                     + ("; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
                        f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed"))
-    names = [f"{s}.{c}" for s in _SEGMENTS for c in _CHANNELS]
+    names = [f"{s}.{c}" for s in seg for c in _CHANNELS]
     body = BodyModel(
         kind="markers", model=model, point_model=point_mass_copy(model), channel_names=names,
-        channel_scale=np.ones(nq), angle_mask=np.array([c in ("yaw", "pitch", "roll") for c in _CHANNELS] * 8),
+        channel_scale=np.ones(nq), angle_mask=np.array([c in ("yaw", "pitch", "roll") for c in _CHANNELS] * len(seg)),
         feet=feet, world_from_input=r_in, up_axis=up, units="m", total_mass=opts.total_mass,
         correction=correction, named_points=named)
     return body, np.hstack(frames)
+
+
+def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass fraction, centre of mass (segment frame, m) and inertia per kg of body mass (3, 3) of the
+    thorax (middle + upper trunk), head or hand, from de Leva (1996)."""
+    t = DE_LEVA_MALE
+    h = stature / 1741.0
+    if kind == "thorax":
+        frac = t["middle_trunk"].mass_fraction + t["upper_trunk"].mass_fraction
+        length = (170.7 + 215.5) * h
+        com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature)])
+        gyr = t["middle_trunk"].gyration
+    elif kind == "head":
+        frac, length, com, gyr = t["head"].mass_fraction, 242.9 * h, np.zeros(3), t["head"].gyration
+    else:
+        s = name[-1].upper()
+        origin, rot = seg[name]
+        length = float(np.linalg.norm(_local(rot, origin, m[s + "FIN"]))) if s + "FIN" in m else 86.2 * h
+        frac, gyr = t["hand"].mass_fraction, t["hand"].gyration
+        com = np.array([0.0, 0.0, -t["hand"].com_fraction * length])
+    r = np.array(gyr) * length
+    return frac, com, frac * np.diag(r * r)
 
 
 def _feet(model: pin.Model, body_frame: dict, seg: dict, m: dict, opts: MarkerBodyOptions,
