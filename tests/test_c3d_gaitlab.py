@@ -333,3 +333,18 @@ def test_bad_subject_file_is_one_line(tmp_path, capsys):
     rc = main(["analyze", str(C3D / "cgm24_walking01_forceplate.c3d"), "--subject", str(bad)])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and "hat_fraction" in err
+
+
+def test_monitor_replays_a_c3d_and_its_recording_replays_the_same(tmp_path, capsys):
+    path = tmp_path / "c3d.mcap"
+    assert main(["monitor", str(C3D / "cgm24_walking01_forceplate.c3d"), "--speed", "0", "--record", str(path)]) == 0
+    assert "493 frames in, 493 analysed" in capsys.readouterr().out
+    assert main(["replay", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "493 results compared" in out and "same analysis" in out
+
+
+def test_correct_refuses_a_c3d_in_one_line(capsys):
+    assert main(["correct", str(C3D / "cgm24_walking01_forceplate.c3d"), "-o", "x.bvh"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "C3D" in err

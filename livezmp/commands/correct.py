@@ -24,6 +24,9 @@ def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
 def cmd_correct(args: argparse.Namespace) -> int:
     if args.motion is None:
         raise InputError("correct: give a motion file (.bvh, or .csv with --robot)")
+    if str(args.motion).lower().endswith(".c3d"):
+        raise InputError(f"{args.motion}: correct does not take C3D marker takes yet (their segments move "
+                         "freely, with no joint chain for the hip re-solve); `livezmp analyze` reads them")
     loaded = load_from_args(args)
     cfg = pipeline_config(args, loaded)
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),

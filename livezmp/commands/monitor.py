@@ -42,7 +42,7 @@ def _source(args: argparse.Namespace) -> Source:
     bvh = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up,
                          mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
-                         speed=args.speed, loop=args.loop)
+                         speed=args.speed, loop=args.loop, mass=args.mass)
     return open_source(args.motion, opts)
 
 

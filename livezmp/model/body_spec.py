@@ -22,17 +22,20 @@ from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.model.c3d import C3dTrial
+from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
 from livezmp.model.segments import SegmentTag
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 SKELETON_FILE = "skeleton.bvh"
+MARKERS_FILE = "markers.csv"
 URDF_FILE = "robot.urdf"
 ROBOT_CONFIG_FILE = "robot.toml"
 
 
 @dataclass(frozen=True)
 class BodySpec:
-    """``kind`` "bvh" or "urdf"; ``files`` name → text; ``options`` plain JSON values."""
+    """``kind`` "bvh", "urdf" or "markers"; ``files`` name → text; ``options`` plain JSON values."""
 
     kind: str
     files: dict[str, str]
@@ -102,6 +105,34 @@ def robot_body(urdf: str | Path, opts: UrdfBodyOptions | None = None) -> tuple[B
     return body, BodySpec("urdf", files, options)
 
 
+def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple[MarkerTake, BodySpec]:
+    """The marker body of a C3D trial (:func:`body_from_markers`) and its spec: the markers it is built
+    from (every frame, at full precision; NaN where unseen) and the subject's parameters."""
+    opts = opts or MarkerBodyOptions()
+    take = body_from_markers(trial, opts)
+    labels = [lab for lab in marker_labels(trial) if lab in trial.labels]
+    pts = np.stack([trial.marker(lab) for lab in labels], axis=1).reshape(len(trial.points), -1)
+    text = ",".join(f"{lab}_{c}" for lab in labels for c in "xyz") + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
+    options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
+               "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
+               "source": trial.source}
+    return take, BodySpec("markers", {MARKERS_FILE: text}, options)
+
+
+def _markers_from_spec(spec: BodySpec) -> BodyModel:
+    o = spec.options
+    lines = spec.files[MARKERS_FILE].splitlines()
+    labels = [h[:-2] for h in lines[0].split(",")[::3]]
+    pts = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]]).reshape(len(lines) - 1, len(labels), 3)
+    trial = C3dTrial(o.get("source", MARKERS_FILE), labels, pts, o["rate"], o["rate"], 0.0, [], o["total_mass"],
+                     "", o.get("height_m"), o.get("widths_m") or {})
+    hat = o.get("hat_offset")
+    opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
+                             hat_fraction=o.get("hat_fraction"))
+    return body_from_markers(trial, opts).body
+
+
 def body_from_spec(spec: BodySpec) -> BodyModel:
     """Rebuild the body a :class:`BodySpec` describes."""
     o = spec.options
@@ -124,4 +155,6 @@ def body_from_spec(spec: BodySpec) -> BodyModel:
                                    sole_length=o.get("sole_length"), sole_width=o.get("sole_width"),
                                    sole_drop=o.get("sole_drop"))
             return body_from_urdf(Path(tmp) / URDF_FILE, opts)
-    raise InputError(f"body spec: unknown body kind {spec.kind!r} (bvh or urdf)")
+    if spec.kind == "markers":
+        return _markers_from_spec(spec)
+    raise InputError(f"body spec: unknown body kind {spec.kind!r} (bvh, urdf or markers)")

@@ -152,6 +152,11 @@ def _up_rotation(m: dict[str, np.ndarray], source: str) -> tuple[str, np.ndarray
     raise InputError(f"{source}: cannot tell the up axis (pelvis-to-ankle vector {np.round(v, 3)} m)")
 
 
+def marker_labels(trial: C3dTrial) -> list[str]:
+    """The labels of ``trial``'s markers that its marker body is built from."""
+    return [label for label in _need(trial).values() if label is not None]
+
+
 def input_rotation(trial: C3dTrial) -> tuple[str, np.ndarray]:
     """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
     return _up_rotation({k: trial.marker(v) for k, v in _need(trial).items() if v}, trial.source)

@@ -1,7 +1,8 @@
 """``open_source(spec)``: the source a path or URL names.
 
-- ``walk.bvh``: replay of a BVH file; ``motion.csv``: of a joint-trajectory CSV (with
-  ``robot``, its URDF); ``session.mcap``: of a livezmp recording's input frames;
+- ``walk.bvh``: replay of a BVH file; ``trial.c3d``: of a gait-lab C3D's marker body;
+  ``motion.csv``: of a joint-trajectory CSV (with ``robot``, its URDF);
+  ``session.mcap``: of a livezmp recording's input frames;
 - ``udp://HOST:PORT[?allow=NET,...&max_bytes=N]``: livezmp frames over UDP;
 - ``tcp://HOST:PORT[?max_line=N]``: a BVH broadcast (one line per frame).
 
@@ -23,8 +24,10 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
-from livezmp.model.body_spec import BodySpec, read_skeleton, robot_body, skeleton_body
-from livezmp.model.bvh_body import BvhBodyOptions
+from livezmp.model.body_spec import BodySpec, marker_body, read_skeleton, robot_body, skeleton_body
+from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
+from livezmp.model.c3d import read_c3d
+from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions
@@ -50,6 +53,7 @@ class SourceOptions:
     fps: float | None = None
     speed: float = 1.0
     loop: bool = False
+    mass: float | None = None  # kg; None: a C3D's subject mass, else the BVH default
 
 
 def _replay(path: Path, o: SourceOptions) -> Source:
@@ -65,13 +69,18 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         body, spec = skeleton_body(sk, o.bvh)
         times = np.arange(len(sk.motion.frames)) * sk.motion.frame_time
         return FileReplaySource(str(path), body, spec, times, sk.motion.frames, o.speed, o.loop)
+    if suffix == ".c3d":
+        trial = read_c3d(path)
+        take, spec = marker_body(trial, MarkerBodyOptions(total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))
+        times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
+        return FileReplaySource(str(path), take.body, spec, times, take.frames, o.speed, o.loop)
     if suffix == ".csv":
         if o.robot is None:
             raise InputError(f"{path}: a joint-trajectory CSV needs --robot ROBOT.urdf")
         body, spec = robot_body(o.robot, o.urdf)
         traj = read_joint_csv(path, body.joint_names)
         return FileReplaySource(str(path), body, spec, traj.t, trajectory_frames(body, traj), o.speed, o.loop)
-    raise InputError(f"{path}: unknown source file type {suffix!r} (.bvh, .csv with --robot, .mcap)")
+    raise InputError(f"{path}: unknown source file type {suffix!r} (.bvh, .c3d, .csv with --robot, .mcap)")
 
 
 def _stream_body(spec: str, o: SourceOptions, robot_ok: bool) -> tuple[BodyModel, BodySpec, float | None]:
