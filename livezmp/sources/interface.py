@@ -45,8 +45,9 @@ class SourceStats:
     ``malformed`` (fails the frame schema, wrong channel count, non-finite value, time
     not increasing), ``oversized`` (longer than the limit), ``duplicate`` (a sequence
     number already seen), ``late`` (older than one already delivered: out of order),
-    ``rejected`` (sender not on the allowlist). ``lost``: sequence numbers skipped and
-    never delivered in order. ``reconnects``: connections re-opened."""
+    ``rejected`` (sender not on the allowlist), ``overflow`` (arrived while the reader's
+    bounded queue was full). ``lost``: sequence numbers skipped and never delivered in
+    order. ``reconnects``: connections re-opened."""
 
     delivered: int = 0
     malformed: int = 0
@@ -54,6 +55,7 @@ class SourceStats:
     duplicate: int = 0
     late: int = 0
     rejected: int = 0
+    overflow: int = 0
     lost: int = 0
     reconnects: int = 0
 
@@ -63,7 +65,7 @@ class SourceStats:
     @property
     def dropped(self) -> int:
         """Packets or lines received and thrown away."""
-        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected
+        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.overflow
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,147 @@
+"""What a live capture system hands over per frame: labelled markers and force plates.
+
+The capture sources (``lsl://``, ``qtm://``, ``natnet://``) produce :class:`MocapFrame`
+records in the stream's own axes (its up axis named), converted to SI units at the edge:
+marker positions and centres of pressure in metres, forces in newtons, moments in
+newton-metres. What turns markers into a body (the marker body model) comes after this.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from livezmp.sources.frame_format import SEQ_MOD
+from livezmp.sources.interface import ErrorLog, SourceStats
+from livezmp.sources.udp import SequenceFilter
+
+UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def _empty3() -> np.ndarray:
+    return np.zeros((0, 3))
+
+
+@dataclass(frozen=True)
+class PlateSamples:
+    """Force plates of one frame, in the stream's axes: ``names`` (p,); ``force`` (p, 3) N
+    exerted on each plate; ``moment`` (p, 3) N·m about the plate's origin as the stream
+    gives it; ``cop`` (p, 3) m, the centre of pressure (NaN when the plate is unloaded)."""
+
+    names: tuple[str, ...] = ()
+    force: np.ndarray = field(default_factory=_empty3)
+    moment: np.ndarray = field(default_factory=_empty3)
+    cop: np.ndarray = field(default_factory=_empty3)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+@dataclass(frozen=True)
+class MocapFrame:
+    """One capture frame. ``t`` s on the source's own clock (LSL: the sample's timestamp
+    mapped onto this machine's LSL clock with the stream's clock offset; QTM: the frame
+    timestamp; NatNet: the frame timestamp); ``received`` ``time.monotonic()`` s at arrival;
+    ``frame`` the source's frame number (-1 when it has none); ``labels`` (n,) marker names;
+    ``markers`` (n, 3) m in the stream's axes, NaN where a marker is occluded; ``up`` the
+    stream's up axis ("+z", "+y", ...); ``plates`` the force plates (empty without);
+    ``latency`` s from the source's timestamp to ``received`` when the source's clock can
+    be related to this machine's (LSL), else None."""
+
+    t: float
+    received: float
+    frame: int
+    labels: tuple[str, ...]
+    markers: np.ndarray
+    up: str
+    plates: PlateSamples = field(default_factory=PlateSamples)
+    latency: float | None = None
+
+    def marker(self, label: str) -> np.ndarray:
+        """Position (3,) m of the marker ``label``; KeyError if the stream has no such label."""
+        return self.markers[self.labels.index(label)]
+
+
+def parse_up_axis(text: str, where: str) -> str:
+    """``"Z"``, ``"+Z"``, ``"-y"`` ... → the canonical form ("+z"); ValueError naming ``where``."""
+    s = text.strip().lower()
+    s = s if s[:1] in "+-" else "+" + s
+    if s not in UP_AXES:
+        raise ValueError(f"{where}: up axis {text!r} is not one of x, y, z (with an optional sign)")
+    return s
+
+
+class MocapSource(Protocol):
+    """A live capture stream (``lsl://``, ``qtm://``, ``natnet://``): ``name`` shown to the
+    operator; ``nominal_dt`` s the stream's frame period as the stream states it;
+    ``stats``/``errors`` as every source's (:mod:`livezmp.sources.interface`)."""
+
+    name: str
+    nominal_dt: float
+    stats: SourceStats
+    errors: ErrorLog
+
+    @property
+    def finished(self) -> bool: ...
+
+    def read(self, timeout: float) -> MocapFrame | None:
+        """The next frame in order, or None if none arrived within ``timeout`` s."""
+
+    def close(self) -> None: ...
+
+
+class FrameQueue:
+    """Frames handed from a client's receiving thread to the reader: at most ``maxlen``
+    wait; one arriving when full is counted in ``stats.overflow`` and thrown away (the
+    newest is dropped, so what is delivered stays in order)."""
+
+    def __init__(self, stats: SourceStats, maxlen: int = 4096):
+        self.stats, self.maxlen = stats, maxlen
+        self._q: deque[MocapFrame] = deque()
+        self._cv = threading.Condition()
+
+    def put(self, frame: MocapFrame) -> None:
+        with self._cv:
+            if len(self._q) >= self.maxlen:
+                self.stats.overflow += 1
+                return
+            self._q.append(frame)
+            self._cv.notify()
+
+    def get(self, timeout: float) -> MocapFrame | None:
+        with self._cv:
+            if not self._q:
+                self._cv.wait(timeout)
+            return self._q.popleft() if self._q else None
+
+
+class InOrder:
+    """In-order delivery by frame number into ``stats`` (``delivered``, ``duplicate``,
+    ``late``, ``lost``), over :class:`~livezmp.sources.udp.SequenceFilter`. :meth:`restart`
+    after a reconnection: the new server's numbers start afresh, the lost count stays."""
+
+    def __init__(self, stats: SourceStats, errors: ErrorLog, name: str):
+        self.stats, self.errors, self.name = stats, errors, name
+        self._filter = SequenceFilter()
+        self._lost_before = 0
+
+    def admit(self, number: int) -> bool:
+        """True if frame ``number`` is the next in order (counted delivered); else counted."""
+        f = self._filter
+        verdict = f.check(number % SEQ_MOD)
+        if verdict != "ok":
+            setattr(self.stats, verdict, getattr(self.stats, verdict) + 1)
+            self.errors.report(verdict, f"{self.name}: frame {number} after {f.last}")
+            return False
+        f.accept(number % SEQ_MOD)
+        self.stats.lost = self._lost_before + f.lost
+        self.stats.delivered += 1
+        return True
+
+    def restart(self) -> None:
+        self._lost_before = self.stats.lost
+        self._filter = SequenceFilter()

@@ -1,0 +1,199 @@
+"""Qualisys Track Manager live: ``qtm://HOST[:PORT]`` through the official ``qtm-rt`` client.
+
+The client runs its asyncio loop in a thread of its own: it connects (protocol 1.25 by
+default, ``?version=``), reads the parameters (``general``: frame rate; ``3d``: up axis
+and marker labels; ``force``: plates with their corners and length unit) and streams
+every frame (``3d`` markers in mm, ``force`` per plate force N, moment N·m, application
+point in the plates' length unit, in each plate's own axes, turned into the lab's with
+the corners, :mod:`livezmp.sources.plate_frame`). Frames go in order by QTM's frame
+number (late, duplicate, lost counted). A lost connection is reported and re-made every
+``retry`` s, parameters read again (a changed marker set is taken as it comes).
+
+QTM timestamps are µs on QTM's own clock, which this machine cannot relate to its own:
+``MocapFrame.latency`` is None; ``t`` is the timestamp in s.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import numpy as np
+
+from livezmp.errors import InputError
+from livezmp.sources.interface import ErrorLog, SourceStats
+from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.plate_frame import plate_axes
+
+DEFAULT_PORT = 22223  # QTM's little-endian RT port, the one qtm-rt speaks
+LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+
+
+@dataclass(frozen=True)
+class QtmParameters:
+    """What the parameters XML says: ``rate`` Hz, ``up`` axis, marker ``labels``, plate
+    ``plates`` names and ``axes`` (R, origin m) from their corners, ``length`` m per the
+    force component's length unit."""
+
+    rate: float
+    up: str
+    labels: tuple[str, ...]
+    plates: tuple[str, ...]
+    axes: tuple[tuple[np.ndarray, np.ndarray], ...]
+    length: float
+
+
+def _text(node: ET.Element | None, path: str, where: str) -> str:
+    found = None if node is None else node.find(path)
+    if found is None or found.text is None:
+        raise InputError(f"{where}: parameters XML has no {path}")
+    return found.text.strip()
+
+
+def parse_parameters(xml: str, where: str) -> QtmParameters:
+    """The :class:`QtmParameters` of a ``getparameters general 3d force`` reply."""
+    try:
+        root = ET.fromstring(xml)
+    except ET.ParseError as e:
+        raise InputError(f"{where}: parameters XML: {e}") from None
+    rate = float(_text(root, "General/Frequency", where))
+    the3d = root.find("The_3D")
+    try:
+        up = parse_up_axis(_text(the3d, "AxisUpwards", where), where)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    labels = tuple(_text(lab, "Name", where) for lab in (the3d.findall("Label") if the3d is not None else []))
+    force = root.find("Force")
+    unit = _text(force, "Unit_Length", where) if force is not None and force.find("Unit_Length") is not None else "mm"
+    if unit not in LENGTH:
+        raise InputError(f"{where}: Force/Unit_Length {unit!r} is not one of {', '.join(LENGTH)}")
+    names, axes = [], []
+    for plate in force.findall("Plate") if force is not None else []:
+        names.append(_text(plate, "Name", where))
+        corners = np.array([[float(_text(plate, f"Location/Corner{j}/{a}", where)) for a in "XYZ"]
+                            for j in range(1, 5)]) * 1e-3  # QTM's locations are in mm
+        axes.append(plate_axes(corners))
+    return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit])
+
+
+def frame_of_packet(packet, p: QtmParameters, received: float) -> MocapFrame:
+    """A :class:`MocapFrame` of a ``qtm_rt.QRTPacket`` with 3D (and force) components."""
+    from qtm_rt.packet import QRTComponentType
+
+    markers = np.full((len(p.labels), 3), np.nan)
+    if QRTComponentType.Component3d in packet.components:
+        _, pts = packet.get_3d_markers()
+        n = min(len(pts), len(p.labels))
+        markers[:n] = np.array([(m.x, m.y, m.z) for m in pts[:n]], float).reshape(n, 3) * 1e-3
+    k = len(p.plates)
+    force, moment, cop = np.zeros((k, 3)), np.zeros((k, 3)), np.full((k, 3), np.nan)
+    if k and QRTComponentType.ComponentForce in packet.components:
+        _, plates = packet.get_force()
+        for info, samples in plates:
+            i = info.id - 1
+            if not 0 <= i < k or not samples:
+                continue
+            s = samples[-1]  # the newest sample of the frame
+            R, origin = p.axes[i]
+            force[i] = R @ (s.x, s.y, s.z)
+            moment[i] = R @ (s.x_m, s.y_m, s.z_m)
+            cop[i] = R @ (np.array([s.x_a, s.y_a, s.z_a]) * p.length) + origin
+    return MocapFrame(packet.timestamp * 1e-6, received, packet.framenumber, p.labels, markers, p.up,
+                      PlateSamples(p.plates, force, moment, cop))
+
+
+class QtmSource:
+    """Client of a QTM RT server at ``host``:``port``; see the module docstring."""
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT, version: str = "1.25", retry: float = 0.5,
+                 connect_timeout: float = 5.0, queue: int = 4096):
+        self.name = f"qtm://{host}:{port}"
+        self.host, self.port, self.version, self.retry = host, port, version, retry
+        self.stats, self.errors = SourceStats(), ErrorLog()
+        self.order = InOrder(self.stats, self.errors, self.name)
+        self.queue = FrameQueue(self.stats, queue)
+        self.params: QtmParameters | None = None
+        self._closed = False
+        self._sessions = 0
+        self._ready = threading.Event()
+        self._failure: str | None = None
+        self._loop = asyncio.new_event_loop()
+        self._stop: asyncio.Event | None = None
+        self._thread = threading.Thread(target=self._loop.run_until_complete, args=(self._run(),),
+                                        name="qtm-client", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(connect_timeout) or self.params is None:
+            self.close()
+            raise InputError(f"{self.name}: cannot connect: {self._failure or 'no answer'}")
+
+    @property
+    def nominal_dt(self) -> float:
+        return 1.0 / self.params.rate
+
+    @property
+    def finished(self) -> bool:
+        return self._closed
+
+    async def _session(self) -> None:
+        """One connection: parameters, then frames until it drops."""
+        import qtm_rt
+
+        lost = asyncio.Event()
+        conn = await qtm_rt.connect(self.host, self.port, version=self.version,
+                                    on_disconnect=lambda exc: lost.set(), timeout=5)
+        if conn is None:
+            self._failure = "connection refused or version not accepted"
+            return
+        try:
+            xml = await conn.get_parameters(["general", "3d", "force"])
+            params = parse_parameters(xml.decode(errors="replace"), self.name)
+            components = ["3d", "force"] if params.plates else ["3d"]
+            self.params = params
+            if self._sessions:
+                self.stats.reconnects += 1
+                self.order.restart()
+            self._sessions += 1
+            # QTM answers streamframes with its first frame: a camera not yet running
+            # answers later, so the answer is not awaited before the source is ready
+            streaming = asyncio.ensure_future(conn.stream_frames(frames="allframes", components=components,
+                                                                 on_packet=self._on_packet))
+            self._ready.set()
+            waits = [asyncio.ensure_future(self._stop.wait()), asyncio.ensure_future(lost.wait())]
+            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+            for task in [*waits, streaming]:
+                task.cancel()
+        except (qtm_rt.QRTCommandException, asyncio.TimeoutError, InputError) as e:
+            self._failure = str(e)
+        finally:
+            if conn.has_transport():
+                conn.disconnect()
+
+    async def _run(self) -> None:
+        self._stop = asyncio.Event()
+        while not self._stop.is_set():
+            await self._session()
+            if self._stop.is_set():
+                break
+            self.errors.report("disconnected", f"{self.name}: connection lost; retrying every {self.retry:g} s")
+            try:
+                await asyncio.wait_for(self._stop.wait(), self.retry)
+            except asyncio.TimeoutError:
+                pass
+
+    def _on_packet(self, packet) -> None:
+        received = time.monotonic()
+        if self.params is None or not self.order.admit(packet.framenumber):
+            return
+        self.queue.put(frame_of_packet(packet, self.params, received))
+
+    def read(self, timeout: float) -> MocapFrame | None:
+        return None if self._closed else self.queue.get(timeout)
+
+    def close(self) -> None:
+        self._closed = True
+        if self._stop is not None:
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(5.0)
