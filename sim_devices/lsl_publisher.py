@@ -86,12 +86,15 @@ class LslPublisher:
         return self.markers.have_consumers() and (self.plates is None or self.plates.have_consumers())
 
     def _send(self, f: TrialFrame) -> None:
+        markers, plates = self.markers, self.plates  # close() may withdraw them meanwhile
+        if markers is None:
+            return
         if self._t0 is None:
             self._t0 = pylsl.local_clock() - f.t
         stamp = self._t0 + f.t
-        self.markers.push_sample((f.markers * 1e3).ravel().tolist(), stamp)
-        if self.plates is not None:
-            self.plates.push_sample(plate_sample(f), stamp)
+        markers.push_sample((f.markers * 1e3).ravel().tolist(), stamp)
+        if plates is not None:
+            plates.push_sample(plate_sample(f), stamp)
 
     def run(self) -> PlayCounters:
         return self.player.play(self._send)

@@ -1,6 +1,6 @@
-"""A simulated motion-capture streamer: plays a BVH out live, with impairments.
+"""A simulated motion-capture streamer: plays a BVH or a C3D trial out live, with impairments.
 
-Two outputs, as real capture software offers them:
+A BVH goes out in two ways, as real capture software offers them:
 
 - UDP: livezmp frames (JSON or binary, ``docs/frame_format.md``) sent to a target
   address, one datagram per frame, sequence number = frame number;
@@ -14,8 +14,17 @@ are skipped); over UDP also late frames (held back and sent after ``late_by`` la
 ones) and duplicated frames. Frames go out at real time × ``speed`` (0 = as fast as
 possible), looping if asked, for at most ``max_frames``.
 
+A C3D trial's markers and force plates (or generated marker motion, ``generated:RATE``)
+go out as a capture system's server: ``--lsl [NAME]`` (LSL outlets,
+:mod:`sim_devices.lsl_publisher`), ``--qtm PORT`` (QTM RT, :mod:`sim_devices.qtm_server`),
+``--natnet PORT`` (NatNet command port, data to ``--data-port``,
+:mod:`sim_devices.natnet_server`), with ``--noise-mm``, ``--gap``, ``--drop``, ``--late``,
+``--rate-scale`` (play faster or slower than recorded).
+
     python -m sim_devices.mocap_streamer walk.bvh --udp 127.0.0.1:9000 --format binary --noise-deg 0.3 --drop 0.02
     python -m sim_devices.mocap_streamer walk.bvh --tcp 9001 --loop
+    python -m sim_devices.mocap_streamer trial.c3d --qtm 22223 --loop --drop 0.01
+    python -m sim_devices.mocap_streamer generated:240 --natnet 1510 --data-port 1511 --loop
 """
 
 from __future__ import annotations
@@ -211,12 +220,67 @@ class TcpStreamer:
         self.server.close()
 
 
+def _trial(spec: str):
+    from sim_devices.mocap_trial import generated_trial, load_c3d_trial
+
+    if spec.startswith("generated:"):
+        try:
+            rate = float(spec.split(":", 1)[1])
+        except ValueError:
+            rate = 0.0
+        if not rate > 0:
+            raise InputError(f"{spec}: generated:RATE needs a positive rate in Hz")
+        return generated_trial(rate, 10.0)
+    return load_c3d_trial(spec)
+
+
+def serve_capture(args: argparse.Namespace) -> str:
+    """Plays a C3D (or generated) trial from a simulated capture server until done or Ctrl-C."""
+    from sim_devices.mocap_trial import Impairments
+
+    trial = _trial(args.motion)
+    imp = Impairments(args.noise_mm * 1e-3, args.gap, args.drop, args.late, 3, args.seed)
+    play = {"impairments": imp, "speed": args.speed, "loop": args.loop, "max_frames": args.frames}
+    if args.lsl is not None:
+        from sim_devices.lsl_publisher import LslPublisher
+
+        server = LslPublisher(trial, name=args.lsl, source_id=args.lsl, **play)
+        print(f"publishing LSL streams {args.lsl!r} (MoCap) and {args.lsl + ' plates'!r} (Force): "
+              f"lsl://{args.lsl}", flush=True)
+        counters = server.run()
+    else:
+        if args.qtm is not None:
+            from sim_devices.qtm_server import QtmServer
+
+            server = QtmServer(trial, args.qtm, **play)
+            print(f"serving QTM RT on qtm://127.0.0.1:{server.port}", flush=True)
+        else:
+            from sim_devices.natnet_server import NatNetServer
+
+            server = NatNetServer(trial, args.natnet, args.data_port, **play)
+            print(f"serving NatNet on natnet://127.0.0.1:{server.command_port}?data_port={args.data_port}",
+                  flush=True)
+        try:
+            server.start().join()
+        finally:
+            server.close()
+        counters = server.counters
+    return (f"sent {counters.sent}, dropped {counters.dropped}, late {counters.out_of_order}, "
+            f"marker gaps {counters.gaps}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m sim_devices.mocap_streamer", description=__doc__.splitlines()[0])
-    p.add_argument("bvh")
+    p.add_argument("motion", help="a BVH file (--udp, --tcp), or a C3D file or generated:RATE (--lsl, --qtm, --natnet)")
     out = p.add_mutually_exclusive_group(required=True)
     out.add_argument("--udp", metavar="HOST:PORT", help="send livezmp frames to this address")
     out.add_argument("--tcp", type=int, metavar="PORT", help="serve a BVH broadcast on 127.0.0.1:PORT")
+    out.add_argument("--lsl", nargs="?", const="livezmp-sim", metavar="NAME", help="publish LSL streams")
+    out.add_argument("--qtm", type=int, metavar="PORT", help="serve QTM RT on 127.0.0.1:PORT (0: any)")
+    out.add_argument("--natnet", type=int, metavar="PORT", help="serve NatNet commands on 127.0.0.1:PORT")
+    p.add_argument("--data-port", type=int, default=1511, help="NatNet data port the client binds")
+    p.add_argument("--noise-mm", type=float, default=0.0, help="marker noise std (mm; capture servers)")
+    p.add_argument("--gap", type=float, default=0.0, help="marker occlusion probability per frame")
     p.add_argument("--format", choices=["json", "binary"], default="json", help="UDP frame format")
     p.add_argument("--avatar", action="store_true", help="TCP lines as '0 Avatar00 values ||'")
     p.add_argument("--speed", type=float, default=1.0)
@@ -230,7 +294,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     try:
-        motion = read_bvh(args.bvh)
+        if args.lsl is not None or args.qtm is not None or args.natnet is not None:
+            print(serve_capture(args))
+            return 0
+        motion = read_bvh(args.motion)
         imp = Impairments(args.noise_deg, args.noise_pos, args.drop, args.late, 3, args.duplicate, args.seed)
         if args.udp:
             host, _, port = args.udp.rpartition(":")

@@ -126,7 +126,8 @@ class Impairments:
 class PlayCounters:
     """What the player did: frames ``sent``, ``dropped``, ``delayed`` (held back),
     ``out_of_order`` (sent after a later frame: what a receiver must call late), ``gaps``
-    (marker samples made missing), ``first``/``last`` frame numbers sent in order."""
+    (marker samples made missing in the frames sent in order), ``first``/``last`` frame
+    numbers sent in order."""
 
     sent: int = 0
     dropped: int = 0
@@ -147,7 +148,8 @@ class PlayCounters:
 @dataclass(frozen=True)
 class TrialFrame:
     """One frame as a server sends it: ``number`` (0-based), ``t`` s from the first
-    frame, ``markers`` (n, 3) m (NaN missing), plates ``force``/``moment``/``cop`` (p, 3)."""
+    frame, ``markers`` (n, 3) m (NaN missing), plates ``force``/``moment``/``cop`` (p, 3),
+    ``gaps`` markers made missing in this frame."""
 
     number: int
     t: float
@@ -155,6 +157,7 @@ class TrialFrame:
     force: np.ndarray
     moment: np.ndarray
     cop: np.ndarray
+    gaps: int = 0
 
 
 class TrialPlayer:
@@ -179,14 +182,14 @@ class TrialPlayer:
             if pacer.due(t, 0.1) is None:
                 continue
             i = k % n
-            m = tr.markers[i]
+            m, gaps = tr.markers[i], 0
             if imp.noise_pos:
                 m = m + rng.normal(0.0, imp.noise_pos, m.shape)
             if imp.gap:
                 hide = rng.random(len(m)) < imp.gap
-                self.counters.gaps += int(np.count_nonzero(hide & ~np.isnan(m[:, 0])))
+                gaps = int(np.count_nonzero(hide & ~np.isnan(m[:, 0])))
                 m = np.where(hide[:, None], np.nan, m)
-            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i])
+            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps)
             k += 1
 
     def play(self, send: Callable[[TrialFrame], None]) -> PlayCounters:
@@ -218,3 +221,4 @@ class TrialPlayer:
             return
         c.first = f.number if c.first < 0 else c.first
         c.last = f.number
+        c.gaps += f.gaps

@@ -257,7 +257,17 @@ class QtmServer:
         with self._lock:
             clients, self.clients = self.clients, []
         for c in clients:
+            try:
+                c.conn.shutdown(socket.SHUT_RDWR)  # wakes the client's serving thread, tells the client
+            except OSError:
+                pass
             c.conn.close()
+
+    def join(self) -> None:
+        """Wait until the trial has been played (forever with loop; Ctrl-C interrupts)."""
+        camera = self._threads[-1]
+        while camera.is_alive():
+            camera.join(0.5)
 
     def close(self) -> None:
         self.player.stop.set()

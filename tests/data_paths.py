@@ -6,3 +6,4 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
 BANDAI = DATA / "bvh" / "bandai"
 OP3_URDF = DATA / "robots" / "robotis_op3.urdf"
+C3D = DATA / "c3d"

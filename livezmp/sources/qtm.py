@@ -165,7 +165,7 @@ class QtmSource:
             await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
             for task in [*waits, streaming]:
                 task.cancel()
-        except (qtm_rt.QRTCommandException, asyncio.TimeoutError, InputError) as e:
+        except (TimeoutError, qtm_rt.QRTCommandException, InputError) as e:
             self._failure = str(e)
         finally:
             if conn.has_transport():
@@ -180,7 +180,7 @@ class QtmSource:
             self.errors.report("disconnected", f"{self.name}: connection lost; retrying every {self.retry:g} s")
             try:
                 await asyncio.wait_for(self._stop.wait(), self.retry)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
 
     def _on_packet(self, packet) -> None:

@@ -1,0 +1,131 @@
+"""A simulated OptiTrack Motive NatNet server (protocol 3.1, unicast) over UDP loopback.
+
+As Motive does: a command socket (``command_port``, 1510 by default) answers connect
+with server info (the data port, a 10 MHz high-resolution clock), model-definition
+requests with the marker set and force plates, keep-alives silently, anything else
+with "unrecognised request"; every frame of data goes to each connected client's
+address at ``data_port`` (1511 by default; Motive's setting, which the client binds).
+Positions are in metres with y up (Motive's streaming default): a z-up trial is turned
+(x, y, z) → (x, z, −y). Force plates stream Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m,
+centre of pressure) in the same axes. Occluded markers are sent as (0, 0, 0), as Motive
+sends them in marker sets. :meth:`close` stops answering and sending (Motive quits).
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import numpy as np
+
+from livezmp.sources import natnet_protocol as nn
+from sim_devices.mocap_trial import Impairments, MocapTrial, PlayCounters, TrialFrame, TrialPlayer
+
+CLOCK_HZ = 10_000_000
+CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz", "Cx", "Cy", "Cz")
+
+
+def to_y_up(trial: MocapTrial) -> np.ndarray:
+    """Rotation (3, 3) taking the trial's axes to Motive's y-up axes."""
+    if trial.up == "+y":
+        return np.eye(3)
+    if trial.up == "+z":
+        return np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+    raise ValueError(f"{trial.source}: up axis {trial.up}: only +z and +y trials are turned to Motive's axes")
+
+
+class NatNetServer:
+    """Serves ``trial`` over NatNet on ``host``; ``command_port`` 0 = any free port."""
+
+    def __init__(self, trial: MocapTrial, command_port: int = 0, data_port: int = 1511, host: str = "127.0.0.1",
+                 impairments: Impairments | None = None, speed: float = 1.0, loop: bool = True,
+                 max_frames: int | None = None, name: str = "trial"):
+        self.trial, self.data_port, self.set_name = trial, data_port, name
+        self.R = to_y_up(trial)
+        self.player = TrialPlayer(trial, impairments, speed, loop, max_frames)
+        self.cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.cmd.bind((host, command_port))
+        self.cmd.settimeout(0.1)
+        self.host, self.command_port = host, self.cmd.getsockname()[1]
+        self.data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.clients: set[str] = set()
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._t0 = time.monotonic()
+        self._threads = [threading.Thread(target=self._serve, name="natnet-command", daemon=True)]
+        self._threads[0].start()
+
+    @property
+    def counters(self) -> PlayCounters:
+        return self.player.counters
+
+    def modeldef(self) -> nn.ModelDef:
+        plates = tuple(nn.ForcePlateDef(i + 1, f"SIM{i + 1}", float(np.linalg.norm(c[0] - c[3])),
+                                        float(np.linalg.norm(c[0] - c[1])), c @ self.R.T, CHANNELS)
+                       for i, c in enumerate(self.trial.corners))
+        return nn.ModelDef({self.set_name: self.trial.labels}, plates)
+
+    def start(self) -> NatNetServer:
+        t = threading.Thread(target=self.player.play, args=(self._frame,), name="natnet-camera", daemon=True)
+        self._threads.append(t)
+        t.start()
+        return self
+
+    def _serve(self) -> None:
+        while not self._closing.is_set():
+            try:
+                data, addr = self.cmd.recvfrom(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            try:
+                kind, _ = nn.split(data)
+            except nn.NatNetError:
+                continue
+            if kind == nn.CONNECT:
+                with self._lock:
+                    self.clients.add(addr[0])
+                info = nn.ServerInfo("Motive", (2, 3, 0, 0), nn.VERSION, CLOCK_HZ, self.data_port)
+                reply = nn.message(nn.SERVERINFO, nn.pack_server_info(info))
+            elif kind == nn.REQUEST_MODELDEF:
+                reply = nn.message(nn.MODELDEF, nn.pack_modeldef(self.modeldef()))
+            elif kind == nn.KEEPALIVE:
+                continue
+            elif kind == nn.DISCONNECT:
+                with self._lock:
+                    self.clients.discard(addr[0])
+                continue
+            else:
+                reply = nn.message(nn.UNRECOGNIZED)
+            self.cmd.sendto(reply, addr)
+
+    def _frame(self, f: TrialFrame) -> None:
+        pos = np.nan_to_num(f.markers @ self.R.T, nan=0.0)
+        plates = {i + 1: np.concatenate([self.R @ f.force[i], self.R @ f.moment[i], self.R @ f.cop[i]])
+                  for i in range(len(f.force))}
+        ticks = int((time.monotonic() - self._t0) * CLOCK_HZ)
+        packet = nn.message(nn.FRAMEOFDATA, nn.pack_frame(nn.FrameOfData(f.number, {self.set_name: pos}, plates,
+                                                                          f.t, ticks)))
+        with self._lock:
+            clients = list(self.clients)
+        for ip in clients:
+            try:
+                self.data.sendto(packet, (ip, self.data_port))
+            except OSError:
+                pass
+
+    def join(self) -> None:
+        """Wait until the trial has been played (forever with loop; Ctrl-C interrupts)."""
+        camera = self._threads[-1]
+        while camera.is_alive():
+            camera.join(0.5)
+
+    def close(self) -> None:
+        self.player.stop.set()
+        self._closing.set()
+        for t in self._threads:
+            t.join(5.0)
+        self.cmd.close()
+        self.data.close()

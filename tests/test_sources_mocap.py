@@ -1,0 +1,233 @@
+"""Live capture streams through the real clients (qtm-rt, pylsl, livezmp's NatNet client)
+against the simulated servers playing a real C3D gait trial: markers and force plates
+arrive equal to the file, rate / units / up axis are read from the stream, drops, late
+frames and gaps are counted exactly, and a server that goes away is re-connected."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+import uuid
+
+import numpy as np
+import pytest
+from data_paths import C3D
+from sim_support import wait_until
+
+from livezmp.errors import InputError
+from livezmp.sources.mocap_factory import open_mocap_source
+from livezmp.sources.plate_frame import plate_axes
+from sim_devices.lsl_publisher import LslPublisher
+from sim_devices.mocap_trial import Impairments, load_c3d_trial
+from sim_devices.natnet_server import NatNetServer
+from sim_devices.qtm_server import QtmServer
+
+TRIAL = C3D / "walk_plugingait_forceplates.c3d"
+IMPAIRED = Impairments(noise_pos=0.0, gap=0.02, drop=0.04, late=0.04, seed=7)
+F32 = 2e-6  # m / N: the streams carry float32
+IDENTITY = np.eye(3)
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return load_c3d_trial(str(TRIAL))
+
+
+def collect(src, until, deadline: float = 10.0) -> list:
+    """Frames read until ``until(frames)`` holds or ``deadline`` s pass."""
+    out, end = [], time.monotonic() + deadline
+    while not until(out) and time.monotonic() < end:
+        f = src.read(0.05)
+        if f is not None:
+            out.append(f)
+    return out
+
+
+def assert_equal_to_trial(frames, trial, number, R=IDENTITY):
+    """Every frame's markers (those not made missing) and plates equal the trial's frame
+    ``number(f)`` (in axes R·lab); a marker missing in the file is missing in the stream."""
+    for f in frames:
+        i = number(f)
+        seen = ~np.isnan(f.markers[:, 0])
+        assert not np.any(seen & np.isnan(trial.markers[i, :, 0]))
+        np.testing.assert_allclose(f.markers[seen] @ R, trial.markers[i][seen], atol=F32)
+        np.testing.assert_allclose(f.plates.force @ R, trial.force[i], atol=F32 * 1e3)
+        np.testing.assert_allclose(f.plates.cop @ R, trial.cop[i], atol=F32, equal_nan=True)
+
+
+def expected_gaps(trial, frames, number) -> int:
+    """Marker samples the stream left missing that the file has."""
+    return sum(int(np.count_nonzero(np.isnan(f.markers[:, 0]) & ~np.isnan(trial.markers[number(f), :, 0])))
+               for f in frames)
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_plate_axes_from_corners():
+    # a 600 x 400 mm plate turned 30° about the vertical, centred at (1, 2, 0): C3D corner order
+    a = np.radians(30)
+    Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    local = np.array([[0.3, 0.2, 0], [-0.3, 0.2, 0], [-0.3, -0.2, 0], [0.3, -0.2, 0]])
+    R, origin = plate_axes(local @ Rz.T + [1, 2, 0])
+    np.testing.assert_allclose(R, Rz @ np.diag([1, 1, 1]), atol=1e-12)
+    np.testing.assert_allclose(origin, [1, 2, 0], atol=1e-12)
+
+
+def test_qtm_markers_and_plates_arrive_with_exact_counts(trial):
+    server = QtmServer(trial, impairments=IMPAIRED, speed=0, loop=False)
+    src = open_mocap_source(f"qtm://127.0.0.1:{server.port}")
+    assert (src.nominal_dt, src.params.up, src.params.labels) == (0.01, "+z", trial.labels)
+    assert wait_until(lambda: server.streaming_clients() == 1)
+    server.start()
+    server.join()
+    view = server.counters.receiver_view()
+    frames = collect(src, lambda out: len(out) == view["delivered"])
+    assert [src.stats.delivered, src.stats.late, src.stats.lost] == [view["delivered"], view["late"], view["lost"]]
+    assert view["late"] > 0 and view["lost"] > view["late"]
+    assert_equal_to_trial(frames, trial, lambda f: f.frame - 1)
+    assert expected_gaps(trial, frames, lambda f: f.frame - 1) == server.counters.gaps > 0
+    assert np.diff([f.t for f in frames]).min() > 0 and all(f.latency is None for f in frames)
+    src.close()
+    server.close()
+
+
+def test_qtm_server_that_goes_away_is_reconnected(trial):
+    server = QtmServer(trial, speed=2.0, loop=True).start()
+    port = server.port
+    src = open_mocap_source(f"qtm://127.0.0.1:{port}")
+    assert len(collect(src, lambda out: len(out) >= 5)) >= 5
+    server.close()
+    assert wait_until(lambda: any(e.kind == "disconnected" for e in src.errors.drain()), 3.0)
+    server = QtmServer(trial, port=port, speed=2.0, loop=True).start()  # QTM back on its port
+    after = collect(src, lambda out: len(out) >= 5)
+    assert len(after) >= 5 and src.stats.reconnects == 1
+    src.close()
+    server.close()
+
+
+def test_qtm_refuses_what_it_cannot_serve(trial):
+    server = QtmServer(trial)
+    with pytest.raises(InputError, match="version not accepted"):
+        open_mocap_source(f"qtm://127.0.0.1:{server.port}?version=1.2")
+    with pytest.raises(InputError, match="unknown parameter 'rate'"):
+        open_mocap_source(f"qtm://127.0.0.1:{server.port}?rate=3")
+    server.close()
+
+
+def lsl_pair(trial, imp=None, **kw):
+    name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
+    pub = LslPublisher(trial, name=name, source_id=name, impairments=imp, **kw)
+    src = open_mocap_source(f"lsl://{name}")
+    assert wait_until(pub.has_consumers, 5.0)
+    return pub, src
+
+
+def test_lsl_markers_and_plates_arrive_with_exact_counts(trial):
+    pub, src = lsl_pair(trial, IMPAIRED, speed=4.0)
+    assert (src.rate, src.up, src.labels, src.plate_names) == (100.0, "+z", trial.labels, trial.plate_names)
+    pub.run()
+    view = pub.counters.receiver_view()
+    frames = collect(src, lambda out: len(out) == view["delivered"])
+    assert [src.stats.delivered, src.stats.late, src.stats.lost] == [view["delivered"], view["late"], view["lost"]]
+    assert_equal_to_trial(frames, trial, lambda f: f.frame)
+    assert expected_gaps(trial, frames, lambda f: f.frame) == pub.counters.gaps > 0
+    src.close()
+
+
+def test_lsl_stream_without_up_axis_needs_one(trial):
+    import pylsl
+
+    from sim_devices.lsl_publisher import marker_info
+
+    name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
+    info = marker_info(trial, name, name)
+    bare = pylsl.StreamInfo(name, "MoCap", info.channel_count(), 100.0, pylsl.cf_float32, name)
+    chans = bare.desc().append_child("channels")
+    for label in trial.labels:
+        for axis in "XYZ":
+            c = chans.append_child("channel")
+            c.append_child_value("label", f"{label}_{axis}")
+            c.append_child_value("type", f"Position{axis}")
+            c.append_child_value("unit", "mm")
+    outlet = pylsl.StreamOutlet(bare)
+    with pytest.raises(InputError, match=r"does not say its up axis.*\?up=z"):
+        open_mocap_source(f"lsl://{name}?plates=none")
+    src = open_mocap_source(f"lsl://{name}?plates=none&up=y")
+    assert src.up == "+y" and src.labels == trial.labels and src.plates is None
+    src.close()
+    del outlet
+
+
+def test_lsl_publisher_that_goes_away_is_reconnected(trial):
+    pub, src = lsl_pair(trial, speed=1.0, loop=True, plates=False)
+    player = threading.Thread(target=pub.run, daemon=True)
+    player.start()
+    before = collect(src, lambda out: len(out) >= 20)
+    # played in real time and read as it comes: latency = stamp (the frame's due time, on
+    # the same LSL clock) to arrival; the reader polls at 2 kHz
+    lat = np.array([f.latency for f in before[5:]])
+    assert np.all(lat > 0) and np.all(lat < 0.05), lat
+    pub.close()
+    player.join(5.0)
+    del pub
+    collect(src, lambda out: False, deadline=0.7)  # what was in flight, then silence
+    pub2 = LslPublisher(trial, name=src.name[len("lsl://"):], source_id=src.name[len("lsl://"):], speed=1.0,
+                        loop=True, plates=False)
+    player = threading.Thread(target=pub2.run, daemon=True)
+    player.start()
+    after = collect(src, lambda out: len(out) >= 5, deadline=15.0)
+    assert len(after) >= 5 and src.stats.reconnects == 1
+    pub2.stop()
+    player.join(5.0)
+    src.close()
+
+
+def test_natnet_markers_and_plates_arrive_with_exact_counts(trial):
+    data_port = free_udp_port()
+    server = NatNetServer(trial, data_port=data_port, impairments=IMPAIRED, speed=4.0, loop=False)
+    src = open_mocap_source(f"natnet://127.0.0.1:{server.command_port}?data_port={data_port}")
+    assert (src.up, src.labels, len(src.plate_names)) == ("+y", trial.labels, len(trial.plate_names))
+    server.start()
+    server.join()
+    view = server.counters.receiver_view()
+    frames = collect(src, lambda out: len(out) == view["delivered"])
+    assert [src.stats.delivered, src.stats.late, src.stats.lost] == [view["delivered"], view["late"], view["lost"]]
+    assert_equal_to_trial(frames, trial, lambda f: f.frame, R=server.R)  # stream: y up
+    assert expected_gaps(trial, frames, lambda f: f.frame) == server.counters.gaps > 0
+    assert src.nominal_dt == pytest.approx(0.01)
+    # a datagram that is not NatNet is counted, never delivered
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(b"\x07\x00\xff\xff junk", ("127.0.0.1", data_port))
+    assert collect(src, lambda out: src.stats.malformed == 1, deadline=2.0) == []
+    src.close()
+    server.close()
+
+
+def test_natnet_server_that_goes_away_is_reconnected(trial):
+    data_port = free_udp_port()
+    server = NatNetServer(trial, data_port=data_port, speed=2.0, loop=True).start()
+    port = server.command_port
+    src = open_mocap_source(f"natnet://127.0.0.1:{port}?data_port={data_port}")
+    assert len(collect(src, lambda out: len(out) >= 5)) >= 5
+    server.close()
+    collect(src, lambda out: False, deadline=0.5)  # what was in flight, then silence
+    server = NatNetServer(trial, command_port=port, data_port=data_port, speed=2.0, loop=True)
+    src.read(1.5)  # past the retry interval: the client connects again
+    assert wait_until(lambda: server.clients, 1.0)
+    server.start()  # numbers from 0 again, below the first server's last: not late
+    after = collect(src, lambda out: len(out) >= 5)
+    assert len(after) >= 5 and src.stats.reconnects == 1 and src.stats.late == 0
+    assert after[0].frame == 0
+    src.close()
+    server.close()
+
+
+def test_natnet_nobody_there():
+    port, data_port = free_udp_port(), free_udp_port()
+    with pytest.raises(InputError, match="no NatNet server answered"):
+        open_mocap_source(f"natnet://127.0.0.1:{port}?data_port={data_port}&timeout=0.3")
