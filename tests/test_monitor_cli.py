@@ -56,7 +56,7 @@ def test_record_then_replay_gives_the_same_analysis(tmp_path, capsys):
 
 def copy_with(src, dst, change) -> None:
     """Copy a recording message by message (mcap reader and writer), passing each decoded
-    message through ``change(topic, message)``."""
+    JSON message through ``change(topic, message)`` (Foxglove's protobuf scene as it is)."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
         w = Writer(out)
@@ -70,7 +70,8 @@ def copy_with(src, dst, change) -> None:
             if channel.id not in channels:
                 sid = w.register_schema(schema.name, schema.encoding, schema.data)
                 channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
-            data = json.dumps(change(channel.topic, json.loads(msg.data))).encode()
+            data = (json.dumps(change(channel.topic, json.loads(msg.data))).encode()
+                    if channel.message_encoding == "json" else msg.data)
             w.add_message(channels[channel.id], msg.log_time, data, msg.publish_time, msg.sequence)
         w.finish()
 

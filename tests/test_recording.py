@@ -21,7 +21,7 @@ from livezmp.errors import InputError
 from livezmp.model.body_spec import body_from_spec, read_skeleton, skeleton_body
 from livezmp.recording.reader import iter_messages, open_recording
 from livezmp.recording.recover import recover
-from livezmp.recording.schemas import SCHEMAS, result_message
+from livezmp.recording.schemas import SCHEMAS
 from livezmp.recording.writer import Recorder
 
 WALK = BANDAI / "walk_normal_001.bvh"
@@ -44,7 +44,7 @@ def record(path, walk, n: int = 200, **kw) -> list:
         rec.input(k, k * motion.frame_time, motion.frames[k], None)
         r = pipe.step(k * motion.frame_time, motion.frames[k])
         if r is not None:
-            rec.write("/result", result_message(r))
+            rec.result(r)
             out.append(r)
     rec.close({"inputs": n})
     return out
@@ -62,14 +62,15 @@ def test_recording_reads_back_with_valid_schemas(tmp_path, walk):
     with open(path, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
         summary = reader.get_summary()
-        assert {c.message_encoding for c in summary.channels.values()} == {"json"}  # what Foxglove reads
-        assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+        json_topics = {c.topic for c in summary.channels.values() if c.message_encoding == "json"}
+        assert json_topics == set(SCHEMAS)  # the rest: Foxglove's protobuf scene (test_recording_foxglove)
         validators = {}
         for s in summary.schemas.values():
-            schema = json.loads(s.data)
-            jsonschema.Draft202012Validator.check_schema(schema)
-            validators[s.id] = jsonschema.Draft202012Validator(schema)
-        for _, channel, msg in reader.iter_messages():
+            if s.encoding == "jsonschema":
+                schema = json.loads(s.data)
+                jsonschema.Draft202012Validator.check_schema(schema)
+                validators[s.id] = jsonschema.Draft202012Validator(schema)
+        for _, channel, msg in reader.iter_messages(topics=sorted(json_topics)):
             validators[channel.schema_id].validate(json.loads(msg.data))
     inputs = list(iter_messages(path, "/input"))
     np.testing.assert_array_equal([m["channels"] for m in inputs], motion.frames[:200])  # exact: JSON floats

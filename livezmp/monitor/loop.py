@@ -27,7 +27,6 @@ from livezmp.errors import InputError
 from livezmp.gait.channels import reference_channel, tag_channels
 from livezmp.gait.live import GaitLiveEstimator
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
-from livezmp.recording.schemas import result_message
 from livezmp.recording.writer import Recorder
 from livezmp.sources.interface import Source
 
@@ -144,7 +143,7 @@ class Monitor:
         self._track_gait(r)
         ev = self.alarms.update(r)
         if self.recorder:
-            self.recorder.write("/result", result_message(r))
+            self.recorder.result(r)
         if ev is not None:
             self._alarm(ev)
         if self.corrector is not None:

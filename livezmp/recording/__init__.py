@@ -7,6 +7,8 @@ metadata record, and the monitor settings as ``livezmp.session``, so ``livezmp r
 rebuilds the same body and re-runs the same analysis.
 
 - :mod:`.schemas`: channels, their JSON schemas, and the messages made from results;
+- :mod:`.foxglove`: beside them, the balance scene in Foxglove's own protobuf schemas
+  (ZMP, CoM, CoP, support polygon, footprints), which Foxglove's 3D panel draws as it is;
 - :mod:`.writer`: :class:`~.writer.Recorder` (crash-safe chunks) and
   :class:`~.writer.BackgroundWriter` (a real-time thread's queue, written in a thread of its own);
 - :mod:`.reader`: :func:`~.reader.open_recording`, :func:`~.reader.iter_messages`;

@@ -25,7 +25,8 @@ from mcap.writer import CompressionType, Writer
 
 from livezmp.errors import InputError
 from livezmp.model.body_spec import BodySpec
-from livezmp.recording.schemas import BODY_PREFIX, PROFILE, SCHEMAS, input_message
+from livezmp.recording import foxglove
+from livezmp.recording.schemas import BODY_PREFIX, PROFILE, SCHEMAS, input_message, result_message
 
 CHUNK_SECONDS = 0.5
 IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
@@ -59,7 +60,8 @@ class Recorder:
         for topic, (name, schema) in {**SCHEMAS, **(extra_schemas or {})}.items():
             sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
             self.channels[topic] = self.writer.register_channel(topic, "json", sid)
-        self.counts = dict.fromkeys(self.channels, 0)
+        self.scene_channels = foxglove.register(self.writer)
+        self.counts = dict.fromkeys(self.channels, 0) | dict.fromkeys(self.scene_channels, 0)
         self.writer.flush()  # header, body and session on disk before the first frame
         self._last_flush = time.monotonic()
         self._closed = False
@@ -72,6 +74,15 @@ class Recorder:
                                 sequence=self.counts[topic])
         self.counts[topic] += 1
         self.tick()
+
+    def result(self, r, cops=(), log_time_ns: int | None = None) -> None:
+        """The ``/result`` of a FrameResult ``r`` and its Foxglove scene (with the plates'
+        centres of pressure ``cops``, each (3,) m in the result's frame), at one log time."""
+        now = time.time_ns() if log_time_ns is None else log_time_ns
+        self.write("/result", result_message(r), now)
+        for topic, data in foxglove.scene_messages(r, now, cops).items():
+            self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
+            self.counts[topic] += 1
 
     def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> None:
         self.write("/input", input_message(index, t, channels, contacts))
