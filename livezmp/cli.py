@@ -121,6 +121,8 @@ def _sink_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tui", action="store_true", help="live status table in the terminal")
     p.add_argument("--alarm-command", metavar="CMD",
                    help="run CMD on every alarm event (LIVEZMP_ALARM* environment variables)")
+    p.add_argument("--summary-json", metavar="FILE",
+                   help="at exit, write frames in/analysed/dropped, latency percentiles and estimator settings")
 
 
 def _monitor_commands(sub: argparse._SubParsersAction) -> None:

@@ -205,7 +205,9 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
 
     helper = threading.Thread(target=stream_then_stop)
     helper.start()
-    rc = main(["monitor", f"udp://127.0.0.1:{port}", "--skeleton", str(WALK), "--record", str(path)])
+    summary_path = tmp_path / "summary.json"
+    rc = main(["monitor", f"udp://127.0.0.1:{port}", "--skeleton", str(WALK), "--record", str(path),
+               "--summary-json", str(summary_path)])
     helper.join(10)
     out = capsys.readouterr().out
     assert rc == 0 and f"source: udp://127.0.0.1:{port}" in out
@@ -213,5 +215,15 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
     dup, late = (int(re.search(rf"{k} (\d+)", out).group(1)) for k in ("duplicate", "late"))
     inputs = open_recording(path).counts["/input"]
     assert dup == c.duplicated and inputs + dup + late == c.sent
+    summary = json.loads(summary_path.read_text())
+    assert summary["frames_in"] == summary["analysed_frames"] == inputs  # the last `lag` frames flushed at exit
+    assert summary["dropped"] == {"malformed": 0, "oversized": 0, "duplicate": dup, "late": late, "rejected": 0,
+                                  "overflow": 0, "total": dup + late}
+    assert summary["lost"] == c.dropped + late  # numbers skipped: the dropped frames and those that came late
+    lat = summary["latency"]["result_after_input"]
+    assert 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
+    assert summary["latency"]["result_after_source_stamp"] is None  # UDP frames' times are the sender's clock
+    est = summary["estimator"]  # 30 Hz skeleton: the 0.1 s lag is 3 frames
+    assert (est["lag_frames"], est["lag_s"], est["lag_ms"]) == (3, 0.1, pytest.approx(100.0))
     assert main(["replay", str(path)]) == 0
     assert "same analysis" in capsys.readouterr().out

@@ -24,6 +24,7 @@ from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
 from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
+from livezmp.offline.report import write_json
 from livezmp.recording.reader import iter_messages
 from livezmp.recording.recover import recover
 from livezmp.recording.writer import Recorder
@@ -86,6 +87,8 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
         if dashboard:
             dashboard.stop()
     _print_summary(summary)
+    if getattr(args, "summary_json", None):
+        write_json(monitor.summary_json(), args.summary_json)
     return summary
 
 

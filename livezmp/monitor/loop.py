@@ -26,6 +26,7 @@ from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.gait.channels import reference_channel, tag_channels
 from livezmp.gait.live import GaitLiveEstimator
+from livezmp.histogram import TimingHistogram
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent, AlarmTracker
 from livezmp.recording.writer import Recorder
 from livezmp.sources.interface import Source
@@ -80,6 +81,10 @@ class Monitor:
         self._gait: tuple[int, GaitLiveEstimator] | None = None
         self._gait_tried = False
         self.cadence: float | None = None
+        # per analysed frame: result ready − arrival of the input that completed it (the
+        # work beyond the estimator's lag), and − the source's own stamp where it has one
+        self.beyond_lag = TimingHistogram(bin_s=1e-5, span_s=1.0)
+        self.from_stamp = TimingHistogram(bin_s=1e-5, span_s=1.0)
 
     # -- status ---------------------------------------------------------------
 
@@ -103,6 +108,23 @@ class Monitor:
             "lag_ms": None if self.source.nominal_dt is None else 1000.0 * self.pipeline.lag * self.source.nominal_dt,
             "cadence": self.cadence, "dropped": st.dropped, "lost": st.lost, "source_stats": st.as_dict(),
             "recording": str(self.recorder.path) if self.recorder else None,
+        }
+
+    def summary_json(self) -> dict:
+        """What ``--summary-json`` writes: frames in / analysed / dropped per reason, latency
+        percentiles (ms), the estimator's settings and lag, source counters."""
+        st, est = self.source.stats.as_dict(), self.pipeline.config.estimator
+        dropped = {k: v for k, v in st.items() if k not in ("delivered", "lost", "reconnects")}
+        dt, lag = self.source.nominal_dt, self.pipeline.lag
+        return {
+            "source": self.source.name, "frames_in": self.inputs, "analysed_frames": self.results,
+            "dropped": {**dropped, "total": sum(dropped.values())}, "lost": st["lost"],
+            "reconnects": st["reconnects"], "out_of_support": self.out_of_support, "alarms": self.alarms.count,
+            "latency": {"result_after_input": self.beyond_lag.summary_ms(),
+                        "result_after_source_stamp": self.from_stamp.summary_ms() if self.from_stamp.count else None},
+            "estimator": {"lag_frames": lag, "lag_ms": None if dt is None else 1e3 * lag * dt,
+                          "window_s": est.window_s, "lag_s": est.lag_s, "cutoff_hz": est.cutoff_hz,
+                          "kalman_corner_hz": est.kalman_corner_hz, "rate_hz": est.rate_hz},
         }
 
     # -- per frame ------------------------------------------------------------
@@ -185,6 +207,10 @@ class Monitor:
         r = self.pipeline.step(frame.t, frame.channels, frame.contacts)
         if r is not None:
             self._result(r)
+            done = time.monotonic() - frame.received
+            self.beyond_lag.add(done)
+            if frame.latency is not None:
+                self.from_stamp.add(frame.latency + done)
         if k % 64 == 0:
             self._idle()
         return True

@@ -31,12 +31,15 @@ class SourceFrame:
     """One input frame: ``t`` s on the source's clock (strictly increasing);
     ``channels`` (nq,) raw values in the body's channel order and the input's units
     (BVH: file length unit and degrees; robot: m and rad); ``contacts`` (left, right)
-    from foot sensors, None to detect them; ``received`` ``time.monotonic()`` s at arrival."""
+    from foot sensors, None to detect them; ``received`` ``time.monotonic()`` s at arrival;
+    ``latency`` s from the source's own timestamp to arrival, when its clock can be
+    related to this machine's (an LSL stream), else None."""
 
     t: float
     channels: np.ndarray
     contacts: tuple[bool, bool] | None = None
     received: float = 0.0
+    latency: float | None = None
 
 
 @dataclass
