@@ -33,7 +33,7 @@ def recording(tmp_path_factory):
         r = pipe.step(k * sk.motion.frame_time, sk.motion.frames[k])
         if r is not None:
             cop = None if r.zmp is None else np.array([r.zmp[0] + 0.01, r.zmp[1], r.ground_z])
-            rec.result(r, [] if cop is None else [cop], log_time_ns=10**9 + k)
+            rec.result(r, cop, log_time_ns=10**9 + k)
             results.append((r, cop))
     rec.close()
     return path, results

@@ -113,7 +113,7 @@ class ReplayCheck:
         self.compared = self.support_diff = self.raised = 0
         self.max_zmp_diff = 0.0
 
-    def publish(self, r: FrameResult) -> None:
+    def publish(self, r: FrameResult, cop=None) -> None:
         while self._next is not None and self._next["index"] < r.index:
             self._next = next(self._recorded, None)
         if self._next is None or self._next["index"] != r.index:

@@ -101,7 +101,7 @@ class DashboardServer:
         self.files = {path: (resources.files("livezmp.monitor").joinpath("static", name).read_bytes(), ctype)
                       for path, (name, ctype) in STATIC.items()}
         self._lock = threading.Lock()
-        self._ring: deque[tuple[int, FrameResult]] = deque(maxlen=RING)
+        self._ring: deque[tuple] = deque(maxlen=RING)  # (seq, FrameResult, measured CoP or None)
         self._alarms: deque[tuple[int, dict]] = deque(maxlen=MAX_ALARMS)
         self._seq = 0
         self._alarm_id = 0
@@ -132,11 +132,12 @@ class DashboardServer:
             raise InputError(f"--dashboard {self.host}:{self.port}: cannot listen: {self._error.strerror}")
         return self.url
 
-    def publish(self, r: FrameResult) -> None:
-        """Offer one analysed frame to the page (cheap; never blocks on clients)."""
+    def publish(self, r: FrameResult, cop=None) -> None:
+        """Offer one analysed frame (and its measured centre of pressure, internal frame)
+        to the page (cheap; never blocks on clients)."""
         with self._lock:
             self._seq += 1
-            self._ring.append((self._seq, r))
+            self._ring.append((self._seq, r, cop))
         self._wake()
 
     def alarm(self, ev: AlarmEvent) -> None:
@@ -198,11 +199,11 @@ class DashboardServer:
 
     def _message(self, last_seq: int, last_alarm: int) -> tuple[str, int, int]:
         with self._lock:
-            ring = [(s, r) for s, r in self._ring if s > last_seq][-MAX_POINTS:]
+            ring = [item for item in self._ring if item[0] > last_seq][-MAX_POINTS:]
             alarms = [(i, a) for i, a in self._alarms if i > last_alarm]
         msg = {"type": "update", "status": self.status(), "alarms": [a for _, a in alarms],
-               "points": [plot_point(r) for _, r in ring],
-               "frame": frame_snapshot(ring[-1][1]) if ring else None}
+               "points": [plot_point(r) for _, r, _ in ring],
+               "frame": frame_snapshot(*ring[-1][1:]) if ring else None}
         return (json.dumps(msg, separators=(",", ":")), ring[-1][0] if ring else last_seq,
                 alarms[-1][0] if alarms else last_alarm)
 

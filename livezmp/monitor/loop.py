@@ -21,6 +21,7 @@ from typing import Protocol
 
 import numpy as np
 
+from livezmp.balance.foot_sensors import CopVsZmp
 from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
@@ -50,10 +51,11 @@ class MonitorSummary:
 
 
 class Listener(Protocol):
-    """Gets every analysed frame and alarm event, on the monitor thread; must be quick
-    (the dashboard only queues them)."""
+    """Gets every analysed frame (with the plates' measured centre of pressure, internal
+    frame, or None) and alarm event, on the monitor thread; must be quick (the dashboard
+    only queues them)."""
 
-    def publish(self, r: FrameResult) -> None: ...
+    def publish(self, r: FrameResult, cop: np.ndarray | None = None) -> None: ...
 
     def alarm(self, ev: AlarmEvent) -> None: ...
 
@@ -85,6 +87,9 @@ class Monitor:
         # work beyond the estimator's lag), and − the source's own stamp where it has one
         self.beyond_lag = TimingHistogram(bin_s=1e-5, span_s=1.0)
         self.from_stamp = TimingHistogram(bin_s=1e-5, span_s=1.0)
+        # plates' CoP (internal frame) of the inputs not yet analysed, by input index
+        self._cops: deque[tuple[int, np.ndarray]] = deque(maxlen=self.pipeline.lag + 8)
+        self.cop_vs_zmp = CopVsZmp()
 
     # -- status ---------------------------------------------------------------
 
@@ -125,6 +130,7 @@ class Monitor:
             "estimator": {"lag_frames": lag, "lag_ms": None if dt is None else 1e3 * lag * dt,
                           "window_s": est.window_s, "lag_s": est.lag_s, "cutoff_hz": est.cutoff_hz,
                           "kalman_corner_hz": est.kalman_corner_hz, "rate_hz": est.rate_hz},
+            "cop_vs_zmp": self.cop_vs_zmp.summary() if self.cop_vs_zmp.readings else None,
         }
 
     # -- per frame ------------------------------------------------------------
@@ -164,8 +170,12 @@ class Monitor:
             self.out_of_support += 1
         self._track_gait(r)
         ev = self.alarms.update(r)
+        cop = self._measured_cop(r.index)
+        if cop is not None:
+            cop = None if np.isnan(cop[0]) else cop  # plates present, unloaded
+            self.cop_vs_zmp.add(cop, r.zmp, r.clamped)
         if self.recorder:
-            self.recorder.result(r)
+            self.recorder.result(r, cop)
         if ev is not None:
             self._alarm(ev)
         if self.corrector is not None:
@@ -177,9 +187,18 @@ class Monitor:
                     "delta": {"x": float(c.delta[0]), "y": float(c.delta[1]), "z": float(c.delta[2])},
                     "offsets": {names[i]: float(c.offsets[i]) for i in np.flatnonzero(c.offsets)}})
         for li in self.listeners:
-            li.publish(r)
+            li.publish(r, cop)
         if self.view:
             self.view.update(self.status())
+
+    def _measured_cop(self, index: int) -> np.ndarray | None:
+        """The plates' CoP of input ``index`` (internal frame), compared with the ZMP by the
+        caller's result; None when the source has no plates."""
+        while self._cops and self._cops[0][0] < index:
+            self._cops.popleft()
+        if not self._cops or self._cops[0][0] != index:
+            return None
+        return self._cops.popleft()[1]
 
     def _idle(self) -> None:
         for err in self.source.errors.drain():
@@ -204,6 +223,8 @@ class Monitor:
             self._arrivals.popleft()
         if self.recorder:
             self.recorder.input(k, frame.t, frame.channels, frame.contacts)
+        if frame.cop is not None:
+            self._cops.append((k, self.source.body.world_from_input @ frame.cop))
         r = self.pipeline.step(frame.t, frame.channels, frame.contacts)
         if r is not None:
             self._result(r)

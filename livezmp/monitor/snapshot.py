@@ -14,14 +14,16 @@ def _xy(p) -> list[float] | None:
     return None if p is None else [round(float(p[0]), 5), round(float(p[1]), 5)]
 
 
-def frame_snapshot(r: FrameResult) -> dict:
-    """Top view of one frame: soles, support polygon, ZMP (raw and clamped), CoM, state."""
+def frame_snapshot(r: FrameResult, cop=None) -> dict:
+    """Top view of one frame: soles, support polygon, ZMP (raw and clamped), CoM, state,
+    and the force plates' measured centre of pressure ``cop`` (internal frame) if any."""
     return {
         "index": r.index, "t": round(r.t, 5), "support": r.support, "inside": r.inside,
         "margin": None if r.margin is None else round(float(r.margin), 5),
         "zmp": _xy(r.zmp), "clamped": _xy(r.clamped), "com": _xy(r.com),
         "polygon": [_xy(p) for p in r.polygon],
         "soles": {s: [_xy(p) for p in pts] for s, pts in r.soles.items()},
+        "cop": _xy(cop),
     }
 
 

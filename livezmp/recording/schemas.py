@@ -52,6 +52,8 @@ SCHEMAS = {
             "polygon": {"type": "array", "items": _POINT2, "description": "support polygon, counter-clockwise, m"},
             "soles": {"type": "object", "properties": {s: {"type": "array", "items": _POINT}
                                                        for s in ("left", "right")}},
+            "cop": {**_POINT, "description": "force plates' measured centre of pressure, m (when the source has "
+                                             "plates and they are loaded)"},
         },
         "required": ["index", "t", "support"],
     }),

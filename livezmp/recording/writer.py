@@ -26,7 +26,7 @@ from mcap.writer import CompressionType, Writer
 from livezmp.errors import InputError
 from livezmp.model.body_spec import BodySpec
 from livezmp.recording import foxglove
-from livezmp.recording.schemas import BODY_PREFIX, PROFILE, SCHEMAS, input_message, result_message
+from livezmp.recording.schemas import BODY_PREFIX, PROFILE, SCHEMAS, input_message, point_message, result_message
 
 CHUNK_SECONDS = 0.5
 IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
@@ -75,12 +75,16 @@ class Recorder:
         self.counts[topic] += 1
         self.tick()
 
-    def result(self, r, cops=(), log_time_ns: int | None = None) -> None:
-        """The ``/result`` of a FrameResult ``r`` and its Foxglove scene (with the plates'
-        centres of pressure ``cops``, each (3,) m in the result's frame), at one log time."""
+    def result(self, r, cop: np.ndarray | None = None, log_time_ns: int | None = None) -> None:
+        """The ``/result`` of a FrameResult ``r`` and its Foxglove scene, with the plates'
+        measured centre of pressure ``cop`` (3,) m in the result's frame if any, at one
+        log time."""
         now = time.time_ns() if log_time_ns is None else log_time_ns
-        self.write("/result", result_message(r), now)
-        for topic, data in foxglove.scene_messages(r, now, cops).items():
+        message = result_message(r)
+        if cop is not None:
+            message["cop"] = point_message(cop)
+        self.write("/result", message, now)
+        for topic, data in foxglove.scene_messages(r, now, [] if cop is None else [cop]).items():
             self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
             self.counts[topic] += 1
 

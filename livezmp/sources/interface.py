@@ -33,13 +33,16 @@ class SourceFrame:
     (BVH: file length unit and degrees; robot: m and rad); ``contacts`` (left, right)
     from foot sensors, None to detect them; ``received`` ``time.monotonic()`` s at arrival;
     ``latency`` s from the source's own timestamp to arrival, when its clock can be
-    related to this machine's (an LSL stream), else None."""
+    related to this machine's (an LSL stream), else None; ``cop`` (3,) m the force plates'
+    measured centre of pressure in the input's world frame (NaN when the plates are
+    unloaded), None for a source without plates."""
 
     t: float
     channels: np.ndarray
     contacts: tuple[bool, bool] | None = None
     received: float = 0.0
     latency: float | None = None
+    cop: np.ndarray | None = None
 
 
 @dataclass

@@ -5,7 +5,7 @@ const PLOT_SECONDS = 10;
 const TRAIL_SECONDS = 1;
 const COLORS = {
   grid: "#1d2630", axis: "#33414f", text: "#8795a3", ok: "#3ecf8e", bad: "#ff5b5b", warn: "#ffb84d",
-  left: "#5aa9ff", right: "#ff9f43", com: "#ffe066", poly: "rgba(62,207,142,0.22)", band: "rgba(62,207,142,0.14)",
+  left: "#5aa9ff", right: "#ff9f43", com: "#ffe066", cop: "#c77dff", poly: "rgba(62,207,142,0.22)", band: "rgba(62,207,142,0.14)",
 };
 
 const state = { frame: null, points: [], alarms: [], status: null, hello: null, dirty: true, view: null, messages: 0 };
@@ -57,6 +57,9 @@ function renderStatus() {
   margin.className = f && f.margin !== null ? (f.margin >= 0 ? "good" : "bad") : "";
   $("support").textContent = f ? f.support : "–";
   $("zmp-readout").textContent = f && f.zmp ? `${f.zmp[0].toFixed(3)}, ${f.zmp[1].toFixed(3)}` : "–";
+  $("cop-readout").textContent = f && f.cop ? `${f.cop[0].toFixed(3)}, ${f.cop[1].toFixed(3)}` : "–";
+  $("cop-error").textContent = f && f.cop && f.zmp
+    ? (1000 * Math.hypot(f.zmp[0] - f.cop[0], f.zmp[1] - f.cop[1])).toFixed(0) : "–";
   $("oos").textContent = `${s.out_of_support} (${fmt(s.out_fraction, 1, 100)} %)`;
   $("fps").textContent = `${fmt(s.input_fps, 1)} Hz`;
   $("frames").textContent = `${s.inputs} / ${s.results}`;
@@ -172,6 +175,11 @@ function drawTop() {
     g.fillStyle = f.inside === false ? COLORS.bad : COLORS.ok;
     g.beginPath(); g.arc(x, y, 7, 0, 2 * Math.PI); g.fill();
     g.strokeStyle = "#0b1015"; g.lineWidth = 2; g.stroke();
+  }
+  if (f.cop) { // the plates' measured CoP: a square, beside the computed ZMP's disc
+    const [x, y] = tx(f.cop);
+    g.fillStyle = COLORS.cop; g.fillRect(x - 5, y - 5, 10, 10);
+    g.strokeStyle = "#0b1015"; g.lineWidth = 1.5; g.strokeRect(x - 5, y - 5, 10, 10);
   }
   if (f.com) { // on top: the CoM projection often sits close to the ZMP
     const [x, y] = tx(f.com);
