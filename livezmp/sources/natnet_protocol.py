@@ -33,12 +33,21 @@ class NatNetError(ValueError):
     """A packet that does not parse."""
 
 
+_STRUCTS: dict[str, struct.Struct] = {}
+LABELLED_MARKER = struct.Struct("<i3ffhf")  # id, position, size, params, residual
+
+
 class _Reader:
     def __init__(self, data: bytes, offset: int = 0):
         self.data, self.pos = data, offset
 
+    def skip(self, n: int) -> None:
+        if self.pos + n > len(self.data):
+            raise NatNetError(f"packet ends at byte {len(self.data)}, needs {self.pos + n}")
+        self.pos += n
+
     def take(self, fmt: str):
-        s = struct.Struct("<" + fmt)
+        s = _STRUCTS.get(fmt) or _STRUCTS.setdefault(fmt, struct.Struct("<" + fmt))
         if self.pos + s.size > len(self.data):
             raise NatNetError(f"packet ends at byte {len(self.data)}, needs {self.pos + s.size}")
         v = s.unpack_from(self.data, self.pos)
@@ -197,7 +206,7 @@ def pack_frame(f: FrameOfData) -> bytes:
     out.append(struct.pack("<i", len(labelled)))
     for i, p in enumerate(labelled):
         occluded = not np.any(p)
-        out.append(struct.pack("<i3ffhf", i + 1, *p, 0.014, 1 if occluded else 0, 0.0))
+        out.append(LABELLED_MARKER.pack(i + 1, *p, 0.014, 1 if occluded else 0, 0.0))
     out.append(struct.pack("<i", len(f.plates)))
     for pid, values in f.plates.items():
         out.append(struct.pack("<ii", pid, len(values)) + b"".join(struct.pack("<if", 1, v) for v in values))
@@ -217,8 +226,7 @@ def unpack_frame(payload: bytes) -> FrameOfData:
     for what in ("rigid bodies", "skeletons"):
         if r.take("i"):
             raise NatNetError(f"frame {frame}: {what} are not read by livezmp's NatNet client")
-    for _ in range(r.take("i")):
-        r.take("i3ffhf")  # labelled markers: the marker sets carry their positions
+    r.skip(LABELLED_MARKER.size * r.take("i"))  # labelled markers: the marker sets carry their positions
     plates = {}
     for _ in range(r.take("i")):
         pid, nch = r.take("ii")
