@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import pylsl
 
-from sim_devices.mocap_trial import Impairments, MocapTrial, PlayCounters, TrialFrame, TrialPlayer
+from sim_devices.impairments import Impairments
+from sim_devices.mocap_trial import MocapTrial, PlayCounters, TrialFrame, TrialPlayer
 
 PLATE_CHANNELS = (("Fx", "ForceX", "newtons", "force", 0), ("Fy", "ForceY", "newtons", "force", 1),
                   ("Fz", "ForceZ", "newtons", "force", 2), ("Mx", "MomentX", "newton meters", "moment", 0),

@@ -42,21 +42,7 @@ from livezmp.errors import InputError
 from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.sources.file_replay import Pacer
 from livezmp.sources.frame_format import WireFrame, encode_binary, encode_json
-
-
-@dataclass(frozen=True)
-class Impairments:
-    """Noise std ``noise_deg`` (degrees) and ``noise_pos`` (file units); probabilities
-    per frame of ``drop``, ``late`` (sent after ``late_by`` later frames; UDP only) and
-    ``duplicate`` (sent twice; UDP only); ``seed`` of the random generator."""
-
-    noise_deg: float = 0.0
-    noise_pos: float = 0.0
-    drop: float = 0.0
-    late: float = 0.0
-    late_by: int = 3
-    duplicate: float = 0.0
-    seed: int = 0
+from sim_devices.impairments import Impairments
 
 
 @dataclass
@@ -236,10 +222,8 @@ def _trial(spec: str):
 
 def serve_capture(args: argparse.Namespace) -> str:
     """Plays a C3D (or generated) trial from a simulated capture server until done or Ctrl-C."""
-    from sim_devices.mocap_trial import Impairments
-
     trial = _trial(args.motion)
-    imp = Impairments(args.noise_mm * 1e-3, args.gap, args.drop, args.late, 3, args.seed)
+    imp = Impairments(noise_pos=args.noise_mm * 1e-3, gap=args.gap, drop=args.drop, late=args.late, seed=args.seed)
     play = {"impairments": imp, "speed": args.speed, "loop": args.loop, "max_frames": args.frames}
     if args.lsl is not None:
         from sim_devices.lsl_publisher import LslPublisher
@@ -298,7 +282,8 @@ def main(argv: list[str] | None = None) -> int:
             print(serve_capture(args))
             return 0
         motion = read_bvh(args.motion)
-        imp = Impairments(args.noise_deg, args.noise_pos, args.drop, args.late, 3, args.duplicate, args.seed)
+        imp = Impairments(noise_deg=args.noise_deg, noise_pos=args.noise_pos, drop=args.drop, late=args.late,
+                          duplicate=args.duplicate, seed=args.seed)
         if args.udp:
             host, _, port = args.udp.rpartition(":")
             if not port.isdigit():

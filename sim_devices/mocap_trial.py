@@ -18,6 +18,7 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.sources.file_replay import Pacer
+from sim_devices.impairments import Impairments
 
 UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 MOMENT_SCALE = {"Nmm": 1e-3, "Nm": 1.0, "N.mm": 1e-3, "N.m": 1.0}
@@ -108,20 +109,6 @@ def generated_trial(rate: float, seconds: float, n_markers: int = 20, n_plates: 
                       f"generated {rate:g} Hz")
 
 
-@dataclass(frozen=True)
-class Impairments:
-    """Position noise std ``noise_pos`` m; ``gap`` probability per marker per frame of an
-    occlusion (sent as missing); per frame: ``drop`` (never sent), ``late`` (sent after
-    ``late_by`` later frames); ``seed`` of the random generator."""
-
-    noise_pos: float = 0.0
-    gap: float = 0.0
-    drop: float = 0.0
-    late: float = 0.0
-    late_by: int = 3
-    seed: int = 0
-
-
 @dataclass
 class PlayCounters:
     """What the player did: frames ``sent``, ``dropped``, ``delayed`` (held back),
@@ -170,6 +157,7 @@ class TrialPlayer:
         self.speed, self.loop, self.max_frames = speed, loop, max_frames
         self.counters = PlayCounters()
         self.stop = threading.Event()
+        self._thread: threading.Thread | None = None
 
     def frames(self) -> Iterator[TrialFrame]:
         """Frames when due, noisy and with gaps, before the drop/late decision."""
@@ -191,6 +179,22 @@ class TrialPlayer:
                 m = np.where(hide[:, None], np.nan, m)
             yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps)
             k += 1
+
+    def start(self, send: Callable[[TrialFrame], None], name: str) -> None:
+        """:meth:`play` in a thread of its own (the capture system's camera)."""
+        self._thread = threading.Thread(target=self.play, args=(send,), name=name, daemon=True)
+        self._thread.start()
+
+    def join(self) -> None:
+        """Wait until the trial has been played (forever with loop; Ctrl-C interrupts)."""
+        while self._thread is not None and self._thread.is_alive():
+            self._thread.join(0.5)
+
+    def close(self) -> None:
+        """Stop playing and wait for the thread."""
+        self.stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
 
     def play(self, send: Callable[[TrialFrame], None]) -> PlayCounters:
         rng = np.random.default_rng(self.imp.seed + 1)

@@ -20,7 +20,8 @@ import time
 import numpy as np
 
 from livezmp.sources import natnet_protocol as nn
-from sim_devices.mocap_trial import Impairments, MocapTrial, PlayCounters, TrialFrame, TrialPlayer
+from sim_devices.impairments import Impairments
+from sim_devices.mocap_trial import MocapTrial, PlayCounters, TrialFrame, TrialPlayer
 
 CLOCK_HZ = 10_000_000
 CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz", "Cx", "Cy", "Cz")
@@ -53,8 +54,8 @@ class NatNetServer:
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._t0 = time.monotonic()
-        self._threads = [threading.Thread(target=self._serve, name="natnet-command", daemon=True)]
-        self._threads[0].start()
+        self._thread = threading.Thread(target=self._serve, name="natnet-command", daemon=True)
+        self._thread.start()
 
     @property
     def counters(self) -> PlayCounters:
@@ -67,9 +68,7 @@ class NatNetServer:
         return nn.ModelDef({self.set_name: self.trial.labels}, plates)
 
     def start(self) -> NatNetServer:
-        t = threading.Thread(target=self.player.play, args=(self._frame,), name="natnet-camera", daemon=True)
-        self._threads.append(t)
-        t.start()
+        self.player.start(self._frame, "natnet-camera")
         return self
 
     def _serve(self) -> None:
@@ -118,14 +117,11 @@ class NatNetServer:
 
     def join(self) -> None:
         """Wait until the trial has been played (forever with loop; Ctrl-C interrupts)."""
-        camera = self._threads[-1]
-        while camera.is_alive():
-            camera.join(0.5)
+        self.player.join()
 
     def close(self) -> None:
-        self.player.stop.set()
+        self.player.close()
         self._closing.set()
-        for t in self._threads:
-            t.join(5.0)
+        self._thread.join(5.0)
         self.cmd.close()
         self.data.close()

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from livezmp.sources.plate_frame import plate_axes
-from sim_devices.mocap_trial import Impairments, MocapTrial, PlayCounters, TrialFrame, TrialPlayer
+from sim_devices.impairments import Impairments
+from sim_devices.mocap_trial import MocapTrial, PlayCounters, TrialFrame, TrialPlayer
 
 HEADER = struct.Struct("<II")
 TYPE_ERROR, TYPE_COMMAND, TYPE_XML, TYPE_DATA, TYPE_NO_MORE_DATA, TYPE_EVENT = 0, 1, 2, 3, 4, 6
@@ -119,17 +120,15 @@ class QtmServer:
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._current: TrialFrame | None = None
-        self._threads = [threading.Thread(target=self._accept, name="qtm-accept", daemon=True)]
-        self._threads[0].start()
+        self._thread = threading.Thread(target=self._accept, name="qtm-accept", daemon=True)
+        self._thread.start()
 
     @property
     def counters(self) -> PlayCounters:
         return self.player.counters
 
     def start(self) -> QtmServer:
-        t = threading.Thread(target=self.player.play, args=(self._frame,), name="qtm-camera", daemon=True)
-        self._threads.append(t)
-        t.start()
+        self.player.start(self._frame, "qtm-camera")
         return self
 
     def streaming_clients(self) -> int:
@@ -265,14 +264,11 @@ class QtmServer:
 
     def join(self) -> None:
         """Wait until the trial has been played (forever with loop; Ctrl-C interrupts)."""
-        camera = self._threads[-1]
-        while camera.is_alive():
-            camera.join(0.5)
+        self.player.join()
 
     def close(self) -> None:
-        self.player.stop.set()
+        self.player.close()
         self._closing.set()
         self.server.close()
         self.kick()
-        for t in self._threads:
-            t.join(5.0)
+        self._thread.join(5.0)
