@@ -43,6 +43,7 @@ from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.sources.file_replay import Pacer
 from livezmp.sources.frame_format import WireFrame, encode_binary, encode_json
 from sim_devices.impairments import Impairments
+from sim_devices.tcp_accept import accept_until
 
 
 @dataclass
@@ -147,16 +148,12 @@ class TcpStreamer:
         self._acceptor.start()
 
     def _accept(self) -> None:
-        while not self._closing.is_set():
-            try:
-                conn, _ = self.server.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.settimeout(1.0)
-            with self._lock:
-                self.clients.append(conn)
+        accept_until(self.server, self._closing, self._add)
+
+    def _add(self, conn: socket.socket) -> None:
+        conn.settimeout(1.0)
+        with self._lock:
+            self.clients.append(conn)
 
     def line(self, values: np.ndarray) -> bytes:
         text = " ".join(f"{v:.6f}" for v in values)

@@ -34,6 +34,7 @@ import numpy as np
 from livezmp.sources.plate_frame import plate_axes
 from sim_devices.impairments import Impairments
 from sim_devices.mocap_trial import MocapTrial, PlayCounters, TrialFrame, TrialPlayer
+from sim_devices.tcp_accept import accept_until
 
 HEADER = struct.Struct("<II")
 TYPE_ERROR, TYPE_COMMAND, TYPE_XML, TYPE_DATA, TYPE_NO_MORE_DATA, TYPE_EVENT = 0, 1, 2, 3, 4, 6
@@ -136,19 +137,15 @@ class QtmServer:
             return sum(1 for c in self.clients if c.divisor)
 
     def _accept(self) -> None:
-        while not self._closing.is_set():
-            try:
-                conn, _ = self.server.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            client = _Client(conn)
-            with self._lock:
-                self.clients.append(client)
-            self._write(client, text_packet(TYPE_COMMAND, "QTM RT Interface connected"))
-            threading.Thread(target=self._serve, args=(client,), name="qtm-client", daemon=True).start()
+        accept_until(self.server, self._closing, self._add)
+
+    def _add(self, conn: socket.socket) -> None:
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client = _Client(conn)
+        with self._lock:
+            self.clients.append(client)
+        self._write(client, text_packet(TYPE_COMMAND, "QTM RT Interface connected"))
+        threading.Thread(target=self._serve, args=(client,), name="qtm-client", daemon=True).start()
 
     def _write(self, client: _Client, data: bytes) -> None:
         try:
