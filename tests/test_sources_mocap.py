@@ -232,3 +232,45 @@ def test_natnet_nobody_there():
     port, data_port = free_udp_port(), free_udp_port()
     with pytest.raises(InputError, match="no NatNet server answered"):
         open_mocap_source(f"natnet://127.0.0.1:{port}?data_port={data_port}&timeout=0.3")
+
+
+def test_natnet_packets_round_trip_and_every_truncation_is_an_error():
+    import livezmp.sources.natnet_protocol as nn
+
+    f = nn.FrameOfData(7, {"a": np.arange(6.0).reshape(2, 3), "b": np.ones((1, 3))},
+                       {1: np.arange(9.0), 2: -np.arange(9.0)}, 12.5, 99)
+    data = nn.pack_frame(f)
+    g = nn.unpack_frame(data)
+    assert (g.frame, g.timestamp, g.stamp_transmit, list(g.marker_sets)) == (7, 12.5, 99, ["a", "b"])
+    np.testing.assert_array_equal(g.marker_sets["a"], f.marker_sets["a"])
+    np.testing.assert_array_equal(g.plates[2], f.plates[2])
+    for n in range(len(data)):  # a datagram cut anywhere is refused, never mis-read
+        with pytest.raises(nn.NatNetError):
+            nn.unpack_frame(data[:n])
+    model = nn.ModelDef({"a": ("x", "y")}, (nn.ForcePlateDef(3, "S3", 0.4, 0.6, np.eye(4, 3), ("Fx", "Cy")),))
+    back = nn.unpack_modeldef(nn.pack_modeldef(model))
+    assert back.marker_sets == model.marker_sets and back.plates[0].channels == ("Fx", "Cy")
+    np.testing.assert_allclose(back.plates[0].corners, np.eye(4, 3))
+
+
+@pytest.mark.parametrize("url, message", [
+    ("vicon://127.0.0.1", "not a capture stream"),
+    ("qtm://", "need a host"),
+    ("qtm://127.0.0.1:1?rate=3", "unknown parameter 'rate'"),
+    ("lsl://x?timeout=soon", "timeout: need seconds"),
+    ("lsl://no-such-stream-livezmp?timeout=0.2", "no LSL stream with name"),
+    ("natnet://127.0.0.1?data_port=abc", "data_port: need a port number"),
+    ("natnet://127.0.0.1?up=w", "up axis 'w'"),
+])
+def test_bad_capture_urls_are_one_line_errors(url, message):
+    with pytest.raises(InputError, match=message):
+        open_mocap_source(url)
+
+
+def test_streamer_bad_input_is_a_one_line_error(capsys):
+    from sim_devices.mocap_streamer import main
+
+    assert main([str(C3D / "nope.c3d"), "--qtm", "0"]) == 2
+    assert main(["generated:fast", "--natnet", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "nope.c3d: not a readable C3D file" in err[0] and "generated:RATE" in err[1]

@@ -238,5 +238,5 @@ def unpack_frame(payload: bytes) -> FrameOfData:
         plates[pid] = values
     if r.take("i"):
         raise NatNetError(f"frame {frame}: devices are not read by livezmp's NatNet client")
-    _, _, timestamp, _, _, transmit, _ = r.take("IIdQQQh")
+    _, _, timestamp, _, _, transmit, _, _ = r.take("IIdQQQhi")  # ... params, end of data
     return FrameOfData(frame, sets, plates, timestamp, transmit)
