@@ -14,7 +14,9 @@ delivered = sent; achieved rate; delay of each frame behind its schedule, p50 / 
 for LSL, from the sample's own stamp (the server's clock, offset-corrected) to the
 frame in the reader's hand; for QTM and NatNet, whose stamps are the capture system's own
 clock, arrival against the nominal schedule anchored at the earliest frame (the
-network and reader delay beyond the fastest frame).
+network and reader delay beyond the fastest frame). The LSL figure carries the error of
+LSL's clock-offset estimate (``time_correction``, one round trip under the machine's
+load): server and reader share one clock here, so a negative delay is that error.
 
 Not yet here: the whole pipeline (markers → body → ZMP) needs the marker body of the
 force-plate issue; see the README.
