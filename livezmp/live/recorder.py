@@ -58,7 +58,8 @@ class LoopRecorder:
                  joint_names: list[str], capacity: int = 8192, period_s: float = 0.02):
         self.path = Path(path)
         self.joint_names = list(joint_names)
-        self.writer = BackgroundWriter(Recorder(path, spec, session, channel_names, extra_schemas=LOOP_SCHEMAS),
+        self.writer = BackgroundWriter(Recorder(path, spec, session, channel_names, extra_schemas=LOOP_SCHEMAS,
+                                                scene=False),  # the loop writes JSON only (yet)
                                        capacity, period_s)
         self._origin_ns = time.time_ns()
 

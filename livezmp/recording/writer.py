@@ -35,11 +35,12 @@ CHUNK_BYTES = 1 << 20
 class Recorder:
     """Writes one session to ``path`` (see the module docstring). ``session`` holds the
     monitor settings (plain JSON values); ``channel_names`` the body's input channels;
-    ``extra_schemas`` further topics (e.g. :data:`LOOP_SCHEMAS`)."""
+    ``extra_schemas`` further topics (e.g. :data:`LOOP_SCHEMAS`); ``scene``: register the
+    Foxglove scene channels that :meth:`result` fills (:mod:`livezmp.recording.foxglove`)."""
 
     def __init__(self, path: str | Path, body_spec: BodySpec, session: dict, channel_names: list[str],
                  chunk_seconds: float = CHUNK_SECONDS, chunk_bytes: int = CHUNK_BYTES,
-                 extra_schemas: dict[str, tuple[str, dict]] | None = None):
+                 extra_schemas: dict[str, tuple[str, dict]] | None = None, scene: bool = True):
         self.path = Path(path)
         try:
             self._file = open(self.path, "xb")  # noqa: SIM115 - closed in close(); never overwrite a session
@@ -60,7 +61,7 @@ class Recorder:
         for topic, (name, schema) in {**SCHEMAS, **(extra_schemas or {})}.items():
             sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
             self.channels[topic] = self.writer.register_channel(topic, "json", sid)
-        self.scene_channels = foxglove.register(self.writer)
+        self.scene_channels = foxglove.register(self.writer) if scene else {}
         self.counts = dict.fromkeys(self.channels, 0) | dict.fromkeys(self.scene_channels, 0)
         self.writer.flush()  # header, body and session on disk before the first frame
         self._last_flush = time.monotonic()
