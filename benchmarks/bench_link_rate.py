@@ -10,8 +10,9 @@ One cycle = ``link.read()`` (verified joint state of all 20 joints) + ``link.wri
 * fw: JOINT_STATE streamed at 1000 Hz (the board's limit), so a cycle waits for the next one;
 * can: one node per servo behind an slcan adapter; JOINT_STATE at 20 Hz, the link's
   default 30 Hz, and 60 Hz (where python-can's slcan reader, one system call per byte,
-  falls behind: the row shows how the link fails); and the same link over python-can's
-  in-process virtual bus (no serial line);
+  falls behind: the row shows how the link fails); the same nodes behind a simulated
+  socketcand daemon on loopback TCP (python-can's socketcand interface) at 30 to 200 Hz;
+  and the same link over python-can's in-process virtual bus (no bus at all);
 * mock: the in-process plant, the link's own cost;
 * dynamixel with the simulated humanoid (livezmp_mini: whole-body dynamics every 1 ms of
   simulated time) as the plant instead of 20 independent servos.
@@ -19,8 +20,11 @@ One cycle = ``link.read()`` (verified joint state of all 20 joints) + ``link.wri
 The simulated devices run in a thread of this process (they share the GIL with the
 client) or, for the serial links, in a process of their own (the machine's other core).
 The GIL switch interval is 0.5 ms (the default 5 ms makes a thread's reply wait for the
-busy-polling client). Bytes cost no wire time in the simulators: the rows measure
-software. "failed" counts reads that raised LinkReadError.
+busy-polling client). The Dynamixel chain's bytes take their wire time at 1 Mbps behind a
+full-speed FTDI adapter (1.5 ms a transaction: livezmp.links.bus_timing); the socketcand
+daemon's CAN frames take theirs at 1 Mbit/s (a JOINT_STATE round of 20 one-joint nodes is
+60 frames, 7.9 ms); the slcan, firmware-board and virtual-bus rows cost no wire time.
+"failed" counts reads that raised LinkReadError.
 
 Run: python benchmarks/bench_link_rate.py [--seconds 1.5]
 """
@@ -88,31 +92,32 @@ def measure(cycle, seconds: float) -> tuple[np.ndarray, int]:
 
 # -- devices: in this process, or served from another one -----------------------------------------
 
-def start(kind: str, humanoid: bool):
-    """Devices of ``kind`` over 20 servos, or over the simulated livezmp_mini humanoid."""
+def start(kind: str, humanoid: bool, options: dict | None = None):
+    """Devices of ``kind`` over 20 servos (`start_devices` ``options``), or over the simulated livezmp_mini
+    humanoid."""
     if not humanoid:
-        return start_devices(kind, ServoPlant(N, position=START), CONFIG)
+        return start_devices(kind, ServoPlant(N, position=START), CONFIG, **(options or {}))
     body = body_from_urdf(MINI_URDF)
     return start_devices(kind, SimHumanoid(body, Poser(body).standing()), MINI_CONFIG, joint_names=body.joint_names)
 
 
-def serve(kind: str, humanoid: bool, conn) -> None:
+def serve(kind: str, humanoid: bool, conn, options: dict | None = None) -> None:
     """Subprocess body: serve ``kind``'s devices until told to stop."""
     sys.setswitchinterval(5e-4)
-    with start(kind, humanoid) as devices:
+    with start(kind, humanoid, options) as devices:
         conn.send(devices.url)
         conn.recv()
 
 
 @contextlib.contextmanager
-def devices_url(kind: str, where: str, humanoid: bool = False):
+def devices_url(kind: str, where: str, humanoid: bool = False, options: dict | None = None):
     if where == "same process":
-        with start(kind, humanoid) as devices:
+        with start(kind, humanoid, options) as devices:
             yield devices.url
         return
     context = multiprocessing.get_context("spawn")
     parent, child = context.Pipe()
-    process = context.Process(target=serve, args=(kind, humanoid, child), daemon=True)
+    process = context.Process(target=serve, args=(kind, humanoid, child, options), daemon=True)
     process.start()
     try:
         yield parent.recv()
@@ -235,6 +240,10 @@ def rows(seconds: float):
     with devices_url("can", "same process") as url:
         for rate in (20, 30, 60):
             yield "can", f"link, slcan, {rate} Hz streams", "20 servo nodes", "same process", \
+                run_link(f"{url}&rate={rate}&timeout=0.5", seconds)
+    with devices_url("can", "own process", options={"can_transport": "socketcand"}) as url:
+        for rate in (30, 60, 100, 200):
+            yield "can", f"link, socketcand, {rate} Hz streams", "20 servo nodes", "own process", \
                 run_link(f"{url}&rate={rate}&timeout=0.5", seconds)
     with virtual_can_nodes() as url:
         yield "can", "link, virtual bus, 200 Hz streams", "20 servo nodes", "same process", \

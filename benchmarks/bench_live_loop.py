@@ -1,31 +1,25 @@
-"""Benchmark: the live balance loop on the simulated 20-servo Dynamixel bus, through dynamixel-sdk.
+"""Benchmark: the live balance loop on simulated Dynamixel buses with wire time, through dynamixel-sdk.
 
-The simulated humanoid (livezmp_mini: 20 XM430s on one chain, true ZMP from its
-whole-body dynamics at 1 kHz) runs in its own process, as `livezmp demo` runs it; the
-loop runs here at the asked rate on absolute deadlines. Rows, side by side in one run:
+The simulated humanoid (true ZMP from its whole-body dynamics at 1 kHz) runs in its own
+process, as `livezmp demo` runs it, behind XM430 chains whose bytes take their wire time
+(10 bits at the baud), whose servos wait their Return Delay Time, and whose USB-serial
+adapter adds its latency (full-speed FTDI, latency timer 1 ms: 0.5 ms out + 1 ms back; or
+a high-speed adapter: 0.06 + 0.13 ms). The loop runs here on absolute deadlines under
+SCHED_FIFO (the simulator just below it). Each configuration is run twice, side by side:
 
-* loop work only: the live loop flat out over the mock link on plain servos (no bus,
-  no simulator, no sleeping): its own CPU cost per cycle;
-* bus only (baseline): the same clock and link, read + write of the present posture
-  each cycle, no estimation or correction: what the bus and simulator alone allow;
-* the live loop (read → estimate → correct → write), sync read and fast sync read,
-  the corrector at 125 Hz (the default: every 4th cycle at 500 Hz) and every cycle;
-* the live loop asked for twice the rate (1 kHz by default);
-* faults: fast sync read with 1 % of replies dropped and 1 % corrupted, the reply
-  reply timeout cut to 3 ms once the link is open (a drop costs one timeout);
-* the live loop and simulator at normal scheduling priority: every other row runs the
-  loop under SCHED_FIFO (as `livezmp run` does by default) and the simulator's devices
-  just below it (they stand in for servo hardware, which nothing on the computer delays).
+* bus only (baseline): the same clock and link, read + write of the present posture each
+  cycle, no estimation or correction: what the bus and simulator alone allow;
+* the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario.
 
-The command is the `demo` scenario (lean past the toes and back, then the arm swing,
-which goes on to the end of the run), so the corrector is working. Columns: achieved
-rate, share of cycles that missed their deadline, skipped deadlines, sense-to-command
-latency (read start to goal write done), the mean time of each stage of a cycle and
-their sum (busy: 1000 / busy is the rate the loop could sustain), whether the
-simulated robot fell, the share of the simulator's 1 ms steps whose true ZMP was
-inside the support polygon, and failed reads.
+Each row asks for 85 % of its bus's ceiling (the physical maximum of one read + one write
+cycle: wire time of the packet sizes + return delays + the adapter's round trip; see
+livezmp.links.bus_timing), capped at 500 Hz (1 kHz for the two-bus row): the target is that
+rate with < 1 % missed deadlines. Columns: robot, bus, read, adapter, return delay, ceiling,
+asked and achieved rate, achieved / ceiling, missed deadlines, p99 sense-to-command latency,
+the mean read and loop-work (estimate + correct) time, whether the simulated robot fell,
+failed reads. The first rows are the loop's own work flat out on the mock link (no bus).
 
-Run: python benchmarks/bench_live_loop.py [--seconds 60] [--rate 500]
+Run: python benchmarks/bench_live_loop.py [--seconds 10]
 """
 
 from __future__ import annotations
@@ -33,9 +27,11 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
+from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync_write_bytes
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
@@ -45,6 +41,8 @@ from livezmp.model.robot import load_robot
 from sim_devices.mock_link import MockLink
 from sim_devices.process import SimProcess
 from sim_devices.servo_plant import ServoPlant
+
+OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 
 
 def bus_only(link, rate: float, seconds: float) -> dict:
@@ -70,8 +68,7 @@ def bus_only(link, rate: float, seconds: float) -> dict:
     st = clock.stats()
     return {"cycles": st.cycles, "achieved_hz": st.achieved_hz, "deadline_misses": st.deadline_misses,
             "skipped": st.skipped, "p50": 1e3 * latency.quantile(0.5), "p99": 1e3 * latency.quantile(0.99),
-            "stages": f"{1e3 * read.mean:.2f} / - / - / {1e3 * write.mean:.2f}", "busy": 1e3 * latency.mean,
-            "fell": None, "failed": failed, "inside": None}
+            "read": 1e3 * read.mean, "work": 0.0, "fell": None, "failed": failed}
 
 
 def live(link, robot, sim, rate: float, seconds: float, correct_hz: float) -> dict:
@@ -81,11 +78,10 @@ def live(link, robot, sim, rate: float, seconds: float, correct_hz: float) -> di
                     fell=sim.fell)
     s = loop.run(seconds)
     truth = sim.verdict()["true_inside_fraction"]
-    means = [s["timing"][k]["mean_ms"] or 0.0 for k in ("read", "estimate", "correct", "write")]
-    stages = " / ".join(f"{m:.2f}" for m in means)
+    means = {k: s["timing"][k]["mean_ms"] or 0.0 for k in ("read", "estimate", "correct", "write")}
     return {"cycles": s["cycles"], "achieved_hz": s["achieved_hz"], "deadline_misses": s["deadline_misses"],
-            "skipped": s["clock"]["skipped_cycles"], "p50": s["p50_latency_ms"], "p99": s["p99_latency_ms"],
-            "stages": stages, "busy": sum(means), "fell": s["fell"], "failed": s["failed_reads"], "inside": truth}
+            "p99": s["p99_latency_ms"] or 0.0, "read": means["read"], "work": means["estimate"] + means["correct"],
+            "fell": s["fell"], "failed": s["failed_reads"], "inside": truth}
 
 
 def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
@@ -105,65 +101,78 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
             "busy": sum(means), "fell": None, "failed": s["failed_reads"], "inside": None}
 
 
-def row(options: str, rate: float, seconds: float, robot, correct_hz: float = 125.0, faults: str = "",
-        baseline: bool = False, priority: int = LOOP_PRIORITY) -> dict:
-    with SimProcess("dynamixel", ("demo", {}), faults, realtime_priority=max(priority - 1, 0)) as sim, \
-            realtime_priority(priority):
+def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
+        baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY) -> dict:
+    with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
+                    devices=devices) as sim, realtime_priority(priority):
         url = f"{sim.url}&{options}" if options else sim.url
-        for attempt in range(3):  # with faults injected from the start, opening may fail: try again
-            try:
-                link = open_link(url, robot.body.joint_names, robot.config)
-                break
-            except LinkError:
-                if attempt == 2:
-                    raise
+        link = open_link(url, robot.body.joint_names, robot.config)
         try:
             return bus_only(link, rate, seconds) if baseline else live(link, robot, sim, rate, seconds, correct_hz)
         finally:
             link.close()
 
 
+def predicted_ceiling(n_servos: int, buses: int, fast: bool, return_delay_us: float, baud: int,
+                      adapter: str) -> float:
+    """Hz: one read of positions + one write of goals on the busiest bus (servos split evenly)."""
+    n = -(-n_servos // buses)
+    per_cycle = sum(sync_read_bytes(n, 4, fast)) + sync_write_bytes(n, 4)
+    return BusCeiling(baud, per_cycle, n * return_delay_us * 1e-6, ADAPTERS[adapter]).ceiling_hz
+
+
+CONFIGS = [  # robot, baud, buses, fast, return delay (us), adapter, rate cap (Hz), faults
+    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("livezmp_mini", 2_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("livezmp_mini", 4_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("livezmp_mini", 1_000_000, 1, False, 0, "ftdi-fs", 500, ""),
+    ("livezmp_mini", 1_000_000, 1, True, 500, "ftdi-fs", 500, ""),
+    ("livezmp_mini", 4_000_000, 1, True, 0, "hs", 500, ""),
+    ("OP3", 1_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("OP3", 2_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("OP3", 4_000_000, 1, True, 0, "ftdi-fs", 500, ""),
+    ("OP3", 2_000_000, 1, True, 0, "hs", 500, ""),
+    ("livezmp_mini", 4_000_000, 2, True, 0, "hs", 1000, ""),
+    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, "drop=0.05,corrupt=0.05"),
+]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=60.0, help="seconds per row (default 60)")
-    parser.add_argument("--rate", type=float, default=500.0, help="loop rate, Hz (default 500)")
+    parser.add_argument("--seconds", type=float, default=10.0, help="seconds per row (default 10)")
     args = parser.parse_args()
-    robot = load_robot(None, None)
-    r, sec = args.rate, args.seconds
+    robots = {"livezmp_mini": (None, load_robot(None, None)), "OP3": (str(OP3), load_robot(str(OP3), None))}
+    sec = args.seconds
     with realtime_priority(LOOP_PRIORITY) as refused:
         scheduling = (f"SCHED_FIFO {LOOP_PRIORITY} for the loop, {LOOP_PRIORITY - 1} for the simulator"
                       if refused is None else f"normal scheduling (real-time priority {refused})")
-    print(f"livezmp_mini, 20 simulated XM430s (simulator in its own process); {os.cpu_count()} CPUs; "
-          f"{sec:g} s per row; asked {r:g} Hz unless the row says otherwise; {scheduling} unless the row says "
-          "otherwise\n")
-    header = ("| loop                                   |      Hz | missed % | skipped |  p50 ms |  p99 ms | "
-              "read / estimate / correct / write, mean ms | busy ms | fell | inside % | failed reads |")
-    print(header)
+    print(f"20 simulated XM430s per robot (simulator in its own process); {os.cpu_count()} CPUs; {sec:g} s per row; "
+          f"{scheduling}; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}\n")
+    mini = robots["livezmp_mini"][1]
+    for correct_hz in (125.0, 500.0):
+        x = compute_only(mini, 500.0, min(sec, 5.0), correct_hz)
+        print(f"loop work only (mock link, no bus), livezmp_mini, correct at {correct_hz:g} Hz: "
+              f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
+    header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | asked Hz | "
+              "achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | failed reads |")
+    print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
-    for correct_hz in (125.0, r):
-        x = compute_only(robot, r, min(sec, 10.0), correct_hz)
-        label = f"loop work only, correct at {correct_hz:g} Hz"
-        print(f"| {label:<38} | {x['achieved_hz']:7.1f} | {'-':>8} | {'-':>7} | {x['p50']:7.3f} | {x['p99']:7.3f} | "
-              f"{x['stages']:<42} | {x['busy']:7.3f} | {'-':>4} | {'-':>8} | {'-':>12} |", flush=True)
-    rows = [
-        ("bus only, sync read (baseline)", "fast=0", r, sec, {"baseline": True}),
-        ("bus only, fast sync read (baseline)", "fast=1", r, sec, {"baseline": True}),
-        ("live loop, sync read", "fast=0", r, sec, {}),
-        ("live loop, fast sync read", "fast=1", r, sec, {}),
-        ("live loop, fast, correct every cycle", "fast=1", r, sec, {"correct_hz": r}),
-        ("live loop, fast sync read, 1 kHz", "fast=1", 2 * r, sec, {}),
-        ("live loop, fast, normal priority", "fast=1", r, sec, {"priority": 0}),
-        # 3 ms: return delays are 0 once open (open itself waits the sdk's own timeout)
-        ("live loop, fast, 1% drop + 1% corrupt", "fast=1&timeout=0.003", r, sec,
-         {"faults": "drop=0.01,corrupt=0.01"}),
-    ]
-    for label, options, rate, seconds, kw in rows:
-        x = row(options, rate, seconds, robot, **kw)
-        fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
-        inside = "-" if x["inside"] is None else f"{100 * x['inside']:.2f}"
-        print(f"| {label:<38} | {x['achieved_hz']:7.1f} | {100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | "
-              f"{x['skipped']:7d} | {x['p50']:7.3f} | {x['p99']:7.3f} | {x['stages']:<42} | {x['busy']:7.3f} | "
-              f"{fell:>4} | {inside:>8} | {x['failed']:12d} |", flush=True)
+    for name, baud, buses, fast, delay, adapter, cap, faults in CONFIGS:
+        urdf, robot = robots[name]
+        ceiling = predicted_ceiling(len(robot.body.joint_names), buses, fast, delay, baud, adapter)
+        rate = min(cap, round(0.85 * ceiling))
+        options = f"fast={int(fast)}&return_delay={delay}" + ("&timeout=0.01" if faults else "")
+        devices = {"baud": baud, "adapter": adapter, "buses": buses}
+        bus = f"{baud / 1e6:g} Mbps" + (f" x {buses}" if buses > 1 else "")
+        read = "fast sync" if fast else "sync"
+        for baseline in (True, False):
+            x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults)
+            fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
+            loop = "bus only" if baseline else ("loop, 5+5%" if faults else "live loop")
+            print(f"| {name:<12} | {bus:<14} | {read:<9} | {adapter:<7} | {delay:8d} | {ceiling:10.0f} | {loop:<9} | "
+                  f"{rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
+                  f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
+                  f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} |", flush=True)
     print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

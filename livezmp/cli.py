@@ -18,6 +18,7 @@ from importlib.metadata import PackageNotFoundError, version
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.gait.takeset import DEFAULT_PATTERN
+from livezmp.links.bus_timing import ADAPTERS, DEFAULT_ADAPTER
 from livezmp.live.config import CONTACT_MODES, LoopConfig, SafetyConfig
 from livezmp.live.realtime import LOOP_PRIORITY
 from livezmp.offline.validated import VALIDATED_P95_MM
@@ -190,6 +191,9 @@ def _loop_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link", required=True, help="dynamixel:PATH, can:INTERFACE:CHANNEL, fw:URL or mock:")
     p.add_argument("--motion", help="joint-trajectory CSV to play as the command (default: hold the first posture)")
     p.add_argument("--scenario", help=f"built-in scenario as the command ({scenarios})")
+    p.add_argument("--adapter-latency-ms", type=float,
+                   help="round-trip latency of the USB-serial adapter, for the bus ceiling in the summary "
+                        "(default 1.5: a full-speed FTDI with its latency timer at 1 ms)")
     add_loop_options(p)
     p.set_defaults(handler="livezmp.commands.run:cmd_run")
 
@@ -199,6 +203,7 @@ def _loop_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link", required=True, choices=SIM_LINKS, help="which devices to simulate")
     p.add_argument("--scenario", default="stand", help=f"initial posture and pushes ({scenarios}; default stand)")
     p.add_argument("--fault", default="", help="fault spec, e.g. drop=0.01,corrupt=0.01,vanish=3s+1s")
+    add_device_options(p)
     p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY - 1,
                    help=f"run the devices under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY - 1}, "
                         "just below the loop's; 0 = normal scheduling)")
@@ -210,8 +215,18 @@ def _loop_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link-options", default="", help="extra link URL options, e.g. fast=1&timeout=0.005")
     p.add_argument("--scenario", default="demo", help=f"{scenarios} (default demo: lean, then arm swing)")
     p.add_argument("--fault", default="", help="fault spec for the simulated devices")
+    add_device_options(p)
     add_loop_options(p)
     p.set_defaults(handler="livezmp.commands.demo:cmd_demo")
+
+
+def add_device_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--baud", type=int, help="line rate of the simulated bus, bit/s (CAN: its bitrate; "
+                                            "default 1000000)")
+    p.add_argument("--adapter", default=DEFAULT_ADAPTER,
+                   help=f"the simulated bus's USB-serial adapter: {', '.join(ADAPTERS)} or a round-trip latency in "
+                        f"ms (default {DEFAULT_ADAPTER}: full-speed FTDI, latency timer 1 ms)")
+    p.add_argument("--buses", type=int, default=1, help="split the servos over this many simulated Dynamixel buses")
 
 
 # -- gait -----------------------------------------------------------------------------------------

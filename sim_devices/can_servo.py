@@ -1,4 +1,5 @@
-"""Simulated CAN servos: one firmware_protocol node per servo (SPEC.md §6) behind a simulated slcan adapter.
+"""Simulated CAN servos: one firmware_protocol node per servo (SPEC.md §6) behind a simulated slcan adapter
+(or, with ``transport="socketcand"``, a simulated socketcand daemon on loopback: `socketcand_server`).
 
 Unmodified python-can opens :attr:`CanServoBus.path` with
 ``can.Bus(interface="slcan", channel=path, bitrate=1_000_000, sleep_after_open=0)``.
@@ -42,6 +43,7 @@ from sim_devices.firmware_board import FootProvider, ImuProvider, PlantBackend, 
 from sim_devices.pty_port import PtyPort
 from sim_devices.servo_plant import JointPlant
 from sim_devices.slcan_adapter import SlcanAdapter
+from sim_devices.socketcand_server import SocketcandServer
 
 NODE_FAULTS = frozenset({"drop", "corrupt", "delay", "overload"})
 ADAPTER_FAULTS = frozenset({"vanish", "busoff"})
@@ -143,7 +145,8 @@ class CanServoBus:
                  foot_sensors: FootProvider | None = None, imu: ImuProvider | None = None,
                  sensor_node: int | None = None, faults: str | FaultSpec = "", bitrate: int = 1_000_000,
                  rates: fp.StreamRates = DEFAULT_RATES,
-                 status_period: float = 1.0, tick_period: float = 1e-3, name: str = "ttySLCAN") -> None:
+                 status_period: float = 1.0, tick_period: float = 1e-3, name: str = "ttySLCAN",
+                 transport: str = "slcan") -> None:
         nodes = list(range(1, len(joint_names) + 1)) if node_ids is None else list(node_ids)
         if len(nodes) != len(joint_names) or len(set(nodes)) != len(nodes) or not all(1 <= n <= 127 for n in nodes):
             raise ValueError(f"CanServoBus: need one distinct node id in 1..127 per joint name, got {nodes}")
@@ -168,6 +171,14 @@ class CanServoBus:
         ]
         adapter_spec = replace(spec, drop=0.0, corrupt=0.0, delay_probability=0.0, delay=0.0, overloads=(),
                                fields=spec.fields & (ADAPTER_FAULTS | {"seed"}))
+        self.transport = transport
+        if transport == "socketcand":
+            if adapter_spec.fields - {"seed"}:
+                raise ValueError("fault spec: vanish and busoff are the slcan adapter's, not socketcand's")
+            self.adapter = SocketcandServer(self.nodes, bitrate=bitrate, tick_period=tick_period)
+            return
+        if transport != "slcan":
+            raise ValueError(f"CanServoBus: transport must be slcan or socketcand, got '{transport}'")
         self.adapter = SlcanAdapter(self.nodes, faults=adapter_spec, bus_bitrate=bitrate, tick_period=tick_period,
                                     name=name)
 

@@ -37,9 +37,13 @@ current relative to the stall current.
 Timing: the plant is stepped lazily, by the elapsed time, whenever a packet
 needs its state or changes its goals, and at each timed fault; there is no
 background physics thread. Replies are written at their due times by the
-port thread. Without ``emulate_wire_time`` bytes take no time on the wire;
-with it, each byte takes 10 bit times at the line speed (instruction and
-replies), as on a real half-duplex bus.
+port thread. By default the bus is physical (:mod:`livezmp.links.bus_timing`):
+each byte takes 10 bit times at the line speed (instruction and replies, one
+after the other on the half-duplex bus), each servo waits its Return Delay Time
+before answering, and the USB-serial ``adapter`` (default a full-speed FTDI
+with its latency timer at 1 ms) delays the instruction on its way to the bus
+and the replies on their way back. ``emulate_wire_time=False`` and
+``adapter="none"`` make bytes take no time (only to test the protocol).
 
 Not modelled: indirect addresses, velocity/current/PWM control modes (the
 registers are kept but the joint only follows goal positions), profiles, and
@@ -57,6 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, parse_adapter, wire_time
 from sim_devices import dynamixel_control_table as ct
 from sim_devices.dynamixel_packet import (
     ALERT,
@@ -131,19 +136,22 @@ class DynamixelChain(PtyDevice):
 
     ``baud_rate`` (bit/s) sets every servo's Baud Rate register; ``settings`` maps
     control-table field names to values written to every servo at start (e.g.
-    ``{"return_delay_time": 0}``); ``faults`` is a fault spec (see `faults`).
+    ``{"return_delay_time": 0}``); ``faults`` is a fault spec (see `faults`);
+    ``adapter``: the USB-serial adapter's latency (a name or ms, see `bus_timing.parse_adapter`).
     Bad arguments raise ValueError, an unknown field name KeyError, naming it.
     """
 
     def __init__(self, ids: Sequence[int], plant: JointPlant | None = None, *, faults: str | FaultSpec = "",
                  baud_rate: int = 1_000_000, settings: Mapping[str, int] | None = None,
-                 zero_tick: int = 2048, emulate_wire_time: bool = False, name: str = "ttyDXL") -> None:
+                 zero_tick: int = 2048, emulate_wire_time: bool = True,
+                 adapter: str | float | Adapter = DEFAULT_ADAPTER, name: str = "ttyDXL") -> None:
         ids = list(ids)
         if not ids or len(set(ids)) != len(ids) or not all(0 <= i <= 252 for i in ids):
             raise ValueError(f"DynamixelChain: ids must be distinct integers in 0..252, got {ids}")
         if baud_rate not in _BAUD_CODES:
             raise ValueError(f"DynamixelChain: baud_rate {baud_rate} is not an XM430 rate "
                              f"({', '.join(map(str, _BAUD_CODES))})")
+        self.adapter = parse_adapter(adapter)
         self.plant: JointPlant = plant if plant is not None else ServoPlant(len(ids))
         if len(self.plant.position) < len(ids):
             raise ValueError(f"DynamixelChain: plant has {len(self.plant.position)} joints for {len(ids)} servos")
@@ -155,7 +163,7 @@ class DynamixelChain(PtyDevice):
         self._lock = threading.Lock()
         self._zero = zero_tick
         self._emulate_wire = emulate_wire_time
-        self._bus_free = -math.inf  # with wire time: when the bus is next idle (monotonic s)
+        self._bus_free = -math.inf  # when the bus is next idle (monotonic s)
         now = time.monotonic()
         self._plant_time = now
         self._last_packet = now
@@ -333,14 +341,12 @@ class DynamixelChain(PtyDevice):
     def _schedule(self, now: float, instruction_size: int, entries: list[tuple[float, bytes]]) -> list[Reply]:
         """Due times for replies sent one after the other, each after its delay; faults applied.
 
-        With wire time, the instruction starts once the bus is free (after earlier instructions and
-        replies) and every byte takes 10 bit times.
+        The instruction reaches the bus the adapter's ``out_s`` after the host wrote it, and once
+        the bus is free (after earlier instructions and replies); with wire time every byte takes
+        10 bit times; each reply reaches the host the adapter's ``in_s`` after its last byte.
         """
-        t = now
-        byte_time = 0.0
-        if self._emulate_wire:
-            byte_time = 10.0 / (self._port.line_speed() or self._servos[0].baud)
-            t = max(now, self._bus_free) + instruction_size * byte_time
+        byte_time = wire_time(1, self._port.line_speed() or self._servos[0].baud) if self._emulate_wire else 0.0
+        t = max(now + self.adapter.out_s, self._bus_free) + instruction_size * byte_time
         replies = []
         for delay, payload in entries:
             t += delay + len(payload) * byte_time
@@ -349,7 +355,7 @@ class DynamixelChain(PtyDevice):
                 continue
             if corrupt:  # error, parameters or CRC: the client's CRC check catches it
                 payload = self._faults.corrupt(payload, 8, len(payload))
-            replies.append((t + extra, payload))
+            replies.append((t + self.adapter.in_s + extra, payload))
         self._bus_free = t
         self.stats.replies += len(replies)
         return replies

@@ -39,7 +39,11 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
 * fall: when the contact ZMP stays outside the support polygon (or the contact force
   is below 5 % of the weight) for longer than ``fall_after_s``, the robot has fallen:
   :attr:`SimHumanoid.fallen` records when and why, and from then on it holds (joints
-  frozen, no further motion).
+  frozen, no further motion of the model). Only its IMU sees the fall, as a robot's own
+  IMU would: from then on it reads the body toppling over the support edge the ZMP left
+  by, as a rigid inverted pendulum of the CoM's height pivoting on that edge (linearised:
+  tilt = 0.05 rad x cosh(t sqrt(g / h)), until it lies at 90 degrees), so a host that
+  watches the IMU can tell the fall, as on hardware.
 
 Sensors, computed on request from the latest dynamic state: four foot force cells per
 foot (:meth:`SimHumanoid.foot_forces`) and an IMU on the base link
@@ -72,6 +76,10 @@ from livezmp.model.body import BodyModel, foot_soles
 from sim_devices.servo_plant import Array, ServoPlant
 
 FLIGHT_FRACTION = 0.05  # contact force below this share of the weight: nothing holds the robot up
+
+
+TOPPLE_START_RAD = 0.05  # tilt the toppling starts from: a lean already past the edge
+TOPPLED_RAD = math.pi / 2  # lying on the ground
 
 
 @dataclass(frozen=True)
@@ -260,6 +268,7 @@ class SimHumanoid:
         self.device_steps = device_steps
         self._clock_zero = clock() if clock is not None else 0.0
         self.fallen: FallEvent | None = None
+        self._topple: tuple[float, Array, float] | None = None  # see _topple_axis
         self.counters = BalanceCounters()
         self._lock = threading.Lock()
         self._data = self.model.createData()  # dynamics, per step
@@ -442,11 +451,28 @@ class SimHumanoid:
             self.fallen = FallEvent(s.t, self._unsupported_since,
                                     f"fell at t = {s.t:.3f} s: {what}, unsupported for more than "
                                     f"{self.fall_after_s} s (since t = {self._unsupported_since:.3f} s)")
+            self._topple = self._topple_axis(s)
             self.servo.velocity[:] = 0.0
             self.servo.current[:] = 0.0
             # it holds: from now on a static state
             self._history = [self._history[2]] * 3
             self._state = self._evaluate(self.t)
+
+    def _topple_axis(self, s: HumanoidState) -> tuple[float, Array, float]:
+        """(fall time, world axis the body topples about, pendulum rate sqrt(g / CoM height))."""
+        out = np.array([1.0, 0.0]) if s.zmp is None or s.clamped is None else s.zmp[:2] - s.clamped
+        norm = float(np.linalg.norm(out))
+        out = out / norm if norm > 1e-9 else np.array([1.0, 0.0])
+        axis = np.array([-out[1], out[0], 0.0])  # z x out: the top moves towards ``out``
+        return s.t, axis, math.sqrt(9.81 / max(float(s.com[2]), 0.05))
+
+    def _toppled(self, t: float) -> tuple[Array, Array]:
+        """World rotation added by toppling and the world angular velocity (rad/s), ``t`` s after the fall."""
+        t_fall, axis, rate = self._topple
+        x = min(max(t - t_fall, 0.0) * rate, math.acosh(TOPPLED_RAD / TOPPLE_START_RAD))
+        tilt = TOPPLE_START_RAD * (math.cosh(x) - 1.0)
+        speed = TOPPLE_START_RAD * rate * math.sinh(x) if tilt < TOPPLED_RAD - TOPPLE_START_RAD else 0.0
+        return pin.AngleAxis(tilt, axis).toRotationMatrix(), axis * speed
 
     # -- readings -----------------------------------------------------------------------------
 
@@ -482,6 +508,10 @@ class SimHumanoid:
             rotation = pin.updateFramePlacement(model, data, f).rotation
             omega = pin.getFrameVelocity(model, data, f, pin.LOCAL).angular
             acc = pin.getFrameClassicalAcceleration(model, data, f, pin.LOCAL).linear
+            if self._topple is not None:
+                tipped, spin = self._toppled(self.t)
+                rotation = tipped @ rotation
+                omega = omega + rotation.T @ spin
             specific = acc - rotation.T @ model.gravity.linear
             return ImuReading(s.t, pin.Quaternion(rotation).coeffs().copy(), omega.copy(), specific)
 

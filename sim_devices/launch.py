@@ -9,11 +9,14 @@
 Plant joint ``i`` is ``joint_names[i]`` (default: the robot config's servo order); each
 needs a ``[servos.NAME]`` entry in the robot config. Per kind:
 
-* ``dynamixel``: one `DynamixelChain` of XM430s with the config's servo ids; each servo's
-  Homing Offset and Drive Mode are set so that its ticks follow the config's ``zero`` and
-  ``direction`` (``ticks_per_rev`` must be 4096). Return Delay Time is left at the factory
-  250 (500 us) for the link to fix at open;
-* ``can``: a `CanServoBus`, one node per servo (node id = servo id), behind an slcan adapter;
+* ``dynamixel``: one `DynamixelChain` of XM430s with the config's servo ids, bytes taking
+  their wire time at ``baud`` behind a USB-serial ``adapter`` (:mod:`livezmp.links.bus_timing`);
+  each servo's Homing Offset and Drive Mode are set so that its ticks follow the config's
+  ``zero`` and ``direction`` (``ticks_per_rev`` must be 4096). Return Delay Time is left at
+  the factory 250 (500 us) for the link to set at open. With ``buses`` > 1 the servos are
+  split in config order over that many chains (ports), one URL ``dynamixel:PATH1+PATH2...``;
+* ``can``: a `CanServoBus`, one node per servo (node id = servo id), behind an slcan adapter
+  on a pty, or with ``can_transport="socketcand"`` a socketcand daemon on loopback TCP;
 * ``fw``: one `FirmwareBoard` with every joint (joint id = servo id).
 
 ``foot_sensors`` / ``imu`` providers (see `firmware_board`) reach the host on ``fw`` and
@@ -34,12 +37,14 @@ import numpy as np
 from firmware_protocol import StreamRates
 from livezmp.errors import InputError
 from livezmp.links.base import FootSensors
+from livezmp.links.bus_timing import DEFAULT_ADAPTER
 from livezmp.model.robot_config import RobotConfig
 from sim_devices.can_servo import CanServoBus
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.faults import FaultCounters, FaultSpec
 from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
 from sim_devices.humanoid import SimHumanoid
+from sim_devices.plant_split import split_plant
 from sim_devices.pty_port import PtyPort
 from sim_devices.servo_plant import JointPlant
 
@@ -124,11 +129,13 @@ class SimDevices:
 def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
                   joint_names: Sequence[str] | None = None, faults: str | FaultSpec = "",
                   foot_sensors: FootProvider | None = None, imu: ImuProvider | None = None,
-                  baud: int = 1_000_000) -> SimDevices:
+                  baud: int = 1_000_000, adapter: str | float = DEFAULT_ADAPTER, buses: int = 1,
+                  can_transport: str = "slcan") -> SimDevices:
     """Start the devices of ``kind`` ("dynamixel", "can" or "fw") driving ``plant`` (see module docstring).
 
-    ``baud`` is the serial line rate (dynamixel, fw) or the CAN bitrate (can). InputError
-    on a bad kind, joint, servo entry or fault spec.
+    ``baud`` is the serial line rate (dynamixel, fw) or the CAN bitrate (can); ``adapter`` the
+    Dynamixel bus's USB adapter (a name or ms). InputError on a bad kind, joint, servo entry,
+    fault spec, baud or adapter.
     """
     if kind not in KINDS:
         raise InputError(f"simulated link kind '{kind}': expected one of {', '.join(KINDS)}")
@@ -152,14 +159,12 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
                 if s.ticks_per_rev != XM430_TICKS_PER_REV:
                     raise InputError(f"{robot_config.source}: [servos.{s.joint}] ticks_per_rev {s.ticks_per_rev}: "
                                      f"the simulated XM430 has {XM430_TICKS_PER_REV}")
-            chain = DynamixelChain(ids, plant, faults=faults, baud_rate=baud)
-            for s in servos:
-                chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)
-                chain.set_register(s.id, "drive_mode", 1 if s.direction < 0 else 0)  # bit 0: reverse
-            return SimDevices(kind, f"dynamixel:{chain.path}?baud={baud}", [chain.port], [chain])
+            return _dynamixel_buses(plant, servos, faults, baud, adapter, buses)
         if kind == "can":
             bus = CanServoBus(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults, bitrate=baud,
-                              rates=CAN_POWER_UP_RATES)
+                              rates=CAN_POWER_UP_RATES, transport=can_transport)
+            if can_transport == "socketcand":
+                return SimDevices(kind, f"can:socketcand:{bus.adapter.channel}?{bus.adapter.url_options}", [], [bus])
             return SimDevices(kind, f"can:slcan:{bus.path}?bitrate={baud}&sleep_after_open=0", [bus.port], [bus])
         board = FirmwareBoard(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults)
         return SimDevices(kind, f"fw:{board.path}?baud={baud}", [board.port], [board])
@@ -167,3 +172,29 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
         if isinstance(err, InputError):
             raise
         raise InputError(str(err)) from None
+
+
+def _dynamixel_buses(plant: JointPlant, servos: list, faults: str | FaultSpec, baud: int, adapter: str | float,
+                     buses: int) -> SimDevices:
+    if not 1 <= buses <= len(servos):
+        raise InputError(f"buses {buses}: must be 1..{len(servos)} (one servo at least on each)")
+    sizes = [len(part) for part in np.array_split(np.arange(len(servos)), buses)]
+    shares = [plant] if buses == 1 else split_plant(plant, sizes)
+    chains = []
+    try:
+        first = 0
+        for share, size in zip(shares, sizes, strict=True):
+            group = servos[first: first + size]
+            first += size
+            chain = DynamixelChain([s.id for s in group], share, faults=faults, baud_rate=baud, adapter=adapter,
+                                   name=f"ttyDXL{len(chains)}")
+            chains.append(chain)
+            for s in group:
+                chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)
+                chain.set_register(s.id, "drive_mode", 1 if s.direction < 0 else 0)  # bit 0: reverse
+    except BaseException:
+        for chain in chains:
+            chain.close()
+        raise
+    paths = "+".join(chain.path for chain in chains)
+    return SimDevices("dynamixel", f"dynamixel:{paths}?baud={baud}", [c.port for c in chains], chains)

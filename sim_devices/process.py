@@ -8,6 +8,7 @@ a child process — its own core and interpreter, as a real robot is another mac
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import multiprocessing
 import sys
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 
 from livezmp.errors import InputError
 from livezmp.links import LinkError
+from livezmp.links.bus_timing import DEFAULT_ADAPTER, parse_adapter
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import realtime_priority
 from livezmp.live.scenarios import Push, make_scenario
@@ -62,11 +64,12 @@ class SimRobot:
             self.devices.close()
 
 
-def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "") -> SimRobot:
+def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", **devices) -> SimRobot:
     """The humanoid at the scenario's first posture (torque off until a link opens it),
     stepping in real time, behind devices of ``kind`` (a firmware board with its foot
     sensors). For ``mock`` there are no devices and no stepping thread: the in-process
-    mock link steps it at each read."""
+    mock link steps it at each read. ``devices``: `start_devices` options (baud, adapter, buses,
+    can_transport)."""
     if kind not in (*KINDS, "mock"):
         raise InputError(f"--link {kind}: expected one of {', '.join((*KINDS, 'mock'))}")
     if kind == "mock" and faults:
@@ -78,10 +81,11 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "") 
         return SimRobot(humanoid, None, None, scenario)
     thread = RealtimeThread(humanoid, period=humanoid.dt).start()
     try:
-        # the firmware board reads the humanoid's foot cells (its true centre of pressure)
-        feet = humanoid_sensors(humanoid)[0] if kind == "fw" else None
+        # the firmware board reads the humanoid's foot cells (its true centre of pressure); boards and CAN
+        # nodes read its IMU (a Dynamixel chain has none)
+        feet, imu = humanoid_sensors(humanoid) if kind in ("fw", "can") else (None, None)
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
-                                foot_sensors=feet)
+                                foot_sensors=feet if kind == "fw" else None, imu=imu, **devices)
     except BaseException:
         thread.stop()
         raise
@@ -102,12 +106,33 @@ def check_faults(spec: str) -> None:
         raise InputError(f"--fault: {e}") from None
 
 
+def device_options(args: argparse.Namespace) -> dict:
+    """--baud, --adapter and --buses as `start_devices` options (defaults left out); InputError on a bad one,
+    before anything starts."""
+    options = {}
+    if args.baud is not None:
+        if args.baud <= 0:
+            raise InputError(f"--baud {args.baud}: must be a positive number of bit/s")
+        options["baud"] = args.baud
+    if args.adapter != DEFAULT_ADAPTER:
+        try:
+            parse_adapter(args.adapter)
+        except ValueError as e:
+            raise InputError(f"--adapter: {e}") from None
+        options["adapter"] = args.adapter
+    if args.buses != 1:
+        if args.link != "dynamixel":
+            raise InputError("--buses: only the dynamixel link has several buses")
+        options["buses"] = args.buses
+    return options
+
+
 
 FELL_FLAG_EVERY_S = 0.02  # how often a SimProcess's child looks for a fall to flag
 
 
 def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
-               faults: str, priority: int) -> None:
+               faults: str, priority: int, devices: dict) -> None:
     """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
     ``fell_flag`` (a multiprocessing Event) once the robot has fallen."""
     sim = None
@@ -116,7 +141,7 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
         try:
             sim_process_setup()
             robot = load_robot(urdf, config)
-            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults)
+            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults, **devices)
             conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
             while True:
                 if not conn.poll(FELL_FLAG_EVERY_S):
@@ -149,16 +174,17 @@ class SimProcess:
     ``ports`` of its devices; :meth:`start_scenario`, :meth:`fell`, :meth:`verdict`;
     :meth:`vanish` / :meth:`restore` its ports. ``scenario``: (name, keyword arguments);
     ``realtime_priority``: SCHED_FIFO priority of the child's threads (0: normal; if refused,
-    normal)."""
+    normal); ``devices``: `start_devices` options (baud, adapter, buses, can_transport)."""
 
     def __init__(self, kind: str, scenario: tuple[str, dict], faults: str = "", urdf: str | None = None,
-                 config: str | None = None, start_timeout: float = 60.0, realtime_priority: int = 0):
+                 config: str | None = None, start_timeout: float = 60.0, realtime_priority: int = 0,
+                 devices: dict | None = None):
         ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no threads or locks inherited
         self._conn, child = ctx.Pipe()
         # the fall is a flag the child raises, so the loop's frequent question costs no round trip
         self._fell = ctx.Event()
         self._proc = ctx.Process(target=_sim_child, args=(child, self._fell, urdf, config, kind, scenario, faults,
-                                                             realtime_priority),
+                                                             realtime_priority, devices or {}),
                                  name="livezmp-sim", daemon=True)
         self._proc.start()
         child.close()

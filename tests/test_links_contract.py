@@ -31,7 +31,8 @@ def test_read_gives_the_plant_positions_in_joint_order(kind):
         frame = r.link.read()
         assert frame.positions.shape == (N[kind],)
         assert np.abs(frame.positions - start_posture(N[kind])).max() <= tolerance(kind)
-        assert np.abs(frame.velocities).max() < 0.05  # holding still
+        if frame.velocities is not None:  # the dynamixel: link reads only positions by default
+            assert np.abs(frame.velocities).max() < 0.05  # holding still
         later = r.link.read()
         assert later.t > frame.t
         assert r.link.stats.read_errors == 0

@@ -54,9 +54,10 @@ def with_options(url: str, options: str) -> str:
 
 
 @contextlib.contextmanager
-def rig(kind: str, n: int = 20, faults: str = "", options: str | None = None, **plant_options) -> Iterator[Rig]:
+def rig(kind: str, n: int = 20, faults: str = "", options: str | None = None, devices: dict | None = None,
+        **plant_options) -> Iterator[Rig]:
     """A plant at `start_posture` (other `ServoPlant` parameters: ``plant_options``), its simulated devices of
-    ``kind`` and an open link to them (``mock``: none)."""
+    ``kind`` (`start_devices` keyword arguments: ``devices``) and an open link to them (``mock``: none)."""
     plant = ServoPlant(n, position=start_posture(n), **plant_options)
     config = servo_config(n)
     names = list(config.servos)
@@ -66,11 +67,11 @@ def rig(kind: str, n: int = 20, faults: str = "", options: str | None = None, **
         yield Rig(kind, plant, config, names, link, None)
         link.close()
         return
-    with start_devices(kind, plant, config, faults=faults) as devices:
-        link = make_link(with_options(devices.url, TEST_OPTIONS[kind] if options is None else options), names, config)
+    with start_devices(kind, plant, config, faults=faults, **(devices or {})) as sim:
+        link = make_link(with_options(sim.url, TEST_OPTIONS[kind] if options is None else options), names, config)
         link.open()
         try:
-            yield Rig(kind, plant, config, names, link, devices)
+            yield Rig(kind, plant, config, names, link, sim)
         finally:
             link.close()
 

@@ -7,6 +7,7 @@ devices, whose counters are the truth the loop's counters are compared with."""
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
@@ -138,6 +139,23 @@ def test_loop_drives_the_robot_through_python_can_slcan(mini, mini_config):
     assert s["fell"] is False
 
 
+def test_loop_drives_the_robot_through_python_can_socketcand(mini, mini_config):
+    """The same CAN servo nodes behind a simulated socketcand daemon on loopback TCP (their frames taking
+    their time on a 1 Mbit/s bus), through python-can's socketcand interface, at twice the slcan test's rate."""
+    scenario = make_scenario("stand", mini)
+    with SimProcess("can", ("stand", {}), devices={"can_transport": "socketcand"}) as sim:
+        assert sim.url.startswith("can:socketcand:can0?host=127.0.0.1&port=")
+        spy = Spy(open_link(sim.url + "&rate=40&timeout=0.5", mini.joint_names, mini_config))
+        try:
+            s = LiveLoop(spy, mini, LoopConfig(rate_hz=spy.rate), command=scenario.goals, fell=sim.fell).run(1.5)
+        finally:
+            spy.link.close()
+        servos = sim.servos()
+    report("can over socketcand", s)
+    check_drove(s, spy, servos["goal"], 1e-6)
+    assert s["fell"] is False
+
+
 @pytest.mark.parametrize("fast", [False, True], ids=["sync_read", "fast_sync_read"])
 def test_dropped_and_corrupted_replies_are_counted_and_never_drive_a_command(mini, mini_config, fast):
     """1 % of the servos' replies dropped and 1 % corrupted: the link's error count equals
@@ -205,3 +223,43 @@ def test_a_servo_overload_is_reported_and_latches_a_safe_stop(mini, mini_config)
     first = next(c[1] for c in spy.of("read") if c[2].hardware_errors)
     assert not [c for c in spy.of("write") if c[1] > first]
     assert len(spy.of("write")) > 20 and any("servo r_knee: hardware error 0x20" in e for e in s["events"])
+
+
+def test_on_a_bad_bus_the_loop_runs_and_counts_what_it_lost(mini, mini_config):
+    """5 % of the replies dropped and 5 % corrupted (a bad cable): `open` retries the servos it has
+    not heard, and the loop runs, commanding only after good reads, every lost reply counted."""
+    scenario = make_scenario("stand", mini)
+    with SimProcess("dynamixel", ("stand", {}), "drop=0.05,corrupt=0.05,seed=3") as sim:
+        link = open_link(f"{sim.url}&fast=1&timeout=0.06", mini.joint_names, mini_config)
+        spy = Spy(link)
+        try:
+            before = sim.verdict()["injected_faults"]
+            s = LiveLoop(spy, mini, LoopConfig(rate_hz=100.0), command=scenario.goals, fell=sim.fell).run(2.0)
+            after = sim.verdict()["injected_faults"]
+        finally:
+            link.close()
+    faults = sum(after[k] - before[k] for k in ("dropped", "corrupted"))
+    print(f"injected {faults}; failed reads {s['failed_reads']} of {s['cycles']}; {s['achieved_hz']:.1f} Hz")
+    assert s["stopped_by"] == "duration" and s["fell"] is False
+    assert s["read_errors"] == faults > 0
+    assert 0 < s["failed_reads"] < 0.25 * s["cycles"]  # about 10 % of the fast sync reads' single replies
+    assert s["commands_sent"] == s["good_frames"] == len(spy.of("write")) and writes_follow_good_reads(spy)
+
+
+def test_a_bus_losing_a_fifth_of_its_replies_stops_the_run_with_the_measured_loss(mini, mini_config):
+    scenario = make_scenario("stand", mini)
+    with SimProcess("dynamixel", ("stand", {}), "drop=0.1,corrupt=0.12,seed=5") as sim:
+        try:
+            link = open_link(f"{sim.url}&fast=1&timeout=0.06", mini.joint_names, mini_config)
+        except LinkError as e:  # open may already have seen enough
+            message = str(e)
+        else:
+            try:
+                s = LiveLoop(link, mini, LoopConfig(rate_hz=100.0), command=scenario.goals).run(10.0)
+            finally:
+                link.close()
+            assert s["cycles"] < 500  # well before the end: a window of 400 replies is enough to know
+            message = s["stopped_by"]
+    print(message)
+    assert re.search(r"lost or corrupted (\d+) % of the last \d+ replies \(more than 15 %\)", message)
+    assert 15 < int(re.search(r"corrupted (\d+) %", message).group(1)) < 30

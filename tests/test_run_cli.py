@@ -55,7 +55,7 @@ def stop(proc: subprocess.Popen, sig=signal.SIGTERM, timeout: float = 20.0) -> t
 
 def test_sim_serves_a_robot_that_run_balances(tmp_path):
     """`livezmp sim` in its own process; `livezmp run` on its URL with a motion CSV."""
-    sim = livezmp("sim", "--link", "dynamixel", "--scenario", "stand")
+    sim = livezmp("sim", "--link", "dynamixel", "--scenario", "stand", "--baud", "2000000", "--adapter", "hs")
     try:
         hello = json.loads(line_from(sim.stdout, time.monotonic() + 30))
         assert hello["link"] == "dynamixel" and os.path.exists(hello["ports"][0])
@@ -69,7 +69,7 @@ def test_sim_serves_a_robot_that_run_balances(tmp_path):
         write_joint_csv(JointTrajectory(t, q, body.joint_names), motion)
         summary_path = tmp_path / "s.json"
         rc = main(["run", "--robot", str(demo_robot_path()), "--link", hello["url"], "--motion", str(motion),
-                   "--rate", "100", "--quiet", "--summary-json", str(summary_path)])
+                   "--rate", "100", "--quiet", "--summary-json", str(summary_path), "--adapter-latency-ms", "0.1875"])
         assert rc == 0
         s = json.loads(summary_path.read_text())
         assert all(k in s for k in SUMMARY_KEYS)
@@ -77,6 +77,13 @@ def test_sim_serves_a_robot_that_run_balances(tmp_path):
         assert s["stopped_by"] == "duration" and s["cycles"] + s["clock"]["skipped_cycles"] == 100
         assert s["commands_sent"] > 50 and s["fell"] is None  # another process's robot: run cannot know
         assert s["watchdog_trips"] == 0
+        # a Fast Sync Read of 20 positions (14 + 20 bytes out, 8 + 20 x 8 back) and a Sync Write of 20 goals
+        # (14 + 20 x 5) at 2 Mbit/s, 10 bits a byte, plus the high-speed adapter's 0.1875 ms
+        bus = s["bus"]
+        assert bus["baud"] == 2_000_000 and bus["read"] == "fast sync read: position"
+        assert bus["bytes_per_cycle"] == 34 + 168 + 114 and bus["wire_ms_per_cycle"] == pytest.approx(1.58)
+        assert bus["ceiling_hz"] == pytest.approx(1 / (1.58e-3 + 0.1875e-3), abs=0.1)
+        assert bus["utilisation"] == pytest.approx(s["achieved_hz"] / bus["ceiling_hz"], rel=1e-3)
     finally:
         rc, _, err = stop(sim)
     assert rc == 0 and "the robot did not fall" in err
@@ -120,6 +127,11 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     (["demo", "--fault", "drop=2"], "fault spec field 'drop': expected a probability in [0, 1], got '2'"),
     (["demo", "--realtime-priority", "120"], "--realtime-priority 120: must be 1-99"),
     (["sim", "--link", "dynamixel", "--realtime-priority", "-1"], "--realtime-priority -1: must be 1-99"),
+    (["demo", "--adapter", "usb3"], "--adapter: USB adapter 'usb3': expected ftdi-fs, hs, none or a latency in ms"),
+    (["demo", "--link", "fw", "--buses", "2"], "--buses: only the dynamixel link has several buses"),
+    (["demo", "--baud", "0"], "--baud 0: must be a positive number of bit/s"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--adapter-latency-ms", "-1"],
+     "--adapter-latency-ms -1.0: must be milliseconds >= 0"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):
     assert main(argv) == 2

@@ -272,6 +272,31 @@ def test_a_lean_past_the_toes_falls_after_fall_after_s_and_then_holds(body, fall
     assert np.abs(h.state().v).max() == 0.0 and h.fallen is fall
 
 
+def imu_tilt(h: SimHumanoid) -> float:
+    """Angle (rad) between the IMU's z axis and the world's vertical."""
+    x, y, _, _ = h.imu().quaternion
+    return float(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))
+
+
+def test_after_a_fall_the_imu_reads_the_body_toppling_forwards_until_it_lies(body):
+    scenario = sc.lean(body, beyond=0.004)  # past the toes: it topples forwards, about the y axis
+    h = SimHumanoid(body, scenario.goals(0.0))
+    record(h, scenario, scenario.duration)
+    assert h.fallen is not None
+    upright = imu_tilt(h)
+    rate = np.sqrt(9.81 / h.state().com[2])
+    player = sc.ScenarioPlayer(h, scenario, rate_hz=125.0)
+    # linearised pendulum from 0.05 rad: the added tilt is 0.05 (cosh(t rate) - 1)
+    t0 = h.t - h.fallen.t
+    player.run(0.3)
+    expected = 0.05 * (np.cosh((h.t - h.fallen.t) * rate) - 1.0)
+    assert imu_tilt(h) - upright == pytest.approx(expected, rel=0.05, abs=1e-3)
+    assert h.imu().angular_velocity[1] > 0.0 and t0 >= 0.0  # pitching forwards (y up to the left)
+    player.run(1.5)
+    assert imu_tilt(h) == pytest.approx(np.pi / 2 - 0.05 + upright, abs=0.02)  # lying on its front
+    assert np.abs(h.imu().angular_velocity).max() < 1e-6
+
+
 def test_a_lean_that_stays_inside_does_not_fall(body):
     scenario = sc.lean(body, beyond=-0.008)  # static CoM 8 mm inside the toes at the hold
     h = SimHumanoid(body, scenario.goals(0.0))

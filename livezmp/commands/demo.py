@@ -22,7 +22,7 @@ from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.launch import humanoid_sensors
 from sim_devices.mock_link import MockLink
-from sim_devices.process import SimProcess, check_faults, start_sim
+from sim_devices.process import SimProcess, check_faults, device_options, start_sim
 
 
 def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
@@ -42,8 +42,8 @@ def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenari
 
 def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
-    with SimProcess(args.link, (args.scenario, {}), args.fault,
-                    realtime_priority=max(args.realtime_priority - 1, 0)) as sim:
+    with SimProcess(args.link, (args.scenario, {}), args.fault, realtime_priority=max(args.realtime_priority - 1, 0),
+                    devices=device_options(args)) as sim:
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -58,6 +58,7 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
 def cmd_demo(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
     check_record(args)
+    device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)

@@ -26,6 +26,7 @@ import numpy as np
 from livezmp.commands.common import stop_on_signals
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
+from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, parse_adapter
 from livezmp.live import scenarios as sc
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import LiveLoop
@@ -121,6 +122,11 @@ def print_summary(s: dict) -> None:
             f"deadline misses; read errors {s['read_errors']}, write errors {s['write_errors']}, stale frames "
             f"{s['stale_frames']}; {s['corrections_sent']} corrections sent; estimated ZMP inside {inside}; "
             f"latency p99 {p99}; stopped by {s['stopped_by']}")
+    if s.get("bus"):
+        b = s["bus"]
+        line += (f"; bus: {b['baud']} baud x {b['buses']}, {b['read']}, {b['bytes_per_cycle']:g} bytes = "
+                 f"{b['wire_ms_per_cycle']:.2f} ms a cycle + {b['adapter_latency_ms']:.2f} ms adapter: ceiling "
+                 f"{b['ceiling_hz']:.0f} Hz, {100 * b['utilisation']:.0f} % used")
     if s.get("fell") is not None:
         true = s.get("true_inside_fraction")
         line += f"; simulator: {'FELL' if s['fell'] else 'did not fall'}"
@@ -163,12 +169,32 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
         raise
     status.done()
     summary = {**summary, "realtime_priority": args.realtime_priority if refused is None else 0}
+    if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
+        summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:
         summary["recording"] = recorder.close(summary)
         if summary["recording"]["dropped_total"] or summary["recording"]["failed"]:
             status.event(f"recording {args.record}: {summary['recording']['dropped_total']} messages dropped "
                          f"(queue full), {summary['recording']['failed']} failed ({summary['recording']['error']})")
     return summary
+
+
+def adapter_option(text: str) -> Adapter:
+    """--adapter: a USB-serial adapter by name or its round-trip latency in ms (InputError otherwise)."""
+    try:
+        return parse_adapter(text)
+    except ValueError as e:
+        raise InputError(f"--adapter: {e}") from None
+
+
+def assumed_adapter(args: argparse.Namespace) -> Adapter:
+    """The adapter the bus ceiling assumes: --adapter-latency-ms, else the simulated --adapter, else the default."""
+    if getattr(args, "adapter_latency_ms", None) is not None:
+        ms = args.adapter_latency_ms
+        if not (np.isfinite(ms) and 0 <= ms < 1e3):
+            raise InputError(f"--adapter-latency-ms {ms}: must be milliseconds >= 0")
+        return parse_adapter(ms)
+    return adapter_option(getattr(args, "adapter", DEFAULT_ADAPTER))
 
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
@@ -184,6 +210,7 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
     check_record(args)
+    assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")

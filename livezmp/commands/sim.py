@@ -13,7 +13,7 @@ from livezmp.commands.common import stop_on_signals
 from livezmp.live.realtime import check_priority, realtime_priority
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import load_robot
-from sim_devices.process import check_faults, sim_process_setup, start_sim
+from sim_devices.process import check_faults, device_options, sim_process_setup, start_sim
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -21,12 +21,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
+    devices = device_options(args)
     sim_process_setup()
     stop = threading.Event()
     # the devices' threads inherit the priority: they stand in for hardware, which no other
     # program on the computer delays
     with realtime_priority(args.realtime_priority) as refused:
-        sim = start_sim(robot, args.link, scenario, args.fault)
+        sim = start_sim(robot, args.link, scenario, args.fault, **devices)
         try:
             sim.start_scenario()
             print(json.dumps({"link": args.link, "url": sim.devices.url, "ports": [p.path for p in sim.devices.ports],

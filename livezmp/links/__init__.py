@@ -1,6 +1,6 @@
 """Servo links: `open_link` picks and opens the backend a URL names (URL forms: :mod:`livezmp.links.base`).
 
-    dynamixel:PATH[?baud=1000000&fast=auto&watchdog=0.1&timeout=S]
+    dynamixel:PATH[+PATH2...][?baud=1000000&fast=auto&read=position&return_delay=0&watchdog=0.1&timeout=S]
     can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
     fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
     mock:                       (registered by sim_devices: an in-process simulated robot)
@@ -10,9 +10,10 @@ through the ``livezmp.links`` entry-point group (``name = "module:BACKEND"`` in 
 package's metadata), as python-can finds its interfaces, so a package such as
 ``sim_devices`` adds ``mock:`` without livezmp importing it.
 
-Options follow the last ``?`` (a pyserial URL with options of its own keeps them before
-it: ``fw:socket://host:5000?logging=debug?rate=200``). Times in seconds, rates in Hz.
-A bad URL or option is an `InputError` naming it.
+``dynamixel:PATH1+PATH2`` is one robot on several buses, read in parallel
+(:mod:`livezmp.links.multi_bus`). Options follow the last ``?`` (a pyserial URL with
+options of its own keeps them before it: ``fw:socket://host:5000?logging=debug?rate=200``).
+Times in seconds, rates in Hz. A bad URL or option is an `InputError` naming it.
 """
 
 from __future__ import annotations
@@ -22,11 +23,11 @@ from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 
 from livezmp.errors import InputError
-from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkStats, LinkUnusable
 from livezmp.model.robot_config import RobotConfig, ServoConfig
 
-__all__ = ["Backend", "FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "make_link",
-           "open_link", "parse_link_url"]
+__all__ = ["Backend", "FootSensors", "Link", "LinkError", "LinkFrame", "LinkReadError", "LinkStats", "LinkUnusable",
+           "make_link", "open_link", "parse_link_url"]
 
 ENTRY_POINT_GROUP = "livezmp.links"
 Builder = Callable[[str, str, list[str], RobotConfig, dict, dict], Link]
@@ -36,7 +37,7 @@ Builder = Callable[[str, str, list[str], RobotConfig, dict, dict], Link]
 class Backend:
     """One link scheme: ``build(url, target, joint_names, robot_config, options, extra)`` makes the
     (unopened) link; ``options`` name -> (kind, default), kind one of "rate", "time", "positive",
-    "flag", "auto_flag"; ``target``: whether the URL names a device after the scheme;
+    "flag", "auto_flag", "read", "return_delay"; ``target``: whether the URL names a device after the scheme;
     ``extra_options``: unknown options are passed on (``extra``) rather than refused."""
 
     build: Builder
@@ -79,14 +80,20 @@ def _value(url: str, name: str, kind: str, text: str):
             if text not in ("0", "1", "true", "false"):
                 raise ValueError
             return text in ("1", "true")
-        value = int(text) if kind == "rate" else float(text)
+        if kind == "read":
+            if text not in ("position", "state"):
+                raise ValueError
+            return text
+        value = int(text) if kind in ("rate", "return_delay") else float(text)
     except ValueError:
         value = None
     ok = value is not None and {"rate": lambda v: v > 0, "time": lambda v: 0 <= v < 1e4,
-                                "positive": lambda v: 0 < v < 1e4}[kind](value)
+                                "positive": lambda v: 0 < v < 1e4,
+                                "return_delay": lambda v: 0 <= v <= 508 and v % 2 == 0}[kind](value)
     if not ok:
         want = {"rate": "a positive integer", "time": "seconds >= 0", "positive": "seconds > 0",
-                "flag": "0 or 1", "auto_flag": "0, 1 or auto"}[kind]
+                "flag": "0 or 1", "auto_flag": "0, 1 or auto", "read": "position or state",
+                "return_delay": "an even number of microseconds, 0-508"}[kind]
         raise InputError(f"link URL '{url}': option '{name}' must be {want}, got '{text}'")
     return value
 
@@ -130,8 +137,16 @@ def _dynamixel(url: str, target: str, names: list[str], config: RobotConfig, opt
     if opts["watchdog"] and not WATCHDOG_UNIT <= opts["watchdog"] <= WATCHDOG_MAX:
         raise InputError(f"link URL '{url}': option 'watchdog' must be 0 (off) or {WATCHDOG_UNIT}.."
                          f"{WATCHDOG_MAX:.2f} s, got {opts['watchdog']:g}")
-    return DynamixelLink(target, names, _servos("dynamixel", names, config), baud=opts["baud"], fast=opts["fast"],
-                         watchdog=opts["watchdog"], timeout=opts["timeout"])
+    options = {k: opts[k] for k in ("baud", "fast", "read", "return_delay", "watchdog", "timeout")}
+    servos = _servos("dynamixel", names, config)
+    if "+" in target:  # several buses, one robot
+        from livezmp.links.multi_bus import MultiBusLink
+
+        paths = target.split("+")
+        if len(set(paths)) != len(paths) or not all(paths):
+            raise InputError(f"link URL '{url}': dynamixel:PATH1+PATH2... needs distinct, non-empty ports")
+        return MultiBusLink(paths, names, servos, **options)
+    return DynamixelLink(target, names, servos, **options)
 
 
 def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
@@ -157,6 +172,7 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
 
 _BUILT_IN = {
     "dynamixel": Backend(_dynamixel, {"baud": ("rate", 1_000_000), "fast": ("auto_flag", None),
+                                      "read": ("read", "position"), "return_delay": ("return_delay", 0),
                                       "watchdog": ("time", 0.1), "timeout": ("positive", None)}),
     "can": Backend(_can, {"bitrate": ("rate", None), "rate": ("rate", 30), "watchdog": ("time", 0.2),
                           "timeout": ("positive", 0.1)}, extra_options=True),  # the rest go to python-can's Bus

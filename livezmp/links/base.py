@@ -32,6 +32,10 @@ class LinkReadError(LinkError):
     """One read failed verification; the frame is dropped, the link may still be up."""
 
 
+class LinkUnusable(LinkError):
+    """The bus works but too badly to control a robot with (e.g. it loses too many replies): stop."""
+
+
 @dataclass
 class FootSensors:
     """Per-foot vertical forces (N) at the sole corners and the board's centre of

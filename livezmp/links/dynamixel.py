@@ -1,9 +1,11 @@
 """Dynamixel Protocol 2.0 servo link, through the ROBOTIS dynamixel-sdk.
 
-    dynamixel:PATH[?baud=1000000&fast=auto&watchdog=0.1&timeout=0.034]
+    dynamixel:PATH[?baud=1000000&fast=auto&read=position&return_delay=0&watchdog=0.1&timeout=S]
 
-One sync read per `read` (Present Current, Velocity and Position of every servo, addresses
-126-135 of the X-series control table), or a Fast Sync Read (one status packet for all
+One sync read per `read` of what the loop uses: Present Position of every servo
+(``read=position``, 4 bytes a servo: every byte costs rate on the bus) or Present Current,
+Velocity and Position (``read=state``, addresses 126-135 of the X-series control table),
+or a Fast Sync Read (one status packet for all
 servos: about half the bytes and one reply to parse instead of one per servo) with
 ``fast=1``, or by default (``fast=auto``) when every servo's firmware is 45 or later (the
 X-series firmware that has it) and the installed dynamixel-sdk has it; one sync write of Goal Position per
@@ -13,22 +15,32 @@ robot config (`ServoConfig`); currents and velocities use the XM/XH units (2.69 
 
 `open` checks every servo answers and is in a position control mode, reads its position
 limits (in position mode 3 a servo ignores a goal beyond them, so `write_goals` refuses
-one with LinkError), sets Return Delay Time to 0 where it is not (an EEPROM write, so
-only on servos whose torque is off), arms the Bus Watchdog (``watchdog`` s, 20 ms units;
-0 leaves it off), enables torque, checks it came on and holds the present posture.
+one with LinkError), sets Return Delay Time to ``return_delay`` us (default 0; 2 us units)
+where it differs (an EEPROM write, so only on servos whose torque is off), arms the Bus
+Watchdog (``watchdog`` s, 20 ms units; 0 leaves it off), enables torque, checks it came on
+and holds the present posture.
 
 Replies are received one status packet at a time with the sdk's packet handler, so a
 lost or corrupt reply does not swallow the others: ``stats.read_errors`` counts replies
 lost (``no_reply``, ``short_reply``) or rejected (``bad_crc``, ``bad_reply``), the same
-unit the simulated devices' fault counters use; any of them makes `read` raise
-`LinkReadError` and return nothing. A status packet with the alert bit set makes the link
-read that servo's Hardware Error Status, reported in ``LinkFrame.hardware_errors``.
+unit the simulated devices' fault counters use. A plain sync read asks the servos whose
+replies were lost once more (a second sync read of just them); a servo still missing, or
+a lost Fast Sync Read reply, makes `read` raise `LinkReadError` and return nothing. At
+`open` each read is retried up to `OPEN_TRIES` times for the servos not heard yet, so a
+noisy bus opens; a servo never heard is a LinkError naming it. On a bus that loses more
+than `MAX_REPLY_LOSS` of its replies (over the last `LOSS_WINDOW`) the link gives up:
+`LinkUnusable`, with the measured loss (a bad cable, termination or baud rate). A status
+packet with the alert bit set makes the link read that servo's Hardware Error Status,
+reported in ``LinkFrame.hardware_errors``.
 
 ``timeout`` (s) bounds the wait for the replies of one transaction once the link is open;
-by default the sdk's own (twice its USB latency timer, 16 ms, plus 2 ms), which is also
-what `open` waits (servos may still have their factory return delays then: 0.5 ms each).
-A lost reply costs the loop one timeout: with return delays at 0 and a low-latency
-adapter a few milliseconds are enough. Known limit: Protocol 2.0 has no
+by default three times the slowest of the good reads at the end of `open` plus 2 ms
+(never more than the sdk's own: twice its USB latency timer, 16 ms, plus 2 ms, which is
+what `open` waits: servos may still have their factory return delays then). A lost
+reply costs the loop one timeout.
+
+The bytes each read and write put on the wire are counted from `open`'s end;
+`bus_ceilings` turns them into the bus's physical ceiling (:mod:`.bus_timing`). Known limit: Protocol 2.0 has no
 sequence numbers, so a reply delayed beyond the timeout that arrives during the next
 transaction would be taken for that transaction's; keep the timeout above the bus's worst
 reply latency.
@@ -54,8 +66,11 @@ from dynamixel_sdk import (
     PacketHandler,
     PortHandler,
 )
+from dynamixel_sdk.port_handler import LATENCY_TIMER
 
-from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, PortLink
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, LinkUnusable, PortLink
+from livezmp.links.bus_timing import Adapter, BusCeiling, sync_read_bytes, sync_write_bytes
+from livezmp.links.reply_loss import ReplyLoss
 from livezmp.model.robot_config import ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
@@ -70,6 +85,9 @@ BUS_WATCHDOG = 98  # 20 ms units, 0 off; reads -1 once it tripped
 GOAL_POSITION = 116
 PRESENT_STATE = 126  # Present Current (2 bytes), Present Velocity (4), Present Position (4)
 PRESENT_STATE_LENGTH = 10
+PRESENT_POSITION = 132
+READS = {"position": (PRESENT_POSITION, 4), "state": (PRESENT_STATE, PRESENT_STATE_LENGTH)}
+RETURN_DELAY_UNIT_US = 2
 POSITION_MODES = {3: "position", 4: "extended position", 5: "current-based position"}
 ALERT = 0x80  # status packet error bit: Hardware Error Status is not 0
 # Protocol 2.0 status packet: header FF FF FD 00, id, length (2: instruction to CRC), 0x55, error, data, CRC (2).
@@ -78,9 +96,12 @@ VELOCITY_UNIT = 0.229 * 2.0 * math.pi / 60.0  # rad/s per unit
 CURRENT_UNIT = 2.69e-3  # A per unit
 WATCHDOG_UNIT = 0.020  # s per unit
 WATCHDOG_MAX = 127 * WATCHDOG_UNIT
-OPEN_TRIES = 5  # attempts of each read at open: a glitch should not fail the whole open
+OPEN_TRIES = 8  # attempts of each read at open, for the servos not heard yet: a noisy bus still opens
+MAX_REPLY_LOSS = 0.15  # share of replies lost or rejected beyond which the bus is not usable
+LOSS_WINDOW = 400  # replies the loss is measured over
 
 _STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")])
+_POSITION = np.dtype([("position", "<i4")])
 _PORT_ERRORS = (serial.SerialException, OSError, termios.error)  # termios: flushing a vanished pty
 
 
@@ -88,7 +109,10 @@ class WaitingPortHandler(PortHandler):
     """The sdk's port handler, but a read that finds no bytes waits for them (select on
     the port, up to the packet's timeout) instead of polling again at once: the sdk's
     own loop spins a whole CPU core for every reply, which on a small computer is the
-    core the servos' other work (and here the simulator) needs."""
+    core the servos' other work (and here the simulator) needs. Counts the bytes it moves."""
+
+    bytes_out = 0
+    bytes_in = 0
 
     def readPort(self, length):
         data = self.ser.read(length)
@@ -97,20 +121,47 @@ class WaitingPortHandler(PortHandler):
             if remaining_ms > 0:
                 select.select([self.ser.fileno()], [], [], remaining_ms / 1000.0)
                 data = self.ser.read(length)
+        self.bytes_in += len(data)
         return data
+
+    def writePort(self, packet):
+        written = self.ser.write(packet)
+        self.bytes_out += written or 0
+        return written
+
+
+ID_ADDRESS = 7
+
+
+def find_servos(path: str, ids: Sequence[int], baud: int, tries: int = OPEN_TRIES) -> set[int]:
+    """Which of ``ids`` answer on the bus at ``path`` (a sync read of their ID register, asked again
+    up to ``tries`` times for the silent ones). LinkError if the port cannot be opened."""
+    probe = DynamixelLink(path, [str(i) for i in ids], [ServoConfig(str(i), i) for i in ids], baud=baud)
+    probe._open_port()
+    heard: set[int] = set()
+    try:
+        for _ in range(tries):
+            silent = tuple(i for i in ids if i not in heard)
+            if not silent:
+                break
+            heard |= set(probe._transaction(ID_ADDRESS, 1, False, silent)[0])
+    finally:
+        probe._release()
+    return heard
 
 
 class DynamixelLink(PortLink):
     """Servos ``servos[i]`` drive joints ``joint_names[i]`` (see module docstring).
 
     ``baud`` (bit/s), ``fast`` (Fast Sync Read; None: where every servo has it, see
-    ``fast_read`` after `open`), ``watchdog`` (s, 0: off), ``timeout``
-    (s per transaction, None: the sdk's). Construction does no I/O; `open` does.
+    ``fast_read`` after `open`), ``read`` ("position" or "state", see `READS`),
+    ``return_delay`` (us, even, 0-508), ``watchdog`` (s, 0: off), ``timeout``
+    (s per transaction, None: from the reads at open). Construction does no I/O; `open` does.
     """
 
     def __init__(self, path: str, joint_names: Sequence[str], servos: Sequence[ServoConfig], *,
-                 baud: int = 1_000_000, fast: bool | None = None, watchdog: float = 0.1,
-                 timeout: float | None = None) -> None:
+                 baud: int = 1_000_000, fast: bool | None = None, read: str = "position", return_delay: int = 0,
+                 watchdog: float = 0.1, timeout: float | None = None) -> None:
         if len(servos) != len(joint_names):
             raise ValueError(f"DynamixelLink: {len(joint_names)} joints but {len(servos)} servos")
         ids = [s.id for s in servos]
@@ -119,8 +170,14 @@ class DynamixelLink(PortLink):
         if watchdog and not WATCHDOG_UNIT <= watchdog <= WATCHDOG_MAX:
             raise ValueError(f"DynamixelLink: watchdog must be 0 or {WATCHDOG_UNIT}..{WATCHDOG_MAX:.2f} s, "
                              f"got {watchdog}")
+        if read not in READS:
+            raise ValueError(f"DynamixelLink: read must be one of {', '.join(READS)}, got '{read}'")
+        if return_delay % RETURN_DELAY_UNIT_US or not 0 <= return_delay <= 254 * RETURN_DELAY_UNIT_US:
+            raise ValueError(f"DynamixelLink: return_delay must be an even number of us in 0..508, got {return_delay}")
         self.path = path
         self.joint_names = list(joint_names)
+        self.read_what = read
+        self.return_delay = return_delay
         self.ids = ids
         self.baud = baud
         self.fast = fast
@@ -129,6 +186,11 @@ class DynamixelLink(PortLink):
         self.timeout = timeout
         self._opening = False  # while open() configures the servos: the sdk's own timeout
         self.stats = LinkStats()
+        self.loss = ReplyLoss(LOSS_WINDOW, MAX_REPLY_LOSS)
+        self._run_timeout_ms: float | None = None  # the reply timeout once open
+        self._traffic = np.zeros(4)  # bytes read, reads, bytes written, writes: since open finished
+        self._pending = False  # a `request`ed read's instruction is out, its replies not taken in
+        self._requested_bytes = 0
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -158,24 +220,54 @@ class DynamixelLink(PortLink):
         finally:
             self._opening = False
 
+    def request(self) -> None:
+        """Send the next `read`'s instruction now; `read` then only receives the replies (a loop
+        computes while they travel). Writing before that `read` first takes them in."""
+        if self._pending or self._port is None:
+            return
+        port = self._port
+        reader = self._reader(*READS[self.read_what], tuple(self.ids))
+        self._requested_bytes = port.bytes_out + port.bytes_in
+        try:
+            result = reader.fastSyncReadTxPacket() if self.fast_read else reader.txPacket()
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        finally:
+            port.is_using = False  # the replies are ours to take in `read`, whatever the sdk thinks
+        if result != COMM_SUCCESS:
+            raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
+        self._pending = True
+
     def read(self) -> LinkFrame:
         """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
         self.stats.reads += 1
-        errors, data = self._sync_read(PRESENT_STATE, PRESENT_STATE_LENGTH, self.fast_read)
+        port = self._require_port()
+        sent, self._pending = self._pending, False
+        before = self._requested_bytes if sent else port.bytes_out + port.bytes_in
+        try:
+            errors, data = self._sync_read(*READS[self.read_what], self.fast_read,
+                                           retries=0 if self.fast_read else 1, sent=sent)
+        finally:
+            self._traffic[:2] += (port.bytes_out + port.bytes_in - before, 1)
         t = time.monotonic()
         alerts = {i: self._hardware_error(i) for i, e in enumerate(errors) if e & ALERT}
-        state = np.frombuffer(data, dtype=_STATE)
+        state = np.frombuffer(data, dtype=_STATE if self.read_what == "state" else _POSITION)
         self._present = state["position"].astype(np.int64)
+        full = self.read_what == "state"
         return LinkFrame(
             t=t,
             positions=(self._present - self._zero) * self._rad_per_tick,
-            velocities=state["velocity"] * self._rad_s_per_unit,
-            currents=state["current"] * self._amp_per_unit,
+            velocities=state["velocity"] * self._rad_s_per_unit if full else None,
+            currents=state["current"] * self._amp_per_unit if full else None,
             hardware_errors={self.joint_names[i]: bits for i, bits in alerts.items() if bits},
         )
 
     def write_goals(self, positions: np.ndarray) -> None:
         """Goal positions (n,) rad in ``joint_names`` order, as one sync write."""
+        self.write_ticks(self.goal_ticks(positions))
+
+    def goal_ticks(self, positions: np.ndarray) -> np.ndarray:
+        """Goal positions (n,) rad as servo ticks; LinkError (nothing sent) if one is beyond its servo's limits."""
         goals = np.asarray(positions, dtype=float)
         if goals.shape != (len(self.ids),):
             raise LinkError(f"{self.path}: write_goals needs {len(self.ids)} positions, got shape {goals.shape}")
@@ -187,12 +279,27 @@ class DynamixelLink(PortLink):
                            (self._highest[i] - self._zero[i]) * self._rad_per_tick[i]])
             raise LinkError(f"{self.path}: goal for joint '{self.joint_names[i]}' is {float(goals[i])} rad, outside "
                             f"its servo's range [{ends[0]:.4f}, {ends[1]:.4f}] rad; nothing sent")
-        self._write_ticks(ticks.astype("<i4"))
+        return ticks.astype("<i4")
+
+    @property
+    def read_label(self) -> str:
+        """What each `read` asks for, e.g. "fast sync read: position"."""
+        return f"{'fast sync read' if self.fast_read else 'sync read'}: {self.read_what}"
+
+    def bus_ceilings(self, adapter: Adapter) -> list[BusCeiling]:
+        """The bus's ceiling from the bytes a read and a write moved since `open` (the packet sizes
+        when nothing was exchanged yet), the servos' return delays and ``adapter``."""
+        read_bytes, reads, write_bytes, writes = self._traffic
+        n, length = len(self.ids), READS[self.read_what][1]
+        per_read = read_bytes / reads if reads else sum(sync_read_bytes(n, length, self.fast_read))
+        per_write = write_bytes / writes if writes else sync_write_bytes(n, 4)
+        delays = n * self.return_delay * 1e-6
+        return [BusCeiling(self.baud, per_read + per_write, delays, adapter)]
 
     def hold(self) -> None:
         """Goals = the present positions, from a fresh read (exact ticks, no rounding)."""
         self.read()
-        self._write_ticks(self._present.astype("<i4"))
+        self.write_ticks(self._present.astype("<i4"))
 
     def safe_stop(self, drop_torque: bool = False) -> None:
         """Hold (or switch torque off); never raises: if the bus is gone the servos' Bus Watchdog stops them."""
@@ -242,11 +349,13 @@ class DynamixelLink(PortLink):
             if mode not in POSITION_MODES:
                 raise LinkError(f"{self.path}: {self._who(i)} is in operating mode {mode}, not a position mode "
                                 f"({', '.join(f'{k} {v}' for k, v in POSITION_MODES.items())})")
-            if delay:
+            want = self.return_delay // RETURN_DELAY_UNIT_US
+            if delay != want:
                 if ram[i]:
                     raise LinkError(f"{self.path}: {self._who(i)} has Return Delay Time {2 * delay} us and torque "
-                                    "on, so it cannot be set to 0: switch its torque off and reopen")
-                self._write_one(i, RETURN_DELAY_TIME, 0)
+                                    f"on, so it cannot be set to {self.return_delay} us: switch its torque off and "
+                                    "reopen")
+                self._write_one(i, RETURN_DELAY_TIME, want)
         if self.watchdog:
             self._write_all(BUS_WATCHDOG, 1, 0)  # writing 0 first clears a tripped watchdog
             self._write_all(BUS_WATCHDOG, 1, round(self.watchdog / WATCHDOG_UNIT))
@@ -259,6 +368,24 @@ class DynamixelLink(PortLink):
                                for i in off)
             raise LinkError(f"{self.path}: torque did not come on for {detail}: reboot or power-cycle the servo")
         self._hold_retrying()
+        self._run_timeout_ms = self._measure_timeout() if self.timeout is None else 1e3 * self.timeout
+        self._traffic[:] = 0
+
+    def _measure_timeout(self) -> float:
+        """The reply timeout (ms) for the run: 3x the slowest of a few good reads, plus 2 ms, at most the sdk's."""
+        port = self._require_port()
+        took = []
+        for _ in range(OPEN_TRIES):
+            start = time.perf_counter()
+            try:
+                self._sync_read(*READS[self.read_what], self.fast_read)
+            except LinkReadError:
+                continue
+            took.append(1e3 * (time.perf_counter() - start))
+            if len(took) == 3:
+                break
+        sdk = 2.0 * LATENCY_TIMER + 2.0 + port.tx_time_per_byte * 1000
+        return min(3.0 * max(took, default=sdk) + 2.0, sdk)
 
     def _hold_retrying(self) -> None:
         """`hold`, retrying reads that fail (a lost reply should not leave the servos on their old goals)."""
@@ -272,56 +399,79 @@ class DynamixelLink(PortLink):
 
     def _read_at_open(self, address: int, length: int) -> bytes:
         """One sync read of every servo, retried; the data in joint order. LinkError after OPEN_TRIES."""
-        failure = None
-        for _ in range(OPEN_TRIES):
-            try:
-                return self._sync_read(address, length, fast=False)[1]
-            except LinkReadError as err:
-                failure = err
-        raise LinkError(f"{failure} ({OPEN_TRIES} tries; check power, ids, baud rate and Status Return Level)")
+        try:
+            return self._sync_read(address, length, fast=False, retries=OPEN_TRIES - 1)[1]
+        except LinkReadError as err:
+            raise LinkError(f"{err} ({OPEN_TRIES} tries; check power, ids, baud rate and Status Return Level)") \
+                from None
 
     # -- bus transactions -----------------------------------------------------------------------
 
-    def _reader(self, address: int, length: int) -> GroupSyncRead:
-        reader = self._readers.get((address, length))
+    def _reader(self, address: int, length: int, ids: tuple[int, ...]) -> GroupSyncRead:
+        reader = self._readers.get((address, length, ids))
         if reader is None:
-            reader = self._readers[(address, length)] = GroupSyncRead(self._port, self._ph, address, length)
-            for dxl_id in self.ids:
+            reader = self._readers[(address, length, ids)] = GroupSyncRead(self._port, self._ph, address, length)
+            for dxl_id in ids:
                 reader.addParam(dxl_id)
         return reader
 
-    def _sync_read(self, address: int, length: int, fast: bool) -> tuple[list[int], bytes]:
-        """(status error byte per servo, data of every servo concatenated), in joint order."""
-        port = self._require_port()
-        reader = self._reader(address, length)
-        try:
-            result = reader.fastSyncReadTxPacket() if fast else reader.txPacket()
-            if result != COMM_SUCCESS:
-                raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
-            if self.timeout is not None and not self._opening:
-                port.setPacketTimeoutMillis(self.timeout * 1000.0)
-            replies, failures = self._receive_fast(length) if fast else self._receive_each(length)
-        except _PORT_ERRORS as err:
-            raise LinkError(f"{self.path}: port failed: {err}") from None
-        finally:
-            port.is_using = False  # the sdk leaves it set when an exception cuts a transaction short
+    def _sync_read(self, address: int, length: int, fast: bool, retries: int = 0,
+                   sent: bool = False) -> tuple[list[int], bytes]:
+        """(status error byte per servo, data of every servo concatenated), in joint order; the servos
+        whose replies were lost asked again up to ``retries`` times (``sent``: the first instruction
+        went out already, by `request`). LinkReadError if some stay silent, LinkUnusable when the bus
+        loses too many replies."""
+        replies: dict[int, tuple[int, bytes]] = {}
+        failures: dict[str, int] = {}
+        missing = tuple(self.ids)
+        for attempt in range(1 + retries):
+            got, lost = self._transaction(address, length, fast, missing, sent=sent and attempt == 0)
+            replies.update(got)
+            for kind, count in lost.items():
+                failures[kind] = failures.get(kind, 0) + count
+            self.loss.add(1 if fast else len(missing), sum(lost.values()))
+            missing = tuple(i for i in self.ids if i not in replies)
+            if not missing:
+                break
         if failures:
             self.stats.read_errors += sum(failures.values())
             for kind, count in failures.items():
                 self.stats.errors_by_kind[kind] = self.stats.errors_by_kind.get(kind, 0) + count
-            missing = [self._who(i) for i, dxl_id in enumerate(self.ids) if dxl_id not in replies]
-            detail = f"; nothing usable from {', '.join(missing[:4])}" if missing else ""
-            if len(missing) > 4:
-                detail += f" and {len(missing) - 4} more"
+        if self.loss.exceeded():
+            raise LinkUnusable(f"{self.path}: {self.loss.describe()}: check the cable, its termination and the baud "
+                               "rate")
+        if missing:
+            who = [self._who(self.ids.index(i)) for i in missing]
+            detail = ", ".join(who[:4]) + (f" and {len(who) - 4} more" if len(who) > 4 else "")
             raise LinkReadError(f"{self.path}: sync read failed: {', '.join(f'{n} {k}' for k, n in failures.items())}"
-                                f"{detail}")
+                                f"; nothing usable from {detail}")
         return [replies[i][0] for i in self.ids], b"".join(replies[i][1] for i in self.ids)
 
-    def _receive_each(self, length: int) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+    def _transaction(self, address: int, length: int, fast: bool, ids: tuple[int, ...],
+                     sent: bool = False) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """One (Fast) Sync Read of ``ids`` (``sent``: its instruction is out already): (the replies by
+        id, the lost or rejected ones by kind)."""
+        port = self._require_port()
+        reader = self._reader(address, length, ids)
+        try:
+            if not sent:
+                result = reader.fastSyncReadTxPacket() if fast else reader.txPacket()
+                if result != COMM_SUCCESS:
+                    raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
+            if sent or (self._run_timeout_ms is not None and not self._opening):
+                # the wait starts now: a `request`ed read's replies may have been waiting for a whole cycle
+                port.setPacketTimeoutMillis(self._run_timeout_ms or 2.0 * LATENCY_TIMER + 2.0)
+            return self._receive_fast(length, ids) if fast else self._receive_each(length, ids)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        finally:
+            port.is_using = False  # the sdk leaves it set when an exception cuts a transaction short
+
+    def _receive_each(self, length: int, ids: tuple[int, ...]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
         """One status packet per servo, in any order, until all are in or the timeout passed."""
         port, ph = self._port, self._ph
-        expected = len(self.ids)
-        wanted = set(self.ids)
+        expected = len(ids)
+        wanted = set(ids)
         size = length + 4  # the length field of a good reply: instruction, error, data, CRC
         replies: dict[int, tuple[int, bytes]] = {}
         failures: dict[str, int] = {}
@@ -342,17 +492,16 @@ class DynamixelLink(PortLink):
                 failures[kind] = failures.get(kind, 0) + expected - len(replies) - sum(failures.values())
         return replies, failures
 
-    def _receive_fast(self, length: int) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+    def _receive_fast(self, length: int, ids: tuple[int, ...]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
         """The one Fast Sync Read status packet: (error, id, data, crc) per servo, in instruction order."""
         stride = length + 4
-        data, result, _ = self._ph.fastSyncReadRx(self._port, BROADCAST_ID, stride * len(self.ids))
+        data, result, _ = self._ph.fastSyncReadRx(self._port, BROADCAST_ID, stride * len(ids))
         if result != COMM_SUCCESS:
             return {}, {"no_reply" if result == COMM_RX_TIMEOUT else "bad_crc": 1}
-        ids = data[1::stride]
-        if len(data) != stride * len(self.ids) or list(ids) != self.ids:
+        if len(data) != stride * len(ids) or tuple(data[1::stride]) != ids:
             return {}, {"short_reply": 1}
         replies = {}
-        for k, dxl_id in enumerate(self.ids):
+        for k, dxl_id in enumerate(ids):
             error = data[k * stride]
             if error & 0x7F:
                 return {}, {"bad_reply": 1}
@@ -376,7 +525,13 @@ class DynamixelLink(PortLink):
         self.stats.read_errors += 1
         self.stats.count("no_reply" if result == COMM_RX_TIMEOUT else "bad_crc")
 
-    def _write_ticks(self, ticks: np.ndarray) -> None:
+    def write_ticks(self, ticks: np.ndarray) -> None:
+        """Goal ticks (n,) int32 from `goal_ticks`, as one sync write."""
+        if self._pending:  # sending clears the port's input: take the requested replies in (and drop them)
+            try:
+                self.read()
+            except LinkReadError:
+                pass  # counted; the write goes on
         raw = ticks.tobytes()
         writer = self._goal_writer
         for k, dxl_id in enumerate(self.ids):
@@ -413,8 +568,10 @@ class DynamixelLink(PortLink):
     def _send(self, writer: GroupSyncWrite) -> None:
         port = self._require_port()
         self.stats.writes += 1
+        before = port.bytes_out
         try:
             result = writer.txPacket()
+            self._traffic[2:] += (port.bytes_out - before, 1)
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
             raise LinkError(f"{self.path}: port failed: {err}") from None
@@ -432,6 +589,7 @@ class DynamixelLink(PortLink):
         return self._port
 
     def _release(self) -> None:
+        self._pending = False
         port, self._port = self._port, None
         if port is not None:
             try:

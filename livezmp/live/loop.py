@@ -32,10 +32,11 @@ window, where analysing a missing sample per skipped deadline would add work exa
 when the loop is already late. With no valid frame for the watchdog time the loop
 stops commanding (hold, or drop torque); while the link reports its port gone
 (:class:`~livezmp.links.base.LinkError`) it stops reading and tries ``reconnect`` every
-``reconnect_every_s`` instead. The first valid frame after a gap longer than the
-watchdog time restarts the estimator and corrector (a gap must not produce a velocity
-spike) and ramps back to the command. After
-dropping torque, or a servo's hardware error, the loop only monitors. On every way out
+``reconnect_every_s`` instead; a link that says it is unusable
+(:class:`~livezmp.links.base.LinkUnusable`: e.g. it loses too many replies) stops the
+run. The first valid frame after a gap longer than the watchdog time restarts the
+estimator and corrector (a gap must not produce a velocity spike) and ramps back to the
+command. After dropping torque, or a servo's hardware error, the loop only monitors. On every way out
 — the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
 first call to the link.
 
@@ -62,9 +63,10 @@ from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.histogram import TimingHistogram
-from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError
+from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkUnusable
 from livezmp.live.clock import LoopClock, Tick
 from livezmp.live.config import CONTACT_MODES, LoopConfig
+from livezmp.live.fall_detection import FallDetector
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.safety import FrameGuard, GoalLimiter, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer
@@ -104,7 +106,9 @@ class LiveLoop:
 
     ``command(t)``: joint goals (rad) at loop time t (s), or None to hold the first
     frame's posture. ``clock``: a :class:`LoopClock` (default: real time at
-    ``config.rate_hz``). ``fell()``: the simulator's fall flag, when there is one.
+    ``config.rate_hz``). ``fell()``: the simulator's fall flag, when there is one; without
+    it, a link with an IMU tells the fall (:mod:`livezmp.live.fall_detection`: the trunk tilted
+    past 45 degrees, or free fall), which stops the run as the simulator's flag does.
     ``on_event(msg)`` gets one-line notes of state changes; ``on_status(dict)`` a status
     every ``config.status_every_s``. ``recorder``: where to record the run (it is not
     closed here)."""
@@ -126,6 +130,11 @@ class LiveLoop:
         self.correct_every = max(1, round(1.0 / (self.dt * cfg.correct_hz)))
         self.command = command
         self.fell = fell
+        # a link that can send its next read's instruction ahead (Dynamixel) lets the cycle's work overlap the
+        # bus: read, write, request the next read, then estimate and correct while it travels
+        self.pipelined = hasattr(link, "request")
+        self.fall_detector = FallDetector()
+        self._imu_seen = False
         self.on_event = on_event
         self.on_status = on_status
         self.recorder = recorder
@@ -271,6 +280,7 @@ class LiveLoop:
                 self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}", kind=verdict.kind)
                 frame = None
         if frame is None:
+            self._request()
             self._missing_sample(t)
             self._check_watchdog(t, t1)
             return
@@ -280,6 +290,23 @@ class LiveLoop:
         self.watchdog.feed(t1)
         if frame.hardware_errors:
             self._hardware_errors(t, frame)
+        if frame.imu is not None:
+            self._watch_imu(t, frame)
+        if self.pipelined:
+            # write first, with the offsets the previous cycle's work computed, then ask for the next read
+            # and do this cycle's work while its bytes are on the wire
+            command = None if self.halted is not None else self._command(t, frame.positions)
+            if command is not None:
+                self._write(t, t0, command)
+            self._request()
+            t2 = now()
+            self._estimate(t, frame)
+            t3 = now()
+            self.times["estimate"].add(t3 - t2)
+            if command is not None:
+                self._correct(t, command)
+                self.times["correct"].add(now() - t3)
+            return
         self._estimate(t, frame)
         t2 = now()
         self.times["estimate"].add(t2 - t1)
@@ -287,8 +314,12 @@ class LiveLoop:
             return
         command = self._command(t, frame.positions)
         self._correct(t, command)
-        t3 = now()
-        self.times["correct"].add(t3 - t2)
+        self.times["correct"].add(now() - t2)
+        self._write(t, t0, command)
+
+    def _write(self, t: float, t0: float, command: np.ndarray) -> None:
+        """Goals = command + offsets, limited, to the link (``t0``: when the cycle's read started)."""
+        t3 = self.clock.now()
         goals, limited = self.limiter.apply(command, self.offsets)
         try:
             self.link.write_goals(goals)
@@ -296,7 +327,7 @@ class LiveLoop:
             self.counters.write_errors += 1
             self._event(t, f"write failed: {e}", kind="write")
             return
-        t4 = now()
+        t4 = self.clock.now()
         self.times["write"].add(t4 - t3)
         self.latency.add(t4 - t0)
         self.counters.commands_sent += 1
@@ -306,16 +337,35 @@ class LiveLoop:
         if self.recorder is not None and self.corrector is not None:
             self.recorder.correction(self._index0 + self._fed - 1, t, self._delta, limited, self.limiter.offsets)
 
+    def _request(self) -> None:
+        """With a pipelined link, its next read's instruction goes out now."""
+        if self.pipelined and not self.link_down:
+            try:
+                self.link.request()
+            except LinkError:
+                pass  # the next read finds the port down and says so
+
     def _read(self, t: float) -> LinkFrame | None:
         try:
             return self.link.read()
         except LinkReadError:
             self.counters.failed_reads += 1
+        except LinkUnusable as e:  # e.g. a bus that loses too many replies: no reconnect mends it
+            self.counters.failed_reads += 1
+            self._event(t, f"link unusable: {e}")
+            self.request_stop(f"link unusable: {e}")
         except LinkError as e:
             self.counters.failed_reads += 1
             self.link_down = True
             self._event(t, f"link down: {e}")
         return None
+
+    def _watch_imu(self, t: float, frame: LinkFrame) -> None:
+        self._imu_seen = True
+        if self.fall_detector.fell is None and self.fall_detector.update(frame.t, frame.imu):
+            self._event(t, f"fell: {self.fall_detector.fell}")
+            if self.fell is None:
+                self.request_stop("fell")
 
     def _missing_sample(self, t: float) -> None:
         if self._started:
@@ -483,7 +533,10 @@ class LiveLoop:
             "max_latency_ms": 1e3 * self.latency.max if self.latency.count else None,
             "p99_latency_ms": 1e3 * self.latency.quantile(0.99) if self.latency.count else None,
             "p50_latency_ms": 1e3 * self.latency.quantile(0.5) if self.latency.count else None,
-            "fell": bool(self.fell()) if self.fell is not None else None,
+            "fell": bool(self.fell()) if self.fell is not None else (
+                self.fall_detector.fell is not None if self._imu_seen else None),
+            "imu_fall": self.fall_detector.fell,
+            "imu_max_tilt_deg": round(math.degrees(self.fall_detector.max_tilt), 2) if self._imu_seen else None,
             "rate_hz": 1.0 / self.dt,
             "correct": self.config.correct,
             "correct_every": self.correct_every,

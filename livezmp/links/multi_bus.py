@@ -1,0 +1,195 @@
+"""One robot whose Dynamixel servos are split over several buses, read and written in parallel.
+
+    dynamixel:PATH1+PATH2[+PATH3...][?options]
+
+A bus carries a limited number of bytes a second (:mod:`.bus_timing`); competition
+humanoids put their legs on two buses and their arms on a third to go faster. Which servo
+is on which bus is found at `open` (each bus is asked for every servo's ID register, so
+the robot config needs no change); a servo heard on no bus, or on two, is a LinkError
+naming it. Every bus gets the same options (baud, fast, read, ...) and is a
+`DynamixelLink` of its own; to the loop this is one link with the robot's joints.
+
+Each cycle the buses' reads run at the same time, one thread per extra bus (the calling
+thread reads the first): a cycle costs the slowest bus's transaction, not their sum. A
+frame is returned only when every bus read verified (else LinkReadError, or the first
+bus's LinkError). Goals are checked against every servo's limits before any bus is sent
+its share, so a refused goal sends nothing anywhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.links.bus_timing import Adapter, BusCeiling
+from livezmp.links.dynamixel import DynamixelLink, find_servos
+from livezmp.model.robot_config import ServoConfig
+
+
+class MultiBusLink:
+    """Servos ``servos[i]`` drive joints ``joint_names[i]``, on the buses at ``paths`` (see module
+    docstring); ``options`` are `DynamixelLink`'s, the same for every bus. No I/O until `open`."""
+
+    def __init__(self, paths: Sequence[str], joint_names: Sequence[str], servos: Sequence[ServoConfig],
+                 **options) -> None:
+        if len(paths) < 2 or len(set(paths)) != len(paths):
+            raise ValueError(f"MultiBusLink: needs two or more distinct ports, got {list(paths)}")
+        self.paths = list(paths)
+        self.joint_names = list(joint_names)
+        self._servos = list(servos)
+        self._options = options
+        self.buses: list[DynamixelLink] = []
+        self._joints: list[np.ndarray] = []  # per bus: the robot joint index of each of its servos
+        self._pool: ThreadPoolExecutor | None = None
+        self._reads = self._writes = 0
+        self._reconnects = 0
+
+    # -- Link -----------------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Find each servo's bus, then open every bus (checked, torque on, holding)."""
+        self._release()
+        found = self._assign()
+        self.buses = []
+        try:
+            for path, joints in zip(self.paths, found, strict=True):
+                bus = DynamixelLink(path, [self.joint_names[i] for i in joints], [self._servos[i] for i in joints],
+                                    **self._options)
+                bus.open()
+                self.buses.append(bus)
+        except LinkError:
+            self._release()
+            raise
+        self._joints = [np.asarray(j, dtype=int) for j in found]
+        self._pool = ThreadPoolExecutor(len(self.buses) - 1, thread_name_prefix="livezmp-bus")
+
+    def request(self) -> None:
+        """Every bus's next read instruction sent now (see `DynamixelLink.request`)."""
+        for bus in self.buses:
+            bus.request()
+
+    def read(self) -> LinkFrame:
+        """Every bus read at once; one frame in the robot's joint order."""
+        self._reads += 1
+        futures = [self._require_pool().submit(bus.read) for bus in self.buses[1:]]
+        outcomes: list[LinkFrame | LinkError] = []
+        try:
+            outcomes.append(self.buses[0].read())
+        except LinkError as e:
+            outcomes.append(e)
+        for future in futures:
+            try:
+                outcomes.append(future.result())
+            except LinkError as e:
+                outcomes.append(e)
+        errors = [o for o in outcomes if isinstance(o, LinkError)]
+        hard = [e for e in errors if not isinstance(e, LinkReadError)]
+        if hard:
+            raise hard[0]
+        if errors:
+            raise LinkReadError("; ".join(str(e) for e in errors))
+        return self._merge(outcomes)
+
+    def write_goals(self, positions: np.ndarray) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order: each bus its share, after all were checked."""
+        goals = np.asarray(positions, dtype=float)
+        if goals.shape != (len(self.joint_names),):
+            raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
+        self._writes += 1
+        ticks = [bus.goal_ticks(goals[joints]) for bus, joints in zip(self.buses, self._joints, strict=True)]
+        for bus, t in zip(self.buses, ticks, strict=True):
+            bus.write_ticks(t)
+
+    def hold(self) -> None:
+        for bus in self.buses:
+            bus.hold()
+
+    def safe_stop(self, drop_torque: bool = False) -> None:
+        for bus in self.buses:
+            bus.safe_stop(drop_torque)
+
+    def reconnect(self) -> bool:
+        """Reopen every bus (finding the servos again); True when all are back."""
+        try:
+            self.open()
+        except LinkError:
+            return False
+        self._reconnects += 1
+        return True
+
+    def close(self) -> None:
+        self.safe_stop()
+        self._release()
+
+    # -- reports --------------------------------------------------------------------------------
+
+    @property
+    def stats(self) -> LinkStats:
+        """Reads and writes of the robot; errors summed over the buses."""
+        total = LinkStats(reads=self._reads, writes=self._writes, reconnects=self._reconnects)
+        for bus in self.buses:
+            total.read_errors += bus.stats.read_errors
+            total.write_errors += bus.stats.write_errors
+            for kind, n in bus.stats.errors_by_kind.items():
+                total.errors_by_kind[kind] = total.errors_by_kind.get(kind, 0) + n
+        return total
+
+    @property
+    def read_label(self) -> str:
+        return self.buses[0].read_label if self.buses else ""
+
+    def bus_ceilings(self, adapter: Adapter) -> list[BusCeiling]:
+        return [c for bus in self.buses for c in bus.bus_ceilings(adapter)]
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def _assign(self) -> list[list[int]]:
+        """Robot joint indices on each bus, from which servos answer where."""
+        ids = [s.id for s in self._servos]
+        baud = self._options.get("baud", 1_000_000)
+        heard = [find_servos(path, ids, baud) for path in self.paths]
+        found: list[list[int]] = [[] for _ in self.paths]
+        for i, servo in enumerate(self._servos):
+            where = [k for k, on in enumerate(heard) if servo.id in on]
+            who = f"servo {servo.id} ({self.joint_names[i]})"
+            if not where:
+                raise LinkError(f"{who} answered on none of {', '.join(self.paths)}: check power, ids and baud rate")
+            if len(where) > 1:
+                raise LinkError(f"{who} answered on {' and '.join(self.paths[k] for k in where)}: two servos "
+                                "share its id")
+            found[where[0]].append(i)
+        empty = [self.paths[k] for k, joints in enumerate(found) if not joints]
+        if empty:
+            raise LinkError(f"{empty[0]}: none of the robot's servos answered on this port")
+        return found
+
+    def _merge(self, frames: list[LinkFrame]) -> LinkFrame:
+        n = len(self.joint_names)
+
+        def gather(name: str) -> np.ndarray | None:
+            if any(getattr(f, name) is None for f in frames):
+                return None
+            out = np.empty(n)
+            for f, joints in zip(frames, self._joints, strict=True):
+                out[joints] = getattr(f, name)
+            return out
+
+        errors = {joint: bits for f in frames for joint, bits in f.hardware_errors.items()}
+        return LinkFrame(t=max(f.t for f in frames), positions=gather("positions"), velocities=gather("velocities"),
+                         currents=gather("currents"), hardware_errors=errors)
+
+    def _require_pool(self) -> ThreadPoolExecutor:
+        if self._pool is None:
+            raise LinkError(f"{'+'.join(self.paths)}: link is not open")
+        return self._pool
+
+    def _release(self) -> None:
+        for bus in self.buses:
+            bus._release()
+        self.buses = []
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None

@@ -1,0 +1,73 @@
+"""One robot on several simulated Dynamixel buses (dynamixel:PATH1+PATH2), through dynamixel-sdk.
+
+Truth: the plant's joint angles and goals, and the wire time of each bus's packets."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from sim_support import short_gil_switch  # noqa: F401 - fixture
+from test_links_support import HALF_TICK, read_until, rig, servo_config, start_posture
+
+from livezmp.links import make_link
+from livezmp.links.base import LinkError
+from livezmp.links.bus_timing import ADAPTERS
+from livezmp.links.multi_bus import MultiBusLink
+from sim_devices.launch import start_devices
+from sim_devices.servo_plant import ServoPlant
+
+pytestmark = pytest.mark.usefixtures("short_gil_switch")
+
+
+def test_two_buses_are_one_robot_read_and_driven_in_joint_order():
+    with rig("dynamixel", devices={"buses": 2}, options="timeout=0.1") as r:
+        assert isinstance(r.link, MultiBusLink) and len(r.devices.devices) == 2
+        assert [len(bus.ids) for bus in r.link.buses] == [10, 10]
+        frame = r.link.read()
+        assert np.abs(frame.positions - start_posture(20)).max() <= HALF_TICK
+        target = start_posture(20)[::-1] * 0.5
+        r.link.write_goals(target)
+        read_until(r.link, lambda p: np.abs(p - target).max() <= 2 * HALF_TICK + 1e-9)
+        r.link.write_goals(r.link.read().positions)
+        # each bus: a Fast Sync Read of 10 (14 + 10 bytes; reply 8 + 10 x 8) and a Sync Write of 10 (14 + 10 x 5)
+        assert [c.bytes_per_cycle for c in r.link.bus_ceilings(ADAPTERS["hs"])] == [24 + 88 + 64] * 2
+
+
+def mean_read_time(url: str, names, config, reads: int = 4) -> float:
+    link = make_link(url, names, config)
+    link.open()
+    try:
+        start = time.perf_counter()
+        for _ in range(reads):
+            link.read()
+        return (time.perf_counter() - start) / reads
+    finally:
+        link.close()
+
+
+def test_the_buses_are_read_at_the_same_time():
+    # At 57600 baud a sync read of 20 positions is 34 + 20 x 15 bytes = 58 ms on one wire; split 10 + 10 over
+    # two wires each carries 24 + 10 x 15 bytes = 30 ms, and in parallel the read takes that, not twice it.
+    config = servo_config(20)
+    names = list(config.servos)
+    took = {}
+    for buses in (1, 2):
+        plant = ServoPlant(20, position=start_posture(20))
+        with start_devices("dynamixel", plant, config, baud=57600, adapter="none", buses=buses) as sim:
+            took[buses] = mean_read_time(sim.url + "&fast=0&timeout=0.5", names, config)
+    print(f"one bus {1e3 * took[1]:.1f} ms, two buses {1e3 * took[2]:.1f} ms a read")
+    assert took[1] >= 334 * 10 / 57600 and took[2] >= 174 * 10 / 57600  # no read beats its wire
+    assert took[2] < 0.65 * took[1]  # in series it would take 348 / 334 of one bus's read
+
+
+def test_a_servo_on_no_bus_is_named():
+    config = servo_config(20)
+    names = list(config.servos)
+    plant = ServoPlant(19)
+    short = type(config)(servos={n: s for n, s in config.servos.items() if s.id != 20}, source="test")
+    with start_devices("dynamixel", plant, short, joint_names=names[:19], buses=2) as sim:
+        link = make_link(sim.url + "&timeout=0.05", names, config)
+        with pytest.raises(LinkError, match=r"servo 20 \(head_tilt\) answered on none of"):
+            link.open()
