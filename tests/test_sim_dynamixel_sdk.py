@@ -23,6 +23,7 @@ from dynamixel_sdk import (
 )
 from sim_support import sdk_latency_timer, short_gil_switch, wait_until  # noqa: F401 - fixtures
 
+from livezmp.links.dynamixel import WaitingPortHandler
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.servo_plant import ServoPlant
 
@@ -39,9 +40,10 @@ def le32(value: int) -> list[int]:
 
 @pytest.fixture
 def rig():
-    """20 servos (ids 1..20) at distinct positions 0, 0.05, ... rad; return delay 0; an open client."""
+    """20 servos (ids 1..20) at distinct positions 0, 0.05, ... rad; return delay 0; an open client. The
+    bytes take their wire time, but no USB adapter adds its latency: the protocol is what is tested here."""
     plant = ServoPlant(len(IDS), position=np.arange(len(IDS)) * 0.05)
-    chain = DynamixelChain(IDS, plant, settings={"return_delay_time": 0})
+    chain = DynamixelChain(IDS, plant, settings={"return_delay_time": 0}, adapter="none")
     port = PortHandler(chain.path)
     assert port.openPort()
     yield chain, port, PacketHandler(2.0)
@@ -226,8 +228,9 @@ def ph_ping(port, dxl_id):
 
 def timed_sync_reads(chain, baud: int, fast: bool, n: int = 7) -> float:
     """Median seconds of ``n`` (Fast) Sync Reads of the 20 Present Positions, each after a Sync Write of
-    20 goals (the loop's cycle), measured by the unmodified sdk client."""
-    port = PortHandler(chain.path)
+    20 goals (the loop's cycle), measured by the sdk client (with the link's port handler, which waits for
+    bytes instead of spinning: a spinning client holds the GIL the simulator's thread needs to reply)."""
+    port = WaitingPortHandler(chain.path)
     assert port.openPort() and port.setBaudRate(baud)
     ph = PacketHandler(2.0)
     reader = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
