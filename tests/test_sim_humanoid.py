@@ -285,7 +285,7 @@ def test_after_a_fall_the_imu_reads_the_body_toppling_forwards_until_it_lies(bod
     assert h.fallen is not None
     upright = imu_tilt(h)
     rate = np.sqrt(9.81 / h.state().com[2])
-    player = sc.ScenarioPlayer(h, scenario, rate_hz=125.0)
+    player = ScenarioPlayer(h, scenario, rate_hz=125.0)
     # linearised pendulum from 0.05 rad: the added tilt is 0.05 (cosh(t rate) - 1)
     t0 = h.t - h.fallen.t
     player.run(0.3)

@@ -1,12 +1,16 @@
 """Scenarios: a humanoid's goal joint angles as functions of time, and the disturbances that go with them.
 
 A scenario is the robot's base command, what it is asked to do; a live loop's balance
-corrector adds its offsets to the leg joints on top. Scenarios work for any body with
-the usual humanoid joint names (head_pan, head_tilt, {l,r}_{sho_pitch, sho_roll, el,
-hip_yaw, hip_roll, hip_pitch, knee, ank_pitch, ank_roll}), e.g. ROBOTIS OP3 and
-livezmp_mini, whatever the signs of their URDF axes: postures are rotations about
-world axes in the zero posture, turned into joint angles through each joint's own axis
-as the model gives it.
+corrector adds its offsets to the leg joints on top. Scenarios work for any humanoid,
+whatever its joint names, order and the signs of its URDF axes: the joints they move are
+found from the kinematic tree (`joint_roles`: each leg is the chain from the trunk to a
+foot, its hip, knee and ankle the first, middle and last joints turning about the
+lateral axis, its hip and ankle roll the first and last about the forward axis; each
+arm the chain to a hand that no other limb shares, its shoulder the first joints turning
+about the lateral and forward axes, its elbow the next), and
+postures are rotations about world axes in the zero posture, turned into joint angles
+through each joint's own axis as the model gives it. Role names follow OP3's
+({l,r}_{hip_pitch, knee, ank_pitch, hip_roll, ank_roll, sho_pitch, sho_roll, el}).
 
 Standing posture: knees bent, hip −θ, knee +2θ, ankle −θ about the lateral axis (y,
 left), which keeps each sole parallel to the pelvis (flat on the ground) and the legs
@@ -30,12 +34,14 @@ import pinocchio as pin
 from scipy.optimize import brentq
 
 from livezmp.balance.support import clamp_to_polygon, support_polygon
+from livezmp.balance.zmp import compute_zmp
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.trajectory_csv import read_joint_csv
 
 SIDES = ("l", "r")
+G = 9.81  # m/s^2
 X, Y, Z = 0, 1, 2
 
 
@@ -71,34 +77,114 @@ class Scenario:
     pushes: tuple[Push, ...] = ()
 
 
+ALIGNED = 0.99  # |cos| between a joint's axis and a world axis for the joint to turn about it
+
+
+def joint_axes(body: BodyModel) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(world axis, world origin) of each actuated joint in the zero posture."""
+    model = body.model
+    data = model.createData()
+    pin.computeJointJacobians(model, data, np.zeros(model.nq))
+    axis, origin = {}, {}
+    for name in body.joint_names:
+        j = model.getJointId(name)
+        axis[name] = data.J[3:, model.joints[j].idx_v].copy()
+        origin[name] = data.oMi[j].translation.copy()
+    return axis, origin
+
+
+def _limb(model: pin.Model, frame: int, names: set[str]) -> list[str]:
+    """Actuated joints from the trunk down to ``frame``, top first."""
+    out = []
+    j = model.frames[frame].parentJoint
+    while j > 0:
+        if model.names[j] in names:
+            out.append(model.names[j])
+        j = model.parents[j]
+    return out[::-1]
+
+
+def joint_roles(body: BodyModel) -> dict[str, str]:
+    """Role (``l_hip_pitch``, ``r_knee``, ``l_sho_roll``...) -> joint name, from the kinematic tree
+    (module docstring). Roles not found are left out (`Poser.index` names what is missing)."""
+    model, names = body.model, set(body.joint_names)
+    axis, origin = joint_axes(body)
+
+    def about(joint: str, k: int) -> bool:
+        return abs(float(axis[joint][k])) >= ALIGNED
+
+    roles: dict[str, str] = {}
+    legs: set[str] = set()
+    for side, foot in body.feet.items():
+        chain = _limb(model, foot.frame_id, names)
+        legs |= set(chain)
+        pitch = [n for n in chain if about(n, Y)]
+        if len(pitch) >= 3:
+            hip, ankle = pitch[0], pitch[-1]
+            middle = 0.5 * (origin[hip][Z] + origin[ankle][Z])
+            knee = min(pitch[1:-1], key=lambda n: abs(origin[n][Z] - middle))
+            roles.update({f"{side[0]}_hip_pitch": hip, f"{side[0]}_knee": knee, f"{side[0]}_ank_pitch": ankle})
+        roll = [n for n in chain if about(n, X)]
+        if len(roll) >= 2:
+            roles.update({f"{side[0]}_hip_roll": roll[0], f"{side[0]}_ank_roll": roll[-1]})
+    children = np.zeros(model.njoints, dtype=int)
+    for j in range(1, model.njoints):
+        children[model.parents[j]] += 1
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.zeros(model.nq))
+    side_of: dict[str, set[int]] = {}  # joint -> the sides (-1 right, 0 middle, +1 left) of the leaves below it
+    chains = []
+    for f in range(model.nframes):
+        if model.frames[f].type != pin.FrameType.BODY or children[model.frames[f].parentJoint]:
+            continue
+        chain = _limb(model, f, names)
+        if not chain or set(chain) & legs:
+            continue
+        y = float(data.oMf[f].translation[Y])
+        sign = 0 if abs(y) < 0.01 else int(np.sign(y))
+        chains.append((sign, chain))
+        for n in chain:
+            side_of.setdefault(n, set()).add(sign)
+    arms = {}
+    for sign, chain in chains:
+        own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
+        pitch = next((n for n in own if about(n, Y)), None)
+        roll = next((n for n in own if about(n, X)), None)
+        if not sign or pitch is None or roll is None or sign in arms:
+            continue
+        after = max(own.index(pitch), own.index(roll)) + 1
+        if after < len(own):
+            arms[sign] = (pitch, roll, own[after])
+    for sign, s in ((1, "l"), (-1, "r")):
+        if sign in arms:
+            pitch, roll, elbow = arms[sign]
+            roles.update({f"{s}_sho_pitch": pitch, f"{s}_sho_roll": roll, f"{s}_el": elbow})
+    return roles
+
+
 class Poser:
-    """Joint-angle vectors from rotations about world axes, for one body."""
+    """Joint-angle vectors from rotations about world axes, for one body (joints by `joint_roles`)."""
 
     def __init__(self, body: BodyModel):
         self.body = body
         self.names = list(body.joint_names)
-        model = body.model
-        data = model.createData()
-        q0 = np.zeros(model.nq)
-        pin.computeJointJacobians(model, data, q0)
-        self.axis: dict[str, np.ndarray] = {}
-        self.origin: dict[str, np.ndarray] = {}
-        for name in self.names:
-            j = model.getJointId(name)
-            self.axis[name] = data.J[3:, model.joints[j].idx_v].copy()  # world axis in the zero posture
-            self.origin[name] = data.oMi[j].translation.copy()
+        self.axis, self.origin = joint_axes(body)
+        self.roles = joint_roles(body)
 
-    def index(self, name: str) -> int:
-        if name not in self.names:
-            raise InputError(f"{self.body.model.name}: no joint {name!r}; scenarios need the usual humanoid "
-                             "joint names (e.g. l_knee, r_sho_pitch)")
-        return self.names.index(name)
+    def index(self, role: str) -> int:
+        """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
+        if role not in self.roles:
+            raise InputError(f"{self.body.model.name}: found no {role} in its kinematic tree (scenarios need two "
+                             "legs of hip, knee and ankle pitch joints and two arms with shoulder pitch and roll "
+                             "joints and an elbow)")
+        return self.names.index(self.roles[role])
 
-    def unit(self, name: str, world_axis: int) -> np.ndarray:
-        """Joint vector that turns ``name`` by +1 rad about the world axis (0 x, 1 y, 2 z)."""
-        i = self.index(name)
+    def unit(self, role: str, world_axis: int) -> np.ndarray:
+        """Joint vector that turns the joint of ``role`` by +1 rad about the world axis (0 x, 1 y, 2 z)."""
+        i = self.index(role)
+        name = self.roles[role]
         along = float(self.axis[name][world_axis])
-        if abs(along) < 0.99:
+        if abs(along) < ALIGNED:
             raise InputError(f"{self.body.model.name}: joint {name!r} turns about {np.round(self.axis[name], 3)}, "
                              f"not the world {'xyz'[world_axis]} axis this scenario needs")
         out = np.zeros(len(self.names))
@@ -122,9 +208,9 @@ class Poser:
         """Shoulder rolls that make each upper arm hang down, ``out_angle`` rad away from the body."""
         out = np.zeros(len(self.names))
         for s, lateral in (("l", 1.0), ("r", -1.0)):
-            roll, elbow = f"{s}_sho_roll", f"{s}_el"
-            i = self.index(roll)
-            self.index(elbow)
+            i = self.index(f"{s}_sho_roll")
+            self.index(f"{s}_el")
+            roll, elbow = self.roles[f"{s}_sho_roll"], self.roles[f"{s}_el"]
             a = self.axis[roll]
             d = self.origin[elbow] - self.origin[roll]  # upper arm in the zero posture
             target = np.array([0.0, lateral * np.sin(out_angle), -np.cos(out_angle)])
@@ -193,25 +279,62 @@ def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: 
     return Scenario("lean", goals, up_end + ramp_s + settle_s)
 
 
-def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float = 2.5, duration: float = 4.0,
-              toe_margin: float | None = 0.008, flexion: float = 0.3) -> Scenario:
+def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None = 2.5, duration: float = 4.0,
+              toe_margin: float | None = 0.008, flexion: float = 0.3, beyond: float = 0.004) -> Scenario:
     """Lean forward at the ankles until the static CoM is ``toe_margin`` (m) inside the
     toes (None: stay upright), then swing both arms forward and back together at the
     shoulders, ``amplitude`` rad at ``frequency`` Hz (the defaults peak at 4.7 rad/s,
     near the XM430's 4.8), the swing growing over its first half second. The static
     CoM stays inside the feet; the ZMP swings with the arms' acceleration, past the toes
-    on every swing."""
+    on every swing. ``frequency=None``: the frequency whose swing puts this robot's ZMP
+    ``beyond`` (m) past its toes at the peak (`swing_frequency`: from its masses and
+    inertias), so robots of any size are asked the same of their balance."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
     if toe_margin is not None:
         q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
+    if frequency is None:
+        frequency = swing_frequency(body, q0, dq, amplitude, beyond)
     w = 2 * np.pi * frequency
 
     def goals(t: float) -> np.ndarray:
         return q0 + amplitude * smooth_step(t / 0.5) * np.sin(w * max(t, 0.0)) * dq
 
     return Scenario("arm_swing", goals, duration)
+
+
+def swing_zmp_beyond_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float,
+                          frequency: float) -> float:
+    """How far (m) past the toes the ZMP goes at the peak of the swing ``q0 + amplitude sin(wt) dq``,
+    feet flat, from the whole-body dynamics (base still: only the arms move)."""
+    model, data = body.model, body.model.createData()
+    base = BasePlacer(body).update(q0)
+    pin.framesForwardKinematics(model, data, np.concatenate([base, q0]))
+    soles = foot_soles(body, data)
+    toe = float(support_polygon(soles["left"], soles["right"], "double")[:, X].max())
+    w = 2 * np.pi * frequency
+    still = np.zeros(len(base))
+    peak = -math.inf
+    for phase in np.linspace(0.0, 2 * np.pi, 64, endpoint=False):
+        q = np.concatenate([base, q0 + amplitude * np.sin(phase) * dq])
+        v = np.concatenate([still, amplitude * w * np.cos(phase) * dq])
+        a = np.concatenate([still, -amplitude * w * w * np.sin(phase) * dq])
+        zmp = compute_zmp(model, data, q, v, a).zmp
+        if zmp is not None:
+            peak = max(peak, float(zmp[X]) - toe)
+    return peak
+
+
+def swing_frequency(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float, beyond: float) -> float:
+    """The swing frequency (Hz, 0.1-3) that takes the ZMP ``beyond`` (m) past the toes; InputError if none."""
+    def excess(f: float) -> float:
+        return swing_zmp_beyond_toes(body, q0, dq, amplitude, f) - beyond
+
+    if excess(0.1) >= 0 or excess(3.0) <= 0:
+        raise InputError(f"{body.model.name}: no arm swing of {amplitude} rad between 0.1 and 3 Hz takes the ZMP "
+                         f"{beyond * 1e3:.1f} mm past the toes")
+    return float(brentq(excess, 0.1, 3.0, xtol=1e-4))
 
 
 def squat(body: BodyModel, depth: float = 0.3, period: float = 2.0, cycles: int = 2,
@@ -246,22 +369,39 @@ def walk(body: BodyModel, path: str | Path) -> Scenario:
     return Scenario("walk", goals, float(t0[-1]))
 
 
-def push(body: BodyModel, force: tuple[float, float] = (5.0, 0.0), at: float = 1.0, duration: float = 0.1,
-         height: float | None = None, total: float = 3.0, flexion: float = 0.3) -> Scenario:
+def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 1.0, duration: float = 0.1,
+         height: float | None = None, total: float = 3.0, flexion: float = 0.3, beyond: float = 0.005) -> Scenario:
     """Stand, and get pushed: a horizontal ``force`` (N, world x, y) for ``duration`` from
-    ``at``, at ``height`` (m above the ground; default the base link's height)."""
+    ``at``, at ``height`` (m above the ground; default the base link's height). ``force=None``:
+    the forward push that moves this robot's ZMP ``beyond`` (m) past its toes: a push F at
+    height h moves the ZMP by h F / (m g) (m the robot's mass), so F = (toe distance +
+    beyond) m g / h, whatever the robot's size."""
     q0 = Poser(body).standing(flexion)
     if height is None:
         height = float(BasePlacer(body).update(q0)[2])
+    if force is None:
+        force = ((front_margin(body, q0) + beyond) * body.total_mass * G / height, 0.0)
     return Scenario("push", lambda t: q0.copy(), total, (Push(tuple(force), height, at, duration),))
+
+
+def front_margin(body: BodyModel, joints: np.ndarray) -> float:
+    """Distance (m) from the static CoM's ground point forward to the toes' edge, standing on both feet."""
+    placer = BasePlacer(body)
+    q = np.concatenate([placer.update(joints), joints])
+    data = body.model.createData()
+    pin.centerOfMass(body.model, data, q)
+    pin.framesForwardKinematics(body.model, data, q)
+    soles = foot_soles(body, data)
+    return float(support_polygon(soles["left"], soles["right"], "double")[:, X].max() - data.com[0][X])
 
 
 # -- the scenarios by name (livezmp run/sim/demo --scenario) ------------------------------------------
 
-# The demo's arm swing: 0.6 rad at 0.8 Hz, leaning to 8 mm inside the toes. Uncorrected the
-# ZMP stays past the toes long enough to fall; the loop's corrector (estimator lag 30 ms)
-# holds it. (The scenario's own default, 2.5 Hz, is faster than the loop can follow.)
-ARM_SWING = {"amplitude": 0.6, "frequency": 0.8, "toe_margin": 0.008}
+# The demo's arm swing: 0.6 rad, leaning to 8 mm inside the toes, at the frequency that takes the ZMP 4 mm past
+# them (livezmp_mini: 0.8 Hz). Uncorrected the ZMP stays past the toes long enough to fall; the loop's corrector
+# (estimator lag 30 ms) holds it. (The scenario's own default, 2.5 Hz, is faster than the loop can follow.)
+ARM_SWING = {"amplitude": 0.6, "frequency": None, "beyond": 0.004, "toe_margin": 0.008}
+PUSH = {"beyond": 0.005, "duration": 0.5}  # past the toes for longer than the simulator's 0.2 s to fall
 BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
 
 
@@ -289,7 +429,7 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
     "lean": lean,
     "arm_swing": lambda body, **kw: arm_swing(body, **{**ARM_SWING, **kw}),
     "squat": squat,
-    "push": push,
+    "push": lambda body, **kw: push(body, **{**PUSH, **kw}),
     "demo": lambda body, **kw: sequence("demo", [lean(body, hold_s=2.0),
                                                   arm_swing(body, duration=3.0, **ARM_SWING)], **kw),
 }
