@@ -159,7 +159,8 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:
     d, s = LoopConfig(), SafetyConfig()
-    p.add_argument("--rate", type=float, help="loop rate, Hz (default: the link's stream rate, else 500)")
+    p.add_argument("--rate", type=float, help="loop rate, Hz (default: the link's stream rate, else 500, or 85 %% "
+                                              "of a serial bus's ceiling if less)")
     p.add_argument("--no-correct", action="store_true", help="send the command only, no balance corrections")
     p.add_argument("--correct-hz", type=float, default=d.correct_hz,
                    help=f"corrector rate, Hz: every few loop cycles (default {d.correct_hz:g})")
@@ -209,7 +210,10 @@ def _loop_commands(sub: argparse._SubParsersAction) -> None:
                         "just below the loop's; 0 = normal scheduling)")
     p.set_defaults(handler="livezmp.commands.sim:cmd_sim")
 
-    p = sub.add_parser("demo", help="the live loop on the built-in simulated humanoid")
+    p = sub.add_parser("demo", help="the live loop on a simulated humanoid (default: the built-in livezmp_mini)")
+    p.add_argument("--robot", help="URDF of any humanoid (default: the built-in livezmp_mini)")
+    p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in; without one, "
+                                          "servo ids in joint order and default soles)")
     p.add_argument("--link", default="dynamixel", choices=[*SIM_LINKS, "mock"],
                    help="simulated link (default dynamixel)")
     p.add_argument("--link-options", default="", help="extra link URL options, e.g. fast=1&timeout=0.005")

@@ -4,6 +4,7 @@ real signals, the summary JSON they write, one-line errors for mistakes."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import select
 import signal
@@ -13,6 +14,7 @@ import time
 
 import numpy as np
 import pytest
+from humanoid_gen import generate_humanoid
 
 from livezmp.cli import main
 from livezmp.live.scenarios import make_scenario
@@ -102,6 +104,19 @@ def test_demo_runs_until_sigterm_then_stops_safely(tmp_path):
     assert s["stopped_by"] == "SIGTERM" and s["fell"] is False and s["scenario"] == "demo"
     assert s["link_url"].startswith("dynamixel:") and s["cycles"] > 0 and s["commands_sent"] > 0
     assert "cycles at" in out and "simulator: did not fall" in out
+
+
+def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
+    """A humanoid never seen (other joint names and order, 0.8x the mini's size), no robot config: servo ids
+    in joint order on the simulated Dynamixel bus; the scenario finds its limbs; uncorrected, it falls."""
+    urdf = generate_humanoid(tmp_path / "other.urdf", 0.8, 0.9, 3)
+    summary_path = tmp_path / "s.json"
+    assert main(["demo", "--robot", str(urdf), "--scenario", "arm_swing", "--no-correct", "--quiet",
+                 "--summary-json", str(summary_path)]) == 0
+    s = json.loads(summary_path.read_text())
+    assert s["fell"] is True and s["stopped_by"] == "fell" and s["corrections_sent"] == 0
+    assert s["bus"]["ceiling_hz"] == pytest.approx(1 / ((34 + 168 + 114) * 10e-6 + 1.5e-3), abs=0.1)
+    assert s["rate_hz"] == math.floor(0.85 * s["bus"]["ceiling_hz"])  # the default rate: what the wire allows
 
 
 def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):

@@ -1,8 +1,9 @@
-"""`livezmp demo`: the live loop on the built-in simulated humanoid.
+"""`livezmp demo`: the live loop on a simulated humanoid.
 
-``livezmp_mini`` on a simulated Dynamixel bus (or ``--link can|fw``) served by a child
-process (:class:`sim_devices.process.SimProcess`: its own core and interpreter, as a
-robot is another machine; ``--link mock`` steps the humanoid in this process instead), a
+``livezmp_mini`` (or any humanoid's URDF: ``--robot``) on a simulated Dynamixel bus (or
+``--link can|fw``) served by a child process (:class:`sim_devices.process.SimProcess`: its
+own core and interpreter, as a robot is another machine; ``--link mock`` steps the
+humanoid in this process instead), a
 scenario (by default: lean past the toes and back, then swing the arms), a live status
 line and the summary, with the simulator's own verdict (``fell``,
 ``true_inside_fraction``: the share of its 1 ms steps whose true ZMP was inside the
@@ -42,8 +43,8 @@ def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenari
 
 def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
-    with SimProcess(args.link, (args.scenario, {}), args.fault, realtime_priority=max(args.realtime_priority - 1, 0),
-                    devices=device_options(args)) as sim:
+    with SimProcess(args.link, (args.scenario, {}), args.fault, urdf=args.robot, config=args.robot_config,
+                    realtime_priority=max(args.realtime_priority - 1, 0), devices=device_options(args)) as sim:
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -59,7 +60,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
     check_record(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
-    robot = load_robot(None, None)
+    robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
     try:

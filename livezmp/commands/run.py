@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import sys
 from collections.abc import Callable
 from dataclasses import replace
@@ -74,9 +75,16 @@ def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, so
     return LoopRecorder(args.record, robot.spec, session, robot.body.channel_names, robot.body.joint_names)
 
 
+CEILING_SHARE = 0.85  # of a serial bus's ceiling: the default rate leaves the rest for the host's own delays
+
+
 def loop_rate(args: argparse.Namespace, link) -> float:
-    """--rate, else the rate a streaming link sends its state at, else 500 Hz."""
+    """--rate, else the rate a streaming link sends its state at, else 500 Hz, or on a serial servo bus
+    `CEILING_SHARE` of what its wire and adapter allow if that is less."""
     rate = args.rate if args.rate is not None else float(getattr(link, "rate", 500.0))
+    if args.rate is None and hasattr(link, "bus_ceilings"):
+        ceiling = min(c.ceiling_hz for c in link.bus_ceilings(assumed_adapter(args)))
+        rate = min(rate, float(math.floor(CEILING_SHARE * ceiling)))
     if not (np.isfinite(rate) and 0 < rate <= 2000):
         raise InputError(f"--rate {rate}: must be a number of Hz in (0, 2000]")
     return rate
