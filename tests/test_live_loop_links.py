@@ -122,36 +122,22 @@ def test_loop_drives_the_robot_through_dynamixel_sdk_and_pyserial(mini, mini_con
     assert humanoid.fallen is None
 
 
-def test_loop_drives_the_robot_through_python_can_slcan(mini, mini_config):
-    """Twenty CAN servo nodes stream 3 frames each per state: more than python-can's slcan
-    reader takes in while sharing a process with them, so the simulator runs in its own
-    process here (as the demo's does)."""
+@pytest.mark.parametrize(("transport", "rate"), [("slcan", 20), ("socketcand", 40)])
+def test_loop_drives_the_robot_through_python_can(mini, mini_config, transport, rate):
+    """Twenty CAN servo nodes stream 3 frames each per state, behind a simulated slcan adapter (more than
+    python-can's slcan reader takes in while sharing a process with them, so the simulator runs in its own
+    process here, as the demo's does) or a simulated socketcand daemon on loopback TCP (frames taking their
+    time on a 1 Mbit/s bus), through python-can's own interfaces."""
     scenario = make_scenario("stand", mini)
-    with SimProcess("can", ("stand", {})) as sim:
-        spy = Spy(open_link(sim.url + "&rate=20&timeout=0.5", mini.joint_names, mini_config))
+    with SimProcess("can", ("stand", {}), devices={"can_transport": transport}) as sim:
+        assert sim.url.startswith(f"can:{transport}:")
+        spy = Spy(open_link(sim.url + f"&rate={rate}&timeout=0.5", mini.joint_names, mini_config))
         try:
             s = LiveLoop(spy, mini, LoopConfig(rate_hz=spy.rate), command=scenario.goals, fell=sim.fell).run(1.5)
         finally:
             spy.link.close()
         servos = sim.servos()
-    report("can", s)
-    check_drove(s, spy, servos["goal"], 1e-6)
-    assert s["fell"] is False
-
-
-def test_loop_drives_the_robot_through_python_can_socketcand(mini, mini_config):
-    """The same CAN servo nodes behind a simulated socketcand daemon on loopback TCP (their frames taking
-    their time on a 1 Mbit/s bus), through python-can's socketcand interface, at twice the slcan test's rate."""
-    scenario = make_scenario("stand", mini)
-    with SimProcess("can", ("stand", {}), devices={"can_transport": "socketcand"}) as sim:
-        assert sim.url.startswith("can:socketcand:can0?host=127.0.0.1&port=")
-        spy = Spy(open_link(sim.url + "&rate=40&timeout=0.5", mini.joint_names, mini_config))
-        try:
-            s = LiveLoop(spy, mini, LoopConfig(rate_hz=spy.rate), command=scenario.goals, fell=sim.fell).run(1.5)
-        finally:
-            spy.link.close()
-        servos = sim.servos()
-    report("can over socketcand", s)
+    report(f"can over {transport}", s)
     check_drove(s, spy, servos["goal"], 1e-6)
     assert s["fell"] is False
 

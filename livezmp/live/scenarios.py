@@ -234,17 +234,22 @@ def stand(body: BodyModel, duration: float = 3.0, flexion: float = 0.3) -> Scena
     return Scenario("stand", lambda t: q.copy(), duration)
 
 
-def static_margin(body: BodyModel, joints: np.ndarray) -> float:
-    """Signed distance (m, + inside) of the CoM's ground projection to the support
-    polygon of both soles, for the robot standing still on both feet in ``joints``."""
-    placer = BasePlacer(body)
-    q = np.concatenate([placer.update(joints), joints])
+def standing_support(body: BodyModel, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(CoM (3,), support polygon of both soles (k, 2)), m, for the robot standing still on both
+    feet in ``joints`` (its base placed by the feet)."""
+    q = np.concatenate([BasePlacer(body).update(joints), joints])
     data = body.model.createData()
     pin.centerOfMass(body.model, data, q)
     pin.framesForwardKinematics(body.model, data, q)
     soles = foot_soles(body, data)
-    poly = support_polygon(soles["left"], soles["right"], "double")
-    return clamp_to_polygon(data.com[0][:2], poly).margin
+    return data.com[0].copy(), support_polygon(soles["left"], soles["right"], "double")
+
+
+def static_margin(body: BodyModel, joints: np.ndarray) -> float:
+    """Signed distance (m, + inside) of the CoM's ground projection to the support
+    polygon of both soles, for the robot standing still on both feet in ``joints``."""
+    com, poly = standing_support(body, joints)
+    return clamp_to_polygon(com[:2], poly).margin
 
 
 def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
@@ -310,9 +315,7 @@ def swing_zmp_beyond_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, ampli
     feet flat, from the whole-body dynamics (base still: only the arms move)."""
     model, data = body.model, body.model.createData()
     base = BasePlacer(body).update(q0)
-    pin.framesForwardKinematics(model, data, np.concatenate([base, q0]))
-    soles = foot_soles(body, data)
-    toe = float(support_polygon(soles["left"], soles["right"], "double")[:, X].max())
+    toe = float(standing_support(body, q0)[1][:, X].max())
     w = 2 * np.pi * frequency
     still = np.zeros(len(base))
     peak = -math.inf
@@ -386,13 +389,8 @@ def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 
 
 def front_margin(body: BodyModel, joints: np.ndarray) -> float:
     """Distance (m) from the static CoM's ground point forward to the toes' edge, standing on both feet."""
-    placer = BasePlacer(body)
-    q = np.concatenate([placer.update(joints), joints])
-    data = body.model.createData()
-    pin.centerOfMass(body.model, data, q)
-    pin.framesForwardKinematics(body.model, data, q)
-    soles = foot_soles(body, data)
-    return float(support_polygon(soles["left"], soles["right"], "double")[:, X].max() - data.com[0][X])
+    com, poly = standing_support(body, joints)
+    return float(poly[:, X].max() - com[X])
 
 
 # -- the scenarios by name (livezmp run/sim/demo --scenario) ------------------------------------------
