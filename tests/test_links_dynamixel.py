@@ -269,7 +269,7 @@ def test_the_bus_ceiling_counts_the_bytes_a_cycle_moves(options, per_cycle):
 
 
 def test_reply_loss_is_measured_over_a_sliding_window():
-    loss = ReplyLoss(window=200, limit=0.15)
+    loss = ReplyLoss(window=100, limit=0.15)
     for _ in range(4):
         loss.add(20, 4)  # 20 % lost, but only 80 replies seen: not yet enough to judge
     assert loss.fraction == pytest.approx(0.2) and not loss.exceeded()
@@ -277,4 +277,9 @@ def test_reply_loss_is_measured_over_a_sliding_window():
     assert loss.exceeded()
     for _ in range(10):
         loss.add(20, 0)  # the bus recovered: the old losses leave the window
+    assert loss.fraction == 0.0 and not loss.exceeded()
+    for _ in range(5):
+        loss.add(20, 4)
+    for _ in range(ReplyLoss.SILENT_RUN):
+        loss.add(20, 20)  # unplugged: silence is the watchdog's and reconnect's business, not a noisy bus
     assert loss.fraction == 0.0 and not loss.exceeded()

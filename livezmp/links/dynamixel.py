@@ -34,8 +34,8 @@ packet with the alert bit set makes the link read that servo's Hardware Error St
 reported in ``LinkFrame.hardware_errors``.
 
 ``timeout`` (s) bounds the wait for the replies of one transaction once the link is open;
-by default three times the slowest of the good reads at the end of `open` plus 2 ms
-(never more than the sdk's own: twice its USB latency timer, 16 ms, plus 2 ms, which is
+by default three times the slowest of the good reads at the end of `open` plus 2 ms, at
+least 10 ms (never more than the sdk's own: twice its USB latency timer, 16 ms, plus 2 ms, which is
 what `open` waits: servos may still have their factory return delays then). A lost
 reply costs the loop one timeout.
 
@@ -99,6 +99,7 @@ WATCHDOG_MAX = 127 * WATCHDOG_UNIT
 OPEN_TRIES = 8  # attempts of each read at open, for the servos not heard yet: a noisy bus still opens
 MAX_REPLY_LOSS = 0.15  # share of replies lost or rejected beyond which the bus is not usable
 LOSS_WINDOW = 400  # replies the loss is measured over
+MIN_TIMEOUT_MS = 10.0  # the shortest reply timeout `open` chooses by itself
 
 _STATE = np.dtype([("current", "<i2"), ("velocity", "<i4"), ("position", "<i4")])
 _POSITION = np.dtype([("position", "<i4")])
@@ -211,6 +212,7 @@ class DynamixelLink(PortLink):
     def open(self) -> None:
         """Open the port, check and configure every servo, enable torque, hold (see module docstring)."""
         self._open_port()
+        self.loss.clear()
         self._opening = True
         try:
             self._configure()
@@ -385,7 +387,8 @@ class DynamixelLink(PortLink):
             if len(took) == 3:
                 break
         sdk = 2.0 * LATENCY_TIMER + 2.0 + port.tx_time_per_byte * 1000
-        return min(3.0 * max(took, default=sdk) + 2.0, sdk)
+        # at least 10 ms: a late reply counted as lost would count towards MAX_REPLY_LOSS on a busy host
+        return min(max(3.0 * max(took, default=sdk) + 2.0, MIN_TIMEOUT_MS), sdk)
 
     def _hold_retrying(self) -> None:
         """`hold`, retrying reads that fail (a lost reply should not leave the servos on their old goals)."""
