@@ -81,11 +81,11 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
         return SimRobot(humanoid, None, None, scenario)
     thread = RealtimeThread(humanoid, period=humanoid.dt).start()
     try:
-        # the firmware board reads the humanoid's foot cells (its true centre of pressure); boards and CAN
-        # nodes read its IMU (a Dynamixel chain has none)
-        feet, imu = humanoid_sensors(humanoid) if kind in ("fw", "can") else (None, None)
+        # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
+        # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly)
+        feet, imu = humanoid_sensors(humanoid) if kind == "fw" else (None, None)
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
-                                foot_sensors=feet if kind == "fw" else None, imu=imu, **devices)
+                                foot_sensors=feet, imu=imu, **devices)
     except BaseException:
         thread.stop()
         raise
