@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     _monitor_commands(sub)
     _loop_commands(sub)
     _gait_commands(sub)
+    _batch_commands(sub)
     return p
 
 
@@ -290,3 +291,25 @@ def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# -- batch ----------------------------------------------------------------------------------------
+
+
+def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
+    batch = subparsers.add_parser("batch", help="whole motion libraries on a Dask cluster",
+                                  description="Analyse every take of a library, one Dask task per take.")
+    sub = batch.add_subparsers(dest="batch_command", required=True)
+    p = sub.add_parser("analyze", help="ZMP analysis of every take: a table (Parquet, CSV) and per-take outputs")
+    p.add_argument("sources", nargs="+", metavar="DIR_OR_GLOB", help="directories (searched recursively), "
+                   "files or glob patterns of takes (.bvh; .csv with --robot)")
+    p.add_argument("--out", required=True, help="output directory: takes.parquet, takes.csv, takes/...")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=2, help="local cluster: worker processes (default 2)")
+    where.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use this running Dask scheduler")
+    p.add_argument("--dashboard-address", default="127.0.0.1:0",
+                   help="local cluster's dashboard address (default: loopback, a free port)")
+    p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
+                   help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
+    add_body_options(p)
+    p.set_defaults(handler="livezmp.commands.batch:cmd_analyze")

@@ -27,17 +27,19 @@ def test_every_subcommand_names_a_handler_that_exists():
     actions = [a for a in parser._actions if a.dest == "command"][0].choices
     seen = 0
     for name, sub in actions.items():
-        subs = [a for a in sub._actions if getattr(a, "choices", None) and a.dest == "gait_command"]
+        subs = [a for a in sub._actions if getattr(a, "choices", None) and a.dest in ("gait_command", "batch_command")]
         for p in (subs[0].choices.values() if subs else [sub]):
             module, _, function = p.get_default("handler").partition(":")
             assert callable(getattr(importlib.import_module(module), function)), (name, module, function)
             seen += 1
-    assert seen == 12  # analyze calibrate correct monitor replay recover run sim demo + gait analyze/synth/compare
+    assert seen == 13  # analyze calibrate correct monitor replay recover run sim demo, gait analyze/synth/compare,
+    # batch analyze
 
 
 def test_help_and_every_subcommand_help_import_nothing_heavy():
     code = ("import sys, contextlib, io\nfrom livezmp.cli import build_parser\n"
-            "for argv in ([], ['analyze'], ['correct'], ['monitor'], ['run'], ['sim'], ['demo'], ['gait', 'synth']):\n"
+            "for argv in ([], ['analyze'], ['correct'], ['monitor'], ['run'], ['sim'], ['demo'], ['gait', 'synth'],"
+            " ['batch', 'analyze']):\n"
             "    with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
             "        build_parser().parse_args([*argv, '--help'])\n"
             "import json; print(json.dumps(sorted(m for m in sys.modules if '.' not in m)))")

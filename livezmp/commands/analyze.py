@@ -14,16 +14,14 @@ from pathlib import Path
 import numpy as np
 from rich.progress import Progress
 
-from livezmp.balance.pipeline import Pipeline
-from livezmp.commands.common import load_from_args, pipeline_config
-from livezmp.errors import InputError
+from livezmp.commands.common import load_from_args
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
-from livezmp.offline.batch import run_batch
 from livezmp.offline.calibrate import load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import summarize, write_json, write_zmp_csv
+from livezmp.offline.take import analyse_loaded
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
@@ -37,17 +35,13 @@ def _analyse_file(args: argparse.Namespace):
         plates = None if lab.plates is None else (lab.plates.cop, lab.complete)
         return lab.take.body, lab.result, lab.rate, args.motion, lab.summary, _lab_columns(lab), plates
     loaded = load_from_args(args)
-    if len(loaded.frames) < 2:
-        raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
-    cfg = pipeline_config(args, loaded)
-    pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     if len(loaded.frames) < PROGRESS_FRAMES:
-        results = run_batch(pipe, loaded.times, loaded.frames)
+        results = analyse_loaded(loaded, args.mode, args.ground)
     else:  # a long take: show how far the analysis is
         with Progress(transient=True) as bar:
             task = bar.add_task("analysing", total=len(loaded.frames))
-            results = run_batch(pipe, loaded.times, loaded.frames,
-                                progress=lambda done: bar.update(task, completed=done))
+            results = analyse_loaded(loaded, args.mode, args.ground,
+                                     progress=lambda done: bar.update(task, completed=done))
     return loaded.body, results, loaded.fps, loaded.source, {}, None, None
 
 

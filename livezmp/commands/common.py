@@ -8,14 +8,12 @@ import contextlib
 import signal
 from collections.abc import Callable
 
-import numpy as np
-
-from livezmp.balance.pipeline import PipelineConfig, default_config
-from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
+from livezmp.balance.pipeline import PipelineConfig
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
-from livezmp.model.motion_file import LoadedMotion, load_motion, trajectory_frames
-from livezmp.model.segments import load_mapping
+from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
+from livezmp.offline.take import TakeOptions, take_config
+from livezmp.offline.validated import VALIDATED_P95_MM
 
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
@@ -25,21 +23,19 @@ def load_from_args(args: argparse.Namespace) -> LoadedMotion:
         body = body_from_urdf(demo_robot_path(), urdf_opts)
         traj = demo_trajectory(body.joint_names)
         return LoadedMotion(body, traj.t, trajectory_frames(body, traj), "<demo>", trajectory=traj)
-    mapping = load_mapping(args.mapping) if args.mapping else None
-    bvh_opts = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up, mapping=mapping,
-                              sole_width=args.sole_width)
-    return load_motion(args.motion, args.robot, bvh_opts, urdf_opts, c3d_mass=args.mass)
+    return take_options(args).load(args.motion)
+
+
+def take_options(args: argparse.Namespace) -> TakeOptions:
+    """The body options of the command line."""
+    return TakeOptions(robot=args.robot, robot_config=args.robot_config, mass=args.mass, units=args.units,
+                       up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
+                       mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM))
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
     """:func:`default_config` with the command line's mode and ground height."""
-    ground = None
-    if args.ground is not None:
-        up = "xyz".index(loaded.body.up_axis)
-        p = np.zeros(3)
-        p[up] = args.ground
-        ground = float((loaded.body.world_from_input @ p)[2])
-    return default_config(loaded.body, loaded.fps, args.mode, ground)
+    return take_config(loaded, args.mode, args.ground)
 
 
 @contextlib.contextmanager
