@@ -147,7 +147,7 @@ def test_real_scheduler_and_worker_processes(library, reference, tmp_path, capsy
 
 def test_killed_run_resumes_to_the_uninterrupted_table(tmp_path):
     root = tmp_path / "lib"
-    frames = make_library(root, copies=3)
+    frames = make_library(root, copies=2)
     total = len(frames) + 2
     ref_out, out = tmp_path / "ref", tmp_path / "out"
     run_library(None, find_takes([str(root)], ref_out, TakeOptions()), ref_out, TakeOptions())
@@ -155,12 +155,12 @@ def test_killed_run_resumes_to_the_uninterrupted_table(tmp_path):
            "--workers", "1"]
     run = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        assert wait_until(lambda: len(list(out.glob("takes/**/summary.json"))) >= 4, timeout=40)
+        assert wait_until(lambda: len(list(out.glob("takes/**/summary.json"))) >= 3, timeout=40)
     finally:
         os.killpg(run.pid, signal.SIGKILL)  # the client, its cluster and its worker, mid-run
         run.wait()
     done = len(list(out.glob("takes/**/summary.json")))
-    assert 4 <= done < total and not (out / "takes.parquet").exists()
+    assert 3 <= done < total and not (out / "takes.parquet").exists()
     for zmp_csv in out.glob("takes/**/zmp.csv"):  # whatever was written is whole
         rows = zmp_csv.read_text().splitlines()
         assert len(rows) - 1 == frames[str(root / zmp_csv.parent.relative_to(out / "takes"))]

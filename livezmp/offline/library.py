@@ -12,10 +12,12 @@ so a killed run resumes where it stopped.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import glob
 import itertools
 import json
+import logging
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -176,6 +178,28 @@ class Progress:
         self.done += 1
         self.failed += row["error"] is not None
         self.frames += row["frames"] or 0
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int = 2, dashboard_address: str = "127.0.0.1:0"):
+    """A Dask client of the running ``scheduler`` (``tcp://HOST:PORT``), or else of a local cluster of
+    ``workers`` processes with one thread each, bound to loopback; closed (with its cluster) on exit."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as e:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({one_line(e)})") from None
+        with client:
+            yield client
+        return
+    if workers < 1:
+        raise InputError(f"--workers must be at least 1, got {workers}")
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=dashboard_address, silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
+        yield client
 
 
 def _rows(client, todo: list[Take], options: TakeOptions, window: int) -> Iterator[dict]:
