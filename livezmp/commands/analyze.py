@@ -15,7 +15,8 @@ import numpy as np
 from rich.progress import Progress
 
 from livezmp.balance.pipeline import Pipeline
-from livezmp.commands.common import load_from_args, pipeline_config
+from livezmp.checks import check_output_path
+from livezmp.commands.common import check_body_options, load_from_args, pipeline_config
 from livezmp.errors import InputError
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
@@ -61,6 +62,9 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
+    for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot")):
+        check_output_path(path, option)
+    check_body_options(args)
     body, results, fps, source, lab_summary, columns, plates = _analyse_file(args)
     summary = {"source": source, **summarize(body, results, fps, args.mode, args.tolerance_mm), **lab_summary}
     if args.out:
