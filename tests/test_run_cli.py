@@ -131,7 +131,7 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: cannot read URDF"),
+    (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: no such file"),
     (["run", "--robot", str(demo_robot_path()), "--link", "serial:/dev/x"], "link URL 'serial:/dev/x': expected"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--scenario", "dance"], "unknown scenario 'dance'"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0"], "--rate 0.0: must be"),

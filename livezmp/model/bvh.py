@@ -197,7 +197,7 @@ def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
     except ValueError:
         raise cur.error(f"bad frame count {toks[1]!r}") from None
     if n_frames <= 0:
-        raise cur.error(f"frame count {toks[1]}: need a positive number of frames")
+        raise cur.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
     toks = cur.next_tokens()
     if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
         raise cur.error("expected 'Frame Time: seconds'")
