@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import threading
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,7 +26,7 @@ from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
 from livezmp.offline.report import write_json
-from livezmp.recording.reader import iter_messages
+from livezmp.recording.reader import damaged_as_input_error, iter_messages
 from livezmp.recording.recover import recover
 from livezmp.recording.writer import Recorder
 from livezmp.sources.factory import SourceOptions, open_source
@@ -132,6 +133,11 @@ class ReplayCheck:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    with damaged_as_input_error(Path(args.recording)):  # a damaged session or /result message: one line
+        return _replay(args)
+
+
+def _replay(args: argparse.Namespace) -> int:
     source = McapReplaySource(args.recording, args.speed)
     s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
