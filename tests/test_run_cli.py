@@ -147,6 +147,13 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     (["demo", "--baud", "0"], "--baud 0: must be a positive number of bit/s"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--adapter-latency-ms", "-1"],
      "--adapter-latency-ms -1.0: must be milliseconds >= 0"),
+    # a device that is not there: exit 2 from run as from monitor, naming the link
+    (["run", "--robot", str(demo_robot_path()), "--link", "dynamixel:/dev/livezmp-none"],
+     "dynamixel:/dev/livezmp-none: cannot open the link"),
+    (["monitor", "dynamixel:/dev/livezmp-none", "--robot", str(demo_robot_path())],
+     "dynamixel:/dev/livezmp-none: cannot open the link"),
+    (["replay", str(demo_robot_path())], "livezmp_mini.urdf: not an MCAP file"),
+    (["recover", str(demo_robot_path()), "-o", "/nonexistent-dir/x.mcap"], "livezmp_mini.urdf: not an MCAP file"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):
     assert main(argv) == 2

@@ -229,9 +229,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenario = make_scenario(args.scenario, robot.body)
     try:
         link = open_link(args.link, robot.body.joint_names, robot.config)
-    except LinkError as e:
-        print(f"livezmp: error: {e}", file=sys.stderr)
-        return 1
+    except LinkError as e:  # a device that is not there is a user mistake, as for `monitor`
+        raise InputError(f"{args.link}: cannot open the link: {e}") from None
     try:
         summary = run_loop(link, robot, args, scenario.goals if scenario else None,
                            duration_of(args, scenario.duration if scenario else None), source=args.link)

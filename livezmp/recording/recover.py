@@ -13,8 +13,9 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
-from livezmp.checks import check_input_file
+from livezmp.checks import check_input_file, check_output_path
 from livezmp.errors import InputError
+from livezmp.recording.reader import MCAP_MAGIC
 from livezmp.recording.writer import CHUNK_BYTES
 
 
@@ -57,6 +58,10 @@ def recover(src: str | Path, dst: str | Path) -> RecoverReport:
     """Copy every intact record of ``src`` (possibly truncated by a crash) into a
     complete MCAP file ``dst``. A chunk is copied whole or not at all (its CRC checked)."""
     src, dst = check_input_file(src, "recording"), Path(dst)
+    with open(src, "rb") as f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise InputError(f"{src}: not an MCAP file (a livezmp recording starts with the MCAP magic)")
+    check_output_path(dst, "-o")
     if dst.exists():
         raise InputError(f"{dst}: already exists; write the recovered file to a new name")
     chunks = attachments = metadata = 0
