@@ -153,7 +153,7 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     (["monitor", "dynamixel:/dev/livezmp-none", "--robot", str(demo_robot_path())],
      "dynamixel:/dev/livezmp-none: cannot open the link"),
     (["replay", str(demo_robot_path())], "livezmp_mini.urdf: not an MCAP file"),
-    (["recover", str(demo_robot_path()), "-o", "/nonexistent-dir/x.mcap"], "livezmp_mini.urdf: not an MCAP file"),
+    (["recover", str(demo_robot_path()), "-o", "/nonexistent-dir/x.mcap"], "-o /nonexistent-dir/x.mcap: directory"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):
     assert main(argv) == 2

@@ -58,12 +58,12 @@ def recover(src: str | Path, dst: str | Path) -> RecoverReport:
     """Copy every intact record of ``src`` (possibly truncated by a crash) into a
     complete MCAP file ``dst``. A chunk is copied whole or not at all (its CRC checked)."""
     src, dst = check_input_file(src, "recording"), Path(dst)
+    if dst.exists():
+        raise InputError(f"{dst}: already exists; write the recovered file to a new name")
+    check_output_path(dst, "-o")
     with open(src, "rb") as f:
         if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise InputError(f"{src}: not an MCAP file (a livezmp recording starts with the MCAP magic)")
-    check_output_path(dst, "-o")
-    if dst.exists():
-        raise InputError(f"{dst}: already exists; write the recovered file to a new name")
     chunks = attachments = metadata = 0
     complete, stopped = False, ""
     with open(src, "rb") as f, open(dst, "xb") as out:
