@@ -33,7 +33,8 @@ def cmd_correct(args: argparse.Namespace) -> int:
     loaded = load_from_args(args)
     cfg = pipeline_config(args, loaded)
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
-                            nominal_dt=1.0 / loaded.fps)
+                            nominal_dt=1.0 / loaded.fps,
+                            progress=lambda message: print(f"correct: {message}", flush=True))
     if loaded.bvh is not None:
         write_bvh(replace(loaded.bvh, frames=result.frames), args.output)
     else:

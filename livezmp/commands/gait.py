@@ -85,7 +85,11 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if args.balance:
             from livezmp.correct.solver import correct_bvh  # imported here: heavy, and only for --balance
 
-            motion = correct_bvh(motion)
+            motion, result = correct_bvh(motion)
+            rep = result.report()
+            print(f"balanced: {rep['out_of_support_before']} → {rep['out_of_support_after']} of "
+                  f"{rep['support_frames']} support frames outside; root rotation max "
+                  f"{rep['max_root_rotation_deg']:.2f}°; stance feet moved ≤ {rep['max_foot_displacement_mm']:.3f} mm")
         write_bvh(motion, out)
         print(f"wrote {out}: {len(motion.frames)} frames at {motion.fps:g} fps, up {args.up}, "
               f"ground plane {GROUND[args.up]}")

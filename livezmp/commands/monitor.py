@@ -150,6 +150,9 @@ def _replay(args: argparse.Namespace) -> int:
     print(f"replay: {check.compared} results compared with the recording: max ZMP difference "
           f"{1000 * check.max_zmp_diff:.6f} mm, {check.support_diff} support differences, "
           f"{recorded_alarms} alarm(s) recorded; {'same analysis' if same else 'DIFFERENT analysis'}", flush=True)
+    if source.recording.dropped:
+        print(f"replay: the recording dropped {source.recording.dropped} messages while it was made (its writer's "
+              "queue was full): the replay sees only the inputs that were kept", flush=True)
     return 0 if same else 1
 
 

@@ -29,6 +29,13 @@ class Recording:
     body_spec: BodySpec
     session: dict
     counts: dict[str, int]
+    totals: dict | None = None  # the ``livezmp.totals`` record written when the session ended
+
+    @property
+    def dropped(self) -> int:
+        """Messages the recording's writer dropped (queue full) or failed to write."""
+        rec = (self.totals or {}).get("recording") or {}
+        return int(rec.get("dropped_total", 0) or 0) + int(rec.get("failed", 0) or 0)
 
 
 MAX_CHUNK_BYTES = 64 << 20  # the writer's chunks are a few hundred kB
@@ -125,7 +132,8 @@ def _recording(p: Path, meta: dict, files: dict, summary) -> Recording:
     stats = summary.statistics
     for cid, n in (stats.channel_message_counts.items() if stats else ()):
         counts[topic_of[cid]] = n
-    return Recording(p, spec, session, counts)
+    totals = {k: json.loads(v) for k, v in meta["livezmp.totals"].items()} if "livezmp.totals" in meta else None
+    return Recording(p, spec, session, counts, totals)
 
 
 def iter_messages(path: str | Path, topic: str) -> Iterator[dict]:
