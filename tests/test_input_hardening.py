@@ -272,3 +272,5 @@ def test_good_robot_still_loads(tmp_path, capsys, robot):
     assert rc == 0, err
     s = json.loads((tmp_path / "s.json").read_text())
     assert np.isfinite(s["max_excursion_m"])
+    # the estimator's settings are in the summary, at the take's rate (the demo CSV is at 100 Hz)
+    assert s["estimator"]["rate_hz"] == pytest.approx(100.0) and s["estimator"]["cutoff_hz"] > 0

@@ -9,6 +9,7 @@ its markers make the body, and its force plates, when present, are compared with
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,8 @@ def _analyse_file(args: argparse.Namespace):
             task = bar.add_task("analysing", total=len(loaded.frames))
             results = run_batch(pipe, loaded.times, loaded.frames,
                                 progress=lambda done: bar.update(task, completed=done))
-    return loaded.body, results, loaded.fps, loaded.source, {}, None, None
+    # the estimator's settings, so a user sees what smoothed the take (README: choosing them)
+    return loaded.body, results, loaded.fps, loaded.source, {"estimator": asdict(pipe.estimator.config)}, None, None
 
 
 def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
