@@ -153,6 +153,8 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     (["monitor", "dynamixel:/dev/livezmp-none", "--robot", str(demo_robot_path())],
      "dynamixel:/dev/livezmp-none: cannot open the link"),
     (["replay", str(demo_robot_path())], "livezmp_mini.urdf: not an MCAP file"),
+    (["demo", "--summary-json", "/nonexistent-dir/s.json"], "--summary-json /nonexistent-dir/s.json: directory"),
+    (["demo", "--record", "/nonexistent-dir/r.mcap"], "--record /nonexistent-dir/r.mcap: directory"),
     (["recover", str(demo_robot_path()), "-o", "/nonexistent-dir/x.mcap"], "-o /nonexistent-dir/x.mcap: directory"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from livezmp.commands.run import check_record, duration_of, finish, run_loop
+from livezmp.commands.run import check_outputs, duration_of, finish, run_loop
 from livezmp.links import LinkError, open_link
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import check_priority
@@ -61,6 +61,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     check_record(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     robot = load_robot(args.robot, args.robot_config)
+    check_outputs(args)
+    robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
     try:

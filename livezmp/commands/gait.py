@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import check_output_path
 from livezmp.errors import InputError
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -71,6 +72,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    check_output_path(args.output, "-o")
     analysis = read_features(args.features)
     take = _load(args.base_walk, args)
     t, q, plan = synth_take(take, analysis, args.to, args.amount, args.features)
