@@ -19,8 +19,8 @@ import numpy as np
 from livezmp.checks import MAX_CHANNEL_VALUE, check_frame_period, first_out_of_range, read_input_text
 from livezmp.errors import InputError
 
-MAX_JOINTS = 512  # joints of a skeleton; mocap skeletons have 20-100 (hands included)
-MAX_CHANNELS = 1536  # 6 channels on every joint of a 256-joint skeleton; the model's matrices grow as its square
+MAX_JOINTS = 256  # joints of a skeleton; mocap skeletons have 20-100 (hands included)
+MAX_CHANNELS = 256  # Pinocchio's model data grows as the cube: ~1 GB at 256 channels, 4 GB at 400
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
 
@@ -180,6 +180,9 @@ def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise cur.error(f"duplicate joint name(s): {', '.join(sorted(dup))}")
+    n_ch = sum(len(j.channels) for j in joints)
+    if n_ch > MAX_CHANNELS:
+        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses")
     return joints, cur
 
 
@@ -207,8 +210,6 @@ def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
         raise cur.error(f"Frame Time {toks[2]!r} is not a number") from None
     check_frame_period(frame_time, f"{source}:{cur.i}: Frame Time")
     n_ch = sum(len(j.channels) for j in joints)
-    if n_ch > MAX_CHANNELS:
-        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses")
     body = cur.lines[cur.i :]
     rows = [(cur.i + k + 1, ln) for k, ln in enumerate(body) if ln.strip()]
     if len(rows) != n_frames:

@@ -24,7 +24,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
-MAX_LINKS = 512  # as MAX_JOINTS for a BVH skeleton
+MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
 BASE_JOINTS = (
     ("base_x", pin.JointModelPX), ("base_y", pin.JointModelPY), ("base_z", pin.JointModelPZ),
     ("base_yaw", pin.JointModelRZ), ("base_pitch", pin.JointModelRY), ("base_roll", pin.JointModelRX),
