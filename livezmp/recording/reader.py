@@ -44,7 +44,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 DAMAGED = (McapError, ZstdError, struct.error, EOFError, ValueError, KeyError, IndexError, TypeError, AttributeError)
 
 
-class _BoundedFile:
+class BoundedFile:
     """A recording opened for the mcap reader: a read never asks for more than the file
     holds, so a damaged length field cannot make it allocate gigabytes."""
 
@@ -62,14 +62,14 @@ class _BoundedFile:
     def tell(self) -> int:
         return self._f.tell()
 
-    def __enter__(self) -> _BoundedFile:
+    def __enter__(self) -> BoundedFile:
         return self
 
     def __exit__(self, *exc) -> None:
         self._f.close()
 
 
-def _reader(f: _BoundedFile) -> SeekingReader:
+def _reader(f: BoundedFile) -> SeekingReader:
     return SeekingReader(f, record_size_limit=max(f._size, 1))
 
 
@@ -86,7 +86,7 @@ def open_recording(path: str | Path) -> Recording:
         if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise InputError(f"{p}: not an MCAP file (a livezmp recording starts with the MCAP magic)")
     try:
-        with _BoundedFile(p) as f:
+        with BoundedFile(p) as f:
             reader = _reader(f)
             summary = reader.get_summary()
             if summary is None:
@@ -140,7 +140,7 @@ def iter_messages(path: str | Path, topic: str) -> Iterator[dict]:
     """The decoded messages of one topic of a finished recording, in file order."""
     p = Path(path)
     try:
-        with _BoundedFile(p) as f:
+        with BoundedFile(p) as f:
             for _, _, msg in _reader(f).iter_messages(topics=[topic], log_time_order=False):
                 m = json.loads(msg.data)
                 if not isinstance(m, dict):

@@ -15,7 +15,7 @@ from zstandard import ZstdError
 
 from livezmp.checks import check_input_file, check_output_path
 from livezmp.errors import InputError
-from livezmp.recording.reader import MCAP_MAGIC
+from livezmp.recording.reader import MCAP_MAGIC, BoundedFile
 from livezmp.recording.writer import CHUNK_BYTES
 
 
@@ -66,7 +66,7 @@ def recover(src: str | Path, dst: str | Path) -> RecoverReport:
             raise InputError(f"{src}: not an MCAP file (a livezmp recording starts with the MCAP magic)")
     chunks = attachments = metadata = 0
     complete, stopped = False, ""
-    with open(src, "rb") as f, open(dst, "xb") as out:
+    with BoundedFile(src) as f, open(dst, "xb") as out:
         writer = Writer(out, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD, enable_crcs=True)
         copier = _Copier(writer)
         started = False
