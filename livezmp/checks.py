@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import os
 import stat
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -129,12 +128,3 @@ def check_frame_period(dt: float, where: str) -> None:
     if not (math.isfinite(dt) and lo <= dt <= hi):
         raise InputError(f"{where}: frame period {dt:g} s is outside {lo:g} .. {hi:g} s "
                          f"({1 / hi:g} .. {1 / lo:g} frames per second)")
-
-
-def read_toml(path: str | Path, what: str) -> dict:
-    """A TOML input file as a dict (see :func:`read_input_text`); bad TOML is one line naming the line."""
-    text = read_input_text(path, what)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{path}: bad TOML: {e}") from None

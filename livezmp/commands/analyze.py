@@ -91,7 +91,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
               f"lag {cv['lag_ms']:+.1f} ms")
-    if lab_summary:
+    if "markers" in lab_summary:
         print(f"  {lab_summary['markers']['hat']}")
         if "note" in lab_summary["mass"]:
             print(f"  mass: {lab_summary['mass']['note']}")

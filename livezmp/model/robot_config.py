@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import read_toml
 from livezmp.errors import InputError
 from livezmp.tomlfile import read_toml
 

@@ -17,7 +17,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from livezmp.checks import read_toml
 from livezmp.errors import InputError
 from livezmp.tomlfile import read_toml
 
