@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-FORMATS = ("bvh", "csv", "urdf", "toml", "mcap", "udp")
+FORMATS = ("bvh", "csv", "urdf", "toml", "mcap", "udp", "c3d")  # c3d: mutations of the data set's CGM2.4 walk
 CORPUS = Path(__file__).parent / "corpus"
 MEMORY_LIMIT = 3 << 30  # bytes of address space per child: a blow-up fails instead of swapping
 KEEP_PER_FORMAT = 40
@@ -44,6 +44,7 @@ def _save(fmt: str, data: bytes, tag: str) -> None:
 
 
 def _child(fmt: str, seconds: float, seed: int) -> dict:
+    from tests.data_paths import DATA
     from tests.fuzz.harness import PacketTarget, Tally, check_file, make_seeds, mutate, random_ops
 
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
@@ -69,7 +70,9 @@ def _child(fmt: str, seconds: float, seed: int) -> dict:
             st = target.src.stats
             tally.clean, tally.refused = st.delivered, st.dropped
         else:
-            seeds = make_seeds(work / "seeds")
+            seeds = make_seeds(work / "seeds", DATA / "c3d" / "cgm24_walking01_forceplate.c3d")
+            if fmt not in seeds.files:
+                raise SystemExit(f"no seed for {fmt}: the data set is not at {DATA}")
             pool = [seeds.files[fmt]] + [p.read_bytes() for p in sorted((CORPUS / fmt).glob("*"))]
             while time.monotonic() < end:
                 data = mutate(rnd.choice(pool), random_ops(rnd))

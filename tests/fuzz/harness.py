@@ -168,12 +168,16 @@ class Seeds:
     files: dict[str, bytes]
 
 
-def make_seeds(d: Path) -> Seeds:
+def make_seeds(d: Path, c3d: Path | None = None) -> Seeds:
+    """Seeds of every format; ``c3d`` a real C3D take to mutate (the data set's), if given."""
     d.mkdir(parents=True, exist_ok=True)
     urdf, csv, toml = _robot_seeds(d)
     (d / "robot.urdf").write_bytes(urdf)
     (d / "robot.csv").write_bytes(csv)
-    return Seeds(d, {"bvh": _bvh_seed(d), "csv": csv, "urdf": urdf, "toml": toml, "mcap": _mcap_seed(d)})
+    files = {"bvh": _bvh_seed(d), "csv": csv, "urdf": urdf, "toml": toml, "mcap": _mcap_seed(d)}
+    if c3d is not None and c3d.is_file():
+        files["c3d"] = c3d.read_bytes()
+    return Seeds(d, files)
 
 
 # -- running a command under the contract ----------------------------------------------------------------
@@ -286,6 +290,8 @@ def check_file(fmt: str, data: bytes, seeds: Seeds, work: Path) -> Outcome:
     if fmt == "toml":
         return run_cli(["analyze", d / "robot.csv", "--robot", d / "robot.urdf", "--robot-config", path,
                         "--summary-json", summary, "--out", table], [path, d / "robot.csv", d / "robot.urdf"], outs)
+    if fmt == "c3d":
+        return run_cli(["analyze", path, "--summary-json", summary, "--out", table], [path], outs)
     if fmt == "mcap":
         o = run_cli(["replay", path], [path], [], ok_codes=(0, 1))
         if o.kind == "failure":
