@@ -150,7 +150,7 @@ def test_looped_file_restarts_the_estimator_at_each_wrap(demo):
     stop = threading.Event()
 
     class Collect:
-        def publish(self, r):
+        def publish(self, r, cop=None):
             results.append(r)
             if len(results) >= 2 * n + 20:
                 stop.set()

@@ -80,8 +80,8 @@ class SourceStats:
     @property
     def dropped(self) -> int:
         """Packets or lines received and thrown away."""
-        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.overflow
-        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.jumps
+        return (self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.overflow
+                + self.jumps)
 
 
 @dataclass(frozen=True)
