@@ -58,11 +58,9 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
 
 def cmd_demo(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
-    check_record(args)
+    check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     robot = load_robot(args.robot, args.robot_config)
-    check_outputs(args)
-    robot = load_robot(None, None)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
     try:

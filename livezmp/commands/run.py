@@ -221,9 +221,8 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
-    check_record(args)
-    assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     check_outputs(args)
+    assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")
