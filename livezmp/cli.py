@@ -13,6 +13,7 @@ import argparse
 import importlib
 import math
 import sys
+import warnings
 from importlib.metadata import PackageNotFoundError, version
 
 from livezmp.correct.limits import CorrectionLimits
@@ -52,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     module, _, function = args.handler.partition(":")
+    # Inputs are checked at the edges and outputs before they are written (never NaN with exit 0),
+    # so numerical warnings would only add lines to a one-line error.
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
     try:
         return int(getattr(importlib.import_module(module), function)(args) or 0)
     except InputError as e:

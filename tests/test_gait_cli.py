@@ -1,6 +1,7 @@
 """`livezmp gait analyze | synth | compare` end to end on files, in process (the `livezmp`
 command's own `main`) and as a real `python -m livezmp gait` subprocess."""
 
+import re
 import subprocess
 import sys
 
@@ -157,4 +158,16 @@ def test_runs_as_a_subprocess(takes):
     assert last_number(r.stdout) == 0.0
     r = subprocess.run([sys.executable, "-m", "livezmp", "gait", "compare", str(takes / "missing.bvh"),
                         str(takes / "p01_normal.bvh")], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2 and r.stderr.strip().endswith("missing.bvh: cannot read: No such file or directory")
+    assert r.returncode == 2 and r.stderr.strip().endswith("missing.bvh: no such file")
+
+
+def test_synth_balance_says_what_it_did(takes, analysed, tmp_path, capsys):
+    capsys.readouterr()
+    rc = main(["gait", "synth", str(takes / "p01_normal.bvh"), "--features", str(analysed / "features.json"),
+               "--to", "fast", "-o", str(tmp_path / "out.bvh"), "--balance"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    m = re.search(r"balanced: (\d+) → (\d+) of (\d+) support frames outside; root rotation max ([\d.]+)°; "
+                  r"stance feet moved ≤ ([\d.]+) mm", out)
+    assert m, out
+    assert int(m[2]) <= int(m[1]) <= int(m[3]) and float(m[5]) <= 1.0

@@ -277,6 +277,14 @@ def _writes_follow_good_reads(link: ScriptedLink) -> bool:
     return all(i > 0 and names[i - 1] == "read" for i, c in enumerate(names) if c == "write")
 
 
+def test_summary_read_errors_agree_with_the_link_block(mini):
+    """Errors counted while the link was opened are not the run's: both places say the run's."""
+    loop, link, _, _ = scripted_loop(mini, fault=lambda n, t: "error" if n in (20, 30) else None)
+    link.stats.read_errors = 5  # e.g. pings that failed while connecting
+    s = loop.run(duration=0.2)
+    assert s["read_errors"] == s["link"]["read_errors"] == 2 and s["link"]["read_errors_before_run"] == 5
+
+
 def test_failed_and_rejected_frames_never_drive_a_command(mini):
     script = {50: "error", 51: "error", 90: "nan", 120: "jump", 150: "slow", 200: "repeat", 240: "error"}
     loop, link, _, events = scripted_loop(mini, fault=lambda n, t: script.get(n))

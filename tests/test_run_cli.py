@@ -131,7 +131,7 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: cannot read URDF"),
+    (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: no such file"),
     (["run", "--robot", str(demo_robot_path()), "--link", "serial:/dev/x"], "link URL 'serial:/dev/x': expected"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--scenario", "dance"], "unknown scenario 'dance'"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0"], "--rate 0.0: must be"),
@@ -147,6 +147,15 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     (["demo", "--baud", "0"], "--baud 0: must be a positive number of bit/s"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--adapter-latency-ms", "-1"],
      "--adapter-latency-ms -1.0: must be milliseconds >= 0"),
+    # a device that is not there: exit 2 from run as from monitor, naming the link
+    (["run", "--robot", str(demo_robot_path()), "--link", "dynamixel:/dev/livezmp-none"],
+     "dynamixel:/dev/livezmp-none: cannot open the link"),
+    (["monitor", "dynamixel:/dev/livezmp-none", "--robot", str(demo_robot_path())],
+     "dynamixel:/dev/livezmp-none: cannot open the link"),
+    (["replay", str(demo_robot_path())], "livezmp_mini.urdf: not an MCAP file"),
+    (["demo", "--summary-json", "/nonexistent-dir/s.json"], "--summary-json /nonexistent-dir/s.json: directory"),
+    (["demo", "--record", "/nonexistent-dir/r.mcap"], "--record /nonexistent-dir/r.mcap: directory"),
+    (["recover", str(demo_robot_path()), "-o", "/nonexistent-dir/x.mcap"], "-o /nonexistent-dir/x.mcap: directory"),
 ])
 def test_mistakes_are_one_line_errors(capsys, argv, message):
     assert main(argv) == 2

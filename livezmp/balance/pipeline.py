@@ -89,6 +89,7 @@ class Pipeline:
             est_cfg = replace(est_cfg, rate_hz=1.0 / nominal_dt)
         self.estimator = StreamingEstimator(body.nq, body.angle_mask, est_cfg)
         self._count = 0
+        self._index0 = 0  # number of the current stream's first frame (see restart)
         ground = GroundConfig(warmup_frames=self.config.ground_warmup_frames, override=self.config.ground_z)
         self.contacts = ContactDetector(self.config.contacts, ground)
         self._outside_contacts: dict[int, tuple[bool, bool]] = {}
@@ -111,8 +112,16 @@ class Pipeline:
     def flush(self) -> list[FrameResult]:
         """Results for the last ``lag`` frames (end of a file or stream); then a new stream starts."""
         out = [self._analyse(e) for e in self.estimator.flush()]
-        self._count = 0
+        self._count = self._index0 = 0
         self._outside_contacts.clear()
+        return out
+
+    def restart(self) -> list[FrameResult]:
+        """Results for the pending frames, then the estimator starts over (the source's
+        timeline jumped: a looped file wrapped, a stream resynchronised); frame numbers go on."""
+        first = self._index0 + self._count
+        out = self.flush()
+        self._index0 = first
         return out
 
     @property
@@ -154,8 +163,8 @@ class Pipeline:
         # the polygon lies on the ground: the soles' z column is ignored
         poly, c = support_and_clamp(left, right, support, None if zmp is None else zmp[:2])
         fz = float(z.force[2])
-        res = FrameResult(est.index, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles, ground,
-                          load=fz / (data.mass[0] * -float(model.gravity.linear[2])))
+        res = FrameResult(est.index + self._index0, est.t, est.q, est.qd, est.qdd, zmp, z.com, support, poly, soles,
+                          ground, load=fz / (data.mass[0] * -float(model.gravity.linear[2])))
         if c is not None:
             res.inside, res.margin = c.inside, c.margin
             x, y = c.point.tolist()

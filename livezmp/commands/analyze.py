@@ -9,19 +9,21 @@ its markers make the body, and its force plates, when present, are compared with
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 from rich.progress import Progress
 
-from livezmp.commands.common import load_from_args
+from livezmp.checks import check_output_path
+from livezmp.commands.common import check_body_options, load_from_args
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.offline.calibrate import load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import summarize, write_json, write_zmp_csv
-from livezmp.offline.take import analyse_loaded
+from livezmp.offline.take import analyse_loaded, take_config
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
@@ -42,7 +44,9 @@ def _analyse_file(args: argparse.Namespace):
             task = bar.add_task("analysing", total=len(loaded.frames))
             results = analyse_loaded(loaded, args.mode, args.ground,
                                      progress=lambda done: bar.update(task, completed=done))
-    return loaded.body, results, loaded.fps, loaded.source, {}, None, None
+    # the estimator's settings, so a user sees what smoothed the take (README: choosing them)
+    estimator = replace(take_config(loaded, args.mode, args.ground).estimator, rate_hz=loaded.fps)
+    return loaded.body, results, loaded.fps, loaded.source, {"estimator": asdict(estimator)}, None, None
 
 
 def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
@@ -55,6 +59,9 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
+    for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot")):
+        check_output_path(path, option)
+    check_body_options(args)
     body, results, fps, source, lab_summary, columns, plates = _analyse_file(args)
     summary = {"source": source, **summarize(body, results, fps, args.mode, args.tolerance_mm), **lab_summary}
     if args.out:
@@ -79,7 +86,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
               f"lag {cv['lag_ms']:+.1f} ms")
-    if lab_summary:
+    if "markers" in lab_summary:
         print(f"  {lab_summary['markers']['hat']}")
         if "note" in lab_summary["mass"]:
             print(f"  mass: {lab_summary['mass']['note']}")

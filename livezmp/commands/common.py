@@ -9,15 +9,28 @@ import signal
 from collections.abc import Callable
 
 from livezmp.balance.pipeline import PipelineConfig
+from livezmp.checks import check_number
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 from livezmp.offline.take import TakeOptions, take_config
 from livezmp.offline.validated import VALIDATED_P95_MM
 
+MAX_BODY_MASS = 1000.0  # kg
+MAX_GROUND_M = 1000.0  # m from the input's origin
+MAX_SOLE_WIDTH_M = 1.0
+
+
+def check_body_options(args: argparse.Namespace) -> None:
+    """The body options' numbers: finite and physically possible."""
+    check_number(args.mass, "--mass (kg)", 0.0, MAX_BODY_MASS, lo_open=True)
+    check_number(args.ground, "--ground (m)", -MAX_GROUND_M, MAX_GROUND_M)
+    check_number(args.sole_width, "--sole-width (m)", 0.0, MAX_SOLE_WIDTH_M, lo_open=True)
+
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
     """The motion named on the command line, or the built-in demo when there is none."""
+    check_body_options(args)
     urdf_opts = UrdfBodyOptions(config=args.robot_config)
     if args.motion is None:
         body = body_from_urdf(demo_robot_path(), urdf_opts)

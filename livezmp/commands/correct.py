@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
+from livezmp.checks import check_output_path
 from livezmp.commands.common import load_from_args, pipeline_config
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.solver import correct_motion
@@ -27,10 +28,13 @@ def cmd_correct(args: argparse.Namespace) -> int:
     if str(args.motion).lower().endswith(".c3d"):
         raise InputError(f"{args.motion}: correct does not take C3D marker takes yet (their segments move "
                          "freely, with no joint chain for the hip re-solve); `livezmp analyze` reads them")
+    check_output_path(args.output, "-o")
+    check_output_path(args.report, "--report")
     loaded = load_from_args(args)
     cfg = pipeline_config(args, loaded)
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
-                            nominal_dt=1.0 / loaded.fps)
+                            nominal_dt=1.0 / loaded.fps,
+                            progress=lambda message: print(f"correct: {message}", flush=True))
     if loaded.bvh is not None:
         write_bvh(replace(loaded.bvh, frames=result.frames), args.output)
     else:

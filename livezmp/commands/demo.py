@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from livezmp.commands.run import check_record, duration_of, finish, run_loop
+from livezmp.commands.run import check_outputs, duration_of, finish, run_loop
 from livezmp.links import LinkError, open_link
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import check_priority
@@ -58,7 +58,7 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
 
 def cmd_demo(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
-    check_record(args)
+    check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)

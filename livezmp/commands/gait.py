@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import check_output_path
 from livezmp.errors import InputError
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -71,6 +72,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    check_output_path(args.output, "-o")
     analysis = read_features(args.features)
     take = _load(args.base_walk, args)
     t, q, plan = synth_take(take, analysis, args.to, args.amount, args.features)
@@ -85,7 +87,11 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if args.balance:
             from livezmp.correct.solver import correct_bvh  # imported here: heavy, and only for --balance
 
-            motion = correct_bvh(motion)
+            motion, result = correct_bvh(motion)
+            rep = result.report()
+            print(f"balanced: {rep['out_of_support_before']} → {rep['out_of_support_after']} of "
+                  f"{rep['support_frames']} support frames outside; root rotation max "
+                  f"{rep['max_root_rotation_deg']:.2f}°; stance feet moved ≤ {rep['max_foot_displacement_mm']:.3f} mm")
         write_bvh(motion, out)
         print(f"wrote {out}: {len(motion.frames)} frames at {motion.fps:g} fps, up {args.up}, "
               f"ground plane {GROUND[args.up]}")

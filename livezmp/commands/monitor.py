@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import threading
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,7 +26,7 @@ from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
 from livezmp.offline.report import write_json
-from livezmp.recording.reader import iter_messages
+from livezmp.recording.reader import damaged_as_input_error, iter_messages
 from livezmp.recording.recover import recover
 from livezmp.recording.writer import Recorder
 from livezmp.sources.factory import SourceOptions, open_source
@@ -132,6 +133,11 @@ class ReplayCheck:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    with damaged_as_input_error(Path(args.recording)):  # a damaged session or /result message: one line
+        return _replay(args)
+
+
+def _replay(args: argparse.Namespace) -> int:
     source = McapReplaySource(args.recording, args.speed)
     s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
@@ -144,6 +150,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     print(f"replay: {check.compared} results compared with the recording: max ZMP difference "
           f"{1000 * check.max_zmp_diff:.6f} mm, {check.support_diff} support differences, "
           f"{recorded_alarms} alarm(s) recorded; {'same analysis' if same else 'DIFFERENT analysis'}", flush=True)
+    if source.recording.dropped:
+        print(f"replay: the recording dropped {source.recording.dropped} messages while it was made (its writer's "
+              "queue was full): the replay sees only the inputs that were kept", flush=True)
     return 0 if same else 1
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import check_output_path
 from livezmp.commands.common import stop_on_signals
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
@@ -59,10 +60,13 @@ def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
                       contacts=args.contacts)
 
 
-def check_record(args: argparse.Namespace) -> None:
-    """A --record file that exists is a one-line error before anything starts (it is never overwritten)."""
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before anything starts: a --record file that exists (it is never overwritten), or an
+    output in a directory that does not exist, is a one-line error."""
     if args.record and Path(args.record).exists():
         raise InputError(f"{args.record}: already exists; record to a new file")
+    check_output_path(args.record, "--record")
+    check_output_path(getattr(args, "summary_json", None), "--summary-json")
 
 
 def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, source: str) -> LoopRecorder:
@@ -217,7 +221,7 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     check_priority(args.realtime_priority)
-    check_record(args)
+    check_outputs(args)
     assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
@@ -229,9 +233,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenario = make_scenario(args.scenario, robot.body)
     try:
         link = open_link(args.link, robot.body.joint_names, robot.config)
-    except LinkError as e:
-        print(f"livezmp: error: {e}", file=sys.stderr)
-        return 1
+    except LinkError as e:  # a device that is not there is a user mistake, as for `monitor`
+        raise InputError(f"{args.link}: cannot open the link: {e}") from None
     try:
         summary = run_loop(link, robot, args, scenario.goals if scenario else None,
                            duration_of(args, scenario.duration if scenario else None), source=args.link)

@@ -23,6 +23,7 @@ are reported. The seed paper's fixed-step search, for comparison, is
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -326,16 +327,21 @@ def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs
 
 
 def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
-                   limits: CorrectionLimits | None = None, nominal_dt: float | None = None) -> CorrectionResult:
-    """Correct a whole take (raw channels ``frames`` (F, nq) at ``times``); see module docstring."""
+                   limits: CorrectionLimits | None = None, nominal_dt: float | None = None,
+                   progress: Callable[[str], None] | None = None) -> CorrectionResult:
+    """Correct a whole take (raw channels ``frames`` (F, nq) at ``times``); see module docstring.
+    ``progress(message)`` is told each stage and solver iteration (a long take takes a while)."""
     limits = limits or CorrectionLimits()
+    tell = progress or (lambda message: None)
     t0 = time.perf_counter()
     dt = nominal_dt or float(np.median(np.diff(times)))
 
     def analyse(fr: np.ndarray, contacts=None) -> list[FrameResult]:
         return analyse_frames(Pipeline(body, config, dt), times, fr, contacts)
 
+    tell(f"analysing {len(frames)} frames")
     before = analyse(frames)
+    tell(f"{sum(1 for r in before if r.inside is False)} frames outside the support polygon; solving")
     # while solving, the feet keep the contacts detected on the original motion: the
     # corrected motion moves a swing foot by millimetres, which must not flip a contact
     # (and with it the polygon) from one trial to the next; the final check re-detects
@@ -383,8 +389,10 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
                     break
                 mu *= 10
             history.append(sum(1 for r in current if r.inside is False))
+            tell(f"iteration {len(history)}: {history[-1]} frames outside")
             if not accepted or history[-1] == 0:
                 break
+    tell("easing contact changes, final check")
     delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
                                                lambda d: (apply_delta(mover, body, frames, d, w), d),
                                                (reg_size, reg_acc), max(1, round(0.3 / dt)))
@@ -397,10 +405,11 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
 
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
-                limits: CorrectionLimits | None = None) -> BvhMotion:
-    """A balance-corrected copy of a BVH motion (same hierarchy, frame count and time)."""
+                limits: CorrectionLimits | None = None) -> tuple[BvhMotion, CorrectionResult]:
+    """A balance-corrected copy of a BVH motion (same hierarchy, frame count and time), and
+    what the correction did."""
     body = body_from_bvh(motion, BvhBodyOptions(total_mass=total_mass))
     times = np.arange(len(motion.frames)) * motion.frame_time
     result = correct_motion(body, times, motion.frames, default_config(body, motion.fps, mode), limits,
                             nominal_dt=motion.frame_time)
-    return replace(motion, frames=result.frames)
+    return replace(motion, frames=result.frames), result

@@ -53,12 +53,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livezmp.errors import InputError
 from livezmp.estimate.kalman import ConstantAccelerationKalman
 from livezmp.estimate.spline_diff import SlidingSplineDifferentiator, smoothing_lambda
 
 
-class EstimatorError(ValueError):
+class EstimatorError(InputError):
     """A bad estimator configuration or input stream (the message names the field or sample)."""
+
+
+MAX_WINDOW = 4096  # samples: the ring buffer is 2 x window x channels; refused before it is allocated
 
 
 @dataclass(frozen=True)
@@ -91,8 +95,13 @@ class EstimatorConfig:
                 raise EstimatorError(f"EstimatorConfig.{name} = {value!r}: must be a number >= 0")
         if self.window < 3:
             raise EstimatorError(
-                f"EstimatorConfig.window_s = {self.window_s} s is {self.window} samples at {self.rate_hz} Hz: "
+                f"EstimatorConfig.window_s = {self.window_s} s is {self.window} samples at {self.rate_hz:g} Hz: "
                 "need at least 3"
+            )
+        if self.window > MAX_WINDOW:
+            raise EstimatorError(
+                f"EstimatorConfig.window_s = {self.window_s} s is {self.window} samples at {self.rate_hz:g} Hz: "
+                f"more than {MAX_WINDOW}"
             )
         if self.lag >= self.window:
             raise EstimatorError(

@@ -558,7 +558,9 @@ class LiveLoop:
             "cop_vs_zmp": self.cop_vs_zmp.summary() if self.cop_vs_zmp.readings else None,
             "clock": clock.as_dict(),
             "timing": {s: h.summary_ms() for s, h in self.times.items()},
-            "link": {"reads": stats.reads, "read_errors": stats.read_errors, "writes": stats.writes,
+            # the run's read errors, as the top-level count; those from opening the link apart
+            "link": {"reads": stats.reads, "read_errors": stats.read_errors - self._link_errors0,
+                     "read_errors_before_run": self._link_errors0, "writes": stats.writes,
                      "write_errors": stats.write_errors, "reconnects": stats.reconnects,
                      "errors_by_kind": dict(stats.errors_by_kind)},
             "events": list(self.events),

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
@@ -42,13 +43,6 @@ class BodySpec:
     options: dict = field(default_factory=dict)
 
 
-def _read_text(path: Path, what: str) -> str:
-    try:
-        return path.read_text(encoding="utf-8", errors="replace")
-    except OSError as e:
-        raise InputError(f"{path}: cannot read {what}: {e.strerror}") from None
-
-
 @dataclass
 class Skeleton:
     """A skeleton file read: ``motion`` (its frames, or for a hierarchy alone one stand-in
@@ -64,9 +58,7 @@ class Skeleton:
 def read_skeleton(path: str | Path) -> Skeleton:
     """A BVH file (hierarchy and frames, e.g. a T-pose or a take), or a hierarchy alone."""
     p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    text = _read_text(p, "skeleton")
+    text = read_input_text(p, "skeleton")
     joints, cur = parse_hierarchy(text, str(p))
     hierarchy = "\n".join(cur.lines[: cur.i]) + "\n"
     if any(ln.strip() for ln in cur.lines[cur.i :]):
@@ -96,10 +88,10 @@ def robot_body(urdf: str | Path, opts: UrdfBodyOptions | None = None) -> tuple[B
     opts = opts or UrdfBodyOptions()
     path = Path(urdf)
     body = body_from_urdf(path, opts)
-    files = {URDF_FILE: _read_text(path, "URDF")}
+    files = {URDF_FILE: read_input_text(path, "URDF")}
     config = Path(opts.config) if opts.config else path.with_suffix(".toml")
     if config.is_file():
-        files[ROBOT_CONFIG_FILE] = _read_text(config, "robot config")
+        files[ROBOT_CONFIG_FILE] = read_input_text(config, "robot config")
     options = {"sole_length": opts.sole_length, "sole_width": opts.sole_width, "sole_drop": opts.sole_drop,
                "source": str(path)}
     return body, BodySpec("urdf", files, options)

@@ -16,8 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import MAX_CHANNEL_VALUE, check_frame_period, first_out_of_range, read_input_text
 from livezmp.errors import InputError
 
+MAX_JOINTS = 256  # joints of a skeleton; mocap skeletons have 20-100 (hands included)
+MAX_CHANNELS = 256  # Pinocchio's model data grows as the cube: ~1 GB at 256 channels, 4 GB at 400
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
 
@@ -88,12 +91,28 @@ def _floats(cur: _Lines, toks: list[str], what: str) -> np.ndarray:
         vals = np.array([float(t) for t in toks], dtype=float)
     except ValueError:
         raise cur.error(f"non-numeric value in {what}: {' '.join(toks)!r}") from None
-    if not np.all(np.isfinite(vals)):
-        raise cur.error(f"non-finite value in {what}")
+    bad = first_out_of_range(vals, MAX_CHANNEL_VALUE)
+    if bad is not None:
+        raise cur.error(f"value {toks[bad[0]]} in {what} is not finite or beyond ±{MAX_CHANNEL_VALUE:g}")
     return vals
 
 
-def _parse_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, first_channel: int) -> int:
+def _parse_end_site(cur: _Lines, joint: BvhJoint) -> None:
+    name = joint.name
+    if cur.next_tokens() != ["{"]:
+        raise cur.error(f"joint {name}: expected '{{' after End Site")
+    toks = cur.next_tokens()
+    if toks[0] != "OFFSET" or len(toks) != 4:
+        raise cur.error(f"End Site of {name}: expected 'OFFSET x y z'")
+    joint.end_site = _floats(cur, toks[1:], f"End Site of {name}")
+    if cur.next_tokens() != ["}"]:
+        raise cur.error(f"End Site of {name}: expected '}}'")
+
+
+def _open_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, first_channel: int) -> BvhJoint:
+    """Read a joint's '{', OFFSET and CHANNELS lines and append it to ``joints``."""
+    if len(joints) >= MAX_JOINTS:
+        raise cur.error(f"more than {MAX_JOINTS} joints: not a skeleton this tool analyses")
     toks = cur.next_tokens()
     if toks != ["{"]:
         raise cur.error(f"expected '{{' after joint {name}, got {' '.join(toks)!r}")
@@ -105,38 +124,42 @@ def _parse_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, fi
     if toks[0] != "CHANNELS":
         raise cur.error(f"joint {name}: expected CHANNELS")
     try:
-        count = int(toks[1])
+        count = int(toks[1]) if len(toks[1]) <= 3 else -1
     except (IndexError, ValueError):
         raise cur.error(f"joint {name}: bad channel count") from None
     channels = toks[2:]
     if count != len(channels):
-        raise cur.error(f"joint {name}: CHANNELS says {count} but lists {len(channels)}")
+        raise cur.error(f"joint {name}: CHANNELS says {toks[1]} but lists {len(channels)}")
     for c in channels:
         if c not in CHANNEL_NAMES:
             raise cur.error(f"joint {name}: unknown channel {c!r}")
-    idx = len(joints)
+    if len(set(channels)) != len(channels):
+        raise cur.error(f"joint {name}: a channel is listed twice")
     joint = BvhJoint(name, parent, offset, channels, first_channel=first_channel)
-    joints.append(joint)
     if parent >= 0:
-        joints[parent].children.append(idx)
-    nxt = first_channel + count
-    while True:
+        joints[parent].children.append(len(joints))
+    joints.append(joint)
+    return joint
+
+
+def _parse_joints(cur: _Lines, joints: list[BvhJoint], root_name: str) -> None:
+    """The joint tree, read with an explicit stack (no recursion limit on deep hierarchies)."""
+    _open_joint(cur, joints, root_name, -1, 0)
+    stack = [0]
+    nxt = len(joints[0].channels)
+    while stack:
+        idx = stack[-1]
         toks = cur.next_tokens()
         if toks[0] == "}":
-            return nxt
-        if toks[0] == "JOINT" and len(toks) >= 2:
-            nxt = _parse_joint(cur, joints, " ".join(toks[1:]), idx, nxt)
+            stack.pop()
+        elif toks[0] == "JOINT" and len(toks) >= 2:
+            j = _open_joint(cur, joints, " ".join(toks[1:]), idx, nxt)
+            nxt += len(j.channels)
+            stack.append(len(joints) - 1)
         elif toks[0] == "End":
-            if cur.next_tokens() != ["{"]:
-                raise cur.error(f"joint {name}: expected '{{' after End Site")
-            toks = cur.next_tokens()
-            if toks[0] != "OFFSET" or len(toks) != 4:
-                raise cur.error(f"End Site of {name}: expected 'OFFSET x y z'")
-            joint.end_site = _floats(cur, toks[1:], f"End Site of {name}")
-            if cur.next_tokens() != ["}"]:
-                raise cur.error(f"End Site of {name}: expected '}}'")
+            _parse_end_site(cur, joints[idx])
         else:
-            raise cur.error(f"joint {name}: unexpected {' '.join(toks)!r}")
+            raise cur.error(f"joint {joints[idx].name}: unexpected {' '.join(toks)!r}")
 
 
 def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint], _Lines]:
@@ -152,11 +175,14 @@ def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint]
     if toks[0] != "ROOT" or len(toks) < 2:
         raise cur.error("expected 'ROOT name'")
     joints: list[BvhJoint] = []
-    _parse_joint(cur, joints, " ".join(toks[1:]), -1, 0)
+    _parse_joints(cur, joints, " ".join(toks[1:]))
     names = [j.name for j in joints]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise cur.error(f"duplicate joint name(s): {', '.join(sorted(dup))}")
+    n_ch = sum(len(j.channels) for j in joints)
+    if n_ch > MAX_CHANNELS:
+        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses")
     return joints, cur
 
 
@@ -170,33 +196,36 @@ def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
     if toks[0] != "Frames:" or len(toks) != 2:
         raise cur.error("expected 'Frames: N'")
     try:
-        n_frames = int(toks[1])
+        n_frames = int(toks[1]) if len(toks[1]) <= 12 else -1
     except ValueError:
         raise cur.error(f"bad frame count {toks[1]!r}") from None
     if n_frames <= 0:
-        raise cur.error("zero frames: nothing to analyse")
+        raise cur.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
     toks = cur.next_tokens()
     if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
         raise cur.error("expected 'Frame Time: seconds'")
-    frame_time = float(_floats(cur, toks[2:], "Frame Time")[0])
-    if frame_time <= 0:
-        raise cur.error("Frame Time must be positive")
+    try:
+        frame_time = float(toks[2])
+    except ValueError:
+        raise cur.error(f"Frame Time {toks[2]!r} is not a number") from None
+    check_frame_period(frame_time, f"{source}:{cur.i}: Frame Time")
     n_ch = sum(len(j.channels) for j in joints)
     body = cur.lines[cur.i :]
     rows = [(cur.i + k + 1, ln) for k, ln in enumerate(body) if ln.strip()]
-    if len(rows) < n_frames:
-        line = cur.i + len(body)
-        raise InputError(f"{source}:{line}: truncated: header says {n_frames} frames, file has {len(rows)}")
+    if len(rows) != n_frames:
+        line = cur.i + len(body) if len(rows) < n_frames else rows[n_frames][0]
+        what = "truncated" if len(rows) < n_frames else "extra rows"
+        raise InputError(f"{source}:{line}: {what}: header says Frames: {n_frames}, file has {len(rows)} rows")
     frames = np.empty((n_frames, n_ch))
     try:
-        data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows[:n_frames])), ndmin=2)
-        ok = data.shape == (n_frames, n_ch) and np.all(np.isfinite(data))
+        data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows)), ndmin=2)
+        ok = data.shape == (n_frames, n_ch) and first_out_of_range(data, MAX_CHANNEL_VALUE) is None
     except ValueError:
         ok = False
     if ok:
         frames[:] = data
     else:  # find the offending line for the message
-        for k, (lineno, ln) in enumerate(rows[:n_frames]):
+        for k, (lineno, ln) in enumerate(rows):
             toks = ln.split()
             if len(toks) != n_ch:
                 raise InputError(f"{source}:{lineno}: frame {k} has {len(toks)} values, hierarchy needs {n_ch}")
@@ -208,11 +237,7 @@ def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
 def read_bvh(path: str | Path) -> BvhMotion:
     """Read a BVH file (see :func:`parse_bvh`)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="replace")
-    except OSError as e:
-        raise InputError(f"{p}: cannot read: {e.strerror}") from None
-    return parse_bvh(text, str(p))
+    return parse_bvh(read_input_text(p, "BVH file"), str(p))
 
 
 def _fmt(v: np.ndarray) -> str:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 from livezmp.model.base_placement import place_base
 from livezmp.model.body import BodyModel
@@ -41,11 +42,11 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
     """Load ``path``: ``.bvh`` or ``.c3d`` on its own, ``.csv`` with ``robot`` (a URDF). A C3D's body
     weighs ``c3d_mass`` kg, else the file's subject mass, else 70 kg (plates are for
     :mod:`livezmp.offline.gaitlab`)."""
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
+    p = check_input_file(path, "motion file")
     suffix = p.suffix.lower()
     if suffix == ".bvh":
+        if robot is not None:
+            raise InputError(f"{p}: --robot is for a joint-trajectory CSV; a BVH carries its own skeleton")
         motion = read_bvh(p)
         body = body_from_bvh(motion, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time

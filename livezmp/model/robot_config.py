@@ -21,6 +21,8 @@ the URDF's ``<robot name>`` (``livezmp/data/robots/NAME.toml``); everything is o
 
 from __future__ import annotations
 
+import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -57,29 +59,96 @@ class RobotConfig:
     source: str = "<defaults>"
 
 
+MAX_SOLE_M = 1.0  # a sole dimension or corner offset beyond a metre is not a foot
+NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def _table(value: object, where: str) -> dict:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"{where}: need a table, got {type(value).__name__}")
+    return value
+
+
+def _int(value: object, where: str, lo: int, hi: int) -> int:
+    if type(value) is not int or not lo <= value <= hi:
+        raise InputError(f"{where}: need an integer {lo} .. {hi}, got {value!r}"[:200])
+    return value
+
+
+def _length(value: object, where: str, positive: bool) -> float:
+    ok = type(value) in (int, float) and math.isfinite(value) and abs(value) <= MAX_SOLE_M
+    if not ok or (positive and value <= 0):
+        need = f"a length in (0, {MAX_SOLE_M:g}] m" if positive else f"a length within ±{MAX_SOLE_M:g} m"
+        raise InputError(f"{where}: need {need}, got {value!r}"[:200])
+    return float(value)
+
+
+def _point(value: object, where: str) -> list[float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise InputError(f"{where}: need [x, y, z] in metres")
+    return [_length(v, f"{where}[{i}]", False) for i, v in enumerate(value)]
+
+
+def _polygon_area(xy: np.ndarray) -> float:
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def _foot(side: str, f: object, source: str) -> dict:
+    where = f"{source}: [feet.{side}]"
+    f = _table(f, where)
+    unknown = set(f) - {"link", "sole", "box"}
+    if unknown:
+        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} (link, sole, box)")
+    if not isinstance(f.get("link"), str):
+        raise InputError(f"{where} link: need the link's name (a string)")
+    out: dict = {"link": f["link"]}
+    if "sole" in f:
+        if not isinstance(f["sole"], list) or len(f["sole"]) < 3:
+            raise InputError(f"{where} sole: need at least 3 points [x, y, z]")
+        sole = np.array([_point(c, f"{where} sole[{i}]") for i, c in enumerate(f["sole"])])
+        if _polygon_area(sole) <= 1e-6:  # m^2: a sole smaller than 1 mm x 1 mm cannot carry a body
+            raise InputError(f"{where} sole: the corners enclose no area")
+        out["sole"] = sole
+    if "box" in f:
+        box = _table(f["box"], f"{where} box")
+        unknown = set(box) - {"length", "width", "center"}
+        if unknown:
+            raise InputError(f"{where} box: unknown key {sorted(unknown)[0]!r} (length, width, center)")
+        out["box"] = {k: _length(box[k], f"{where} box.{k}", True) for k in ("length", "width") if k in box}
+        if "center" in box:
+            out["box"]["center"] = _point(box["center"], f"{where} box.center")
+    return out
+
+
 def _parse(data: dict, source: str) -> RobotConfig:
+    """A config from parsed TOML; every field's type and range is checked (one line per field)."""
     cfg = RobotConfig(source=source)
-    for side, f in (data.get("feet") or {}).items():
+    for side, f in _table(data.get("feet"), f"{source}: [feet]").items():
         if side not in ("left", "right"):
             raise InputError(f"{source}: [feet.{side}]: side must be left or right")
-        if "link" not in f:
-            raise InputError(f"{source}: [feet.{side}]: missing 'link'")
-        if "sole" in f:
-            sole = np.asarray(f["sole"], dtype=float)
-            if sole.ndim != 2 or sole.shape[1] != 3 or len(sole) < 3:
-                raise InputError(f"{source}: [feet.{side}] sole: need at least 3 points [x, y, z]")
-            f = {**f, "sole": sole}
-        cfg.feet[side] = f
-    corr = data.get("correction") or {}
-    cfg.legs = {k: list(v) for k, v in (corr.get("legs") or {}).items()}
-    for joint, s in (data.get("servos") or {}).items():
+        cfg.feet[side] = _foot(side, f, source)
+    corr = _table(data.get("correction"), f"{source}: [correction]")
+    for side, joints in _table(corr.get("legs"), f"{source}: [correction.legs]").items():
+        if side not in ("left", "right"):
+            raise InputError(f"{source}: [correction.legs] {side}: side must be left or right")
+        if not isinstance(joints, list) or not all(isinstance(j, str) for j in joints):
+            raise InputError(f"{source}: [correction.legs] {side}: need a list of joint names")
+        cfg.legs[side] = list(joints)
+    for joint, s in _table(data.get("servos"), f"{source}: [servos]").items():
+        where = f"{source}: [servos.{joint}]"
+        s = _table(s, where)
         if "id" not in s:
-            raise InputError(f"{source}: [servos.{joint}]: missing 'id'")
-        d = int(s.get("direction", 1))
-        if d not in (1, -1):
-            raise InputError(f"{source}: [servos.{joint}] direction: must be 1 or -1")
-        cfg.servos[joint] = ServoConfig(joint, int(s["id"]), int(s.get("zero", 2048)), d,
-                                        int(s.get("ticks_per_rev", 4096)))
+            raise InputError(f"{where}: missing 'id'")
+        d = s.get("direction", 1)
+        if type(d) is not int or d not in (1, -1):
+            raise InputError(f"{where} direction: must be 1 or -1")
+        ticks = _int(s.get("ticks_per_rev", 4096), f"{where} ticks_per_rev", 1, 1 << 24)
+        cfg.servos[joint] = ServoConfig(joint, _int(s["id"], f"{where} id", 0, 252),
+                                        _int(s.get("zero", 2048), f"{where} zero", -(1 << 31), (1 << 31) - 1),
+                                        d, ticks)
     return cfg
 
 
@@ -89,10 +158,15 @@ def load_robot_config(path: str | Path) -> RobotConfig:
 
 
 def find_robot_config(urdf: str | Path, robot_name: str) -> RobotConfig:
-    """The config beside the URDF, else the built-in one for ``robot_name``, else defaults."""
+    """The config beside the URDF, else the built-in one for ``robot_name``, else defaults.
+
+    A robot name that is not a plain file name (letters, digits, ``_ . -``; e.g. one with
+    ``/`` or ``..``) is refused rather than looked up."""
     beside = Path(urdf).with_suffix(".toml")
     if beside.is_file():
         return load_robot_config(beside)
+    if not NAME_RE.fullmatch(robot_name) or robot_name.startswith("."):
+        raise InputError(f"{urdf}: <robot name={robot_name!r}>: a robot name is letters, digits, '_', '.', '-'"[:300])
     builtin = resources.files("livezmp") / "data" / "robots" / f"{robot_name}.toml"
     if builtin.is_file():
         return _parse(tomllib.loads(builtin.read_text(encoding="utf-8")), f"livezmp:{robot_name}.toml")

@@ -9,11 +9,13 @@ Extra columns are ignored. Without base columns the caller places the base.
 from __future__ import annotations
 
 import csv
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import MAX_CHANNEL_VALUE, check_frame_period, read_input_text
 from livezmp.errors import InputError
 
 BASE_COLUMNS = ("base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw")
@@ -32,11 +34,11 @@ class JointTrajectory:
 
 def read_csv_rows(path: Path, what: str = "file") -> list[list[str]]:
     """All rows of a CSV file; a one-line InputError if it cannot be read or is empty."""
+    text = read_input_text(path, what)
     try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except OSError as e:
-        raise InputError(f"{path}: cannot read {what}: {e.strerror}") from None
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as e:
+        raise InputError(f"{path}: bad CSV: {e}") from None
     if not rows:
         raise InputError(f"{path}:1: empty {what}")
     return rows
@@ -47,6 +49,9 @@ def read_joint_csv(path: str | Path, joint_names: list[str]) -> JointTrajectory:
     p = Path(path)
     rows = read_csv_rows(p)
     header = [h.strip() for h in rows[0]]
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise InputError(f"{p}:1: column {dup[0]!r} appears more than once")
     col = {h: i for i, h in enumerate(header)}
     if "time" not in col:
         raise InputError(f"{p}:1: no 'time' column")
@@ -64,19 +69,22 @@ def read_joint_csv(path: str | Path, joint_names: list[str]) -> JointTrajectory:
     idx = [col[n] for n in names]
     data = np.empty((len(body), len(idx)))
     for k, (line, r) in enumerate(body):
-        if len(r) < len(header):
+        if len(r) != len(header):  # a missing or extra field (a decimal comma) would shift the columns
             raise InputError(f"{p}:{line}: {len(r)} fields, header has {len(header)}")
         for c, (n, i) in enumerate(zip(names, idx, strict=True)):
             try:
                 data[k, c] = float(r[i])
             except ValueError:
                 raise InputError(f"{p}:{line}: field {n}: not a number: {r[i]!r}") from None
-            if not np.isfinite(data[k, c]):
-                raise InputError(f"{p}:{line}: field {n}: not finite")
+            if not abs(data[k, c]) <= MAX_CHANNEL_VALUE:
+                raise InputError(f"{p}:{line}: field {n}: {r[i].strip()} is not finite or "
+                                 f"beyond ±{MAX_CHANNEL_VALUE:g}")
     t = data[:, 0]
     bad = np.nonzero(np.diff(t) <= 0)[0]
     if bad.size:
         raise InputError(f"{p}:{body[bad[0] + 1][0]}: field time: not increasing")
+    if len(t) > 1:
+        check_frame_period(float(np.median(np.diff(t))), f"{p}: field time")
     n = len(joint_names)
     base = data[:, 1 + n :] if all(has_base) else None
     return JointTrajectory(t, data[:, 1 : 1 + n], list(joint_names), base, str(p))

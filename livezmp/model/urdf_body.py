@@ -9,6 +9,9 @@ by default 0.5 × / 0.28 × / 0.12 × the hip-to-foot height.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,10 +19,12 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
+MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
 BASE_JOINTS = (
     ("base_x", pin.JointModelPX), ("base_y", pin.JointModelPY), ("base_z", pin.JointModelPZ),
     ("base_yaw", pin.JointModelRZ), ("base_pitch", pin.JointModelRY), ("base_roll", pin.JointModelRX),
@@ -34,23 +39,106 @@ class UrdfBodyOptions:
     sole_drop: float | None = None
 
 
-def _load_fixed(path: Path) -> pin.Model:
+MAX_LINK_MASS = 1e4  # kg: heavier than any humanoid's link
+MAX_LENGTH = 1e3  # m: joint origins and centres of mass
+
+
+def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.ndarray:
+    text = el.get(attr, default)
     try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as e:
+        vals = np.array([float(v) for v in text.split()])
+    except ValueError:
+        raise InputError(f"{where} {attr}: {text[:40]!r} is not {n} numbers") from None
+    if vals.shape != (n,) or not np.all(np.isfinite(vals)):
+        raise InputError(f"{where} {attr}: {text[:40]!r} is not {n} finite numbers")
+    return vals
+
+
+def _check_inertial(link: ET.Element, path: Path) -> None:
+    """Mass finite and > 0, centre of mass finite, inertia finite, positive definite and
+    obeying the triangle inequality (each principal moment at most the sum of the other two)."""
+    where = f"{path}: link {link.get('name')!r} <inertial>"
+    inertial = link.find("inertial")
+    if inertial is None:
+        return
+    mass_el, inertia_el, origin = inertial.find("mass"), inertial.find("inertia"), inertial.find("origin")
+    if mass_el is None or inertia_el is None:
+        raise InputError(f"{where}: needs <mass> and <inertia>")
+    mass = _numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
+    if not 0 < mass <= MAX_LINK_MASS:
+        raise InputError(f"{where} <mass> value: {mass:g} kg is outside (0, {MAX_LINK_MASS:g}]")
+    if origin is not None:
+        for attr in ("xyz", "rpy"):
+            v = _numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")
+            if np.abs(v).max() > MAX_LENGTH:
+                raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
+    comps = {}
+    for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+        comps[k] = _numbers(inertia_el, k, 1, "0", f"{where} <inertia>")[0]
+    c = comps
+    inertia = np.array([[c["ixx"], c["ixy"], c["ixz"]], [c["ixy"], c["iyy"], c["iyz"]], [c["ixz"], c["iyz"], c["izz"]]])
+    moments = np.linalg.eigvalsh(inertia)
+    scale = max(float(np.abs(moments).max()), 1e-300)
+    if moments[0] <= 1e-12 * scale or moments[0] <= 0:
+        raise InputError(f"{where} <inertia>: not positive definite (principal moments "
+                         f"{', '.join(f'{m:.3g}' for m in moments)} kg m^2)")
+    if moments[2] > (moments[0] + moments[1]) * (1 + 1e-6):
+        raise InputError(f"{where} <inertia>: principal moments {', '.join(f'{m:.3g}' for m in moments)} "
+                         "kg m^2 break the triangle inequality (no rigid body has them)")
+
+
+def _check_joints(root: ET.Element, path: Path) -> None:
+    for j in root.findall("joint"):
+        where = f"{path}: joint {j.get('name')!r}"
+        if j.get("type") not in ("revolute", "prismatic", "fixed"):
+            raise InputError(f"{where}: type {j.get('type')!r} not supported (revolute, prismatic, fixed)")
+        origin = j.find("origin")
+        if origin is not None:
+            for attr in ("xyz", "rpy"):
+                if np.abs(_numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")).max() > MAX_LENGTH:
+                    raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
+        axis = j.find("axis")
+        if axis is not None and not np.any(_numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
+            raise InputError(f"{where} <axis>: zero vector")
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence the C++ URDF parser's console output (urdfdom writes warnings to fd 2):
+    a refused URDF gets our one-line message only."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _load_fixed(path: Path) -> pin.Model:
+    text = read_input_text(path, "URDF")
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
         raise InputError(f"{path}: cannot read URDF: {e}") from None
     if root.tag != "robot":
         raise InputError(f"{path}: not a URDF (root element <{root.tag}>)")
+    links = root.findall("link")
+    if len(links) > MAX_LINKS:
+        raise InputError(f"{path}: {len(links)} links, more than the {MAX_LINKS} this tool analyses")
     if root.find("./link/inertial") is None:
         raise InputError(f"{path}: URDF has no <inertial> on any link; masses are needed for the ZMP")
-    for j in root.findall("joint"):
-        if j.get("type") not in ("revolute", "prismatic", "fixed"):
-            raise InputError(f"{path}: joint {j.get('name')}: type {j.get('type')!r} not supported "
-                             "(revolute, prismatic, fixed)")
+    for link in links:
+        _check_inertial(link, path)
+    _check_joints(root, path)
     try:
-        return pin.buildModelFromUrdf(str(path))
+        with _quiet_stderr():
+            return pin.buildModelFromXML(text)
     except (RuntimeError, ValueError) as e:
-        raise InputError(f"{path}: Pinocchio cannot load it: {str(e).splitlines()[0]}") from None
+        first = str(e).splitlines()[0] if str(e).strip() else type(e).__name__
+        raise InputError(f"{path}: Pinocchio cannot load it: {first}") from None
 
 
 def _with_base(fixed: pin.Model) -> pin.Model:

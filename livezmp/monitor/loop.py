@@ -221,6 +221,9 @@ class Monitor:
         self._arrivals.append(frame.received)
         while self._arrivals[-1] - self._arrivals[0] > RATE_WINDOW:
             self._arrivals.popleft()
+        if frame.restart and self.pipeline.frames_in:  # a new timeline: finish the old one, start over
+            for r in self.pipeline.restart():
+                self._result(r)
         if self.recorder:
             self.recorder.input(k, frame.t, frame.channels, frame.contacts)
         if frame.cop is not None:

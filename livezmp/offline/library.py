@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from livezmp.errors import InputError
-from livezmp.offline.take import SUMMARY_JSON, ZMP_CSV, TakeOptions, analyse_take, write_json_atomic
+from livezmp.offline.report import write_json
+from livezmp.offline.take import SUMMARY_JSON, ZMP_CSV, TakeOptions, analyse_take
 
 TABLE_COLUMNS = ("file", "format", "frames", "fps", "duration_s", "inside_fraction", "max_excursion_mm", "error")
 TABLE_PARQUET = "takes.parquet"
@@ -90,7 +91,7 @@ def run_take(take: Take, options: TakeOptions) -> dict:
         summary = {"source": str(take.path), "error": one_line(e), "options": options.fingerprint()}
         take.out_dir.mkdir(parents=True, exist_ok=True)
         (take.out_dir / ZMP_CSV).unlink(missing_ok=True)
-        write_json_atomic(summary, take.out_dir / SUMMARY_JSON)
+        write_json(summary, take.out_dir / SUMMARY_JSON)
     return table_row(take.path, summary)
 
 

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from livezmp.balance.support import SUPPORT_LABELS
+from livezmp.checks import first_out_of_range, non_finite_field
+from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.offline.batch import BatchResult
 from livezmp.offline.plausibility import plausibility
@@ -47,6 +52,10 @@ def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path,
     filled[:, 8:13] = result.judged[:, None]
     kind = 8 * result.has_zmp + 4 * result.judged + result.support
     extra = extra or {}
+    bad = first_out_of_range(np.where(filled, values, 0.0), np.inf)
+    if bad is not None:
+        raise InputError(f"{path}: frame {bad[0]} column {ZMP_COLUMNS[bad[1]]} is not finite; "
+                         "the input drives the analysis out of range, not written")
     with open(path, "w", newline="", encoding="utf-8") as f:
         f.write(",".join((*ZMP_COLUMNS, *extra)) + "\r\n")
         for lo in range(0, count, CSV_ROWS):
@@ -101,5 +110,26 @@ def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str,
     }
 
 
+@contextlib.contextmanager
+def atomic_path(path: str | Path):
+    """Yield a temporary path beside ``path``; on success it replaces ``path``, on error it is removed."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
 def write_json(data: dict, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    """Strict JSON (NaN and infinity are not JSON): a non-finite field is refused, naming it; the file
+    is written atomically (:func:`atomic_path`)."""
+    bad = non_finite_field(data)
+    if bad:
+        raise InputError(f"{path}: field {bad} is not finite; the input drives the analysis out of range, not written")
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")

@@ -7,11 +7,8 @@ so a run killed at any point leaves either the old file or the complete new one.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
-import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -25,7 +22,7 @@ from livezmp.model.motion_file import LoadedMotion, load_motion
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import BatchResult, run_batch
-from livezmp.offline.report import summarize, write_zmp_csv
+from livezmp.offline.report import atomic_path, summarize, write_json, write_zmp_csv
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
@@ -81,26 +78,6 @@ def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | Non
     return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | Path):
-    """Yield a temporary path beside ``path``; on success it replaces ``path``, on error it is removed."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def write_json_atomic(data: dict, path: str | Path) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-
-
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) -> dict:
     """Analyse the take at ``path``; write ``zmp.csv`` then ``summary.json`` (the summary with the
     options' fingerprint) into ``out_dir``, each atomically; return the summary."""
@@ -113,5 +90,5 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) ->
     with atomic_path(out_dir / ZMP_CSV) as tmp:
         write_zmp_csv(loaded.body, results, tmp)
     summary["options"] = options.fingerprint()
-    write_json_atomic(summary, out_dir / SUMMARY_JSON)
+    write_json(summary, out_dir / SUMMARY_JSON)
     return summary

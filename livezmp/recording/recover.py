@@ -13,7 +13,9 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
+from livezmp.checks import check_input_file, check_output_path
 from livezmp.errors import InputError
+from livezmp.recording.reader import MCAP_MAGIC, BoundedFile
 from livezmp.recording.writer import CHUNK_BYTES
 
 
@@ -55,18 +57,21 @@ class _Copier:
 def recover(src: str | Path, dst: str | Path) -> RecoverReport:
     """Copy every intact record of ``src`` (possibly truncated by a crash) into a
     complete MCAP file ``dst``. A chunk is copied whole or not at all (its CRC checked)."""
-    src, dst = Path(src), Path(dst)
-    if not src.is_file():
-        raise InputError(f"{src}: no such file")
+    src, dst = check_input_file(src, "recording"), Path(dst)
     if dst.exists():
         raise InputError(f"{dst}: already exists; write the recovered file to a new name")
+    check_output_path(dst, "-o")
+    with open(src, "rb") as f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise InputError(f"{src}: not an MCAP file (a livezmp recording starts with the MCAP magic)")
     chunks = attachments = metadata = 0
     complete, stopped = False, ""
-    with open(src, "rb") as f, open(dst, "xb") as out:
+    with BoundedFile(src) as f, open(dst, "xb") as out:
         writer = Writer(out, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD, enable_crcs=True)
         copier = _Copier(writer)
         started = False
-        records = StreamReader(f, emit_chunks=True, record_size_limit=1 << 30).records
+        # no record is longer than the file: a damaged length is refused before it is allocated
+        records = StreamReader(f, emit_chunks=True, record_size_limit=max(src.stat().st_size, 1)).records
         try:
             for record in records:
                 if isinstance(record, Header):

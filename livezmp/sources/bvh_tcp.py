@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from livezmp.checks import MAX_CHANNEL_VALUE, first_out_of_range
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.body_spec import BodySpec
@@ -39,9 +40,9 @@ def parse_frame_line(line: bytes, n_channels: int) -> np.ndarray:
         values = np.array([float(t) for t in toks])
     except ValueError:
         raise InputError("non-numeric value") from None
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        raise InputError(f"value {bad[0]} is not finite")
+    bad = first_out_of_range(values, MAX_CHANNEL_VALUE)
+    if bad is not None:
+        raise InputError(f"value {bad[0]} is not finite or beyond ±{MAX_CHANNEL_VALUE:g}")
     return values
 
 
@@ -139,7 +140,7 @@ class BvhTcpSource:
             line = self._next_line()
             if line is not None:
                 frame = self._frame(line)
-                if frame is not None:
+                if frame is not None or time.monotonic() >= deadline:  # a flood of bad lines returns in time
                     return frame
                 continue
             left = deadline - time.monotonic()

@@ -3,7 +3,8 @@
 Frames are handed out when their time comes: a frame at time t (from the first frame)
 at ``start + t / speed`` on the monotonic clock; ``speed`` 0 means as fast as the reader
 takes them. With ``loop`` the motion starts over after its end, time continuing (one
-frame period after the last frame), so the stream's time keeps increasing.
+frame period after the last frame), so the stream's time keeps increasing; each lap
+after the first is marked ``restart`` (the motion jumps back), so the analysis starts over.
 """
 
 from __future__ import annotations
@@ -77,7 +78,8 @@ class FileReplaySource:
             return None
         self._k += 1
         self.stats.delivered += 1
-        return SourceFrame(float(self.times[0]) + t, self.frames[i], None, sent)
+        # each lap after the first restarts the analysis: the wrap is a jump in the motion
+        return SourceFrame(float(self.times[0]) + t, self.frames[i], None, sent, restart=i == 0 and lap > 0)
 
     def close(self) -> None:
         self._closed = True

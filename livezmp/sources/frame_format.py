@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livezmp.checks import MAX_CHANNEL_VALUE, first_out_of_range
 from livezmp.errors import InputError
 
 MAGIC = b"LZF1"
@@ -23,6 +24,10 @@ HEADER = struct.Struct("<4sBBHId")  # magic, flags, reserved, channel count, seq
 FLAG_CONTACTS, FLAG_LEFT, FLAG_RIGHT = 0x01, 0x02, 0x04
 SEQ_MOD = 1 << 32
 JSON_KEYS = {"v", "seq", "t", "channels", "contacts"}
+# A frame is one object holding at most two arrays: deeper nesting is refused before parsing
+# (the JSON parser recurses), and integers longer than uint32 before they are converted.
+MAX_BRACKETS, MAX_BRACES, MAX_INT_DIGITS = 2, 1, 10
+MAX_TIME_S = 1e9  # sender clock, s (31 years): larger times lose the precision of a frame period
 NUMBER_TYPES = {int, float}
 
 
@@ -69,9 +74,20 @@ def encode_binary(frame: WireFrame) -> bytes:
 def _check_values(channels: np.ndarray, n_channels: int) -> None:
     if len(channels) != n_channels:
         raise FrameError("malformed", f"field channels: {len(channels)} values, the body has {n_channels}")
-    bad = np.flatnonzero(~np.isfinite(channels))
-    if bad.size:
-        raise FrameError("malformed", f"field channels[{bad[0]}]: not finite")
+    bad = first_out_of_range(channels, MAX_CHANNEL_VALUE)
+    if bad is not None:
+        raise FrameError("malformed", f"field channels[{bad[0]}]: not finite or beyond ±{MAX_CHANNEL_VALUE:g}")
+
+
+def _check_time(t: float) -> None:
+    if not (math.isfinite(t) and abs(t) <= MAX_TIME_S):
+        raise FrameError("malformed", f"field t: need a finite number within ±{MAX_TIME_S:g} s")
+
+
+def _json_int(text: str) -> int:
+    if len(text.lstrip("-")) > MAX_INT_DIGITS:
+        raise FrameError("malformed", f"JSON frame: integer of {len(text)} digits")
+    return int(text)
 
 
 def _decode_binary(data: bytes, n_channels: int) -> WireFrame:
@@ -82,8 +98,7 @@ def _decode_binary(data: bytes, n_channels: int) -> WireFrame:
         raise FrameError("malformed", f"binary frame: unknown flags 0x{flags:02x} / reserved byte {reserved}")
     if len(data) != HEADER.size + 4 * n:
         raise FrameError("malformed", f"binary frame: {len(data)} bytes, {n} channels need {HEADER.size + 4 * n}")
-    if not math.isfinite(t):
-        raise FrameError("malformed", "field t: not finite")
+    _check_time(t)
     channels = np.frombuffer(data, dtype="<f4", offset=HEADER.size).astype(float)
     _check_values(channels, n_channels)
     contacts = (bool(flags & FLAG_LEFT), bool(flags & FLAG_RIGHT)) if flags & FLAG_CONTACTS else None
@@ -91,8 +106,10 @@ def _decode_binary(data: bytes, n_channels: int) -> WireFrame:
 
 
 def _decode_json(data: bytes, n_channels: int) -> WireFrame:
+    if data.count(b"[") > MAX_BRACKETS or data.count(b"{") > MAX_BRACES:
+        raise FrameError("malformed", "JSON frame: nested deeper than a frame")
     try:
-        doc = json.loads(data)
+        doc = json.loads(data, parse_int=_json_int)
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise FrameError("malformed", f"JSON frame: {e}") from None
     if not isinstance(doc, dict):
@@ -106,8 +123,9 @@ def _decode_json(data: bytes, n_channels: int) -> WireFrame:
     if type(seq) is not int or not 0 <= seq < SEQ_MOD:
         raise FrameError("malformed", "field seq: need an integer 0 .. 2^32-1")
     t = doc.get("t")
-    if type(t) not in (int, float) or not math.isfinite(t):
+    if type(t) not in (int, float):
         raise FrameError("malformed", "field t: need a finite number (s)")
+    _check_time(t)
     values = doc.get("channels")
     if not isinstance(values, list) or not set(map(type, values)) <= NUMBER_TYPES:  # bool is not a number here
         raise FrameError("malformed", "field channels: need an array of numbers")

@@ -35,7 +35,9 @@ class SourceFrame:
     ``latency`` s from the source's own timestamp to arrival, when its clock can be
     related to this machine's (an LSL stream), else None; ``cop`` (3,) m the force plates'
     measured centre of pressure in the input's world frame (NaN when the plates are
-    unloaded), None for a source without plates."""
+    unloaded), None for a source without plates;
+    ``restart``: the source's timeline starts over here (a looped file wrapped, a stream
+    resynchronised), so the analysis restarts its estimator."""
 
     t: float
     channels: np.ndarray
@@ -43,6 +45,7 @@ class SourceFrame:
     received: float = 0.0
     latency: float | None = None
     cop: np.ndarray | None = None
+    restart: bool = False
 
 
 @dataclass
@@ -53,7 +56,11 @@ class SourceStats:
     number already seen), ``late`` (older than one already delivered: out of order),
     ``rejected`` (sender not on the allowlist), ``overflow`` (arrived while the reader's
     bounded queue was full). ``lost``: sequence numbers skipped and never delivered in
-    order. ``reconnects``: connections re-opened."""
+    order. ``reconnects``: connections re-opened.;
+    ``rejected`` (sender not on the allowlist). ``lost``: sequence numbers skipped and
+    never delivered in order. ``jumps``: frames whose sequence or time jumped too far ahead
+    (dropped); ``resyncs``: times the source moved onto a new timeline (see
+    :mod:`livezmp.sources.udp`). ``reconnects``: connections re-opened."""
 
     delivered: int = 0
     malformed: int = 0
@@ -63,6 +70,8 @@ class SourceStats:
     rejected: int = 0
     overflow: int = 0
     lost: int = 0
+    jumps: int = 0
+    resyncs: int = 0
     reconnects: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -71,7 +80,8 @@ class SourceStats:
     @property
     def dropped(self) -> int:
         """Packets or lines received and thrown away."""
-        return self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.overflow
+        return (self.malformed + self.oversized + self.duplicate + self.late + self.rejected + self.overflow
+                + self.jumps)
 
 
 @dataclass(frozen=True)

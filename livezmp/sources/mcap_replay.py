@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from livezmp.checks import MAX_CHANNEL_VALUE
 from livezmp.errors import InputError
 from livezmp.model.body_spec import body_from_spec
-from livezmp.recording.reader import iter_messages, open_recording
+from livezmp.recording.reader import damaged_as_input_error, iter_messages, open_recording
 from livezmp.sources.file_replay import Pacer
+from livezmp.sources.frame_format import MAX_TIME_S
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 
@@ -23,7 +25,11 @@ class McapReplaySource:
         self.recording = open_recording(path)
         self.name = str(path)
         self.body_spec = self.recording.body_spec
-        self.body = body_from_spec(self.body_spec)
+        try:
+            with damaged_as_input_error(self.recording.path):
+                self.body = body_from_spec(self.body_spec)
+        except InputError as e:  # the message names a temporary file: name the recording
+            raise InputError(f"{path}: the recorded body: {str(e).split(': ', 1)[-1]}") from None
         fps = self.recording.session.get("fps")
         if not isinstance(fps, int | float) or not fps > 0:
             raise InputError(f"{path}: the recording's session has no frame rate (livezmp.session fps)")
@@ -48,16 +54,32 @@ class McapReplaySource:
                 self._done = True
                 return None
         m = self._pending
+        t = m.get("t")
+        if type(t) not in (int, float) or not abs(t) <= MAX_TIME_S:
+            t = 0.0  # refused with its message below, once due
         if self._t0 is None:
-            self._t0 = m["t"]
-        sent = self.pacer.due(m["t"] - self._t0, timeout)
+            self._t0 = t
+        sent = self.pacer.due(t - self._t0, timeout)
         if sent is None:
             return None
         self._pending = None
         self.stats.delivered += 1
-        contacts = m.get("contacts")
-        return SourceFrame(m["t"], np.array(m["channels"], dtype=float),
-                           None if contacts is None else (bool(contacts[0]), bool(contacts[1])), sent)
+        t, channels, contacts = self._checked(m)
+        return SourceFrame(t, channels, contacts, sent)
+
+    def _checked(self, m: dict) -> tuple[float, np.ndarray, tuple[bool, bool] | None]:
+        """An ``/input`` message's time, channels and contacts, checked as a UDP frame is."""
+        where = f"{self.name}: /input message {self.stats.delivered - 1}"
+        t, values, contacts = m.get("t"), m.get("channels"), m.get("contacts")
+        if type(t) not in (int, float) or not abs(t) <= MAX_TIME_S:
+            raise InputError(f"{where}: t {t!r} is not a finite time"[:200])
+        if not isinstance(values, list) or len(values) != self.body.nq or \
+                not all(type(v) in (int, float) and abs(v) <= MAX_CHANNEL_VALUE for v in values):
+            raise InputError(f"{where}: channels: need {self.body.nq} finite numbers")
+        if contacts is not None and (not isinstance(contacts, list) or len(contacts) != 2):
+            raise InputError(f"{where}: contacts: need [left, right]")
+        return float(t), np.array(values, dtype=float), None if contacts is None else (bool(contacts[0]),
+                                                                                        bool(contacts[1]))
 
     def close(self) -> None:
         self._done = True

@@ -6,7 +6,19 @@ failing one is counted in :class:`SourceStats` and dropped: sender on the allowl
 (``duplicate`` or ``late``), time strictly increasing (``malformed``). Sequence numbers
 compare modulo 2^32 (serial-number arithmetic, as RTP does), and a 64-frame window of
 those already seen tells a duplicate from a late frame. A sender that restarts its
-sequence from an older number is seen as late until it passes the last one.
+sequence from an older number is seen as late until it passes the last one — or until
+the resynchronisation rule below moves the stream onto its new numbers.
+
+No packet can lock the stream out. A frame whose sequence number jumps more than
+:data:`MAX_SEQ_JUMP` ahead, or whose time jumps more than :data:`MAX_GAP_S` ahead, is
+dropped and counted (``jumps``). Dropped late, duplicate, jumped or time-not-increasing
+frames are candidates for a new timeline (a restarted sender reuses numbers): when
+:data:`RESYNC_FRAMES` of them arrive in a row (no frame accepted in between), each one
+to ``WINDOW`` sequence numbers after the previous and later by at most ``MAX_GAP_S``,
+the source follows them (``resyncs``): the last one is delivered with ``restart`` set,
+so the analysis starts over on the new clock. A single far-ahead packet thus costs
+nothing, a restarted sender is followed after ``RESYNC_FRAMES`` frames, and genuine
+frames arriving in between clear the candidate run, so stray packets cannot take over.
 
 The allowlist defaults to loopback senders; binding beyond loopback requires one.
 """
@@ -25,6 +37,9 @@ from livezmp.sources.frame_format import SEQ_MOD, FrameError, decode_frame, max_
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 WINDOW = 64
+MAX_SEQ_JUMP = 1024  # frames: ~4 s lost at 240 Hz; a larger jump ahead is suspect
+MAX_GAP_S = 5.0  # s of sender time between two frames before a jump is suspect
+RESYNC_FRAMES = 8  # consecutive consistent frames that move the stream onto a new timeline
 RECV_BUFFER = 4 << 20  # bytes of kernel buffer: a few seconds of frames if the monitor stalls
 LOOPBACK = (ipaddress.ip_network("127.0.0.0/8"), ipaddress.ip_network("::1/128"))
 
@@ -60,6 +75,26 @@ class SequenceFilter:
         self.lost += d - 1
         self.seen = ((self.seen << d) | 1) & ((1 << WINDOW) - 1)
         self.last = seq
+
+
+class Resync:
+    """The candidate new timeline: a run of dropped frames consistent with each other."""
+
+    def __init__(self):
+        self.seq: int | None = None
+        self.t = 0.0
+        self.run = 0
+
+    def clear(self) -> None:
+        self.seq, self.run = None, 0
+
+    def offer(self, seq: int, t: float) -> bool:
+        """Add a dropped frame; True when it completes a run of :data:`RESYNC_FRAMES`."""
+        follows = (self.seq is not None and 0 < (seq - self.seq) % SEQ_MOD <= WINDOW
+                   and 0 < t - self.t <= MAX_GAP_S)
+        self.run = self.run + 1 if follows else 1
+        self.seq, self.t = seq, t
+        return self.run >= RESYNC_FRAMES
 
 
 def parse_allowlist(text: str, where: str) -> tuple[Network, ...]:
@@ -98,7 +133,8 @@ class UdpSource:
         self.allow = allow or LOOPBACK
         self.max_bytes = max_packet_bytes(body.nq) if max_bytes is None else max_bytes
         self.stats, self.errors = SourceStats(), ErrorLog()
-        self.sequence = SequenceFilter()
+        self.sequence, self.resync = SequenceFilter(), Resync()
+        self._lost_before = 0  # lost before the last resynchronisation
         self._last_t: float | None = None
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self.sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -131,17 +167,33 @@ class UdpSource:
             self._drop(e.kind, str(e), sender)
             return None
         verdict = self.sequence.check(f.seq)
+        last = self.sequence.last
+        if verdict == "ok" and last is not None and (f.seq - last) % SEQ_MOD > MAX_SEQ_JUMP:
+            verdict, why = "jumps", f"seq {f.seq} jumps ahead of {last}"
+        elif verdict == "ok" and self._last_t is not None and not f.t > self._last_t:
+            verdict, why = "malformed", f"field t: {f.t} does not increase (last {self._last_t})"
+        elif verdict == "ok" and self._last_t is not None and f.t - self._last_t > MAX_GAP_S:
+            verdict, why = "jumps", f"field t: {f.t} jumps {f.t - self._last_t:.3g} s ahead"
+        else:
+            why = f"seq {f.seq} after {last}"
+        restart = False
         if verdict != "ok":
-            self._drop(verdict, f"seq {f.seq} after {self.sequence.last}", sender)
-            return None
-        if self._last_t is not None and not f.t > self._last_t:
-            self._drop("malformed", f"field t: {f.t} does not increase (last {self._last_t})", sender)
-            return None
+            self._drop(verdict, why, sender)
+            if not self.resync.offer(f.seq, f.t):
+                return None
+            self.stats.resyncs += 1
+            self.errors.report("resync", f"{self.name}: from {sender}: following a new timeline at seq {f.seq}, "
+                                         f"t {f.t:g} s after {RESYNC_FRAMES} consistent frames")
+            self.sequence = SequenceFilter()
+            restart = True
+        self.resync.clear()
         self.sequence.accept(f.seq)
-        self.stats.lost = self.sequence.lost
+        self.stats.lost = self._lost_before + self.sequence.lost
+        if restart:
+            self._lost_before = self.stats.lost
         self.stats.delivered += 1
         self._last_t = f.t
-        return SourceFrame(f.t, f.channels, f.contacts, received)
+        return SourceFrame(f.t, f.channels, f.contacts, received, restart=restart)
 
     def read(self, timeout: float) -> SourceFrame | None:
         deadline = time.monotonic() + timeout

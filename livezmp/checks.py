@@ -1,0 +1,130 @@
+"""Checks at the edges: every file, option and number from outside passes through here.
+
+One place decides what an input file may be (a regular file, UTF-8 text with or without
+a byte-order mark, at most :data:`MAX_FILE_BYTES`), where an output may go (its
+directory must exist, checked before any work starts), and which numbers are accepted
+(finite, inside limits with a physical meaning). Each refusal is an :class:`InputError`
+of one line naming the file, line, option or field.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import stat
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.errors import InputError
+
+MAX_FILE_BYTES = 1 << 30  # 1 GiB: larger than any take we read (an hour of 120 Hz BVH is ~0.4 GB)
+UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+UTF8_BOM = b"\xef\xbb\xbf"
+
+
+def check_input_file(path: str | Path, what: str = "file") -> Path:
+    """``path`` as a Path if it is a readable regular file (not a directory, FIFO or device)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file") from None
+    except OSError as e:
+        raise InputError(f"{p}: cannot read {what}: {e.strerror}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(f"{p}: is a directory, not a {what}")
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{p}: not a regular file (a FIFO, socket or device); give a {what}")
+    if st.st_size > MAX_FILE_BYTES:
+        raise InputError(f"{p}: {st.st_size} bytes, more than the {MAX_FILE_BYTES >> 20} MiB limit for a {what}")
+    return p
+
+
+def decode_text(data: bytes, source: str) -> str:
+    """UTF-8 text (a leading byte-order mark, as Excel writes, is dropped); anything else
+    is a one-line error naming the line of the first bad byte."""
+    if data.startswith(UTF16_BOMS):
+        raise InputError(f"{source}:1: UTF-16 text; save it as UTF-8")
+    if data.startswith(UTF8_BOM):
+        data = data[len(UTF8_BOM):]
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise InputError(f"{source}:{line}: not UTF-8 text (byte 0x{data[e.start]:02x}); save it as UTF-8") from None
+
+
+def read_input_text(path: str | Path, what: str = "file") -> str:
+    """The text of an input file, after :func:`check_input_file` and :func:`decode_text`."""
+    p = check_input_file(path, what)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"{p}: cannot read {what}: {e.strerror}") from None
+    return decode_text(data, str(p))
+
+
+def check_output_path(path: str | Path | None, option: str) -> None:
+    """Refuse an output whose directory does not exist or which is a directory (before work starts)."""
+    if path is None:
+        return
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise InputError(f"{option} {p}: is a directory; give a file name")
+    if not parent.is_dir():
+        raise InputError(f"{option} {p}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"{option} {p}: directory {parent} is not writable")
+
+
+def check_number(value: float | None, what: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """``value`` finite and within [lo, hi] (or (lo, hi] with ``lo_open``); None passes."""
+    if value is None:
+        return
+    ok = math.isfinite(value) and (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        bracket = "(" if lo_open else "["
+        raise InputError(f"{what}: {value:g} is outside {bracket}{lo:g}, {hi:g}]")
+
+
+def first_out_of_range(values: np.ndarray, limit: float) -> tuple[int, ...] | None:
+    """Index of the first value that is not finite or whose magnitude exceeds ``limit``, else None."""
+    bad = ~(np.abs(values) <= limit)  # NaN compares False, so it is caught too
+    if not bad.any():
+        return None
+    return tuple(int(i) for i in np.argwhere(bad)[0])
+
+
+def non_finite_field(doc: object, path: str = "") -> str | None:
+    """The first field of a JSON-able document holding NaN or ±inf (e.g. ``summary.max_margin``), else None."""
+    if isinstance(doc, float):
+        return None if math.isfinite(doc) else path or "value"
+    if isinstance(doc, dict):
+        items = ((f"{path}.{k}" if path else str(k), v) for k, v in doc.items())
+    elif isinstance(doc, (list, tuple)):
+        items = ((f"{path}[{i}]", v) for i, v in enumerate(doc))
+    else:
+        return None
+    for p, v in items:
+        found = non_finite_field(v, p)
+        if found:
+            return found
+    return None
+
+
+# Frame periods the estimator can follow: its 0.4 s spline window needs at least 3 samples
+# (<= 0.1 s, 10 Hz) and at most a few thousand (>= 0.1 ms, 10 kHz; beyond any mocap or servo bus).
+FRAME_PERIOD_RANGE = (1e-4, 0.1)  # s
+# Largest magnitude of a channel value in file units (cm, mm, degrees, rad): 10 km in mm,
+# thousands of turns; beyond it products in the dynamics overflow rather than mean anything.
+MAX_CHANNEL_VALUE = 1e7
+
+
+def check_frame_period(dt: float, where: str) -> None:
+    """A frame period (s) the estimator can follow, see :data:`FRAME_PERIOD_RANGE`."""
+    lo, hi = FRAME_PERIOD_RANGE
+    if not (math.isfinite(dt) and lo <= dt <= hi):
+        raise InputError(f"{where}: frame period {dt:g} s is outside {lo:g} .. {hi:g} s "
+                         f"({1 / hi:g} .. {1 / lo:g} frames per second)")

@@ -1,0 +1,276 @@
+"""Bad files and options: one stderr line naming the file/option and exit 2, never a
+traceback, never exit 0 with NaN (issue 12, classes 3-8). Each case failed on the tree
+before the checks in livezmp/checks.py (a traceback, exit 0 with a misread, or NaN)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from livezmp.cli import main
+from livezmp.gait.sinewalk import sine_bvh, walk_spec
+from livezmp.model.bvh import write_bvh
+from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.trajectory_csv import write_joint_csv
+from livezmp.model.urdf_body import body_from_urdf
+
+
+def run(capsys, *argv) -> tuple[int, list[str], str]:
+    rc = main([str(a) for a in argv])
+    cap = capsys.readouterr()
+    return rc, cap.err.splitlines(), cap.out
+
+
+def refused(capsys, *argv, names: str, says: str) -> None:
+    """exit 2, exactly one stderr line, naming ``names`` and saying ``says`` (regex)."""
+    rc, err, _ = run(capsys, *argv)
+    assert rc == 2, err
+    assert len(err) == 1, err
+    assert names in err[0] and re.search(says, err[0]), err[0]
+
+
+@pytest.fixture(scope="module")
+def walk_text(tmp_path_factory) -> str:
+    p = tmp_path_factory.mktemp("walk") / "walk.bvh"
+    write_bvh(sine_bvh(walk_spec(), 1.0, 100.0, 2.0), p)
+    return p.read_text()
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory) -> tuple[Path, str]:
+    """The demo robot's URDF text and a 1 s joint CSV text for it."""
+    d = tmp_path_factory.mktemp("robot")
+    body = body_from_urdf(demo_robot_path())
+    write_joint_csv(demo_trajectory(body.joint_names, duration=1.0), d / "t.csv")
+    return demo_robot_path().read_text(), (d / "t.csv").read_text()
+
+
+def put(tmp_path: Path, name: str, text: str | bytes) -> Path:
+    p = tmp_path / name
+    (p.write_bytes if isinstance(text, bytes) else p.write_text)(text)
+    return p
+
+
+def with_line(text: str, prefix: str, new: str) -> str:
+    return "\n".join(new if ln.startswith(prefix) else ln for ln in text.splitlines()) + "\n"
+
+
+# -- class 5 and 6: frame time, sizes, deep hierarchies --------------------------------------------
+
+
+@pytest.mark.parametrize("ft", ["1e-300", "1e-9", "3600", "1e308", "nan", "-0.01"])
+def test_extreme_frame_time_is_one_line(tmp_path, capsys, walk_text, ft):
+    p = put(tmp_path, "w.bvh", with_line(walk_text, "Frame Time:", f"Frame Time: {ft}"))
+    refused(capsys, "analyze", p, names="w.bvh:", says="Frame Time")
+
+
+def test_deep_hierarchy_is_one_line_not_recursion_error(tmp_path, capsys):
+    depth = 1500
+    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    for k in range(1, depth):
+        lines += [f"JOINT J{k}", "{", "OFFSET 0 1 0", "CHANNELS 1 Xrotation"]
+    lines += ["}"] * depth + ["MOTION", "Frames: 1", "Frame Time: 0.01", " ".join(["0"] * (depth + 2))]
+    refused(capsys, "analyze", put(tmp_path, "deep.bvh", "\n".join(lines)), names="deep.bvh:", says="joints")
+
+
+def test_channel_count_is_refused_before_allocating(tmp_path, capsys):
+    lines = ["HIERARCHY", "ROOT R", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition "
+             "Zrotation Xrotation Yrotation"]
+    for k in range(50):  # a flat skeleton of 51 joints with 306 channels
+        lines += [f"JOINT J{k}", "{", "OFFSET 0 1 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation "
+                  "Xrotation Yrotation", "}"]
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.01", " ".join(["0"] * 306)]
+    refused(capsys, "analyze", put(tmp_path, "wide.bvh", "\n".join(lines)), names="wide.bvh:", says="channels")
+
+
+def test_estimator_window_limit_refuses_before_allocating():
+    from livezmp.errors import InputError
+    from livezmp.estimate.estimator import EstimatorConfig
+
+    with pytest.raises(InputError, match="more than"):
+        EstimatorConfig(rate_hz=1e9, cutoff_hz=6.0)
+
+
+# -- class 4: never NaN/inf with exit 0 --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("option", [["--mass", "1e308"], ["--ground", "1e308"], ["--mass", "0"],
+                                    ["--sole-width", "0"], ["--sole-width", "inf"], ["--sole-width", "-0.1"]])
+def test_out_of_range_options_are_refused(tmp_path, capsys, walk_text, option):
+    p = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "analyze", p, *option, "--summary-json", tmp_path / "s.json", names=option[0], says="outside")
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_huge_cell_is_refused_naming_the_line(tmp_path, capsys, walk_text):
+    lines = walk_text.splitlines()
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 3
+    cells = lines[first].split()
+    cells[0] = "1e300"
+    lines[first] = " ".join(cells)
+    refused(capsys, "analyze", put(tmp_path, "w.bvh", "\n".join(lines)), names=f"w.bvh:{first + 1}",
+            says="not finite or beyond")
+
+
+def test_summary_writer_refuses_nan(tmp_path):
+    from livezmp.errors import InputError
+    from livezmp.offline.report import write_json
+
+    with pytest.raises(InputError, match=r"field a\.b\[1\] is not finite"):
+        write_json({"a": {"b": [1.0, float("nan")]}}, tmp_path / "s.json")
+    write_json({"a": 1.5}, tmp_path / "ok.json")
+    assert json.loads((tmp_path / "ok.json").read_text()) == {"a": 1.5}
+
+
+def test_csv_base_far_away_is_refused(tmp_path, capsys, robot):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    lines = csv_text.splitlines()
+    lines[0] += ",base_x,base_y,base_z,base_roll,base_pitch,base_yaw"
+    lines[1:] = [ln + ",0,0,0.3,0,0,0" for ln in lines[1:]]
+    lines[5] = lines[5].rsplit(",", 6)[0] + ",1e300,0,0.3,0,0,0"
+    refused(capsys, "analyze", put(tmp_path, "t.csv", "\n".join(lines)), "--robot", u, names="t.csv:6",
+            says="base_x")
+
+
+# -- class 5 and 8: encodings, paths -------------------------------------------------------------------
+
+
+def test_utf8_bom_is_accepted(tmp_path, capsys, walk_text, robot):
+    p = put(tmp_path, "w.bvh", b"\xef\xbb\xbf" + walk_text.encode())
+    assert run(capsys, "analyze", p)[0] == 0
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    assert run(capsys, "analyze", put(tmp_path, "t.csv", b"\xef\xbb\xbf" + csv_text.encode()), "--robot", u)[0] == 0
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "latin-1"])
+def test_other_encodings_are_one_line(tmp_path, capsys, robot, encoding):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    text = csv_text.replace("time", "tíme", 1) if encoding == "latin-1" else csv_text
+    refused(capsys, "analyze", put(tmp_path, "t.csv", text.encode(encoding)), "--robot", u, names="t.csv:1",
+            says="UTF")
+
+
+def test_directory_fifo_device_as_motion(tmp_path, capsys):
+    refused(capsys, "analyze", tmp_path, names=str(tmp_path), says="is a directory")
+    fifo = tmp_path / "f.bvh"
+    os.mkfifo(fifo)
+    refused(capsys, "analyze", fifo, names="f.bvh", says="not a regular file")
+    refused(capsys, "analyze", "/dev/null", names="/dev/null", says="not a regular file")
+
+
+@pytest.mark.parametrize("option", ["--out", "--plot", "--summary-json"])
+def test_output_in_missing_directory_is_checked_first(tmp_path, capsys, walk_text, option):
+    p = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "analyze", p, option, tmp_path / "missing" / "x", names=option, says="does not exist")
+
+
+def test_correct_output_in_missing_directory(tmp_path, capsys, walk_text):
+    p = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "correct", p, "-o", tmp_path / "no" / "c.bvh", names="-o", says="does not exist")
+
+
+# -- class 7: silent misreads ---------------------------------------------------------------------------
+
+
+def test_frames_count_disagreeing_with_rows(tmp_path, capsys, walk_text):
+    p = put(tmp_path, "w.bvh", with_line(walk_text, "Frames:", "Frames: 30"))
+    refused(capsys, "analyze", p, names="w.bvh:", says="Frames: 30, file has 60 rows")
+
+
+def test_csv_duplicated_column(tmp_path, capsys, robot):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    lines = csv_text.splitlines()
+    first = lines[0].split(",")[1]
+    lines[0] += f",{first}"
+    lines[1:] = [ln + ",0" for ln in lines[1:]]
+    refused(capsys, "analyze", put(tmp_path, "t.csv", "\n".join(lines)), "--robot", u, names="t.csv:1",
+            says=f"'{first}' appears more than once")
+
+
+def test_csv_row_with_extra_field(tmp_path, capsys, robot):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    lines = csv_text.splitlines()
+    lines[3] = lines[3].replace(".", ",", 1)  # a decimal comma
+    refused(capsys, "analyze", put(tmp_path, "t.csv", "\n".join(lines)), "--robot", u, names="t.csv:4",
+            says="fields, header has")
+
+
+def test_robot_with_bvh_is_refused(tmp_path, capsys, walk_text):
+    p = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "analyze", p, "--robot", demo_robot_path(), names="w.bvh", says="--robot")
+
+
+# -- class 3: URDF physics, robot config types, robot names --------------------------------------------
+
+
+def _first_inertial(urdf: str, mass: str | None = None, inertia: str | None = None, com: str | None = None) -> str:
+    if mass is not None:
+        urdf = re.sub(r'<mass value="[^"]*"', f'<mass value="{mass}"', urdf, count=1)
+    if inertia is not None:
+        urdf = re.sub(r"<inertia [^/]*/>", inertia, urdf, count=1)
+    if com is not None:
+        urdf = re.sub(r'(<inertial>\s*<origin[^/]*xyz=)"[^"]*"', rf'\1"{com}"', urdf, count=1)
+    return urdf
+
+
+@pytest.mark.parametrize("change, says", [
+    ({"mass": "nan"}, "mass"), ({"mass": "inf"}, "mass"), ({"mass": "heavy"}, "mass"), ({"mass": "-1"}, "mass"),
+    ({"mass": "0"}, "mass"),
+    ({"inertia": '<inertia ixx="nan" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'}, "ixx"),
+    ({"inertia": '<inertia ixx="-1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'}, "positive definite"),
+    ({"inertia": '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"/>'}, "triangle"),
+    ({"com": "nan 0 0"}, "xyz"),
+])
+def test_urdf_bad_physics_is_refused(tmp_path, capsys, robot, change, says):
+    urdf, csv_text = robot
+    bad = _first_inertial(urdf, **change)
+    assert bad != urdf
+    u = put(tmp_path, "r.urdf", bad)
+    refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u, names="r.urdf: link", says=says)
+
+
+@pytest.mark.parametrize("toml, says", [
+    ('[feet.left]\nlink = 3\n', "link"),
+    ('[feet.left]\nlink = "l_foot"\nbox = { length = -0.1, width = 0.05 }\n', "box.length"),
+    ('[feet.left]\nlink = "l_foot"\nbox = { length = 0.1, width = "wide" }\n', "box.width"),
+    ('[feet.left]\nlink = "l_foot"\nsole = [[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]]\n', "no area"),
+    ('[feet.left]\nlink = "l_foot"\nsole = [[0, 0], [1, 0], [1, 1]]\n', "sole"),
+    ("feet = 3\n", "table"),
+    ("[servos.l_knee]\nid = \"x\"\n", "id"),
+    ("[servos.l_knee]\nid = 1\ndirection = 2\n", "direction"),
+    ('[correction.legs]\nleft = "l_knee"\n', "list"),
+])
+def test_robot_config_types_one_line_per_field(tmp_path, capsys, robot, toml, says):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    cfg = put(tmp_path, "cfg.toml", toml)
+    refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u, "--robot-config", cfg,
+            names="cfg.toml", says=says)
+
+
+def test_robot_name_with_path_separator(tmp_path, capsys, robot):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", re.sub(r'<robot name="[^"]*"', '<robot name="../../../etc/x"', urdf, count=1))
+    refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u, names="r.urdf", says="robot name")
+
+
+def test_good_robot_still_loads(tmp_path, capsys, robot):
+    urdf, csv_text = robot
+    u = put(tmp_path, "r.urdf", urdf)
+    rc, err, _ = run(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u,
+                     "--summary-json", tmp_path / "s.json")
+    assert rc == 0, err
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert np.isfinite(s["max_excursion_m"])
+    # the estimator's settings are in the summary, at the take's rate (the demo CSV is at 100 Hz)
+    assert s["estimator"]["rate_hz"] == pytest.approx(100.0) and s["estimator"]["cutoff_hz"] > 0
