@@ -142,6 +142,24 @@ def test_loop_drives_the_robot_through_python_can(mini, mini_config, transport, 
     assert s["fell"] is False
 
 
+def stand_on_a_faulty_chain(mini, mini_config, faults: str, fast: bool, seconds: float):
+    """The loop standing livezmp_mini at 100 Hz for ``seconds`` on a Dynamixel chain with ``faults``, in
+    its own process; (spy, summary, replies the chain dropped or corrupted during the loop)."""
+    scenario = make_scenario("stand", mini)
+    with SimProcess("dynamixel", ("stand", {}), faults) as sim:
+        # a 60 ms reply timeout (the default is 34 ms), as a loaded machine may hold the simulator
+        # up that long
+        link = open_link(f"{sim.url}&fast={int(fast)}&timeout=0.06", mini.joint_names, mini_config)
+        spy = Spy(link)
+        try:
+            before = sim.verdict()["injected_faults"]
+            s = LiveLoop(spy, mini, LoopConfig(rate_hz=100.0), command=scenario.goals, fell=sim.fell).run(seconds)
+            after = sim.verdict()["injected_faults"]  # before close(), whose hold reads once more
+        finally:
+            link.close()
+    return spy, s, sum(after[k] - before[k] for k in ("dropped", "corrupted"))
+
+
 @pytest.mark.parametrize("fast", [False, True], ids=["sync_read", "fast_sync_read"])
 def test_dropped_and_corrupted_replies_are_counted_and_never_drive_a_command(mini, mini_config, fast):
     """1 % of the servos' replies dropped and 1 % corrupted: the link's error count equals
@@ -149,19 +167,7 @@ def test_dropped_and_corrupted_replies_are_counted_and_never_drive_a_command(min
     them with a fast sync read's single reply), and no write follows a failed read. The
     chain runs in its own process: sharing this one, a busy machine could stall it past
     the reply timeout and add timeouts nobody injected."""
-    scenario = make_scenario("stand", mini)
-    with SimProcess("dynamixel", ("stand", {}), "drop=0.01,corrupt=0.01,seed=7") as sim:
-        # a 60 ms reply timeout (the default is 34 ms), as a loaded machine may hold the simulator
-        # up that long
-        link = open_link(f"{sim.url}&fast={int(fast)}&timeout=0.06", mini.joint_names, mini_config)
-        spy = Spy(link)
-        try:
-            before = sim.verdict()["injected_faults"]
-            s = LiveLoop(spy, mini, LoopConfig(rate_hz=100.0), command=scenario.goals, fell=sim.fell).run(3.0)
-            after = sim.verdict()["injected_faults"]  # before close(), whose hold reads once more
-        finally:
-            link.close()
-    faults = sum(after[k] - before[k] for k in ("dropped", "corrupted"))
+    spy, s, faults = stand_on_a_faulty_chain(mini, mini_config, "drop=0.01,corrupt=0.01,seed=7", fast, 3.0)
     failed = len(spy.of("read_failed"))
     print(f"injected {faults}; link read errors {s['read_errors']}, failed reads {failed} of "
           f"{failed + len(spy.of('read'))}; {s['cycles']} cycles at {s['achieved_hz']:.1f} Hz of 100")
@@ -214,17 +220,7 @@ def test_a_servo_overload_is_reported_and_latches_a_safe_stop(mini, mini_config)
 def test_on_a_bad_bus_the_loop_runs_and_counts_what_it_lost(mini, mini_config):
     """5 % of the replies dropped and 5 % corrupted (a bad cable): `open` retries the servos it has
     not heard, and the loop runs, commanding only after good reads, every lost reply counted."""
-    scenario = make_scenario("stand", mini)
-    with SimProcess("dynamixel", ("stand", {}), "drop=0.05,corrupt=0.05,seed=3") as sim:
-        link = open_link(f"{sim.url}&fast=1&timeout=0.06", mini.joint_names, mini_config)
-        spy = Spy(link)
-        try:
-            before = sim.verdict()["injected_faults"]
-            s = LiveLoop(spy, mini, LoopConfig(rate_hz=100.0), command=scenario.goals, fell=sim.fell).run(2.0)
-            after = sim.verdict()["injected_faults"]
-        finally:
-            link.close()
-    faults = sum(after[k] - before[k] for k in ("dropped", "corrupted"))
+    spy, s, faults = stand_on_a_faulty_chain(mini, mini_config, "drop=0.05,corrupt=0.05,seed=3", True, 2.0)
     print(f"injected {faults}; failed reads {s['failed_reads']} of {s['cycles']}; {s['achieved_hz']:.1f} Hz")
     assert s["stopped_by"] == "duration" and s["fell"] is False
     assert s["read_errors"] == faults > 0
