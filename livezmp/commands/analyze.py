@@ -9,69 +9,45 @@ its markers make the body, and its force plates, when present, are compared with
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict, replace
 from pathlib import Path
 
-import numpy as np
 from rich.progress import Progress
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import check_body_options, load_from_args
-from livezmp.model.c3d import read_c3d
-from livezmp.model.markers import MarkerBodyOptions
-from livezmp.offline.calibrate import load_subject
-from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
+from livezmp.commands.common import check_body_options, load_from_args, take_options
 from livezmp.offline.plot import plot_analysis
-from livezmp.offline.report import summarize, write_json, write_zmp_csv
-from livezmp.offline.take import analyse_loaded, take_config
+from livezmp.offline.report import write_json, write_zmp_csv
+from livezmp.offline.take import TakeAnalysis, analyse_c3d, analyse_motion
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
 
-def _analyse_file(args: argparse.Namespace):
-    """(body, result, fps, source, extra summary, extra CSV columns, plate CoP and complete frames or None)
-    of the command line's motion."""
+def _analyse(args: argparse.Namespace) -> TakeAnalysis:
+    """The analysis of the command line's motion (or of the built-in demo)."""
+    options = take_options(args)
     if args.motion is not None and Path(args.motion).suffix.lower() == ".c3d":
-        markers = load_subject(args.subject).marker_options() if args.subject else MarkerBodyOptions()
-        lab = analyse_lab_take(read_c3d(args.motion), LabOptions(mass=args.mass, mode=args.mode, markers=markers))
-        plates = None if lab.plates is None else (lab.plates.cop, lab.complete)
-        return lab.take.body, lab.result, lab.rate, args.motion, lab.summary, _lab_columns(lab), plates
+        return analyse_c3d(args.motion, options)
     loaded = load_from_args(args)
     if len(loaded.frames) < PROGRESS_FRAMES:
-        results = analyse_loaded(loaded, args.mode, args.ground)
-    else:  # a long take: show how far the analysis is
-        with Progress(transient=True) as bar:
-            task = bar.add_task("analysing", total=len(loaded.frames))
-            results = analyse_loaded(loaded, args.mode, args.ground,
-                                     progress=lambda done: bar.update(task, completed=done))
-    # the estimator's settings, so a user sees what smoothed the take (README: choosing them)
-    estimator = replace(take_config(loaded, args.mode, args.ground).estimator, rate_hz=loaded.fps)
-    return loaded.body, results, loaded.fps, loaded.source, {"estimator": asdict(estimator)}, None, None
-
-
-def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
-    """zmp.csv's plate columns: CoP (input frame, m; empty where unloaded), plate vertical force (N), complete."""
-    if lab.plates is None:
-        return None
-    cop = lab.take.body.to_input_frame(lab.plates.cop)
-    return {"cop_x": cop[:, 0], "cop_y": cop[:, 1], "cop_z": cop[:, 2], "plate_fz": lab.plates.force[:, 2],
-            "complete": lab.complete.astype(float)}
+        return analyse_motion(loaded, options)
+    with Progress(transient=True) as bar:  # a long take: show how far the analysis is
+        task = bar.add_task("analysing", total=len(loaded.frames))
+        return analyse_motion(loaded, options, progress=lambda done: bar.update(task, completed=done))
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot")):
         check_output_path(path, option)
     check_body_options(args)
-    body, results, fps, source, lab_summary, columns, plates = _analyse_file(args)
-    summary = {"source": source, **summarize(body, results, fps, args.mode, args.tolerance_mm), **lab_summary}
+    a = _analyse(args)
+    summary, source = a.summary, a.source
     if args.out:
-        write_zmp_csv(body, results, args.out, columns)
+        write_zmp_csv(a.body, a.result, args.out, a.columns)
     if args.summary_json:
         write_json(summary, args.summary_json)
     if args.plot:
-        cop, complete = plates or (None, None)
-        plot_analysis(body, results, args.plot, title=f"{Path(source).name} ({args.mode} ZMP)", cop=cop,
-                      complete=complete)
+        plot_analysis(a.body, a.result, args.plot, title=f"{Path(source).name} ({args.mode} ZMP)", cop=a.cop,
+                      complete=a.complete)
     inside = summary["inside_fraction"]
     print(f"{source}: {summary['frames']} frames at {summary['fps']:.1f} Hz, "
           f"{summary['support_frames']} with support, {summary['flight_frames']} flight, "
@@ -86,8 +62,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
               f"lag {cv['lag_ms']:+.1f} ms")
-    if "markers" in lab_summary:
-        print(f"  {lab_summary['markers']['hat']}")
-        if "note" in lab_summary["mass"]:
-            print(f"  mass: {lab_summary['mass']['note']}")
+    if "markers" in summary:
+        print(f"  {summary['markers']['hat']}")
+        if "note" in summary["mass"]:
+            print(f"  mass: {summary['mass']['note']}")
     return 0

@@ -43,7 +43,8 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
     """The body options of the command line."""
     return TakeOptions(robot=args.robot, robot_config=args.robot_config, mass=args.mass, units=args.units,
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
-                       mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM))
+                       mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
+                       subject=getattr(args, "subject", None))
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:

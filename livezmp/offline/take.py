@@ -1,5 +1,7 @@
 """One take's analysis, as a plain function: what ``livezmp analyze`` does for one file and
 ``livezmp batch analyze`` does for each take of a library (in a Dask worker or in a loop).
+A C3D gait trial goes through :mod:`livezmp.offline.gaitlab` (its markers make the body, its
+force plates, when present, are compared with the ZMP); other files through :func:`load_motion`.
 
 Outputs are written atomically (a temporary file beside the target, then :func:`os.replace`),
 so a run killed at any point leaves either the old file or the complete new one.
@@ -10,18 +12,23 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.errors import InputError
+from livezmp.model.body import BodyModel
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
+from livezmp.model.c3d import read_c3d
+from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import LoadedMotion, load_motion
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import BatchResult, run_batch
+from livezmp.offline.calibrate import load_subject
+from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.offline.report import atomic_path, summarize, write_json, write_zmp_csv
 from livezmp.offline.validated import VALIDATED_P95_MM
 
@@ -45,6 +52,7 @@ class TakeOptions:
     ground: float | None = None
     mode: str = "full"
     tolerance_mm: float = VALIDATED_P95_MM
+    subject: str | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
         mapping = load_mapping(self.mapping) if self.mapping else None
@@ -78,17 +86,71 @@ def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | Non
     return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
 
 
+@dataclass
+class TakeAnalysis:
+    """A take's analysis: its ``body``, per-frame ``result``, frame rate ``fps`` (Hz), ``source``;
+    ``summary`` the summary figures (see README); ``columns`` extra zmp.csv columns (the plates':
+    CoP in the input frame m, plate Fz N, complete) or None; ``cop`` (F, 3) plate CoP (internal
+    frame, m) and ``complete`` (F,) bool, or None without plates."""
+
+    body: BodyModel
+    result: BatchResult
+    fps: float
+    source: str
+    summary: dict
+    columns: dict[str, np.ndarray] | None = None
+    cop: np.ndarray | None = None
+    complete: np.ndarray | None = None
+
+
+def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
+                   progress: Callable[[int], None] | None = None) -> TakeAnalysis:
+    """The analysis of a loaded take; the summary keeps the estimator's settings, so a user sees what
+    smoothed the take (README: choosing them)."""
+    result = analyse_loaded(loaded, options.mode, options.ground, progress)
+    estimator = replace(take_config(loaded, options.mode, options.ground).estimator, rate_hz=loaded.fps)
+    summary = {"source": loaded.source,
+               **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
+               "estimator": asdict(estimator)}
+    return TakeAnalysis(loaded.body, result, loaded.fps, loaded.source, summary)
+
+
+def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
+    """zmp.csv's plate columns: CoP (input frame, m; empty where unloaded), plate vertical force (N), complete."""
+    if lab.plates is None:
+        return None
+    cop = lab.take.body.to_input_frame(lab.plates.cop)
+    return {"cop_x": cop[:, 0], "cop_y": cop[:, 1], "cop_z": cop[:, 2], "plate_fz": lab.plates.force[:, 2],
+            "complete": lab.complete.astype(float)}
+
+
+def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
+    """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
+    ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
+    markers = load_subject(options.subject).marker_options() if options.subject else MarkerBodyOptions()
+    lab = analyse_lab_take(read_c3d(path), LabOptions(mass=options.mass, mode=options.mode, markers=markers))
+    summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
+                                                options.tolerance_mm), **lab.summary}
+    plates = lab.plates is not None
+    return TakeAnalysis(lab.take.body, lab.result, lab.rate, str(path), summary, _lab_columns(lab),
+                        lab.plates.cop if plates else None, lab.complete if plates else None)
+
+
+def analyse_path(path: str | Path, options: TakeOptions) -> TakeAnalysis:
+    """The analysis of the motion file at ``path`` (C3D, BVH, or joint CSV with ``options.robot``)."""
+    if Path(path).suffix.lower() == ".c3d":
+        return analyse_c3d(path, options)
+    return analyse_motion(options.load(path), options)
+
+
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) -> dict:
     """Analyse the take at ``path``; write ``zmp.csv`` then ``summary.json`` (the summary with the
     options' fingerprint) into ``out_dir``, each atomically; return the summary."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    loaded = options.load(path)
-    results = analyse_loaded(loaded, options.mode, options.ground)
-    summary = {"source": loaded.source,
-               **summarize(loaded.body, results, loaded.fps, options.mode, options.tolerance_mm)}
+    a = analyse_path(path, options)
     with atomic_path(out_dir / ZMP_CSV) as tmp:
-        write_zmp_csv(loaded.body, results, tmp)
-    summary["options"] = options.fingerprint()
+        write_zmp_csv(a.body, a.result, tmp, a.columns)
+    summary = {**a.summary, "options": options.fingerprint()}
     write_json(summary, out_dir / SUMMARY_JSON)
     return summary
