@@ -28,8 +28,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from livezmp.model.bvh import read_bvh, write_bvh  # noqa: E402
+from livezmp.offline.jobs import AnalyzeJob  # noqa: E402
 from livezmp.offline.library import dask_client, find_takes, run_library  # noqa: E402
-from livezmp.offline.take import TakeOptions  # noqa: E402
 
 BANDAI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "bvh" / "bandai"
 
@@ -59,10 +59,10 @@ def make_library(root: Path, count: int, seed: int = 0) -> int:
 
 
 def timed_run(client, library: Path, out: Path) -> tuple[float, int, int]:
-    options = TakeOptions()
-    takes = find_takes([str(library)], out, options)
+    job = AnalyzeJob()
+    takes = find_takes([str(library)], out, job)
     t0 = time.perf_counter()
-    progress = run_library(client, takes, out, options)
+    progress = run_library(client, takes, out, job)
     return time.perf_counter() - t0, progress.done, progress.frames
 
 

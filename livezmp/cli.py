@@ -100,18 +100,23 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mass", type=float, help="body mass, kg (default: the plates', else the file's)")
     p.set_defaults(handler="livezmp.commands.calibrate:cmd_calibrate")
 
-    d = CorrectionLimits()
     p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
     p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot)")
     p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
     p.add_argument("--report", help="report JSON")
     add_body_options(p)
+    add_correction_limits(p)
+    p.set_defaults(handler="livezmp.commands.correct:cmd_correct")
+
+
+def add_correction_limits(p: argparse.ArgumentParser) -> None:
+    """The limits of the balance correction (``correct``, ``batch correct``)."""
+    d = CorrectionLimits()
     p.add_argument("--max-rotation-deg", type=float, nargs=3, metavar=("ROLL", "PITCH", "YAW"),
                    default=list(d.max_rotation_deg), help="largest root rotation per axis, degrees")
     p.add_argument("--max-rate-deg-s", type=float, default=d.max_rate_deg_s, help="largest root rotation rate, deg/s")
     p.add_argument("--margin-mm", type=float, default=1000 * d.margin_m,
                    help="how far inside the support polygon to aim, mm")
-    p.set_defaults(handler="livezmp.commands.correct:cmd_correct")
 
 
 # -- monitor, replay, recover ---------------------------------------------------------------------
@@ -247,6 +252,21 @@ def _gait_input_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
 
 
+def add_population_options(p: argparse.ArgumentParser) -> None:
+    """How takes are labelled and compared across people (``gait analyze``, ``batch gait``)."""
+    p.add_argument("--manifest", help="CSV with columns path,subject,condition instead of inputs")
+    p.add_argument("--pattern", default=DEFAULT_PATTERN,
+                   help="regex on file names with groups (?P<condition>) and optionally (?P<subject>)")
+    p.add_argument("--base", required=True, help="base condition, e.g. normal")
+    p.add_argument("--variant", type=_variant, action="append", required=True, metavar="LABEL=CONDITION",
+                   help="a variant, e.g. fast=active (repeatable)")
+    p.add_argument("--threshold", type=float, default=250.0, help="feature parts: |CV| ≤ this, %% (default 250)")
+    p.add_argument("--min-base", type=float, default=1.0,
+                   help="DC or amplitude below this (deg) in the base: no ratio (default 1)")
+    p.add_argument("--min-change", type=float, default=1.0,
+                   help="feature parts also need |μ| ≥ this, %% (default 1; 0 = the paper's rule)")
+
+
 def _variant(text: str) -> tuple[str, str]:
     label, sep, cond = text.partition("=")
     if not sep or not label or not cond:
@@ -261,18 +281,8 @@ def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("analyze", help="features common across people: K, μ, σ, CV, feature parts")
     p.add_argument("inputs", nargs="*", help="walk files or directories (labelled by --pattern)")
-    p.add_argument("--manifest", help="CSV with columns path,subject,condition instead of inputs")
-    p.add_argument("--pattern", default=DEFAULT_PATTERN,
-                   help="regex on file names with groups (?P<condition>) and optionally (?P<subject>)")
-    p.add_argument("--base", required=True, help="base condition, e.g. normal")
-    p.add_argument("--variant", type=_variant, action="append", required=True, metavar="LABEL=CONDITION",
-                   help="a variant, e.g. fast=active (repeatable)")
     p.add_argument("--out", required=True, help="output directory for tables, plot and features.json")
-    p.add_argument("--threshold", type=float, default=250.0, help="feature parts: |CV| ≤ this, %% (default 250)")
-    p.add_argument("--min-base", type=float, default=1.0,
-                   help="DC or amplitude below this (deg) in the base: no ratio (default 1)")
-    p.add_argument("--min-change", type=float, default=1.0,
-                   help="feature parts also need |μ| ≥ this, %% (default 1; 0 = the paper's rule)")
+    add_population_options(p)
     _gait_input_options(p)
     p.set_defaults(handler="livezmp.commands.gait:cmd_analyze")
 
@@ -293,27 +303,44 @@ def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(handler="livezmp.commands.gait:cmd_compare")
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
-
 # -- batch ----------------------------------------------------------------------------------------
 
 
-def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
-    batch = subparsers.add_parser("batch", help="whole motion libraries on a Dask cluster",
-                                  description="Analyse every take of a library, one Dask task per take.")
-    sub = batch.add_subparsers(dest="batch_command", required=True)
-    p = sub.add_parser("analyze", help="ZMP analysis of every take: a table (Parquet, CSV) and per-take outputs")
-    p.add_argument("sources", nargs="+", metavar="DIR_OR_GLOB", help="directories (searched recursively), "
-                   "files or glob patterns of takes (.bvh; .csv with --robot)")
+def _batch_common(p: argparse.ArgumentParser, kinds: str) -> None:
+    p.add_argument("sources", nargs="*", metavar="DIR_OR_GLOB", help="directories (searched recursively), "
+                   f"files or glob patterns of takes ({kinds})")
     p.add_argument("--out", required=True, help="output directory: takes.parquet, takes.csv, takes/...")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=2, help="local cluster: worker processes (default 2)")
     where.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use this running Dask scheduler")
     p.add_argument("--dashboard-address", default="127.0.0.1:0",
                    help="local cluster's dashboard address (default: loopback, a free port)")
+
+
+def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
+    batch = subparsers.add_parser("batch", help="whole motion libraries on a Dask cluster",
+                                  description="Process every take of a library, one Dask task per take.")
+    sub = batch.add_subparsers(dest="batch_command", required=True)
+    p = sub.add_parser("analyze", help="ZMP analysis of every take: a table (Parquet, CSV) and per-take outputs")
+    _batch_common(p, ".bvh, .c3d; .csv with --robot")
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
+    p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D takes: HAT mass and centre of mass)")
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.batch:cmd_analyze")
+
+    p = sub.add_parser("correct", help="balance correction of every take: corrected files and a table")
+    _batch_common(p, ".bvh; .csv with --robot")
+    add_body_options(p)
+    add_correction_limits(p)
+    p.set_defaults(handler="livezmp.commands.batch:cmd_correct")
+
+    p = sub.add_parser("gait", help="gait features of every take (on the cluster), then the population (paper 003)")
+    _batch_common(p, ".bvh; .csv with --urdf")
+    add_population_options(p)
+    _gait_input_options(p)
+    p.set_defaults(handler="livezmp.commands.batch:cmd_gait")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -19,6 +19,7 @@ import pytest
 
 from livezmp.cli import main
 from livezmp.model.bvh import read_bvh, write_bvh
+from livezmp.offline.jobs import AnalyzeJob
 from livezmp.offline.library import find_takes, run_library
 from livezmp.offline.take import TakeOptions
 from tests.data_paths import BANDAI
@@ -77,7 +78,7 @@ def reference(library, tmp_path_factory) -> list[dict]:
     """The library analysed in this process, take after take, without Dask."""
     root, frames = library
     out = tmp_path_factory.mktemp("reference")
-    progress = run_library(None, find_takes([str(root)], out, TakeOptions()), out, TakeOptions())
+    progress = run_library(None, find_takes([str(root)], out, AnalyzeJob()), out, AnalyzeJob())
     assert (progress.done, progress.failed, progress.skipped) == (len(frames) + 2, 2, 0)
     rows = read_table(out)
     check_table(rows, frames, out)
@@ -111,13 +112,13 @@ def test_local_cluster_of_two_worker_processes(library, reference, tmp_path, cap
 def test_outputs_out_of_date_when_input_or_options_change(tmp_path):
     make_library(tmp_path / "lib")
     out = tmp_path / "out"
-    takes = find_takes([str(tmp_path / "lib")], out, TakeOptions())
-    run_library(None, takes, out, TakeOptions())
-    assert run_library(None, takes, out, TakeOptions()).skipped == len(takes)
-    assert run_library(None, takes, out, TakeOptions(mass=80.0)).skipped == 0  # other options
+    takes = find_takes([str(tmp_path / "lib")], out, AnalyzeJob())
+    run_library(None, takes, out, AnalyzeJob())
+    assert run_library(None, takes, out, AnalyzeJob()).skipped == len(takes)
+    assert run_library(None, takes, out, AnalyzeJob(TakeOptions(mass=80.0))).skipped == 0  # other options
     newer = (takes[0].out_dir / "summary.json").stat().st_mtime_ns + 10**9
     os.utime(takes[0].path, ns=(newer, newer))  # the input changed after its outputs
-    assert run_library(None, takes, out, TakeOptions(mass=80.0)).skipped == len(takes) - 1
+    assert run_library(None, takes, out, AnalyzeJob(TakeOptions(mass=80.0))).skipped == len(takes) - 1
 
 
 def test_real_scheduler_and_worker_processes(library, reference, tmp_path, capsys):
@@ -150,7 +151,7 @@ def test_killed_run_resumes_to_the_uninterrupted_table(tmp_path):
     frames = make_library(root, copies=2)
     total = len(frames) + 2
     ref_out, out = tmp_path / "ref", tmp_path / "out"
-    run_library(None, find_takes([str(root)], ref_out, TakeOptions()), ref_out, TakeOptions())
+    run_library(None, find_takes([str(root)], ref_out, AnalyzeJob()), ref_out, AnalyzeJob())
     cmd = [Path(sys.executable).with_name("livezmp"), "batch", "analyze", str(root), "--out", str(out),
            "--workers", "1"]
     run = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)

@@ -32,8 +32,8 @@ def test_every_subcommand_names_a_handler_that_exists():
             module, _, function = p.get_default("handler").partition(":")
             assert callable(getattr(importlib.import_module(module), function)), (name, module, function)
             seen += 1
-    assert seen == 13  # analyze calibrate correct monitor replay recover run sim demo, gait analyze/synth/compare,
-    # batch analyze
+    assert seen == 15  # analyze calibrate correct monitor replay recover run sim demo, gait analyze/synth/compare,
+    # batch analyze/correct/gait
 
 
 def test_help_and_every_subcommand_help_import_nothing_heavy():

@@ -7,9 +7,12 @@ import argparse
 import contextlib
 import signal
 from collections.abc import Callable
+from dataclasses import replace
 
 from livezmp.balance.pipeline import PipelineConfig
 from livezmp.checks import check_number
+from livezmp.correct.limits import CorrectionLimits
+from livezmp.errors import InputError
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -45,6 +48,14 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
                        subject=getattr(args, "subject", None))
+
+
+def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
+    """The correction limits of the command line (degrees, deg/s, mm → m)."""
+    if min(args.max_rotation_deg) <= 0 or args.max_rate_deg_s <= 0 or args.margin_mm < 0:
+        raise InputError("--max-rotation-deg and --max-rate-deg-s must be positive, --margin-mm not negative")
+    return replace(CorrectionLimits(), max_rotation_deg=tuple(args.max_rotation_deg),
+                   max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:

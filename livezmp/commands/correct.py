@@ -3,23 +3,13 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import load_from_args, pipeline_config
-from livezmp.correct.limits import CorrectionLimits
+from livezmp.commands.common import limits_from_args, load_from_args, pipeline_config
 from livezmp.correct.solver import correct_motion
 from livezmp.errors import InputError
-from livezmp.model.bvh import write_bvh
-from livezmp.model.trajectory_csv import JointTrajectory, write_joint_csv
+from livezmp.model.motion_file import write_motion
 from livezmp.offline.report import write_json
-
-
-def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
-    if min(args.max_rotation_deg) <= 0 or args.max_rate_deg_s <= 0 or args.margin_mm < 0:
-        raise InputError("--max-rotation-deg and --max-rate-deg-s must be positive, --margin-mm not negative")
-    return replace(CorrectionLimits(), max_rotation_deg=tuple(args.max_rotation_deg),
-                   max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
 
 
 def cmd_correct(args: argparse.Namespace) -> int:
@@ -35,16 +25,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
                             nominal_dt=1.0 / loaded.fps,
                             progress=lambda message: print(f"correct: {message}", flush=True))
-    if loaded.bvh is not None:
-        write_bvh(replace(loaded.bvh, frames=result.frames), args.output)
-    else:
-        traj = loaded.trajectory
-        q = loaded.body.channels_to_q(result.frames)
-        nb = len(loaded.body.base_channels)
-        base = None
-        if traj.base is not None:  # back to the CSV's (x, y, z, roll, pitch, yaw)
-            base = q[:, [0, 1, 2, 5, 4, 3]]
-        write_joint_csv(JointTrajectory(traj.t, q[:, nb:], traj.joint_names, base), args.output)
+    write_motion(loaded, result.frames, args.output)
     report = {"source": loaded.source, "output": args.output, "mode": cfg.mode, **result.report()}
     if args.report:
         write_json(report, args.report)

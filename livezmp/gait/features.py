@@ -12,7 +12,7 @@ speed / frequency (distance per gait cycle).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -41,6 +41,21 @@ class WalkFeatures:
     @property
     def frequency(self) -> float:
         return self.cycles.frequency
+
+    def to_json(self) -> dict:
+        """Plain JSON data (angles rad, times s), read back by :meth:`from_json`: how a library run
+        keeps one take's features on disk between the worker that computed them and the population."""
+        return {"source": self.source, "tags": [asdict(t) for t in self.tags],
+                "events_s": self.cycles.events.tolist(), "frequency_hz": self.cycles.frequency,
+                "dc_rad": self.dc.tolist(), "amplitude_rad": self.amplitude.tolist(),
+                "stride_length_m": self.stride_length, "speed_mps": self.speed}
+
+    @classmethod
+    def from_json(cls, d: dict) -> WalkFeatures:
+        return cls(d["source"], [ChannelTag(**t) for t in d["tags"]],
+                   Cycles(np.asarray(d["events_s"], dtype=float), float(d["frequency_hz"])),
+                   np.asarray(d["dc_rad"], dtype=float), np.asarray(d["amplitude_rad"], dtype=float),
+                   float(d["stride_length_m"]), float(d["speed_mps"]))
 
 
 def walk_features(take: GaitTake, harmonics: int = HARMONICS) -> WalkFeatures:

@@ -3,7 +3,7 @@ robot joint-trajectory CSV with its URDF."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -12,11 +12,11 @@ from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 from livezmp.model.base_placement import place_base
 from livezmp.model.body import BodyModel
-from livezmp.model.bvh import BvhMotion, read_bvh
+from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
-from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv
+from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv, write_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
@@ -75,3 +75,18 @@ def trajectory_frames(body: BodyModel, traj: JointTrajectory) -> np.ndarray:
         x, y, z, roll, pitch, yaw = traj.base.T
         base = np.column_stack([x, y, z, yaw, pitch, roll])
     return np.hstack([base, traj.q])
+
+
+def write_motion(loaded: LoadedMotion, frames: np.ndarray, path: str | Path) -> None:
+    """Write ``frames`` (F, nq, the body's raw channels) in the format ``loaded`` came from: a BVH with
+    its skeleton, or a joint-trajectory CSV with its joint names (base as x, y, z, roll, pitch, yaw)."""
+    if loaded.bvh is not None:
+        write_bvh(replace(loaded.bvh, frames=frames), path)
+        return
+    traj = loaded.trajectory
+    if traj is None:
+        raise InputError(f"{loaded.source}: writing this motion back is supported for BVH and joint CSV only")
+    q = loaded.body.channels_to_q(frames)
+    nb = len(loaded.body.base_channels)
+    base = q[:, [0, 1, 2, 5, 4, 3]] if traj.base is not None else None  # back to the CSV's (x, y, z, r, p, y)
+    write_joint_csv(JointTrajectory(traj.t, q[:, nb:], traj.joint_names, base), path)

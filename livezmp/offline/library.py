@@ -1,13 +1,13 @@
-"""A motion library analysed take by take on Dask (``livezmp batch analyze``).
+"""A motion library processed take by take on Dask (``livezmp batch analyze | correct | gait``).
 
-Each take is one task (:func:`run_take`, the same function a plain loop would call): it
-analyses the take with :func:`livezmp.offline.take.analyse_take` into its own directory
-under ``OUT/takes/`` and returns one small row. A bad take becomes a row with its error.
-The client keeps only a bounded window of tasks in flight and streams the rows, as they
-complete, to the table (Parquet and CSV, written under temporary names and renamed at the
-end). A take whose ``summary.json`` is newer than its input and was made with the same
-options is up to date: a rerun reads its row from there instead of analysing it again,
-so a killed run resumes where it stopped.
+Each take is one task (:func:`run_take`, the same function a plain loop would call): it runs
+the job (:mod:`livezmp.offline.jobs`) on the take into its own directory under ``OUT/takes/``,
+writes the take's ``summary.json`` last, and returns one small row. A bad take becomes a row
+with its error. The client keeps only a bounded window of tasks in flight and streams the
+rows, as they complete, to the table (Parquet and CSV, written under temporary names and
+renamed at the end). A take whose ``summary.json`` is newer than its input and was made by
+the same job with the same options, beside its complete outputs, is up to date: a rerun
+reads its row from there instead of running it again, so a killed run resumes where it stopped.
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from livezmp.errors import InputError
+from livezmp.offline.jobs import Job
 from livezmp.offline.report import write_json
-from livezmp.offline.take import SUMMARY_JSON, ZMP_CSV, TakeOptions, analyse_take
 
-TABLE_COLUMNS = ("file", "format", "frames", "fps", "duration_s", "inside_fraction", "max_excursion_mm", "error")
+SUMMARY_JSON = "summary.json"
 TABLE_PARQUET = "takes.parquet"
 TABLE_CSV = "takes.csv"
 ROWS_PER_BATCH = 256  # rows buffered before a Parquet record batch is written
@@ -42,11 +42,11 @@ class Take:
     out_dir: Path
 
 
-def find_takes(sources: Iterable[str], out: str | Path, options: TakeOptions) -> list[Take]:
-    """The takes named by ``sources`` (files, directories searched recursively, glob patterns):
-    ``.bvh`` files, and ``.csv`` joint trajectories when ``options.robot`` is given; sorted, without
+def find_takes(sources: Iterable[str], out: str | Path, job: Job) -> list[Take]:
+    """The takes named by ``sources`` (files, directories searched recursively, glob patterns) that
+    ``job`` takes (its suffixes, e.g. ``.bvh`` and ``.c3d``, ``.csv`` with a robot); sorted, without
     repeats, anything under ``out`` left out."""
-    suffixes = {".bvh"} | ({".csv"} if options.robot else set())
+    suffixes = job.suffixes()
     out = Path(out).resolve()
     found: set[Path] = set()
     for source in sources:
@@ -65,16 +65,14 @@ def find_takes(sources: Iterable[str], out: str | Path, options: TakeOptions) ->
     return [Take(p, out / "takes" / p.relative_to(root)) for p in paths]
 
 
-def table_row(path: Path, summary: dict) -> dict:
+def table_row(job: Job, path: Path, summary: dict) -> dict:
     """The library table's row of a take from its summary (or its error)."""
-    error = summary.get("error")
-    if error is not None:
-        return {"file": str(path), "format": path.suffix.lower().lstrip("."), "frames": None, "fps": None,
-                "duration_s": None, "inside_fraction": None, "max_excursion_mm": None, "error": error}
-    return {"file": str(path), "format": path.suffix.lower().lstrip("."), "frames": summary["frames"],
-            "fps": summary["fps"], "duration_s": summary["duration_s"],
-            "inside_fraction": summary["inside_fraction"],
-            "max_excursion_mm": round(1000 * summary["max_excursion_m"], 3), "error": None}
+    row = {name: None for name, _ in job.table_columns()}
+    row.update(file=str(path), format=path.suffix.lower().lstrip("."), error=summary.get("error"))
+    if row["error"] is None:
+        row.update(frames=summary["frames"], fps=summary["fps"], duration_s=summary["duration_s"],
+                   **job.fields(summary))
+    return row
 
 
 def one_line(error: BaseException) -> str:
@@ -82,22 +80,26 @@ def one_line(error: BaseException) -> str:
     return text if isinstance(error, InputError) else f"{type(error).__name__}: {text}"
 
 
-def run_take(take: Take, options: TakeOptions) -> dict:
-    """Analyse one take into ``take.out_dir``; return its table row. Never raises for a bad take:
-    the row (and ``summary.json``) then carry the error in one line."""
+def run_take(take: Take, job: Job) -> dict:
+    """Run ``job`` on one take into ``take.out_dir``, then write its ``summary.json`` (with the job's
+    fingerprint); return its table row. Never raises for a bad take: the row (and ``summary.json``)
+    then carry the error in one line."""
+    take.out_dir.mkdir(parents=True, exist_ok=True)
     try:
-        summary = analyse_take(take.path, take.out_dir, options)
+        summary = job.run(take.path, take.out_dir)
     except Exception as e:  # any failure of one take is that take's row, not the run's end
-        summary = {"source": str(take.path), "error": one_line(e), "options": options.fingerprint()}
-        take.out_dir.mkdir(parents=True, exist_ok=True)
-        (take.out_dir / ZMP_CSV).unlink(missing_ok=True)
-        write_json(summary, take.out_dir / SUMMARY_JSON)
-    return table_row(take.path, summary)
+        summary = {"source": str(take.path), "error": one_line(e)}
+        for name in job.outputs(take.path):
+            (take.out_dir / name).unlink(missing_ok=True)
+    summary["options"] = job.fingerprint()
+    write_json(summary, take.out_dir / SUMMARY_JSON)
+    return table_row(job, take.path, summary)
 
 
-def stored_row(take: Take, fingerprint: str) -> dict | None:
+def stored_row(take: Take, job: Job) -> dict | None:
     """The row of a take whose outputs are complete and up to date (a ``summary.json`` newer than
-    the input, made with the same options, beside its ``zmp.csv`` unless it records an error), else None."""
+    the input, made by the same job and options, beside the job's outputs unless it records an
+    error), else None."""
     summary_path = take.out_dir / SUMMARY_JSON
     try:
         if summary_path.stat().st_mtime_ns < take.path.stat().st_mtime_ns:
@@ -105,30 +107,28 @@ def stored_row(take: Take, fingerprint: str) -> dict | None:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if summary.get("options") != fingerprint:
+    if summary.get("options") != job.fingerprint():
         return None
-    if summary.get("error") is None and not (take.out_dir / ZMP_CSV).is_file():
+    if summary.get("error") is None and not all((take.out_dir / n).is_file() for n in job.outputs(take.path)):
         return None
-    return table_row(take.path, summary)
+    return table_row(job, take.path, summary)
 
 
 class TableWriter:
     """Rows streamed to ``takes.parquet`` and ``takes.csv`` under temporary names, renamed on close."""
 
-    def __init__(self, out: Path):
+    def __init__(self, out: Path, columns: tuple[tuple[str, str], ...]):
+        """``columns``: (name, Arrow type name such as "float64") in table order."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         self._pa = pa
-        self.schema = pa.schema([("file", pa.string()), ("format", pa.string()), ("frames", pa.int64()),
-                                 ("fps", pa.float64()), ("duration_s", pa.float64()),
-                                 ("inside_fraction", pa.float64()), ("max_excursion_mm", pa.float64()),
-                                 ("error", pa.string())])
+        self.schema = pa.schema([(name, pa.type_for_alias(kind)) for name, kind in columns])
         self._final = [out / TABLE_PARQUET, out / TABLE_CSV]
         self._tmp = [p.with_name(f".{p.name}.part") for p in self._final]
         self._parquet = pq.ParquetWriter(self._tmp[0], self.schema)
         self._csv_file = open(self._tmp[1], "w", newline="", encoding="utf-8")
-        self._csv = csv.DictWriter(self._csv_file, TABLE_COLUMNS)
+        self._csv = csv.DictWriter(self._csv_file, [name for name, _ in columns])
         self._csv.writeheader()
         self._rows: list[dict] = []
 
@@ -203,7 +203,7 @@ def dask_client(scheduler: str | None = None, workers: int = 2, dashboard_addres
         yield client
 
 
-def _rows(client, todo: list[Take], options: TakeOptions, window: int) -> Iterator[dict]:
+def _rows(client, todo: list[Take], job: Job, window: int) -> Iterator[dict]:
     """Rows of ``todo`` analysed on the Dask ``client``, as they complete, with at most
     ``window`` tasks submitted at a time (so neither the scheduler nor the client holds the library)."""
     from distributed import as_completed
@@ -213,7 +213,7 @@ def _rows(client, todo: list[Take], options: TakeOptions, window: int) -> Iterat
     submitted = {}
 
     def submit(take: Take) -> None:
-        fut = client.submit(run_take, take, options, pure=False, key=f"take-{take.path}")
+        fut = client.submit(run_take, take, job, pure=False, key=f"{job.name}-{take.path}")
         submitted[fut.key] = take
         running.add(fut)
 
@@ -224,7 +224,7 @@ def _rows(client, todo: list[Take], options: TakeOptions, window: int) -> Iterat
         try:
             row = fut.result()
         except Exception as e:  # the worker died or the task could not run: the take's row says so
-            row = table_row(take.path, {"error": f"task failed: {one_line(e)}"})
+            row = table_row(job, take.path, {"error": f"task failed: {one_line(e)}"})
         fut.release()
         yield row
         nxt = next(queue, None)
@@ -232,19 +232,18 @@ def _rows(client, todo: list[Take], options: TakeOptions, window: int) -> Iterat
             submit(nxt)
 
 
-def run_library(client, takes: list[Take], out: str | Path, options: TakeOptions, window: int | None = None,
+def run_library(client, takes: list[Take], out: str | Path, job: Job, window: int | None = None,
                 on_row: Callable[[Progress], None] | None = None) -> Progress:
-    """Analyse ``takes`` on the Dask ``client`` (or in this process when ``client`` is None), skipping
-    the up-to-date ones; write the table under ``out``; call ``on_row(progress)`` after every row."""
+    """Run ``job`` on ``takes`` on the Dask ``client`` (or in this process when ``client`` is None),
+    skipping the up-to-date ones; write the table under ``out``; call ``on_row(progress)`` after every row."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    fingerprint = options.fingerprint()
     progress = Progress(total=len(takes), started=time.perf_counter())
-    writer = TableWriter(out)
+    writer = TableWriter(out, job.table_columns())
     try:
         todo = []
         for take in takes:
-            row = stored_row(take, fingerprint)
+            row = stored_row(take, job)
             if row is None:
                 todo.append(take)
                 continue
@@ -254,10 +253,10 @@ def run_library(client, takes: list[Take], out: str | Path, options: TakeOptions
             if on_row:
                 on_row(progress)
         if client is None:
-            rows = (run_take(t, options) for t in todo)
+            rows = (run_take(t, job) for t in todo)
         else:
             workers = max(1, len(client.scheduler_info().get("workers", {})))
-            rows = _rows(client, todo, options, window or 4 * workers)
+            rows = _rows(client, todo, job, window or 4 * workers)
         for row in rows:
             progress.count(row)
             writer.write(row)

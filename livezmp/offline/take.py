@@ -9,8 +9,6 @@ so a run killed at any point leaves either the old file or the complete new one.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -29,11 +27,10 @@ from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import BatchResult, run_batch
 from livezmp.offline.calibrate import load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
-from livezmp.offline.report import atomic_path, summarize, write_json, write_zmp_csv
+from livezmp.offline.report import atomic_path, summarize, write_zmp_csv
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
-SUMMARY_JSON = "summary.json"
 
 
 @dataclass(frozen=True)
@@ -60,10 +57,6 @@ class TakeOptions:
                              sole_width=self.sole_width)
         return load_motion(path, self.robot, bvh, UrdfBodyOptions(config=self.robot_config),
                            c3d_mass=self.mass)
-
-    def fingerprint(self) -> str:
-        """A short hash of the options: outputs made with other options are out of date."""
-        return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:16]
 
 
 def take_config(loaded: LoadedMotion, mode: str, ground: float | None) -> PipelineConfig:
@@ -144,13 +137,9 @@ def analyse_path(path: str | Path, options: TakeOptions) -> TakeAnalysis:
 
 
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) -> dict:
-    """Analyse the take at ``path``; write ``zmp.csv`` then ``summary.json`` (the summary with the
-    options' fingerprint) into ``out_dir``, each atomically; return the summary."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    """Analyse the take at ``path``; write its ``zmp.csv`` (atomically) into the directory
+    ``out_dir``; return the summary."""
     a = analyse_path(path, options)
-    with atomic_path(out_dir / ZMP_CSV) as tmp:
+    with atomic_path(Path(out_dir) / ZMP_CSV) as tmp:
         write_zmp_csv(a.body, a.result, tmp, a.columns)
-    summary = {**a.summary, "options": options.fingerprint()}
-    write_json(summary, out_dir / SUMMARY_JSON)
-    return summary
+    return a.summary
