@@ -11,6 +11,8 @@ file length units) here; the body model converts to SI.
 from __future__ import annotations
 
 import io
+import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -186,51 +188,132 @@ def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint]
     return joints, cur
 
 
-def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
-    """Parse a whole BVH text. Raises :class:`InputError` naming file and line."""
-    joints, cur = parse_hierarchy(text, source)
-    toks = cur.next_tokens()
-    if toks != ["MOTION"]:
-        raise cur.error("expected MOTION after the hierarchy")
-    toks = cur.next_tokens()
-    if toks[0] != "Frames:" or len(toks) != 2:
-        raise cur.error("expected 'Frames: N'")
+_MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.M)
+MOTION_BLOCK_CHARS = 1 << 20  # the motion text is split into lines this much at a time
+MOTION_BLOCK_ROWS = 4096  # rows converted to numbers at a time
+
+
+def _numbered_lines(text: str, start: int, lineno: int) -> Iterator[tuple[int, str]]:
+    """(line number, line) of ``text[start:]`` (``start`` at a line's beginning, ``lineno`` lines
+    before it), split as :meth:`str.splitlines` does but a block at a time, so a long take's text is
+    never held twice."""
+    while start < len(text):
+        end = text.find("\n", start + MOTION_BLOCK_CHARS)
+        end = len(text) if end < 0 else end + 1
+        for line in text[start:end].splitlines():
+            lineno += 1
+            yield lineno, line
+        start = end
+
+
+class _Rows:
+    """The motion section's lines, with the last line number seen (for end-of-file messages)."""
+
+    def __init__(self, lines: Iterator[tuple[int, str]], lineno: int, source: str):
+        self.lines, self.lineno, self.source = lines, lineno, source
+
+    def __iter__(self) -> Iterator[tuple[int, str]]:
+        for lineno, line in self.lines:
+            self.lineno = lineno
+            yield lineno, line
+
+    def error(self, msg: str, line: int | None = None) -> InputError:
+        return InputError(f"{self.source}:{self.lineno if line is None else line}: {msg}")
+
+    def next_tokens(self) -> list[str]:
+        for _, line in self:
+            toks = line.split()
+            if toks:
+                return toks
+        raise self.error("unexpected end of file (truncated BVH?)")
+
+
+def _motion_rows(text: str, source: str) -> tuple[list[BvhJoint], _Rows]:
+    """The hierarchy, and the lines from MOTION on. The hierarchy is parsed on the text before the
+    MOTION line only, and the motion read from the text lazily (see :func:`_numbered_lines`)."""
+    cut = _MOTION_LINE.search(text)
+    head = text if cut is None else text[: cut.start()]
+    joints, cur = parse_hierarchy(head, source)
+    if cut is None:  # no MOTION line of its own: what follows the hierarchy says what is wrong
+        rest = ((cur.i + k + 1, line) for k, line in enumerate(cur.lines[cur.i :]))
+        return joints, _Rows(rest, cur.i, source)
     try:
-        n_frames = int(toks[1]) if len(toks[1]) <= 12 else -1
-    except ValueError:
-        raise cur.error(f"bad frame count {toks[1]!r}") from None
-    if n_frames <= 0:
-        raise cur.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
-    toks = cur.next_tokens()
-    if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
-        raise cur.error("expected 'Frame Time: seconds'")
+        cur.next_tokens()
+    except InputError:  # only blank lines between the hierarchy and MOTION
+        return joints, _Rows(_numbered_lines(text, cut.start(), len(cur.lines)), cur.i, source)
+    raise cur.error("expected MOTION after the hierarchy")
+
+
+def _fill_block(block: list[tuple[int, str]], out: np.ndarray, first: int, source: str) -> None:
+    """Rows ``first``… of ``out`` from the (line number, line) ``block``, or the first bad line's error."""
+    n_ch = out.shape[1]
     try:
-        frame_time = float(toks[2])
-    except ValueError:
-        raise cur.error(f"Frame Time {toks[2]!r} is not a number") from None
-    check_frame_period(frame_time, f"{source}:{cur.i}: Frame Time")
-    n_ch = sum(len(j.channels) for j in joints)
-    body = cur.lines[cur.i :]
-    rows = [(cur.i + k + 1, ln) for k, ln in enumerate(body) if ln.strip()]
-    if len(rows) != n_frames:
-        line = cur.i + len(body) if len(rows) < n_frames else rows[n_frames][0]
-        what = "truncated" if len(rows) < n_frames else "extra rows"
-        raise InputError(f"{source}:{line}: {what}: header says Frames: {n_frames}, file has {len(rows)} rows")
-    frames = np.empty((n_frames, n_ch))
-    try:
-        data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows)), ndmin=2)
-        ok = data.shape == (n_frames, n_ch) and first_out_of_range(data, MAX_CHANNEL_VALUE) is None
+        data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in block)), ndmin=2)
+        ok = data.shape == (len(block), n_ch) and first_out_of_range(data, MAX_CHANNEL_VALUE) is None
     except ValueError:
         ok = False
     if ok:
-        frames[:] = data
-    else:  # find the offending line for the message
-        for k, (lineno, ln) in enumerate(rows):
-            toks = ln.split()
-            if len(toks) != n_ch:
-                raise InputError(f"{source}:{lineno}: frame {k} has {len(toks)} values, hierarchy needs {n_ch}")
-            cur.i = lineno
-            frames[k] = _floats(cur, toks, f"frame {k}")
+        out[first : first + len(block)] = data
+        return
+    for k, (lineno, line) in enumerate(block, start=first):  # find the offending line for the message
+        toks = line.split()
+        if len(toks) != n_ch:
+            raise InputError(f"{source}:{lineno}: frame {k} has {len(toks)} values, hierarchy needs {n_ch}")
+        try:
+            vals = np.array([float(t) for t in toks], dtype=float)
+        except ValueError:
+            raise InputError(f"{source}:{lineno}: non-numeric value in frame {k}: {' '.join(toks)!r}") from None
+        bad = first_out_of_range(vals, MAX_CHANNEL_VALUE)
+        if bad is not None:
+            raise InputError(f"{source}:{lineno}: value {toks[bad[0]]} in frame {k} is not finite or beyond "
+                             f"±{MAX_CHANNEL_VALUE:g}")
+        out[k] = vals
+
+
+def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
+    """Parse a whole BVH text. Raises :class:`InputError` naming file and line. Memory: the frames
+    array and one block of rows beside the text (the rows are converted a block at a time)."""
+    joints, rows = _motion_rows(text, source)
+    if rows.next_tokens() != ["MOTION"]:
+        raise rows.error("expected MOTION after the hierarchy")
+    toks = rows.next_tokens()
+    if toks[0] != "Frames:" or len(toks) != 2:
+        raise rows.error("expected 'Frames: N'")
+    try:
+        n_frames = int(toks[1]) if len(toks[1]) <= 12 else -1
+    except ValueError:
+        raise rows.error(f"bad frame count {toks[1]!r}") from None
+    if n_frames <= 0:
+        raise rows.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
+    toks = rows.next_tokens()
+    if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
+        raise rows.error("expected 'Frame Time: seconds'")
+    try:
+        frame_time = float(toks[2])
+    except ValueError:
+        raise rows.error(f"Frame Time {toks[2]!r} is not a number") from None
+    check_frame_period(frame_time, f"{source}:{rows.lineno}: Frame Time")
+    n_ch = sum(len(j.channels) for j in joints)
+    # a row takes at least 2 characters per value: more frames than that cannot be in the text, and
+    # then nothing is allocated (only counted, for the message)
+    frames = np.empty((n_frames, n_ch)) if n_frames <= len(text) // (2 * n_ch) + 1 else None
+    count, block = 0, []
+    for lineno, line in rows:
+        if not line.strip():
+            continue
+        if count == n_frames:
+            raise InputError(f"{source}:{lineno}: extra rows: header says Frames: {n_frames}, file has "
+                             f"{n_frames + 1 + sum(1 for _, ln in rows if ln.strip())} rows")
+        count += 1
+        if frames is not None:
+            block.append((lineno, line))
+            if len(block) == MOTION_BLOCK_ROWS:
+                _fill_block(block, frames, count - len(block), source)
+                block = []
+    if count < n_frames:
+        raise InputError(f"{source}:{rows.lineno}: truncated: header says Frames: {n_frames}, file has {count} rows")
+    if block:
+        _fill_block(block, frames, count - len(block), source)
     return BvhMotion(joints, frame_time, frames, source)
 
 
