@@ -83,6 +83,8 @@ class MarkerTake:
     first_frame: int  # index in the C3D of frames[0]
     notes: dict = field(default_factory=dict)
     centres: dict = field(default_factory=dict)  # joint -> side -> (F, 3) m, internal frame
+    roles: dict = field(default_factory=dict)  # marker role -> label, as found in the trial
+    subject: C3dTrial | None = None  # the trial the body was calibrated on (its widths, height, labels)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -266,24 +268,42 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     seg, centres, notes = _segments(m, trial)
     body, frames = _build(seg, m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
-    return MarkerTake(body, frames, keep.start, notes, centres)
+    return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
 
 
-def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, dict]:
-    """Segment frames: name -> (origin (F, 3), rotation (F, 3, 3)); joint centres; notes."""
+def marker_channels(take: MarkerTake, markers: dict[str, np.ndarray]) -> np.ndarray:
+    """The body's channels (F, nq) of new frames of markers: ``markers`` role -> (F, 3) m in the internal
+    frame (every role of ``take.roles``; NaN where unseen gives NaN channels). The subject's dimensions
+    (pelvis width and depth, stature) stay those measured when ``take`` was built, so frames of the take
+    itself give back ``take.frames`` (angles wrapped to ±π instead of unwrapped over frames)."""
+    seg, _, _ = _segments(markers, take.subject, take.notes["dimensions"])
+    return segment_channels(seg)
+
+
+def segment_channels(seg: dict) -> np.ndarray:
+    """(F, 6 per segment) x, y, z (m), yaw, pitch, roll (rad) of segment frames ``seg`` (see _segments)."""
+    return np.hstack([np.hstack([origin, _euler_zyx(rot)]) for origin, rot in seg.values()])
+
+
+def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = None) -> tuple[dict, dict, dict]:
+    """Segment frames: name -> (origin (F, 3), rotation (F, 3, 3)); joint centres; notes. ``dims`` the
+    subject's pelvis width, depth and stature (m) as in ``notes["dimensions"]``; None: measured on ``m``."""
     mid_asis = (m["LASI"] + m["RASI"]) / 2
     back = (m["LPSI"] + m["RPSI"]) / 2 if "LPSI" in m else m["SACR"]
     y = _unit(m["LASI"] - m["RASI"])
     fwd = mid_asis - back
     x = _unit(fwd - np.sum(fwd * y, axis=1, keepdims=True) * y)
     z = np.cross(x, y)
-    pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
-    pd = float(np.median(np.linalg.norm(fwd, axis=1)))
+    if dims is None:
+        pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
+        pd = float(np.median(np.linalg.norm(fwd, axis=1)))
+    else:
+        pw, pd = dims["pelvis_width_m"], dims["pelvis_depth_m"]
     hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
            for side, (_, sign, _) in _SIDES.items()}
     # stature: the file's, else from the leg (hip centre to the lateral ankle marker)
-    stature = trial.height_m or float(np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1))
-                                      / LEG_FRACTION_OF_STATURE)
+    stature = dims["stature_m"] if dims else trial.height_m or float(
+        np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
     for side, (s, sign, _) in _SIDES.items():
@@ -324,7 +344,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
-             "joint_centres": rules, "stature_m": round(stature, 4)}
+             "joint_centres": rules, "stature_m": round(stature, 4),
+             "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
     return seg, centres, notes
 
 
@@ -388,14 +409,12 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     scale_rest = (1.0 - hat_fraction) / (1.0 - hat_mass)  # keep the total at 1 when the HAT fraction is set
     model = pin.Model()
     model.name = "markers"
-    frames = []
     body_frame = {}
     for name, (origin, rot) in seg.items():
         parent = 0
         for ch, jm in zip(_CHANNELS, (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRZ,
                                       pin.JointModelRY, pin.JointModelRX), strict=True):
             parent = model.addJoint(parent, jm(), pin.SE3.Identity(), f"{name}.{ch}")
-        frames.append(np.hstack([origin, _euler_zyx(rot)]))
         body_frame[name] = model.addFrame(pin.Frame(name, parent, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
         kind = name.split("_")[0]
         if name == "hat":
@@ -450,7 +469,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         channel_scale=np.ones(nq), angle_mask=np.array([c in ("yaw", "pitch", "roll") for c in _CHANNELS] * len(seg)),
         feet=feet, world_from_input=r_in, up_axis=up, units="m", total_mass=opts.total_mass,
         correction=correction, named_points=named)
-    return body, np.hstack(frames)
+    return body, segment_channels(seg)
 
 
 def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float) -> tuple[float, np.ndarray, np.ndarray]:

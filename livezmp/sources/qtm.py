@@ -134,6 +134,14 @@ class QtmSource:
         return 1.0 / self.params.rate
 
     @property
+    def up(self) -> str:
+        return self.params.up
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return self.params.labels
+
+    @property
     def finished(self) -> bool:
         return self._closed
 
