@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -107,6 +107,26 @@ def generated_trial(rate: float, seconds: float, n_markers: int = 20, n_plates: 
     return MocapTrial(tuple(f"M{i:02d}" for i in range(n_markers)), markers, rate, "+z",
                       tuple(f"plate{i + 1}" for i in range(n_plates)), force, moment, cop, corners,
                       f"generated {rate:g} Hz")
+
+
+def resampled(trial: MocapTrial, rate: float) -> MocapTrial:
+    """``trial`` at ``rate`` Hz over the same span: markers and plates interpolated by a cubic spline
+    through the recorded frames (a marker missing at either neighbouring frame stays missing), e.g.
+    a 100 Hz gait trial played as a 1000 Hz camera would see it."""
+    from scipy.interpolate import CubicSpline
+
+    t = np.arange(trial.n_frames) / trial.rate
+    new = np.arange(int(np.floor(t[-1] * rate)) + 1) / rate
+
+    def spline(x: np.ndarray) -> np.ndarray:
+        seen = np.isfinite(x).all(axis=tuple(range(2, x.ndim)))  # (F, n) samples with every coordinate
+        out = CubicSpline(t, np.nan_to_num(x), axis=0)(new)
+        nearest = np.clip(np.searchsorted(t, new), 1, len(t) - 1)
+        ok = seen[nearest - 1] & seen[nearest]
+        return np.where(ok.reshape(ok.shape + (1,) * (x.ndim - 2)), out, np.nan)
+
+    return replace(trial, markers=spline(trial.markers), rate=rate, force=spline(trial.force),
+                   moment=spline(trial.moment), cop=spline(trial.cop), source=f"{trial.source} at {rate:g} Hz")
 
 
 @dataclass

@@ -195,12 +195,14 @@ def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.median(np.einsum("fji,fj->fi", rot, p - origin), axis=0)
 
 
-def _euler_zyx(rot: np.ndarray) -> np.ndarray:
-    """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames."""
+def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
+    """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames (else
+    each within ±pi)."""
     yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
     pitch = np.arcsin(np.clip(-rot[:, 2, 0], -1.0, 1.0))
     roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
-    return np.unwrap(np.column_stack([yaw, pitch, roll]), axis=0)
+    angles = np.column_stack([yaw, pitch, roll])
+    return np.unwrap(angles, axis=0) if unwrap else angles
 
 
 def hat_table(stature: float) -> tuple[float, float, np.ndarray]:
@@ -275,14 +277,15 @@ def marker_channels(take: MarkerTake, markers: dict[str, np.ndarray]) -> np.ndar
     """The body's channels (F, nq) of new frames of markers: ``markers`` role -> (F, 3) m in the internal
     frame (every role of ``take.roles``; NaN where unseen gives NaN channels). The subject's dimensions
     (pelvis width and depth, stature) stay those measured when ``take`` was built, so frames of the take
-    itself give back ``take.frames`` (angles wrapped to ±π instead of unwrapped over frames)."""
+    itself give back ``take.frames`` (angles each within ±pi instead of unwrapped over frames)."""
     seg, _, _ = _segments(markers, take.subject, take.notes["dimensions"])
-    return segment_channels(seg)
+    return segment_channels(seg, unwrap=False)
 
 
-def segment_channels(seg: dict) -> np.ndarray:
-    """(F, 6 per segment) x, y, z (m), yaw, pitch, roll (rad) of segment frames ``seg`` (see _segments)."""
-    return np.hstack([np.hstack([origin, _euler_zyx(rot)]) for origin, rot in seg.values()])
+def segment_channels(seg: dict, unwrap: bool = True) -> np.ndarray:
+    """(F, 6 per segment) x, y, z (m), yaw, pitch, roll (rad) of segment frames ``seg`` (see _segments),
+    angles unwrapped over the frames (else each within ±pi)."""
+    return np.hstack([np.hstack([origin, _euler_zyx(rot, unwrap)]) for origin, rot in seg.values()])
 
 
 def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = None) -> tuple[dict, dict, dict]:

@@ -38,6 +38,7 @@ from livezmp.sources.mocap_frame import MocapFrame, MocapSource
 
 CALIBRATION_S = 2.0  # s of stream that calibrate the body when no calibration trial is given
 MAX_GAP_S = 0.1  # s: longest marker gap carried on (the C3D take's fill limit)
+BATCH = 32  # frames already waiting that are converted together
 
 
 class MarkerStreamSource:
@@ -78,6 +79,7 @@ class MarkerStreamSource:
         self._channels: np.ndarray | None = None
         self.filled = self.long_gaps = self.frames_with_long_gap = 0
         self._pending: deque[MocapFrame] = deque()
+        self._ready: deque[SourceFrame] = deque()
         self._wait_for_rate(timeout)
 
     # -- calibration ----------------------------------------------------------
@@ -166,23 +168,36 @@ class MarkerStreamSource:
         return p
 
     def _to_channels(self, p: np.ndarray) -> np.ndarray:
-        ch = marker_channels(self.take, {r: p[i:i + 1] for i, r in enumerate(self.roles)})[0]
-        last = self._channels
-        if last is not None:  # angles continue from the last frame's (no jump of 2 pi)
-            turn = self._angles & np.isfinite(ch) & np.isfinite(last)
-            ch[turn] -= 2 * np.pi * np.round((ch[turn] - last[turn]) / (2 * np.pi))
-            self._channels = np.where(np.isfinite(ch), ch, last)
-        else:
-            self._channels = ch.copy()
-        return ch
+        """(B, nq) channels of (B, n roles, 3) markers, angles continuing from the previous frame's."""
+        out = marker_channels(self.take, {r: p[:, i] for i, r in enumerate(self.roles)})
+        for ch in out:
+            last = self._channels
+            if last is not None:  # no jump of 2 pi from one frame to the next
+                turn = self._angles & np.isfinite(ch) & np.isfinite(last)
+                ch[turn] -= 2 * np.pi * np.round((ch[turn] - last[turn]) / (2 * np.pi))
+                self._channels = np.where(np.isfinite(ch), ch, last)
+            else:
+                self._channels = ch.copy()
+        return out
+
+    def _next(self, timeout: float) -> MocapFrame | None:
+        return self._pending.popleft() if self._pending else self.mocap.read(timeout)
 
     def read(self, timeout: float) -> SourceFrame | None:
-        f = self._pending.popleft() if self._pending else self.mocap.read(timeout)
-        if f is None:
-            return None
-        channels = self._to_channels(self._markers(f))
-        cop = f.plates.combined_cop(self.rotation[2]) if len(f.plates) else None
-        return SourceFrame(f.t, channels, None, f.received, f.latency, cop)
+        """The next frame. Frames that are already waiting are converted together (the geometry is
+        vectorised over frames): a reader that fell behind catches up at a fraction of the cost."""
+        if not self._ready:
+            f = self._next(timeout)
+            if f is None:
+                return None
+            batch = [f]
+            while len(batch) < BATCH and (f := self._next(0.0)) is not None:
+                batch.append(f)
+            channels = self._to_channels(np.stack([self._markers(f) for f in batch]))
+            for f, ch in zip(batch, channels, strict=True):
+                cop = f.plates.combined_cop(self.rotation[2]) if len(f.plates) else None
+                self._ready.append(SourceFrame(f.t, ch, None, f.received, f.latency, cop))
+        return self._ready.popleft()
 
     def details(self) -> dict:
         """For the summary: how the body was calibrated and what the gap rule did."""
