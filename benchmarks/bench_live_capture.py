@@ -147,7 +147,8 @@ def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
            "natnet": f"natnet://127.0.0.1:{where}?data_port={data_port}"}[kind]
     source = InHand(open_source(url, SourceOptions(calibration=str(TRIAL))))
     fps = 1.0 / source.nominal_dt
-    session = {"source": url, "fps": fps, "mode": "full", "ground_z": source.ground_z, "alarm_after": 1e9, "correct": False}
+    session = {"source": url, "fps": fps, "mode": "full", "ground_z": source.ground_z, "alarm_after": 1e9,
+               "correct": False}
     recorder = Recorder(str(tmp / f"{kind}_{rate:.0f}.mcap"), source.body_spec, session, source.body.channel_names)
     timing = Timing()
     cfg = default_config(source.body, fps, "full", source.ground_z)

@@ -18,8 +18,8 @@ network and reader delay beyond the fastest frame). The LSL figure carries the e
 LSL's clock-offset estimate (``time_correction``, one round trip under the machine's
 load): server and reader share one clock here, so a negative delay is that error.
 
-Not yet here: the whole pipeline (markers → body → ZMP) needs the marker body of the
-force-plate issue; see the README.
+The whole pipeline (markers → body → ZMP → recording and dashboard) is measured by
+``bench_live_capture.py``.
 
 Run: python benchmarks/bench_mocap_sources.py [--seconds 3]
 """
