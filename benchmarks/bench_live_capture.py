@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import os
-import socket
 import sys
 import tempfile
 import threading
@@ -44,6 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_mocap_sources import free_udp_port  # noqa: E402
 from bench_monitor import Page  # noqa: E402
 
 from livezmp.balance.pipeline import default_config  # noqa: E402
@@ -54,12 +54,6 @@ from livezmp.sources.factory import SourceOptions, open_source  # noqa: E402
 
 TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "walk_plugingait_forceplates.c3d"
 RATES = (100.0, 240.0, 1000.0)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def serve(kind: str, rate: float, laps: int, address, ready, go, done) -> None:

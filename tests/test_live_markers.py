@@ -91,6 +91,8 @@ def _monitor(kind: str, trial, tmp_path) -> tuple[dict, dict]:
         player.join(10)
         server.close()
     assert rc == 0
+    # the recording re-runs to the same analysis (the stream's body rebuilt from the recorded calibration)
+    assert main(["replay", str(rec)]) == 0
     return {m["index"]: m for m in iter_messages(str(rec), "/result")}, json.loads(summary.read_text())
 
 

@@ -112,6 +112,8 @@ def cmd_monitor(args: argparse.Namespace) -> int:
             raise InputError(f"--window-s / --lag-s: {e}") from None
     session = {"source": source.name, "fps": fps, "mode": cfg.mode, "ground_z": cfg.ground_z,
                "alarm_after": args.alarm_after / 1000.0, "correct": args.correct}
+    if settings:  # replay re-runs with them
+        session["estimator"] = settings
     _run(source, cfg, args, session, [])
     return 0
 
@@ -154,6 +156,8 @@ def _replay(args: argparse.Namespace) -> int:
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
     if "live_loop" in s:  # recorded by `livezmp run/demo --record`: the loop's own estimator settings
         cfg = replace(cfg, estimator=EstimatorConfig(rate_hz=s["fps"], **s["live_loop"]["estimator"]))
+    elif "estimator" in s:  # a monitor session with --window-s / --lag-s
+        cfg = replace(cfg, estimator=replace(cfg.estimator, rate_hz=s["fps"], **s["estimator"]))
     check = ReplayCheck(args.recording)
     recorded_alarms = sum(1 for m in iter_messages(args.recording, "/alarm") if m["event"] == "raised")
     _run(source, cfg, args, {**s, "source": f"replay of {args.recording}"}, [check])
