@@ -41,6 +41,9 @@ class MocapTrial:
     cop: np.ndarray
     corners: np.ndarray
     source: str
+    segment_names: tuple[str, ...] = ()  # rigid segments a capture system solves (skeleton bones)
+    segment_pos: np.ndarray | None = None  # (F, s, 3) m, lab axes
+    segment_rot: np.ndarray | None = None  # (F, s, 3, 3), columns the segment's axes in the lab's
 
     @property
     def n_frames(self) -> int:
@@ -86,6 +89,26 @@ def load_c3d_trial(path: str) -> MocapTrial:
                       str(path))
 
 
+def with_segments(trial: MocapTrial, path: str) -> MocapTrial:
+    """``trial`` (of the C3D file ``path``) with the segment poses of livezmp's marker body of that file
+    (pelvis, thighs, shanks, feet, the HAT or the upper-body segments), as a capture system's skeleton
+    solver would stream them: the truth a skeleton stream of this trial carries."""
+    from scipy.spatial.transform import Rotation
+
+    from livezmp.model.c3d import read_c3d
+    from livezmp.model.markers import body_from_markers
+
+    take = body_from_markers(read_c3d(path))
+    if take.first_frame != 0 or len(take.frames) != trial.n_frames:
+        raise InputError(f"{path}: the marker body does not cover every frame; no segment poses")
+    r_in = take.body.world_from_input
+    q = take.frames.reshape(trial.n_frames, -1, 6)
+    rot = Rotation.from_euler("ZYX", q[:, :, 3:].reshape(-1, 3)).as_matrix().reshape(q.shape[:2] + (3, 3))
+    names = tuple(n[: -len(".x")] for n in take.body.channel_names[::6])
+    return replace(trial, segment_names=names, segment_pos=q[:, :, :3] @ r_in,
+                   segment_rot=np.einsum("ji,fsjk->fsik", r_in, rot))
+
+
 def generated_trial(rate: float, seconds: float, n_markers: int = 20, n_plates: int = 2) -> MocapTrial:
     """A synthetic trial at ``rate`` Hz: markers on a body swaying 2 cm at 0.5 Hz (z up,
     metres), each plate carrying half of a 700 N body with its CoP following the sway."""
@@ -126,7 +149,8 @@ def resampled(trial: MocapTrial, rate: float) -> MocapTrial:
         return np.where(ok.reshape(ok.shape + (1,) * (x.ndim - 2)), out, np.nan)
 
     return replace(trial, markers=spline(trial.markers), rate=rate, force=spline(trial.force),
-                   moment=spline(trial.moment), cop=spline(trial.cop), source=f"{trial.source} at {rate:g} Hz")
+                   moment=spline(trial.moment), cop=spline(trial.cop), source=f"{trial.source} at {rate:g} Hz",
+                   segment_names=(), segment_pos=None, segment_rot=None)  # poses are not interpolated
 
 
 @dataclass
@@ -156,7 +180,8 @@ class PlayCounters:
 class TrialFrame:
     """One frame as a server sends it: ``number`` (0-based), ``t`` s from the first
     frame, ``markers`` (n, 3) m (NaN missing), plates ``force``/``moment``/``cop`` (p, 3),
-    ``gaps`` markers made missing in this frame."""
+    ``gaps`` markers made missing in this frame; ``segment_pos`` (s, 3) / ``segment_rot`` (s, 3, 3)
+    the segment poses when the trial has them."""
 
     number: int
     t: float
@@ -165,6 +190,8 @@ class TrialFrame:
     moment: np.ndarray
     cop: np.ndarray
     gaps: int = 0
+    segment_pos: np.ndarray | None = None
+    segment_rot: np.ndarray | None = None
 
 
 class TrialPlayer:
@@ -197,7 +224,8 @@ class TrialPlayer:
                 hide = rng.random(len(m)) < imp.gap
                 gaps = int(np.count_nonzero(hide & ~np.isnan(m[:, 0])))
                 m = np.where(hide[:, None], np.nan, m)
-            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps)
+            poses = (None, None) if tr.segment_pos is None else (tr.segment_pos[i], tr.segment_rot[i])
+            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps, *poses)
             k += 1
 
     def start(self, send: Callable[[TrialFrame], None], name: str) -> None:

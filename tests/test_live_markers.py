@@ -7,12 +7,14 @@ Tolerances: the monitor steps frame by frame where analyze runs the batch path (
 ~1e-13 m); QTM and LSL carry millimetres as float32, which is what the C3D file stores, so nothing
 is lost: 1e-9 m. NatNet carries metres as float32: its ZMP equals analyze of the file with the
 markers rounded to float32 metres to 1e-8 m (the monitor's body is calibrated on the unrounded file;
-measured 3e-9 m), and the unrounded analyze to 1 µm (measured 0.3 µm).
+measured 3e-9 m), and the unrounded analyze to 1 µm (measured 0.3 µm). A NatNet skeleton stream (the
+segments' poses alone, no markers) drives the body directly: analyze's ZMP to 2 µm (float32 poses).
 """
 
 from __future__ import annotations
 
 import threading
+import time
 import uuid
 from dataclasses import replace
 
@@ -28,7 +30,7 @@ from livezmp.model.c3d import read_c3d
 from livezmp.offline.gaitlab import analyse_lab_take
 from livezmp.recording.reader import iter_messages
 from sim_devices.lsl_publisher import LslPublisher
-from sim_devices.mocap_trial import load_c3d_trial
+from sim_devices.mocap_trial import load_c3d_trial, with_segments
 from sim_devices.natnet_server import NatNetServer
 from sim_devices.qtm_server import QtmServer
 
@@ -41,6 +43,12 @@ NATNET_TURN = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 @pytest.fixture(scope="module")
 def trial():
     return load_c3d_trial(str(TRIAL))
+
+
+@pytest.fixture(scope="module")
+def skeleton_trial(trial):
+    """The trial with its segments' poses, as a skeleton solver would stream them."""
+    return with_segments(trial, str(TRIAL))
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +66,8 @@ def _serve(kind: str, trial):
         server = QtmServer(trial, 0, loop=False, speed=3.0)
         return server, f"qtm://127.0.0.1:{server.port}", lambda: wait_until(server.streaming_clients, 10) and \
             server.start()
-    if kind == "natnet":
-        server = NatNetServer(trial, 0, _free_udp_port(), loop=False, speed=3.0)
+    if kind.startswith("natnet"):  # "natnet-skeleton": the segment poses alone, no markers
+        server = NatNetServer(trial, 0, _free_udp_port(), loop=False, speed=3.0, markers=kind == "natnet")
         url = f"natnet://127.0.0.1:{server.command_port}?data_port={server.data_port}"
         return server, url, lambda: wait_until(lambda: bool(server.clients), 10) and server.start()
     name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
@@ -133,3 +141,38 @@ def test_streamed_trial_gives_the_zmp_of_analyze(kind, trial, offline, tmp_path)
     assert (got["frames"], got["no_cop"]) == (want["frames"], want["no_cop"]) and want["frames"] > 150
     assert got["mean_mm"] == pytest.approx(want["mean_mm"], abs=1e-3)
     assert got["max_mm"] == pytest.approx(want["max_mm"], abs=1e-3)
+
+
+def test_natnet_skeleton_drives_the_body_directly(skeleton_trial, offline, tmp_path):
+    """A Motive-like stream of the segments' poses alone (NatNet skeleton, no markers): the body is
+    driven by the poses and gives analyze's ZMP to float32 (positions in metres, quaternions)."""
+    results, summary = _monitor("natnet-skeleton", skeleton_trial, tmp_path)
+    exact, _ = offline
+    assert summary["frames_from_segment_poses"] == summary["analysed_frames"] == skeleton_trial.n_frames
+    zmp = np.array([[r["zmp"][a] for a in "xyz"] for _, r in sorted(results.items())]) @ NATNET_TURN
+    np.testing.assert_allclose(zmp, exact.result.zmp, rtol=0, atol=2e-6)  # measured: 0.6 µm
+
+
+def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
+    """Each bone arrives as the pose the server sent: position and rotation in Motive's y-up axes."""
+    from livezmp.sources.mocap_factory import open_mocap_source
+
+    server, url, start = _serve("natnet-skeleton", skeleton_trial)
+    src = open_mocap_source(url)
+    start()
+    frames, deadline = [], time.monotonic() + 10
+    try:
+        while len(frames) < 50 and time.monotonic() < deadline:
+            f = src.read(0.05)
+            if f is not None:
+                frames.append(f)
+    finally:
+        src.close()
+        server.close()
+    assert len(frames) >= 50 and frames[0].segments.names == skeleton_trial.segment_names
+    y_up = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # Motive's axes of the z-up trial
+    for f in frames:
+        seg = f.segments
+        assert seg.tracked.all() and len(f.markers) == 0
+        np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[f.frame] @ y_up.T, atol=1e-6)
+        np.testing.assert_allclose(seg.rotation, y_up @ skeleton_trial.segment_rot[f.frame], atol=1e-6)

@@ -16,6 +16,11 @@ at most ``max_gap_s`` (0.1 s, the longest gap a C3D take fills); a longer gap le
 out (NaN): the segments that need it get no measurement and the estimator predicts them, and the
 gap is reported (``marker_gap``) and counted in :meth:`MarkerStreamSource.details`.
 
+Segment poses: a stream that carries the body's segments solved by the capture system (rigid
+bodies or skeleton bones named as the marker body's segments: ``pelvis``, ``thigh_l``, ``shank_l``,
+``foot_l``, ..., ``hat`` or the upper-body ones; NatNet skeletons) drives the body directly from
+them, frame by frame when all are tracked (the markers are then not needed); otherwise the markers.
+
 Force plates: the plates' combined centre of pressure (each plate's CoP weighted by its vertical
 force; none below 20 N) goes with the frame, in the stream's axes.
 """
@@ -32,7 +37,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import world_from_up_axis
 from livezmp.model.body_spec import marker_body, stream_marker_body
 from livezmp.model.c3d import C3dTrial, strip_prefix
-from livezmp.model.markers import MarkerBodyOptions, marker_channels
+from livezmp.model.markers import MarkerBodyOptions, marker_channels, segment_channels
 from livezmp.sources.interface import SourceFrame
 from livezmp.sources.mocap_frame import MocapFrame, MocapSource
 
@@ -80,6 +85,10 @@ class MarkerStreamSource:
         self.filled = self.long_gaps = self.frames_with_long_gap = 0
         self._pending: deque[MocapFrame] = deque()
         self._ready: deque[SourceFrame] = deque()
+        self.segments = [n[: -len(".x")] for n in self.body.channel_names[::6]]  # the body's, in channel order
+        self._segment_names: tuple[str, ...] = ()
+        self._segment_index: np.ndarray | None = None
+        self.from_segments = 0
         self._wait_for_rate(timeout)
 
     # -- calibration ----------------------------------------------------------
@@ -167,9 +176,36 @@ class MarkerStreamSource:
         self._last[seen], self._t_last[seen] = p[seen], f.t
         return p
 
-    def _to_channels(self, p: np.ndarray) -> np.ndarray:
-        """(B, nq) channels of (B, n roles, 3) markers, angles continuing from the previous frame's."""
-        out = marker_channels(self.take, {r: p[:, i] for i, r in enumerate(self.roles)})
+    def _poses(self, f: MocapFrame) -> np.ndarray | None:
+        """Indices into ``f.segments`` of the body's segments when the frame has all of them tracked."""
+        names = f.segments.names
+        if not names:
+            return None
+        if names != self._segment_names:
+            where = {n: i for i, n in enumerate(names)}
+            self._segment_index = (np.array([where[n] for n in self.segments])
+                                   if all(n in where for n in self.segments) else None)
+            self._segment_names = names
+        i = self._segment_index
+        return i if i is not None and f.segments.tracked[i].all() else None
+
+    def _to_channels(self, batch: list[MocapFrame]) -> np.ndarray:
+        """(B, nq) channels of a batch of frames, angles continuing from the previous frame's: from the
+        body's segment poses when the stream solved them all, else from the markers."""
+        out = np.empty((len(batch), self.body.nq))
+        poses = [self._poses(f) for f in batch]
+        by_pose = [k for k, i in enumerate(poses) if i is not None]
+        by_markers = [k for k, i in enumerate(poses) if i is None]
+        if by_pose:
+            r = self.rotation
+            seg = {n: (np.stack([batch[k].segments.position[poses[k][j]] for k in by_pose]) @ r.T,
+                       r @ np.stack([batch[k].segments.rotation[poses[k][j]] for k in by_pose]))
+                   for j, n in enumerate(self.segments)}
+            out[by_pose] = segment_channels(seg, unwrap=False)
+            self.from_segments += len(by_pose)
+        if by_markers:
+            p = np.stack([self._markers(batch[k]) for k in by_markers])
+            out[by_markers] = marker_channels(self.take, {r: p[:, i] for i, r in enumerate(self.roles)})
         for ch in out:
             last = self._channels
             if last is not None:  # no jump of 2 pi from one frame to the next
@@ -193,7 +229,7 @@ class MarkerStreamSource:
             batch = [f]
             while len(batch) < BATCH and (f := self._next(0.0)) is not None:
                 batch.append(f)
-            channels = self._to_channels(np.stack([self._markers(f) for f in batch]))
+            channels = self._to_channels(batch)
             for f, ch in zip(batch, channels, strict=True):
                 cop = f.plates.combined_cop(self.rotation[2]) if len(f.plates) else None
                 self._ready.append(SourceFrame(f.t, ch, None, f.received, f.latency, cop))
@@ -204,7 +240,8 @@ class MarkerStreamSource:
         return {"calibration": self.calibration, "up_axis": self.up,
                 "markers": {"roles": len(self.roles), "max_gap_ms": 1000 * self.max_gap_s,
                             "filled_samples": self.filled, "long_gaps": self.long_gaps,
-                            "frames_with_long_gap": self.frames_with_long_gap}}
+                            "frames_with_long_gap": self.frames_with_long_gap},
+                "frames_from_segment_poses": self.from_segments}
 
     def close(self) -> None:
         self.mocap.close()

@@ -54,6 +54,20 @@ class PlateSamples:
 
 
 @dataclass(frozen=True)
+class SegmentPoses:
+    """Rigid bodies / skeleton segments the capture system solved, in the stream's axes: ``names``
+    (s,), ``position`` (s, 3) m, ``rotation`` (s, 3, 3) (columns: the segment's axes), ``tracked`` (s,)."""
+
+    names: tuple[str, ...] = ()
+    position: np.ndarray = field(default_factory=_empty3)
+    rotation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+@dataclass(frozen=True)
 class MocapFrame:
     """One capture frame. ``t`` s on the source's own clock (LSL: the sample's timestamp
     mapped onto this machine's LSL clock with the stream's clock offset; QTM: the frame
@@ -62,7 +76,8 @@ class MocapFrame:
     ``markers`` (n, 3) m in the stream's axes, NaN where a marker is occluded; ``up`` the
     stream's up axis ("+z", "+y", ...); ``plates`` the force plates (empty without);
     ``latency`` s from the source's timestamp to ``received`` when the source's clock can
-    be related to this machine's (LSL), else None."""
+    be related to this machine's (LSL), else None; ``segments`` the rigid bodies and skeleton
+    segments the system solved (empty without)."""
 
     t: float
     received: float
@@ -72,6 +87,7 @@ class MocapFrame:
     up: str
     plates: PlateSamples = field(default_factory=PlateSamples)
     latency: float | None = None
+    segments: SegmentPoses = field(default_factory=SegmentPoses)
 
     def marker(self, label: str) -> np.ndarray:
         """Position (3,) m of the marker ``label``; KeyError if the stream has no such label."""

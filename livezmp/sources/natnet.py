@@ -3,7 +3,9 @@
 livezmp's own NatNet client (:mod:`livezmp.sources.natnet_protocol`), unicast: it binds
 the data port (Motive's "Data Port" setting, 1511 by default), sends connect to the
 command port (1510), reads the server info and the model definitions (marker set
-names, force plates and their channel names), then receives frames of data. Markers of
+names, rigid bodies, skeletons and their bones, force plates and their channel names), then
+receives frames of data. Rigid bodies and skeleton bones become the frame's segment poses
+(by name; an untracked one NaN); markers of
 every marker set are delivered (``SET:MARKER`` when there are several sets; an all-zero
 position, Motive's mark of an occluded marker, becomes NaN); plates from their channels
 Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m). NatNet streams metres; it does not carry its
@@ -28,7 +30,7 @@ import numpy as np
 from livezmp.errors import InputError
 from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import InOrder, MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.mocap_frame import InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
 from livezmp.sources.url_query import query_params
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
@@ -113,6 +115,10 @@ class NatNetSource:
         many = len(m.marker_sets) > 1
         self.sets = m.marker_sets
         self.labels = tuple(f"{s}:{x}" if many else x for s, xs in m.marker_sets.items() for x in xs)
+        # rigid bodies by name, then each skeleton's bones (by bone name: what a body's segments are called)
+        self.bodies = [(None, b.id) for b in m.rigid_bodies] + [(sk.id, b.id) for sk in m.skeletons for b in sk.bones]
+        self.segment_names = tuple(b.name for b in m.rigid_bodies) + tuple(b.name for sk in m.skeletons
+                                                                           for b in sk.bones)
         self.plate_ids = tuple(p.id for p in m.plates)
         self.plate_names = tuple(p.serial or f"plate{p.id}" for p in m.plates)
         self.plate_index = {}
@@ -166,7 +172,21 @@ class NatNetSource:
                 ok = (idx[i] >= 0) & (idx[i] < len(values))
                 out[q][i, ok] = values[idx[i][ok]]
         return MocapFrame(f.timestamp, received, f.frame, self.labels, markers, self.up,
-                          PlateSamples(self.plate_names, out["force"], out["moment"], out["cop"]))
+                          PlateSamples(self.plate_names, out["force"], out["moment"], out["cop"]),
+                          segments=self._segments(f))
+
+    def _segments(self, f: nn.FrameOfData) -> SegmentPoses:
+        """The frame's rigid bodies and skeleton bones in the model's order (untracked: NaN)."""
+        from scipy.spatial.transform import Rotation
+
+        k = len(self.bodies)
+        pos, quat, tracked = np.full((k, 3), np.nan), np.tile([0.0, 0.0, 0.0, 1.0], (k, 1)), np.zeros(k, bool)
+        for i, (sid, bid) in enumerate(self.bodies):
+            p = f.rigid_bodies.get(bid) if sid is None else f.skeletons.get(sid, {}).get(bid)
+            if p is not None and p.tracked and np.any(p.quat):
+                pos[i], quat[i], tracked[i] = p.position, p.quat, True
+        rot = Rotation.from_quat(quat).as_matrix() if k else np.zeros((0, 3, 3))
+        return SegmentPoses(self.segment_names, pos, rot, tracked)
 
     def _keep_connected(self, now: float) -> None:
         if self._silent_since is None:
