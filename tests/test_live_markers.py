@@ -29,6 +29,7 @@ from livezmp.cli import main
 from livezmp.model.c3d import read_c3d
 from livezmp.offline.gaitlab import analyse_lab_take
 from livezmp.recording.reader import iter_messages
+from sim_devices.impairments import Impairments
 from sim_devices.lsl_publisher import LslPublisher
 from sim_devices.mocap_trial import load_c3d_trial, with_segments
 from sim_devices.natnet_server import NatNetServer
@@ -62,8 +63,9 @@ def offline():
 def _serve(kind: str, trial):
     """(server, URL, start): the server plays the trial once (3x real time: the analysis does not depend
     on when frames arrive, only on their stamps), from when the monitor is connected."""
-    if kind == "qtm":
-        server = QtmServer(trial, 0, loop=False, speed=3.0)
+    if kind.startswith("qtm"):  # "qtm-6d": every marker occluded, the segments' 6DOF bodies tracked
+        hidden = Impairments(gap=1.0) if kind == "qtm-6d" else None
+        server = QtmServer(trial, 0, loop=False, speed=3.0, impairments=hidden)
         return server, f"qtm://127.0.0.1:{server.port}", lambda: wait_until(server.streaming_clients, 10) and \
             server.start()
     if kind.startswith("natnet"):  # "natnet-skeleton": the segment poses alone, no markers
@@ -143,14 +145,17 @@ def test_streamed_trial_gives_the_zmp_of_analyze(kind, trial, offline, tmp_path)
     assert got["max_mm"] == pytest.approx(want["max_mm"], abs=1e-3)
 
 
-def test_natnet_skeleton_drives_the_body_directly(skeleton_trial, offline, tmp_path):
-    """A Motive-like stream of the segments' poses alone (NatNet skeleton, no markers): the body is
-    driven by the poses and gives analyze's ZMP to float32 (positions in metres, quaternions)."""
-    results, summary = _monitor("natnet-skeleton", skeleton_trial, tmp_path)
+@pytest.mark.parametrize("kind", ["natnet-skeleton", "qtm-6d"])
+def test_segment_poses_drive_the_body_directly(kind, skeleton_trial, offline, tmp_path):
+    """The segments' poses without markers (a NatNet skeleton; QTM 6DOF bodies with every marker
+    occluded): the body is driven by the poses and gives analyze's ZMP to float32 (positions,
+    quaternions or rotation matrices)."""
+    results, summary = _monitor(kind, skeleton_trial, tmp_path)
     exact, _ = offline
     assert summary["frames_from_segment_poses"] == summary["analysed_frames"] == skeleton_trial.n_frames
-    zmp = np.array([[r["zmp"][a] for a in "xyz"] for _, r in sorted(results.items())]) @ NATNET_TURN
-    np.testing.assert_allclose(zmp, exact.result.zmp, rtol=0, atol=2e-6)  # measured: 0.6 µm
+    turn = NATNET_TURN if kind.startswith("natnet") else np.eye(3)
+    zmp = np.array([[r["zmp"][a] for a in "xyz"] for _, r in sorted(results.items())]) @ turn
+    np.testing.assert_allclose(zmp, exact.result.zmp, rtol=0, atol=2e-6)  # measured: 0.6 µm (NatNet)
 
 
 def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
@@ -176,3 +181,28 @@ def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
         assert seg.tracked.all() and len(f.markers) == 0
         np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[f.frame] @ y_up.T, atol=1e-6)
         np.testing.assert_allclose(seg.rotation, y_up @ skeleton_trial.segment_rot[f.frame], atol=1e-6)
+
+
+def test_qtm_client_reads_6dof_bodies(skeleton_trial):
+    """qtm-rt's 6D component arrives as the bodies the server sent (QTM's z-up lab axes)."""
+    from livezmp.sources.mocap_factory import open_mocap_source
+
+    server, url, start = _serve("qtm", skeleton_trial)
+    src = open_mocap_source(url)
+    threading.Thread(target=start, daemon=True).start()
+    frames, deadline = [], time.monotonic() + 10
+    try:
+        while len(frames) < 50 and time.monotonic() < deadline:
+            f = src.read(0.05)
+            if f is not None:
+                frames.append(f)
+    finally:
+        src.close()
+        server.close()
+    assert len(frames) >= 50 and frames[0].segments.names == skeleton_trial.segment_names
+    for f in frames:
+        seg = f.segments
+        assert seg.tracked.all()
+        i = f.frame - 1  # QTM numbers frames from 1
+        np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[i], atol=1e-6)
+        np.testing.assert_allclose(seg.rotation, skeleton_trial.segment_rot[i], atol=1e-6)
