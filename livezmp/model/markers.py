@@ -87,6 +87,14 @@ class MarkerTake:
     subject: C3dTrial | None = None  # the trial the body was calibrated on (its widths, height, labels)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (F, 3) arrays: ``np.cross``'s arithmetic without its per-call
+    overhead (a live stream converts one frame at a time)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
@@ -180,14 +188,14 @@ def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: fl
 def _frame(z_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     """(F, 3, 3) rotations with z along ``z_dir`` and y as close to ``y_ref`` as allowed; columns x, y, z."""
     z = _unit(z_dir)
-    x = _unit(np.cross(y_ref, z))
-    return np.stack([x, np.cross(z, x), z], axis=-1)
+    x = _unit(_cross(y_ref, z))
+    return np.stack([x, _cross(z, x), z], axis=-1)
 
 
 def _foot_frame(x_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     x = _unit(x_dir)
-    z = _unit(np.cross(x, y_ref))
-    return np.stack([x, np.cross(z, x), z], axis=-1)
+    z = _unit(_cross(x, y_ref))
+    return np.stack([x, _cross(z, x), z], axis=-1)
 
 
 def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -296,7 +304,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     y = _unit(m["LASI"] - m["RASI"])
     fwd = mid_asis - back
     x = _unit(fwd - np.sum(fwd * y, axis=1, keepdims=True) * y)
-    z = np.cross(x, y)
+    z = _cross(x, y)
     if dims is None:
         pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
         pd = float(np.median(np.linalg.norm(fwd, axis=1)))
@@ -366,7 +374,7 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     forearm)."""
     top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
     fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
-    thorax = _frame(top - bottom, np.cross(top - bottom, fwd))
+    thorax = _frame(top - bottom, _cross(top - bottom, fwd))
     front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
     head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
     out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
