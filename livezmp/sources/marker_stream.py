@@ -33,6 +33,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from livezmp.balance.plates import plates_floor
 from livezmp.errors import InputError
 from livezmp.model.body import world_from_up_axis
 from livezmp.model.body_spec import marker_body, stream_marker_body
@@ -49,14 +50,12 @@ BATCH = 32  # frames already waiting that are converted together
 class MarkerStreamSource:
     """``mocap`` (a connected capture stream) as marker-body frames; see the module docstring.
     ``calibration`` a C3D trial of the subject (None: the stream's first ``calibration_s``);
-    ``options`` the marker body's (mass, HAT); ``floor_z`` set from the calibration trial's plates
-    when it has them (as ``livezmp analyze`` does)."""
+    ``options`` the marker body's (mass, HAT). ``ground_z`` (m, internal frame): the floor, the
+    calibration trial's plates' surface when it has plates (as ``livezmp analyze`` takes it), else None."""
 
     def __init__(self, mocap: MocapSource, calibration: C3dTrial | None = None,
                  options: MarkerBodyOptions | None = None, calibration_s: float = CALIBRATION_S,
                  max_gap_s: float = MAX_GAP_S, timeout: float = 10.0):
-        from livezmp.balance.plates import plates_floor
-
         self.mocap, self.name = mocap, mocap.name
         self.stats, self.errors = mocap.stats, mocap.errors
         self.max_gap_s = max_gap_s
