@@ -2,21 +2,23 @@
 
 As Motive does: a command socket (``command_port``, 1510 by default) answers connect
 with server info (the data port, a 10 MHz high-resolution clock), model-definition
-requests with the marker set and force plates, keep-alives silently, anything else
-with "unrecognised request"; every frame of data goes to each connected client's
-address at ``data_port`` (1511 by default; Motive's setting, which the client binds).
-Positions are in metres with y up (Motive's streaming default): a z-up trial is turned
-(x, y, z) → (x, z, −y). Force plates stream Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m,
-centre of pressure) in the same axes. Occluded markers are sent as (0, 0, 0), as Motive
-sends them in marker sets. A trial with segment poses (:func:`~sim_devices.mocap_trial.with_segments`)
-also streams them as a skeleton (id 1, one bone per segment, named as the segment, each
-pose a position and an x, y, z, w quaternion); ``markers=False`` streams the skeleton alone.
+requests with the marker set, skeleton and force plates, the "FrameRate" request with
+the rate (float32), keep-alives silently, anything else with "unrecognised request";
+every frame of data goes to each connected client's address at ``data_port`` (1511 by
+default; Motive's setting, which the client binds). Positions are in metres with y up
+(Motive's streaming default): a z-up trial is turned (x, y, z) → (x, z, −y). Force
+plates stream Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m, centre of pressure) in the
+same axes. Occluded markers are sent as (0, 0, 0), as Motive sends them in marker sets.
+A trial with segment poses (:func:`~sim_devices.mocap_trial.with_segments`) also streams
+them as a skeleton (id 1, one bone per segment, named as the segment, each pose a
+position and an x, y, z, w quaternion); ``markers=False`` streams the skeleton alone.
 :meth:`close` stops answering and sending (Motive quits).
 """
 
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 import time
 
@@ -86,7 +88,7 @@ class NatNetServer:
             except OSError:
                 return
             try:
-                kind, _ = nn.split(data)
+                kind, payload = nn.split(data)
             except nn.NatNetError:
                 continue
             if kind == nn.CONNECT:
@@ -96,6 +98,8 @@ class NatNetServer:
                 reply = nn.message(nn.SERVERINFO, nn.pack_server_info(info))
             elif kind == nn.REQUEST_MODELDEF:
                 reply = nn.message(nn.MODELDEF, nn.pack_modeldef(self.modeldef()))
+            elif kind == nn.REQUEST and payload.rstrip(b"\0") == b"FrameRate":  # the SDK's rate request
+                reply = nn.message(nn.RESPONSE, struct.pack("<f", self.trial.rate))
             elif kind == nn.KEEPALIVE:
                 continue
             elif kind == nn.DISCONNECT:

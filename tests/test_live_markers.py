@@ -164,6 +164,7 @@ def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
 
     server, url, start = _serve("natnet-skeleton", skeleton_trial)
     src = open_mocap_source(url)
+    assert src.nominal_dt == 1 / skeleton_trial.rate  # asked ("FrameRate") before any frame came
     start()
     frames, deadline = [], time.monotonic() + 10
     try:

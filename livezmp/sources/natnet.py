@@ -3,7 +3,9 @@
 livezmp's own NatNet client (:mod:`livezmp.sources.natnet_protocol`), unicast: it binds
 the data port (Motive's "Data Port" setting, 1511 by default), sends connect to the
 command port (1510), reads the server info and the model definitions (marker set
-names, rigid bodies, skeletons and their bones, force plates and their channel names), then
+names, rigid bodies, skeletons and their bones, force plates and their channel names) and
+the frame rate (the SDK's ``FrameRate`` request; measured from the frames' timestamps when a
+server does not answer it), then
 receives frames of data. Rigid bodies and skeleton bones become the frame's segment poses
 (by name; an untracked one NaN); markers of
 every marker set are delivered (``SET:MARKER`` when there are several sets; an all-zero
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import select
 import socket
+import struct
 import time
 from urllib.parse import urlsplit
 
@@ -97,6 +100,8 @@ class NatNetSource:
                 return None
             if got == want:
                 return payload_in
+            if got == nn.UNRECOGNIZED:  # a server without this request
+                return None
         return None
 
     def _handshake(self, timeout: float) -> bool:
@@ -112,6 +117,10 @@ class NatNetSource:
             self.errors.report("malformed", f"{self.name}: server info / model: {e}")
             return False
         self.clock_hz = self.info.clock_hz
+        # the NatNet SDK's "FrameRate" request, answered with the rate as a float32; else measured
+        rate = self._request(nn.REQUEST, b"FrameRate\0", nn.RESPONSE, timeout)
+        if rate is not None and len(rate) >= 4 and struct.unpack_from("<f", rate)[0] > 0:
+            self._dt = 1.0 / struct.unpack_from("<f", rate)[0]
         many = len(m.marker_sets) > 1
         self.sets = m.marker_sets
         self.labels = tuple(f"{s}:{x}" if many else x for s, xs in m.marker_sets.items() for x in xs)
@@ -133,7 +142,8 @@ class NatNetSource:
 
     @property
     def nominal_dt(self) -> float | None:
-        """NatNet's server info carries no frame rate: measured from the frames' timestamps."""
+        """The server's answer to "FrameRate", else (it carries no rate otherwise) measured from the
+        frames' timestamps."""
         return self._dt
 
     _dt: float | None = None
