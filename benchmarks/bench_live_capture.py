@@ -28,13 +28,11 @@ Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,ls
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
 import os
 import sys
 import tempfile
 import threading
 import time
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_mocap_sources import free_udp_port  # noqa: E402
+from bench_mocap_sources import spawn_server  # noqa: E402
 from bench_monitor import Page  # noqa: E402
 
 from livezmp.balance.pipeline import default_config  # noqa: E402
@@ -130,15 +128,7 @@ class InHand:
 
 
 def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
-    ctx = mp.get_context("spawn")
-    ready, done, go = ctx.Queue(), ctx.Queue(), ctx.Event()
-    data_port = free_udp_port() if kind == "natnet" else None
-    address = f"bench-{uuid.uuid4().hex[:8]}" if kind == "lsl" else data_port
-    proc = ctx.Process(target=serve, args=(kind, rate, laps, address, ready, go, done), daemon=True)
-    proc.start()
-    where = ready.get(timeout=60)
-    url = {"lsl": f"lsl://{where}", "qtm": f"qtm://127.0.0.1:{where}",
-           "natnet": f"natnet://127.0.0.1:{where}?data_port={data_port}"}[kind]
+    proc, _, url, _, go, done = spawn_server(serve, kind, rate, laps)
     source = InHand(open_source(url, SourceOptions(calibration=str(TRIAL))))
     fps = 1.0 / source.nominal_dt
     session = {"source": url, "fps": fps, "mode": "full", "ground_z": source.ground_z, "alarm_after": 1e9,

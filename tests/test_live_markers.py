@@ -158,26 +158,36 @@ def test_segment_poses_drive_the_body_directly(kind, skeleton_trial, offline, tm
     np.testing.assert_allclose(zmp, exact.result.zmp, rtol=0, atol=2e-6)  # measured: 0.6 µm (NatNet)
 
 
-def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
-    """Each bone arrives as the pose the server sent: position and rotation in Motive's y-up axes."""
+def _first_frames(kind: str, trial, n: int = 50, check=None) -> list:
+    """The first ``n`` MocapFrames the capture client reads from the ``kind`` server playing ``trial``
+    (``check(source)`` first, before any frame is sent)."""
     from livezmp.sources.mocap_factory import open_mocap_source
 
-    server, url, start = _serve("natnet-skeleton", skeleton_trial)
+    server, url, start = _serve(kind, trial)
     src = open_mocap_source(url)
-    assert src.nominal_dt == 1 / skeleton_trial.rate  # asked ("FrameRate") before any frame came
-    start()
     frames, deadline = [], time.monotonic() + 10
     try:
-        while len(frames) < 50 and time.monotonic() < deadline:
+        if check is not None:
+            check(src)
+        threading.Thread(target=start, daemon=True).start()
+        while len(frames) < n and time.monotonic() < deadline:
             f = src.read(0.05)
             if f is not None:
                 frames.append(f)
     finally:
         src.close()
         server.close()
-    assert len(frames) >= 50 and frames[0].segments.names == skeleton_trial.segment_names
+    assert len(frames) >= n and frames[0].segments.names == trial.segment_names
+    return frames
+
+
+def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
+    """Each bone arrives as the pose the server sent: position and rotation in Motive's y-up axes."""
+    def asked_rate(src):  # asked ("FrameRate") before any frame came
+        assert src.nominal_dt == 1 / skeleton_trial.rate
+
     y_up = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # Motive's axes of the z-up trial
-    for f in frames:
+    for f in _first_frames("natnet-skeleton", skeleton_trial, check=asked_rate):
         seg = f.segments
         assert seg.tracked.all() and len(f.markers) == 0
         np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[f.frame] @ y_up.T, atol=1e-6)
@@ -186,22 +196,7 @@ def test_natnet_client_reads_rigid_bodies_and_skeleton_bones(skeleton_trial):
 
 def test_qtm_client_reads_6dof_bodies(skeleton_trial):
     """qtm-rt's 6D component arrives as the bodies the server sent (QTM's z-up lab axes)."""
-    from livezmp.sources.mocap_factory import open_mocap_source
-
-    server, url, start = _serve("qtm", skeleton_trial)
-    src = open_mocap_source(url)
-    threading.Thread(target=start, daemon=True).start()
-    frames, deadline = [], time.monotonic() + 10
-    try:
-        while len(frames) < 50 and time.monotonic() < deadline:
-            f = src.read(0.05)
-            if f is not None:
-                frames.append(f)
-    finally:
-        src.close()
-        server.close()
-    assert len(frames) >= 50 and frames[0].segments.names == skeleton_trial.segment_names
-    for f in frames:
+    for f in _first_frames("qtm", skeleton_trial):
         seg = f.segments
         assert seg.tracked.all()
         i = f.frame - 1  # QTM numbers frames from 1
