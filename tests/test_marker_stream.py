@@ -116,3 +116,18 @@ def test_stream_too_short_to_calibrate_is_one_line(c3d):
     missing = replace(c3d, labels=[x if x != "LASI" else "XXXX" for x in c3d.labels])
     with pytest.raises(InputError, match="missing LASI"):
         MarkerStreamSource(FakeStream(missing.labels, c3d.points), None)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["qtm://127.0.0.1:1", "--calibration", "/no/such.c3d"], "/no/such.c3d: no such file"),
+    (["udp://127.0.0.1:9", "--calibration", str(TRIAL)], "--calibration is for capture streams"),
+    (["qtm://127.0.0.1:1", "--frames", "0"], "--frames must be a positive number"),
+    (["qtm://127.0.0.1:1", "--lag-s", "-1"], "--lag-s (s): -1 is outside [0, 10]"),
+    (["qtm://127.0.0.1:1", "--window-s", "nan"], "--window-s (s): nan is outside (0, 10]"),
+])
+def test_monitor_capture_options_refused_in_one_line(args, message, capsys):
+    from livezmp.cli import main
+
+    assert main(["monitor", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err

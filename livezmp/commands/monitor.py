@@ -12,6 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
+from livezmp.checks import check_number
 from livezmp.commands.common import pipeline_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
@@ -94,11 +95,16 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
     return summary
 
 
+MAX_WINDOW_S = 10.0  # s: the estimator's window and lag (its memory grows with the window)
+
+
 def cmd_monitor(args: argparse.Namespace) -> int:
     if not args.alarm_after >= 0:
         raise InputError(f"--alarm-after must be ≥ 0 ms, got {args.alarm_after}")
     if args.frames is not None and args.frames < 1:
         raise InputError(f"--frames must be a positive number of frames, got {args.frames}")
+    check_number(args.window_s, "--window-s (s)", 0.0, MAX_WINDOW_S, lo_open=True)
+    check_number(args.lag_s, "--lag-s (s)", 0.0, MAX_WINDOW_S)
     source = _source(args)
     fps = 1.0 / source.nominal_dt
     cfg = pipeline_config(args, SimpleNamespace(body=source.body, fps=fps))  # it needs only the body and rate
