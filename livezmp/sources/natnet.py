@@ -13,10 +13,12 @@ position, Motive's mark of an occluded marker, becomes NaN); plates from their c
 Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m). NatNet streams metres; it does not carry its
 up axis: Motive streams y up unless its Up Axis setting says z (then ``?up=z``).
 
-Frames go in order by frame number (late, duplicate, lost counted; bad datagrams
-``malformed``). No frame for ``retry`` s: connect is sent again every ``retry`` s (Motive
-restarted, or a new take) and the model re-read; a server info answering it after a
-silence, followed by frames, counts as a reconnect. NatNet timestamps are Motive's own clock, so
+A receiving thread drains the data socket as datagrams arrive and queues the frames
+(at most 4096 wait; more are counted as ``overflow``). Frames go in order by frame
+number (late, duplicate, lost counted; bad datagrams ``malformed``). No frame for
+``retry`` s: connect is sent again every ``retry`` s (Motive restarted, or a new take)
+and the model re-read; a server info answering it after a silence, followed by frames,
+counts as a reconnect. NatNet timestamps are Motive's own clock, so
 ``MocapFrame.latency`` is None.
 """
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 import select
 import socket
 import struct
+import threading
 import time
 from urllib.parse import urlsplit
 
@@ -33,10 +36,11 @@ import numpy as np
 from livezmp.errors import InputError
 from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
+from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
 from livezmp.sources.url_query import query_params
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
+POLL_S = 0.1  # s: the receiving thread looks at its stop flag and the silence this often
 QUERY_KEYS = {"data_port", "up", "timeout"}
 PLATE_CHANNELS = {"force": ("Fx", "Fy", "Fz"), "moment": ("Mx", "My", "Mz"), "cop": ("Cx", "Cy", "Cz")}
 
@@ -84,6 +88,9 @@ class NatNetSource:
         if not self._handshake(timeout):
             self._close_sockets()
             raise InputError(f"{url}: no NatNet server answered within {timeout:g} s")
+        self.queue = FrameQueue(self.stats)
+        self._thread = threading.Thread(target=self._receive, name="natnet-client", daemon=True)
+        self._thread.start()
 
     def _request(self, kind: int, payload: bytes, want: int, timeout: float) -> bytes | None:
         try:
@@ -208,19 +215,21 @@ class NatNetSource:
                 self._rejoined = True
                 self._silent_since = now
 
-    def read(self, timeout: float) -> MocapFrame | None:
-        deadline = time.monotonic() + timeout
+    def _receive(self) -> None:
+        """The receiving thread: drains the data socket as datagrams arrive (the kernel's buffer holds
+        only a fraction of a second at 1 kHz), hands frames to the queue, reconnects on silence."""
         while not self._closed:
             try:
                 packet = self.data.recv(65536)
             except BlockingIOError:
-                now = time.monotonic()
-                self._keep_connected(now)
-                left = deadline - now
-                if left <= 0:
-                    return None
-                select.select([self.data], [], [], min(left, self.retry))
+                self._keep_connected(time.monotonic())
+                try:
+                    select.select([self.data], [], [], POLL_S)
+                except (OSError, ValueError):  # closed meanwhile
+                    return
                 continue
+            except OSError:
+                return
             now = time.monotonic()
             self._silent_since = None
             try:
@@ -230,9 +239,11 @@ class NatNetSource:
                 self.errors.report("malformed", f"{self.name}: {e}")
                 continue
             f = self._frame(payload, now) if kind == nn.FRAMEOFDATA else None
-            if f is not None or now >= deadline:
-                return f
-        return None
+            if f is not None:
+                self.queue.put(f)
+
+    def read(self, timeout: float) -> MocapFrame | None:
+        return None if self._closed else self.queue.get(timeout)
 
     def _close_sockets(self) -> None:
         self.cmd.close()
@@ -241,6 +252,7 @@ class NatNetSource:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            self._thread.join(1.0)
             try:
                 self.cmd.send(nn.message(nn.DISCONNECT))
             except OSError:
