@@ -18,8 +18,8 @@ network and reader delay beyond the fastest frame). The LSL figure carries the e
 LSL's clock-offset estimate (``time_correction``, one round trip under the machine's
 load): server and reader share one clock here, so a negative delay is that error.
 
-Not yet here: the whole pipeline (markers → body → ZMP) needs the marker body of the
-force-plate issue; see the README.
+The whole pipeline (markers → body → ZMP → recording and dashboard) is measured by
+``bench_live_capture.py``.
 
 Run: python benchmarks/bench_mocap_sources.py [--seconds 3]
 """
@@ -194,17 +194,24 @@ def read_bare_natnet(port: int, data_port: int, go, done) -> dict:
             "span": arrivals[-1] - arrivals[0], "delays": list(lag - lag.min())}
 
 
-def run_case(kind: str, reader: str, rate: float, seconds: float) -> dict:
+def spawn_server(target, kind: str, rate: float, amount: float):
+    """Start the capture server process ``target(kind, rate, amount, address, ready, go, done)``; returns
+    (process, where it listens, livezmp's URL for it, NatNet data port, go, done)."""
     ctx = mp.get_context("spawn")
     ready, done, go = ctx.Queue(), ctx.Queue(), ctx.Event()
     data_port = free_udp_port() if kind == "natnet" else None
     address = f"bench-{uuid.uuid4().hex[:8]}" if kind == "lsl" else data_port
-    proc = ctx.Process(target=serve, args=(kind, rate, seconds, address, ready, go, done), daemon=True)
+    proc = ctx.Process(target=target, args=(kind, rate, amount, address, ready, go, done), daemon=True)
     proc.start()
-    where = ready.get(timeout=30)
+    where = ready.get(timeout=60)
+    url = {"lsl": f"lsl://{where}", "qtm": f"qtm://127.0.0.1:{where}",
+           "natnet": f"natnet://127.0.0.1:{where}?data_port={data_port}"}[kind]
+    return proc, where, url, data_port, go, done
+
+
+def run_case(kind: str, reader: str, rate: float, seconds: float) -> dict:
+    proc, where, url, data_port, go, done = spawn_server(serve, kind, rate, seconds)
     if reader == "livezmp":
-        url = {"lsl": f"lsl://{where}", "qtm": f"qtm://127.0.0.1:{where}",
-               "natnet": f"natnet://127.0.0.1:{where}?data_port={data_port}"}[kind]
         out = read_livezmp(url, go, done)
     elif kind == "lsl":
         out = read_bare_lsl(where, go, done)

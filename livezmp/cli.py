@@ -140,7 +140,14 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams")
     p.add_argument("motion", nargs="?", metavar="SOURCE",
                    help="motion file (.bvh, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
-                        "(livezmp frames), tcp://HOST:PORT (BVH broadcast); default: built-in demo")
+                        "(livezmp frames), tcp://HOST:PORT (BVH broadcast), lsl://NAME, qtm://HOST, natnet://HOST "
+                        "(capture systems' markers and plates); default: built-in demo")
+    p.add_argument("--calibration", metavar="TRIAL.c3d",
+                   help="a capture stream's subject: C3D trial (same marker labels) calibrating the marker body "
+                        "(default: the stream's first 2 s)")
+    p.add_argument("--window-s", type=float, help="estimator spline window, s (default 0.4)")
+    p.add_argument("--lag-s", type=float, help="estimator output lag, s (default 0.1; analyze of a C3D uses 0.8 / 0.4)")
+    p.add_argument("--frames", type=int, metavar="N", help="stop after N input frames (default: at the end or Ctrl-C)")
     p.add_argument("--skeleton", help="BVH file giving a stream's skeleton (hierarchy, optional frames)")
     p.add_argument("--fps", type=float, help="a stream's frame rate, Hz (default: the skeleton file's)")
     p.add_argument("--speed", type=float, default=1.0, help="replay speed factor for files (0 = as fast as possible)")

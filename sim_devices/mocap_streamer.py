@@ -220,6 +220,12 @@ def _trial(spec: str):
 def serve_capture(args: argparse.Namespace) -> str:
     """Plays a C3D (or generated) trial from a simulated capture server until done or Ctrl-C."""
     trial = _trial(args.motion)
+    if args.skeleton or args.skeleton_only:
+        from sim_devices.mocap_trial import with_segments
+
+        if args.natnet is None or args.motion.startswith("generated:"):
+            raise InputError("--skeleton: a C3D trial served over --natnet")
+        trial = with_segments(trial, args.motion)
     imp = Impairments(noise_pos=args.noise_mm * 1e-3, gap=args.gap, drop=args.drop, late=args.late, seed=args.seed)
     play = {"impairments": imp, "speed": args.speed, "loop": args.loop, "max_frames": args.frames}
     if args.lsl is not None:
@@ -238,7 +244,7 @@ def serve_capture(args: argparse.Namespace) -> str:
         else:
             from sim_devices.natnet_server import NatNetServer
 
-            server = NatNetServer(trial, args.natnet, args.data_port, **play)
+            server = NatNetServer(trial, args.natnet, args.data_port, markers=not args.skeleton_only, **play)
             print(f"serving NatNet on natnet://127.0.0.1:{server.command_port}?data_port={args.data_port}",
                   flush=True)
         try:
@@ -260,6 +266,9 @@ def main(argv: list[str] | None = None) -> int:
     out.add_argument("--qtm", type=int, metavar="PORT", help="serve QTM RT on 127.0.0.1:PORT (0: any)")
     out.add_argument("--natnet", type=int, metavar="PORT", help="serve NatNet commands on 127.0.0.1:PORT")
     p.add_argument("--data-port", type=int, default=1511, help="NatNet data port the client binds")
+    p.add_argument("--skeleton", action="store_true", help="NatNet: also stream the marker body's segments as a "
+                                                           "skeleton")
+    p.add_argument("--skeleton-only", action="store_true", help="NatNet: stream the skeleton without markers")
     p.add_argument("--noise-mm", type=float, default=0.0, help="marker noise std (mm; capture servers)")
     p.add_argument("--gap", type=float, default=0.0, help="marker occlusion probability per frame")
     p.add_argument("--format", choices=["json", "binary"], default="json", help="UDP frame format")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,6 +41,9 @@ class MocapTrial:
     cop: np.ndarray
     corners: np.ndarray
     source: str
+    segment_names: tuple[str, ...] = ()  # rigid segments a capture system solves (skeleton bones)
+    segment_pos: np.ndarray | None = None  # (F, s, 3) m, lab axes
+    segment_rot: np.ndarray | None = None  # (F, s, 3, 3), columns the segment's axes in the lab's
 
     @property
     def n_frames(self) -> int:
@@ -86,6 +89,26 @@ def load_c3d_trial(path: str) -> MocapTrial:
                       str(path))
 
 
+def with_segments(trial: MocapTrial, path: str) -> MocapTrial:
+    """``trial`` (of the C3D file ``path``) with the segment poses of livezmp's marker body of that file
+    (pelvis, thighs, shanks, feet, the HAT or the upper-body segments), as a capture system's skeleton
+    solver would stream them: the truth a skeleton stream of this trial carries."""
+    from scipy.spatial.transform import Rotation
+
+    from livezmp.model.c3d import read_c3d
+    from livezmp.model.markers import body_from_markers
+
+    take = body_from_markers(read_c3d(path))
+    if take.first_frame != 0 or len(take.frames) != trial.n_frames:
+        raise InputError(f"{path}: the marker body does not cover every frame; no segment poses")
+    r_in = take.body.world_from_input
+    q = take.frames.reshape(trial.n_frames, -1, 6)
+    rot = Rotation.from_euler("ZYX", q[:, :, 3:].reshape(-1, 3)).as_matrix().reshape(q.shape[:2] + (3, 3))
+    names = tuple(n[: -len(".x")] for n in take.body.channel_names[::6])
+    return replace(trial, segment_names=names, segment_pos=q[:, :, :3] @ r_in,
+                   segment_rot=np.einsum("ji,fsjk->fsik", r_in, rot))
+
+
 def generated_trial(rate: float, seconds: float, n_markers: int = 20, n_plates: int = 2) -> MocapTrial:
     """A synthetic trial at ``rate`` Hz: markers on a body swaying 2 cm at 0.5 Hz (z up,
     metres), each plate carrying half of a 700 N body with its CoP following the sway."""
@@ -107,6 +130,27 @@ def generated_trial(rate: float, seconds: float, n_markers: int = 20, n_plates: 
     return MocapTrial(tuple(f"M{i:02d}" for i in range(n_markers)), markers, rate, "+z",
                       tuple(f"plate{i + 1}" for i in range(n_plates)), force, moment, cop, corners,
                       f"generated {rate:g} Hz")
+
+
+def resampled(trial: MocapTrial, rate: float) -> MocapTrial:
+    """``trial`` at ``rate`` Hz over the same span: markers and plates interpolated by a cubic spline
+    through the recorded frames (a marker missing at either neighbouring frame stays missing), e.g.
+    a 100 Hz gait trial played as a 1000 Hz camera would see it."""
+    from scipy.interpolate import CubicSpline
+
+    t = np.arange(trial.n_frames) / trial.rate
+    new = np.arange(int(np.floor(t[-1] * rate)) + 1) / rate
+
+    def spline(x: np.ndarray) -> np.ndarray:
+        seen = np.isfinite(x).all(axis=tuple(range(2, x.ndim)))  # (F, n) samples with every coordinate
+        out = CubicSpline(t, np.nan_to_num(x), axis=0)(new)
+        nearest = np.clip(np.searchsorted(t, new), 1, len(t) - 1)
+        ok = seen[nearest - 1] & seen[nearest]
+        return np.where(ok.reshape(ok.shape + (1,) * (x.ndim - 2)), out, np.nan)
+
+    return replace(trial, markers=spline(trial.markers), rate=rate, force=spline(trial.force),
+                   moment=spline(trial.moment), cop=spline(trial.cop), source=f"{trial.source} at {rate:g} Hz",
+                   segment_names=(), segment_pos=None, segment_rot=None)  # poses are not interpolated
 
 
 @dataclass
@@ -136,7 +180,8 @@ class PlayCounters:
 class TrialFrame:
     """One frame as a server sends it: ``number`` (0-based), ``t`` s from the first
     frame, ``markers`` (n, 3) m (NaN missing), plates ``force``/``moment``/``cop`` (p, 3),
-    ``gaps`` markers made missing in this frame."""
+    ``gaps`` markers made missing in this frame; ``segment_pos`` (s, 3) / ``segment_rot`` (s, 3, 3)
+    the segment poses when the trial has them."""
 
     number: int
     t: float
@@ -145,6 +190,8 @@ class TrialFrame:
     moment: np.ndarray
     cop: np.ndarray
     gaps: int = 0
+    segment_pos: np.ndarray | None = None
+    segment_rot: np.ndarray | None = None
 
 
 class TrialPlayer:
@@ -177,7 +224,8 @@ class TrialPlayer:
                 hide = rng.random(len(m)) < imp.gap
                 gaps = int(np.count_nonzero(hide & ~np.isnan(m[:, 0])))
                 m = np.where(hide[:, None], np.nan, m)
-            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps)
+            poses = (None, None) if tr.segment_pos is None else (tr.segment_pos[i], tr.segment_rot[i])
+            yield TrialFrame(k, t, m, tr.force[i], tr.moment[i], tr.cop[i], gaps, *poses)
             k += 1
 
     def start(self, send: Callable[[TrialFrame], None], name: str) -> None:

@@ -10,8 +10,12 @@ endian as QTM's little-endian port does:
   and marker labels (``The_3D``), the plates with their corners (``Force``, lengths mm);
 - ``getcurrentframe`` / ``streamframes allframes|frequency:N|frequencydivisor:N
   COMPONENTS`` / ``streamframes stop``: data packets with the ``3d`` component (mm, NaN
-  for occluded markers) and the ``force`` component (per plate one sample: force N,
-  moment N·m, application point mm, in the plate's own axes from its corners);
+  for occluded markers), the ``force`` component (per plate one sample: force N,
+  moment N·m, application point mm, in the plate's own axes from its corners) and, for a
+  trial with segment poses, the ``6d`` component (header: body count int32, 2D drop and
+  out-of-sync rates int16; per body position xyz float32 mm and the 3x3 rotation matrix
+  as 9 float32 column by column, as Qualisys' clients read it; bodies named in the
+  parameters' ``The_6D``);
 - anything else: an error packet "Parse error".
 
 Packet layouts follow the QTM RT protocol documentation (header: size incl. header,
@@ -39,9 +43,9 @@ from sim_devices.tcp_accept import accept_until
 HEADER = struct.Struct("<II")
 TYPE_ERROR, TYPE_COMMAND, TYPE_XML, TYPE_DATA, TYPE_NO_MORE_DATA, TYPE_EVENT = 0, 1, 2, 3, 4, 6
 EVENT_CAPTURE_STARTED = 3
-COMPONENT_3D, COMPONENT_FORCE = 1, 4
+COMPONENT_3D, COMPONENT_FORCE, COMPONENT_6D = 1, 4, 5
 VERSIONS = (1, 8), (1, 25)
-COMPONENTS = {"3d": COMPONENT_3D, "force": COMPONENT_FORCE}
+COMPONENTS = {"3d": COMPONENT_3D, "force": COMPONENT_FORCE, "6d": COMPONENT_6D}
 
 
 def packet(kind: int, body: bytes) -> bytes:
@@ -54,7 +58,7 @@ def text_packet(kind: int, text: str) -> bytes:
 
 def parameters_xml(trial: MocapTrial, version: str, parts: list[str]) -> str:
     """The parameters XML of ``parts`` (general, 3d, force; "all" = every one)."""
-    want = set(parts) if "all" not in parts else {"general", "3d", "force"}
+    want = set(parts) if "all" not in parts else {"general", "3d", "force", "6d"}
     out = [f"<QTM_Parameters_Ver_{version}>"]
     if "general" in want:
         out.append(f"<General><Frequency>{trial.rate:g}</Frequency><Capture_Time>{trial.n_frames / trial.rate:.6f}"
@@ -76,6 +80,9 @@ def parameters_xml(trial: MocapTrial, version: str, parts: list[str]) -> str:
                           f"<Width>{np.linalg.norm(c[0] - c[3]):.6f}</Width><Location>{corners}</Location>"
                           "<Origin><X>0</X><Y>0</Y><Z>0</Z></Origin></Plate>")
         out.append(f"<Force><Unit_Length>mm</Unit_Length><Unit_Force>N</Unit_Force>{''.join(plates)}</Force>")
+    if "6d" in want:
+        bodies = "".join(f"<Body><Name>{n}</Name><RGBColor>255</RGBColor></Body>" for n in trial.segment_names)
+        out.append(f"<The_6D><Bodies>{len(trial.segment_names)}</Bodies>{bodies}</The_6D>")
     out.append(f"</QTM_Parameters_Ver_{version}>")
     return "".join(out)
 
@@ -86,6 +93,12 @@ def data_packet(trial: MocapTrial, f: TrialFrame, components: list[int], axes: l
     for comp in components:
         if comp == COMPONENT_3D:
             body = struct.pack("<Ihh", len(f.markers), 0, 0) + (f.markers * 1e3).astype("<f4").tobytes()
+        elif comp == COMPONENT_6D:
+            n = len(trial.segment_names)
+            body = struct.pack("<ihh", n, 0, 0)
+            if n:  # position mm, then the rotation matrix column by column
+                cols = np.swapaxes(f.segment_rot, 1, 2).reshape(n, 9)
+                body += np.hstack([f.segment_pos * 1e3, cols]).astype("<f4").tobytes()
         else:
             body = struct.pack("<i", len(axes))
             for i, (R, origin) in enumerate(axes):

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from livezmp.model.c3d import PlateRecord
+from livezmp.model.c3d import C3dTrial, PlateRecord
+from livezmp.model.markers import input_rotation
 
 QUIET_WINDOW_S = 0.1  # s: an unloaded stretch this long gives a plate's offset
 QUIET_STD_N = 3.0  # N: vertical force this steady (std) is "quiet"
@@ -35,6 +36,15 @@ class PlateFrames:
     outlines: list[np.ndarray]
     offsets: list[tuple[np.ndarray, np.ndarray] | None]
     surface_z: float
+
+
+def plates_floor(trial: C3dTrial) -> float | None:
+    """Height (m, internal frame) of the trial's plates' surface (the mean of their corners): the floor;
+    None without plates."""
+    if not trial.plates:
+        return None
+    r_in = input_rotation(trial)[1]
+    return float(np.mean([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates]))
 
 
 def unloaded_offset(plate: PlateRecord, analog_rate: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -12,9 +12,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
+from livezmp.checks import check_number
 from livezmp.commands.common import pipeline_config, stop_on_signals
 from livezmp.errors import InputError
-from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -44,7 +45,7 @@ def _source(args: argparse.Namespace) -> Source:
     bvh = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up,
                          mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
-                         speed=args.speed, loop=args.loop, mass=args.mass)
+                         speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration)
     return open_source(args.motion, opts)
 
 
@@ -66,7 +67,8 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
             print(f"recording: {args.record}", flush=True)
         view = TerminalView() if args.tui else None
         monitor = Monitor(source, cfg, alarm_after=session["alarm_after"], recorder=recorder, listeners=listeners,
-                          view=view, alarm_command=command, correct=session["correct"])
+                          view=view, alarm_command=command, correct=session["correct"],
+                          max_inputs=getattr(args, "frames", None))
         if args.dashboard:
             host, port = parse_address(args.dashboard)
             hello = {"source": source.name, "body": f"{source.body.kind} body, {source.body.nq} channels",
@@ -93,14 +95,31 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
     return summary
 
 
+MAX_WINDOW_S = 10.0  # s: the estimator's window and lag (its memory grows with the window)
+
+
 def cmd_monitor(args: argparse.Namespace) -> int:
     if not args.alarm_after >= 0:
         raise InputError(f"--alarm-after must be ≥ 0 ms, got {args.alarm_after}")
+    if args.frames is not None and args.frames < 1:
+        raise InputError(f"--frames must be a positive number of frames, got {args.frames}")
+    check_number(args.window_s, "--window-s (s)", 0.0, MAX_WINDOW_S, lo_open=True)
+    check_number(args.lag_s, "--lag-s (s)", 0.0, MAX_WINDOW_S)
     source = _source(args)
     fps = 1.0 / source.nominal_dt
     cfg = pipeline_config(args, SimpleNamespace(body=source.body, fps=fps))  # it needs only the body and rate
+    if args.ground is None and getattr(source, "ground_z", None) is not None:  # a capture stream's plates
+        cfg = replace(cfg, ground_z=source.ground_z)
+    settings = {k: v for k, v in (("window_s", args.window_s), ("lag_s", args.lag_s)) if v is not None}
+    if settings:
+        try:
+            cfg = replace(cfg, estimator=replace(cfg.estimator, rate_hz=fps, **settings))
+        except EstimatorError as e:
+            raise InputError(f"--window-s / --lag-s: {e}") from None
     session = {"source": source.name, "fps": fps, "mode": cfg.mode, "ground_z": cfg.ground_z,
                "alarm_after": args.alarm_after / 1000.0, "correct": args.correct}
+    if settings:  # replay re-runs with them
+        session["estimator"] = settings
     _run(source, cfg, args, session, [])
     return 0
 
@@ -143,6 +162,8 @@ def _replay(args: argparse.Namespace) -> int:
     cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
     if "live_loop" in s:  # recorded by `livezmp run/demo --record`: the loop's own estimator settings
         cfg = replace(cfg, estimator=EstimatorConfig(rate_hz=s["fps"], **s["live_loop"]["estimator"]))
+    elif "estimator" in s:  # a monitor session with --window-s / --lag-s
+        cfg = replace(cfg, estimator=replace(cfg.estimator, rate_hz=s["fps"], **s["estimator"]))
     check = ReplayCheck(args.recording)
     recorded_alarms = sum(1 for m in iter_messages(args.recording, "/alarm") if m["event"] == "raised")
     _run(source, cfg, args, {**s, "source": f"replay of {args.recording}"}, [check])

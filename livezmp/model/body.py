@@ -91,6 +91,17 @@ class BodyModel:
         return p @ self.world_from_input
 
 
+def world_from_up_axis(up: str) -> np.ndarray:
+    """Rotation (3, 3) from an input's axes whose up axis is ``up`` ("+z", "-y", ...) into the internal
+    frame (z up): the axes are turned cyclically so ``up`` becomes z (y up: (x, y, z) -> (z, x, y), as for
+    BVH input); a negative up axis also flips the first axis (a proper rotation)."""
+    a = "xyz".index(up[-1])
+    r = np.eye(3)[[(a + 1) % 3, (a + 2) % 3, a]]
+    if up[0] == "-":
+        r[[0, 2]] *= -1.0
+    return r
+
+
 def point_mass_copy(model: pin.Model) -> pin.Model:
     """The same model with every body's rotational inertia removed (point masses at the
     segment centres of mass): its centroidal dynamics give the seed paper's ZMP."""

@@ -13,14 +13,14 @@ feet; the first frame gives the up axis), written at full precision.
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
-from livezmp.model.body import BodyModel
+from livezmp.model.body import BodyModel, world_from_up_axis
 from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
@@ -108,8 +108,15 @@ def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple
         ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
     options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
                "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
-               "source": trial.source}
+               "floor_z": opts.floor_z, "source": trial.source}
     return take, BodySpec("markers", {MARKERS_FILE: text}, options)
+
+
+def stream_marker_body(take: MarkerTake, spec: BodySpec, up: str) -> tuple[BodyModel, BodySpec]:
+    """A marker body calibrated on ``take`` (spec ``spec``) for a live stream whose up axis is ``up``
+    ("+y"): its outputs go back into the stream's axes; the spec says so, so the body is rebuilt the same."""
+    body = replace(take.body, world_from_input=world_from_up_axis(up), up_axis=up.lstrip("+"))
+    return body, replace(spec, options={**spec.options, "input_up": up})
 
 
 def _markers_from_spec(spec: BodySpec) -> BodyModel:
@@ -121,8 +128,11 @@ def _markers_from_spec(spec: BodySpec) -> BodyModel:
                      "", o.get("height_m"), o.get("widths_m") or {})
     hat = o.get("hat_offset")
     opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
-                             hat_fraction=o.get("hat_fraction"))
-    return body_from_markers(trial, opts).body
+                             hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"))
+    body = body_from_markers(trial, opts).body
+    if o.get("input_up"):  # a live stream's body: outputs in the stream's axes
+        body = replace(body, world_from_input=world_from_up_axis(o["input_up"]), up_axis=o["input_up"].lstrip("+"))
+    return body
 
 
 def body_from_spec(spec: BodySpec) -> BodyModel:

@@ -83,6 +83,16 @@ class MarkerTake:
     first_frame: int  # index in the C3D of frames[0]
     notes: dict = field(default_factory=dict)
     centres: dict = field(default_factory=dict)  # joint -> side -> (F, 3) m, internal frame
+    roles: dict = field(default_factory=dict)  # marker role -> label, as found in the trial
+    subject: C3dTrial | None = None  # the trial the body was calibrated on (its widths, height, labels)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (F, 3) arrays: ``np.cross``'s arithmetic without its per-call
+    overhead (a live stream converts one frame at a time)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -178,14 +188,14 @@ def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: fl
 def _frame(z_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     """(F, 3, 3) rotations with z along ``z_dir`` and y as close to ``y_ref`` as allowed; columns x, y, z."""
     z = _unit(z_dir)
-    x = _unit(np.cross(y_ref, z))
-    return np.stack([x, np.cross(z, x), z], axis=-1)
+    x = _unit(_cross(y_ref, z))
+    return np.stack([x, _cross(z, x), z], axis=-1)
 
 
 def _foot_frame(x_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     x = _unit(x_dir)
-    z = _unit(np.cross(x, y_ref))
-    return np.stack([x, np.cross(z, x), z], axis=-1)
+    z = _unit(_cross(x, y_ref))
+    return np.stack([x, _cross(z, x), z], axis=-1)
 
 
 def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -193,12 +203,14 @@ def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.median(np.einsum("fji,fj->fi", rot, p - origin), axis=0)
 
 
-def _euler_zyx(rot: np.ndarray) -> np.ndarray:
-    """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames."""
+def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
+    """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames (else
+    each within ±pi)."""
     yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
     pitch = np.arcsin(np.clip(-rot[:, 2, 0], -1.0, 1.0))
     roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
-    return np.unwrap(np.column_stack([yaw, pitch, roll]), axis=0)
+    angles = np.column_stack([yaw, pitch, roll])
+    return np.unwrap(angles, axis=0) if unwrap else angles
 
 
 def hat_table(stature: float) -> tuple[float, float, np.ndarray]:
@@ -266,24 +278,43 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     seg, centres, notes = _segments(m, trial)
     body, frames = _build(seg, m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
-    return MarkerTake(body, frames, keep.start, notes, centres)
+    return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
 
 
-def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, dict]:
-    """Segment frames: name -> (origin (F, 3), rotation (F, 3, 3)); joint centres; notes."""
+def marker_channels(take: MarkerTake, markers: dict[str, np.ndarray]) -> np.ndarray:
+    """The body's channels (F, nq) of new frames of markers: ``markers`` role -> (F, 3) m in the internal
+    frame (every role of ``take.roles``; NaN where unseen gives NaN channels). The subject's dimensions
+    (pelvis width and depth, stature) stay those measured when ``take`` was built, so frames of the take
+    itself give back ``take.frames`` (angles each within ±pi instead of unwrapped over frames)."""
+    seg, _, _ = _segments(markers, take.subject, take.notes["dimensions"])
+    return segment_channels(seg, unwrap=False)
+
+
+def segment_channels(seg: dict, unwrap: bool = True) -> np.ndarray:
+    """(F, 6 per segment) x, y, z (m), yaw, pitch, roll (rad) of segment frames ``seg`` (see _segments),
+    angles unwrapped over the frames (else each within ±pi)."""
+    return np.hstack([np.hstack([origin, _euler_zyx(rot, unwrap)]) for origin, rot in seg.values()])
+
+
+def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = None) -> tuple[dict, dict, dict]:
+    """Segment frames: name -> (origin (F, 3), rotation (F, 3, 3)); joint centres; notes. ``dims`` the
+    subject's pelvis width, depth and stature (m) as in ``notes["dimensions"]``; None: measured on ``m``."""
     mid_asis = (m["LASI"] + m["RASI"]) / 2
     back = (m["LPSI"] + m["RPSI"]) / 2 if "LPSI" in m else m["SACR"]
     y = _unit(m["LASI"] - m["RASI"])
     fwd = mid_asis - back
     x = _unit(fwd - np.sum(fwd * y, axis=1, keepdims=True) * y)
-    z = np.cross(x, y)
-    pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
-    pd = float(np.median(np.linalg.norm(fwd, axis=1)))
+    z = _cross(x, y)
+    if dims is None:
+        pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
+        pd = float(np.median(np.linalg.norm(fwd, axis=1)))
+    else:
+        pw, pd = dims["pelvis_width_m"], dims["pelvis_depth_m"]
     hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
            for side, (_, sign, _) in _SIDES.items()}
     # stature: the file's, else from the leg (hip centre to the lateral ankle marker)
-    stature = trial.height_m or float(np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1))
-                                      / LEG_FRACTION_OF_STATURE)
+    stature = dims["stature_m"] if dims else trial.height_m or float(
+        np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
     for side, (s, sign, _) in _SIDES.items():
@@ -324,7 +355,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial) -> tuple[dict, dict, di
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
-             "joint_centres": rules, "stature_m": round(stature, 4)}
+             "joint_centres": rules, "stature_m": round(stature, 4),
+             "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
     return seg, centres, notes
 
 
@@ -342,7 +374,7 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     forearm)."""
     top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
     fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
-    thorax = _frame(top - bottom, np.cross(top - bottom, fwd))
+    thorax = _frame(top - bottom, _cross(top - bottom, fwd))
     front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
     head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
     out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
@@ -388,14 +420,12 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     scale_rest = (1.0 - hat_fraction) / (1.0 - hat_mass)  # keep the total at 1 when the HAT fraction is set
     model = pin.Model()
     model.name = "markers"
-    frames = []
     body_frame = {}
     for name, (origin, rot) in seg.items():
         parent = 0
         for ch, jm in zip(_CHANNELS, (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRZ,
                                       pin.JointModelRY, pin.JointModelRX), strict=True):
             parent = model.addJoint(parent, jm(), pin.SE3.Identity(), f"{name}.{ch}")
-        frames.append(np.hstack([origin, _euler_zyx(rot)]))
         body_frame[name] = model.addFrame(pin.Frame(name, parent, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
         kind = name.split("_")[0]
         if name == "hat":
@@ -450,7 +480,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         channel_scale=np.ones(nq), angle_mask=np.array([c in ("yaw", "pitch", "roll") for c in _CHANNELS] * len(seg)),
         feet=feet, world_from_input=r_in, up_axis=up, units="m", total_mass=opts.total_mass,
         correction=correction, named_points=named)
-    return body, np.hstack(frames)
+    return body, segment_channels(seg)
 
 
 def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float) -> tuple[float, np.ndarray, np.ndarray]:

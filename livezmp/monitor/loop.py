@@ -64,18 +64,20 @@ class Monitor:
     """Runs ``source`` through a :class:`Pipeline` with ``config``. Optional sinks:
     ``recorder``, ``listeners`` (e.g. the dashboard), ``view`` (update/alarm/close),
     ``alarm_command``; ``alarm_after`` s out of support raises an alarm; ``correct``
-    runs the :class:`OnlineCorrector` and records its output."""
+    runs the :class:`OnlineCorrector` and records its output; ``max_inputs`` stops after that many
+    input frames (None: when the source is finished or ``stop`` is set)."""
 
     def __init__(self, source: Source, config: PipelineConfig, *, alarm_after: float = 0.2,
                  recorder: Recorder | None = None, listeners: Sequence[Listener] = (), view=None,
-                 alarm_command: AlarmCommand | None = None, correct: bool = False, idle: float = 0.05):
+                 alarm_command: AlarmCommand | None = None, correct: bool = False, idle: float = 0.05,
+                 max_inputs: int | None = None):
         self.source, self.recorder, self.listeners, self.view = source, recorder, list(listeners), view
         self.alarm_command = alarm_command
         self.pipeline = Pipeline(source.body, config, source.nominal_dt)
         self.alarms = AlarmTracker(alarm_after)
         dt = source.nominal_dt or 0.01
         self.corrector = OnlineCorrector(source.body, dt) if correct else None
-        self.idle = idle
+        self.idle, self.max_inputs = idle, max_inputs
         self.inputs = self.results = self.out_of_support = 0
         self.last: FrameResult | None = None
         self.events: deque[AlarmEvent] = deque(maxlen=KEPT_EVENTS)
@@ -131,6 +133,7 @@ class Monitor:
                           "window_s": est.window_s, "lag_s": est.lag_s, "cutoff_hz": est.cutoff_hz,
                           "kalman_corner_hz": est.kalman_corner_hz, "rate_hz": est.rate_hz},
             "cop_vs_zmp": self.cop_vs_zmp.summary() if self.cop_vs_zmp.readings else None,
+            **(self.source.details() if hasattr(self.source, "details") else {}),  # e.g. a marker stream's gaps
         }
 
     # -- per frame ------------------------------------------------------------
@@ -245,7 +248,8 @@ class Monitor:
         stop = stop or threading.Event()
         try:
             while not stop.is_set() and self.step():
-                pass
+                if self.max_inputs is not None and self.inputs >= self.max_inputs:
+                    break
             for r in self.pipeline.flush():
                 self._result(r)
             self._idle()

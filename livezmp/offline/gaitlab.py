@@ -15,11 +15,11 @@ import numpy as np
 import pinocchio as pin
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.balance.plates import G, PlateFrames, complete_frames, gait_cycles, plate_frames, plate_mass
+from livezmp.balance.plates import G, PlateFrames, complete_frames, gait_cycles, plate_frames, plate_mass, plates_floor
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, input_rotation
+from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers
 from livezmp.offline.batch import BatchResult, run_batch
 from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, plate_delay
 
@@ -143,10 +143,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     """Run the pipeline over ``trial``'s marker body and, with plates, compare (see module docstring)."""
     opts = opts or LabOptions()
     first = opts.mass or trial.mass_kg or DEFAULT_MASS
-    floor = None
-    if trial.plates:
-        r_in = input_rotation(trial)[1]
-        floor = float(np.mean([(c @ r_in.T)[:, 2].mean() for c in (p.corners for p in trial.plates)]))
+    floor = plates_floor(trial)
     take, times, cfg, result = _run(trial, opts, first, floor)
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)

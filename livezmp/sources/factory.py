@@ -10,6 +10,9 @@ Stream sources need their body: ``skeleton`` (a BVH file, for udp and tcp) or
 ``robot`` (a URDF, for udp), and their frame rate: ``fps``, else the skeleton file's
 frame time (the estimator is tuned to it; frames still carry their own times).
 
+- ``lsl://…``, ``qtm://…``, ``natnet://…``: a capture system's labelled markers (and force plates)
+  through the marker body (:mod:`.marker_stream`), calibrated on ``calibration`` (a C3D trial of the
+  subject) or on the stream's first seconds;
 - ``dynamixel:…``, ``can:…``, ``fw:…``: a servo link (``livezmp.links`` URL forms),
   watched without commanding it at ``fps`` (100 Hz by default); needs ``robot``.
 """
@@ -35,6 +38,7 @@ from livezmp.sources.bvh_tcp import BvhTcpSource
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source
 from livezmp.sources.mcap_replay import McapReplaySource
+from livezmp.sources.mocap_factory import MOCAP_SCHEMES, open_mocap_source
 from livezmp.sources.udp import UdpSource, parse_allowlist
 
 SCHEMES = ("udp", "tcp")
@@ -54,6 +58,7 @@ class SourceOptions:
     speed: float = 1.0
     loop: bool = False
     mass: float | None = None  # kg; None: a C3D's subject mass, else the BVH default
+    calibration: str | None = None  # a C3D trial calibrating a capture stream's marker body
 
 
 def _replay(path: Path, o: SourceOptions) -> Source:
@@ -118,6 +123,20 @@ def _link(spec: str, o: SourceOptions) -> Source:
         raise InputError(f"{spec}: cannot open the link: {e}") from None
 
 
+def _capture(spec: str, o: SourceOptions) -> Source:
+    """A capture stream through the marker body (see :mod:`livezmp.sources.marker_stream`)."""
+    from livezmp.sources.marker_stream import MarkerStreamSource
+
+    trial = read_c3d(o.calibration) if o.calibration else None
+    mass = o.mass or (trial.mass_kg if trial else None) or DEFAULT_MASS
+    mocap = open_mocap_source(spec)
+    try:
+        return MarkerStreamSource(mocap, trial, MarkerBodyOptions(total_mass=mass))
+    except BaseException:
+        mocap.close()
+        raise
+
+
 def _int_param(query: dict, key: str, spec: str) -> int | None:
     if key not in query:
         return None
@@ -143,8 +162,13 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
             raise InputError(f"{spec}: no such file (or give udp://HOST:PORT, tcp://HOST:PORT)")
         return _replay(path, o)
     url = urlsplit(spec)
+    if url.scheme in MOCAP_SCHEMES:
+        return _capture(spec, o)
+    if o.calibration:
+        raise InputError(f"{spec}: --calibration is for capture streams (lsl://, qtm://, natnet://)")
     if url.scheme not in SCHEMES:
-        raise InputError(f"{spec}: unknown source scheme {url.scheme!r} (udp://, tcp://, or a file)")
+        raise InputError(f"{spec}: unknown source scheme {url.scheme!r} (udp://, tcp://, lsl://, qtm://, natnet://, "
+                         "or a file)")
     try:
         host, port = url.hostname, url.port
     except ValueError:

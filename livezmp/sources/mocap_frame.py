@@ -20,6 +20,7 @@ from livezmp.sources.interface import ErrorLog, SourceStats
 from livezmp.sources.udp import SequenceFilter
 
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+MIN_LOAD_N = 20.0  # N: plates carrying less are unloaded (no CoP), as in the C3D analysis
 
 
 def _empty3() -> np.ndarray:
@@ -40,6 +41,31 @@ class PlateSamples:
     def __len__(self) -> int:
         return len(self.names)
 
+    def combined_cop(self, up: np.ndarray, min_force: float = MIN_LOAD_N) -> np.ndarray:
+        """(3,) m the centre of pressure of all plates together, in the stream's axes: each plate's CoP
+        weighted by its force along ``up`` (3,) (unit vector; either sign convention of the force);
+        exact for plates whose surfaces lie in one plane. NaN when they carry less than ``min_force`` N."""
+        load = np.abs(self.force @ up)
+        ok = np.isfinite(self.cop).all(axis=1) & (load > 0)
+        total = float(load[ok].sum())
+        if total < min_force:
+            return np.full(3, np.nan)
+        return (load[ok, None] * self.cop[ok]).sum(axis=0) / total
+
+
+@dataclass(frozen=True)
+class SegmentPoses:
+    """Rigid bodies / skeleton segments the capture system solved, in the stream's axes: ``names``
+    (s,), ``position`` (s, 3) m, ``rotation`` (s, 3, 3) (columns: the segment's axes), ``tracked`` (s,)."""
+
+    names: tuple[str, ...] = ()
+    position: np.ndarray = field(default_factory=_empty3)
+    rotation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __len__(self) -> int:
+        return len(self.names)
+
 
 @dataclass(frozen=True)
 class MocapFrame:
@@ -50,7 +76,8 @@ class MocapFrame:
     ``markers`` (n, 3) m in the stream's axes, NaN where a marker is occluded; ``up`` the
     stream's up axis ("+z", "+y", ...); ``plates`` the force plates (empty without);
     ``latency`` s from the source's timestamp to ``received`` when the source's clock can
-    be related to this machine's (LSL), else None."""
+    be related to this machine's (LSL), else None; ``segments`` the rigid bodies and skeleton
+    segments the system solved (empty without)."""
 
     t: float
     received: float
@@ -60,6 +87,7 @@ class MocapFrame:
     up: str
     plates: PlateSamples = field(default_factory=PlateSamples)
     latency: float | None = None
+    segments: SegmentPoses = field(default_factory=SegmentPoses)
 
     def marker(self, label: str) -> np.ndarray:
         """Position (3,) m of the marker ``label``; KeyError if the stream has no such label."""
@@ -77,11 +105,14 @@ def parse_up_axis(text: str, where: str) -> str:
 
 class MocapSource(Protocol):
     """A live capture stream (``lsl://``, ``qtm://``, ``natnet://``): ``name`` shown to the
-    operator; ``nominal_dt`` s the stream's frame period as the stream states it;
+    operator; ``nominal_dt`` s the stream's frame period as the stream states it; ``up`` its up
+    axis and ``labels`` its marker labels as the stream states them at connection;
     ``stats``/``errors`` as every source's (:mod:`livezmp.sources.interface`)."""
 
     name: str
     nominal_dt: float
+    up: str
+    labels: tuple[str, ...]
     stats: SourceStats
     errors: ErrorLog
 

@@ -3,16 +3,22 @@
 livezmp's own NatNet client (:mod:`livezmp.sources.natnet_protocol`), unicast: it binds
 the data port (Motive's "Data Port" setting, 1511 by default), sends connect to the
 command port (1510), reads the server info and the model definitions (marker set
-names, force plates and their channel names), then receives frames of data. Markers of
+names, rigid bodies, skeletons and their bones, force plates and their channel names) and
+the frame rate (the SDK's ``FrameRate`` request; measured from the frames' timestamps when a
+server does not answer it), then
+receives frames of data. Rigid bodies and skeleton bones become the frame's segment poses
+(by name; an untracked one NaN); markers of
 every marker set are delivered (``SET:MARKER`` when there are several sets; an all-zero
 position, Motive's mark of an occluded marker, becomes NaN); plates from their channels
 Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m). NatNet streams metres; it does not carry its
 up axis: Motive streams y up unless its Up Axis setting says z (then ``?up=z``).
 
-Frames go in order by frame number (late, duplicate, lost counted; bad datagrams
-``malformed``). No frame for ``retry`` s: connect is sent again every ``retry`` s (Motive
-restarted, or a new take) and the model re-read; a server info answering it after a
-silence, followed by frames, counts as a reconnect. NatNet timestamps are Motive's own clock, so
+A receiving thread drains the data socket as datagrams arrive and queues the frames
+(at most 4096 wait; more are counted as ``overflow``). Frames go in order by frame
+number (late, duplicate, lost counted; bad datagrams ``malformed``). No frame for
+``retry`` s: connect is sent again every ``retry`` s (Motive restarted, or a new take)
+and the model re-read; a server info answering it after a silence, followed by frames,
+counts as a reconnect. NatNet timestamps are Motive's own clock, so
 ``MocapFrame.latency`` is None.
 """
 
@@ -20,6 +26,8 @@ from __future__ import annotations
 
 import select
 import socket
+import struct
+import threading
 import time
 from urllib.parse import urlsplit
 
@@ -28,10 +36,11 @@ import numpy as np
 from livezmp.errors import InputError
 from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import InOrder, MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
 from livezmp.sources.url_query import query_params
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
+POLL_S = 0.1  # s: the receiving thread looks at its stop flag and the silence this often
 QUERY_KEYS = {"data_port", "up", "timeout"}
 PLATE_CHANNELS = {"force": ("Fx", "Fy", "Fz"), "moment": ("Mx", "My", "Mz"), "cop": ("Cx", "Cy", "Cz")}
 
@@ -79,6 +88,9 @@ class NatNetSource:
         if not self._handshake(timeout):
             self._close_sockets()
             raise InputError(f"{url}: no NatNet server answered within {timeout:g} s")
+        self.queue = FrameQueue(self.stats)
+        self._thread = threading.Thread(target=self._receive, name="natnet-client", daemon=True)
+        self._thread.start()
 
     def _request(self, kind: int, payload: bytes, want: int, timeout: float) -> bytes | None:
         try:
@@ -95,6 +107,8 @@ class NatNetSource:
                 return None
             if got == want:
                 return payload_in
+            if got == nn.UNRECOGNIZED:  # a server without this request
+                return None
         return None
 
     def _handshake(self, timeout: float) -> bool:
@@ -110,9 +124,17 @@ class NatNetSource:
             self.errors.report("malformed", f"{self.name}: server info / model: {e}")
             return False
         self.clock_hz = self.info.clock_hz
+        # the NatNet SDK's "FrameRate" request, answered with the rate as a float32; else measured
+        rate = self._request(nn.REQUEST, b"FrameRate\0", nn.RESPONSE, timeout)
+        if rate is not None and len(rate) >= 4 and struct.unpack_from("<f", rate)[0] > 0:
+            self._dt = 1.0 / struct.unpack_from("<f", rate)[0]
         many = len(m.marker_sets) > 1
         self.sets = m.marker_sets
         self.labels = tuple(f"{s}:{x}" if many else x for s, xs in m.marker_sets.items() for x in xs)
+        # rigid bodies by name, then each skeleton's bones (by bone name: what a body's segments are called)
+        self.bodies = [(None, b.id) for b in m.rigid_bodies] + [(sk.id, b.id) for sk in m.skeletons for b in sk.bones]
+        self.segment_names = tuple(b.name for b in m.rigid_bodies) + tuple(b.name for sk in m.skeletons
+                                                                           for b in sk.bones)
         self.plate_ids = tuple(p.id for p in m.plates)
         self.plate_names = tuple(p.serial or f"plate{p.id}" for p in m.plates)
         self.plate_index = {}
@@ -127,7 +149,8 @@ class NatNetSource:
 
     @property
     def nominal_dt(self) -> float | None:
-        """NatNet's server info carries no frame rate: measured from the frames' timestamps."""
+        """The server's answer to "FrameRate", else (it carries no rate otherwise) measured from the
+        frames' timestamps."""
         return self._dt
 
     _dt: float | None = None
@@ -166,7 +189,21 @@ class NatNetSource:
                 ok = (idx[i] >= 0) & (idx[i] < len(values))
                 out[q][i, ok] = values[idx[i][ok]]
         return MocapFrame(f.timestamp, received, f.frame, self.labels, markers, self.up,
-                          PlateSamples(self.plate_names, out["force"], out["moment"], out["cop"]))
+                          PlateSamples(self.plate_names, out["force"], out["moment"], out["cop"]),
+                          segments=self._segments(f))
+
+    def _segments(self, f: nn.FrameOfData) -> SegmentPoses:
+        """The frame's rigid bodies and skeleton bones in the model's order (untracked: NaN)."""
+        from scipy.spatial.transform import Rotation
+
+        k = len(self.bodies)
+        pos, quat, tracked = np.full((k, 3), np.nan), np.tile([0.0, 0.0, 0.0, 1.0], (k, 1)), np.zeros(k, bool)
+        for i, (sid, bid) in enumerate(self.bodies):
+            p = f.rigid_bodies.get(bid) if sid is None else f.skeletons.get(sid, {}).get(bid)
+            if p is not None and p.tracked and np.any(p.quat):
+                pos[i], quat[i], tracked[i] = p.position, p.quat, True
+        rot = Rotation.from_quat(quat).as_matrix() if k else np.zeros((0, 3, 3))
+        return SegmentPoses(self.segment_names, pos, rot, tracked)
 
     def _keep_connected(self, now: float) -> None:
         if self._silent_since is None:
@@ -178,19 +215,21 @@ class NatNetSource:
                 self._rejoined = True
                 self._silent_since = now
 
-    def read(self, timeout: float) -> MocapFrame | None:
-        deadline = time.monotonic() + timeout
+    def _receive(self) -> None:
+        """The receiving thread: drains the data socket as datagrams arrive (the kernel's buffer holds
+        only a fraction of a second at 1 kHz), hands frames to the queue, reconnects on silence."""
         while not self._closed:
             try:
                 packet = self.data.recv(65536)
             except BlockingIOError:
-                now = time.monotonic()
-                self._keep_connected(now)
-                left = deadline - now
-                if left <= 0:
-                    return None
-                select.select([self.data], [], [], min(left, self.retry))
+                self._keep_connected(time.monotonic())
+                try:
+                    select.select([self.data], [], [], POLL_S)
+                except (OSError, ValueError):  # closed meanwhile
+                    return
                 continue
+            except OSError:
+                return
             now = time.monotonic()
             self._silent_since = None
             try:
@@ -200,9 +239,11 @@ class NatNetSource:
                 self.errors.report("malformed", f"{self.name}: {e}")
                 continue
             f = self._frame(payload, now) if kind == nn.FRAMEOFDATA else None
-            if f is not None or now >= deadline:
-                return f
-        return None
+            if f is not None:
+                self.queue.put(f)
+
+    def read(self, timeout: float) -> MocapFrame | None:
+        return None if self._closed else self.queue.get(timeout)
 
     def _close_sockets(self) -> None:
         self.cmd.close()
@@ -211,6 +252,7 @@ class NatNetSource:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            self._thread.join(1.0)
             try:
                 self.cmd.send(nn.message(nn.DISCONNECT))
             except OSError:

@@ -8,10 +8,15 @@ string, 9 disconnect, 10 keep-alive, 100 unrecognised request. Strings are
 NUL-terminated, except the 256-byte application name of connect/server info.
 
 Only what livezmp uses is laid out here: connect / server info (with the data port and
-the high-resolution clock), model definitions with marker sets (type 0) and force
-plates (type 3), and frames of data with marker sets, labelled markers, force plates
-and the frame suffix (timecode, timestamp, camera and transmit stamps). Rigid bodies,
-skeletons and devices are written empty and skipped when read (their counts must be 0:
+the high-resolution clock), model definitions with marker sets (type 0), rigid bodies
+(type 1: name, id, parent id, offset xyz, then (3.0+) marker count, their positions and
+required labels), skeletons (type 2: name, id, bone count, each bone a rigid-body
+description) and force plates (type 3), and frames of data with marker sets, rigid
+bodies (id, position xyz, orientation quaternion qx qy qz qw, mean marker error, int16
+params whose bit 0 says tracking is valid; 3.0+ carries no per-body markers), skeletons
+(id, bone count, each bone as a rigid body, bone id = skeleton id << 16 | bone), labelled
+markers, force plates and the frame suffix (timecode, timestamp, camera and transmit
+stamps). Devices are written empty and refused when read (their count must be 0:
 :class:`NatNetError` otherwise, rather than mis-reading the rest).
 """
 
@@ -26,7 +31,8 @@ CONNECT, SERVERINFO, REQUEST, RESPONSE, REQUEST_MODELDEF, MODELDEF = 0, 1, 2, 3,
 REQUEST_FRAMEOFDATA, FRAMEOFDATA, MESSAGESTRING, DISCONNECT, KEEPALIVE, UNRECOGNIZED = 6, 7, 8, 9, 10, 100
 HEADER = struct.Struct("<HH")
 VERSION = (3, 1, 0, 0)
-DATASET_MARKERSET, DATASET_FORCEPLATE = 0, 3
+DATASET_MARKERSET, DATASET_RIGIDBODY, DATASET_SKELETON, DATASET_FORCEPLATE = 0, 1, 2, 3
+RIGID_BODY = struct.Struct("<i3f4ffh")  # id, position, quaternion (x, y, z, w), mean error, params
 
 
 class NatNetError(ValueError):
@@ -138,22 +144,61 @@ class ForcePlateDef:
 
 
 @dataclass(frozen=True)
+class RigidBodyDef:
+    """A rigid body (or skeleton bone): ``name``, ``id``, ``parent`` id (-1 / 0 none), ``offset``
+    (3,) from the parent, in the stream's length unit."""
+
+    name: str
+    id: int
+    parent: int = -1
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class SkeletonDef:
+    """A skeleton: ``name``, ``id`` and its ``bones``."""
+
+    name: str
+    id: int
+    bones: tuple[RigidBodyDef, ...] = ()
+
+
+@dataclass(frozen=True)
 class ModelDef:
-    """Marker sets (name → marker names) and force plates."""
+    """Marker sets (name → marker names), rigid bodies, skeletons and force plates."""
 
     marker_sets: dict[str, tuple[str, ...]] = field(default_factory=dict)
     plates: tuple[ForcePlateDef, ...] = ()
+    rigid_bodies: tuple[RigidBodyDef, ...] = ()
+    skeletons: tuple[SkeletonDef, ...] = ()
 
 
 def _cstr(s: str) -> bytes:
     return s.encode() + b"\0"
 
 
+def _pack_rigid_body_def(b: RigidBodyDef) -> bytes:
+    return _cstr(b.name) + struct.pack("<ii3fi", b.id, b.parent, *b.offset, 0)  # no markers
+
+
+def _unpack_rigid_body_def(r: _Reader) -> RigidBodyDef:
+    name = r.string()
+    rid, parent, *offset = r.take("ii3f")
+    n = r.take("i")
+    r.skip(16 * n)  # marker positions (3 floats) and required labels (int) of each
+    return RigidBodyDef(name, rid, parent, tuple(offset))
+
+
 def pack_modeldef(m: ModelDef) -> bytes:
-    out = [struct.pack("<i", len(m.marker_sets) + len(m.plates))]
+    out = [struct.pack("<i", len(m.marker_sets) + len(m.rigid_bodies) + len(m.skeletons) + len(m.plates))]
     for name, markers in m.marker_sets.items():
         out.append(struct.pack("<i", DATASET_MARKERSET) + _cstr(name) + struct.pack("<i", len(markers))
                    + b"".join(_cstr(x) for x in markers))
+    for b in m.rigid_bodies:
+        out.append(struct.pack("<i", DATASET_RIGIDBODY) + _pack_rigid_body_def(b))
+    for sk in m.skeletons:
+        out.append(struct.pack("<i", DATASET_SKELETON) + _cstr(sk.name) + struct.pack("<ii", sk.id, len(sk.bones))
+                   + b"".join(_pack_rigid_body_def(b) for b in sk.bones))
     for p in m.plates:
         out.append(struct.pack("<ii", DATASET_FORCEPLATE, p.id) + _cstr(p.serial)
                    + struct.pack("<ff3f", p.width, p.length, 0.0, 0.0, 0.0) + np.zeros(144, "<f4").tobytes()
@@ -165,12 +210,18 @@ def pack_modeldef(m: ModelDef) -> bytes:
 def unpack_modeldef(payload: bytes) -> ModelDef:
     r = _Reader(payload)
     sets: dict[str, tuple[str, ...]] = {}
-    plates = []
+    plates, bodies, skeletons = [], [], []
     for _ in range(r.take("i")):
         kind = r.take("i")
         if kind == DATASET_MARKERSET:
             name = r.string()
             sets[name] = tuple(r.string() for _ in range(r.take("i")))
+        elif kind == DATASET_RIGIDBODY:
+            bodies.append(_unpack_rigid_body_def(r))
+        elif kind == DATASET_SKELETON:
+            name = r.string()
+            sid, n = r.take("ii")
+            skeletons.append(SkeletonDef(name, sid, tuple(_unpack_rigid_body_def(r) for _ in range(n))))
         elif kind == DATASET_FORCEPLATE:
             pid, serial = r.take("i"), r.string()
             width, length = r.take("ff")
@@ -180,28 +231,56 @@ def unpack_modeldef(payload: bytes) -> ModelDef:
             plates.append(ForcePlateDef(pid, serial, width, length, corners,
                                         tuple(r.string() for _ in range(r.take("i")))))
         else:
-            raise NatNetError(f"data set type {kind}: only marker sets (0) and force plates (3) are read")
-    return ModelDef(sets, tuple(plates))
+            raise NatNetError(f"data set type {kind}: only marker sets, rigid bodies, skeletons and force plates "
+                              "(0-3) are read")
+    return ModelDef(sets, tuple(plates), tuple(bodies), tuple(skeletons))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A rigid body's ``position`` (3,), orientation ``quat`` (4,) x, y, z, w, and whether it is
+    ``tracked``."""
+
+    position: np.ndarray
+    quat: np.ndarray
+    tracked: bool = True
 
 
 @dataclass(frozen=True)
 class FrameOfData:
     """``frame`` number; ``marker_sets`` name → (n, 3) positions; ``plates`` id →
     (channels,) the last sample of each channel; ``timestamp`` s since the server
-    started; ``stamp_transmit`` in high-resolution ticks."""
+    started; ``stamp_transmit`` in high-resolution ticks; ``rigid_bodies`` id → pose;
+    ``skeletons`` id → bone id (without the skeleton's id) → pose."""
 
     frame: int
     marker_sets: dict[str, np.ndarray]
     plates: dict[int, np.ndarray]
     timestamp: float
     stamp_transmit: int = 0
+    rigid_bodies: dict[int, Pose] = field(default_factory=dict)
+    skeletons: dict[int, dict[int, Pose]] = field(default_factory=dict)
+
+
+def _pack_pose(rid: int, p: Pose) -> bytes:
+    return RIGID_BODY.pack(rid, *p.position, *p.quat, 0.0, 1 if p.tracked else 0)
+
+
+def _unpack_pose(r: _Reader) -> tuple[int, Pose]:
+    rid, x, y, z, qx, qy, qz, qw, _, params = r.take("i3f4ffh")
+    return rid, Pose(np.array([x, y, z]), np.array([qx, qy, qz, qw]), bool(params & 1))
 
 
 def pack_frame(f: FrameOfData) -> bytes:
     out = [struct.pack("<ii", f.frame, len(f.marker_sets))]
     for name, pos in f.marker_sets.items():
         out.append(_cstr(name) + struct.pack("<i", len(pos)) + np.asarray(pos, "<f4").tobytes())
-    out.append(struct.pack("<iii", 0, 0, 0))  # unlabelled markers, rigid bodies, skeletons
+    out.append(struct.pack("<ii", 0, len(f.rigid_bodies)))  # no unlabelled markers
+    out += [_pack_pose(rid, p) for rid, p in f.rigid_bodies.items()]
+    out.append(struct.pack("<i", len(f.skeletons)))
+    for sid, bones in f.skeletons.items():
+        out.append(struct.pack("<ii", sid, len(bones)))
+        out += [_pack_pose(sid << 16 | bid, p) for bid, p in bones.items()]
     labelled = [p for pos in f.marker_sets.values() for p in pos]
     out.append(struct.pack("<i", len(labelled)))
     for i, p in enumerate(labelled):
@@ -223,9 +302,11 @@ def unpack_frame(payload: bytes) -> FrameOfData:
         name = r.string()
         sets[name] = r.floats(3 * r.take("i")).reshape(-1, 3)
     r.floats(3 * r.take("i"))  # unlabelled markers
-    for what in ("rigid bodies", "skeletons"):
-        if r.take("i"):
-            raise NatNetError(f"frame {frame}: {what} are not read by livezmp's NatNet client")
+    bodies = dict(_unpack_pose(r) for _ in range(r.take("i")))
+    skeletons = {}
+    for _ in range(r.take("i")):
+        sid, n = r.take("ii")
+        skeletons[sid] = {rid & 0xFFFF: p for rid, p in (_unpack_pose(r) for _ in range(n))}
     r.skip(LABELLED_MARKER.size * r.take("i"))  # labelled markers: the marker sets carry their positions
     plates = {}
     for _ in range(r.take("i")):
@@ -239,4 +320,4 @@ def unpack_frame(payload: bytes) -> FrameOfData:
     if r.take("i"):
         raise NatNetError(f"frame {frame}: devices are not read by livezmp's NatNet client")
     _, _, timestamp, _, _, transmit, _, _ = r.take("IIdQQQhi")  # ... params, end of data
-    return FrameOfData(frame, sets, plates, timestamp, transmit)
+    return FrameOfData(frame, sets, plates, timestamp, transmit, bodies, skeletons)

@@ -5,7 +5,9 @@ default, ``?version=``), reads the parameters (``general``: frame rate; ``3d``: 
 and marker labels; ``force``: plates with their corners and length unit) and streams
 every frame (``3d`` markers in mm, ``force`` per plate force N, moment N·m, application
 point in the plates' length unit, in each plate's own axes, turned into the lab's with
-the corners, :mod:`livezmp.sources.plate_frame`). Frames go in order by QTM's frame
+the corners, :mod:`livezmp.sources.plate_frame`; ``6d`` rigid bodies named in ``The_6D``:
+position mm and rotation matrix, 9 floats column by column as Qualisys' own clients read
+them, an untracked body NaN, as the frame's segment poses). Frames go in order by QTM's frame
 number (late, duplicate, lost counted). A lost connection is reported and re-made every
 ``retry`` s, parameters read again (a changed marker set is taken as it comes).
 
@@ -25,7 +27,7 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
 from livezmp.sources.plate_frame import plate_axes
 
 DEFAULT_PORT = 22223  # QTM's little-endian RT port, the one qtm-rt speaks
@@ -44,6 +46,7 @@ class QtmParameters:
     plates: tuple[str, ...]
     axes: tuple[tuple[np.ndarray, np.ndarray], ...]
     length: float
+    bodies: tuple[str, ...] = ()  # 6DOF bodies
 
 
 def _text(node: ET.Element | None, path: str, where: str) -> str:
@@ -54,7 +57,7 @@ def _text(node: ET.Element | None, path: str, where: str) -> str:
 
 
 def parse_parameters(xml: str, where: str) -> QtmParameters:
-    """The :class:`QtmParameters` of a ``getparameters general 3d force`` reply."""
+    """The :class:`QtmParameters` of a ``getparameters general 3d force 6d`` reply."""
     try:
         root = ET.fromstring(xml)
     except ET.ParseError as e:
@@ -76,7 +79,9 @@ def parse_parameters(xml: str, where: str) -> QtmParameters:
         corners = np.array([[float(_text(plate, f"Location/Corner{j}/{a}", where)) for a in "XYZ"]
                             for j in range(1, 5)]) * 1e-3  # QTM's locations are in mm
         axes.append(plate_axes(corners))
-    return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit])
+    six = root.find("The_6D")
+    bodies = tuple(_text(b, "Name", where) for b in (six.findall("Body") if six is not None else []))
+    return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit], bodies)
 
 
 def frame_of_packet(packet, p: QtmParameters, received: float) -> MocapFrame:
@@ -102,7 +107,22 @@ def frame_of_packet(packet, p: QtmParameters, received: float) -> MocapFrame:
             moment[i] = R @ (s.x_m, s.y_m, s.z_m)
             cop[i] = R @ (np.array([s.x_a, s.y_a, s.z_a]) * p.length) + origin
     return MocapFrame(packet.timestamp * 1e-6, received, packet.framenumber, p.labels, markers, p.up,
-                      PlateSamples(p.plates, force, moment, cop))
+                      PlateSamples(p.plates, force, moment, cop), segments=_bodies(packet, p))
+
+
+def _bodies(packet, p: QtmParameters) -> SegmentPoses:
+    """The 6D component's bodies (named by the parameters) as segment poses; an untracked one NaN."""
+    from qtm_rt.packet import QRTComponentType
+
+    k = len(p.bodies)
+    pos, rot = np.full((k, 3), np.nan), np.tile(np.eye(3), (k, 1, 1))
+    if k and QRTComponentType.Component6d in packet.components:
+        _, bodies = packet.get_6d()
+        n = min(len(bodies), k)
+        pos[:n] = np.array([(b.x, b.y, b.z) for b, _ in bodies[:n]], float).reshape(n, 3) * 1e-3
+        rot[:n] = np.array([m.matrix for _, m in bodies[:n]], float).reshape(n, 3, 3).transpose(0, 2, 1)
+    tracked = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
+    return SegmentPoses(p.bodies, pos, rot, tracked)
 
 
 class QtmSource:
@@ -134,6 +154,14 @@ class QtmSource:
         return 1.0 / self.params.rate
 
     @property
+    def up(self) -> str:
+        return self.params.up
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return self.params.labels
+
+    @property
     def finished(self) -> bool:
         return self._closed
 
@@ -148,9 +176,9 @@ class QtmSource:
             self._failure = "connection refused or version not accepted"
             return
         try:
-            xml = await conn.get_parameters(["general", "3d", "force"])
+            xml = await conn.get_parameters(["general", "3d", "force", "6d"])
             params = parse_parameters(xml.decode(errors="replace"), self.name)
-            components = ["3d", "force"] if params.plates else ["3d"]
+            components = ["3d"] + ["force"] * bool(params.plates) + ["6d"] * bool(params.bodies)
             self.params = params
             if self._sessions:
                 self.stats.reconnects += 1

@@ -1,0 +1,195 @@
+"""Benchmark: a capture stream end to end — from each frame's capture to its ZMP ready and on the
+dashboard page — at 100, 240 and 1000 Hz, with recording on, against the transport alone.
+
+A simulated capture server (QTM RT, NatNet, LSL) runs in a process of its own (the capture PC) and
+plays the Plug-in Gait walk with its 4 force plates (``walk_plugingait_forceplates.c3d``, 96
+labelled points) resampled to the row's rate, ``--laps`` times. This process runs ``livezmp
+monitor``'s loop on it (the marker body calibrated on the same file; the real clients; recording
+to MCAP; the dashboard with one WebSocket page reading every message).
+
+Times are all on this machine's monotonic clock (the server process shares it): a frame's
+"capture" is when the server handed it to its socket (the camera's frame time on this clock;
+QTM's and NatNet's own stamps are their capture clocks, which a real client cannot relate to
+its own). The estimator gives frame k's result when frame k + L arrives (its configured lag L
+frames, stated apart), so the work beyond the lag is measured from the capture of frame k + L:
+
+- ``in hand``: capture -> the MocapFrame in livezmp's source (the transport and the client: the
+  baseline, measured on the same frames);
+- ``result``: capture of k + L -> frame k's result analysed, recorded and handed to the dashboard;
+- ``page``: capture of k + L -> the page receiving frame k's point (the page feed sends at most
+  60 messages a second, so this includes up to ~17 ms of waiting for the next message).
+
+Columns: frames sent, analysed, lost + late + overflow (0 = sustained without loss), p50/p99 ms.
+Target: p99 of ``result`` within 5 ms at 240 Hz; 1000 Hz with 0 frames lost.
+
+Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,lsl]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_mocap_sources import spawn_server  # noqa: E402
+from bench_monitor import Page  # noqa: E402
+
+from livezmp.balance.pipeline import default_config  # noqa: E402
+from livezmp.monitor.dashboard import DashboardServer  # noqa: E402
+from livezmp.monitor.loop import Monitor  # noqa: E402
+from livezmp.recording.writer import Recorder  # noqa: E402
+from livezmp.sources.factory import SourceOptions, open_source  # noqa: E402
+
+TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "walk_plugingait_forceplates.c3d"
+RATES = (100.0, 240.0, 1000.0)
+
+
+def serve(kind: str, rate: float, laps: int, address, ready, go, done) -> None:
+    """The capture server process: plays once a client is connected and the monitor runs (``go``);
+    reports each frame's send time."""
+    from sim_devices.mocap_trial import load_c3d_trial, resampled
+
+    trial = resampled(load_c3d_trial(str(TRIAL)), rate)
+    frames = laps * trial.n_frames
+    sent: dict[int, float] = {}
+
+    def logged(send):
+        def out(f):
+            sent[f.number] = time.monotonic()
+            send(f)
+        return out
+
+    if kind == "lsl":
+        from sim_devices.lsl_publisher import LslPublisher
+
+        server = LslPublisher(trial, name=address, source_id=address, loop=True, max_frames=frames)
+        ready.put(address)
+        go.wait(60)
+        server.player.play(logged(server._send))
+    else:
+        if kind == "qtm":
+            from sim_devices.qtm_server import QtmServer
+
+            server = QtmServer(trial, loop=True, max_frames=frames)
+            ready.put(server.port)
+            connected = server.streaming_clients
+        else:
+            from sim_devices.natnet_server import NatNetServer
+
+            server = NatNetServer(trial, data_port=address, loop=True, max_frames=frames)
+            ready.put(server.command_port)
+            connected = lambda: bool(server.clients)  # noqa: E731
+        while not connected():
+            time.sleep(0.01)
+        go.wait(60)
+        server.player.start(logged(server._frame), "camera")
+        server.player.join()
+    done.put({"sent": sent, "counters": server.counters.receiver_view()})
+    time.sleep(1.0)
+
+
+class Timing:
+    """A monitor listener: when each result was handed over (after recording and the dashboard)."""
+
+    def __init__(self):
+        self.ready: dict[int, float] = {}
+
+    def publish(self, r, cop=None) -> None:
+        self.ready[r.index] = time.monotonic()
+
+    def alarm(self, ev) -> None:
+        pass
+
+
+class InHand:
+    """The source, noting when each input frame reached livezmp (the transport's share)."""
+
+    def __init__(self, source):
+        self.source, self.received = source, []
+
+    def __getattr__(self, name):
+        return getattr(self.source, name)
+
+    def read(self, timeout):
+        f = self.source.read(timeout)
+        if f is not None:
+            self.received.append(f.received)
+        return f
+
+
+def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
+    proc, _, url, _, go, done = spawn_server(serve, kind, rate, laps)
+    source = InHand(open_source(url, SourceOptions(calibration=str(TRIAL))))
+    fps = 1.0 / source.nominal_dt
+    session = {"source": url, "fps": fps, "mode": "full", "ground_z": source.ground_z, "alarm_after": 1e9,
+               "correct": False}
+    recorder = Recorder(str(tmp / f"{kind}_{rate:.0f}.mcap"), source.body_spec, session, source.body.channel_names)
+    timing = Timing()
+    cfg = default_config(source.body, fps, "full", source.ground_z)
+    monitor = Monitor(source, cfg, alarm_after=1e9, recorder=recorder)
+    dash = DashboardServer("127.0.0.1", 0, monitor.status, {"source": url})
+    page = Page(dash.start())
+    page.start()
+    monitor.listeners += [dash, timing]
+    stop = threading.Event()
+    loop = threading.Thread(target=monitor.run, args=(stop,), daemon=True)
+    loop.start()
+    go.set()
+    result = done.get(timeout=600)
+    lag = monitor.pipeline.lag
+    want = len(result["sent"]) - 1 - lag
+    end = time.monotonic() + 10
+    while page.last < want and time.monotonic() < end:
+        time.sleep(0.01)
+    stop.set()
+    loop.join(30)
+    dash.stop()
+    proc.join(10)
+    sent, st = result["sent"], source.stats
+    # input index k is frame number k when nothing was lost or late (checked in the table)
+    n = min(len(source.received), len(sent))
+    in_hand = np.array([source.received[k] - sent[k] for k in range(n)])
+    ks = [k for k in timing.ready if k + lag in sent]
+    res = np.array([timing.ready[k] - sent[k + lag] for k in ks])
+    pg = np.array([page.seen[k] - sent[k + lag] for k in ks if k in page.seen])
+    return {"sent": len(sent), "analysed": monitor.results, "lost": st.lost + st.late + st.overflow + st.dropped,
+            "lag_frames": lag, "lag_ms": 1e3 * lag / fps, "in_hand": in_hand * 1e3, "result": res * 1e3,
+            "page": pg * 1e3}
+
+
+def pct(x: np.ndarray) -> str:
+    return f"{np.percentile(x, 50):6.2f} {np.percentile(x, 99):6.2f}" if len(x) else f"{'-':>6} {'-':>6}"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--laps", type=int, default=2, help="times the 2.2 s walk is played per row")
+    p.add_argument("--systems", default="qtm,natnet,lsl")
+    args = p.parse_args()
+    la = os.getloadavg()
+    print(f"load average {la[0]:.2f} {la[1]:.2f} {la[2]:.2f} ({os.cpu_count()} cores); Plug-in Gait walk, "
+          f"4 plates, {args.laps} laps per row; recording + dashboard page on")
+    head = (f"{'system':7} {'rate':>5} {'sent':>6} {'analysed':>8} {'lost':>5} {'lag ms':>7}   "
+            f"{'in hand p50/p99':>15}   {'result p50/p99':>14}   {'page p50/p99':>13}  (ms beyond the lag)")
+    print(head)
+    print("-" * len(head))
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in args.systems.split(","):
+            for rate in RATES:
+                r = run_case(kind, rate, args.laps, Path(tmp))
+                print(f"{kind:7} {rate:5.0f} {r['sent']:6d} {r['analysed']:8d} {r['lost']:5d} {r['lag_ms']:7.1f}   "
+                      f"{pct(r['in_hand'])}     {pct(r['result'])}     {pct(r['page'])}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
