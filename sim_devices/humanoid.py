@@ -390,8 +390,9 @@ class SimHumanoid:
         self._pushes = [p for p in self._pushes if p.start + p.duration > t]
         force, moment = np.zeros(3), np.zeros(3)
         for p in self._pushes:
-            if p.start <= t:
-                f = np.array([p.force[0], p.force[1], 0.0])
+            share = p.share(t)
+            if share > 0:
+                f = share * np.array([p.force[0], p.force[1], 0.0])
                 force += f
                 moment += np.cross(np.array([0.0, 0.0, p.height - com[2]]), f)
         return force, moment

@@ -13,14 +13,14 @@ import contextlib
 import multiprocessing
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from livezmp.errors import InputError
 from livezmp.links import LinkError
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, parse_adapter
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import realtime_priority
-from livezmp.live.scenarios import Push, make_scenario
+from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import RealtimeThread, SimHumanoid
@@ -40,7 +40,7 @@ class SimRobot:
         """Scenario time 0 is now: schedule its pushes, count the balance from here."""
         now = self.humanoid.t
         for p in self.scenario.pushes:
-            self.humanoid.push(Push(p.force, p.height, now + p.start, p.duration))
+            self.humanoid.push(replace(p, start=now + p.start))
         c = self.humanoid.counters
         self._since = (c.steps, c.unsupported_steps)
 

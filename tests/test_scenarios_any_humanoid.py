@@ -62,7 +62,7 @@ def test_the_push_moves_the_zmp_the_stated_distance_past_the_toes(generated):
     # a push F at height h moves the ZMP by h F / (m g): F = (toe distance + 5 mm) m g / h
     assert push.force[0] == pytest.approx((sc.front_margin(body, q0) + 0.005) * body.total_mass * 9.81 / push.height)
     h = SimHumanoid(body, q0, fall_after_s=10.0)
-    ScenarioPlayer(h, scenario).run(push.start + 0.1)  # the player applies the scenario's pushes
+    ScenarioPlayer(h, scenario).run(push.start + push.rise_s + 0.1)  # the player applies the scenario's pushes
     s = h.state()
     toe = s.polygon[:, 0].max()
     assert s.zmp[0] - toe == pytest.approx(0.005, abs=0.0015)
@@ -79,3 +79,24 @@ def test_a_robot_never_seen_falls_uncorrected_and_stands_corrected(generated, sp
     print(f"{spec} {name}: uncorrected fell at {off.fallen.t:.2f} s; corrected: true ZMP inside "
           f"{100 * (1 - c.unsupported_steps / c.steps):.2f} % of its steps")
     assert on.fallen is None and s_on["stopped_by"] == "duration"
+
+
+@pytest.mark.parametrize("robot", ["livezmp_mini", "robotis_op3", "generated"])
+def test_a_push_topples_the_uncorrected_robot_and_the_corrector_holds_it_with_foot_sensors(
+        robot, mini, op3_body, generated):
+    """The push scenario on the mini, the OP3 and a robot never seen: uncorrected it falls; corrected from the
+    joints alone it falls too (a push does not move the joints); corrected with the feet's measured CoP it stands."""
+    body = {"livezmp_mini": mini, "robotis_op3": op3_body, "generated": generated.get(SMALL)}[robot]
+    scenario = make_scenario("push", body)
+    (push,) = scenario.pushes
+    off, s_off = balance(body, scenario, correct=False, foot_sensors=True)
+    blind, _ = balance(body, scenario, correct=True)
+    on, s_on = balance(body, scenario, correct=True, foot_sensors=True)
+    impulse = push.force[0] * (push.duration - push.rise_s)  # each half-cosine ramp carries half its span
+    print(f"{robot}: push {push.force[0]:.2f} N at {push.height:.3f} m, impulse {impulse:.2f} N s; uncorrected "
+          f"fell at {off.fallen and off.fallen.t:.2f} s, joints-only corrected fell at "
+          f"{blind.fallen and blind.fallen.t:.2f} s; with the CoP: fell {on.fallen}, worst true margin "
+          f"{1e3 * on.counters.worst_margin:.1f} mm")
+    assert off.fallen is not None and s_off["stopped_by"] == "fell"
+    assert blind.fallen is not None
+    assert on.fallen is None and s_on["stopped_by"] == "duration" and on.counters.unsupported_steps == 0

@@ -13,7 +13,8 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
    sample, whose centre of pressure, placed on the result's soles, is compared with the
    computed ZMP (:mod:`livezmp.balance.foot_sensors`; summary ``cop_vs_zmp``);
 3. correct: at ``correct_hz`` (every few cycles) the
-   :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result into
+   :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result (with the
+   measured CoP of its sample, where there are foot sensors: it sees pushes) into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
    more than one 500 Hz period allows on every cycle);
 4. write: goals = command + offsets, through the
@@ -180,6 +181,7 @@ class LiveLoop:
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
         self.result: FrameResult | None = None
+        self._cop: np.ndarray | None = None  # the measured CoP of the result's sample (foot sensors)
         self._fresh = False  # a new result arrived this cycle
         self._started = False  # the estimator has had a real sample
         self._fed = 0  # samples given to this pipeline
@@ -418,8 +420,9 @@ class LiveLoop:
     def _compare_sensors(self, result: FrameResult) -> None:
         """The foot sensors read with ``result``'s sample against its ZMP; both recorded."""
         feet = self._feet[result.index % len(self._feet)]
+        self._cop = None
         if feet is not None:
-            cop = self.cop_locator.locate(feet, result.soles)
+            cop = self._cop = self.cop_locator.locate(feet, result.soles)
             distance = self.cop_vs_zmp.add(cop, result.zmp, result.clamped)
         if self.recorder is not None:
             index = self._index0 + result.index
@@ -444,7 +447,7 @@ class LiveLoop:
             return
         self._next_correction = t + self.correct_every * self.dt
         q_command = np.concatenate([self.command_placer.update(command), command])
-        step = self.corrector.step(self.result, q_command)
+        step = self.corrector.step(self.result, q_command, self._cop)
         self.offsets, self._delta = step.offsets[self.nb:], step.delta
 
     # -- faults --------------------------------------------------------------------------------
