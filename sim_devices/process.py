@@ -76,7 +76,8 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
         raise InputError("--fault: the mock link has no devices to inject faults into")
     # the mock link steps the humanoid at each read; behind devices, only its thread does,
     # once per physics step, so no device reply waits for physics
-    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock")
+    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock",
+                           slope=scenario.slope)
     if kind == "mock":
         return SimRobot(humanoid, None, None, scenario)
     thread = RealtimeThread(humanoid, period=humanoid.dt).start()

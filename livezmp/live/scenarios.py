@@ -81,12 +81,15 @@ class Push:
 @dataclass(frozen=True)
 class Scenario:
     """``goals(t)``: joint goal angles (rad, ``body.joint_names`` order) at scenario time
-    t (s); ``duration`` (s); ``pushes`` in scenario time."""
+    t (s); ``duration`` (s); ``pushes`` in scenario time; ``slope`` (rad): the ground it is
+    played on rises ahead of the robot by this angle (a simulator's ground; on a robot,
+    where to stand it)."""
 
     name: str
     goals: Callable[[float], np.ndarray]
     duration: float
     pushes: tuple[Push, ...] = ()
+    slope: float = 0.0
 
 
 ALIGNED = 0.99  # |cos| between a joint's axis and a world axis for the joint to turn about it
@@ -404,6 +407,25 @@ def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 
     return Scenario("push", lambda t: q0.copy(), total, (Push(tuple(force), height, at, duration, rise_s),))
 
 
+def slope(body: BodyModel, degrees: float = 7.0, amplitude: float = 0.4, frequency: float = 0.7,
+          duration: float = 4.0, flexion: float = 0.3) -> Scenario:
+    """Stand facing up a slope of ``degrees``, upright (leaning forward at the ankles by the
+    slope, so the CoM stays over the feet), and swing both arms forward and back together,
+    ``amplitude`` rad at ``frequency`` Hz, the swing growing over its first second. A
+    flat-foot base estimate sees the body leaning forward by the slope, and its ZMP
+    forward by about the CoM height times the slope's tangent; the IMU knows better."""
+    poser = Poser(body)
+    angle = math.radians(degrees)
+    q0 = poser.standing(flexion) + poser.ankles_lean(angle)
+    dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
+    w = 2 * np.pi * frequency
+
+    def goals(t: float) -> np.ndarray:
+        return q0 + amplitude * smooth_step(t) * np.sin(w * max(t, 0.0)) * dq
+
+    return Scenario("slope", goals, duration, slope=angle)
+
+
 def front_margin(body: BodyModel, joints: np.ndarray) -> float:
     """Distance (m) from the static CoM's ground point forward to the toes' edge, standing on both feet."""
     com, poly = standing_support(body, joints)
@@ -420,7 +442,7 @@ ARM_SWING = {"amplitude": 0.6, "frequency": None, "beyond": 0.004, "toe_margin":
 # it does nothing before the push): the force grows over 1 s to what takes the ZMP 5 mm past the toes, holds 1 s and
 # eases off. The joints do not show it; the feet's CoP does (OnlineCorrector). Uncorrected, the ZMP is past the toes
 # for longer than the simulator's 0.2 s to fall. Faster pushes are not held (0.5 s rise: the trunk, limited to
-# 500 deg/s^2, first pushes the ZMP forward as it starts back), nor pushes past what 15 degrees of trunk rotation
+# 100 deg/s^2, first pushes the ZMP forward as it starts back), nor pushes past what 15 degrees of trunk rotation
 # offsets.
 PUSH = {"beyond": 0.005, "toe_margin": 0.02, "duration": 3.0, "rise_s": 1.0, "total": 5.0}
 BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
@@ -450,6 +472,7 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
     "lean": lean,
     "arm_swing": lambda body, **kw: arm_swing(body, **{**ARM_SWING, **kw}),
     "squat": squat,
+    "slope": slope,
     "push": lambda body, **kw: push(body, **{**PUSH, **kw}),
     "demo": lambda body, **kw: sequence("demo", [lean(body, hold_s=2.0),
                                                   arm_swing(body, duration=3.0, **ARM_SWING)], **kw),
