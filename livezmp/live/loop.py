@@ -412,7 +412,7 @@ class LiveLoop:
         ring[slot] = valid
         self._feet[slot] = feet
         if valid and self.recorder is not None:
-            self.recorder.input(self._index0 + self._fed, t, channels, contacts)
+            self.recorder.input(self._index0 + self._fed, t, channels, contacts, gravity)
         self._fed += 1
         self._samples += 1
         result = self.pipe.step(t, channels, contacts, gravity)
