@@ -84,7 +84,10 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
     try:
         # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
         # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly)
-        feet, imu = humanoid_sensors(humanoid) if kind == "fw" else (None, None)
+        # the Dynamixel bus reads the IMU where the robot has a sub-controller for it ([imu] in its config)
+        feet, imu = humanoid_sensors(humanoid) if kind == "fw" or (kind == "dynamixel" and robot.config.imu) \
+            else (None, None)
+        feet = feet if kind == "fw" else None
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
                                 foot_sensors=feet, imu=imu, **devices)
     except BaseException:

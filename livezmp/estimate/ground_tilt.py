@@ -59,7 +59,7 @@ def _rotation(base: np.ndarray) -> np.ndarray:
     return pin.rpy.rpyToMatrix(float(base[5]), float(base[4]), float(base[3]))
 
 
-def _gravity_in_imu(imu: dict[str, np.ndarray], gate: float) -> tuple[np.ndarray | None, bool]:
+def gravity_in_imu(imu: dict[str, np.ndarray], gate: float) -> tuple[np.ndarray | None, bool]:
     """(gravity in the IMU's axes (3,) m/s² or None, whether it came from an orientation)."""
     q = imu.get("orientation")
     if q is not None and np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
@@ -101,7 +101,7 @@ class GroundTilt:
         self._k, self._t = k, t
         if imu is None:
             return self.gravity
-        measured, from_orientation = _gravity_in_imu(imu, self.config.accel_gate)
+        measured, from_orientation = gravity_in_imu(imu, self.config.accel_gate)
         if measured is None:
             return self.gravity
         measured = k @ measured
