@@ -87,13 +87,20 @@ def humanoid_sensors(humanoid: SimHumanoid) -> tuple[FootProvider, ImuProvider]:
         cop = {side: (f @ offsets[side] / f.sum() if f.sum() > 0 else None) for side, f in forces.items()}
         return FootSensors(forces, cop)
 
+    return foot_sensors, humanoid_imu(humanoid)
+
+
+def humanoid_imu(humanoid: SimHumanoid) -> ImuProvider:
+    """An IMU provider reading ``humanoid``: orientation as (w, x, y, z), angular velocity (rad/s)
+    and specific force (m/s^2) in the base link's axes."""
+
     def imu() -> dict[str, np.ndarray]:
         reading = humanoid.imu()
         x, y, z, w = reading.quaternion
         return {"orientation": np.array([w, x, y, z]), "angular_velocity": np.asarray(reading.angular_velocity),
                 "acceleration": np.asarray(reading.specific_force)}
 
-    return foot_sensors, imu
+    return imu
 
 
 @dataclass

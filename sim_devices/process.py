@@ -24,7 +24,7 @@ from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import RealtimeThread, SimHumanoid
-from sim_devices.launch import KINDS, humanoid_sensors, start_devices
+from sim_devices.launch import KINDS, humanoid_imu, humanoid_sensors, start_devices
 
 
 @dataclass
@@ -84,10 +84,9 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
     try:
         # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
         # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly)
-        # the Dynamixel bus reads the IMU where the robot has a sub-controller for it ([imu] in its config)
-        feet, imu = humanoid_sensors(humanoid) if kind == "fw" or (kind == "dynamixel" and robot.config.imu) \
-            else (None, None)
-        feet = feet if kind == "fw" else None
+        feet, imu = humanoid_sensors(humanoid) if kind == "fw" else (None, None)
+        if kind == "dynamixel" and robot.config.imu is not None:  # the robot's IMU sub-controller on its bus
+            imu = humanoid_imu(humanoid)
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
                                 foot_sensors=feet, imu=imu, **devices)
     except BaseException:

@@ -21,7 +21,7 @@ from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.scenarios import make_scenario
 from sim_devices.humanoid import SimHumanoid
-from sim_devices.launch import humanoid_sensors
+from sim_devices.launch import humanoid_imu
 from sim_devices.mock_link import MockLink
 
 SLOPE = math.radians(7.0)
@@ -85,7 +85,7 @@ def zmp_error_on_slope(body, imu: str | None) -> tuple[np.ndarray, dict]:
     scenario = make_scenario("slope", body)
     clock = SimTime()
     h = SimHumanoid(body, scenario.goals(0.0), slope=scenario.slope)
-    _, reading = humanoid_sensors(h)
+    reading = humanoid_imu(h)
     provider = None if imu is None else reading if imu == "full" else (
         lambda: {k: v for k, v in reading().items() if k != "orientation"})
     mock = MockLink(h, body.joint_names, clock=clock.now, imu=provider)

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 import re
-import time
 from dataclasses import replace
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -22,9 +22,11 @@ from livezmp.live.config import LoopConfig
 from livezmp.live.fall_detection import FallDetector
 from livezmp.live.loop import LiveLoop
 from livezmp.live.scenarios import Poser, make_scenario
+from livezmp.model.robot import load_robot
 from livezmp.model.robot_config import ImuConfig, load_robot_config
-from sim_devices.humanoid import RealtimeThread, SimHumanoid
-from sim_devices.launch import humanoid_sensors, start_devices
+from sim_devices.humanoid import SimHumanoid
+from sim_devices.launch import humanoid_imu, start_devices
+from sim_devices.process import SimProcess
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch", "sdk_latency_timer")
 OP3_AXES = (-1, -1, 1)  # the OP3's board: x and y turned round (the vendor's module negates them)
@@ -66,7 +68,7 @@ def sloped(body) -> SimHumanoid:
 def test_the_link_reads_the_imu_in_the_servos_transaction_and_counts_its_bytes(mini, mini_config, fast):
     humanoid = sloped(mini)
     config = replace(mini_config, imu=ImuConfig(200, OP3_AXES))
-    _, imu = humanoid_sensors(humanoid)
+    imu = humanoid_imu(humanoid)
     names = mini.joint_names
     counted = {}
     for cfg in (mini_config, config):
@@ -119,21 +121,24 @@ def test_fall_detection_tracks_the_tilt_from_gyro_and_accelerometer_alone():
     assert "tilted" in detector.fell and math.radians(45) / 2.0 + 0.05 <= fell_at < math.radians(45) / 2.0 + 0.07
 
 
-def test_over_dynamixel_the_host_tells_the_fall_from_the_sub_controllers_imu(mini, mini_config):
-    """The loop has no fall flag, only the bus: leaning past the toes uncorrected, the robot falls, and its
-    IMU sub-controller's gyro and accelerometer tell the loop, which stops."""
+def test_over_dynamixel_the_host_tells_the_fall_from_the_sub_controllers_imu(mini, tmp_path):
+    """The simulator in another process with the mini's config plus an [imu]: the loop has no fall flag, only
+    the bus. Leaning past the toes uncorrected, the robot falls, and its IMU sub-controller's gyro and
+    accelerometer tell the loop, which stops."""
+    config = tmp_path / "mini_imu.toml"
+    config.write_text((resources.files("livezmp") / "data" / "robots" / "livezmp_mini.toml").read_text()
+                      + "\n[imu]\nid = 200\naxes = [-1, -1, 1]\n")
+    robot = load_robot(None, str(config))
     scenario = make_scenario("lean", mini, hold_s=1.0)
-    humanoid = SimHumanoid(mini, scenario.goals(0.0), clock=time.monotonic, device_steps=False)
-    config = replace(mini_config, imu=ImuConfig(200, OP3_AXES))
-    _, imu = humanoid_sensors(humanoid)
-    with RealtimeThread(humanoid, period=humanoid.dt), \
-            start_devices("dynamixel", humanoid, config, joint_names=mini.joint_names, imu=imu) as devices:
-        link = open_link(devices.url, mini.joint_names, config)
+    with SimProcess("dynamixel", ("lean", {"hold_s": 1.0}), config=str(config)) as sim:
+        link = open_link(sim.url, mini.joint_names, robot.config)
         try:
+            sim.start_scenario()
             s = LiveLoop(link, mini, LoopConfig(rate_hz=100.0, correct=False), command=scenario.goals).run(
                 scenario.duration)
         finally:
             link.close()
-    print(humanoid.fallen, s["imu_fall"], s["stopped_by"], s["imu_max_tilt_deg"])
-    assert humanoid.fallen is not None
+        truth = sim.verdict()
+    print(truth["fall"], s["imu_fall"], s["stopped_by"], s["imu_max_tilt_deg"])
+    assert truth["fell"] is True
     assert s["fell"] is True and s["stopped_by"] == "fell" and "tilted" in s["imu_fall"]
