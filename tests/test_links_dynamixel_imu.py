@@ -14,19 +14,17 @@ from importlib import resources
 import numpy as np
 import pytest
 from sim_support import sdk_latency_timer, short_gil_switch  # noqa: F401 - fixtures
+from test_fall_detection import against_a_simulator
 
 from livezmp.errors import InputError
 from livezmp.links import open_link
 from livezmp.links.dynamixel_imu import decode_imu, encode_imu
-from livezmp.live.config import LoopConfig
 from livezmp.live.fall_detection import FallDetector
-from livezmp.live.loop import LiveLoop
-from livezmp.live.scenarios import Poser, make_scenario
+from livezmp.live.scenarios import Poser
 from livezmp.model.robot import load_robot
 from livezmp.model.robot_config import ImuConfig, load_robot_config
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import humanoid_imu, start_devices
-from sim_devices.process import SimProcess
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch", "sdk_latency_timer")
 OP3_AXES = (-1, -1, 1)  # the OP3's board: x and y turned round (the vendor's module negates them)
@@ -129,16 +127,8 @@ def test_over_dynamixel_the_host_tells_the_fall_from_the_sub_controllers_imu(min
     config.write_text((resources.files("livezmp") / "data" / "robots" / "livezmp_mini.toml").read_text()
                       + "\n[imu]\nid = 200\naxes = [-1, -1, 1]\n")
     robot = load_robot(None, str(config))
-    scenario = make_scenario("lean", mini, hold_s=1.0)
-    with SimProcess("dynamixel", ("lean", {"hold_s": 1.0}), config=str(config)) as sim:
-        link = open_link(sim.url, mini.joint_names, robot.config)
-        try:
-            sim.start_scenario()
-            s = LiveLoop(link, mini, LoopConfig(rate_hz=100.0, correct=False), command=scenario.goals).run(
-                scenario.duration)
-        finally:
-            link.close()
-        truth = sim.verdict()
+    s, truth = against_a_simulator("dynamixel", mini, robot.config, False, ("lean", {"hold_s": 1.0}),
+                                   config_path=str(config))
     print(truth["fall"], s["imu_fall"], s["stopped_by"], s["imu_max_tilt_deg"])
     assert truth["fell"] is True
     assert s["fell"] is True and s["stopped_by"] == "fell" and "tilted" in s["imu_fall"]
