@@ -444,7 +444,7 @@ ARM_SWING = {"amplitude": 0.6, "frequency": None, "beyond": 0.004, "toe_margin":
 # for longer than the simulator's 0.2 s to fall. Faster pushes are not held (0.5 s rise: the trunk, limited to
 # 100 deg/s^2, first pushes the ZMP forward as it starts back), nor pushes past what 15 degrees of trunk rotation
 # offsets.
-PUSH = {"beyond": 0.005, "toe_margin": 0.02, "duration": 3.0, "rise_s": 1.0, "total": 5.0}
+PUSH = {"beyond": 0.005, "toe_margin": 0.02, "duration": 3.0, "rise_s": 1.0, "total": 4.5}
 BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
 
 
