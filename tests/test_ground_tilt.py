@@ -15,6 +15,7 @@ import pytest
 from test_live_loop import SimTime
 from test_live_loop_closed import BusTime
 
+from livezmp.errors import InputError
 from livezmp.estimate.ground_tilt import G, GroundTilt
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
@@ -76,6 +77,8 @@ def test_the_simulators_zmp_on_a_slope_is_under_the_com_along_gravity(mini):
     imu = h.imu()
     world_z_in_base = pin.Quaternion(*imu.quaternion[[3, 0, 1, 2]]).toRotationMatrix()[2]
     np.testing.assert_allclose(imu.specific_force, G * world_z_in_base, atol=1e-6)  # at rest: 1 g up, in the world
+    with pytest.raises(InputError, match="slope must be a finite angle under 45 degrees"):
+        SimHumanoid(mini, slope=math.radians(50))
 
 
 def zmp_error_on_slope(body, imu: str | None) -> tuple[np.ndarray, dict]:

@@ -8,6 +8,7 @@ import pytest
 from humanoid_gen import generate_humanoid, joint_name
 from test_live_loop_closed import balance
 
+from livezmp.errors import InputError
 from livezmp.live import scenarios as sc
 from livezmp.live.scenarios import joint_roles, make_scenario
 from livezmp.model.robot import load_robot
@@ -101,3 +102,12 @@ def test_a_push_topples_the_uncorrected_robot_and_the_corrector_holds_it_with_fo
     assert off.fallen is not None and s_off["stopped_by"] == "fell"
     assert blind is None or blind.fallen is not None
     assert on.fallen is None and s_on["stopped_by"] == "duration" and on.counters.unsupported_steps == 0
+
+
+def test_a_push_grows_and_eases_off_as_half_cosines():
+    p = sc.Push((2.0, 0.0), 0.2, start=1.0, duration=3.0, rise_s=1.0)
+    shares = [p.share(t) for t in (0.99, 1.0, 1.5, 2.0, 3.0, 3.5, 4.0)]
+    assert shares == pytest.approx([0.0, 0.0, 0.5, 1.0, 1.0, 0.5, 0.0])
+    assert sc.Push((2.0, 0.0), 0.2, 1.0, 0.1).share(1.05) == 1.0  # no rise: a step
+    with pytest.raises(InputError, match="rise_s within"):
+        sc.Push((2.0, 0.0), 0.2, 1.0, 1.0, rise_s=0.6)
