@@ -42,7 +42,7 @@ reply costs the loop one timeout.
 An IMU sub-controller in the robot config (``[imu]``, the OP3's OpenCR at id 200:
 :mod:`.dynamixel_imu`) is read in the same transaction: the read becomes a (Fast) Bulk Read
 of the servos' registers and the IMU's 12 (longer instruction, one more reply; no second
-round trip through the adapter), and the frame carries its ``imu`` (gyro and accelerometer,
+round trip through the adapter; Fast only with ``fast=1``), and the frame carries its ``imu`` (gyro and accelerometer,
 base-link axes). A lost IMU reply leaves that frame without one (counted); robots without
 an ``[imu]`` keep the sync read and pay nothing.
 
@@ -360,7 +360,10 @@ class DynamixelLink(PortLink):
         firmware, delays, modes = eeprom[0::stride], eeprom[RETURN_DELAY_TIME - FIRMWARE_VERSION::stride], \
             eeprom[OPERATING_MODE - FIRMWARE_VERSION::stride]
         if self.fast is None:
-            self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE
+            # with an IMU sub-controller, only when asked (fast=1): whether its firmware answers a Fast Bulk
+            # Read is not something the servos' firmware versions tell
+            self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE \
+                and self._extra is None
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
         limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
