@@ -45,6 +45,10 @@ with its latency timer at 1 ms) delays the instruction on its way to the bus
 and the replies on their way back. ``emulate_wire_time=False`` and
 ``adapter="none"`` make bytes take no time (only to test the protocol).
 
+A sub-controller (``sub_controller``: an :class:`~sim_devices.dynamixel_imu_board.ImuBoard`,
+the OP3's OpenCR with its IMU) may share the bus: it answers Ping, Read and its part of
+Sync/Bulk (and Fast) Reads, with its own Return Delay Time, under the same wire timing.
+
 Not modelled: indirect addresses, velocity/current/PWM control modes (the
 registers are kept but the joint only follows goal positions), profiles, and
 the time a real servo takes to reboot.
@@ -63,6 +67,7 @@ import numpy as np
 
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, parse_adapter, wire_time
 from sim_devices import dynamixel_control_table as ct
+from sim_devices.dynamixel_imu_board import ImuBoard
 from sim_devices.dynamixel_packet import (
     ALERT,
     BROADCAST_ID,
@@ -137,17 +142,22 @@ class DynamixelChain(PtyDevice):
     ``baud_rate`` (bit/s) sets every servo's Baud Rate register; ``settings`` maps
     control-table field names to values written to every servo at start (e.g.
     ``{"return_delay_time": 0}``); ``faults`` is a fault spec (see `faults`);
-    ``adapter``: the USB-serial adapter's latency (a name or ms, see `bus_timing.parse_adapter`).
+    ``adapter``: the USB-serial adapter's latency (a name or ms, see `bus_timing.parse_adapter`);
+    ``sub_controller``: a board sharing the bus (module docstring).
     Bad arguments raise ValueError, an unknown field name KeyError, naming it.
     """
 
     def __init__(self, ids: Sequence[int], plant: JointPlant | None = None, *, faults: str | FaultSpec = "",
                  baud_rate: int = 1_000_000, settings: Mapping[str, int] | None = None,
                  zero_tick: int = 2048, emulate_wire_time: bool = True,
-                 adapter: str | float | Adapter = DEFAULT_ADAPTER, name: str = "ttyDXL") -> None:
+                 adapter: str | float | Adapter = DEFAULT_ADAPTER, name: str = "ttyDXL",
+                 sub_controller: ImuBoard | None = None) -> None:
         ids = list(ids)
         if not ids or len(set(ids)) != len(ids) or not all(0 <= i <= 252 for i in ids):
             raise ValueError(f"DynamixelChain: ids must be distinct integers in 0..252, got {ids}")
+        if sub_controller is not None and sub_controller.id in ids:
+            raise ValueError(f"DynamixelChain: the sub-controller's id {sub_controller.id} is a servo's")
+        self.sub_controller = sub_controller
         if baud_rate not in _BAUD_CODES:
             raise ValueError(f"DynamixelChain: baud_rate {baud_rate} is not an XM430 rate "
                              f"({', '.join(map(str, _BAUD_CODES))})")
@@ -370,9 +380,23 @@ class DynamixelChain(PtyDevice):
         for servo in servos:
             info = _PING.pack(servo.get("model_number"), servo.get("firmware_version"))
             entries.append((servo.return_delay, encode_status(servo.id, self._error(servo, 0), info)))
+        sub = self.sub_controller
+        if sub is not None and packet.id in (sub.id, BROADCAST_ID):
+            entries.append((sub.return_delay, encode_status(sub.id, 0, _PING.pack(0, 0))))
         return entries
 
+    def _sub_reply(self, address: int, length: int) -> tuple[int, bytes]:
+        data = self.sub_controller.read(address, length)
+        return (ErrorCode.ACCESS, b"") if data is None else (ErrorCode.NONE, data)
+
     def _read_instruction(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
+        sub = self.sub_controller
+        if sub is not None and packet.id == sub.id:
+            if sub.status_level < 1:
+                return []
+            code, data = self._sub_reply(*_ADDRESS_LENGTH.unpack(packet.params)) if len(packet.params) == 4 \
+                else (ErrorCode.DATA_LENGTH, b"")
+            return [(sub.return_delay, encode_status(sub.id, code, data))]
         servo = self._unicast(packet.id, line)
         if servo is None:
             return []
@@ -487,7 +511,16 @@ class DynamixelChain(PtyDevice):
         segments = []
         delay = 0.0
         hearing = self._hearing(line)
+        sub = self.sub_controller
         for dxl_id, address, length in requests:
+            if sub is not None and dxl_id == sub.id and sub.status_level >= 1:
+                code, data = self._sub_reply(address, length)
+                if fast:
+                    segments.append((code, sub.id, data))
+                    delay += sub.return_delay
+                else:
+                    entries.append((sub.return_delay, encode_status(sub.id, code, data)))
+                continue
             servo = hearing.get(dxl_id)
             if servo is None:
                 self.stats.unheard += dxl_id in self._by_id

@@ -17,8 +17,14 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
 * base: the stance foot is flat on the ground, the base follows from the leg
   (:class:`livezmp.model.base_placement.BasePlacer`): the servos prescribe the whole motion
   and the feet neither slip nor tip;
+* ground: a plane, level or sloped by ``slope`` (rad, rising ahead along the starting
+  stance foot's x axis). The simulation works in the ground's frame (its plane z = 0, x
+  uphill), where gravity is tilted: (−g sin slope, 0, −g cos slope). Everything below —
+  states, ZMP, soles, polygon, pushes (along the ground) — is in that frame; only the
+  IMU, as a real one, reads the world (gravity straight down);
 * true ZMP: exact rigid-body dynamics of the whole body
-  (:func:`livezmp.balance.zmp.compute_zmp`) in the state (q, v, a). v and a are second-order
+  (:func:`livezmp.balance.zmp.compute_zmp`) in the state (q, v, a), under the ground
+  frame's gravity: the centre of pressure on the ground plane. v and a are second-order
   central differences of the last three whole-body configurations (base coordinates
   from the placer, joint angles from the plant), evaluated at the middle one: for the
   joints this is exactly the plant's own velocity (the mean of its two step
@@ -47,7 +53,8 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
 
 Sensors, computed on request from the latest dynamic state: four foot force cells per
 foot (:meth:`SimHumanoid.foot_forces`) and an IMU on the base link
-(:meth:`SimHumanoid.imu`). World frame: z up, ground z = 0, metres, SI units.
+(:meth:`SimHumanoid.imu`). Frame: the ground's (z up, ground z = 0; on a level ground the
+world), metres, SI units.
 
 Stepping: :meth:`advance_to` runs whole internal steps up to a time; :meth:`step`
 (the `JointPlant` call) advances by ``dt``, or, when the humanoid has a ``clock``, to
@@ -138,9 +145,9 @@ class FootForces:
 @dataclass(frozen=True)
 class ImuReading:
     """An IMU at the base link's origin, axes along the base link. ``quaternion`` (x, y,
-    z, w) rotates base-link vectors into the world (z up); ``angular_velocity`` (rad/s)
-    and ``specific_force`` (m/s², acceleration minus gravity: +9.81 up at rest) are in
-    the base-link axes."""
+    z, w) rotates base-link vectors into the world (z up, gravity down, whatever the
+    ground's slope); ``angular_velocity`` (rad/s) and ``specific_force`` (m/s², acceleration
+    minus gravity: +9.81 up at rest) are in the base-link axes."""
 
     t: float
     quaternion: Array
@@ -233,14 +240,21 @@ class SimHumanoid:
     def __init__(self, body: BodyModel, posture: Array | None = None, *, servo: ServoPlant | None = None,
                  dt: float = 1e-3, goal_window_s: float = 0.008, goal_lag_s: float = 0.01,
                  fall_after_s: float = 0.2, contact_tolerance: float = 1e-3, clock: Callable[[], float] | None = None,
-                 torque_on: bool = False, device_steps: bool = True) -> None:
+                 torque_on: bool = False, device_steps: bool = True, slope: float = 0.0) -> None:
         if body.kind != "urdf" or len(body.base_channels) != 6:
             raise InputError("SimHumanoid: needs a URDF robot body with a floating base (body_from_urdf)")
+        if not (math.isfinite(slope) and abs(slope) < math.radians(45)):
+            raise InputError(f"SimHumanoid: slope must be a finite angle under 45 degrees (rad), got {slope!r}")
         if not (dt > 0 and min(goal_window_s, goal_lag_s, fall_after_s, contact_tolerance) >= 0):
             raise InputError(f"SimHumanoid: need dt > 0 and goal_window_s, goal_lag_s, fall_after_s, contact_tolerance "
                              f">= 0; got {dt}, {goal_window_s}, {goal_lag_s}, {fall_after_s}, {contact_tolerance}")
         self.body = body
         self.model = body.model
+        self.slope = slope
+        g = float(np.linalg.norm(body.model.gravity.linear))
+        #: gravity in the ground's frame (m/s²), and the world's orientation of that frame
+        self.gravity = np.array([-g * math.sin(slope), 0.0, -g * math.cos(slope)])
+        self._ground_in_world = pin.AngleAxis(-slope, np.array([0.0, 1.0, 0.0])).toRotationMatrix()
         n = len(body.joint_names)
         if servo is not None and posture is not None:
             raise InputError("SimHumanoid: give a posture or a servo plant (at its own position), not both")
@@ -390,8 +404,9 @@ class SimHumanoid:
         self._pushes = [p for p in self._pushes if p.start + p.duration > t]
         force, moment = np.zeros(3), np.zeros(3)
         for p in self._pushes:
-            if p.start <= t:
-                f = np.array([p.force[0], p.force[1], 0.0])
+            share = p.share(t)
+            if share > 0:
+                f = share * np.array([p.force[0], p.force[1], 0.0])
                 force += f
                 moment += np.cross(np.array([0.0, 0.0, p.height - com[2]]), f)
         return force, moment
@@ -403,7 +418,7 @@ class SimHumanoid:
         a = (q2 - 2 * q1 + q0) / (h * h)
         model, data = self.model, self._data
         min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
-        res = compute_zmp(model, data, q1, v, a, 0.0, FLIGHT_FRACTION)
+        res = compute_zmp(model, data, q1, v, a, 0.0, FLIGHT_FRACTION, self.gravity)
         push, push_moment = self._push_wrench(t, res.com)
         force, zmp = res.force, res.zmp
         if push.any():
@@ -512,8 +527,9 @@ class SimHumanoid:
                 tipped, spin = self._toppled(self.t)
                 rotation = tipped @ rotation
                 omega = omega + rotation.T @ spin
-            specific = acc - rotation.T @ model.gravity.linear
-            return ImuReading(s.t, pin.Quaternion(rotation).coeffs().copy(), omega.copy(), specific)
+            specific = acc - rotation.T @ self.gravity
+            world = self._ground_in_world @ rotation
+            return ImuReading(s.t, pin.Quaternion(world).coeffs().copy(), omega.copy(), specific)
 
 
 class RealtimeThread:

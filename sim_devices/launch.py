@@ -41,6 +41,7 @@ from livezmp.links.bus_timing import DEFAULT_ADAPTER
 from livezmp.model.robot_config import RobotConfig
 from sim_devices.can_servo import CanServoBus
 from sim_devices.dynamixel_chain import DynamixelChain
+from sim_devices.dynamixel_imu_board import ImuBoard
 from sim_devices.faults import FaultCounters, FaultSpec
 from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
 from sim_devices.humanoid import SimHumanoid
@@ -86,13 +87,20 @@ def humanoid_sensors(humanoid: SimHumanoid) -> tuple[FootProvider, ImuProvider]:
         cop = {side: (f @ offsets[side] / f.sum() if f.sum() > 0 else None) for side, f in forces.items()}
         return FootSensors(forces, cop)
 
+    return foot_sensors, humanoid_imu(humanoid)
+
+
+def humanoid_imu(humanoid: SimHumanoid) -> ImuProvider:
+    """An IMU provider reading ``humanoid``: orientation as (w, x, y, z), angular velocity (rad/s)
+    and specific force (m/s^2) in the base link's axes."""
+
     def imu() -> dict[str, np.ndarray]:
         reading = humanoid.imu()
         x, y, z, w = reading.quaternion
         return {"orientation": np.array([w, x, y, z]), "angular_velocity": np.asarray(reading.angular_velocity),
                 "acceleration": np.asarray(reading.specific_force)}
 
-    return foot_sensors, imu
+    return imu
 
 
 @dataclass
@@ -134,7 +142,9 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
     """Start the devices of ``kind`` ("dynamixel", "can" or "fw") driving ``plant`` (see module docstring).
 
     ``baud`` is the serial line rate (dynamixel, fw) or the CAN bitrate (can); ``adapter`` the
-    Dynamixel bus's USB adapter (a name or ms). InputError on a bad kind, joint, servo entry,
+    Dynamixel bus's USB adapter (a name or ms). On a Dynamixel bus, ``imu`` is served by an IMU
+    sub-controller (:class:`~sim_devices.dynamixel_imu_board.ImuBoard`) where the robot config
+    has an ``[imu]`` (on the first bus). InputError on a bad kind, joint, servo entry,
     fault spec, baud or adapter.
     """
     if kind not in KINDS:
@@ -159,7 +169,9 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
                 if s.ticks_per_rev != XM430_TICKS_PER_REV:
                     raise InputError(f"{robot_config.source}: [servos.{s.joint}] ticks_per_rev {s.ticks_per_rev}: "
                                      f"the simulated XM430 has {XM430_TICKS_PER_REV}")
-            return _dynamixel_buses(plant, servos, faults, baud, adapter, buses)
+            board = None if imu is None or robot_config.imu is None else \
+                ImuBoard(robot_config.imu.id, imu, robot_config.imu.axes)
+            return _dynamixel_buses(plant, servos, faults, baud, adapter, buses, board)
         if kind == "can":
             bus = CanServoBus(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults, bitrate=baud,
                               rates=CAN_POWER_UP_RATES, transport=can_transport)
@@ -175,7 +187,7 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
 
 
 def _dynamixel_buses(plant: JointPlant, servos: list, faults: str | FaultSpec, baud: int, adapter: str | float,
-                     buses: int) -> SimDevices:
+                     buses: int, board: ImuBoard | None = None) -> SimDevices:
     if not 1 <= buses <= len(servos):
         raise InputError(f"buses {buses}: must be 1..{len(servos)} (one servo at least on each)")
     sizes = [len(part) for part in np.array_split(np.arange(len(servos)), buses)]
@@ -187,7 +199,7 @@ def _dynamixel_buses(plant: JointPlant, servos: list, faults: str | FaultSpec, b
             group = servos[first: first + size]
             first += size
             chain = DynamixelChain([s.id for s in group], share, faults=faults, baud_rate=baud, adapter=adapter,
-                                   name=f"ttyDXL{len(chains)}")
+                                   name=f"ttyDXL{len(chains)}", sub_controller=None if chains else board)
             chains.append(chain)
             for s in group:
                 chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)

@@ -13,18 +13,18 @@ import contextlib
 import multiprocessing
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from livezmp.errors import InputError
 from livezmp.links import LinkError
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, parse_adapter
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import realtime_priority
-from livezmp.live.scenarios import Push, make_scenario
+from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import RealtimeThread, SimHumanoid
-from sim_devices.launch import KINDS, humanoid_sensors, start_devices
+from sim_devices.launch import KINDS, humanoid_imu, humanoid_sensors, start_devices
 
 
 @dataclass
@@ -40,7 +40,7 @@ class SimRobot:
         """Scenario time 0 is now: schedule its pushes, count the balance from here."""
         now = self.humanoid.t
         for p in self.scenario.pushes:
-            self.humanoid.push(Push(p.force, p.height, now + p.start, p.duration))
+            self.humanoid.push(replace(p, start=now + p.start))
         c = self.humanoid.counters
         self._since = (c.steps, c.unsupported_steps)
 
@@ -76,7 +76,8 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
         raise InputError("--fault: the mock link has no devices to inject faults into")
     # the mock link steps the humanoid at each read; behind devices, only its thread does,
     # once per physics step, so no device reply waits for physics
-    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock")
+    humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock",
+                           slope=scenario.slope)
     if kind == "mock":
         return SimRobot(humanoid, None, None, scenario)
     thread = RealtimeThread(humanoid, period=humanoid.dt).start()
@@ -84,6 +85,8 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
         # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
         # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly)
         feet, imu = humanoid_sensors(humanoid) if kind == "fw" else (None, None)
+        if kind == "dynamixel" and robot.config.imu is not None:  # the robot's IMU sub-controller on its bus
+            imu = humanoid_imu(humanoid)
         devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
                                 foot_sensors=feet, imu=imu, **devices)
     except BaseException:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
-from livezmp.live.scenarios import Push, Scenario
+from livezmp.live.scenarios import Scenario
 from sim_devices.humanoid import SimHumanoid
 
 
@@ -28,7 +29,7 @@ class ScenarioPlayer:
         for i in range(len(humanoid.position)):
             humanoid.set_torque(i, True)
         for p in scenario.pushes:
-            humanoid.push(Push(p.force, p.height, self.start + p.start, p.duration))
+            humanoid.push(replace(p, start=self.start + p.start))
 
     @property
     def t(self) -> float:

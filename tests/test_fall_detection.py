@@ -57,20 +57,27 @@ def test_free_fall_is_a_fall():
     assert "free fall (0.05 g)" in detector.update(0.06, falling)
 
 
+def against_a_simulator(kind: str, body, robot_config, correct: bool, scenario: tuple[str, dict],
+                        url_options: str = "", config_path: str | None = None) -> tuple[dict, dict]:
+    """The loop at 100 Hz against the simulator in another process, with no fall flag: only what the link
+    reads (its IMU) can tell it the robot fell. (summary, the simulator's verdict)."""
+    command = make_scenario(scenario[0], body, **scenario[1])
+    with SimProcess(kind, scenario, config=config_path) as sim:
+        link = open_link(sim.url + url_options, body.joint_names, robot_config)
+        try:
+            sim.start_scenario()
+            s = LiveLoop(link, body, LoopConfig(rate_hz=100.0, correct=correct), command=command.goals).run(
+                command.duration)
+        finally:
+            link.close()
+        return s, sim.verdict()
+
+
 @pytest.mark.parametrize("correct", [False, True], ids=["uncorrected", "corrected"])
 def test_the_host_tells_the_simulators_fall_from_its_imu(mini, mini_config, correct):
     """The fw board in another process; the loop gets no fall flag, only the board's IMU. Leaning past the
     toes, the uncorrected robot falls and the loop stops on the IMU's word; the corrected one stands."""
-    scenario = make_scenario("lean", mini)
-    with SimProcess("fw", ("lean", {})) as sim:
-        link = open_link(sim.url + "&rate=100", mini.joint_names, mini_config)
-        try:
-            sim.start_scenario()
-            s = LiveLoop(link, mini, LoopConfig(rate_hz=100.0, correct=correct), command=scenario.goals).run(
-                scenario.duration)
-        finally:
-            link.close()
-        truth = sim.verdict()
+    s, truth = against_a_simulator("fw", mini, mini_config, correct, ("lean", {}), "&rate=100")
     print(truth["fall"], s["imu_fall"], s["stopped_by"], s["imu_max_tilt_deg"])
     assert s["fell"] is truth["fell"] is (not correct)
     if correct:

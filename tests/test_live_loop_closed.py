@@ -16,6 +16,7 @@ from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.scenarios import make_scenario
 from sim_devices.humanoid import SimHumanoid
+from sim_devices.launch import humanoid_sensors
 from sim_devices.mock_link import MockLink
 
 READ_S, WRITE_S = 6e-4, 2e-4
@@ -43,11 +44,14 @@ class BusTime:
         return self.link.reconnect()
 
 
-def balance(body, scenario, correct: bool) -> tuple[SimHumanoid, dict]:
+def balance(body, scenario, correct: bool, foot_sensors: bool = False) -> tuple[SimHumanoid, dict]:
     time = SimTime()
     humanoid = SimHumanoid(body, scenario.goals(0.0))
-    mock = MockLink(humanoid, body.joint_names, clock=time.now)
+    mock = MockLink(humanoid, body.joint_names, clock=time.now,
+                    foot_sensors=humanoid_sensors(humanoid)[0] if foot_sensors else None)
     mock.open()
+    for push in scenario.pushes:  # scenario time is loop time, and the humanoid's (both start at the link's opening)
+        humanoid.push(push)
     loop = LiveLoop(BusTime(mock, time), body, LoopConfig(correct=correct), command=scenario.goals,
                     clock=LoopClock(500.0, now=time.now, sleep=time.advance), fell=lambda: humanoid.fallen is not None)
     return humanoid, loop.run(scenario.duration)

@@ -8,6 +8,7 @@ import pytest
 from humanoid_gen import generate_humanoid, joint_name
 from test_live_loop_closed import balance
 
+from livezmp.errors import InputError
 from livezmp.live import scenarios as sc
 from livezmp.live.scenarios import joint_roles, make_scenario
 from livezmp.model.robot import load_robot
@@ -62,7 +63,7 @@ def test_the_push_moves_the_zmp_the_stated_distance_past_the_toes(generated):
     # a push F at height h moves the ZMP by h F / (m g): F = (toe distance + 5 mm) m g / h
     assert push.force[0] == pytest.approx((sc.front_margin(body, q0) + 0.005) * body.total_mass * 9.81 / push.height)
     h = SimHumanoid(body, q0, fall_after_s=10.0)
-    ScenarioPlayer(h, scenario).run(push.start + 0.1)  # the player applies the scenario's pushes
+    ScenarioPlayer(h, scenario).run(push.start + push.rise_s + 0.1)  # the player applies the scenario's pushes
     s = h.state()
     toe = s.polygon[:, 0].max()
     assert s.zmp[0] - toe == pytest.approx(0.005, abs=0.0015)
@@ -79,3 +80,34 @@ def test_a_robot_never_seen_falls_uncorrected_and_stands_corrected(generated, sp
     print(f"{spec} {name}: uncorrected fell at {off.fallen.t:.2f} s; corrected: true ZMP inside "
           f"{100 * (1 - c.unsupported_steps / c.steps):.2f} % of its steps")
     assert on.fallen is None and s_on["stopped_by"] == "duration"
+
+
+@pytest.mark.parametrize("robot", ["livezmp_mini", "robotis_op3", "generated"])
+def test_a_push_topples_the_uncorrected_robot_and_the_corrector_holds_it_with_foot_sensors(
+        robot, mini, op3_body, generated):
+    """The push scenario on the mini, the OP3 and a robot never seen: uncorrected it falls; corrected with the
+    feet's measured CoP it stands; (the mini) corrected from the joints alone it falls too: a push does not move
+    the joints."""
+    body = {"livezmp_mini": mini, "robotis_op3": op3_body, "generated": generated.get(SMALL)}[robot]
+    scenario = make_scenario("push", body)
+    (push,) = scenario.pushes
+    off, s_off = balance(body, scenario, correct=False, foot_sensors=True)
+    blind, _ = balance(body, scenario, correct=True) if robot == "livezmp_mini" else (None, None)
+    on, s_on = balance(body, scenario, correct=True, foot_sensors=True)
+    impulse = push.force[0] * (push.duration - push.rise_s)  # each half-cosine ramp carries half its span
+    blind_said = "" if blind is None else f"joints-only corrected fell at {blind.fallen and blind.fallen.t:.2f} s; "
+    print(f"{robot}: push {push.force[0]:.2f} N at {push.height:.3f} m, impulse {impulse:.2f} N s; uncorrected "
+          f"fell at {off.fallen and off.fallen.t:.2f} s; {blind_said}with the CoP: fell {on.fallen}, worst true "
+          f"margin {1e3 * on.counters.worst_margin:.1f} mm")
+    assert off.fallen is not None and s_off["stopped_by"] == "fell"
+    assert blind is None or blind.fallen is not None
+    assert on.fallen is None and s_on["stopped_by"] == "duration" and on.counters.unsupported_steps == 0
+
+
+def test_a_push_grows_and_eases_off_as_half_cosines():
+    p = sc.Push((2.0, 0.0), 0.2, start=1.0, duration=3.0, rise_s=1.0)
+    shares = [p.share(t) for t in (0.99, 1.0, 1.5, 2.0, 3.0, 3.5, 4.0)]
+    assert shares == pytest.approx([0.0, 0.0, 0.5, 1.0, 1.0, 0.5, 0.0])
+    assert sc.Push((2.0, 0.0), 0.2, 1.0, 0.1).share(1.05) == 1.0  # no rise: a step
+    with pytest.raises(InputError, match="rise_s within"):
+        sc.Push((2.0, 0.0), 0.2, 1.0, 1.0, rise_s=0.6)

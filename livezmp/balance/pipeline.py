@@ -93,18 +93,25 @@ class Pipeline:
         ground = GroundConfig(warmup_frames=self.config.ground_warmup_frames, override=self.config.ground_z)
         self.contacts = ContactDetector(self.config.contacts, ground)
         self._outside_contacts: dict[int, tuple[bool, bool]] = {}
+        self._gravity: dict[int, np.ndarray] = {}  # frame -> gravity in the ground's frame (an IMU's, see step)
 
     @property
     def lag(self) -> int:
         return self.estimator.lag
 
-    def step(self, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None = None) -> FrameResult | None:
+    def step(self, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None = None,
+             gravity: np.ndarray | None = None) -> FrameResult | None:
         """Feed one input frame (raw channels in file units, time in s); return the result
         for the frame ``lag`` frames back, or None while the estimator fills.
 
-        ``contacts`` (left, right) from foot sensors replaces contact detection for this frame."""
+        ``contacts`` (left, right) from foot sensors replaces contact detection for this frame.
+        ``gravity`` (3,) m/s²: gravity in the internal frame for this frame, when the ground
+        is not level (e.g. from an IMU, :mod:`livezmp.estimate.ground_tilt`); the ZMP is then
+        the centre of pressure on the ground plane, whatever its tilt."""
         if contacts is not None:
             self._outside_contacts[self._count] = contacts
+        if gravity is not None:
+            self._gravity[self._count] = gravity
         self._count += 1
         est = self.estimator.step(t, self.body.channels_to_q(np.asarray(channels, dtype=float)))
         return None if est is None else self._analyse(est)
@@ -114,6 +121,7 @@ class Pipeline:
         out = [self._analyse(e) for e in self.estimator.flush()]
         self._count = self._index0 = 0
         self._outside_contacts.clear()
+        self._gravity.clear()
         return out
 
     def restart(self) -> list[FrameResult]:
@@ -148,7 +156,8 @@ class Pipeline:
 
     def _analyse(self, est: Estimate) -> FrameResult:
         model, data = self.model, self.data
-        z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction)
+        gravity = self._gravity.pop(est.index, None) if self._gravity else None
+        z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction, gravity)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
         low = lowest_sole_points(self.body, model, data, soles)

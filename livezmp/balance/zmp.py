@@ -53,16 +53,18 @@ def zmp_from_wrench(com: np.ndarray, force: np.ndarray, moment: np.ndarray, grou
 
 
 def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a: np.ndarray,
-                ground_z: float = 0.0, flight_fraction: float = 0.05) -> ZmpResult:
+                ground_z: float = 0.0, flight_fraction: float = 0.05, gravity: np.ndarray | None = None) -> ZmpResult:
     """ZMP of ``model`` in state (q, v, a) (SI units, internal z-up frame).
 
     Pass the body's ``model`` for the full ZMP, its ``point_model`` for the seed's.
-    Leaves ``data`` with kinematics of (q, v, a) computed (joint placements, CoM)."""
+    ``gravity`` (3,) m/s²: gravity in this frame when it is not the model's (−z): in the
+    frame of a sloped ground (its plane z = 0), the ZMP is the centre of pressure on that
+    ground. Leaves ``data`` with kinematics of (q, v, a) computed (joint placements, CoM)."""
     pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
     # Plain floats from here: a handful of 3-vectors, where numpy's per-call cost would dominate.
     mass = data.mass[0]
     lx, ly, lz, mx, my, mz = data.dhg.vector.tolist()  # linear, then angular
-    gx, gy, gz = model.gravity.linear.tolist()  # the model's gravity points down (−z)
+    gx, gy, gz = (model.gravity.linear if gravity is None else gravity).tolist()  # points down (−z) or nearly
     force = (lx - mass * gx, ly - mass * gy, lz - mass * gz)
     com = tuple(data.com[0].tolist())
     xy = _zmp_xy(com, force, (mx, my, mz), ground_z, flight_fraction * mass * -gz)

@@ -29,8 +29,8 @@ from sim_devices.process import SimProcess, check_faults, device_options, start_
 def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """The mock link: the humanoid stepped by the loop's own reads, in this process."""
     sim = start_sim(robot, "mock", scenario, args.fault)
-    feet, _ = humanoid_sensors(sim.humanoid)
-    link = MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet)
+    feet, imu = humanoid_sensors(sim.humanoid)
+    link = MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet, imu=imu)
     link.open()
     try:
         sim.start_scenario()

@@ -13,6 +13,16 @@ back toward zero over ``relax_s``, but only while the ZMP keeps three margins
 (hysteresis, so relaxing and correcting do not chase each other). The output is joint
 offsets: the root and thigh channels of a skeleton, the leg joints of a robot (its
 base is not actuated).
+
+The ZMP estimated from the joints cannot see an external force (a push, a hand leaning
+on the robot): the servos hold the posture, and only the ground's reaction changes.
+Where the feet have force sensors, their measured centre of pressure (CoP) does see it,
+but it never leaves the feet. So the corrector acts on the estimate moved by what the
+sensors disagree with: p = ZMP + (CoP − ZMP clamped to the support polygon). Without an
+external force the CoP is the clamped ZMP and p is the estimate, whose depth outside the
+feet the CoP cannot show; under a push p follows the CoP to the edge the push presses
+it against, and the integrating step moves the trunk until the CoP is back
+``margin_m`` inside.
 """
 
 from __future__ import annotations
@@ -87,13 +97,15 @@ class OnlineCorrector:
         # δ is in hip axes (see RootMover): world rotation = H δ; CoM shift = ω × r = −skew(r) ω
         return -(m_up / m) * (pin.skew(r) @ hip_axes(h_left, h_right))[:2]
 
-    def step(self, result: FrameResult, q_command: np.ndarray) -> OnlineCorrection:
+    def step(self, result: FrameResult, q_command: np.ndarray, cop: np.ndarray | None = None) -> OnlineCorrection:
         """Update δ from an analysed frame and return offsets for ``q_command`` (SI, the
-        posture about to be sent, before correction)."""
+        posture about to be sent, before correction). ``cop``: the feet's measured centre of
+        pressure (m, the result's frame) of the same sample, where the link has foot sensors."""
         self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
         s = self.sensitivity(result.q)
         damp = np.diag([1e-6, 1e-6, 1e-4])
+        result = with_measured_cop(result, cop)
         target = zmp_target(result, self.limits.margin_m)
         if target is not None:
             err = target - result.zmp[:2]
@@ -119,3 +131,16 @@ class OnlineCorrector:
             offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
         self._last_offsets = offsets
         return OnlineCorrection(self.delta.copy(), offsets, limited)
+
+
+def with_measured_cop(result: FrameResult, cop: np.ndarray | None) -> FrameResult:
+    """``result`` with its ZMP moved by the measured CoP's disagreement with it (module
+    docstring): ZMP + (CoP − clamped ZMP), clamped and judged again; ``result`` itself
+    without a CoP, a ZMP or a support polygon."""
+    if cop is None or result.zmp is None or result.clamped is None or len(result.polygon) < 3:
+        return result
+    zmp = result.zmp.copy()
+    zmp[:2] += cop[:2] - result.clamped[:2]
+    c = clamp_to_polygon(zmp[:2], result.polygon)
+    clamped = np.array((*c.point, result.zmp[2]))
+    return replace(result, zmp=zmp, clamped=clamped, margin=c.margin, inside=c.inside)

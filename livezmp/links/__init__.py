@@ -145,8 +145,8 @@ def _dynamixel(url: str, target: str, names: list[str], config: RobotConfig, opt
         paths = target.split("+")
         if len(set(paths)) != len(paths) or not all(paths):
             raise InputError(f"link URL '{url}': dynamixel:PATH1+PATH2... needs distinct, non-empty ports")
-        return MultiBusLink(paths, names, servos, **options)
-    return DynamixelLink(target, names, servos, **options)
+        return MultiBusLink(paths, names, servos, **options)  # an [imu] is read on one bus only (so far)
+    return DynamixelLink(target, names, servos, imu=config.imu, **options)
 
 
 def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:

@@ -85,6 +85,14 @@ def sync_read_bytes(n_servos: int, length: int, fast: bool) -> tuple[int, int]:
     return instruction, n_servos * (STATUS_OVERHEAD + length)
 
 
+def bulk_read_bytes(lengths: list[int], fast: bool) -> tuple[int, int]:
+    """(instruction bytes, reply bytes) of a (Fast) Bulk Read of ``lengths[i]`` bytes from device i."""
+    instruction = INSTRUCTION_OVERHEAD + 5 * len(lengths)
+    if fast:
+        return instruction, FAST_STATUS_OVERHEAD + sum(4 + n for n in lengths)
+    return instruction, sum(STATUS_OVERHEAD + n for n in lengths)
+
+
 def sync_write_bytes(n_servos: int, length: int) -> int:
     """Bytes of a Sync Write of ``length`` bytes to each of ``n_servos``."""
     return INSTRUCTION_OVERHEAD + 4 + n_servos * (1 + length)

@@ -39,6 +39,13 @@ least 10 ms (never more than the sdk's own: twice its USB latency timer, 16 ms, 
 what `open` waits: servos may still have their factory return delays then). A lost
 reply costs the loop one timeout.
 
+An IMU sub-controller in the robot config (``[imu]``, the OP3's OpenCR at id 200:
+:mod:`.dynamixel_imu`) is read in the same transaction: the read becomes a (Fast) Bulk Read
+of the servos' registers and the IMU's 12 (longer instruction, one more reply; no second
+round trip through the adapter; Fast only with ``fast=1``), and the frame carries its ``imu`` (gyro and accelerometer,
+base-link axes). A lost IMU reply leaves that frame without one (counted); robots without
+an ``[imu]`` keep the sync read and pay nothing.
+
 The bytes each read and write put on the wire are counted from `open`'s end;
 `bus_ceilings` turns them into the bus's physical ceiling (:mod:`.bus_timing`). Known limit: Protocol 2.0 has no
 sequence numbers, so a reply delayed beyond the timeout that arrives during the next
@@ -61,6 +68,7 @@ from dynamixel_sdk import (
     COMM_RX_CORRUPT,
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
+    GroupBulkRead,
     GroupSyncRead,
     GroupSyncWrite,
     PacketHandler,
@@ -69,9 +77,10 @@ from dynamixel_sdk import (
 from dynamixel_sdk.port_handler import LATENCY_TIMER
 
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, LinkUnusable, PortLink
-from livezmp.links.bus_timing import Adapter, BusCeiling, sync_read_bytes, sync_write_bytes
+from livezmp.links.bus_timing import Adapter, BusCeiling, bulk_read_bytes, sync_read_bytes, sync_write_bytes
+from livezmp.links.dynamixel_imu import IMU_ADDRESS, IMU_LENGTH, decode_imu
 from livezmp.links.reply_loss import ReplyLoss
-from livezmp.model.robot_config import ServoConfig
+from livezmp.model.robot_config import ImuConfig, ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
 FIRMWARE_VERSION = 6  # EEPROM
@@ -157,12 +166,13 @@ class DynamixelLink(PortLink):
     ``baud`` (bit/s), ``fast`` (Fast Sync Read; None: where every servo has it, see
     ``fast_read`` after `open`), ``read`` ("position" or "state", see `READS`),
     ``return_delay`` (us, even, 0-508), ``watchdog`` (s, 0: off), ``timeout``
-    (s per transaction, None: from the reads at open). Construction does no I/O; `open` does.
+    (s per transaction, None: from the reads at open), ``imu``: an IMU sub-controller on the
+    bus (module docstring). Construction does no I/O; `open` does.
     """
 
     def __init__(self, path: str, joint_names: Sequence[str], servos: Sequence[ServoConfig], *,
                  baud: int = 1_000_000, fast: bool | None = None, read: str = "position", return_delay: int = 0,
-                 watchdog: float = 0.1, timeout: float | None = None) -> None:
+                 watchdog: float = 0.1, timeout: float | None = None, imu: ImuConfig | None = None) -> None:
         if len(servos) != len(joint_names):
             raise ValueError(f"DynamixelLink: {len(joint_names)} joints but {len(servos)} servos")
         ids = [s.id for s in servos]
@@ -175,7 +185,12 @@ class DynamixelLink(PortLink):
             raise ValueError(f"DynamixelLink: read must be one of {', '.join(READS)}, got '{read}'")
         if return_delay % RETURN_DELAY_UNIT_US or not 0 <= return_delay <= 254 * RETURN_DELAY_UNIT_US:
             raise ValueError(f"DynamixelLink: return_delay must be an even number of us in 0..508, got {return_delay}")
+        if imu is not None and imu.id in ids:
+            raise ValueError(f"DynamixelLink: the IMU's id {imu.id} is a servo's")
         self.path = path
+        self.imu = imu
+        self._extra = None if imu is None else (imu.id, IMU_ADDRESS, IMU_LENGTH)  # read with the servos
+        self._imu_data: bytes | None = None  # the IMU's registers from the last read
         self.joint_names = list(joint_names)
         self.read_what = read
         self.return_delay = return_delay
@@ -228,10 +243,10 @@ class DynamixelLink(PortLink):
         if self._pending or self._port is None:
             return
         port = self._port
-        reader = self._reader(*READS[self.read_what], tuple(self.ids))
+        reader = self._reader(*READS[self.read_what], tuple(self.ids), self._extra)
         self._requested_bytes = port.bytes_out + port.bytes_in
         try:
-            result = reader.fastSyncReadTxPacket() if self.fast_read else reader.txPacket()
+            result = _fast_tx(reader) if self.fast_read else reader.txPacket()
         except _PORT_ERRORS as err:
             raise LinkError(f"{self.path}: port failed: {err}") from None
         finally:
@@ -248,7 +263,7 @@ class DynamixelLink(PortLink):
         before = self._requested_bytes if sent else port.bytes_out + port.bytes_in
         try:
             errors, data = self._sync_read(*READS[self.read_what], self.fast_read,
-                                           retries=0 if self.fast_read else 1, sent=sent)
+                                           retries=0 if self.fast_read else 1, sent=sent, extra=self._extra)
         finally:
             self._traffic[:2] += (port.bytes_out + port.bytes_in - before, 1)
         t = time.monotonic()
@@ -262,6 +277,7 @@ class DynamixelLink(PortLink):
             velocities=state["velocity"] * self._rad_s_per_unit if full else None,
             currents=state["current"] * self._amp_per_unit if full else None,
             hardware_errors={self.joint_names[i]: bits for i, bits in alerts.items() if bits},
+            imu=None if self._imu_data is None else decode_imu(self._imu_data, self.imu.axes),
         )
 
     def write_goals(self, positions: np.ndarray) -> None:
@@ -286,14 +302,17 @@ class DynamixelLink(PortLink):
     @property
     def read_label(self) -> str:
         """What each `read` asks for, e.g. "fast sync read: position"."""
-        return f"{'fast sync read' if self.fast_read else 'sync read'}: {self.read_what}"
+        kind = "bulk read" if self._extra else "sync read"
+        return f"{'fast ' if self.fast_read else ''}{kind}: {self.read_what}" + (" + imu" if self._extra else "")
 
     def bus_ceilings(self, adapter: Adapter) -> list[BusCeiling]:
         """The bus's ceiling from the bytes a read and a write moved since `open` (the packet sizes
         when nothing was exchanged yet), the servos' return delays and ``adapter``."""
         read_bytes, reads, write_bytes, writes = self._traffic
         n, length = len(self.ids), READS[self.read_what][1]
-        per_read = read_bytes / reads if reads else sum(sync_read_bytes(n, length, self.fast_read))
+        planned = bulk_read_bytes([length] * n + [IMU_LENGTH], self.fast_read) if self._extra else \
+            sync_read_bytes(n, length, self.fast_read)
+        per_read = read_bytes / reads if reads else sum(planned)
         per_write = write_bytes / writes if writes else sync_write_bytes(n, 4)
         delays = n * self.return_delay * 1e-6
         return [BusCeiling(self.baud, per_read + per_write, delays, adapter)]
@@ -341,7 +360,10 @@ class DynamixelLink(PortLink):
         firmware, delays, modes = eeprom[0::stride], eeprom[RETURN_DELAY_TIME - FIRMWARE_VERSION::stride], \
             eeprom[OPERATING_MODE - FIRMWARE_VERSION::stride]
         if self.fast is None:
-            self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE
+            # with an IMU sub-controller, only when asked (fast=1): whether its firmware answers a Fast Bulk
+            # Read is not something the servos' firmware versions tell
+            self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE \
+                and self._extra is None
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
         limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
@@ -370,8 +392,27 @@ class DynamixelLink(PortLink):
                                for i in off)
             raise LinkError(f"{self.path}: torque did not come on for {detail}: reboot or power-cycle the servo")
         self._hold_retrying()
+        if self.imu is not None:
+            self._check_imu()
         self._run_timeout_ms = self._measure_timeout() if self.timeout is None else 1e3 * self.timeout
         self._traffic[:] = 0
+
+    def _check_imu(self) -> None:
+        """The IMU sub-controller answers a read of its registers; LinkError naming it after OPEN_TRIES."""
+        port = self._require_port()
+        for _ in range(OPEN_TRIES):
+            try:
+                _, result, error = self._ph.readTxRx(port, self.imu.id, IMU_ADDRESS, IMU_LENGTH)
+            except _PORT_ERRORS as err:
+                raise LinkError(f"{self.path}: port failed: {err}") from None
+            finally:
+                port.is_using = False
+            if result == COMM_SUCCESS and not error & 0x7F:
+                return
+            self._lost_reply(result)
+        raise LinkError(f"{self.path}: the IMU sub-controller (id {self.imu.id}, the robot config's [imu]) does not "
+                        f"answer a read of its registers {IMU_ADDRESS}-{IMU_ADDRESS + IMU_LENGTH - 1} "
+                        f"({OPEN_TRIES} tries)")
 
     def _measure_timeout(self) -> float:
         """The reply timeout (ms) for the run: 3x the slowest of a few good reads, plus 2 ms, at most the sdk's."""
@@ -380,7 +421,7 @@ class DynamixelLink(PortLink):
         for _ in range(OPEN_TRIES):
             start = time.perf_counter()
             try:
-                self._sync_read(*READS[self.read_what], self.fast_read)
+                self._sync_read(*READS[self.read_what], self.fast_read, extra=self._extra)
             except LinkReadError:
                 continue
             took.append(1e3 * (time.perf_counter() - start))
@@ -410,29 +451,44 @@ class DynamixelLink(PortLink):
 
     # -- bus transactions -----------------------------------------------------------------------
 
-    def _reader(self, address: int, length: int, ids: tuple[int, ...]) -> GroupSyncRead:
-        reader = self._readers.get((address, length, ids))
+    def _reader(self, address: int, length: int, ids: tuple[int, ...],
+                extra: tuple[int, int, int] | None = None) -> GroupSyncRead | GroupBulkRead:
+        """The sync read of ``ids``, or with ``extra`` (id, address, length) the bulk read of both."""
+        key = (address, length, ids, extra)
+        reader = self._readers.get(key)
         if reader is None:
-            reader = self._readers[(address, length, ids)] = GroupSyncRead(self._port, self._ph, address, length)
-            for dxl_id in ids:
-                reader.addParam(dxl_id)
+            if extra is None:
+                reader = GroupSyncRead(self._port, self._ph, address, length)
+                for dxl_id in ids:
+                    reader.addParam(dxl_id)
+            else:
+                reader = GroupBulkRead(self._port, self._ph)
+                for dxl_id in ids:
+                    reader.addParam(dxl_id, address, length)
+                reader.addParam(*extra)
+            self._readers[key] = reader
         return reader
 
     def _sync_read(self, address: int, length: int, fast: bool, retries: int = 0,
-                   sent: bool = False) -> tuple[list[int], bytes]:
+                   sent: bool = False, extra: tuple[int, int, int] | None = None) -> tuple[list[int], bytes]:
         """(status error byte per servo, data of every servo concatenated), in joint order; the servos
         whose replies were lost asked again up to ``retries`` times (``sent``: the first instruction
-        went out already, by `request`). LinkReadError if some stay silent, LinkUnusable when the bus
-        loses too many replies."""
+        went out already, by `request`). ``extra`` (id, address, length): a device read in the first
+        transaction too (a bulk read), its data left in ``_imu_data`` (None when lost). LinkReadError
+        if some servos stay silent, LinkUnusable when the bus loses too many replies."""
         replies: dict[int, tuple[int, bytes]] = {}
         failures: dict[str, int] = {}
         missing = tuple(self.ids)
+        self._imu_data = None
         for attempt in range(1 + retries):
-            got, lost = self._transaction(address, length, fast, missing, sent=sent and attempt == 0)
+            first = extra if attempt == 0 else None
+            got, lost = self._transaction(address, length, fast, missing, sent=sent and attempt == 0, extra=first)
+            if first is not None and first[0] in got:
+                self._imu_data = got.pop(first[0])[1]
             replies.update(got)
             for kind, count in lost.items():
                 failures[kind] = failures.get(kind, 0) + count
-            self.loss.add(1 if fast else len(missing), sum(lost.values()))
+            self.loss.add(1 if fast else len(missing) + (first is not None), sum(lost.values()))
             missing = tuple(i for i in self.ids if i not in replies)
             if not missing:
                 break
@@ -450,41 +506,44 @@ class DynamixelLink(PortLink):
                                 f"; nothing usable from {detail}")
         return [replies[i][0] for i in self.ids], b"".join(replies[i][1] for i in self.ids)
 
-    def _transaction(self, address: int, length: int, fast: bool, ids: tuple[int, ...],
-                     sent: bool = False) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
-        """One (Fast) Sync Read of ``ids`` (``sent``: its instruction is out already): (the replies by
-        id, the lost or rejected ones by kind)."""
+    def _transaction(self, address: int, length: int, fast: bool, ids: tuple[int, ...], sent: bool = False,
+                     extra: tuple[int, int, int] | None = None) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """One (Fast) Sync Read of ``ids``, or Bulk Read with ``extra`` (``sent``: its instruction is out
+        already): (the replies by id, the lost or rejected ones by kind)."""
         port = self._require_port()
-        reader = self._reader(address, length, ids)
+        reader = self._reader(address, length, ids, extra)
         try:
             if not sent:
-                result = reader.fastSyncReadTxPacket() if fast else reader.txPacket()
+                result = _fast_tx(reader) if fast else reader.txPacket()
                 if result != COMM_SUCCESS:
                     raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
             if sent or (self._run_timeout_ms is not None and not self._opening):
                 # the wait starts now: a `request`ed read's replies may have been waiting for a whole cycle
                 port.setPacketTimeoutMillis(self._run_timeout_ms or 2.0 * LATENCY_TIMER + 2.0)
-            return self._receive_fast(length, ids) if fast else self._receive_each(length, ids)
+            requests = [(i, length) for i in ids] + ([] if extra is None else [(extra[0], extra[2])])
+            return self._receive_fast(requests) if fast else self._receive_each(requests)
         except _PORT_ERRORS as err:
             raise LinkError(f"{self.path}: port failed: {err}") from None
         finally:
             port.is_using = False  # the sdk leaves it set when an exception cuts a transaction short
 
-    def _receive_each(self, length: int, ids: tuple[int, ...]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
-        """One status packet per servo, in any order, until all are in or the timeout passed."""
+    def _receive_each(self, requests: list[tuple[int, int]]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """One status packet per device of ``requests`` (id, data length), in any order, until all
+        are in or the timeout passed."""
         port, ph = self._port, self._ph
-        expected = len(ids)
-        wanted = set(ids)
-        size = length + 4  # the length field of a good reply: instruction, error, data, CRC
+        expected = len(requests)
+        wanted = dict(requests)
         replies: dict[int, tuple[int, bytes]] = {}
         failures: dict[str, int] = {}
         while len(replies) + sum(failures.values()) < expected:
             packet, result = ph.rxPacket(port, False)
             if result == COMM_SUCCESS:
                 # Un-stuffed by the sdk: the length field is exact, the list may run on past the CRC.
+                # a good reply's length field counts instruction, error, data and CRC
                 dxl_id = packet[PKT_ID]
-                if dxl_id in wanted and dxl_id not in replies and not packet[PKT_ERROR] & 0x7F \
-                        and packet[PKT_LENGTH] | packet[PKT_LENGTH + 1] << 8 == size:
+                length = wanted.get(dxl_id, -9)
+                if dxl_id not in replies and not packet[PKT_ERROR] & 0x7F \
+                        and packet[PKT_LENGTH] | packet[PKT_LENGTH + 1] << 8 == length + 4:
                     replies[dxl_id] = (packet[PKT_ERROR], bytes(packet[PKT_DATA: PKT_DATA + length]))
                 else:
                     failures["bad_reply"] = failures.get("bad_reply", 0) + 1
@@ -495,20 +554,25 @@ class DynamixelLink(PortLink):
                 failures[kind] = failures.get(kind, 0) + expected - len(replies) - sum(failures.values())
         return replies, failures
 
-    def _receive_fast(self, length: int, ids: tuple[int, ...]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
-        """The one Fast Sync Read status packet: (error, id, data, crc) per servo, in instruction order."""
-        stride = length + 4
-        data, result, _ = self._ph.fastSyncReadRx(self._port, BROADCAST_ID, stride * len(ids))
+    def _receive_fast(self, requests: list[tuple[int, int]]) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:
+        """The one Fast Sync/Bulk Read status packet: (error, id, data, crc) per device of ``requests``
+        (id, data length), in instruction order."""
+        total = sum(length + 4 for _, length in requests)
+        data, result, _ = self._ph.fastSyncReadRx(self._port, BROADCAST_ID, total)
         if result != COMM_SUCCESS:
             return {}, {"no_reply" if result == COMM_RX_TIMEOUT else "bad_crc": 1}
-        if len(data) != stride * len(ids) or tuple(data[1::stride]) != ids:
+        if len(data) != total:
             return {}, {"short_reply": 1}
         replies = {}
-        for k, dxl_id in enumerate(ids):
-            error = data[k * stride]
+        at = 0
+        for dxl_id, length in requests:
+            error = data[at]
+            if data[at + 1] != dxl_id:
+                return {}, {"short_reply": 1}
             if error & 0x7F:
                 return {}, {"bad_reply": 1}
-            replies[dxl_id] = (error, bytes(data[k * stride + 2: k * stride + 2 + length]))
+            replies[dxl_id] = (error, bytes(data[at + 2: at + 2 + length]))
+            at += length + 4
         return replies, {}
 
     def _hardware_error(self, i: int) -> int:
@@ -602,3 +666,8 @@ class DynamixelLink(PortLink):
 
     def _who(self, i: int) -> str:
         return f"servo {self.ids[i]} ({self.joint_names[i]})"
+
+
+def _fast_tx(reader: GroupSyncRead | GroupBulkRead) -> int:
+    """Send a Fast Sync Read or Fast Bulk Read instruction."""
+    return reader.fastBulkReadTxPacket() if isinstance(reader, GroupBulkRead) else reader.fastSyncReadTxPacket()

@@ -54,7 +54,10 @@ class LoopConfig:
     body's weight; a frame without a reading falls back to kinematic detection, counted
     and told), ``"kinematics"`` (detected from the sole heights and speeds, sensors
     ignored), ``"auto"`` (sensors whenever the frame has them, silently kinematics
-    otherwise). Sensor readings are compared with the ZMP in every mode."""
+    otherwise). Sensor readings are compared with the ZMP in every mode.
+    ``imu_tilt``: where the link reads an IMU, gravity's direction under the feet comes from
+    it fused with the legs' kinematics, so a sloped ground gives the right ZMP
+    (:mod:`livezmp.estimate.ground_tilt`); False: the ground is taken as level."""
 
     rate_hz: float = 500.0
     correct: bool = True
@@ -69,3 +72,4 @@ class LoopConfig:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     contacts: str = "auto"
     contact_fraction: float = CONTACT_FRACTION
+    imu_tilt: bool = True

@@ -9,7 +9,12 @@ Two signs, each held for ``hold_s`` so one bad sample is not a fall:
   and dropped, or falling from a step).
 
 Readings follow the links' IMU dict: ``orientation`` (w, x, y, z) rotating IMU-frame
-vectors into the world (z up), ``acceleration`` the specific force (m/s², IMU axes).
+vectors into the world (z up), ``acceleration`` the specific force (m/s², IMU axes),
+``angular_velocity`` (rad/s, IMU axes). An IMU without an orientation (a gyro and an
+accelerometer, as a Dynamixel sub-controller's) gives the tilt as the angle through which
+gravity's direction in its axes has turned since the first reading, tracked by a
+complementary filter: the gyro turns it, the accelerometer (within 20 % of 1 g) pulls it
+back with a 0.2 s time constant.
 """
 
 from __future__ import annotations
@@ -18,8 +23,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
+
+from livezmp.estimate.ground_tilt import gravity_in_imu
 
 G = 9.81  # m/s^2
+ACCEL_TAU_S = 0.2  # s, the accelerometer's pull on the tracked gravity direction
 
 
 @dataclass(frozen=True)
@@ -51,6 +60,9 @@ class FallDetector:
         self.max_tilt = 0.0  # rad, the largest tilt seen
         self._upright: np.ndarray | None = None
         self._since: dict[str, float] = {}
+        self._down: np.ndarray | None = None  # gravity's direction in the IMU's axes (no orientation given)
+        self._down0: np.ndarray | None = None
+        self._t: float | None = None
 
     def update(self, t: float, imu: dict[str, np.ndarray]) -> str | None:
         """One reading at ``t`` (s); the fall's reason once fallen (it stays), else None."""
@@ -59,16 +71,21 @@ class FallDetector:
         c = self.config
         signs = {}
         orientation = imu.get("orientation")
+        tilt = None
         if orientation is not None and np.all(np.isfinite(orientation)):
             if self._upright is None:
                 self._upright = np.asarray(orientation, dtype=float)
             tilt = tilt_between(self._upright, orientation)
+        else:
+            tilt = self._tracked_tilt(t, imu)
+        if tilt is not None:
             self.max_tilt = max(self.max_tilt, tilt)
             signs["tilt"] = (tilt > c.tilt_rad, f"the trunk tilted {math.degrees(tilt):.0f} degrees")
         acceleration = imu.get("acceleration")
         if acceleration is not None and np.all(np.isfinite(acceleration)):
             g = float(np.linalg.norm(acceleration)) / G
             signs["free_fall"] = (g < c.free_fall_g, f"free fall ({g:.2f} g)")
+        self._t = t
         for name, (on, reason) in signs.items():
             if not on:
                 self._since.pop(name, None)
@@ -77,3 +94,22 @@ class FallDetector:
             if t - since >= c.hold_s:
                 self.fell = f"{reason} for {1e3 * (t - since):.0f} ms (IMU)"
         return self.fell
+
+    def _tracked_tilt(self, t: float, imu: dict[str, np.ndarray]) -> float | None:
+        """Tilt (rad) from gyro and accelerometer (module docstring); None before a usable reading."""
+        dt = 0.0 if self._t is None else max(t - self._t, 0.0)
+        gyro = imu.get("angular_velocity")
+        if self._down is not None and gyro is not None and np.all(np.isfinite(gyro)):
+            # a direction fixed in the world turns the other way in the IMU's axes
+            self._down = pin.exp3(-np.asarray(gyro, dtype=float) * dt) @ self._down
+        measured, _ = gravity_in_imu({"acceleration": imu["acceleration"]} if "acceleration" in imu else {}, 0.2)
+        if measured is not None:
+            measured = measured / np.linalg.norm(measured)
+            if self._down is None:
+                self._down = self._down0 = measured
+            else:
+                blended = self._down + min(1.0, dt / ACCEL_TAU_S) * (measured - self._down)
+                self._down = blended / np.linalg.norm(blended)
+        if self._down is None:
+            return None
+        return float(np.arccos(np.clip(self._down @ self._down0, -1.0, 1.0)))

@@ -4,8 +4,10 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
 
 1. read one verified frame from the link; the :class:`~livezmp.live.safety.FrameGuard`
    rejects stale and corrupted ones;
-2. estimate: the robot has no base sensor, so the base pose comes from the joint
-   angles with the stance foot flat (:class:`~livezmp.model.base_placement.BasePlacer`);
+2. estimate: the base pose comes from the joint angles with the stance foot flat
+   (:class:`~livezmp.model.base_placement.BasePlacer`); where the link reads an IMU,
+   gravity's direction in that foot's frame comes from it, fused with the legs
+   (:class:`~livezmp.estimate.ground_tilt.GroundTilt`), so a slope does not bend the ZMP;
    base + joints go through the per-frame :class:`~livezmp.balance.pipeline.Pipeline`
    (results lag by the estimator's lag). Where the link reads foot sensors
    (``LoopConfig.contacts``), they say which feet are down instead of the kinematic
@@ -13,7 +15,8 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
    sample, whose centre of pressure, placed on the result's soles, is compared with the
    computed ZMP (:mod:`livezmp.balance.foot_sensors`; summary ``cop_vs_zmp``);
 3. correct: at ``correct_hz`` (every few cycles) the
-   :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result into
+   :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result (with the
+   measured CoP of its sample, where there are foot sensors: it sees pushes) into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
    more than one 500 Hz period allows on every cycle);
 4. write: goals = command + offsets, through the
@@ -62,6 +65,7 @@ from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.estimate.ground_tilt import GroundTilt
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkUnusable
 from livezmp.live.clock import LoopClock, Tick
@@ -171,6 +175,8 @@ class LiveLoop:
         """A fresh estimator, base placement, corrector and offsets (start, or after a gap)."""
         self.pipe = Pipeline(self.body, self.pipeline_config, nominal_dt=self.dt)
         self.placer = BasePlacer(self.body)
+        self.tilt = GroundTilt()
+        self._gravity: np.ndarray | None = None  # gravity in the placer's frame at the sample (from the IMU)
         self.command_placer = BasePlacer(self.body)
         cfg = self.config
         every = self.correct_every
@@ -180,6 +186,7 @@ class LiveLoop:
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
         self.result: FrameResult | None = None
+        self._cop: np.ndarray | None = None  # the measured CoP of the result's sample (foot sensors)
         self._fresh = False  # a new result arrived this cycle
         self._started = False  # the estimator has had a real sample
         self._fed = 0  # samples given to this pipeline
@@ -374,7 +381,10 @@ class LiveLoop:
     def _estimate(self, t: float, frame: LinkFrame) -> None:
         q = frame.positions
         self._reading = (self._contacts(t, frame.feet), frame.feet)
-        self._feed(t, np.concatenate([self.placer.update(q), q]), valid=True)
+        base = self.placer.update(q)
+        if self.config.imu_tilt and frame.imu is not None:
+            self._gravity = self.tilt.update(frame.t, base, frame.imu)
+        self._feed(t, np.concatenate([base, q]), valid=True)
         self._started = True
 
     def _contacts(self, t: float, feet: FootSensors | None) -> tuple[bool, bool] | None:
@@ -396,15 +406,16 @@ class LiveLoop:
         (``_reading``); keep its result only when it is the analysis of a real sample, not
         of the estimator's prediction across a gap."""
         contacts, feet = self._reading if valid else (None, None)
+        gravity = self._gravity if valid else None
         ring = self._valid
         slot = self._fed % len(ring)
         ring[slot] = valid
         self._feet[slot] = feet
         if valid and self.recorder is not None:
-            self.recorder.input(self._index0 + self._fed, t, channels, contacts)
+            self.recorder.input(self._index0 + self._fed, t, channels, contacts, gravity)
         self._fed += 1
         self._samples += 1
-        result = self.pipe.step(t, channels, contacts)
+        result = self.pipe.step(t, channels, contacts, gravity)
         if result is None or not ring[result.index % len(ring)]:
             return
         self.result = result
@@ -418,8 +429,9 @@ class LiveLoop:
     def _compare_sensors(self, result: FrameResult) -> None:
         """The foot sensors read with ``result``'s sample against its ZMP; both recorded."""
         feet = self._feet[result.index % len(self._feet)]
+        self._cop = None
         if feet is not None:
-            cop = self.cop_locator.locate(feet, result.soles)
+            cop = self._cop = self.cop_locator.locate(feet, result.soles)
             distance = self.cop_vs_zmp.add(cop, result.zmp, result.clamped)
         if self.recorder is not None:
             index = self._index0 + result.index
@@ -444,7 +456,7 @@ class LiveLoop:
             return
         self._next_correction = t + self.correct_every * self.dt
         q_command = np.concatenate([self.command_placer.update(command), command])
-        step = self.corrector.step(self.result, q_command)
+        step = self.corrector.step(self.result, q_command, self._cop)
         self.offsets, self._delta = step.offsets[self.nb:], step.delta
 
     # -- faults --------------------------------------------------------------------------------
@@ -537,6 +549,7 @@ class LiveLoop:
                 self.fall_detector.fell is not None if self._imu_seen else None),
             "imu_fall": self.fall_detector.fell,
             "imu_max_tilt_deg": round(math.degrees(self.fall_detector.max_tilt), 2) if self._imu_seen else None,
+            "ground_slope_deg": None if self.tilt.slope_rad is None else round(math.degrees(self.tilt.slope_rad), 2),
             "rate_hz": 1.0 / self.dt,
             "correct": self.config.correct,
             "correct_every": self.correct_every,

@@ -70,8 +70,9 @@ class LoopRecorder:
     def _ns(self, t: float) -> int:
         return self._origin_ns + int(t * 1e9)
 
-    def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> None:
-        self.writer.put("/input", self._ns(t), input_message, index, t, channels, contacts)
+    def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None,
+              gravity: np.ndarray | None = None) -> None:
+        self.writer.put("/input", self._ns(t), input_message, index, t, channels, contacts, gravity)
 
     def result(self, index: int, r: FrameResult) -> None:
         self.writer.put("/result", self._ns(r.t), _result_at, index, r)

@@ -17,6 +17,10 @@ the URDF's ``<robot name>`` (``livezmp/data/robots/NAME.toml``); everything is o
     zero = 2048                       # ticks at 0 rad
     direction = 1                     # +1 or -1
     ticks_per_rev = 4096
+
+    [imu]                             # an IMU sub-controller on the Dynamixel bus (the OP3's OpenCR)
+    id = 200
+    axes = [-1, -1, 1]                # sign of each board axis in the base link's axes
 """
 
 from __future__ import annotations
@@ -51,12 +55,22 @@ class ServoConfig:
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
 
+@dataclass(frozen=True)
+class ImuConfig:
+    """An IMU sub-controller at bus ``id``; ``axes``: the sign of each of its axes in the
+    base link's (see :mod:`livezmp.links.dynamixel_imu`)."""
+
+    id: int
+    axes: tuple[int, int, int] = (1, 1, 1)
+
+
 @dataclass
 class RobotConfig:
     feet: dict[str, dict] = field(default_factory=dict)
     legs: dict[str, list[str]] = field(default_factory=dict)
     servos: dict[str, ServoConfig] = field(default_factory=dict)
     source: str = "<defaults>"
+    imu: ImuConfig | None = None
 
 
 MAX_SOLE_M = 1.0  # a sole dimension or corner offset beyond a metre is not a foot
@@ -149,7 +163,24 @@ def _parse(data: dict, source: str) -> RobotConfig:
         cfg.servos[joint] = ServoConfig(joint, _int(s["id"], f"{where} id", 0, 252),
                                         _int(s.get("zero", 2048), f"{where} zero", -(1 << 31), (1 << 31) - 1),
                                         d, ticks)
+    if "imu" in data:
+        cfg.imu = _imu(_table(data["imu"], f"{source}: [imu]"), f"{source}: [imu]", cfg)
     return cfg
+
+
+def _imu(t: dict, where: str, cfg: RobotConfig) -> ImuConfig:
+    unknown = set(t) - {"id", "axes"}
+    if unknown:
+        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} (id, axes)")
+    if "id" not in t:
+        raise InputError(f"{where}: missing 'id'")
+    dxl_id = _int(t["id"], f"{where} id", 0, 252)
+    if any(s.id == dxl_id for s in cfg.servos.values()):
+        raise InputError(f"{where} id: {dxl_id} is a servo's id")
+    axes = t.get("axes", [1, 1, 1])
+    if not isinstance(axes, list) or len(axes) != 3 or not all(type(a) is int and a in (1, -1) for a in axes):
+        raise InputError(f"{where} axes: need three signs, e.g. [-1, -1, 1]")
+    return ImuConfig(dxl_id, tuple(axes))
 
 
 def load_robot_config(path: str | Path) -> RobotConfig:

@@ -228,10 +228,10 @@ class Monitor:
             for r in self.pipeline.restart():
                 self._result(r)
         if self.recorder:
-            self.recorder.input(k, frame.t, frame.channels, frame.contacts)
+            self.recorder.input(k, frame.t, frame.channels, frame.contacts, frame.gravity)
         if frame.cop is not None:
             self._cops.append((k, self.source.body.world_from_input @ frame.cop))
-        r = self.pipeline.step(frame.t, frame.channels, frame.contacts)
+        r = self.pipeline.step(frame.t, frame.channels, frame.contacts, frame.gravity)
         if r is not None:
             self._result(r)
             done = time.monotonic() - frame.received

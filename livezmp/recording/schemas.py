@@ -33,6 +33,9 @@ SCHEMAS = {
             "channels": {"type": "array", "items": {"type": "number"}},
             "contacts": {"description": "foot sensors [left, right], null = detected",
                          "anyOf": [{"type": "array", "items": {"type": "boolean"}}, {"type": "null"}]},
+            "gravity": {"description": "gravity in the input's frame, m/s^2, from the IMU (a sloped ground); "
+                                       "absent = straight down",
+                        "type": "array", "items": {"type": "number"}},
         },
         "required": ["index", "t", "channels"],
     }),
@@ -139,7 +142,12 @@ def result_message(r) -> dict:
     }
 
 
-def input_message(index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> dict:
-    """The ``/input`` message of one frame: raw ``channels``, sensor ``contacts`` or None."""
-    return {"index": index, "t": t, "channels": channels.tolist(),
-            "contacts": None if contacts is None else list(contacts)}
+def input_message(index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None,
+                  gravity: np.ndarray | None = None) -> dict:
+    """The ``/input`` message of one frame: raw ``channels``, sensor ``contacts`` or None, and
+    ``gravity`` (3,) m/s² where an IMU said where it points."""
+    out = {"index": index, "t": t, "channels": channels.tolist(),
+           "contacts": None if contacts is None else list(contacts)}
+    if gravity is not None:
+        out["gravity"] = gravity.tolist()
+    return out

@@ -89,8 +89,9 @@ class Recorder:
             self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
             self.counts[topic] += 1
 
-    def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None) -> None:
-        self.write("/input", input_message(index, t, channels, contacts))
+    def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None,
+              gravity: np.ndarray | None = None) -> None:
+        self.write("/input", input_message(index, t, channels, contacts, gravity))
 
     def tick(self) -> None:
         """Close the chunk in progress if it is ``chunk_seconds`` old; call it when idle too."""

@@ -37,7 +37,8 @@ class SourceFrame:
     measured centre of pressure in the input's world frame (NaN when the plates are
     unloaded), None for a source without plates;
     ``restart``: the source's timeline starts over here (a looped file wrapped, a stream
-    resynchronised), so the analysis restarts its estimator."""
+    resynchronised), so the analysis restarts its estimator; ``gravity`` (3,) m/s² gravity in
+    the input's frame when the ground is not level (a live loop's IMU estimate, replayed), else None."""
 
     t: float
     channels: np.ndarray
@@ -46,6 +47,7 @@ class SourceFrame:
     latency: float | None = None
     cop: np.ndarray | None = None
     restart: bool = False
+    gravity: np.ndarray | None = None
 
 
 @dataclass

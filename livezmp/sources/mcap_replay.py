@@ -7,6 +7,8 @@ replay (``speed`` 0 = as fast as possible).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from livezmp.checks import MAX_CHANNEL_VALUE
@@ -65,7 +67,18 @@ class McapReplaySource:
         self._pending = None
         self.stats.delivered += 1
         t, channels, contacts = self._checked(m)
-        return SourceFrame(t, channels, contacts, sent)
+        return SourceFrame(t, channels, contacts, sent, gravity=self._gravity(m))
+
+    def _gravity(self, m: dict) -> np.ndarray | None:
+        """An ``/input`` message's gravity (3,) m/s², None when it has none."""
+        g = m.get("gravity")
+        if g is None:
+            return None
+        if not isinstance(g, list) or len(g) != 3 or not all(type(v) in (int, float) and abs(v) <= 100 for v in g) \
+                or not 1.0 <= math.hypot(*g) <= 100:
+            raise InputError(f"{self.name}: /input message {self.stats.delivered - 1}: gravity: need [x, y, z] "
+                             "in m/s^2, of 1 to 100 m/s^2")
+        return np.array(g, dtype=float)
 
     def _checked(self, m: dict) -> tuple[float, np.ndarray, tuple[bool, bool] | None]:
         """An ``/input`` message's time, channels and contacts, checked as a UDP frame is."""
