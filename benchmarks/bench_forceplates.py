@@ -13,11 +13,16 @@ then the estimator's cutoff around the default, and the estimator's own gain and
 (why row 4 matters). Figures: over each trial's complete frames (every loaded foot on a plate);
 lag > 0: the ZMP comes after the CoP; bias: mean ZMP - CoP along the walk and to its left.
 
-    python benchmarks/bench_forceplates.py
+    python benchmarks/bench_forceplates.py [MORE.c3d | DIR ...]
+
+Extra trials (files, or directories searched for *.c3d) get one row each with `livezmp analyze`'s
+default settings, or the one line that refuses them; the median is then over every trial with
+complete frames (the shared ones included).
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from pathlib import Path
@@ -25,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.plates import G
+from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
@@ -105,13 +111,46 @@ def estimator_response(rate: float, freq: float, window: float, lag: float, cuto
     return abs(ratio), -np.angle(ratio) / (2 * np.pi * freq) * 1000
 
 
+def extra_paths(args: list[str]) -> list[Path]:
+    out = []
+    for a in args:
+        p = Path(a)
+        out += sorted(q for q in p.rglob("*") if q.suffix.lower() == ".c3d" and q.stat().st_size) if p.is_dir() else [p]
+    return out
+
+
+def extra_table(paths: list[Path]) -> list[float]:
+    """One row per extra trial at the defaults (or why it is refused); their RMS values (mm)."""
+    print(f"\nmore trials, `livezmp analyze` defaults  mm\n{'trial':40s} {header()[41:]}  rate, plates, marker set")
+    rms = []
+    for path in paths:
+        try:
+            trial = read_c3d(path)
+            a = analyse_lab_take(trial)
+        except InputError as e:
+            print(f"{path.name[:40]:40s} refused: {str(e).replace(str(path) + ': ', '')[:150]}")
+            continue
+        cv = a.summary["cop_vs_zmp"]
+        info = f"{trial.rate:g} Hz, {len(trial.plates)} plates, {a.summary['markers']['marker_set'][:28]}"
+        print(row(path.name[:40], cv, info) if cv["frames"] else f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}")
+        if cv["frames"]:
+            rms.append(cv["rms_mm"])
+    return rms
+
+
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("more", nargs="*", help="more C3D trials, or directories holding them")
+    args = ap.parse_args()
     t0 = time.perf_counter()
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
     results = {name: trial_table(DATA / name) for name in TRIALS}
     print("\nmedian RMS over the trials per step (mm):")
     for k, (name, _) in enumerate(STEPS):
         print(f"  {name:40s} {np.median([results[t][k]['rms_mm'] for t in TRIALS]):7.1f}")
+    if args.more:
+        rms = extra_table(extra_paths(args.more)) + [results[t][-1]["rms_mm"] for t in TRIALS]
+        print(f"median RMS over all {len(rms)} trials with complete frames (defaults): {np.median(rms):.1f} mm")
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
     print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")
     for rate in (50.0, 100.0, 240.0):

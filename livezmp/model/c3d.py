@@ -1,7 +1,8 @@
 """Read a C3D gait trial (ezc3d): marker trajectories, force platforms, subject parameters, events.
 
 Everything comes out in SI units in the file's own world frame (metres, newtons, N·m, seconds).
-Marker labels lose their subject prefix (``Subject:LASI`` -> ``LASI``). Force platforms are
+Unseen markers (negative residual, or a point at exactly (0, 0, 0) as older writers store
+them) are NaN. Marker labels lose their subject prefix (``Subject:LASI`` -> ``LASI``). Force platforms are
 taken from ezc3d's platform filter: per analog sample, the force the plate exerts on the
 subject (N, world axes) and its moment (N·m) about the centre of the plate's top surface (the
 mean of its four corners), plus the plate outline. Nothing here filters or zeroes; see
@@ -154,7 +155,9 @@ def read_c3d(path: str | Path) -> C3dTrial:
     labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
     labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]
     residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=float)[0]  # (P, F); < 0: not seen
-    pts = np.where(residual[None] < 0, np.nan, pts) * _LENGTH[unit]
+    # a marker not seen: a negative residual, or (older writers) all three coordinates exactly zero
+    unseen = (residual < 0) | (pts == 0).all(axis=0)
+    pts = np.where(unseen[None], np.nan, pts) * _LENGTH[unit]
     first = _first_number(_param(groups, "TRIAL", "ACTUAL_START_FIELD"))
     mass, where, height, widths = _subject(groups)
     return C3dTrial(

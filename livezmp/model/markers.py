@@ -55,6 +55,7 @@ _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "
           "LWRB", "RWRB")
 SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
+_OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 
@@ -121,7 +122,8 @@ def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, 
 
 def _need(trial: C3dTrial) -> dict[str, str | None]:
     """Marker roles -> labels found; raises InputError naming what a usable set lacks."""
-    have = set(trial.labels)
+    seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
+    have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}  # a label never seen is missing
     roles: dict[str, str | None] = {"LASI": "LASI", "RASI": "RASI"}
     missing = [m for m in ("LASI", "RASI") if m not in have]
     if {"LPSI", "RPSI"} <= have:
@@ -145,6 +147,7 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
         roles.update({u: u for u in _UPPER})
         roles.update({s + "FIN": s + "FIN" for s in "LR" if s + "FIN" in have})
     if missing:
+        missing = [f"{m} (never seen)" if m in trial.labels else m for m in missing]
         seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
         raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
                          f"(markers in the file: {seen})")
@@ -267,10 +270,21 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
     roles = _need(trial)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
+    max_gap = max(1, round(opts.max_gap_s * trial.rate))
+    optional = {k: raw.pop(k) for k in list(raw) if k[1:] in _OPTIONAL}
     try:
-        keep, open_gaps = _trim(raw, max(1, round(opts.max_gap_s * trial.rate)), trial.rate)
+        keep, open_gaps = _trim(raw, max_gap, trial.rate)
     except InputError as e:
         raise InputError(f"{trial.source}: {e}") from None
+    # an optional marker (wand, heel, medial, finger) is used only where it covers the needed markers' stretch
+    dropped = []
+    for role, x in optional.items():
+        filled, _ = fill_gaps(x, max_gap)
+        if np.isfinite(filled[keep]).all():
+            raw[role] = filled
+        else:
+            dropped.append(roles[role])
+            roles[role] = None  # so that live frames leave it out too
     if keep.stop - keep.start < 4:
         raise InputError(f"{trial.source}: only {keep.stop - keep.start} frames have every needed marker")
     up, r_in = _up_rotation(raw, trial.source)
@@ -278,6 +292,8 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     seg, centres, notes = _segments(m, trial)
     body, frames = _build(seg, m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
+    if dropped:
+        notes["optional_markers_not_used"] = sorted(dropped)
     return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
 
 
