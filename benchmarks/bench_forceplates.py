@@ -132,9 +132,11 @@ def extra_table(paths: list[Path]) -> list[float]:
             continue
         cv = a.summary["cop_vs_zmp"]
         info = f"{trial.rate:g} Hz, {len(trial.plates)} plates, {a.summary['markers']['marker_set'][:28]}"
-        print(row(path.name[:40], cv, info) if cv["frames"] else f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}")
-        if cv["frames"]:
-            rms.append(cv["rms_mm"])
+        if not cv["frames"]:
+            print(f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}")
+            continue
+        print(row(path.name[:40], cv, info))
+        rms.append(cv["rms_mm"])
     return rms
 
 

@@ -91,6 +91,8 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D: HAT mass and centre of mass)")
+    p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
+                                     "joint-centre rules; docs/validation.md)")
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
 
@@ -98,6 +100,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("trials", nargs="+", help="C3D trials of one subject with force plates")
     p.add_argument("-o", "--output", default="subject.toml", help="subject file to write (default subject.toml)")
     p.add_argument("--mass", type=float, help="body mass, kg (default: the plates', else the file's)")
+    p.add_argument("--markers", help="C3D marker map (TOML), as for analyze")
     p.set_defaults(handler="livezmp.commands.calibrate:cmd_calibrate")
 
     p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")

@@ -37,9 +37,13 @@ PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # 
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
 
-def _markers(t: np.ndarray, full_body: bool = False) -> dict[str, np.ndarray]:
+def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False) -> dict[str, np.ndarray]:
     """(F, 3) m per label: the body above the ankles sways fore-aft and sideways about the ankle line;
-    ``full_body`` adds Plug-in Gait's trunk, head and arm markers (the arms also swing)."""
+    ``full_body`` adds Plug-in Gait's trunk, head and arm markers (the arms also swing); ``cluster``
+    gives instead a cluster set (CLUSTER: 3-4 markers a segment, no standard label) plus medial knee
+    and ankle markers."""
+    if cluster:
+        return _cluster_markers(_markers(t))
     pitch = 0.05 * np.sin(2 * np.pi * 0.4 * t)
     roll = 0.03 * np.sin(2 * np.pi * 0.3 * t + 1.0)
     rot = np.array([pin.utils.rpyToMatrix(r, p, 0.0) for r, p in zip(roll, pitch, strict=True)])
@@ -65,18 +69,44 @@ def _markers(t: np.ndarray, full_body: bool = False) -> dict[str, np.ndarray]:
     return out
 
 
-def _trial(t: np.ndarray, rate: float, full_body: bool = False) -> C3dTrial:
-    m = _markers(t, full_body)
+CLUSTER = {"pelvis": ("PV1", "PV2", "PV3", "PV4"), "thigh": ("TH1", "TH2", "TH3"), "shank": ("SK1", "SK2", "SK3"),
+           "foot": ("FT1", "FT2", "FT3")}
+
+
+def _cluster_markers(std: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The standard markers' motion carried by a cluster set: the pelvis' four, three per leg segment
+    (affine combinations of markers of the same rigid body, so they move rigidly), lateral and medial
+    knee and ankle markers (KNE, KNM, ANK, ANM)."""
+    out = {f"PV{k + 1}": std[m] for k, m in enumerate(("LASI", "RASI", "LPSI", "RPSI"))}
+    for s, o in (("L", "R"), ("R", "L")):
+        fwd = 0.3 * (std[s + "ASI"] - std[s + "PSI"])
+        across = (std[o + "KNE"] - std[s + "KNE"]) / 0.28  # unit medial (the knees are 0.28 m apart)
+        out |= {s + "TH1": std[s + "THI"], s + "TH2": 0.8 * std[s + "KNE"] + 0.2 * std[s + "ASI"],
+                s + "TH3": std[s + "THI"] + fwd, s + "SK1": std[s + "TIB"], s + "SK2": std[s + "TIB"] + fwd,
+                s + "SK3": (std[s + "KNE"] + std[s + "TIB"]) / 2, s + "FT1": std[s + "TOE"], s + "FT2": std[s + "HEE"],
+                s + "FT3": std[s + "ANK"], s + "KNE": std[s + "KNE"], s + "KNM": std[s + "KNE"] + 0.10 * across,
+                s + "ANK": std[s + "ANK"], s + "ANM": std[s + "ANK"] + 0.07 * _medial(s)}  # the feet stand still
+    return out
+
+
+def _medial(side: str) -> np.ndarray:
+    """Unit medial direction (m) of a foot standing still, facing +x."""
+    return np.array([0.0, -1.0 if side == "L" else 1.0, 0.0])
+
+
+def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = False) -> C3dTrial:
+    m = _markers(t, full_body, cluster)
     return C3dTrial("synthetic", list(m), np.stack(list(m.values()), axis=1), rate, rate, 0.0, [], MASS,
                     "PROCESSING:Bodymass", 1.75)
 
 
-def _true_wrench(body: MarkerBodyOptions, full_body: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _true_wrench(body: MarkerBodyOptions, full_body: bool = False,
+                 cluster: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
     marker body's own rigid-body dynamics driven by the motion sampled at 10 kHz (central differences)."""
     fine = 10
     t = np.arange(int(SECONDS * ANALOG) * fine + 2 * fine) / (ANALOG * fine) - 1.0 / ANALOG
-    take = body_from_markers(_trial(t, ANALOG * fine, full_body), replace(body, total_mass=MASS))
+    take = body_from_markers(_trial(t, ANALOG * fine, full_body, cluster), replace(body, total_mass=MASS))
     q = take.frames
     h = 1.0 / (ANALOG * fine)
     model, data = take.body.model, take.body.model.createData()
@@ -101,16 +131,17 @@ def _add_int(c3d, group: str, name: str, value) -> None:
 
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
-                  delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False) -> np.ndarray:
+                  delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
+                  cluster: bool = False) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
-    true CoP (S, 2) m at the analog rate."""
-    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body)
+    true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map)."""
+    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(SECONDS * RATE)) / RATE
-    m = _markers(t, full_body)
-    m["LTHI"][150:155] = np.nan  # a short gap (filled)
-    m["RTOE"][:30] = np.nan  # a long gap at the start (the take is cut)
+    m = _markers(t, full_body, cluster)
+    m["LTH1" if cluster else "LTHI"][150:155] = np.nan  # a short gap (filled)
+    m["RFT1" if cluster else "RTOE"][:30] = np.nan  # a long gap at the start (the take is cut)
     c3d = ezc3d.c3d()
     c3d["parameters"]["POINT"]["RATE"]["value"] = [RATE]
     c3d["parameters"]["POINT"]["LABELS"]["value"] = [f"Sub01:{k}" for k in m]
@@ -305,7 +336,7 @@ def test_calibration_model_reproduces_the_pipelines_zmp_exactly():
     trial = read_c3d(C3D / "walk_plugingait_forceplates.c3d")
     lab = analyse_lab_take(trial)
     rows = lab.complete & lab.result.has_zmp
-    terms = calibration._terms(trial, lab, rows)
+    terms = calibration._terms(trial, lab, rows, MarkerBodyOptions())
     fraction, height, _ = hat_table(lab.summary["markers"]["stature_m"])
     zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height]))
     assert np.abs(zmp - lab.result.zmp[rows, :2]).max() < 1e-9

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from livezmp.model.c3d import C3dTrial, PlateRecord
+from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import input_rotation
 
 QUIET_WINDOW_S = 0.1  # s: an unloaded stretch this long gives a plate's offset
@@ -38,12 +39,12 @@ class PlateFrames:
     surface_z: float
 
 
-def plates_floor(trial: C3dTrial) -> float | None:
+def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None:
     """Height (m, internal frame) of the trial's plates' surface (the mean of their corners): the floor;
-    None without plates."""
+    None without plates. ``mmap``: the trial's marker map, if it needs one."""
     if not trial.plates:
         return None
-    r_in = input_rotation(trial)[1]
+    r_in = input_rotation(trial, mmap)[1]
     return float(np.mean([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates]))
 
 

@@ -17,7 +17,7 @@ from livezmp.checks import check_output_path
 from livezmp.commands.common import check_body_options, load_from_args, take_options
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import write_json, write_zmp_csv
-from livezmp.offline.take import TakeAnalysis, analyse_c3d, analyse_motion
+from livezmp.offline.take import TakeAnalysis, analyse_c3d, analyse_motion, check_not_c3d_options
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
@@ -27,6 +27,7 @@ def _analyse(args: argparse.Namespace) -> TakeAnalysis:
     options = take_options(args)
     if args.motion is not None and Path(args.motion).suffix.lower() == ".c3d":
         return analyse_c3d(args.motion, options)
+    check_not_c3d_options(options, args.motion)
     loaded = load_from_args(args)
     if len(loaded.frames) < PROGRESS_FRAMES:
         return analyse_motion(loaded, options)

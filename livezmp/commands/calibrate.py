@@ -6,13 +6,16 @@ from __future__ import annotations
 import argparse
 
 from livezmp.model.c3d import read_c3d
+from livezmp.model.marker_map import load_marker_map
+from livezmp.model.markers import MarkerBodyOptions
 from livezmp.offline.calibrate import calibrate, write_subject
 from livezmp.offline.gaitlab import LabOptions
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     trials = [read_c3d(p) for p in args.trials]
-    subject, report = calibrate(trials, LabOptions(mass=args.mass))
+    markers = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None)
+    subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))
     write_subject(subject, args.output, report)
     print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "
           f"{1000 * subject.hat_offset[0]:+.0f} mm forward, {1000 * subject.hat_offset[1]:+.0f} mm left, "

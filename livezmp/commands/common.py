@@ -47,7 +47,7 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
     return TakeOptions(robot=args.robot, robot_config=args.robot_config, mass=args.mass, units=args.units,
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
-                       subject=getattr(args, "subject", None))
+                       subject=getattr(args, "subject", None), markers=getattr(args, "markers", None))
 
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:

@@ -32,6 +32,7 @@ reported and the take is cut to the longest stretch where every needed marker is
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -42,6 +43,7 @@ from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE, WORLD_FROM_INPUT
 from livezmp.model.c3d import C3dTrial
+from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
 
 MARKER_RADIUS = 0.007  # m: Plug-in Gait's default 14 mm markers
 KNEE_WIDTH_OF_STATURE = 0.064  # typical knee / ankle widths (m / m) when the file gives none
@@ -73,6 +75,7 @@ class MarkerBodyOptions:
     floor_z: float | None = None
     max_gap_s: float = 0.1
     hat_follows_pelvis: bool = False
+    marker_map: MarkerMap | None = None  # labels renamed, or a cluster set (livezmp.model.marker_map)
 
 
 @dataclass
@@ -156,7 +159,11 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
 
 def _up_rotation(m: dict[str, np.ndarray], source: str) -> tuple[str, np.ndarray]:
     """The input's up axis (pelvis above the feet) and the rotation into the internal z-up frame."""
-    v = np.nanmean((m["LASI"] + m["RASI"]) / 2 - (m["LANK"] + m["RANK"]) / 2, axis=0)
+    return _up_from((m["LASI"] + m["RASI"]) / 2 - (m["LANK"] + m["RANK"]) / 2, source)
+
+
+def _up_from(pelvis_above_feet: np.ndarray, source: str) -> tuple[str, np.ndarray]:
+    v = np.nanmean(pelvis_above_feet, axis=0)
     ax = int(np.argmax(np.abs(v)))
     if ax == 2 and v[2] > 0:
         return "z", WORLD_FROM_INPUT["z"]
@@ -170,9 +177,30 @@ def marker_labels(trial: C3dTrial) -> list[str]:
     return [label for label in _need(trial).values() if label is not None]
 
 
-def input_rotation(trial: C3dTrial) -> tuple[str, np.ndarray]:
+def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
     """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
+    if mmap is not None and mmap.segments:
+        return _up_from(_cluster_up_vector(_cluster_markers(renamed(trial, mmap), mmap), mmap), trial.source)
+    trial = trial if mmap is None else renamed(trial, mmap)
     return _up_rotation({k: trial.marker(v) for k, v in _need(trial).items() if v}, trial.source)
+
+
+def _cluster_markers(trial: C3dTrial, mmap: MarkerMap) -> dict[str, np.ndarray]:
+    """The cluster map's markers (F, 3) m; InputError naming those the file does not have (or never sees)."""
+    labels = map_labels(mmap)
+    seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
+    have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}
+    missing = [label for label in labels if label not in have]
+    if missing:
+        raise InputError(f"{trial.source}: markers of the map {mmap.source} not in the file (or never seen): "
+                         f"{', '.join(missing)}")
+    return {label: trial.marker(label) for label in labels}
+
+
+def _cluster_up_vector(m: dict[str, np.ndarray], mmap: MarkerMap) -> np.ndarray:
+    seg = dict(mmap.segments)
+    centroid = {s: np.mean([m[label] for label in seg[s]], axis=0) for s in ("pelvis", "foot_l", "foot_r")}
+    return centroid["pelvis"] - (centroid["foot_l"] + centroid["foot_r"]) / 2
 
 
 def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: float,
@@ -268,6 +296,10 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     opts = opts or MarkerBodyOptions()
     if not opts.total_mass > 0:
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
+    if opts.marker_map is not None:
+        trial = renamed(trial, opts.marker_map)
+        if opts.marker_map.segments:
+            return _cluster_take(trial, opts, opts.marker_map)
     roles = _need(trial)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
     max_gap = max(1, round(opts.max_gap_s * trial.rate))
@@ -351,9 +383,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 centres[joint][side] = lateral - sign * delta * y
                 rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
-    heading = np.arctan2(x[:, 1], x[:, 0])
-    c, sn, zero, one = np.cos(heading), np.sin(heading), np.zeros_like(heading), np.ones_like(heading)
-    upright = np.stack([np.stack([c, -sn, zero], -1), np.stack([sn, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
+    upright = _upright(x)
     seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1))}
     full = "C7" in m
     if full:
@@ -373,6 +403,76 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
+    return seg, centres, notes
+
+
+def _upright(x: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) upright frames turned to the heading of the forward axes ``x`` (F, 3)."""
+    heading = np.arctan2(x[:, 1], x[:, 0])
+    c, sn, zero, one = np.cos(heading), np.sin(heading), np.zeros_like(heading), np.ones_like(heading)
+    return np.stack([np.stack([c, -sn, zero], -1), np.stack([sn, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
+
+
+def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> MarkerTake:
+    """The body of a cluster set (see :mod:`livezmp.model.marker_map`)."""
+    raw = _cluster_markers(trial, mmap)
+    try:
+        keep, open_gaps = _trim(raw, max(1, round(opts.max_gap_s * trial.rate)), trial.rate)
+    except InputError as e:
+        raise InputError(f"{trial.source}: {e}") from None
+    if keep.stop - keep.start < 4:
+        raise InputError(f"{trial.source}: only {keep.stop - keep.start} frames have every mapped marker")
+    up, r_in = _up_from(_cluster_up_vector(raw, mmap), trial.source)
+    m = {k: v[keep] @ r_in.T for k, v in raw.items()}
+    seg, centres, notes = _cluster_segments(m, mmap, trial)
+    body, frames = _build(seg, m, opts, up, r_in, notes)
+    notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
+    return MarkerTake(body, frames, keep.start, notes, centres)
+
+
+def _carried(rot: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """``direction`` (F, 3) as a cluster with rotations ``rot`` (F, 3, 3) carries it: its mean in the
+    cluster frame, turned back by each frame's rotation."""
+    local = _unit(np.mean(np.einsum("fji,fj->fi", rot, direction), axis=0))
+    return rot @ local
+
+
+def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial) -> tuple[dict, dict, dict]:
+    """Segment frames, joint centres and notes of a cluster set; adds each foot's toe (its marker furthest
+    from the ankle centre) to ``m`` as LTOE / RTOE."""
+    poses = {s: cluster_frames(np.stack([m[label] for label in labels], axis=1)) for s, labels in mmap.segments}
+    centres: dict = {j: {} for j in JOINTS}
+    rules = {}
+    for side, (_, _, t) in _SIDES.items():
+        for joint, (a, b) in JOINTS.items():
+            rule = mmap.joint_rule(joint, t)
+            if rule == "functional":
+                pa = poses["pelvis" if a == "pelvis" else f"{a}_{t}"]
+                centres[joint][side] = functional_centre(*pa, *poses[f"{b}_{t}"])
+                rules[f"{side}_{joint}"] = "functional (SCoRE, Ehrig et al. 2006)"
+            else:
+                centres[joint][side] = np.mean([m[label] for label in rule], axis=0)
+                rules[f"{side}_{joint}"] = f"mid-point of {', '.join(rule)}"
+    hip_l, hip_r = centres["hip"]["left"], centres["hip"]["right"]
+    _, r_pelvis = poses["pelvis"]
+    y = _unit(hip_l - hip_r)
+    x = _unit(np.cross(y, _carried(r_pelvis, np.tile([0.0, 0.0, 1.0], (len(y), 1)))))
+    pelvis_origin = (hip_l + hip_r) / 2
+    seg = {"pelvis": (pelvis_origin, np.stack([x, y, np.cross(x, y)], axis=-1)), "hat": (pelvis_origin, _upright(x))}
+    stature = mmap.stature_m or trial.height_m or float(
+        np.median(np.linalg.norm(hip_l - centres["ankle"]["left"], axis=1)) / LEG_FRACTION_OF_STATURE)
+    for side, (s, _, t) in _SIDES.items():
+        hip, knee, ankle = centres["hip"][side], centres["knee"][side], centres["ankle"][side]
+        thigh = _frame(hip - knee, _carried(poses[f"thigh_{t}"][1], y))
+        shank = _frame(knee - ankle, _carried(poses[f"shank_{t}"][1], y))
+        foot_labels = dict(mmap.segments)[f"foot_{t}"]
+        toe = max(foot_labels, key=lambda label: float(np.median(np.linalg.norm(m[label] - ankle, axis=1))))
+        m[s + "TOE"] = m[toe]
+        seg[f"thigh_{t}"], seg[f"shank_{t}"] = (hip, thigh), (knee, shank)
+        seg[f"foot_{t}"] = (ankle, _foot_frame(m[toe] - ankle, shank[:, :, 1]))
+        rules[f"{side}_toe"] = toe
+    notes = {"marker_set": f"cluster set (marker map {Path(mmap.source).name})",
+             "hip_joint_centre": rules["left_hip"], "joint_centres": rules, "stature_m": round(stature, 4)}
     return seg, centres, notes
 
 

@@ -89,9 +89,9 @@ class _Terms:
     floor: float
 
 
-def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> _Terms:
+def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerBodyOptions) -> _Terms:
     mass = lab.summary["mass"]["used_kg"]
-    rest = body_from_markers(trial, replace(MarkerBodyOptions(), total_mass=mass, hat_fraction=0.0)).body.model
+    rest = body_from_markers(trial, replace(markers, total_mass=mass, hat_fraction=0.0)).body.model
     data = rest.createData()
     r = lab.result
     idx = np.flatnonzero(rows)
@@ -150,6 +150,7 @@ def _fit(terms: list[_Terms], start: np.ndarray) -> np.ndarray:
 def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[Subject, dict]:
     """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
     (RMS ZMP − CoP before, fitted, and cross-validated on held-out halves, mm)."""
+    opts = opts or LabOptions()
     whole, halves = [], ([], [])
     for trial in trials:
         if not trial.plates:
@@ -161,12 +162,12 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
         rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
         if rows.sum() < 20:
             raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need 20")
-        whole.append(_terms(trial, lab, rows))
+        whole.append(_terms(trial, lab, rows, opts.markers))
         stature = lab.summary["markers"]["stature_m"]
         idx = np.flatnonzero(rows)
         cut = idx[len(idx) // 2]
         for k, part in enumerate((rows & (np.arange(len(rows)) < cut), rows & (np.arange(len(rows)) >= cut))):
-            halves[k].append(_terms(trial, lab, part))
+            halves[k].append(_terms(trial, lab, part, opts.markers))
     fraction, height, _ = hat_table(stature)
     start = np.array([fraction, 0.0, 0.0, height])
     fitted = _fit(whole, start)

@@ -143,7 +143,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     """Run the pipeline over ``trial``'s marker body and, with plates, compare (see module docstring)."""
     opts = opts or LabOptions()
     first = opts.mass or trial.mass_kg or DEFAULT_MASS
-    floor = plates_floor(trial)
+    floor = plates_floor(trial, opts.markers.marker_map)
     take, times, cfg, result = _run(trial, opts, first, floor)
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)

@@ -20,6 +20,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
+from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import LoadedMotion, load_motion
 from livezmp.model.segments import load_mapping
@@ -37,7 +38,8 @@ ZMP_CSV = "zmp.csv"
 class TakeOptions:
     """How a take is loaded and analysed (the body options of ``livezmp analyze``):
     ``mass`` kg (None: the file's subject mass for a C3D, else 70 kg), ``sole_width`` m, ``ground`` m in
-    the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``."""
+    the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``; ``subject``
+    and ``markers``: a subject file and a marker map (C3D only)."""
 
     robot: str | None = None
     robot_config: str | None = None
@@ -50,6 +52,7 @@ class TakeOptions:
     mode: str = "full"
     tolerance_mm: float = VALIDATED_P95_MM
     subject: str | None = None
+    markers: str | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
         mapping = load_mapping(self.mapping) if self.mapping else None
@@ -120,7 +123,8 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
-    markers = load_subject(options.subject).marker_options() if options.subject else MarkerBodyOptions()
+    markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
+    markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
     lab = analyse_lab_take(read_c3d(path), LabOptions(mass=options.mass, mode=options.mode, markers=markers))
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
                                                 options.tolerance_mm), **lab.summary}
@@ -133,7 +137,14 @@ def analyse_path(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of the motion file at ``path`` (C3D, BVH, or joint CSV with ``options.robot``)."""
     if Path(path).suffix.lower() == ".c3d":
         return analyse_c3d(path, options)
+    check_not_c3d_options(options, path)
     return analyse_motion(options.load(path), options)
+
+
+def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None:
+    """A marker map only applies to C3D trials: say so for any other input."""
+    if options.markers:
+        raise InputError(f"{options.markers}: --markers is for C3D trials (got {path or 'the built-in demo'})")
 
 
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) -> dict:

@@ -1,0 +1,189 @@
+"""Marker maps (livezmp.model.marker_map): label renames and cluster sets with functional joint
+centres, on closed-form motions, on the synthetic gait lab (its plates written from the mapped
+body's exact dynamics), and on the shared cluster-set trial sample01."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import ezc3d
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from livezmp.cli import main
+from livezmp.errors import InputError
+from livezmp.model.c3d import read_c3d
+from livezmp.model.marker_map import cluster_frames, functional_centre, load_marker_map
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers
+from tests.test_c3d_gaitlab import C3D, PLATES, RATE, SECONDS, _trial, write_lab_c3d
+
+CLUSTER_MAP = """
+[segments]
+pelvis = ["PV1", "PV2", "PV3", "PV4"]
+thigh_l = ["LTH1", "LTH2", "LTH3"]
+shank_l = ["LSK1", "LSK2", "LSK3"]
+foot_l = ["LFT1", "LFT2", "LFT3"]
+thigh_r = ["RTH1", "RTH2", "RTH3"]
+shank_r = ["RSK1", "RSK2", "RSK3"]
+foot_r = ["RFT1", "RFT2", "RFT3"]
+
+[joints]
+knee_l = ["LKNE", "LKNM"]
+knee_r = ["RKNE", "RKNM"]
+ankle_l = ["LANK", "LANM"]
+ankle_r = ["RANK", "RANM"]
+"""
+SAMPLE01_MAP = """
+[segments]
+pelvis = ["PV1", "PV2", "PV3", "pv4"]
+thigh_l = ["LTH1", "LTH2", "LTH3", "LTH4"]
+shank_l = ["LSK1", "LSK2", "LSK3", "LSK4"]
+foot_l = ["LFT1", "LFT2", "LFT3"]
+thigh_r = ["RTH1", "RTH2", "RTH3", "RTH4"]
+shank_r = ["RSK1", "RSK2", "RSK3", "RSK4"]
+foot_r = ["RFT1", "RFT2", "RFT3"]
+"""
+
+
+def _rotations(rng, n: int, scale: float, axis: np.ndarray | None = None) -> np.ndarray:
+    """n smooth rotations (3, 3): about random axes, or about ``axis`` only (a hinge)."""
+    t = np.linspace(0, 2 * np.pi, n)
+    if axis is not None:
+        return np.array([pin.exp3(axis * scale * np.sin(v)) for v in t])
+    w = rng.normal(size=(3, 3))
+    return np.array([pin.exp3(scale * (w[0] * np.sin(v) + w[1] * np.cos(2 * v) + w[2] * np.sin(3 * v))) for v in t])
+
+
+def test_functional_centre_finds_a_ball_joint_and_a_point_on_a_hinge():
+    rng = np.random.default_rng(1)
+    n = 200
+    centre = np.column_stack([np.linspace(0, 1.0, n), np.zeros(n), 0.9 + 0.02 * np.sin(np.linspace(0, 9, n))])
+    r1 = _rotations(rng, n, 0.2)
+    c1, c2 = np.array([0.05, 0.08, -0.1]), np.array([0.0, -0.02, 0.2])
+    for r2, hinge in ((_rotations(rng, n, 0.5), None), (None, np.array([0.0, 1.0, 0.0]))):
+        if r2 is None:  # second segment turns about the first one's y axis only
+            r2 = np.einsum("fij,fjk->fik", r1, _rotations(rng, n, 0.6, hinge))
+        o1 = centre - r1 @ c1
+        o2 = centre - r2 @ c2
+        found = functional_centre(o1, r1, o2, r2)
+        if hinge is None:
+            assert np.abs(found - centre).max() < 1e-9
+        else:  # on the hinge axis through the centre: off it by nothing, along it anywhere
+            axis = r1 @ hinge
+            off = (found - centre) - np.sum((found - centre) * axis, axis=1, keepdims=True) * axis
+            assert np.abs(off).max() < 1e-6
+            assert np.ptp(np.sum((found - centre) * axis, axis=1)) < 1e-6  # the same point every frame
+
+
+def test_cluster_frames_follow_a_rigid_cluster():
+    rng = np.random.default_rng(2)
+    n = 50
+    shape = rng.normal(scale=0.05, size=(4, 3))
+    rot = _rotations(rng, n, 0.7)
+    origin = rng.normal(size=(n, 3))
+    pts = np.einsum("fij,kj->fki", rot, shape) + origin[:, None]
+    o, r = cluster_frames(pts)
+    assert np.allclose(o, pts.mean(axis=1))
+    relative = r @ r[0].T  # rotation from frame 0
+    assert np.abs(relative - rot @ rot[0].T).max() < 1e-9
+    assert np.allclose(np.linalg.det(r), 1.0)
+
+
+def test_functional_ankle_of_the_sway_is_its_pivot(tmp_path):
+    """The synthetic subject sways as one rigid body about the point (0, 0, 0.08) m above its still feet:
+    SCoRE between a shank and its foot finds that point."""
+    t = np.arange(int(SECONDS * RATE)) / RATE
+    path = _map_file(CLUSTER_MAP.split("[joints]")[0], tmp_path)
+    take = body_from_markers(_trial(t, RATE, cluster=True), MarkerBodyOptions(marker_map=load_marker_map(path)))
+    for side in ("left", "right"):
+        assert np.abs(take.centres["ankle"][side] - [0.0, 0.0, 0.08]).max() < 1e-6
+
+
+def _map_file(text: str, d: Path, name: str = "map.toml") -> Path:
+    path = d / name
+    path.write_text(text)
+    return path
+
+
+def _analyze(path, tmp_path, *extra) -> tuple[int, dict]:
+    out = tmp_path / "s.json"
+    rc = main(["analyze", str(path), "--summary-json", str(out), *extra])
+    return rc, json.loads(out.read_text()) if rc == 0 else {}
+
+
+def test_cluster_set_through_a_map_agrees_with_its_plates(tmp_path, capsys):
+    """A cluster set (no standard label) with its plates written from the mapped body's exact dynamics:
+    refused without the map in one line naming what is missing; with it, ZMP = plate CoP to a millimetre."""
+    map_path = _map_file(CLUSTER_MAP, tmp_path)
+    path = tmp_path / "cluster.c3d"
+    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(marker_map=load_marker_map(map_path)), cluster=True)
+    assert main(["analyze", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "missing LASI" in err
+    rc, s = _analyze(path, tmp_path, "--markers", str(map_path))
+    assert rc == 0
+    assert s["markers"]["marker_set"] == f"cluster set (marker map {map_path.name})"
+    assert s["markers"]["joint_centres"]["left_knee"] == "mid-point of LKNE, LKNM"
+    assert s["markers"]["frames_used"][0] == 30  # RFT1's long gap cut the start, as for the standard set
+    assert s["cop_vs_zmp"]["frames"] > 250 and s["cop_vs_zmp"]["max_mm"] < 1.0
+
+
+def test_labels_map_reads_a_renamed_standard_set(tmp_path, capsys):
+    """A Helen Hayes set whose toe and sacrum markers have other names (as some labs write L.TO, VSAC):
+    refused naming them, read through [labels] with the same ZMP as the standard file."""
+    std = tmp_path / "std.c3d"
+    write_lab_c3d(std, PLATES)
+    c3d = ezc3d.c3d(str(std))
+    labels = c3d["parameters"]["POINT"]["LABELS"]["value"]
+    rename = {"Sub01:LTOE": "L.TO", "Sub01:RTOE": "R.TO"}
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = [rename.get(v, v) for v in labels]
+    other = tmp_path / "other.c3d"
+    c3d.write(str(other))
+    assert main(["analyze", str(other)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "missing LTOE, RTOE" in err
+    map_path = _map_file('[labels]\nLTOE = "L.TO"\nRTOE = "R.TO"\n', tmp_path)
+    rc, s = _analyze(other, tmp_path, "--markers", str(map_path))
+    _, ref = _analyze(std, tmp_path)
+    assert rc == 0 and s["cop_vs_zmp"] == ref["cop_vs_zmp"]
+
+
+@pytest.mark.parametrize("text, field", [
+    ('[segments]\npelvis = ["A", "B", "C"]\n', "missing thigh_l"),
+    (CLUSTER_MAP.replace('["PV1", "PV2", "PV3", "PV4"]', '["PV1", "PV1", "PV2"]'), "segments.pelvis"),
+    (CLUSTER_MAP + 'wrist = "functional"\n', "joints.wrist"),
+    (CLUSTER_MAP + 'hip = 3\n', "joints.hip"),
+    ('[labels]\nLTOE = 4\n', "[labels]"),
+    ('stature_m = 9\n[labels]\nLTOE = "X"\n', "stature_m"),
+    ('[other]\n', "unknown table"),
+    ('[labels]\nLTOE = "NOPE"\n', "labels.LTOE"),
+])
+def test_bad_marker_maps_are_one_line(tmp_path, capsys, text, field):
+    map_path = _map_file(text, tmp_path)
+    rc = main(["analyze", str(C3D / "cgm24_walking01_forceplate.c3d"), "--markers", str(map_path)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and field in err and str(map_path) in err
+
+
+def test_markers_option_is_for_c3d_only(capsys):
+    assert main(["analyze", "--markers", "x.toml"]) == 2
+    assert "C3D" in capsys.readouterr().err
+
+
+def test_sample01_cluster_set_through_a_map(tmp_path):
+    """The shared c3d.org Sample01 (pelvis, thigh, shank and foot clusters, no anatomical markers; only the
+    right foot lands on a plate, so the complete frames are its single-support phases)."""
+    map_path = _map_file(SAMPLE01_MAP, tmp_path)
+    rc, s = _analyze(C3D / "sample01_gait_forceplates.c3d", tmp_path, "--markers", str(map_path))
+    assert rc == 0
+    cv = s["cop_vs_zmp"]
+    # 37 frames of one foot's single support at 50 Hz: 50 mm RMS, 86 mm p95, bias -15 / +28 mm, lag +27 ms
+    assert cv["frames"] >= 30 and cv["rms_mm"] < 55 and cv["p95_mm"] < 95 and abs(cv["lag_ms"]) < 35
+    assert abs(cv["bias_mm"][0]) < 20 and abs(cv["bias_mm"][1]) < 35
+    assert s["markers"]["joint_centres"]["right_knee"].startswith("functional")
+    with pytest.raises(InputError, match="never seen|not in the file"):
+        bad = _map_file(SAMPLE01_MAP.replace('"pv4"', '"PV9"'), tmp_path, "bad.toml")
+        body_from_markers(read_c3d(C3D / "sample01_gait_forceplates.c3d"),
+                          MarkerBodyOptions(marker_map=load_marker_map(bad)))
