@@ -132,9 +132,10 @@ def _add_int(c3d, group: str, name: str, value) -> None:
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
-                  cluster: bool = False) -> np.ndarray:
+                  cluster: bool = False, spare_drift_n: float = 0.0) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
-    true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map)."""
+    true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map);
+    ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the second half."""
     force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
@@ -161,8 +162,9 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     m1 = np.cross(foot - centres["left"], f1)  # the left foot's force acts at its sole centre
     f2 = force - f1
     m2 = moment - (m1 + np.cross(centres["left"], f1)) - np.cross(centres["right"], f2)
-    channels = [np.hstack([f1, 1000 * m1]), np.hstack([f2, 1000 * m2]),
-                np.tile(OFFSET * (1.0, 1.0, 1.0, 1000, 1000, 1000) * with_offsets, (len(force), 1))]
+    spare = np.tile(OFFSET * (1.0, 1.0, 1.0, 1000, 1000, 1000) * with_offsets, (len(force), 1))
+    spare[:, 2] += spare_drift_n * np.clip(np.linspace(-1.0, 1.0, len(force)), 0.0, None)
+    channels = [np.hstack([f1, 1000 * m1]), np.hstack([f2, 1000 * m2]), spare]
     c3d["data"]["analogs"] = np.hstack(channels).T[None]
     _add_int(c3d, "FORCE_PLATFORM", "USED", [3])
     _add_int(c3d, "FORCE_PLATFORM", "TYPE", [2, 2, 2])
@@ -239,6 +241,20 @@ def test_full_body_set_tracks_trunk_head_and_arms(tmp_path):
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
     with pytest.raises(InputError, match="full-body"):
         calibration.calibrate([read_c3d(path)])
+
+
+def test_a_plate_pulling_down_is_set_aside(lab, tmp_path, monkeypatch):
+    """The unloaded plate drifts by -120 N: past its offset it reads a pull, which a plate cannot exert, so it
+    is set aside and the ZMP still meets the true CoP; summed in, its drift would move the CoP by centimetres."""
+    d, _ = lab
+    path = tmp_path / "drift.c3d"
+    write_lab_c3d(path, PLATES, spare_drift_n=-120.0)
+    a = analyse_lab_take(read_c3d(path))
+    [aside] = a.summary["plates"]["set_aside"]
+    assert aside["plate"] == 3 and aside["min_fz_n"] < -plates_mod.PULL_N
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    monkeypatch.setattr(plates_mod, "PULL_N", np.inf)
+    assert analyse_lab_take(read_c3d(path)).summary["cop_vs_zmp"]["max_mm"] > 10.0
 
 
 def test_late_plates_are_measured_and_realigned(lab):

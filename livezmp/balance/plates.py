@@ -8,7 +8,7 @@ floor it is the ZMP the motion implies.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
@@ -20,6 +20,9 @@ from livezmp.model.markers import input_rotation
 QUIET_WINDOW_S = 0.1  # s: an unloaded stretch this long gives a plate's offset
 QUIET_STD_N = 3.0  # N: vertical force this steady (std) is "quiet"
 UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not an offset
+# N: a plate cannot pull a foot down; an offset-free, low-passed vertical force below -this (ten times the
+# quiet noise) is a drifting or faulty plate, set aside (a foot on it is off the plates)
+PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
 
@@ -37,6 +40,7 @@ class PlateFrames:
     outlines: list[np.ndarray]
     offsets: list[tuple[np.ndarray, np.ndarray] | None]
     surface_z: float
+    set_aside: list[dict] = field(default_factory=list)  # {plate (1-based), min_fz_n}: not used, see PULL_N
 
 
 def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None:
@@ -82,22 +86,27 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
 
     Analog sample k is at time k / analog_rate, marker frame i at i / rate (the C3D convention: a
     frame's first analog sample is simultaneous with it); ``shift_s`` samples the plates that much
-    later (time alignment)."""
+    later (time alignment). A plate whose vertical force goes below ``-PULL_N`` is set aside: not
+    summed, and its outline left out of ``outlines``."""
     r = world_from_input
     force = np.zeros((len(plates[0].force) if plates else 0, 3))
     moment = np.zeros_like(force)
-    offsets, outlines = [], []
-    for p in plates:
+    offsets, outlines, aside = [], [], []
+    for k, p in enumerate(plates):
         off = unloaded_offset(p, analog_rate)
         offsets.append(off)
         f, mom = p.force, p.moment
         if off is not None:
             f, mom = f - off[0], mom - off[1]
+        low = float(lowpass(f[:, 2], analog_rate, cutoff_hz).min()) if len(f) else 0.0
+        if low < -PULL_N:
+            aside.append({"plate": k + 1, "min_fz_n": round(low, 1)})
+            continue
         f, mom, c = f @ r.T, mom @ r.T, r @ p.centre
         force += f
         moment += mom + np.cross(c, f)  # about the world origin
         outlines.append(p.corners @ r.T)
-    surface = float(np.mean([o[:, 2].mean() for o in outlines])) if outlines else 0.0
+    surface = float(np.mean([(p.corners @ r.T)[:, 2].mean() for p in plates])) if plates else 0.0
     wrench = lowpass(np.hstack([force, moment]), analog_rate, cutoff_hz)
     t = (np.asarray(frames, dtype=float) / rate + shift_s) * analog_rate
     idx = np.clip(t, 0, len(wrench) - 1)
@@ -111,7 +120,7 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
     cop[ok, 0] = (surface * fr[ok, 0] - mo[ok, 1]) / fr[ok, 2]
     cop[ok, 1] = (mo[ok, 0] + surface * fr[ok, 1]) / fr[ok, 2]
     cop[ok, 2] = surface
-    return PlateFrames(fr, mo, cop, outlines, offsets, surface)
+    return PlateFrames(fr, mo, cop, outlines, offsets, surface, aside)
 
 
 def _inside(points: np.ndarray, outline: np.ndarray, margin: float) -> np.ndarray:

@@ -171,7 +171,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "plates": {"count": len(trial.plates), "surface_z_m": round(plates.surface_z, 4),
                    "offsets_removed_n": [None if o is None else [round(float(v), 2) for v in o[0]]
                                          for o in plates.offsets],
-                   "lowpass_hz": cutoff, "complete_frames": int(complete.sum())},
+                   "lowpass_hz": cutoff, "complete_frames": int(complete.sum()),
+                   "set_aside": plates.set_aside},
         "time_alignment": {"plate_delay_measured_ms": None if measured is None else round(1000 * measured, 1),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
