@@ -19,7 +19,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     write_subject(subject, args.output, report)
     print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "
           f"{1000 * subject.hat_offset[0]:+.0f} mm forward, {1000 * subject.hat_offset[1]:+.0f} mm left, "
-          f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip")
+          f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip, swaying {subject.hat_sway_gain[0]:.2f} (fore-aft) "
+          f"and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip")
     print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
           f"{report['rms_fitted_mm']:.1f} mm; on held-out halves: table {report['rms_held_out_table_mm']:.1f} mm, "
           f"fitted {report['rms_held_out_fitted_mm']:.1f} mm")

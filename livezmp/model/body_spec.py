@@ -108,7 +108,7 @@ def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple
         ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
     options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
                "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
-               "floor_z": opts.floor_z, "source": trial.source}
+               "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain, "source": trial.source}
     return take, BodySpec("markers", {MARKERS_FILE: text}, options)
 
 
@@ -126,9 +126,10 @@ def _markers_from_spec(spec: BodySpec) -> BodyModel:
     pts = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]]).reshape(len(lines) - 1, len(labels), 3)
     trial = C3dTrial(o.get("source", MARKERS_FILE), labels, pts, o["rate"], o["rate"], 0.0, [], o["total_mass"],
                      "", o.get("height_m"), o.get("widths_m") or {})
-    hat = o.get("hat_offset")
+    hat, gain = o.get("hat_offset"), o.get("hat_sway_gain")
     opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
-                             hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"))
+                             hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"),
+                             hat_sway_gain=None if gain is None else tuple(gain))
     body = body_from_markers(trial, opts).body
     if o.get("input_up"):  # a live stream's body: outputs in the stream's axes
         body = replace(body, world_from_input=world_from_up_axis(o["input_up"]), up_axis=o["input_up"].lstrip("+"))

@@ -75,6 +75,7 @@ class MarkerBodyOptions:
     floor_z: float | None = None
     max_gap_s: float = 0.1
     hat_follows_pelvis: bool = False
+    hat_sway_gain: tuple[float, float] | None = None  # fore-aft, lateral: see hat_sway
     marker_map: MarkerMap | None = None  # labels renamed, or a cluster set (livezmp.model.marker_map)
 
 
@@ -322,7 +323,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     up, r_in = _up_rotation(raw, trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _segments(m, trial)
-    body, frames = _build(seg, m, opts, up, r_in, notes)
+    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
         notes["optional_markers_not_used"] = sorted(dropped)
@@ -406,6 +407,34 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     return seg, centres, notes
 
 
+def sway_basis(origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The straight-line trend (F, 3) m of a walking take's point ``origin`` (F, 3) (least squares over
+    frames: the steady progression), and the walk's fore-aft and lateral unit axes (3,) (the trend's
+    horizontal travel; +x when it travels less than 0.1 m)."""
+    k = np.arange(len(origin), dtype=float)
+    slope, icpt = np.polyfit(k, origin, 1)
+    trend = np.outer(k, slope) + icpt
+    d = trend[-1, :2] - trend[0, :2]
+    fwd = d / np.linalg.norm(d) if np.linalg.norm(d) > 0.1 else np.array([1.0, 0.0])
+    return trend, np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
+
+
+def hat_sway(origin: np.ndarray, gain: tuple[float, float]) -> np.ndarray:
+    """The HAT's base (F, 3) m when the trunk sways ``gain`` (fore-aft, lateral) times as far as the
+    mid-hip ``origin`` (F, 3) about the walk's straight-line trend (:func:`sway_basis`); height
+    unchanged. Its acceleration is the gain times the mid-hip's along each axis (the trend has none)."""
+    trend, fwd, left = sway_basis(origin)
+    k = gain[0] * np.outer(fwd, fwd) + gain[1] * np.outer(left, left) + np.diag([0.0, 0.0, 1.0])
+    return trend + (origin - trend) @ k.T
+
+
+def _swayed(seg: dict, opts: MarkerBodyOptions) -> dict:
+    if opts.hat_sway_gain is None or "hat" not in seg:
+        return seg
+    origin, rot = seg["hat"]
+    return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain), rot)}
+
+
 def _upright(x: np.ndarray) -> np.ndarray:
     """(F, 3, 3) upright frames turned to the heading of the forward axes ``x`` (F, 3)."""
     heading = np.arctan2(x[:, 1], x[:, 0])
@@ -425,7 +454,7 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     up, r_in = _up_from(_cluster_up_vector(raw, mmap), trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _cluster_segments(m, mmap, trial)
-    body, frames = _build(seg, m, opts, up, r_in, notes)
+    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
 
@@ -589,7 +618,10 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
                     + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
                     + ("; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
-                       f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed"))
+                       f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
+                    + ("" if opts.hat_sway_gain is None or full else
+                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip (subject file)".format(
+                           *opts.hat_sway_gain)))
     names = [f"{s}.{c}" for s in seg for c in _CHANNELS]
     body = BodyModel(
         kind="markers", model=model, point_model=point_mass_copy(model), channel_names=names,

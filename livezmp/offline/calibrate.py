@@ -24,30 +24,37 @@ from scipy.optimize import least_squares
 from livezmp.balance.plates import G
 from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table, sway_basis
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.tomlfile import read_toml
 
 HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
 ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP shift it causes (h / g)
-PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05])  # fraction, m, m, m: what subjects plausibly differ by
+# fraction, m, m, m: what subjects plausibly differ by; sway gains: no table gives them, so a weak prior that
+# only holds them at 1 (the HAT moving with the mid-hip) where the data do not say otherwise
+PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05, 0.5, 0.5])
 PRIOR_MM = 10.0
-BOUNDS = ([0.30, -0.15, -0.10, 0.10], [0.70, 0.15, 0.10, 0.60])  # fraction, forward, left, up (m)
+# fraction, forward, left, up (m), sway gain fore-aft, lateral
+BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.5])
 
 
 @dataclass(frozen=True)
 class Subject:
-    """HAT mass fraction of the body and its centre of mass (forward, left, up) m from the mid-hip."""
+    """HAT mass fraction of the body, its centre of mass (forward, left, up) m from the mid-hip, and how far
+    it sways (fore-aft, lateral) relative to the mid-hip (:func:`livezmp.model.markers.hat_sway`)."""
 
     hat_fraction: float
     hat_offset: tuple[float, float, float]
+    hat_sway_gain: tuple[float, float] = (1.0, 1.0)
 
     def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
-        return replace(base or MarkerBodyOptions(), hat_fraction=self.hat_fraction, hat_offset=self.hat_offset)
+        return replace(base or MarkerBodyOptions(), hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
+                       hat_sway_gain=None if self.hat_sway_gain == (1.0, 1.0) else self.hat_sway_gain)
 
 
 def load_subject(path: str | Path) -> Subject:
-    """Read a subject file (TOML ``[subject]`` with ``hat_fraction`` and ``hat_offset_m = [fwd, left, up]``)."""
+    """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
+    optionally ``hat_sway_gain = [fore_aft, lateral]``)."""
     p = Path(path)
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
@@ -58,13 +65,17 @@ def load_subject(path: str | Path) -> Subject:
     if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
             and all(abs(v) < 1.5 for v in off)):
         raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
-    return Subject(float(f), tuple(float(v) for v in off))
+    gain = s.get("hat_sway_gain", [1.0, 1.0])
+    if not (isinstance(gain, list) and len(gain) == 2 and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
+        raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
+    return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain))
 
 
 def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
     lines = ["# livezmp subject file (livezmp calibrate)", "[subject]",
              f"hat_fraction = {subject.hat_fraction:.5f}",
              "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
+             "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
              "", "[calibration]"]
     for k, v in report.items():
         lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
@@ -75,7 +86,8 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
 class _Terms:
     """Per complete frame: the rest of the body's wrench for the whole mass (F (n, 3) N, moment about
     the origin (n, 3) N·m), the HAT frame's origin o, acceleration a_o, heading A and its second
-    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3)."""
+    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3); the
+    origin's straight-line trend and the walk's axes (for the sway gains: o -> trend + K (o - trend))."""
 
     f_rest: np.ndarray
     m_rest: np.ndarray
@@ -87,6 +99,9 @@ class _Terms:
     plate_acc: np.ndarray
     mass: float
     floor: float
+    trend: np.ndarray
+    fwd: np.ndarray
+    left: np.ndarray
 
 
 def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerBodyOptions) -> _Terms:
@@ -108,17 +123,20 @@ def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerB
     d2 = np.stack([np.stack([-c, s, zero], -1), np.stack([-s, -c, zero], -1), np.stack([zero] * 3, -1)], 1)
     B = a[:, 3, None, None] * d1 + (v[:, 3] ** 2)[:, None, None] * d2
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
+    trend, fwd, left = sway_basis(r.q[:, HAT][:, :3])
     return _Terms(f_rest, m_rest, q[:, :3], a[:, :3], A, B, lab.plates.cop[idx, :2], plate_acc, mass,
-                  lab.plates.surface_z)
+                  lab.plates.surface_z, trend[idx], fwd, left)
 
 
 def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ZMP (n, 2) m and CoM acceleration (n, 3) m/s² for parameters (fraction, forward, left, up)."""
-    f_h, r = theta[0], theta[1:]
+    """ZMP (n, 2) m and CoM acceleration (n, 3) m/s² for parameters (fraction, forward, left, up, sway gain
+    fore-aft, lateral)."""
+    f_h, r, (k_fa, k_lat) = theta[0], theta[1:4], theta[4:6]
     rest = 1.0 - f_h  # the rest's wrench was computed with no HAT, i.e. the rest carrying the whole mass
     m_h = f_h * t.mass
-    p = t.o + t.A @ r
-    acc = t.a_o + t.B @ r - np.array([0.0, 0.0, -G])
+    k = k_fa * np.outer(t.fwd, t.fwd) + k_lat * np.outer(t.left, t.left) + np.diag([0.0, 0.0, 1.0])
+    p = t.trend + (t.o - t.trend) @ k.T + t.A @ r
+    acc = t.a_o @ k.T + t.B @ r - np.array([0.0, 0.0, -G])
     force = rest * t.f_rest + m_h * acc
     moment = rest * t.m_rest + m_h * np.cross(p, acc)
     z0 = t.floor
@@ -169,7 +187,7 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
         for k, part in enumerate((rows & (np.arange(len(rows)) < cut), rows & (np.arange(len(rows)) >= cut))):
             halves[k].append(_terms(trial, lab, part, opts.markers))
     fraction, height, _ = hat_table(stature)
-    start = np.array([fraction, 0.0, 0.0, height])
+    start = np.array([fraction, 0.0, 0.0, height, 1.0, 1.0])
     fitted = _fit(whole, start)
     held_out = [_rms_mm(_fit(halves[k], start), halves[1 - k]) for k in (0, 1)]
     table_held = [_rms_mm(start, halves[1 - k]) for k in (0, 1)]
@@ -177,4 +195,4 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
               "rms_table_mm": round(_rms_mm(start, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
               "rms_held_out_table_mm": round(float(np.mean(table_held)), 2),
               "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2)}
-    return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:])), report
+    return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6])), report
