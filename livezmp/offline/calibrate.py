@@ -66,7 +66,8 @@ def load_subject(path: str | Path) -> Subject:
             and all(abs(v) < 1.5 for v in off)):
         raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
     gain = s.get("hat_sway_gain", [1.0, 1.0])
-    if not (isinstance(gain, list) and len(gain) == 2 and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
+    if not (isinstance(gain, list) and len(gain) == 2
+            and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
         raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
     return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain))
 
