@@ -9,9 +9,11 @@ Each row adds one change to the one above, so each error source shows its share:
   4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)  [livezmp analyze default]
   5  + plates' delay behind the markers measured and undone             [livezmp analyze default]
 
-then the estimator's cutoff around the default, and the estimator's own gain and delay on sinusoids
-(why row 4 matters). Figures: over each trial's complete frames (every loaded foot on a plate);
-lag > 0: the ZMP comes after the CoP; bias: mean ZMP - CoP along the walk and to its left.
+then the estimator's cutoff around the default, the error split by axis, support phase and the ZMP's
+linear (CoM) part with the kinematic and the plates' acceleration, `livezmp calibrate` cross-validated
+per trial, and the estimator's own gain and delay on sinusoids (why row 4 matters). Figures: over each
+trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after the CoP; bias: mean
+ZMP - CoP along the walk and to its left.
 
     python benchmarks/bench_forceplates.py [MORE.c3d | DIR ...]
 
@@ -34,7 +36,8 @@ from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
-from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
+from livezmp.offline.calibrate import calibrate
+from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
 from livezmp.offline.validation import cop_vs_zmp, walking_axes
 
@@ -119,10 +122,11 @@ def extra_paths(args: list[str]) -> list[Path]:
     return out
 
 
-def extra_table(paths: list[Path]) -> list[float]:
-    """One row per extra trial at the defaults (or why it is refused); their RMS values (mm)."""
+def extra_table(paths: list[Path]) -> dict[str, tuple]:
+    """One row per extra trial at the defaults (or why it is refused); {name: (trial, analysis)} of those
+    with complete frames."""
     print(f"\nmore trials, `livezmp analyze` defaults  mm\n{'trial':40s} {header()[41:]}  rate, plates, marker set")
-    rms = []
+    done = {}
     for path in paths:
         try:
             trial = read_c3d(path)
@@ -132,12 +136,68 @@ def extra_table(paths: list[Path]) -> list[float]:
             continue
         cv = a.summary["cop_vs_zmp"]
         info = f"{trial.rate:g} Hz, {len(trial.plates)} plates, {a.summary['markers']['marker_set'][:28]}"
+        aside = a.summary["plates"]["set_aside"]
+        info += f"; plate(s) {', '.join(str(p['plate']) for p in aside)} set aside (pulling)" if aside else ""
         if not cv["frames"]:
             print(f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}")
             continue
         print(row(path.name[:40], cv, info))
-        rms.append(cv["rms_mm"])
-    return rms
+        done[path.name] = (trial, a)
+    return done
+
+
+def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
+    """'total (fore-aft / lateral)' RMS in mm of horizontal differences ``d`` (n, 2)."""
+    fa, lat = (1000 * np.sqrt(np.mean((d @ ax[:2]) ** 2)) for ax in axes)
+    return f"{1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))):5.1f} ({fa:5.1f}/{lat:5.1f})"
+
+
+def error_sources(done: dict[str, tuple]) -> None:
+    """Per trial: the error split by axis and support phase; the ZMP's linear part (CoM - h a / (a_z + g))
+    with the kinematic CoM acceleration and with the plates' (GRF / m: what the plates say the same CoM
+    term is); the lateral CoM acceleration's spread, kinematics vs plates."""
+    print("\nerror sources over complete frames, mm: total (fore-aft / lateral)")
+    print(f"{'trial':34s} {'ZMP':>19s} {'single support':>19s} {'double':>19s} {'linear, kin. acc':>19s} "
+          f"{'linear, plate acc':>19s}  lat. acc SD kin/plates m/s2")
+    for name, (trial, a) in done.items():
+        r, p = a.result, a.plates
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        axes = walking_axes(r.com)
+        cop = p.cop[rows, :2]
+        loaded = [may_bear_weight(sole, p.surface_z, 1.0 / trial.rate)[rows] for sole in r.soles.values()]
+        double = loaded[0] & loaded[1]
+        acc = com_accelerations(r.com, 1.0 / trial.rate)[rows]
+        plate_acc = p.force[rows] / a.summary["mass"]["used_kg"] - [0.0, 0.0, G]
+        h = r.com[rows, 2:] - p.surface_z
+        lin = [r.com[rows, :2] - h * x[:, :2] / (x[:, 2:] + G) for x in (acc, plate_acc)]
+        d = r.zmp[rows, :2] - cop
+        parts = [_rms(d, axes), _rms(d[~double], axes) if (~double).any() else f"{'-':>19s}",
+                 _rms(d[double], axes) if double.any() else f"{'-':>19s}", _rms(lin[0] - cop, axes),
+                 _rms(lin[1] - cop, axes)]
+        sd = [float(np.std(x @ axes[1])) for x in (acc, plate_acc)]
+        print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
+
+
+def calibration_table(done: dict[str, tuple]) -> None:
+    """`livezmp calibrate` on each trial alone, cross-validated on the halves of its complete frames."""
+    print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames, "
+          "scored on the other (mm)")
+    print(f"{'trial':34s} {'frames':>6s} {'table':>7s} {'fitted':>7s} {'held-out table':>15s} {'fitted':>7s}  "
+          "HAT fraction, CoM fwd/left/up mm, sway gain fore-aft/lateral")
+    held = []
+    for name, (trial, _) in done.items():
+        try:
+            subject, rep = calibrate([trial])
+        except InputError as e:
+            print(f"{name[:34]:34s} not calibrated: {str(e).split(': ')[-1]}")
+            continue
+        held.append(rep["rms_held_out_fitted_mm"])
+        off = ", ".join(f"{1000 * v:+.0f}" for v in subject.hat_offset)
+        print(f"{name[:34]:34s} {rep['frames']:6d} {rep['rms_table_mm']:7.1f} {rep['rms_fitted_mm']:7.1f} "
+              f"{rep['rms_held_out_table_mm']:15.1f} {rep['rms_held_out_fitted_mm']:7.1f}  {subject.hat_fraction:.3f}, "
+              f"{off}, {subject.hat_sway_gain[0]:.2f}/{subject.hat_sway_gain[1]:.2f}")
+    if held:
+        print(f"median held-out RMS, calibrated: {np.median(held):.1f} mm over {len(held)} trials")
 
 
 def main() -> None:
@@ -150,9 +210,13 @@ def main() -> None:
     print("\nmedian RMS over the trials per step (mm):")
     for k, (name, _) in enumerate(STEPS):
         print(f"  {name:40s} {np.median([results[t][k]['rms_mm'] for t in TRIALS]):7.1f}")
+    done = {name: (trial, analyse_lab_take(trial)) for name in TRIALS for trial in [read_c3d(DATA / name)]}
     if args.more:
-        rms = extra_table(extra_paths(args.more)) + [results[t][-1]["rms_mm"] for t in TRIALS]
+        done |= extra_table(extra_paths(args.more))
+        rms = [a.summary["cop_vs_zmp"]["rms_mm"] for _, a in done.values()]
         print(f"median RMS over all {len(rms)} trials with complete frames (defaults): {np.median(rms):.1f} mm")
+    error_sources(done)
+    calibration_table(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
     print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")
     for rate in (50.0, 100.0, 240.0):
