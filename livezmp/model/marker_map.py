@@ -16,7 +16,7 @@ A TOML file (``livezmp analyze TRIAL.c3d --markers MAP.toml``) with either or bo
 Segment frames of a cluster set: the pelvis' lateral axis joins the hip centres, its up axis is
 the cluster's mean up direction carried by the cluster; a thigh or shank runs from its proximal to
 its distal joint centre, turned about that line by its cluster; the foot runs from the ankle centre to
-the foot marker furthest from it (taken as the toe). Errors are one line naming the file and field.
+the foot marker furthest forward of it (taken as the toe). Errors are one line naming the file and field.
 """
 
 from __future__ import annotations

@@ -468,7 +468,7 @@ def _carried(rot: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial) -> tuple[dict, dict, dict]:
     """Segment frames, joint centres and notes of a cluster set; adds each foot's toe (its marker furthest
-    from the ankle centre) to ``m`` as LTOE / RTOE."""
+    forward of the ankle centre along the pelvis' forward axis) to ``m`` as LTOE / RTOE."""
     poses = {s: cluster_frames(np.stack([m[label] for label in labels], axis=1)) for s, labels in mmap.segments}
     centres: dict = {j: {} for j in JOINTS}
     rules = {}
@@ -495,7 +495,7 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
         thigh = _frame(hip - knee, _carried(poses[f"thigh_{t}"][1], y))
         shank = _frame(knee - ankle, _carried(poses[f"shank_{t}"][1], y))
         foot_labels = dict(mmap.segments)[f"foot_{t}"]
-        toe = max(foot_labels, key=lambda label: float(np.median(np.linalg.norm(m[label] - ankle, axis=1))))
+        toe = max(foot_labels, key=lambda label: float(np.median(np.sum((m[label] - ankle) * x, axis=1))))
         m[s + "TOE"] = m[toe]
         seg[f"thigh_{t}"], seg[f"shank_{t}"] = (hip, thigh), (knee, shank)
         seg[f"foot_{t}"] = (ankle, _foot_frame(m[toe] - ankle, shank[:, :, 1]))
