@@ -57,6 +57,7 @@ _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "
           "LWRB", "RWRB")
 SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
+MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
@@ -323,6 +324,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     up, r_in = _up_rotation(raw, trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _segments(m, trial)
+    _check_turns(seg, keep.start, trial.source)
     body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
@@ -407,6 +409,18 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     return seg, centres, notes
 
 
+def _check_turns(seg: dict, first: int, source: str) -> None:
+    """Refuse a segment whose frame turns more than ``MAX_TURN_RAD`` between two frames: its axes flipped
+    (markers nearly in line, or a joint-centre rule switching sides), not a motion."""
+    for name, (_, rot) in seg.items():
+        cos = (np.einsum("fij,fij->f", rot[:-1], rot[1:]) - 1.0) / 2.0  # trace(R_k^T R_k+1) = sum R_k * R_k+1
+        turn = np.arccos(np.clip(cos, -1.0, 1.0))
+        if len(turn) and turn.max() > MAX_TURN_RAD:
+            k = int(np.argmax(turn))
+            raise InputError(f"{source}: segment {name} turns {np.degrees(turn[k]):.0f} deg between frames "
+                             f"{first + k} and {first + k + 1}: its markers give no stable frame there")
+
+
 def sway_basis(origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The straight-line trend (F, 3) m of a walking take's point ``origin`` (F, 3) (least squares over
     frames: the steady progression), and the walk's fore-aft and lateral unit axes (3,) (the trend's
@@ -454,6 +468,7 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     up, r_in = _up_from(_cluster_up_vector(raw, mmap), trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _cluster_segments(m, mmap, trial)
+    _check_turns(seg, keep.start, trial.source)
     body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
