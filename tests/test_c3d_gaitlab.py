@@ -341,7 +341,8 @@ def test_unzeroed_plates_of_sample01_have_their_offsets_found():
 
 def test_a_segment_flipping_between_frames_is_refused():
     """LASI and RASI swapped for one frame (a labelling slip) turn the pelvis 180 degrees in 10 ms: refused
-    naming the segment and frame, instead of a ZMP kilometres away."""
+    naming the segment and frame, instead of a ZMP kilometres away; LASI on top of RASI leaves the pelvis
+    without a frame (before: a pinocchio traceback)."""
     t = np.arange(int(SECONDS * RATE)) / RATE
     trial = _trial(t, RATE)
     a, b = trial.labels.index("LASI"), trial.labels.index("RASI")
@@ -349,6 +350,9 @@ def test_a_segment_flipping_between_frames_is_refused():
     with pytest.raises(InputError, match="segment pelvis turns 1[0-9][0-9] deg between frames 99 and 100"):
         body_from_markers(trial)
     body_from_markers(_trial(t, RATE))  # unswapped: fine
+    trial.points[100, a] = trial.points[100, b]  # LASI on RASI: no pelvis frame there
+    with pytest.raises(InputError, match="segment pelvis has no frame at frame 100"):
+        body_from_markers(trial)
 
 
 def test_not_a_c3d_is_one_line(tmp_path, capsys):

@@ -410,9 +410,14 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
 
 
 def _check_turns(seg: dict, first: int, source: str) -> None:
-    """Refuse a segment whose frame turns more than ``MAX_TURN_RAD`` between two frames: its axes flipped
-    (markers nearly in line, or a joint-centre rule switching sides), not a motion."""
-    for name, (_, rot) in seg.items():
+    """Refuse a segment without a frame somewhere (markers on top of each other or in line, or far out of
+    range) or whose frame turns more than ``MAX_TURN_RAD`` between two frames: its axes flipped (markers
+    nearly in line, or a joint-centre rule switching sides), not a motion."""
+    for name, (origin, rot) in seg.items():
+        bad = ~(np.isfinite(origin).all(axis=1) & np.isfinite(rot).all(axis=(1, 2)))
+        if bad.any():
+            raise InputError(f"{source}: segment {name} has no frame at frame {first + int(np.argmax(bad))}: "
+                             "its markers coincide, lie in line or are out of range there")
         cos = (np.einsum("fij,fij->f", rot[:-1], rot[1:]) - 1.0) / 2.0  # trace(R_k^T R_k+1) = sum R_k * R_k+1
         turn = np.arccos(np.clip(cos, -1.0, 1.0))
         if len(turn) and turn.max() > MAX_TURN_RAD:
