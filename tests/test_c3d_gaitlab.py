@@ -17,6 +17,7 @@ from livezmp.balance import plates as plates_mod
 from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
 from livezmp.errors import InputError
+from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
 from livezmp.offline import calibrate as calibration
@@ -37,13 +38,16 @@ PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # 
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
 
-def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False) -> dict[str, np.ndarray]:
+def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
+             trunk: bool = False) -> dict[str, np.ndarray]:
     """(F, 3) m per label: the body above the ankles sways fore-aft and sideways about the ankle line;
     ``full_body`` adds Plug-in Gait's trunk, head and arm markers (the arms also swing); ``cluster``
     gives instead a cluster set (CLUSTER: 3-4 markers a segment, no standard label) plus medial knee
-    and ankle markers."""
+    and ankle markers; ``trunk`` the lower body and the trunk's four markers only (C7 T10 CLAV STRN)."""
     if cluster:
         return _cluster_markers(_markers(t))
+    if trunk:
+        return {k: v for k, v in _markers(t, full_body=True).items() if k in CENTRE or k[1:] in LEFT}
     pitch = 0.05 * np.sin(2 * np.pi * 0.4 * t)
     roll = 0.03 * np.sin(2 * np.pi * 0.3 * t + 1.0)
     rot = np.array([pin.utils.rpyToMatrix(r, p, 0.0) for r, p in zip(roll, pitch, strict=True)])
@@ -94,19 +98,20 @@ def _medial(side: str) -> np.ndarray:
     return np.array([0.0, -1.0 if side == "L" else 1.0, 0.0])
 
 
-def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = False) -> C3dTrial:
-    m = _markers(t, full_body, cluster)
+def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = False,
+           trunk: bool = False) -> C3dTrial:
+    m = _markers(t, full_body, cluster, trunk)
     return C3dTrial("synthetic", list(m), np.stack(list(m.values()), axis=1), rate, rate, 0.0, [], MASS,
                     "PROCESSING:Bodymass", 1.75)
 
 
-def _true_wrench(body: MarkerBodyOptions, full_body: bool = False,
-                 cluster: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _true_wrench(body: MarkerBodyOptions, full_body: bool = False, cluster: bool = False,
+                 trunk: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
     marker body's own rigid-body dynamics driven by the motion sampled at 10 kHz (central differences)."""
     fine = 10
     t = np.arange(int(SECONDS * ANALOG) * fine + 2 * fine) / (ANALOG * fine) - 1.0 / ANALOG
-    take = body_from_markers(_trial(t, ANALOG * fine, full_body, cluster), replace(body, total_mass=MASS))
+    take = body_from_markers(_trial(t, ANALOG * fine, full_body, cluster, trunk), replace(body, total_mass=MASS))
     q = take.frames
     h = 1.0 / (ANALOG * fine)
     model, data = take.body.model, take.body.model.createData()
@@ -132,15 +137,15 @@ def _add_int(c3d, group: str, name: str, value) -> None:
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
-                  cluster: bool = False, spare_drift_n: float = 0.0) -> np.ndarray:
+                  cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool = False) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
     true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map);
     ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the second half."""
-    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster)
+    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(SECONDS * RATE)) / RATE
-    m = _markers(t, full_body, cluster)
+    m = _markers(t, full_body, cluster, trunk)
     m["LTH1" if cluster else "LTHI"][150:155] = np.nan  # a short gap (filled)
     m["RFT1" if cluster else "RTOE"][:30] = np.nan  # a long gap at the start (the take is cut)
     c3d = ezc3d.c3d()
@@ -255,6 +260,32 @@ def test_a_plate_pulling_down_is_set_aside(lab, tmp_path, monkeypatch):
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
     monkeypatch.setattr(plates_mod, "PULL_N", np.inf)
     assert analyse_lab_take(read_c3d(path)).summary["cop_vs_zmp"]["max_mm"] > 10.0
+
+
+def test_trunk_markers_alone_track_the_thorax(tmp_path):
+    """A lower-body set with the trunk's four markers (C7 T10 CLAV STRN) but no head or arm markers: the
+    thorax is a segment of its own, head and arms ride on it (no placed HAT), and the ZMP matches the plates
+    written from that body's dynamics to a millimetre. Its mass adds up to the body's."""
+    path = tmp_path / "trunk.c3d"
+    write_lab_c3d(path, PLATES, trunk=True)
+    a = analyse_lab_take(read_c3d(path))
+    names = {n.split(".")[0] for n in a.take.body.channel_names}
+    assert {"thorax", "headarms"} <= names and not {"hat", "head", "upperarm_l"} & names
+    assert "thorax from C7 T10 CLAV STRN" in a.summary["markers"]["marker_set"]
+    assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    # head and arms placed on the thorax: de Leva's head above the cervicale, both arms hanging from it
+    t, stature = DE_LEVA_MALE, 1.75
+    head_len = 242.9 * stature / 1741
+    parts = [(t["head"].mass_fraction, head_len * (1 - t["head"].com_fraction))]
+    joint = 0.0
+    for name in ("upper_arm", "forearm", "hand"):
+        length = t[name].length_fraction * stature
+        parts.append((2 * t[name].mass_fraction, joint - t[name].com_fraction * length))
+        joint -= length
+    ha, ha_height, _ = hat_table(stature, head_and_arms=True)
+    assert ha == pytest.approx(sum(f for f, _ in parts))
+    assert ha_height == pytest.approx(sum(f * z for f, z in parts) / ha)  # ~0.14 m below: arms outweigh the head
 
 
 def test_late_plates_are_measured_and_realigned(lab):

@@ -55,6 +55,7 @@ _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 # Plug-in Gait full body: trunk, head and arm markers (FIN optional); all present or the HAT is placed
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
           "LWRB", "RWRB")
+_TRUNK = ("C7", "T10", "CLAV", "STRN")
 SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
@@ -152,6 +153,8 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
     if len(upper) == len(_UPPER):
         roles.update({u: u for u in _UPPER})
         roles.update({s + "FIN": s + "FIN" for s in "LR" if s + "FIN" in have})
+    elif set(_TRUNK) <= have:  # the thorax is seen; head and arms are placed on it
+        roles.update({u: u for u in _TRUNK})
     if missing:
         missing = [f"{m} (never seen)" if m in trial.labels else m for m in missing]
         seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
@@ -247,11 +250,12 @@ def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     return np.unwrap(angles, axis=0) if unwrap else angles
 
 
-def hat_table(stature: float) -> tuple[float, float, np.ndarray]:
+def hat_table(stature: float, head_and_arms: bool = False) -> tuple[float, float, np.ndarray]:
     """Head-arms-trunk above the lower trunk, from de Leva (1996): mass fraction, height (m) of its
     centre of mass above the mid-hip, and its inertia (3, 3) per kg of HAT about that point
     (x forward, y left, z up). Segments stacked upright: lower, middle, upper trunk, head; each arm
-    hangs from the cervicale (the top of the upper trunk) along the body's side."""
+    hangs from the cervicale (the top of the upper trunk) along the body's side. ``head_and_arms``:
+    the same without the middle and upper trunk, its height then measured from the cervicale."""
     t = DE_LEVA_MALE
     h = stature / 1741.0  # de Leva lengths are mm for a 1741 mm man
     parts = []  # (mass fraction, CoM height m, segment, length m)
@@ -262,11 +266,13 @@ def hat_table(stature: float) -> tuple[float, float, np.ndarray]:
         base = top
     head_len = 242.9 * h
     parts.append((t["head"].mass_fraction, base + head_len * (1 - t["head"].com_fraction), "head", head_len))
-    joint = base  # shoulders at the cervicale
+    joint = joint_top = base  # shoulders at the cervicale
     for name in ("upper_arm", "forearm", "hand"):
         length = t[name].length_fraction * stature
         parts += [(t[name].mass_fraction, joint - t[name].com_fraction * length, name, length)] * 2
         joint -= length
+    if head_and_arms:
+        parts = [(f, z - joint_top, n, length) for f, z, n, length in parts if not n.endswith("_trunk")]
     mass = sum(p[0] for p in parts)
     height = sum(p[0] * p[1] for p in parts) / mass
     inertia = np.zeros((3, 3))
@@ -389,10 +395,12 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
     upright = _upright(x)
     seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1))}
-    full = "C7" in m
+    full = "LFHD" in m
     if full:
         seg.update(_upper_segments(m, stature))
         rules["elbows"] = f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
+    elif "C7" in m:
+        seg["thorax"] = seg["headarms"] = _thorax(m)
     else:
         seg["hat"] = (pelvis_origin, upright)
     for side, (s, sign, t) in _SIDES.items():
@@ -403,7 +411,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         foot = _foot_frame(m[s + "TOE"] - heel, shank[:, :, 1])
         seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
-             "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial),
+             "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
+             + ("; thorax from C7 T10 CLAV STRN" if "C7" in m else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -528,9 +537,16 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
 
 def _upper_note(m: dict, trial: C3dTrial) -> str:
     have = [u for u in _UPPER if u in trial.labels]
-    if not have:
+    if not have or "C7" in m:
         return ""
     return f"; upper-body markers incomplete (missing {', '.join(u for u in _UPPER if u not in have)}): not used"
+
+
+def _thorax(m: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The thorax' origin (between C7 and CLAV) and frame (z up the trunk, x forward)."""
+    top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
+    fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
+    return top, _frame(top - bottom, _cross(top - bottom, fwd))
 
 
 def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
@@ -538,9 +554,7 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     markers, x forward) and each arm: shoulder centre ``SHOULDER_DROP`` below SHO along the thorax,
     wrist centre between WRA and WRB, elbow centre by the chord rule, hand towards FIN (else along the
     forearm)."""
-    top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
-    fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
-    thorax = _frame(top - bottom, _cross(top - bottom, fwd))
+    top, thorax = _thorax(m)
     front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
     head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
     out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
@@ -607,6 +621,12 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * np.diag(np.square(r))), pin.SE3.Identity())
             body_frame["pelvis_joint"] = parent
             continue
+        if kind == "headarms":  # placed on the tracked thorax, whose origin is at the cervicale
+            frac, height, inertia = hat_table(stature, head_and_arms=True)
+            mass = opts.total_mass * frac
+            model.appendBodyToJoint(parent, pin.Inertia(mass, np.array([0.0, 0.0, height]), mass * inertia),
+                                    pin.SE3.Identity())
+            continue
         if kind in ("thorax", "head", "hand"):
             mass, com, inertia = _upper_inertia(kind, name, seg, m, stature)
             model.appendBodyToJoint(parent, pin.Inertia(opts.total_mass * mass, com, opts.total_mass * inertia),
@@ -634,7 +654,9 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         legs={s: [6 * list(seg).index(f"thigh_{s[0]}") + k for k in (3, 4, 5)] for s in ("left", "right")},
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
-    notes["hat"] = ("head, arms and trunk tracked by their own markers" if full else
+    notes["hat"] = ("head, arms and trunk tracked by their own markers" if "head" in seg else
+                    "trunk tracked by C7 T10 CLAV STRN; head and arms (de Leva) placed on it, arms hanging"
+                    if full else
                     f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
                     + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")

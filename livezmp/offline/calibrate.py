@@ -176,7 +176,7 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
             raise InputError(f"{trial.source}: no force plates: nothing to calibrate against")
         lab = analyse_lab_take(trial, opts)
         if "hat.x" not in lab.take.body.channel_names:
-            raise InputError(f"{trial.source}: a full-body marker set tracks the trunk, head and arms: "
+            raise InputError(f"{trial.source}: a full-body or trunk marker set tracks the trunk: "
                              "there is no placed HAT to calibrate")
         rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
         if rows.sum() < 20:
