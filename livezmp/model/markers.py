@@ -452,7 +452,8 @@ def sway_basis(origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def hat_sway(origin: np.ndarray, gain: tuple[float, float]) -> np.ndarray:
     """The HAT's base (F, 3) m when the trunk sways ``gain`` (fore-aft, lateral) times as far as the
     mid-hip ``origin`` (F, 3) about the walk's straight-line trend (:func:`sway_basis`); height
-    unchanged. Its acceleration is the gain times the mid-hip's along each axis (the trend has none)."""
+    unchanged. Its acceleration is the gain times the mid-hip's along each axis (the trend has none).
+    Whole takes only: a live stream has no trend, and :func:`marker_channels` does not sway."""
     trend, fwd, left = sway_basis(origin)
     k = gain[0] * np.outer(fwd, fwd) + gain[1] * np.outer(left, left) + np.diag([0.0, 0.0, 1.0])
     return trend + (origin - trend) @ k.T
