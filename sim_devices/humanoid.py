@@ -181,8 +181,8 @@ def cop_weights(corners: Array, point: Array) -> Array:
     equally, and the load moves towards the edge the point approaches."""
     k = len(corners)
     hull = convex_hull(corners)
-    # convex_hull returns input coordinates unchanged, so exact matches find the corners
-    idx = [int(np.flatnonzero((corners == v).all(axis=1))[0]) for v in hull]
+    # convex_hull returns the input coordinates (subnormal ones as 0): the nearest corner is the one
+    idx = [int(np.argmin(np.abs(corners - v).sum(axis=1))) for v in hull]
     g = corners.mean(axis=0)
     a, b = hull - g, np.roll(hull, -1, axis=0) - g
     p = point - g

@@ -67,6 +67,16 @@ def test_hull_near_coincident_points_are_one_point():
     assert hull.shape == (1, 2) and np.allclose(hull, [[2.0, 1.0]])
 
 
+def test_hull_keeps_a_corner_beside_subnormal_coordinates():
+    """Two soles, the upper one shifted by a subnormal -5e-324 m: the products in the turn test
+    underflowed to 0, the lower-left corner looked collinear and was dropped (found by hypothesis)."""
+    sole = np.array([[0.0, 0.0], [0.0912, 0.0], [0.0912, 0.0914], [0.0, 0.0914]])
+    pts = np.vstack([sole, sole + [-5e-324, 0.175]])
+    hull = convex_hull(pts)
+    np.testing.assert_allclose(sorted(map(tuple, hull)), [(0, 0), (0, 0.2664), (0.0912, 0), (0.0912, 0.2664)],
+                               atol=1e-15)
+
+
 @pytest.mark.parametrize(
     "bad, match",
     [

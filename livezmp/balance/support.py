@@ -29,6 +29,7 @@ _MAX_COORD = 1e12
 # Hull vertices closer than this fraction of the coordinates' magnitude to the segment between their
 # neighbours are dropped (collinear or coincident), so rounding noise never adds sliver vertices.
 _COLLINEAR_REL_TOL = 1e-9
+_TINY = float(np.finfo(float).tiny)  # smallest normal float
 
 
 class SupportError(InputError):
@@ -119,7 +120,9 @@ def _drop_slivers(hull: list, tol: float) -> list:
 
 
 def _hull_rows(rows: list[list[float]]) -> list[tuple[float, float]]:
-    pts = sorted({(x, y) for x, y in rows})
+    # subnormal coordinates are taken as 0: their products with other differences underflow to 0,
+    # which made a real vertex look collinear and dropped it
+    pts = sorted({(x if abs(x) >= _TINY else 0.0, y if abs(y) >= _TINY else 0.0) for x, y in rows})
     if len(pts) <= 1:
         return pts
     ys = [p[1] for p in pts]
@@ -161,7 +164,8 @@ def convex_hull(points_xy) -> np.ndarray:
     points_xy: (k, 2) or (k, 3) array of points in metres (a z column is ignored), k >= 0.
     Returns an (m, 2) array of hull vertices, counter-clockwise, starting at the lowest-x (then
     lowest-y) point, without repeated or collinear vertices: a vertex within 1e-9 * L of the segment
-    joining its neighbours is dropped, L being the largest absolute coordinate. Degenerate inputs
+    joining its neighbours is dropped, L being the largest absolute coordinate. Coordinates are returned
+    as given, except subnormal ones (below 2.2e-308 m in magnitude), returned as 0. Degenerate inputs
     give degenerate hulls, never NaN: no points -> (0, 2); coincident points -> the single point
     (1, 2); collinear points -> the segment's two ends (2, 2).
     Raises SupportError on a wrong shape or a coordinate that is not finite or beyond 1e12 m.
