@@ -60,6 +60,7 @@ import select
 import termios
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 
 import numpy as np
 import serial
@@ -123,6 +124,7 @@ class WaitingPortHandler(PortHandler):
 
     bytes_out = 0
     bytes_in = 0
+    _held: bytearray | None = None  # packets kept for one write (`one_write`)
 
     def readPort(self, length):
         data = self.ser.read(length)
@@ -135,9 +137,30 @@ class WaitingPortHandler(PortHandler):
         return data
 
     def writePort(self, packet):
+        if self._held is not None:
+            self._held += bytes(packet)
+            self.bytes_out += len(packet)
+            return len(packet)
         written = self.ser.write(packet)
         self.bytes_out += written or 0
         return written
+
+    def clearPort(self):
+        if self._held is None:  # while packets are held, the input was cleared before the first
+            super().clearPort()
+
+    @contextmanager
+    def one_write(self):
+        """The packets sent inside go out in one write at the end: one USB transfer on a real
+        adapter (one out latency for both), one wake-up of the device at the other end."""
+        self._held = bytearray()
+        try:
+            yield
+            data = bytes(self._held)
+        finally:
+            self._held = None
+        if data:
+            self.ser.write(data)
 
 
 ID_ADDRESS = 7
@@ -280,9 +303,10 @@ class DynamixelLink(PortLink):
             imu=None if self._imu_data is None else decode_imu(self._imu_data, self.imu.axes),
         )
 
-    def write_goals(self, positions: np.ndarray) -> None:
-        """Goal positions (n,) rad in ``joint_names`` order, as one sync write."""
-        self.write_ticks(self.goal_ticks(positions))
+    def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order, as one sync write (with ``request``:
+        and the next read's instruction, see `write_ticks`)."""
+        self.write_ticks(self.goal_ticks(positions), request)
 
     def goal_ticks(self, positions: np.ndarray) -> np.ndarray:
         """Goal positions (n,) rad as servo ticks; LinkError (nothing sent) if one is beyond its servo's limits."""
@@ -592,8 +616,9 @@ class DynamixelLink(PortLink):
         self.stats.read_errors += 1
         self.stats.count("no_reply" if result == COMM_RX_TIMEOUT else "bad_crc")
 
-    def write_ticks(self, ticks: np.ndarray) -> None:
-        """Goal ticks (n,) int32 from `goal_ticks`, as one sync write."""
+    def write_ticks(self, ticks: np.ndarray, request: bool = False) -> None:
+        """Goal ticks (n,) int32 from `goal_ticks`, as one sync write; with ``request``, the next
+        read's instruction (`request`) goes out with it, in the same write to the port."""
         if self._pending:  # sending clears the port's input: take the requested replies in (and drop them)
             try:
                 self.read()
@@ -603,7 +628,17 @@ class DynamixelLink(PortLink):
         writer = self._goal_writer
         for k, dxl_id in enumerate(self.ids):
             writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
-        self._send(writer)
+        if not request:
+            self._send(writer)
+            return
+        port = self._require_port()
+        try:
+            with port.one_write():
+                self._send(writer)
+                self.request()
+        except _PORT_ERRORS as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: port failed: {err}") from None
 
     def _write_all(self, address: int, size: int, value: int) -> None:
         """The same value to every servo, one sync write (no reply)."""

@@ -305,7 +305,7 @@ class LiveLoop:
             command = None if self.halted is not None else self._command(t, frame.positions)
             if command is not None:
                 self._write(t, t0, command)
-            self._request()
+            self._request()  # when the write failed or was not sent
             t2 = now()
             self._estimate(t, frame)
             t3 = now()
@@ -329,7 +329,10 @@ class LiveLoop:
         t3 = self.clock.now()
         goals, limited = self.limiter.apply(command, self.offsets)
         try:
-            self.link.write_goals(goals)
+            if self.pipelined:  # the next read's instruction in the same transfer as the goals
+                self.link.write_goals(goals, request=not self.link_down)
+            else:
+                self.link.write_goals(goals)
         except LinkError as e:
             self.counters.write_errors += 1
             self._event(t, f"write failed: {e}", kind="write")
