@@ -153,14 +153,19 @@ class WaitingPortHandler(PortHandler):
     def one_write(self):
         """The packets sent inside go out in one write at the end: one USB transfer on a real
         adapter (one out latency for both), one wake-up of the device at the other end."""
-        self._held = bytearray()
-        try:
+        with self.held() as data:
             yield
-            data = bytes(self._held)
+        if data:
+            self.ser.write(bytes(data))
+
+    @contextmanager
+    def held(self):
+        """The packets sent inside are not sent: the bytearray given collects them."""
+        self._held = data = bytearray()
+        try:
+            yield data
         finally:
             self._held = None
-        if data:
-            self.ser.write(data)
 
 
 ID_ADDRESS = 7
@@ -230,6 +235,7 @@ class DynamixelLink(PortLink):
         self._traffic = np.zeros(4)  # bytes read, reads, bytes written, writes: since open finished
         self._pending = False  # a `request`ed read's instruction is out, its replies not taken in
         self._requested_bytes = 0
+        self._prepared: tuple[bytes, bytes] | None = None  # (sync write of goals, read instruction), not sent yet
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -302,6 +308,49 @@ class DynamixelLink(PortLink):
             hardware_errors={self.joint_names[i]: bits for i, bits in alerts.items() if bits},
             imu=None if self._imu_data is None else decode_imu(self._imu_data, self.imu.axes),
         )
+
+    def prepare_goals(self, positions: np.ndarray) -> None:
+        """Build the sync write of ``positions`` (rad, checked as by `write_goals`) and the next read's
+        instruction now, for `send_prepared` to send in one write (a loop builds them while it would
+        otherwise sleep, so the moment a read verified costs only the write)."""
+        writer = self._fill_goals(self.goal_ticks(positions))
+        port = self._require_port()
+        reader = self._reader(*READS[self.read_what], tuple(self.ids))
+        with port.held() as goals:
+            result = writer.txPacket()
+        port.is_using = False
+        with port.held() as instruction:
+            result = result if result != COMM_SUCCESS else (
+                reader.fastSyncReadTxPacket() if self.fast_read else reader.txPacket())
+        port.is_using = False
+        port.bytes_out -= len(goals) + len(instruction)  # counted when they are sent
+        if result != COMM_SUCCESS:
+            raise LinkError(f"{self.path}: packets not built: {self._ph.getTxRxResult(result)}")
+        self._prepared = (bytes(goals), bytes(instruction))
+
+    def send_prepared(self) -> None:
+        """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
+        if self._prepared is None:
+            raise LinkError(f"{self.path}: no goals prepared")
+        port = self._require_port()
+        goals, instruction = self._prepared
+        self._prepared = None
+        if self._pending:  # as in `write_ticks`: the requested replies are taken in first
+            try:
+                self.read()
+            except LinkReadError:
+                pass
+        self.stats.writes += 1
+        try:
+            port.ser.write(goals + instruction)
+        except _PORT_ERRORS as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        port.bytes_out += len(goals)
+        self._traffic[2:] += (len(goals), 1)
+        self._requested_bytes = port.bytes_out + port.bytes_in
+        port.bytes_out += len(instruction)
+        self._pending = True
 
     def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
         """Goal positions (n,) rad in ``joint_names`` order, as one sync write (with ``request``:
@@ -624,10 +673,7 @@ class DynamixelLink(PortLink):
                 self.read()
             except LinkReadError:
                 pass  # counted; the write goes on
-        raw = ticks.tobytes()
-        writer = self._goal_writer
-        for k, dxl_id in enumerate(self.ids):
-            writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
+        writer = self._fill_goals(ticks)
         if not request:
             self._send(writer)
             return
@@ -639,6 +685,14 @@ class DynamixelLink(PortLink):
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
             raise LinkError(f"{self.path}: port failed: {err}") from None
+
+    def _fill_goals(self, ticks: np.ndarray) -> GroupSyncWrite:
+        """The goal writer with ``ticks`` (n,) int32 as its data."""
+        raw = ticks.tobytes()
+        writer = self._goal_writer
+        for k, dxl_id in enumerate(self.ids):
+            writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
+        return writer
 
     def _write_all(self, address: int, size: int, value: int) -> None:
         """The same value to every servo, one sync write (no reply)."""
@@ -692,6 +746,7 @@ class DynamixelLink(PortLink):
 
     def _release(self) -> None:
         self._pending = False
+        self._prepared = None
         port, self._port = self._port, None
         if port is not None:
             try:

@@ -47,6 +47,7 @@ class MultiBusLink:
         self.buses: list[DynamixelLink] = []
         self._joints: list[np.ndarray] = []  # per bus: the robot joint index of each of its servos
         self._reads = self._writes = 0
+        self._prepared = False  # every bus has goals prepared
         self._reconnects = 0
 
     # -- Link -----------------------------------------------------------------------------------
@@ -99,13 +100,29 @@ class MultiBusLink:
     def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
         """Goal positions (n,) rad in ``joint_names`` order: each bus its share, after all were checked
         (with ``request``: and each bus's next read instruction, see `DynamixelLink.write_ticks`)."""
-        goals = np.asarray(positions, dtype=float)
-        if goals.shape != (len(self.joint_names),):
-            raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
+        goals = self._checked(positions)
         self._writes += 1
         ticks = [bus.goal_ticks(goals[joints]) for bus, joints in zip(self.buses, self._joints, strict=True)]
         for bus, t in zip(self.buses, ticks, strict=True):
             bus.write_ticks(t, request)
+
+    def prepare_goals(self, positions: np.ndarray) -> None:
+        """Each bus's share of ``positions`` (rad) and its next read instruction built now (see
+        `DynamixelLink.prepare_goals`; a LinkError leaves nothing that `send_prepared` may send)."""
+        goals = self._checked(positions)
+        self._prepared = False
+        for bus, joints in zip(self.buses, self._joints, strict=True):
+            bus.prepare_goals(goals[joints])
+        self._prepared = True
+
+    def send_prepared(self) -> None:
+        """Every bus sends what `prepare_goals` built."""
+        if not self._prepared:
+            raise LinkError(f"{'+'.join(self.paths)}: no goals prepared")
+        self._prepared = False
+        self._writes += 1
+        for bus in self.buses:
+            bus.send_prepared()
 
     def hold(self) -> None:
         for bus in self.buses:
@@ -169,6 +186,12 @@ class MultiBusLink:
         if empty:
             raise LinkError(f"{empty[0]}: none of the robot's servos answered on this port")
         return found
+
+    def _checked(self, positions: np.ndarray) -> np.ndarray:
+        goals = np.asarray(positions, dtype=float)
+        if goals.shape != (len(self.joint_names),):
+            raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
+        return goals
 
     def _merge(self, frames: list[LinkFrame]) -> LinkFrame:
         n = len(self.joint_names)
