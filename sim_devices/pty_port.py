@@ -202,7 +202,8 @@ class PtyPort:
                         done.set()
                     self._unplug_requests.clear()
                 master = self._master
-                due = min(device.next_deadline(), self._pending[0][0] - SPIN_BEFORE_DUE_S if self._pending else math.inf)
+                spin_from = self._pending[0][0] - SPIN_BEFORE_DUE_S if self._pending else math.inf
+                due = min(device.next_deadline(), spin_from)
                 writers = [master] if master >= 0 and self._out else []
             timeout = None if due == math.inf else max(0.0, due - time.monotonic())
             readers = [self._wake_r] if master < 0 else [self._wake_r, master]
