@@ -137,6 +137,8 @@ class LiveLoop:
         # a link that can send its next read's instruction ahead (Dynamixel) lets the cycle's work overlap the
         # bus: read, write, request the next read, then estimate and correct while it travels
         self.pipelined = hasattr(link, "request")
+        # ... and one that builds its packets ahead (`prepare_goals`) gets the next cycle's goals then
+        self.prepares = self.pipelined and hasattr(link, "prepare_goals")
         self.fall_detector = FallDetector()
         self._imu_seen = False
         self.on_event = on_event
@@ -349,7 +351,8 @@ class LiveLoop:
         is all that is left between the read and the write. Not before commanding has started (its
         ramp starts from the posture read then)."""
         self._prepared = None
-        if self._ramp_from is None or self.halted is not None or self.stopped or self.link_down:
+        if not self.prepares or self._ramp_from is None or self.halted is not None or self.stopped or \
+                self.link_down:
             return
         t = index * self.dt
         goals, limited, offsets = self.limiter.propose(self._command(t, self._ramp_from), self.offsets)
