@@ -160,12 +160,13 @@ class WaitingPortHandler(PortHandler):
 
     @contextmanager
     def held(self):
-        """The packets sent inside are not sent: the bytearray given collects them."""
-        self._held = data = bytearray()
+        """The packets sent inside are not sent: the bytearray given collects them (inside an outer
+        `held`, only these)."""
+        outer, self._held = self._held, bytearray()
         try:
-            yield data
+            yield self._held
         finally:
-            self._held = None
+            self._held = outer
 
 
 ID_ADDRESS = 7
@@ -236,6 +237,7 @@ class DynamixelLink(PortLink):
         self._pending = False  # a `request`ed read's instruction is out, its replies not taken in
         self._requested_bytes = 0
         self._prepared: tuple[bytes, bytes] | None = None  # (sync write of goals, read instruction), not sent yet
+        self._instruction: bytes | None = None  # `read`'s instruction, once built
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -272,17 +274,30 @@ class DynamixelLink(PortLink):
         if self._pending or self._port is None:
             return
         port = self._port
-        reader = self._reader(*READS[self.read_what], tuple(self.ids), self._extra)
+        instruction = self._read_instruction()
         self._requested_bytes = port.bytes_out + port.bytes_in
         try:
-            result = _fast_tx(reader) if self.fast_read else reader.txPacket()
+            port.clearPort()  # as the sdk does before each instruction: no stale byte is taken for a reply
+            port.writePort(instruction)
         except _PORT_ERRORS as err:
             raise LinkError(f"{self.path}: port failed: {err}") from None
-        finally:
-            port.is_using = False  # the replies are ours to take in `read`, whatever the sdk thinks
-        if result != COMM_SUCCESS:
-            raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
         self._pending = True
+
+    def _read_instruction(self) -> bytes:
+        """The bytes of `read`'s (Fast) Sync or Bulk Read instruction, built by the sdk once: they never change."""
+        if self._instruction is None:
+            port = self._require_port()
+            reader = self._reader(*READS[self.read_what], tuple(self.ids), self._extra)
+            with port.held() as data:
+                try:
+                    result = _fast_tx(reader) if self.fast_read else reader.txPacket()
+                finally:
+                    port.is_using = False  # the replies are ours to take in `read`, whatever the sdk thinks
+            port.bytes_out -= len(data)  # counted when sent
+            if result != COMM_SUCCESS:
+                raise LinkError(f"{self.path}: sync read not built: {self._ph.getTxRxResult(result)}")
+            self._instruction = bytes(data)
+        return self._instruction
 
     def read(self) -> LinkFrame:
         """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
@@ -315,18 +330,15 @@ class DynamixelLink(PortLink):
         otherwise sleep, so the moment a read verified costs only the write)."""
         writer = self._fill_goals(self.goal_ticks(positions))
         port = self._require_port()
-        reader = self._reader(*READS[self.read_what], tuple(self.ids))
         with port.held() as goals:
-            result = writer.txPacket()
-        port.is_using = False
-        with port.held() as instruction:
-            result = result if result != COMM_SUCCESS else (
-                reader.fastSyncReadTxPacket() if self.fast_read else reader.txPacket())
-        port.is_using = False
-        port.bytes_out -= len(goals) + len(instruction)  # counted when they are sent
+            try:
+                result = writer.txPacket()
+            finally:
+                port.is_using = False
+        port.bytes_out -= len(goals)  # counted when sent
         if result != COMM_SUCCESS:
-            raise LinkError(f"{self.path}: packets not built: {self._ph.getTxRxResult(result)}")
-        self._prepared = (bytes(goals), bytes(instruction))
+            raise LinkError(f"{self.path}: sync write not built: {self._ph.getTxRxResult(result)}")
+        self._prepared = (bytes(goals), self._read_instruction())
 
     def send_prepared(self) -> None:
         """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
@@ -342,6 +354,7 @@ class DynamixelLink(PortLink):
                 pass
         self.stats.writes += 1
         try:
+            port.clearPort()
             port.ser.write(goals + instruction)
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
@@ -422,6 +435,7 @@ class DynamixelLink(PortLink):
             raise LinkError(f"{self.path}: this dynamixel-sdk has no Fast Sync Read: use fast=0 or upgrade it")
         self._port = port
         self._readers = {}
+        self._instruction = None
         self._goal_writer = GroupSyncWrite(port, self._ph, GOAL_POSITION, 4)
         for dxl_id in self.ids:
             self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
@@ -437,6 +451,7 @@ class DynamixelLink(PortLink):
             # Read is not something the servos' firmware versions tell
             self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE \
                 and self._extra is None
+            self._instruction = None
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
         limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
