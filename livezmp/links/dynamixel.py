@@ -46,6 +46,12 @@ round trip through the adapter; Fast only with ``fast=1``), and the frame carrie
 base-link axes). A lost IMU reply leaves that frame without one (counted); robots without
 an ``[imu]`` keep the sync read and pay nothing.
 
+For a loop that overlaps its work with the bus: `request` sends the next read's instruction
+ahead (built by the sdk once: it never changes), ``write_goals(q, request=True)`` sends the
+goals and that instruction in one write (one USB transfer, one out latency), and
+`prepare_goals` builds both packets ahead for `send_prepared` to send the moment a read
+has verified.
+
 The bytes each read and write put on the wire are counted from `open`'s end;
 `bus_ceilings` turns them into the bus's physical ceiling (:mod:`.bus_timing`). Known limit: Protocol 2.0 has no
 sequence numbers, so a reply delayed beyond the timeout that arrives during the next
