@@ -222,7 +222,7 @@ class DynamixelChain(PtyDevice):
             if "goal_position" not in config:  # the goal starts where the joint is
                 self._hold_present(servo, now)
         self._faults.start(now)
-        self._port = PtyPort(self, name)  # last: its thread calls back into this object
+        self._port = PtyPort(self, name, spin=emulate_wire_time)  # last: its thread calls back into this object
 
     # -- public API -------------------------------------------------------------------------------
 

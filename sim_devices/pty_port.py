@@ -13,9 +13,11 @@ The device behind the port is any object with the `ByteDevice` methods. All of
 its methods are called from the port thread, with ``now`` from
 ``time.monotonic()`` in seconds. Replies are ``(due, bytes)`` pairs: the port
 writes each payload once ``due`` has passed, in due order, so devices can model
-response delays without sleeping; it spins through the last `SPIN_BEFORE_DUE_S`
-before a reply is due, so the reply leaves on time rather than when a late select()
-wake-up allows (the simulated bus's timing is the model's, not the host's).
+response delays without sleeping. With ``spin=True`` (a device whose timing is a bus
+model, e.g. the Dynamixel chain) it spins through the last `SPIN_BEFORE_DUE_S` before a
+reply is due, so the reply leaves on time rather than when a late select() wake-up allows
+(the simulated bus's timing is the model's, not the host's); spinning holds the GIL, so
+devices that send many small replies (CAN frames, board streams) do not.
 """
 
 from __future__ import annotations
@@ -76,8 +78,9 @@ class PtyPort:
     re-raised by :meth:`close`, so device bugs surface in the caller.
     """
 
-    def __init__(self, device: ByteDevice, name: str = "ttySIM") -> None:
+    def __init__(self, device: ByteDevice, name: str = "ttySIM", spin: bool = False) -> None:
         self._device = device
+        self._spin_s = SPIN_BEFORE_DUE_S if spin else 0.0
         self._dir = tempfile.mkdtemp(prefix="livezmp-pty-")
         # Remove the directory at exit even if close() is never called.
         self._cleanup = weakref.finalize(self, shutil.rmtree, self._dir, ignore_errors=True)
@@ -202,7 +205,7 @@ class PtyPort:
                         done.set()
                     self._unplug_requests.clear()
                 master = self._master
-                spin_from = self._pending[0][0] - SPIN_BEFORE_DUE_S if self._pending else math.inf
+                spin_from = self._pending[0][0] - self._spin_s if self._pending else math.inf
                 due = min(device.next_deadline(), spin_from)
                 writers = [master] if master >= 0 and self._out else []
             timeout = None if due == math.inf else max(0.0, due - time.monotonic())
@@ -222,7 +225,7 @@ class PtyPort:
                 if now >= device.next_deadline():
                     self._queue(device.poll(now))
                 reply_due = self._pending[0][0] if self._pending else math.inf
-            while time.monotonic() < reply_due <= now + SPIN_BEFORE_DUE_S:
+            while time.monotonic() < reply_due <= now + self._spin_s:
                 pass  # a reply due within the spin time: written when due, not after select's late wake-up
             with self._lock:
                 if self._master >= 0:
