@@ -147,7 +147,9 @@ def main() -> None:
         scheduling = (f"SCHED_FIFO {LOOP_PRIORITY} for the loop, {LOOP_PRIORITY - 1} for the simulator"
                       if refused is None else f"normal scheduling (real-time priority {refused})")
     print(f"20 simulated XM430s per robot (simulator in its own process); {os.cpu_count()} CPUs; {sec:g} s per row; "
-          f"{scheduling}; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}\n")
+          f"{scheduling}; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print("the live loop reads, writes and estimates every cycle and corrects at 125 Hz (every round(rate / 125)-th "
+          "cycle: the summary's correct_every, 8 at 1 kHz)\n")
     mini = robots["livezmp_mini"][1]
     for correct_hz in (125.0, 500.0):
         x = compute_only(mini, 500.0, min(sec, 5.0), correct_hz)

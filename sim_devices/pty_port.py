@@ -13,7 +13,11 @@ The device behind the port is any object with the `ByteDevice` methods. All of
 its methods are called from the port thread, with ``now`` from
 ``time.monotonic()`` in seconds. Replies are ``(due, bytes)`` pairs: the port
 writes each payload once ``due`` has passed, in due order, so devices can model
-response delays without sleeping.
+response delays without sleeping. With ``spin=True`` (a device whose timing is a bus
+model, e.g. the Dynamixel chain) it spins through the last `SPIN_BEFORE_DUE_S` before a
+reply is due, so the reply leaves on time rather than when a late select() wake-up allows
+(the simulated bus's timing is the model's, not the host's); spinning holds the GIL, so
+devices that send many small replies (CAN frames, board streams) do not.
 """
 
 from __future__ import annotations
@@ -36,6 +40,10 @@ from collections.abc import Iterable
 from typing import Protocol
 
 Reply = tuple[float, bytes]
+
+# A reply due this soon is waited for by spinning rather than in select(), whose wake-up comes
+# tens of microseconds late (more on a busy machine): the simulated bus delivers on time.
+SPIN_BEFORE_DUE_S = 1e-4
 
 # Bytes waiting for a client that does not read are dropped beyond this bound,
 # as a real adapter's FIFO would overflow; it keeps memory bounded.
@@ -70,8 +78,9 @@ class PtyPort:
     re-raised by :meth:`close`, so device bugs surface in the caller.
     """
 
-    def __init__(self, device: ByteDevice, name: str = "ttySIM") -> None:
+    def __init__(self, device: ByteDevice, name: str = "ttySIM", spin: bool = False) -> None:
         self._device = device
+        self._spin_s = SPIN_BEFORE_DUE_S if spin else 0.0
         self._dir = tempfile.mkdtemp(prefix="livezmp-pty-")
         # Remove the directory at exit even if close() is never called.
         self._cleanup = weakref.finalize(self, shutil.rmtree, self._dir, ignore_errors=True)
@@ -196,7 +205,8 @@ class PtyPort:
                         done.set()
                     self._unplug_requests.clear()
                 master = self._master
-                due = min(device.next_deadline(), self._pending[0][0] if self._pending else math.inf)
+                spin_from = self._pending[0][0] - self._spin_s if self._pending else math.inf
+                due = min(device.next_deadline(), spin_from)
                 writers = [master] if master >= 0 and self._out else []
             timeout = None if due == math.inf else max(0.0, due - time.monotonic())
             readers = [self._wake_r] if master < 0 else [self._wake_r, master]
@@ -214,6 +224,10 @@ class PtyPort:
                         self._queue(device.on_bytes(data, now))
                 if now >= device.next_deadline():
                     self._queue(device.poll(now))
+                reply_due = self._pending[0][0] if self._pending else math.inf
+            while time.monotonic() < reply_due <= now + self._spin_s:
+                pass  # a reply due within the spin time: written when due, not after select's late wake-up
+            with self._lock:
                 if self._master >= 0:
                     self._flush(self._master, time.monotonic())
 

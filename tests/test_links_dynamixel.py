@@ -268,6 +268,36 @@ def test_the_bus_ceiling_counts_the_bytes_a_cycle_moves(options, per_cycle):
     assert ceiling.ceiling_hz == pytest.approx(1 / (per_cycle * 10e-6 + 1.5e-3))
 
 
+@pytest.mark.parametrize("ahead", [False, True])
+def test_goals_and_the_next_read_instruction_go_out_in_one_write(ahead):
+    """A pipelined loop's cycle: goals with the next read's instruction in one write to the port (one USB
+    transfer), built at once or ahead (`prepare_goals`); the goals reach the servos, the next read gets
+    its replies, and the bytes a cycle moves are still the packet sizes (Sync Write 114, Fast Sync Read
+    instruction 34 and reply 8 + 20 x 8)."""
+    with rig("dynamixel", options="fast=1&timeout=0.1") as r:
+        writes = []
+        ser = r.link._port.ser
+        send = ser.write
+        ser.write = lambda data: writes.append(bytes(data)) or send(data)
+        frame = r.link.read()
+        for k in range(5):
+            goals = frame.positions + 0.01 * (k + 1)
+            if ahead:
+                r.link.prepare_goals(goals)
+                r.link.send_prepared()
+            else:
+                r.link.write_goals(goals, request=True)
+            frame = r.link.read()
+        (ceiling,) = r.link.bus_ceilings(ADAPTERS["ftdi-fs"])
+        assert wait_until(lambda: np.array_equal(
+            [chain_of(r).register(s.id, "goal_position") for s in r.config.servos.values()],
+            r.link.goal_ticks(goals)), 2.0)
+    cycle = writes[1:6]  # the first is the read's own instruction
+    assert [len(w) for w in cycle] == [114 + 34] * 5
+    assert all(w[7] == 0x83 and w[114 + 7] == 0x8A for w in cycle)  # Sync Write, then Fast Sync Read
+    assert ceiling.bytes_per_cycle == 114 + 34 + 8 + 20 * 8
+
+
 def test_reply_loss_is_measured_over_a_sliding_window():
     loss = ReplyLoss(window=100, limit=0.15)
     for _ in range(4):

@@ -402,6 +402,62 @@ def test_stop_request_ends_the_loop_with_a_safe_stop(mini):
     assert link.calls[-1][0] == "safe_stop"
 
 
+class PipelinedLink(ScriptedLink):
+    """A ScriptedLink whose goals go out with the next read's request (as on a Dynamixel bus), and,
+    with ``prepares``, can have them built ahead (`prepare_goals`, then `send_prepared`)."""
+
+    def request(self) -> None:
+        self.calls.append(("request", self.time.t))
+
+    def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
+        super().write_goals(positions)
+
+    def prepare(self, positions: np.ndarray) -> None:
+        self.prepared = positions.copy()
+
+    def send_prepared(self) -> None:
+        self.sent_prepared += 1
+        super().write_goals(self.prepared)
+
+
+def pipelined_loop(body, prepares: bool, fault, command, config):
+    loop, link, _, _ = scripted_loop(body, fault=fault, command=command, config=config)
+    piped = PipelinedLink(link.time, body.joint_names, np.zeros(len(body.joint_names)), fault)
+    piped.sent_prepared = 0
+    if prepares:
+        piped.prepare_goals = piped.prepare
+    loop = LiveLoop(piped, body, config, command=command, clock=loop.clock)
+    return loop, piped
+
+
+def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
+    """The pipelined loop builds cycle k+1's goals at the end of cycle k. Sent or not (a read fails,
+    a frame is rejected, the watchdog stops and the loop resumes), every goal written is the one
+    the cycle would have computed itself: the limiter keeps its state until they are sent."""
+    cfg = LoopConfig(rate_hz=RATE, ramp_s=0.05, safety=SafetyConfig(max_correction_rate_rad_s=0.05))
+    ankles = [mini.joint_names.index(n) for n in ("l_ank_pitch", "r_ank_pitch")]
+
+    def command(t):
+        q = np.zeros(len(mini.joint_names))
+        q[ankles] = -0.3 * min(t / 0.5, 1.0)
+        return q
+
+    # the corrector's offsets move at the limiter's rate from about read 190; then faults
+    script = {250: "error", 251: "nan", 300: "error", 350: "jump", **{n: "error" for n in range(400, 460)}}
+    runs = {}
+    for prepares in (False, True):
+        loop, link = pipelined_loop(mini, prepares, lambda n, t: script.get(n), command, cfg)
+        runs[prepares] = (loop.run(duration=1.0), link)
+    (plain, plain_link), (ahead, ahead_link) = runs[False], runs[True]
+    assert plain["commands_sent"] == ahead["commands_sent"]
+    assert ahead["corrections_limited"] > 0 and ahead["resumes"] == 1  # the limiter and a restart are exercised
+    goals = [np.array([g for _, g, _ in link.writes]) for link in (plain_link, ahead_link)]
+    assert goals[0].shape == goals[1].shape and np.array_equal(goals[0], goals[1])
+    # all but the first write of each stretch of good frames went out as built ahead
+    stretches = 1 + 3 + 1  # the start; after reads 250-251, 300 and 350 (failed or rejected); the watchdog's resume
+    assert ahead_link.sent_prepared == ahead["commands_sent"] - stretches and plain_link.sent_prepared == 0
+
+
 def test_corrections_are_bounded_and_rate_limited(mini):
     """A command that leans the robot forward at the ankles far beyond its toes: the
     corrector pushes back (at 125 Hz, every 4th cycle), within the safety limits."""

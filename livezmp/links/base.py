@@ -90,7 +90,9 @@ class Link(Protocol):
         """One verified joint-state read. Raises LinkReadError or LinkError."""
 
     def write_goals(self, positions: np.ndarray) -> None:
-        """Goal positions (n,) rad in ``joint_names`` order. Raises LinkError."""
+        """Goal positions (n,) rad in ``joint_names`` order. Raises LinkError. A link that also has
+        ``request()`` (its next read's instruction sent ahead) takes ``request=True`` here: the
+        goals and that instruction in one transfer."""
 
     def hold(self) -> None:
         """Hold the present posture (goals = present positions)."""

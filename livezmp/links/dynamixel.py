@@ -46,6 +46,12 @@ round trip through the adapter; Fast only with ``fast=1``), and the frame carrie
 base-link axes). A lost IMU reply leaves that frame without one (counted); robots without
 an ``[imu]`` keep the sync read and pay nothing.
 
+For a loop that overlaps its work with the bus: `request` sends the next read's instruction
+ahead (built by the sdk once: it never changes), ``write_goals(q, request=True)`` sends the
+goals and that instruction in one write (one USB transfer, one out latency), and
+`prepare_goals` builds both packets ahead for `send_prepared` to send the moment a read
+has verified.
+
 The bytes each read and write put on the wire are counted from `open`'s end;
 `bus_ceilings` turns them into the bus's physical ceiling (:mod:`.bus_timing`). Known limit: Protocol 2.0 has no
 sequence numbers, so a reply delayed beyond the timeout that arrives during the next
@@ -60,6 +66,7 @@ import select
 import termios
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 
 import numpy as np
 import serial
@@ -123,6 +130,7 @@ class WaitingPortHandler(PortHandler):
 
     bytes_out = 0
     bytes_in = 0
+    _held: bytearray | None = None  # packets kept for one write (`one_write`)
 
     def readPort(self, length):
         data = self.ser.read(length)
@@ -135,9 +143,36 @@ class WaitingPortHandler(PortHandler):
         return data
 
     def writePort(self, packet):
+        if self._held is not None:
+            self._held += bytes(packet)
+            self.bytes_out += len(packet)
+            return len(packet)
         written = self.ser.write(packet)
         self.bytes_out += written or 0
         return written
+
+    def clearPort(self):
+        if self._held is None:  # while packets are held, the input was cleared before the first
+            super().clearPort()
+
+    @contextmanager
+    def one_write(self):
+        """The packets sent inside go out in one write at the end: one USB transfer on a real
+        adapter (one out latency for both), one wake-up of the device at the other end."""
+        with self.held() as data:
+            yield
+        if data:
+            self.ser.write(bytes(data))
+
+    @contextmanager
+    def held(self):
+        """The packets sent inside are not sent: the bytearray given collects them (inside an outer
+        `held`, only these)."""
+        outer, self._held = self._held, bytearray()
+        try:
+            yield self._held
+        finally:
+            self._held = outer
 
 
 ID_ADDRESS = 7
@@ -207,6 +242,8 @@ class DynamixelLink(PortLink):
         self._traffic = np.zeros(4)  # bytes read, reads, bytes written, writes: since open finished
         self._pending = False  # a `request`ed read's instruction is out, its replies not taken in
         self._requested_bytes = 0
+        self._prepared: tuple[bytes, bytes] | None = None  # (sync write of goals, read instruction), not sent yet
+        self._instruction: bytes | None = None  # `read`'s instruction, once built
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -243,17 +280,30 @@ class DynamixelLink(PortLink):
         if self._pending or self._port is None:
             return
         port = self._port
-        reader = self._reader(*READS[self.read_what], tuple(self.ids), self._extra)
+        instruction = self._read_instruction()
         self._requested_bytes = port.bytes_out + port.bytes_in
         try:
-            result = _fast_tx(reader) if self.fast_read else reader.txPacket()
+            port.clearPort()  # as the sdk does before each instruction: no stale byte is taken for a reply
+            port.writePort(instruction)
         except _PORT_ERRORS as err:
             raise LinkError(f"{self.path}: port failed: {err}") from None
-        finally:
-            port.is_using = False  # the replies are ours to take in `read`, whatever the sdk thinks
-        if result != COMM_SUCCESS:
-            raise LinkError(f"{self.path}: sync read not sent: {self._ph.getTxRxResult(result)}")
         self._pending = True
+
+    def _read_instruction(self) -> bytes:
+        """The bytes of `read`'s (Fast) Sync or Bulk Read instruction, built by the sdk once: they never change."""
+        if self._instruction is None:
+            port = self._require_port()
+            reader = self._reader(*READS[self.read_what], tuple(self.ids), self._extra)
+            with port.held() as data:
+                try:
+                    result = _fast_tx(reader) if self.fast_read else reader.txPacket()
+                finally:
+                    port.is_using = False  # the replies are ours to take in `read`, whatever the sdk thinks
+            port.bytes_out -= len(data)  # counted when sent
+            if result != COMM_SUCCESS:
+                raise LinkError(f"{self.path}: sync read not built: {self._ph.getTxRxResult(result)}")
+            self._instruction = bytes(data)
+        return self._instruction
 
     def read(self) -> LinkFrame:
         """Present position (rad), velocity (rad/s) and current (A) of every joint, verified."""
@@ -280,9 +330,51 @@ class DynamixelLink(PortLink):
             imu=None if self._imu_data is None else decode_imu(self._imu_data, self.imu.axes),
         )
 
-    def write_goals(self, positions: np.ndarray) -> None:
-        """Goal positions (n,) rad in ``joint_names`` order, as one sync write."""
-        self.write_ticks(self.goal_ticks(positions))
+    def prepare_goals(self, positions: np.ndarray) -> None:
+        """Build the sync write of ``positions`` (rad, checked as by `write_goals`) and the next read's
+        instruction now, for `send_prepared` to send in one write (a loop builds them while it would
+        otherwise sleep, so the moment a read verified costs only the write)."""
+        writer = self._fill_goals(self.goal_ticks(positions))
+        port = self._require_port()
+        with port.held() as goals:
+            try:
+                result = writer.txPacket()
+            finally:
+                port.is_using = False
+        port.bytes_out -= len(goals)  # counted when sent
+        if result != COMM_SUCCESS:
+            raise LinkError(f"{self.path}: sync write not built: {self._ph.getTxRxResult(result)}")
+        self._prepared = (bytes(goals), self._read_instruction())
+
+    def send_prepared(self) -> None:
+        """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
+        if self._prepared is None:
+            raise LinkError(f"{self.path}: no goals prepared")
+        port = self._require_port()
+        goals, instruction = self._prepared
+        self._prepared = None
+        if self._pending:  # as in `write_ticks`: the requested replies are taken in first
+            try:
+                self.read()
+            except LinkReadError:
+                pass
+        self.stats.writes += 1
+        try:
+            port.clearPort()
+            port.ser.write(goals + instruction)
+        except _PORT_ERRORS as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        port.bytes_out += len(goals)
+        self._traffic[2:] += (len(goals), 1)
+        self._requested_bytes = port.bytes_out + port.bytes_in
+        port.bytes_out += len(instruction)
+        self._pending = True
+
+    def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order, as one sync write (with ``request``:
+        and the next read's instruction, see `write_ticks`)."""
+        self.write_ticks(self.goal_ticks(positions), request)
 
     def goal_ticks(self, positions: np.ndarray) -> np.ndarray:
         """Goal positions (n,) rad as servo ticks; LinkError (nothing sent) if one is beyond its servo's limits."""
@@ -349,6 +441,7 @@ class DynamixelLink(PortLink):
             raise LinkError(f"{self.path}: this dynamixel-sdk has no Fast Sync Read: use fast=0 or upgrade it")
         self._port = port
         self._readers = {}
+        self._instruction = None
         self._goal_writer = GroupSyncWrite(port, self._ph, GOAL_POSITION, 4)
         for dxl_id in self.ids:
             self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
@@ -364,6 +457,7 @@ class DynamixelLink(PortLink):
             # Read is not something the servos' firmware versions tell
             self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE \
                 and self._extra is None
+            self._instruction = None
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
         limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
@@ -592,18 +686,34 @@ class DynamixelLink(PortLink):
         self.stats.read_errors += 1
         self.stats.count("no_reply" if result == COMM_RX_TIMEOUT else "bad_crc")
 
-    def write_ticks(self, ticks: np.ndarray) -> None:
-        """Goal ticks (n,) int32 from `goal_ticks`, as one sync write."""
+    def write_ticks(self, ticks: np.ndarray, request: bool = False) -> None:
+        """Goal ticks (n,) int32 from `goal_ticks`, as one sync write; with ``request``, the next
+        read's instruction (`request`) goes out with it, in the same write to the port."""
         if self._pending:  # sending clears the port's input: take the requested replies in (and drop them)
             try:
                 self.read()
             except LinkReadError:
                 pass  # counted; the write goes on
+        writer = self._fill_goals(ticks)
+        if not request:
+            self._send(writer)
+            return
+        port = self._require_port()
+        try:
+            with port.one_write():
+                self._send(writer)
+                self.request()
+        except _PORT_ERRORS as err:
+            self.stats.write_errors += 1
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+
+    def _fill_goals(self, ticks: np.ndarray) -> GroupSyncWrite:
+        """The goal writer with ``ticks`` (n,) int32 as its data."""
         raw = ticks.tobytes()
         writer = self._goal_writer
         for k, dxl_id in enumerate(self.ids):
             writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
-        self._send(writer)
+        return writer
 
     def _write_all(self, address: int, size: int, value: int) -> None:
         """The same value to every servo, one sync write (no reply)."""
@@ -657,6 +767,7 @@ class DynamixelLink(PortLink):
 
     def _release(self) -> None:
         self._pending = False
+        self._prepared = None
         port, self._port = self._port, None
         if port is not None:
             try:

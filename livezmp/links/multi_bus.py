@@ -9,17 +9,20 @@ the robot config needs no change); a servo heard on no bus, or on two, is a Link
 naming it. Every bus gets the same options (baud, fast, read, ...) and is a
 `DynamixelLink` of its own; to the loop this is one link with the robot's joints.
 
-Each cycle the buses' reads run at the same time, one thread per extra bus (the calling
-thread reads the first): a cycle costs the slowest bus's transaction, not their sum. A
-frame is returned only when every bus read verified (else LinkReadError, or the first
-bus's LinkError). Goals are checked against every servo's limits before any bus is sent
-its share, so a refused goal sends nothing anywhere.
+Each cycle every bus's read instruction is out before any reply is waited for (sent ahead
+with the goals by a pipelined loop, see `DynamixelLink.write_ticks`, or at the start of
+`read`), so the buses carry their transactions at the same time and a cycle costs the
+slowest bus's transaction, not their sum. The replies are then taken in one bus after the
+other in the calling thread: they wait in each port's buffer meanwhile, and no thread
+hand-off (a wake-up and the GIL) sits in the cycle. A frame is returned only when every
+bus read verified (else LinkReadError, or the first bus's LinkError). Goals are checked
+against every servo's limits before any bus is sent its share, so a refused goal sends
+nothing anywhere.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -43,8 +46,8 @@ class MultiBusLink:
         self._options = options
         self.buses: list[DynamixelLink] = []
         self._joints: list[np.ndarray] = []  # per bus: the robot joint index of each of its servos
-        self._pool: ThreadPoolExecutor | None = None
         self._reads = self._writes = 0
+        self._prepared = False  # every bus has goals prepared
         self._reconnects = 0
 
     # -- Link -----------------------------------------------------------------------------------
@@ -64,7 +67,6 @@ class MultiBusLink:
             self._release()
             raise
         self._joints = [np.asarray(j, dtype=int) for j in found]
-        self._pool = ThreadPoolExecutor(len(self.buses) - 1, thread_name_prefix="livezmp-bus")
 
     def request(self) -> None:
         """Every bus's next read instruction sent now (see `DynamixelLink.request`)."""
@@ -72,17 +74,19 @@ class MultiBusLink:
             bus.request()
 
     def read(self) -> LinkFrame:
-        """Every bus read at once; one frame in the robot's joint order."""
+        """Every bus read at once (all instructions out, then the replies); one frame in the robot's joint order."""
+        if not self.buses:
+            raise LinkError(f"{'+'.join(self.paths)}: link is not open")
         self._reads += 1
-        futures = [self._require_pool().submit(bus.read) for bus in self.buses[1:]]
-        outcomes: list[LinkFrame | LinkError] = []
-        try:
-            outcomes.append(self.buses[0].read())
-        except LinkError as e:
-            outcomes.append(e)
-        for future in futures:
+        for bus in self.buses:  # those not yet asked (`request`), so that all transactions travel together
             try:
-                outcomes.append(future.result())
+                bus.request()
+            except LinkError:
+                pass  # its read below finds the port failed and says so
+        outcomes: list[LinkFrame | LinkError] = []
+        for bus in self.buses:
+            try:
+                outcomes.append(bus.read())
             except LinkError as e:
                 outcomes.append(e)
         errors = [o for o in outcomes if isinstance(o, LinkError)]
@@ -93,15 +97,32 @@ class MultiBusLink:
             raise LinkReadError("; ".join(str(e) for e in errors))
         return self._merge(outcomes)
 
-    def write_goals(self, positions: np.ndarray) -> None:
-        """Goal positions (n,) rad in ``joint_names`` order: each bus its share, after all were checked."""
-        goals = np.asarray(positions, dtype=float)
-        if goals.shape != (len(self.joint_names),):
-            raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
+    def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
+        """Goal positions (n,) rad in ``joint_names`` order: each bus its share, after all were checked
+        (with ``request``: and each bus's next read instruction, see `DynamixelLink.write_ticks`)."""
+        goals = self._checked(positions)
         self._writes += 1
         ticks = [bus.goal_ticks(goals[joints]) for bus, joints in zip(self.buses, self._joints, strict=True)]
         for bus, t in zip(self.buses, ticks, strict=True):
-            bus.write_ticks(t)
+            bus.write_ticks(t, request)
+
+    def prepare_goals(self, positions: np.ndarray) -> None:
+        """Each bus's share of ``positions`` (rad) and its next read instruction built now (see
+        `DynamixelLink.prepare_goals`; a LinkError leaves nothing that `send_prepared` may send)."""
+        goals = self._checked(positions)
+        self._prepared = False
+        for bus, joints in zip(self.buses, self._joints, strict=True):
+            bus.prepare_goals(goals[joints])
+        self._prepared = True
+
+    def send_prepared(self) -> None:
+        """Every bus sends what `prepare_goals` built."""
+        if not self._prepared:
+            raise LinkError(f"{'+'.join(self.paths)}: no goals prepared")
+        self._prepared = False
+        self._writes += 1
+        for bus in self.buses:
+            bus.send_prepared()
 
     def hold(self) -> None:
         for bus in self.buses:
@@ -166,6 +187,12 @@ class MultiBusLink:
             raise LinkError(f"{empty[0]}: none of the robot's servos answered on this port")
         return found
 
+    def _checked(self, positions: np.ndarray) -> np.ndarray:
+        goals = np.asarray(positions, dtype=float)
+        if goals.shape != (len(self.joint_names),):
+            raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
+        return goals
+
     def _merge(self, frames: list[LinkFrame]) -> LinkFrame:
         n = len(self.joint_names)
 
@@ -181,15 +208,7 @@ class MultiBusLink:
         return LinkFrame(t=max(f.t for f in frames), positions=gather("positions"), velocities=gather("velocities"),
                          currents=gather("currents"), hardware_errors=errors)
 
-    def _require_pool(self) -> ThreadPoolExecutor:
-        if self._pool is None:
-            raise LinkError(f"{'+'.join(self.paths)}: link is not open")
-        return self._pool
-
     def _release(self) -> None:
         for bus in self.buses:
             bus._release()
         self.buses = []
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None

@@ -137,6 +137,8 @@ class LiveLoop:
         # a link that can send its next read's instruction ahead (Dynamixel) lets the cycle's work overlap the
         # bus: read, write, request the next read, then estimate and correct while it travels
         self.pipelined = hasattr(link, "request")
+        # ... and one that builds its packets ahead (`prepare_goals`) gets the next cycle's goals then
+        self.prepares = self.pipelined and hasattr(link, "prepare_goals")
         self.fall_detector = FallDetector()
         self._imu_seen = False
         self.on_event = on_event
@@ -197,6 +199,7 @@ class LiveLoop:
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
+        self._prepared: tuple[int, bool, np.ndarray] | None = None  # (cycle, limited, offsets) of built goals
 
     def request_stop(self, reason: str) -> None:
         """Ask the loop to end after the current cycle (safe from a signal handler)."""
@@ -300,12 +303,14 @@ class LiveLoop:
         if frame.imu is not None:
             self._watch_imu(t, frame)
         if self.pipelined:
-            # write first, with the offsets the previous cycle's work computed, then ask for the next read
-            # and do this cycle's work while its bytes are on the wire
+            # write first, with the offsets the previous cycle's work computed (built then, when this cycle's
+            # goals are known ahead), then ask for the next read and do this cycle's work while its bytes are
+            # on the wire
+            sent = self._send_prepared(tick.index, t, t0)
             command = None if self.halted is not None else self._command(t, frame.positions)
-            if command is not None:
+            if command is not None and not sent:
                 self._write(t, t0, command)
-            self._request()
+            self._request()  # when the write failed or was not sent
             t2 = now()
             self._estimate(t, frame)
             t3 = now()
@@ -313,6 +318,7 @@ class LiveLoop:
             if command is not None:
                 self._correct(t, command)
                 self.times["correct"].add(now() - t3)
+                self._prepare(tick.index + 1)
             return
         self._estimate(t, frame)
         t2 = now()
@@ -329,11 +335,51 @@ class LiveLoop:
         t3 = self.clock.now()
         goals, limited = self.limiter.apply(command, self.offsets)
         try:
-            self.link.write_goals(goals)
+            if self.pipelined:  # the next read's instruction in the same transfer as the goals
+                self.link.write_goals(goals, request=not self.link_down)
+            else:
+                self.link.write_goals(goals)
         except LinkError as e:
             self.counters.write_errors += 1
             self._event(t, f"write failed: {e}", kind="write")
             return
+        self._written(t, t0, t3, limited)
+
+    def _prepare(self, index: int) -> None:
+        """Cycle ``index``'s goals (its command + the offsets computed now, limited) built into the
+        link's packets ahead, while the loop would sleep: when that cycle's read verifies, sending
+        is all that is left between the read and the write. Not before commanding has started (its
+        ramp starts from the posture read then)."""
+        self._prepared = None
+        if not self.prepares or self._ramp_from is None or self.halted is not None or self.stopped or \
+                self.link_down:
+            return
+        t = index * self.dt
+        goals, limited, offsets = self.limiter.propose(self._command(t, self._ramp_from), self.offsets)
+        try:
+            self.link.prepare_goals(goals)
+        except LinkError:
+            return  # the cycle builds and sends them itself, and says what failed
+        self._prepared = (index, limited, offsets)
+
+    def _send_prepared(self, index: int, t: float, t0: float) -> bool:
+        """Send the goals `_prepare` built for cycle ``index`` (True), if it did and nothing changed since."""
+        prepared, self._prepared = self._prepared, None
+        if prepared is None or prepared[0] != index or self.halted is not None or self.stopped:
+            return False
+        t3 = self.clock.now()
+        try:
+            self.link.send_prepared()
+        except LinkError as e:
+            self.counters.write_errors += 1
+            self._event(t, f"write failed: {e}", kind="write")
+            return True
+        self.limiter.offsets = prepared[2]
+        self._written(t, t0, t3, prepared[1])
+        return True
+
+    def _written(self, t: float, t0: float, t3: float, limited: bool) -> None:
+        """Bookkeeping of goals sent at ``t3`` (s) in the cycle whose read started at ``t0``."""
         t4 = self.clock.now()
         self.times["write"].add(t4 - t3)
         self.latency.add(t4 - t0)

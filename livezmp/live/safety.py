@@ -153,10 +153,15 @@ class GoalLimiter:
     def apply(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool]:
         """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, and whether a
         limit cut anything. Non-finite offsets count as zero."""
+        goals, limited, self.offsets = self.propose(command, offsets)
+        return goals, limited
+
+    def propose(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray]:
+        """What `apply` would return, and the offsets it would keep (rad), without keeping them:
+        for goals built ahead of the cycle that sends them (set ``offsets`` once they are sent)."""
         want = np.where(np.isfinite(offsets), offsets, 0.0)
         sent = np.clip(np.clip(want, -self.max_offset, self.max_offset),
                        self.offsets - self.max_step, self.offsets + self.max_step)
-        self.offsets = sent
         goals = np.clip(command + sent, self.lower, self.upper)
         limited = bool(np.any(sent != want) or np.any(goals != command + sent))
-        return goals, limited
+        return goals, limited, sent
