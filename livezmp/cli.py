@@ -90,7 +90,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", help="figure (PNG)")
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
-    p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D: HAT mass and centre of mass)")
+    p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
     p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
                                      "joint-centre rules; docs/validation.md)")
     add_body_options(p)
@@ -104,9 +104,10 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler="livezmp.commands.calibrate:cmd_calibrate")
 
     p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
-    p.add_argument("motion", nargs="?", help="motion file (.bvh, or .csv with --robot)")
+    p.add_argument("motion", nargs="?", help="motion file (.bvh, .c3d, or .csv with --robot)")
     p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
     p.add_argument("--report", help="report JSON")
+    p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
     add_body_options(p)
     add_correction_limits(p)
     p.set_defaults(handler="livezmp.commands.correct:cmd_correct")
@@ -158,6 +159,7 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--alarm-after", type=float, default=200.0, metavar="MS",
                    help="alarm when the ZMP is out of support for this long, ms (default 200)")
     p.add_argument("--correct", action="store_true", help="run the online balance correction and record it")
+    p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
     _sink_options(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.monitor:cmd_monitor")

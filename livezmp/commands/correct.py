@@ -1,38 +1,75 @@
-"""`livezmp correct`: balance-correct a motion file (BVH, or joint-trajectory CSV + URDF)."""
+"""`livezmp correct`: balance-correct a motion file (BVH, joint-trajectory CSV + URDF, or a gait-lab C3D)."""
 
 from __future__ import annotations
 
 import argparse
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import limits_from_args, load_from_args, pipeline_config
+from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, pipeline_config
 from livezmp.correct.solver import correct_motion
 from livezmp.errors import InputError
+from livezmp.model.bvh import write_bvh
+from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import write_motion
+from livezmp.offline.calibrate import load_subject
+from livezmp.offline.gaitlab import LabOptions
 from livezmp.offline.report import write_json
 
 
 def cmd_correct(args: argparse.Namespace) -> int:
     if args.motion is None:
         raise InputError("correct: give a motion file (.bvh, or .csv with --robot)")
-    if str(args.motion).lower().endswith(".c3d"):
-        raise InputError(f"{args.motion}: correct does not take C3D marker takes yet (their segments move "
-                         "freely, with no joint chain for the hip re-solve); `livezmp analyze` reads them")
     check_output_path(args.output, "-o")
     check_output_path(args.report, "--report")
+    c3d_in, c3d_out = (str(p).lower().endswith(".c3d") for p in (args.motion, args.output))
+    if c3d_in:
+        if not c3d_out:
+            raise InputError(f"{args.output}: a C3D take is corrected into a C3D file (-o ending in .c3d); "
+                             "writing it as BVH is not supported")
+        return _correct_c3d(args)
+    if c3d_out:
+        raise InputError(f"{args.output}: only a C3D take can be written as C3D (its markers are moved); "
+                         f"{args.motion} is written in its own format")
     loaded = load_from_args(args)
     cfg = pipeline_config(args, loaded)
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
                             nominal_dt=1.0 / loaded.fps,
                             progress=lambda message: print(f"correct: {message}", flush=True))
     write_motion(loaded, result.frames, args.output)
-    report = {"source": loaded.source, "output": args.output, "mode": cfg.mode, **result.report()}
+    _tell({"source": loaded.source, "output": args.output, "mode": cfg.mode, **result.report()}, args)
+    return 0
+
+
+def _correct_c3d(args: argparse.Namespace) -> int:
+    """A gait-lab take: its marker body corrected as a chain, its markers moved, written as C3D."""
+    from livezmp.correct.marker_take import correct_marker_take
+    from livezmp.model.c3d import read_c3d
+    from livezmp.model.c3d_write import non_position_labels, write_moved_points
+
+    check_body_options(args)
+    markers = load_subject(args.subject).marker_options() if args.subject else MarkerBodyOptions()
+    trial = read_c3d(args.motion)
+    fix = correct_marker_take(trial, LabOptions(mass=args.mass, mode=args.mode, markers=markers),
+                              limits_from_args(args), non_position_labels(args.motion),
+                              progress=lambda message: print(f"correct: {message}", flush=True))
+    write_moved_points(args.motion, args.output, fix.moved, fix.added, fix.first_frame)
+    report = {"source": args.motion, "output": args.output, "mode": args.mode, **fix.result.report(),
+              "max_stance_foot_marker_move_mm": round(fix.stance_marker_mm, 4),
+              "markers_moved": len(fix.moved), "hat_points_written": list(fix.added),
+              "points_unchanged": fix.unchanged}
+    _tell(report, args)
+    if fix.unchanged:
+        print(f"copied unchanged (angles, loads, or never seen): {len(fix.unchanged)} points; "
+              "model outputs describe the motion before the correction")
+    return 0
+
+
+def _tell(report: dict, args: argparse.Namespace) -> None:
     if args.report:
         write_json(report, args.report)
-    print(f"{loaded.source}: {report['out_of_support_before']} → {report['out_of_support_after']} of "
+    print(f"{report['source']}: {report['out_of_support_before']} → {report['out_of_support_after']} of "
           f"{report['support_frames']} support frames outside; root rotation max "
           f"{report['max_root_rotation_deg']:.2f}°, rms {report['rms_root_rotation_deg']:.2f}°; stance feet moved "
           f"≤ {report['max_foot_displacement_mm']:.3f} mm; wrote {args.output}")
     if report["infeasible_frames"]:
         print(f"not fully corrected within the limits: frames {report['infeasible_frames']}")
-    return 0

@@ -73,6 +73,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_synth(args: argparse.Namespace) -> int:
     check_output_path(args.output, "-o")
+    if Path(args.base_walk).suffix.lower() == ".c3d":
+        raise InputError(f"{args.base_walk}: gait synth changes BVH or CSV walks; a C3D take can be analysed "
+                         "and compared, not synthesised")
     analysis = read_features(args.features)
     take = _load(args.base_walk, args)
     t, q, plan = synth_take(take, analysis, args.to, args.amount, args.features)

@@ -19,6 +19,7 @@ from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
@@ -26,6 +27,7 @@ from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
 from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
+from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.offline.report import write_json
 from livezmp.recording.reader import damaged_as_input_error, iter_messages
 from livezmp.recording.recover import recover
@@ -34,19 +36,36 @@ from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source
 from livezmp.sources.mcap_replay import McapReplaySource
+from livezmp.sources.mocap_factory import MOCAP_SCHEMES
 
 
 def _source(args: argparse.Namespace) -> Source:
     urdf = UrdfBodyOptions(config=args.robot_config)
+    subject = _subject(args)
     if args.motion is None:  # the built-in demo, as for `livezmp analyze`
         body, spec = robot_body(demo_robot_path(), urdf)
         traj = demo_trajectory(body.joint_names)
         return FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), args.speed, args.loop)
     bvh = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up,
-                         mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width)
+                         mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width,
+                         hat_fraction=subject and subject.hat_fraction)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
-                         speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration)
+                         speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration,
+                         markers=subject.marker_options() if subject else MarkerBodyOptions())
     return open_source(args.motion, opts)
+
+
+def _subject(args: argparse.Namespace) -> Subject | None:
+    """The --subject file, for a person's body: a BVH (file or a stream's --skeleton), a C3D, or a capture
+    stream's marker body."""
+    if not args.subject:
+        return None
+    person = (args.skeleton or Path(args.motion or "").suffix.lower() in (".bvh", ".c3d")
+              or str(args.motion).split("://")[0] in MOCAP_SCHEMES)
+    if args.robot or not person:
+        raise InputError(f"{args.subject}: a subject file describes a person: it goes with a BVH or C3D file or a "
+                         "stream's --skeleton (a recording carries its own body; a robot has its URDF)")
+    return load_subject(args.subject)
 
 
 def _print_summary(s: MonitorSummary) -> None:

@@ -38,6 +38,7 @@ _ROBOT_KINDS = [
     (r"head|neck", "head"),
     (r"waist|torso|chest|spine", "spine"),
 ]
+_MARKER_KINDS = {"hat": "spine", "thorax": "spine", "upperarm": "upper_arm"}  # marker body segment -> kind
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,13 @@ def _segment_of_channels(body: BodyModel, source: str) -> list[tuple[str, str, s
         unique = list(dict.fromkeys(joints))
         tags = dict(zip(unique, tag_joints(unique, source=source), strict=True))
         return [(j, tags[j].kind, tags[j].side) for j in joints]
+    if body.kind == "markers":  # segment names: pelvis, hat, thorax, head, thigh_l, upperarm_r, ...
+        out = []
+        for n in body.channel_names:
+            seg = n.split(".")[0]
+            kind, _, side = seg.partition("_")
+            out.append((seg, _MARKER_KINDS.get(kind, kind), {"l": "left", "r": "right"}.get(side, "center")))
+        return out
     return [(n, *robot_joint_kind(n)) for n in body.channel_names]
 
 

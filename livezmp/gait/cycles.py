@@ -79,11 +79,11 @@ def max_harmonics(frequency: float, sample_rate: float, wanted: int) -> int:
 
 
 def detect_cycles(t: np.ndarray, x: np.ndarray, what: str, harmonics: int = 5,
-                  min_period: float = 0.4, max_period: float = 3.0) -> Cycles:
+                  min_period: float = 0.4, max_period: float = 3.0, min_cycles: int = 2) -> Cycles:
     """Cycles of the reference angle ``x`` (rad) sampled at ``t`` (s).
 
     ``what`` names the file and channel for errors. Raises :class:`InputError` when
-    fewer than two whole cycles are found.
+    fewer than ``min_cycles`` whole cycles are found.
     """
     lo, hi = np.percentile(x, [5, 95])
     half = (hi - lo) / 2
@@ -91,8 +91,9 @@ def detect_cycles(t: np.ndarray, x: np.ndarray, what: str, harmonics: int = 5,
         raise InputError(f"{what}: swings only {np.rad2deg(2 * half):.2f}° peak to peak: not a walk")
     events = _longest_run(up_crossings(t, x, (hi + lo) / 2, HYSTERESIS * half), min_period, max_period)
     n = max(len(events) - 1, 0)
-    if n < 2:
-        raise InputError(f"{what}: fewer than two whole gait cycles ({n}); need a longer take")
+    needed = {1: "one", 2: "two"}.get(min_cycles, str(min_cycles))
+    if n < min_cycles:
+        raise InputError(f"{what}: fewer than {needed} whole gait cycles ({n}); need a longer take")
     f0 = n / (events[-1] - events[0])
     inside = (t >= events[0]) & (t <= events[-1])
     tw, xw = t[inside], x[inside]
@@ -103,6 +104,7 @@ def detect_cycles(t: np.ndarray, x: np.ndarray, what: str, harmonics: int = 5,
     # nearly straight, so the interpolated times do not depend on where the samples fall.
     mean = float(hm.fit(tw, xw, best.x, h)[0][0, 0])
     events = _longest_run(up_crossings(t, x, mean, HYSTERESIS * half), min_period, max_period)
-    if len(events) < 3:
-        raise InputError(f"{what}: fewer than two whole gait cycles ({max(len(events) - 1, 0)}); need a longer take")
+    if len(events) < min_cycles + 1:
+        raise InputError(f"{what}: fewer than {needed} whole gait cycles ({max(len(events) - 1, 0)}); "
+                         "need a longer take")
     return Cycles(events, float(best.x))

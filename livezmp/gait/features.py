@@ -62,7 +62,8 @@ def walk_features(take: GaitTake, harmonics: int = HARMONICS) -> WalkFeatures:
     """Features of ``take`` (see module doc). Raises InputError for takes with < 2 cycles."""
     ref = reference_channel(take.tags, take.source)
     angles = take.angles
-    cyc = detect_cycles(take.t, angles[:, ref], f"{take.source}: {take.tags[ref].name}", harmonics)
+    cyc = detect_cycles(take.t, angles[:, ref], f"{take.source}: {take.tags[ref].name}", harmonics,
+                        min_cycles=take.min_cycles)
     inside = cyc.window(take.t)
     h = max_harmonics(cyc.frequency, 1.0 / float(np.median(np.diff(take.t))), harmonics)
     coef, _ = hm.fit(take.t[inside], angles[inside], cyc.frequency, h)

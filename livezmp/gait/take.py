@@ -1,4 +1,8 @@
-"""One recorded walk in SI units, from a BVH file or a robot joint-trajectory CSV.
+"""One recorded walk in SI units, from a BVH file, a robot joint-trajectory CSV, or a gait-lab C3D.
+
+A C3D's markers give the marker body as a chain (:mod:`livezmp.model.marker_chain`): its channels are
+joint angles (each segment's rotation in its parent's frame, flexion first) and the pelvis' world pose,
+in the internal frame (z up, metres).
 
 Rotation channels are read as the file gives them, one angle per channel in the
 file's Euler order (no re-parametrisation), converted to radians and unwrapped in time
@@ -15,17 +19,21 @@ turns a changed walk back before it is written.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 from livezmp.gait.channels import ChannelTag, tag_channels
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
+from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
+from livezmp.model.markers import body_from_markers
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
 
@@ -39,7 +47,7 @@ class GaitTake:
     root does not move), ``root_rot`` the columns of its rotation channels and
     ``root_seq`` their intrinsic Euler order (e.g. "ZXY"); ``heading`` rad, the angle about
     the up axis the recorded walk is turned from internal +x (``q`` is turned back by it);
-    ``origin`` the BVH motion or CSV trajectory it came from."""
+    ``origin`` the BVH motion, CSV trajectory or C3D trial it came from."""
 
     source: str
     t: np.ndarray
@@ -51,7 +59,8 @@ class GaitTake:
     root_rot: list[int]
     root_seq: str
     heading: float
-    origin: BvhMotion | JointTrajectory
+    origin: BvhMotion | JointTrajectory | C3dTrial
+    min_cycles: int = 2  # whole gait cycles the features need (a gait-lab pass over the plates has one or two)
 
     @property
     def angles(self) -> np.ndarray:
@@ -68,7 +77,13 @@ def _ground(q: np.ndarray, body: BodyModel, root_xyz: list[int]) -> np.ndarray:
     for k, col in enumerate(root_xyz):
         if col >= 0:
             p[:, k] = q[:, col]
-    return (p @ body.world_from_input.T)[:, :2]
+    return (p @ _world_from_channels(body).T)[:, :2]
+
+
+def _world_from_channels(body: BodyModel) -> np.ndarray:
+    """The rotation from the frame of the root's channels into the internal one (a marker body's
+    channels are in the internal frame already)."""
+    return np.eye(3) if body.kind == "markers" else body.world_from_input
 
 
 def turn_root(q: np.ndarray, take: GaitTake, angle: float) -> np.ndarray:
@@ -79,7 +94,7 @@ def turn_root(q: np.ndarray, take: GaitTake, angle: float) -> np.ndarray:
 def _turn(q: np.ndarray, body: BodyModel, root_xyz: list[int], root_rot: list[int], seq: str,
           angle: float) -> np.ndarray:
     out = q.copy()
-    w = body.world_from_input
+    w = _world_from_channels(body)
     r_in = w.T @ Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix() @ w  # about the input's up axis
     if min(root_xyz) >= 0:
         out[:, root_xyz] = q[:, root_xyz] @ r_in.T
@@ -108,6 +123,8 @@ def _root_columns(body: BodyModel, q: np.ndarray) -> tuple[list[int], list[int],
     if body.kind == "urdf":
         rot = ["base_yaw", "base_pitch", "base_roll"]  # R = Rz·Ry·Rx (body_urdf)
         return [names.index(n) for n in ("base_x", "base_y", "base_z")], [names.index(n) for n in rot], "ZYX"
+    if body.kind == "markers":  # the pelvis: x, y, z, yaw, pitch, roll (R = Rz·Ry·Rx)
+        return [0, 1, 2], [3, 4, 5], "ZYX"
     joint = names[moving[0]].rsplit(".", 1)[0]
     xyz = [names.index(f"{joint}.{a}position") if f"{joint}.{a}position" in names else -1 for a in "XYZ"]
     rot = [i for i, n in enumerate(names) if n.startswith(f"{joint}.") and n.endswith("rotation")]
@@ -149,14 +166,26 @@ def take_from_trajectory(traj: JointTrajectory, body: BodyModel) -> GaitTake:
     return _make(traj.source, traj.t, q, body, traj)
 
 
+def take_from_c3d(trial: C3dTrial) -> GaitTake:
+    """A gait-lab walk: the marker body of ``trial`` as a chain (joint angles), over the frames where
+    every needed marker is seen; times from the trial's first frame (s)."""
+    take = body_from_markers(trial)
+    names = segment_names(take.body)
+    t = (take.first_frame + np.arange(len(take.frames))) / trial.rate
+    walk = _make(trial.source, t, chain_frames(names, take.frames), chain_body(take.body), trial)
+    return replace(walk, min_cycles=1)
+
+
 def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: str | Path | None = None) -> GaitTake:
-    """Read a walk from a ``.bvh`` file, or a ``.csv`` joint trajectory (needs ``urdf``)."""
+    """Read a walk from a ``.bvh`` or ``.c3d`` file, or a ``.csv`` joint trajectory (needs ``urdf``)."""
     p = Path(path)
     if p.suffix.lower() == ".bvh":
         return take_from_bvh(read_bvh(p), up, units)
+    if p.suffix.lower() == ".c3d":
+        return take_from_c3d(read_c3d(check_input_file(p, "walk")))
     if p.suffix.lower() == ".csv":
         if urdf is None:
             raise InputError(f"{p}: a joint-trajectory CSV needs the robot's URDF (--urdf)")
         body = body_from_urdf(urdf)
         return take_from_trajectory(read_joint_csv(p, body.joint_names), body)
-    raise InputError(f"{p}: unknown walk format {p.suffix!r} (.bvh or .csv)")
+    raise InputError(f"{p}: unknown walk format {p.suffix!r} (.bvh, .c3d or .csv)")

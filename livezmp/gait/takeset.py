@@ -15,8 +15,8 @@ from pathlib import Path
 from livezmp.errors import InputError
 from livezmp.model.trajectory_csv import read_csv_rows
 
-DEFAULT_PATTERN = r"(?:^|[_-])(?P<condition>[A-Za-z]+)[_-](?P<take>\d+)\.(?:bvh|csv)$"
-WALK_SUFFIXES = (".bvh", ".csv")
+DEFAULT_PATTERN = r"(?:^|[_-])(?P<condition>[A-Za-z]+)[_-](?P<take>\d+)\.(?:bvh|c3d|csv)$"
+WALK_SUFFIXES = (".bvh", ".c3d", ".csv")
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ def read_manifest(path: str | Path) -> list[TakeSpec]:
 
 
 def takes_from_paths(paths: list[str | Path], pattern: str = DEFAULT_PATTERN) -> list[TakeSpec]:
-    """Label files (directories: their .bvh and .csv files) by ``pattern`` on the file name."""
+    """Label files (directories: their .bvh, .c3d and .csv files) by ``pattern`` on the file name."""
     try:
         rx = re.compile(pattern)
     except re.error as e:
@@ -76,5 +76,5 @@ def takes_from_paths(paths: list[str | Path], pattern: str = DEFAULT_PATTERN) ->
         subject = m.groupdict().get("subject")
         out.append(TakeSpec(f, subject or None, m.group("condition")))
     if not out:
-        raise InputError(f"{', '.join(map(str, paths))}: no .bvh or .csv walks found")
+        raise InputError(f"{', '.join(map(str, paths))}: no .bvh, .c3d or .csv walks found")
     return out

@@ -78,7 +78,7 @@ def skeleton_body(skeleton: Skeleton, opts: BvhBodyOptions | None = None) -> tup
     mapping = {k: f"{v.kind}:{v.side}" for k, v in (opts.mapping or {}).items()}
     options = {"total_mass": opts.total_mass, "units": body.units, "up_axis": body.up_axis,
                "sole_width": opts.sole_width, "heel_back": opts.heel_back, "toe_front": opts.toe_front,
-               "mapping": mapping, "source": motion.source}
+               "mapping": mapping, "hat_fraction": opts.hat_fraction, "source": motion.source}
     return body, BodySpec("bvh", {SKELETON_FILE: text}, options)
 
 
@@ -147,7 +147,8 @@ def body_from_spec(spec: BodySpec) -> BodyModel:
             mapping[joint] = SegmentTag(kind, side)
         opts = BvhBodyOptions(total_mass=o["total_mass"], units=o["units"], up_axis=o["up_axis"],
                               mapping=mapping or None, sole_width=o.get("sole_width"),
-                              heel_back=o.get("heel_back"), toe_front=o.get("toe_front"))
+                              heel_back=o.get("heel_back"), toe_front=o.get("toe_front"),
+                              hat_fraction=o.get("hat_fraction"))
         return body_from_bvh(motion, opts)
     if spec.kind == "urdf":
         with tempfile.TemporaryDirectory(prefix="livezmp-body-") as tmp:

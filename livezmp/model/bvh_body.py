@@ -47,6 +47,7 @@ class BvhBodyOptions:
     sole_width: float | None = None
     heel_back: float | None = None
     toe_front: float | None = None
+    hat_fraction: float | None = None  # head, arms and trunk above the lower trunk, of total mass (subject file)
 
 
 def _rot_to(d: np.ndarray) -> np.ndarray:
@@ -77,13 +78,24 @@ def _segment_vector(motion: BvhMotion, tags: list[SegmentTag], i: int, scale: fl
     return np.zeros(3)
 
 
-def _mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
+_BELOW_HAT = ("lower_trunk", "thigh", "shank", "foot")
+
+
+def _mass_table(tags: list[SegmentTag], motion: BvhMotion,
+                hat_fraction: float | None = None) -> dict[int, tuple[str, float, bool]]:
     """joint index → (de Leva kind, mass fraction, proximal-is-up) for every massive joint;
     fractions renormalised so that a skeleton missing segments (no arms, say) keeps its
-    total mass."""
+    total mass. ``hat_fraction``: the head, arms and trunk above the lower trunk together weigh
+    this part of the body (a subject file's), the other segments the rest, each group keeping its
+    proportions."""
     out = _raw_mass_table(tags, motion)
     total = sum(f for _, f, _ in out.values())
-    return {i: (k, f / total, up) for i, (k, f, up) in out.items()}
+    out = {i: (k, f / total, up) for i, (k, f, up) in out.items()}
+    hat = sum(f for k, f, _ in out.values() if k not in _BELOW_HAT)
+    if hat_fraction is None or not 0.0 < hat < 1.0:
+        return out
+    scale = {True: (1.0 - hat_fraction) / (1.0 - hat), False: hat_fraction / hat}
+    return {i: (k, f * scale[k in _BELOW_HAT], up) for i, (k, f, up) in out.items()}
 
 
 def _raw_mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
@@ -140,7 +152,7 @@ def _build(motion: BvhMotion, tags: list[SegmentTag], scale: float, world_from_i
     q_index: list[int] = []
     anchor: list[tuple[int, pin.SE3]] = []  # (pin joint, placement in it) of each BVH joint
     stature = _stature(motion, tags, scale)
-    masses = _mass_table(tags, motion)
+    masses = _mass_table(tags, motion, opts.hat_fraction)
     for i, j in enumerate(motion.joints):
         pos_axes = [_AXES[c[0]] for c in j.channels if c.endswith("position")]
         seen_rot = False

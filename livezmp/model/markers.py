@@ -57,6 +57,9 @@ _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
           "LWRB", "RWRB")
 _TRUNK = ("C7", "T10", "CLAV", "STRN")
+# the HAT's frame as virtual points (origin, anterior, left, proximal axis tips: Plug-in Gait's segment-axis
+# convention), written by `livezmp correct` when it leans the HAT; when present they orient the placed HAT
+HAT_POINTS = ("HATO", "HATA", "HATL", "HATP")
 SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
@@ -150,6 +153,7 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
             roles[s + m] = s + m if s + m in have else None
         for m, alts in _MEDIAL.items():
             roles[s + m + "_med"] = next((s + a for a in alts if s + a in have), None)
+    roles.update({p: p for p in HAT_POINTS if set(HAT_POINTS) <= have})
     upper = [u for u in _UPPER if u in have]
     if len(upper) == len(_UPPER):
         roles.update({u: u for u in _UPPER})
@@ -403,7 +407,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     elif "C7" in m:
         seg["thorax"] = seg["headarms"] = _thorax(m)
     else:
-        seg["hat"] = (pelvis_origin, upright)
+        seg["hat"] = (pelvis_origin, upright) if "HATO" not in m else \
+            (m["HATO"], np.stack([_unit(m[p] - m["HATO"]) for p in HAT_POINTS[1:]], axis=-1))
     for side, (s, sign, t) in _SIDES.items():
         hip, knee, ankle = centres["hip"][side], centres["knee"][side], centres["ankle"][side]
         thigh = _frame(hip - knee, sign * (m[s + "KNE"] - knee))
@@ -662,7 +667,8 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
                     f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
                     + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
-                    + ("; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
+                    + ("; oriented by the file's HAT points (" + ", ".join(HAT_POINTS) + ")" if "HATO" in m else
+                       "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
                        f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
                     + ("" if opts.hat_sway_gain is None or full else
                        "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip (subject file)".format(

@@ -38,9 +38,10 @@ class LoadedMotion:
 
 
 def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: BvhBodyOptions | None = None,
-                urdf_options: UrdfBodyOptions | None = None, c3d_mass: float | None = None) -> LoadedMotion:
+                urdf_options: UrdfBodyOptions | None = None, c3d_mass: float | None = None,
+                markers: MarkerBodyOptions | None = None) -> LoadedMotion:
     """Load ``path``: ``.bvh`` or ``.c3d`` on its own, ``.csv`` with ``robot`` (a URDF). A C3D's body
-    weighs ``c3d_mass`` kg, else the file's subject mass, else 70 kg (plates are for
+    (``markers`` options) weighs ``c3d_mass`` kg, else the file's subject mass, else 70 kg (plates are for
     :mod:`livezmp.offline.gaitlab`)."""
     p = check_input_file(path, "motion file")
     suffix = p.suffix.lower()
@@ -53,7 +54,8 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         return LoadedMotion(body, times, motion.frames, str(p), bvh=motion)
     if suffix == ".c3d":
         trial = read_c3d(p)
-        take = body_from_markers(trial, MarkerBodyOptions(total_mass=c3d_mass or trial.mass_kg or DEFAULT_MASS))
+        take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),
+                                                total_mass=c3d_mass or trial.mass_kg or DEFAULT_MASS))
         times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
         return LoadedMotion(take.body, times, take.frames, str(p), c3d=trial)
     if suffix == ".csv":

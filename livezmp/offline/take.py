@@ -51,15 +51,18 @@ class TakeOptions:
     ground: float | None = None
     mode: str = "full"
     tolerance_mm: float = VALIDATED_P95_MM
-    subject: str | None = None
+    subject: str | None = None  # subject file (livezmp calibrate): a BVH's HAT mass fraction, a C3D's HAT
     markers: str | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
         mapping = load_mapping(self.mapping) if self.mapping else None
+        subject = load_subject(self.subject) if self.subject else None
+        if subject is not None and self.robot is not None:
+            raise InputError(f"{self.subject}: a subject file describes a person (BVH or C3D takes), not a robot")
         bvh = BvhBodyOptions(total_mass=self.mass or DEFAULT_MASS, units=self.units, up_axis=self.up, mapping=mapping,
-                             sole_width=self.sole_width)
+                             sole_width=self.sole_width, hat_fraction=subject and subject.hat_fraction)
         return load_motion(path, self.robot, bvh, UrdfBodyOptions(config=self.robot_config),
-                           c3d_mass=self.mass)
+                           c3d_mass=self.mass, markers=subject.marker_options() if subject else None)
 
 
 def take_config(loaded: LoadedMotion, mode: str, ground: float | None) -> PipelineConfig:

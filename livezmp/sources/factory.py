@@ -19,7 +19,7 @@ frame time (the estimator is tuned to it; frames still carry their own times).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
@@ -59,6 +59,7 @@ class SourceOptions:
     loop: bool = False
     mass: float | None = None  # kg; None: a C3D's subject mass, else the BVH default
     calibration: str | None = None  # a C3D trial calibrating a capture stream's marker body
+    markers: MarkerBodyOptions = field(default_factory=MarkerBodyOptions)  # a marker body's options (mass set here)
 
 
 def _replay(path: Path, o: SourceOptions) -> Source:
@@ -76,7 +77,7 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         return FileReplaySource(str(path), body, spec, times, sk.motion.frames, o.speed, o.loop)
     if suffix == ".c3d":
         trial = read_c3d(path)
-        take, spec = marker_body(trial, MarkerBodyOptions(total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))
+        take, spec = marker_body(trial, replace(o.markers, total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))
         times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
         return FileReplaySource(str(path), take.body, spec, times, take.frames, o.speed, o.loop)
     if suffix == ".csv":
@@ -131,7 +132,7 @@ def _capture(spec: str, o: SourceOptions) -> Source:
     mass = o.mass or (trial.mass_kg if trial else None) or DEFAULT_MASS
     mocap = open_mocap_source(spec)
     try:
-        return MarkerStreamSource(mocap, trial, MarkerBodyOptions(total_mass=mass))
+        return MarkerStreamSource(mocap, trial, replace(o.markers, total_mass=mass))
     except BaseException:
         mocap.close()
         raise

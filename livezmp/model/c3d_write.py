@@ -1,0 +1,74 @@
+"""Write a C3D trial back with some of its points moved (ezc3d): everything else — analog channels,
+force platforms, events, parameters, residuals of points not moved — is copied from the source file.
+
+Points that are not positions (the POINT group's ANGLES, FORCES, MOMENTS, POWERS, SCALARS and REACTIONS
+lists, which model outputs fill with angles and loads) are named by :func:`non_position_labels`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.errors import InputError
+from livezmp.model.c3d import strip_prefix
+
+NON_POSITION = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
+_TO_METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+
+
+def _open(path: str | Path):
+    import ezc3d  # imported here: only C3D files need it
+
+    try:
+        return ezc3d.c3d(str(path))
+    except Exception as e:  # ezc3d raises plain RuntimeError/ValueError  # noqa: BLE001
+        raise InputError(f"{path}: not a readable C3D file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") \
+            from None
+
+
+def non_position_labels(path: str | Path) -> set[str]:
+    """Labels (prefix stripped) of the points of ``path`` that hold angles, loads or scalars."""
+    point = _open(path)["parameters"]["POINT"]
+    return {strip_prefix(v) for k in NON_POSITION if k in point for v in point[k]["value"]}
+
+
+def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np.ndarray],
+                       added: dict[str, np.ndarray], first_frame: int) -> None:
+    """Copy ``source`` to ``dest`` with points replaced: ``moved`` point index -> (N, 3) positions (m, the
+    file's world frame) for frames ``first_frame`` .. ``first_frame + N - 1`` (NaN rows: left as they were);
+    ``added``: label -> (N, 3) m, new points (or replacing points of that label), unseen outside those
+    frames."""
+    c3d = _open(source)
+    point = c3d["parameters"]["POINT"]
+    scale = 1.0 / _TO_METRES[str(point["UNITS"]["value"][0]).strip().lower()]
+    pts = np.array(c3d["data"]["points"], dtype=float)
+    residuals = np.array(c3d["data"]["meta_points"]["residuals"], dtype=float)
+    masks = c3d["data"]["meta_points"].get("camera_masks")
+    labels = list(point["LABELS"]["value"])
+    stripped = [strip_prefix(s) for s in labels]
+    new = [lab for lab in added if lab not in stripped]
+    if new:
+        pts = np.concatenate([pts, np.zeros((4, len(new), pts.shape[2]))], axis=1)
+        pts[3, -len(new):] = 1.0
+        residuals = np.concatenate([residuals, -np.ones((1, len(new), pts.shape[2]))], axis=1)
+        labels += new
+        stripped += new
+        if masks is not None:
+            masks = np.concatenate([np.asarray(masks), np.zeros((masks.shape[0], len(new), pts.shape[2]), bool)], 1)
+    span = slice(first_frame, first_frame + len(next(iter({**moved, **added}.values()))))
+    for i, xyz in [*moved.items(), *((stripped.index(k), v) for k, v in added.items())]:
+        ok = np.isfinite(xyz).all(axis=1)
+        block = pts[:3, i, span]
+        block[:, ok] = xyz[ok].T * scale
+        if stripped[i] in added:
+            residuals[0, i, span] = np.where(ok, 0.0, -1.0)
+    c3d["data"]["points"] = pts
+    c3d["data"]["meta_points"]["residuals"] = residuals
+    if masks is not None:
+        c3d["data"]["meta_points"]["camera_masks"] = masks
+    point["LABELS"]["value"] = labels
+    if new and "DESCRIPTIONS" in point:
+        point["DESCRIPTIONS"]["value"] = list(point["DESCRIPTIONS"]["value"]) + ["livezmp HAT axis"] * len(new)
+    c3d.write(str(dest))
