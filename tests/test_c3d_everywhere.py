@@ -164,7 +164,7 @@ def test_gait_features_of_the_plugin_gait_walk_match_its_plates():
     assert f.frequency == pytest.approx(1 / stride_time, rel=0.05)
     assert f.stride_length == pytest.approx(stride, rel=0.03)
     ahead = (strikes[2][1] - strikes[0][1]) / stride  # step lengths along the walk (feet are apart sideways)
-    steps = [float((b[1] - a[1]) @ ahead) for a, b in zip(strikes, strikes[1:])]
+    steps = [float((b[1] - a[1]) @ ahead) for a, b in zip(strikes[:-1], strikes[1:], strict=True)]
     assert np.mean(steps) == pytest.approx(f.stride_length / 2, rel=0.03)
 
 

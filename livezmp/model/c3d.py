@@ -132,18 +132,25 @@ def _plates(c3d: dict, source: str) -> list[PlateRecord]:
     return out
 
 
-def read_c3d(path: str | Path) -> C3dTrial:
-    """Read ``path`` (see module docstring). Raises InputError for files ezc3d cannot read."""
+def open_c3d(path: str | Path, plates: bool = False):
+    """The ezc3d object of ``path`` (``plates``: with ezc3d's force-platform data). Raises InputError for
+    files ezc3d cannot read."""
     import ezc3d  # imported here: only C3D input needs it
 
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")
     try:
-        c3d = ezc3d.c3d(str(p), extract_forceplat_data=True)
+        return ezc3d.c3d(str(p), extract_forceplat_data=plates)
     except Exception as e:  # ezc3d raises plain RuntimeError/ValueError with a C++ message  # noqa: BLE001
         raise InputError(f"{p}: not a readable C3D file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") \
             from None
+
+
+def read_c3d(path: str | Path) -> C3dTrial:
+    """Read ``path`` (see module docstring). Raises InputError for files ezc3d cannot read."""
+    p = Path(path)
+    c3d = open_c3d(p, plates=True)
     groups = c3d["parameters"]
     unit = str((_param(groups, "POINT", "UNITS") or ["mm"])[0]).strip().lower()
     if unit not in _LENGTH:

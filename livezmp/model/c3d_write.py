@@ -11,26 +11,15 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.errors import InputError
-from livezmp.model.c3d import strip_prefix
+from livezmp.model.c3d import open_c3d, strip_prefix
 
 NON_POSITION = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
 _TO_METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 
 
-def _open(path: str | Path):
-    import ezc3d  # imported here: only C3D files need it
-
-    try:
-        return ezc3d.c3d(str(path))
-    except Exception as e:  # ezc3d raises plain RuntimeError/ValueError  # noqa: BLE001
-        raise InputError(f"{path}: not a readable C3D file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") \
-            from None
-
-
 def non_position_labels(path: str | Path) -> set[str]:
     """Labels (prefix stripped) of the points of ``path`` that hold angles, loads or scalars."""
-    point = _open(path)["parameters"]["POINT"]
+    point = open_c3d(path)["parameters"]["POINT"]
     return {strip_prefix(v) for k in NON_POSITION if k in point for v in point[k]["value"]}
 
 
@@ -40,7 +29,7 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
     file's world frame) for frames ``first_frame`` .. ``first_frame + N - 1`` (NaN rows: left as they were);
     ``added``: label -> (N, 3) m, new points (or replacing points of that label), unseen outside those
     frames."""
-    c3d = _open(source)
+    c3d = open_c3d(source)
     point = c3d["parameters"]["POINT"]
     scale = 1.0 / _TO_METRES[str(point["UNITS"]["value"][0]).strip().lower()]
     pts = np.array(c3d["data"]["points"], dtype=float)
