@@ -15,11 +15,15 @@ from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
 from livezmp.gait.features import walk_features
 from livezmp.gait.take import load_take
+from livezmp.model.bvh import read_bvh, write_bvh
+from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import read_c3d
+from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
 from livezmp.model.markers import HAT_POINTS, body_from_markers
 from livezmp.recording.reader import iter_messages
 from tests.data_paths import DATA
+from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
 
 CGM = DATA / "c3d" / "cgm24_walking01_forceplate.c3d"
 PIG = DATA / "c3d" / "walk_plugingait_forceplates.c3d"
@@ -127,9 +131,39 @@ def test_corrected_c3d_keeps_plates_analogs_events_and_model_outputs(corrected):
     assert np.array_equal(old["data"]["points"][:, angle], new["data"]["points"][:, angle])
 
 
+def _bvh_positions(path, joint: str) -> np.ndarray:
+    """(F, 3) m: where the BVH at ``path`` puts ``joint``, internal frame (z up)."""
+    body = body_from_bvh(read_bvh(path), BvhBodyOptions(units="cm", up_axis="z"))
+    motion, data = read_bvh(path), body.model.createData()
+    fid = body.model.getFrameId(joint)
+    out = []
+    for row in motion.frames:
+        pin.framesForwardKinematics(body.model, data, body.channels_to_q(row))
+        out.append(data.oMf[fid].translation.copy())
+    return np.array(out)
+
+
+def test_a_marker_chain_written_as_bvh_places_its_segments_exactly(tmp_path):
+    """The synthetic full-body subject (arms swinging) as BVH (what `correct TRIAL.c3d -o out.bvh` writes):
+    the BVH puts the ankles, knees and wrists where the markers put them, under names a skeleton reader knows."""
+    path = tmp_path / "full.c3d"
+    write_lab_c3d(path, PLATES, full_body=True)
+    take = body_from_markers(read_c3d(path))
+    names = segment_names(take.body)
+    write_bvh(chain_to_bvh(take.body, chain_frames(names, take.frames), 0.01, str(path)), tmp_path / "full.bvh")
+    for joint, (seg, centre) in {"LeftFoot": ("foot_l", take.centres["ankle"]["left"]),
+                                 "RightLeg": ("shank_r", take.centres["knee"]["right"]),
+                                 "LeftHand": ("hand_l", None)}.items():
+        if centre is None:
+            centre = take.frames[:, 6 * names.index(seg):][:, :3]
+        assert np.abs(_bvh_positions(tmp_path / "full.bvh", joint) - centre).max() < 1e-6, joint
+    names = [j.name for j in read_bvh(tmp_path / "full.bvh").joints]
+    assert {"Hips", "Spine", "Head", "LeftArm", "RightForeArm", "LeftHand", "RightUpLeg"} <= set(names)
+
+
 @pytest.mark.parametrize(("motion", "output", "message"), [
     (DATA / "bvh" / "bandai" / "walk_normal_001.bvh", "out.c3d", "only a C3D take"),
-    (CGM, "out.bvh", "corrected into a C3D file"),
+    (CGM, "out.csv", "written as C3D"),
 ])
 def test_correct_output_format_it_cannot_write_is_one_line(motion, output, message, tmp_path, capsys):
     assert main(["correct", str(motion), "-o", str(tmp_path / output)]) == 2

@@ -23,10 +23,10 @@ def cmd_correct(args: argparse.Namespace) -> int:
     check_output_path(args.report, "--report")
     c3d_in, c3d_out = (str(p).lower().endswith(".c3d") for p in (args.motion, args.output))
     if c3d_in:
-        if not c3d_out:
-            raise InputError(f"{args.output}: a C3D take is corrected into a C3D file (-o ending in .c3d); "
-                             "writing it as BVH is not supported")
-        return _correct_c3d(args)
+        if not (c3d_out or str(args.output).lower().endswith(".bvh")):
+            raise InputError(f"{args.output}: a C3D take is written as C3D (its markers moved) or BVH (its segments); "
+                             "give -o ending in .c3d or .bvh")
+        return _correct_c3d(args, c3d_out)
     if c3d_out:
         raise InputError(f"{args.output}: only a C3D take can be written as C3D (its markers are moved); "
                          f"{args.motion} is written in its own format")
@@ -40,11 +40,12 @@ def cmd_correct(args: argparse.Namespace) -> int:
     return 0
 
 
-def _correct_c3d(args: argparse.Namespace) -> int:
-    """A gait-lab take: its marker body corrected as a chain, its markers moved, written as C3D."""
+def _correct_c3d(args: argparse.Namespace, as_c3d: bool) -> int:
+    """A gait-lab take: its marker body corrected as a chain, written as C3D (markers moved) or BVH."""
     from livezmp.correct.marker_take import correct_marker_take
     from livezmp.model.c3d import read_c3d
     from livezmp.model.c3d_write import non_position_labels, write_moved_points
+    from livezmp.model.marker_bvh import chain_to_bvh
 
     check_body_options(args)
     markers = load_subject(args.subject).marker_options() if args.subject else MarkerBodyOptions()
@@ -52,13 +53,16 @@ def _correct_c3d(args: argparse.Namespace) -> int:
     fix = correct_marker_take(trial, LabOptions(mass=args.mass, mode=args.mode, markers=markers),
                               limits_from_args(args), non_position_labels(args.motion),
                               progress=lambda message: print(f"correct: {message}", flush=True))
-    write_moved_points(args.motion, args.output, fix.moved, fix.added, fix.first_frame)
+    if as_c3d:
+        write_moved_points(args.motion, args.output, fix.moved, fix.added, fix.first_frame)
+    else:
+        write_bvh(chain_to_bvh(fix.body, fix.result.frames, 1.0 / trial.rate, args.motion), args.output)
     report = {"source": args.motion, "output": args.output, "mode": args.mode, **fix.result.report(),
               "max_stance_foot_marker_move_mm": round(fix.stance_marker_mm, 4),
               "markers_moved": len(fix.moved), "hat_points_written": list(fix.added),
               "points_unchanged": fix.unchanged}
     _tell(report, args)
-    if fix.unchanged:
+    if fix.unchanged and as_c3d:
         print(f"copied unchanged (angles, loads, or never seen): {len(fix.unchanged)} points; "
               "model outputs describe the motion before the correction")
     return 0

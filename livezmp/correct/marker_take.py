@@ -20,6 +20,7 @@ import numpy as np
 
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.solver import CorrectionResult, correct_motion
+from livezmp.model.body import BodyModel
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, segment_names, world_poses
 from livezmp.model.markers import HAT_POINTS, _need
@@ -35,12 +36,13 @@ _SIDE = {"L": "_l", "R": "_r"}
 
 @dataclass
 class MarkerCorrection:
-    """``result`` the correction of the chain body; ``moved`` point index -> (N, 3) corrected positions
+    """``result`` the correction of the chain ``body``; ``moved`` point index -> (N, 3) corrected positions
     (m, the file's frame) over the take's frames from ``first_frame``; ``added`` the HAT's virtual points;
     ``attached`` label -> segment; ``stance_marker_mm`` the largest move of a weight-bearing foot's
     markers; ``unchanged`` the points copied as they were."""
 
     result: CorrectionResult
+    body: BodyModel  # the chain body corrected
     moved: dict[int, np.ndarray]
     added: dict[str, np.ndarray]
     first_frame: int
@@ -107,5 +109,5 @@ def correct_marker_take(trial: C3dTrial, lab_options: LabOptions, limits: Correc
             d = np.linalg.norm(moved[i] - trial.points[span, i], axis=1)[bearing]
             worst = max(worst, float(np.nanmax(d, initial=0.0)))
     unchanged = [lab for i, lab in enumerate(trial.labels) if i not in attached and lab not in HAT_POINTS]
-    return MarkerCorrection(result, moved, added, free.first_frame,
+    return MarkerCorrection(result, body, moved, added, free.first_frame,
                             {trial.labels[i]: s for i, s in attached.items()}, 1000 * worst, unchanged)
