@@ -5,10 +5,12 @@ against what the force plates say, `monitor --subject` against `analyze --subjec
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import ezc3d
 import numpy as np
 import pinocchio as pin
+import pyarrow.parquet as pq
 import pytest
 
 from livezmp.balance.plates import unloaded_offset
@@ -21,6 +23,8 @@ from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
 from livezmp.model.markers import HAT_POINTS, body_from_markers
+from livezmp.offline.jobs import GaitJob
+from livezmp.offline.library import find_takes, run_library
 from livezmp.offline.take import TakeOptions, analyse_loaded
 from livezmp.recording.reader import iter_messages
 from tests.data_paths import DATA
@@ -221,6 +225,17 @@ def test_gait_features_of_the_cgm_walk_match_its_foot_strikes():
     assert f.cycles.n_cycles == 4
     assert 120 * f.frequency == pytest.approx(120 / np.mean(strides), rel=0.01)  # cadence, steps/min
     assert f.stride_length == pytest.approx(np.mean(lengths), rel=0.03)
+
+
+def test_batch_gait_reads_c3d_walks_as_gait_does(tmp_path):
+    job = GaitJob()
+    progress = run_library(None, find_takes([str(CGM), str(PIG)], tmp_path, job), tmp_path, job)
+    assert (progress.done, progress.failed) == (2, 0)
+    rows = {Path(r["file"]).name: r for r in pq.read_table(tmp_path / "takes.parquet").to_pylist()}
+    for path in (CGM, PIG):
+        f = walk_features(load_take(path))
+        assert rows[path.name]["frequency_hz"] == pytest.approx(f.frequency, abs=1e-6)
+        assert rows[path.name]["stride_length_m"] == pytest.approx(f.stride_length, abs=1e-6)
 
 
 def test_gait_compare_reads_c3d_and_synth_refuses_it_in_one_line(tmp_path, capsys):

@@ -157,7 +157,7 @@ class GaitJob(Job):
                          ("speed_mps", "float64"))
 
     def suffixes(self) -> set[str]:
-        return {".bvh"} | ({".csv"} if self.urdf else set())
+        return {".bvh", ".c3d"} | ({".csv"} if self.urdf else set())
 
     def outputs(self, path: Path) -> tuple[str, ...]:
         return (FEATURES_JSON,)
