@@ -20,6 +20,7 @@ from livezmp.gait.take import load_take
 from livezmp.model.bvh import read_bvh, write_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import read_c3d
+from livezmp.model.c3d_write import write_moved_points
 from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
 from livezmp.model.markers import HAT_POINTS, body_from_markers
@@ -134,6 +135,19 @@ def test_corrected_c3d_keeps_plates_analogs_events_and_model_outputs(corrected):
     angle = labels.index("LKneeAngles")
     assert "LKneeAngles" in report["points_unchanged"]
     assert np.array_equal(old["data"]["points"][:, angle], new["data"]["points"][:, angle])
+
+
+def test_written_c3d_keeps_latin1_text_and_every_channel(tmp_path):
+    """The Plug-in Gait walk's analog units hold a Latin-1 byte (mm/s², which ezc3d reads as a surrogate escape
+    and could not write back): the copy keeps the units, points and analogs, and adds the points asked for."""
+    hat = np.zeros((50, 3))
+    write_moved_points(PIG, tmp_path / "copy.c3d", {}, {"HATO": hat}, 10)
+    old, new = ezc3d.c3d(str(PIG)), ezc3d.c3d(str(tmp_path / "copy.c3d"))
+    assert "mm/s²" in new["parameters"]["ANALOG"]["UNITS"]["value"]
+    assert np.array_equal(old["data"]["analogs"], new["data"]["analogs"])
+    n = old["data"]["points"].shape[1]
+    assert np.array_equal(np.nan_to_num(old["data"]["points"]), np.nan_to_num(new["data"]["points"][:, :n]))
+    assert read_c3d(tmp_path / "copy.c3d").labels[-1] == "HATO"
 
 
 def _bvh_positions(path, joint: str) -> np.ndarray:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.errors import InputError
 from livezmp.model.c3d import open_c3d, strip_prefix
 
 NON_POSITION = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
@@ -53,6 +54,7 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
         block[:, ok] = xyz[ok].T * scale
         if stripped[i] in added:
             residuals[0, i, span] = np.where(ok, 0.0, -1.0)
+    _latin1_text(c3d["parameters"])
     c3d["data"]["points"] = pts
     c3d["data"]["meta_points"]["residuals"] = residuals
     if masks is not None:
@@ -60,4 +62,18 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
     point["LABELS"]["value"] = labels
     if new and "DESCRIPTIONS" in point:
         point["DESCRIPTIONS"]["value"] = list(point["DESCRIPTIONS"]["value"]) + ["livezmp HAT axis"] * len(new)
-    c3d.write(str(dest))
+    try:
+        c3d.write(str(dest))
+    except (ValueError, RuntimeError, NotImplementedError) as e:  # ezc3d's messages are one line
+        raise InputError(f"{source}: its parameters cannot be written back by ezc3d ({e})") from None
+
+
+def _latin1_text(parameters: dict) -> None:
+    """ezc3d reads text bytes it cannot decode as surrogate escapes, and cannot write those back: such
+    strings are read as Latin-1 instead (C3D text is ASCII; the extended bytes labs write, such as the
+    ``²`` of ``mm/s²``, are Latin-1). In place."""
+    for group in parameters.values():
+        for p in group.values():
+            if isinstance(p, dict) and p.get("type") == -1 and isinstance(p.get("value"), list):
+                p["value"] = [v.encode("utf-8", "surrogateescape").decode("latin-1") if isinstance(v, str) else v
+                              for v in p["value"]]
