@@ -162,11 +162,32 @@ def _bvh_positions(path, joint: str) -> np.ndarray:
     return np.array(out)
 
 
-def test_a_marker_chain_written_as_bvh_places_its_segments_exactly(tmp_path):
-    """The synthetic full-body subject (arms swinging) as BVH (what `correct TRIAL.c3d -o out.bvh` writes):
-    the BVH puts the ankles, knees and wrists where the markers put them, under names a skeleton reader knows."""
-    path = tmp_path / "full.c3d"
-    write_lab_c3d(path, PLATES, full_body=True)
+@pytest.fixture(scope="module")
+def full_lab(tmp_path_factory):
+    """The synthetic gait lab's full-body subject (swaying on two plates, arms swinging) and its correction."""
+    d = tmp_path_factory.mktemp("full")
+    write_lab_c3d(d / "full.c3d", PLATES, full_body=True)
+    assert main(["correct", str(d / "full.c3d"), "-o", str(d / "fixed.c3d"), "--report", str(d / "r.json")]) == 0
+    return d, json.loads((d / "r.json").read_text())
+
+
+def test_corrected_generated_c3d_keeps_its_feet_and_analyses_inside(full_lab):
+    """Both feet stand on the plates all along: every foot marker stays within a millimetre in every frame; the
+    trunk, head and arms have their own markers, so no HAT points are written."""
+    d, report = full_lab
+    before, after = _analyze(d / "full.c3d", d / "a0.json"), _analyze(d / "fixed.c3d", d / "a1.json")
+    assert before["out_of_support_frames"] >= 30 and after["out_of_support_frames"] == 0
+    old, new = read_c3d(d / "full.c3d"), read_c3d(d / "fixed.c3d")
+    assert new.labels == old.labels and report["hat_points_written"] == []
+    feet = [lab for lab in old.labels if lab[1:] in ("ANK", "HEE", "TOE")]
+    assert max(np.nanmax(np.linalg.norm(new.marker(lab) - old.marker(lab), axis=1)) for lab in feet) < 1e-3
+    assert np.nanmax(np.linalg.norm(new.marker("C7") - old.marker("C7"), axis=1)) > 0.005  # the trunk leaned
+
+
+def test_a_marker_chain_written_as_bvh_places_its_segments_exactly(full_lab, tmp_path):
+    """The synthetic full-body subject as BVH (what `correct TRIAL.c3d -o out.bvh` writes): the BVH puts the
+    ankles, knees and wrists where the markers put them, under names a skeleton reader knows."""
+    path = full_lab[0] / "full.c3d"
     take = body_from_markers(read_c3d(path))
     names = segment_names(take.body)
     write_bvh(chain_to_bvh(take.body, chain_frames(names, take.frames), 0.01, str(path)), tmp_path / "full.bvh")
