@@ -5,6 +5,7 @@ against what the force plates say, `monitor --subject` against `analyze --subjec
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import ezc3d
@@ -24,10 +25,12 @@ from livezmp.model.c3d_write import write_moved_points
 from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
 from livezmp.model.markers import HAT_POINTS, body_from_markers
+from livezmp.offline.calibrate import Subject
 from livezmp.offline.jobs import GaitJob
 from livezmp.offline.library import find_takes, run_library
 from livezmp.offline.take import TakeOptions, analyse_loaded
 from livezmp.recording.reader import iter_messages
+from livezmp.sources.marker_stream import MarkerStreamSource
 from tests.data_paths import DATA
 from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
 
@@ -336,3 +339,17 @@ def test_bad_subject_for_monitor_is_one_line(subject, source, message, tmp_path,
     assert main(["monitor", str(path), "--speed", "0", "--subject", str(tmp_path / "s.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err
+
+
+def test_a_capture_streams_marker_body_takes_the_subjects_hat():
+    """What `monitor lsl://... --subject` builds: the marker stream's body with the subject's HAT (45 % of the
+    mass) instead of the table's."""
+    from tests.test_marker_stream import FakeStream  # a stream handing out a trial's markers
+
+    trial = read_c3d(CGM)
+    subject = Subject(0.45, (0.03, 0.0, 0.33))
+    src = MarkerStreamSource(FakeStream(trial.labels, trial.points[:60]), trial,
+                             replace(subject.marker_options(), total_mass=70.0))
+    model = src.body.model
+    hat = model.inertias[src.body.channel_names.index("hat.roll") + 1].mass
+    assert hat == pytest.approx(0.45 * 70.0)
