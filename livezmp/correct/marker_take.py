@@ -51,21 +51,25 @@ class MarkerCorrection:
     unchanged: list[str]
 
 
-def role_segment(role: str) -> str:
+def role_segment(role: str) -> str | None:
     """The segment a marker role belongs to: ``LKNE`` -> ``thigh_l``, ``LANK_med`` -> ``shank_l``,
-    ``LASI`` -> ``pelvis``, ``HATO`` -> ``hat``."""
+    ``LASI`` -> ``pelvis``, ``HATO`` -> ``hat``; None for a role not in the table (a cluster set's)."""
     if role in HAT_POINTS:
         return "hat"
     base = role.removesuffix("_med")
-    seg = _SEGMENT_OF_ROLE.get(base) or _SEGMENT_OF_ROLE[base[1:]]
-    return seg if seg in ("pelvis", "thorax", "head") else seg + _SIDE[base[0]]
+    seg = _SEGMENT_OF_ROLE.get(base) or _SEGMENT_OF_ROLE.get(base[1:])
+    if seg is None or seg in ("pelvis", "thorax", "head"):
+        return seg
+    return seg + _SIDE[base[0]] if base[0] in _SIDE else None
 
 
-def attach(trial: C3dTrial, skip: set[str]) -> dict[int, str]:
-    """Point index -> segment: the marker set's markers by role; other position points (not in ``skip``,
-    seen at least once) with the marker nearest to them (median distance over the frames)."""
+def attach(trial: C3dTrial, skip: set[str], segments: list[str]) -> dict[int, str]:
+    """Point index -> segment (of ``segments``): the marker set's markers by role; other position points
+    (not in ``skip``, seen at least once, or markers whose role has no segment here) with the marker
+    nearest to them (median distance over the frames)."""
     roles = {label: role for role, label in _need(trial).items() if label is not None}
-    out = {trial.labels.index(lab): role_segment(role) for lab, role in roles.items() if role not in HAT_POINTS}
+    out = {trial.labels.index(lab): role_segment(role) for lab, role in roles.items()
+           if role not in HAT_POINTS and role_segment(role) in segments}
     known = list(out)
     for i, label in enumerate(trial.labels):
         if i in out or label in skip or label in HAT_POINTS or not np.isfinite(trial.points[:, i]).any():
@@ -88,7 +92,7 @@ def correct_marker_take(trial: C3dTrial, lab_options: LabOptions, limits: Correc
     before, after = world_poses(names, free.frames), chain_poses(names, result.frames)
     r_in = free.body.world_from_input
     span = slice(free.first_frame, free.first_frame + len(free.frames))
-    attached = attach(trial, skip)
+    attached = attach(trial, skip, names)
     moved = {}
     for i, seg in attached.items():
         (o0, r0), (o1, r1) = before[seg], after[seg]

@@ -4,8 +4,9 @@ The marker body (:mod:`livezmp.model.markers`) places every segment freely in th
 channels each: x, y, z, yaw, pitch, roll), so that soft-tissue motion cannot break a chain. A balance
 correction needs a chain: rotating the pelvis must carry the trunk with it, and a thigh rotation the
 rest of its leg. :func:`chain_body` gives the same segments, inertias, frames and feet hung on a tree
-(pelvis the root; trunk or HAT and thighs on the pelvis, shank on thigh, foot on shank, head and upper
-arms on the thorax, forearm on upper arm, hand on forearm), each child with six channels relative to
+(pelvis the root; trunk or HAT and thighs on the pelvis, shank on thigh, foot on shank, head, upper
+arms and a trunk-marker set's head-and-arms block on the thorax, forearm on upper arm, hand on
+forearm), each child with six channels relative to
 its parent's frame: the translation of its origin (m, parent axes, so the small joint-centre motion
 of soft tissue is kept exactly) and its rotation as intrinsic Y-X-Z angles (rad: flexion about the
 parent's lateral axis, then ab/adduction, then axial rotation, the joint-coordinate order of Grood &
@@ -25,7 +26,8 @@ import pinocchio as pin
 from livezmp.model.body import BodyModel, point_mass_copy
 from livezmp.model.markers import _euler_zyx
 
-PARENT = {"hat": "pelvis", "thorax": "pelvis", "head": "thorax", "thigh": "pelvis", "shank": "thigh", "foot": "shank",
+PARENT = {"hat": "pelvis", "thorax": "pelvis", "head": "thorax", "headarms": "thorax", "thigh": "pelvis",
+          "shank": "thigh", "foot": "shank",
           "upperarm": "thorax", "forearm": "upperarm", "hand": "forearm"}
 _CHILD_CHANNELS = ("x", "y", "z", "flex", "abd", "rot")  # rotations about the y, x, z axes, in that order
 _CHILD_JOINTS = (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRY, pin.JointModelRX,
