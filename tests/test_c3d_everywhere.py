@@ -26,7 +26,7 @@ from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
 from livezmp.model.markers import HAT_POINTS, body_from_markers
 from livezmp.offline.calibrate import Subject
-from livezmp.offline.jobs import GaitJob
+from livezmp.offline.jobs import CorrectJob, GaitJob
 from livezmp.offline.library import find_takes, run_library
 from livezmp.offline.take import TakeOptions, analyse_loaded
 from livezmp.recording.reader import iter_messages
@@ -124,6 +124,20 @@ def test_corrected_c3d_moves_markers_rigidly_and_keeps_weight_bearing_feet(corre
     for lab in ("LHEE", "LTOE", "LANK"):
         assert np.nanmax(move(lab)[loaded]) < 1e-3
     assert report["max_stance_foot_marker_move_mm"] < 1.0
+
+
+def test_batch_correct_of_a_c3d_take_writes_what_correct_writes(corrected):
+    """`batch correct` takes C3D takes through the same per-take function: the same file, the same report."""
+    d, report = corrected
+    lib = d / "lib"
+    lib.mkdir()
+    (lib / "cut.c3d").symlink_to(d / "cut.c3d")
+    job = CorrectJob()
+    assert run_library(None, find_takes([str(lib)], d / "batch", job), d / "batch", job).failed == 0
+    (row,) = pq.read_table(d / "batch" / "takes.parquet").to_pylist()
+    assert Path(row["output"]).read_bytes() == (d / "fixed.c3d").read_bytes()
+    for k in ("frames", "out_of_support_before", "out_of_support_after", "max_foot_displacement_mm"):
+        assert row[k] == report[k]
 
 
 def test_corrected_c3d_keeps_plates_analogs_events_and_model_outputs(corrected):

@@ -5,15 +5,12 @@ from __future__ import annotations
 import argparse
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, pipeline_config
+from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, pipeline_config, take_options
 from livezmp.correct.solver import correct_motion
 from livezmp.errors import InputError
-from livezmp.model.bvh import write_bvh
-from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import write_motion
-from livezmp.offline.calibrate import load_subject
-from livezmp.offline.gaitlab import LabOptions
 from livezmp.offline.report import write_json
+from livezmp.offline.take import correct_c3d_take
 
 
 def cmd_correct(args: argparse.Namespace) -> int:
@@ -42,28 +39,12 @@ def cmd_correct(args: argparse.Namespace) -> int:
 
 def _correct_c3d(args: argparse.Namespace, as_c3d: bool) -> int:
     """A gait-lab take: its marker body corrected as a chain, written as C3D (markers moved) or BVH."""
-    from livezmp.correct.marker_take import correct_marker_take
-    from livezmp.model.c3d import read_c3d
-    from livezmp.model.c3d_write import non_position_labels, write_moved_points
-    from livezmp.model.marker_bvh import chain_to_bvh
-
     check_body_options(args)
-    markers = load_subject(args.subject).marker_options() if args.subject else MarkerBodyOptions()
-    trial = read_c3d(args.motion)
-    fix = correct_marker_take(trial, LabOptions(mass=args.mass, mode=args.mode, markers=markers),
-                              limits_from_args(args), non_position_labels(args.motion),
+    report = correct_c3d_take(args.motion, args.output, take_options(args), limits_from_args(args),
                               progress=lambda message: print(f"correct: {message}", flush=True))
-    if as_c3d:
-        write_moved_points(args.motion, args.output, fix.moved, fix.added, fix.first_frame)
-    else:
-        write_bvh(chain_to_bvh(fix.body, fix.result.frames, 1.0 / trial.rate, args.motion), args.output)
-    report = {"source": args.motion, "output": args.output, "mode": args.mode, **fix.result.report(),
-              "max_stance_foot_marker_move_mm": round(fix.stance_marker_mm, 4),
-              "markers_moved": len(fix.moved), "hat_points_written": list(fix.added),
-              "points_unchanged": fix.unchanged}
     _tell(report, args)
-    if fix.unchanged and as_c3d:
-        print(f"copied unchanged (angles, loads, or never seen): {len(fix.unchanged)} points; "
+    if report["points_unchanged"] and as_c3d:
+        print(f"copied unchanged (angles, loads, or never seen): {len(report['points_unchanged'])} points; "
               "model outputs describe the motion before the correction")
     return 0
 

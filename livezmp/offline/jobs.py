@@ -22,7 +22,7 @@ from livezmp.gait.features import walk_features
 from livezmp.gait.take import load_take
 from livezmp.model.motion_file import write_motion
 from livezmp.offline.report import atomic_path, write_json
-from livezmp.offline.take import ZMP_CSV, TakeOptions, analyse_take, take_config
+from livezmp.offline.take import ZMP_CSV, TakeOptions, analyse_take, correct_c3d_take, take_config
 
 # (name, Arrow type) of the columns every table starts with; "error" ends every table
 COMMON_COLUMNS = (("file", "string"), ("format", "string"), ("frames", "int64"), ("fps", "float64"),
@@ -104,8 +104,8 @@ class AnalyzeJob(Job):
 
 @dataclass(frozen=True)
 class CorrectJob(Job):
-    """``livezmp correct`` of each take: the corrected motion, in the take's own format (BVH, or
-    joint CSV with a robot), and the correction report as the summary."""
+    """``livezmp correct`` of each take: the corrected motion, in the take's own format (BVH, C3D with
+    its markers moved, or joint CSV with a robot), and the correction report as the summary."""
 
     options: TakeOptions = field(default_factory=TakeOptions)
     limits: CorrectionLimits = field(default_factory=CorrectionLimits)
@@ -118,12 +118,14 @@ class CorrectJob(Job):
                          ("infeasible_frames", "int64"), ("output", "string"))
 
     def suffixes(self) -> set[str]:
-        return {".bvh"} | ({".csv"} if self.options.robot else set())
+        return {".bvh", ".c3d"} | ({".csv"} if self.options.robot else set())
 
     def outputs(self, path: Path) -> tuple[str, ...]:
         return (f"corrected{path.suffix.lower()}",)
 
     def run(self, path: Path, out_dir: Path) -> dict:
+        if path.suffix.lower() == ".c3d":  # the markers moved with their segments, written as C3D
+            return correct_c3d_take(path, out_dir / self.outputs(path)[0], self.options, self.limits)
         loaded = self.options.load(path)
         cfg = take_config(loaded, self.options.mode, self.options.ground)
         result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, self.limits,

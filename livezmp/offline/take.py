@@ -16,8 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
+from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
+from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
@@ -123,12 +125,17 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
             "complete": lab.complete.astype(float)}
 
 
+def lab_options(options: TakeOptions) -> LabOptions:
+    """How a C3D take is read: the marker map and the subject file's parameters, if given."""
+    markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
+    markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
+    return LabOptions(mass=options.mass, mode=options.mode, markers=markers)
+
+
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
-    markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
-    markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
-    lab = analyse_lab_take(read_c3d(path), LabOptions(mass=options.mass, mode=options.mode, markers=markers))
+    lab = analyse_lab_take(read_c3d(path), lab_options(options))
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
                                                 options.tolerance_mm), **lab.summary}
     plates = lab.plates is not None
@@ -157,3 +164,26 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) ->
     with atomic_path(Path(out_dir) / ZMP_CSV) as tmp:
         write_zmp_csv(a.body, a.result, tmp, a.columns)
     return a.summary
+
+
+def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
+                     progress: Callable[[str], None] | None = None) -> dict:
+    """``livezmp correct`` of a gait-lab C3D take: its marker body corrected as a chain and written
+    (atomically) to ``output``: a C3D (the markers moved rigidly with their segments, everything else
+    copied) or, for a ``.bvh`` output, a BVH of the segments. Returns the correction report."""
+    from livezmp.correct.marker_take import correct_marker_take  # the correction's modules: heavy
+    from livezmp.model.c3d_write import non_position_labels, write_moved_points
+    from livezmp.model.marker_bvh import chain_to_bvh
+
+    trial = read_c3d(path)
+    fix = correct_marker_take(trial, lab_options(options), limits, non_position_labels(path), progress=progress)
+    with atomic_path(output) as tmp:
+        if str(output).lower().endswith(".c3d"):
+            write_moved_points(path, tmp, fix.moved, fix.added, fix.first_frame)
+        else:
+            write_bvh(chain_to_bvh(fix.body, fix.result.frames, 1.0 / trial.rate, str(path)), tmp)
+    report = fix.result.report()
+    return {"source": str(path), "output": str(output), "mode": options.mode, "fps": round(trial.rate, 6),
+            "duration_s": round((report["frames"] - 1) / trial.rate, 6), **report,
+            "max_stance_foot_marker_move_mm": round(fix.stance_marker_mm, 4), "markers_moved": len(fix.moved),
+            "hat_points_written": list(fix.added), "points_unchanged": fix.unchanged}
