@@ -471,3 +471,90 @@ def test_monitor_replays_a_c3d_and_its_recording_replays_the_same(tmp_path, caps
     out = capsys.readouterr().out
     assert "493 results compared" in out and "same analysis" in out
 
+
+def test_correct_refuses_a_c3d_in_one_line(capsys):
+    assert main(["correct", str(C3D / "cgm24_walking01_forceplate.c3d"), "-o", "x.bvh"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "C3D" in err
+
+
+# -- degenerate marker geometry (issue 12: the fuzz run reached Pinocchio with NaN or huge inertias) --------
+
+
+def _synthetic() -> C3dTrial:
+    return _trial(np.arange(200) / RATE, RATE)
+
+
+def test_a_corrupt_marker_coordinate_is_refused_naming_marker_and_frame():
+    trial = _synthetic()
+    trial.points[57, trial.labels.index("RKNE"), 1] = 2.6e35
+    with pytest.raises(InputError, match=r"synthetic: marker RKNE at frame 57 \(0\.570 s\): coordinate 2\.6e\+35 m"):
+        body_from_markers(trial)
+
+
+def test_implausible_stature_and_segment_length_are_refused():
+    trial = _synthetic()
+    trial.height_m = 17.5  # cm read as m
+    with pytest.raises(InputError, match=r"stature 17\.5 m \(the file's height\) is outside 0\.5-2\.6 m"):
+        body_from_markers(trial)
+    trial = _synthetic()
+    trial.points[:, trial.labels.index("LTOE"), 0] += 2.0  # the toe marker 2 m ahead of the foot
+    with pytest.raises(InputError, match=r"segment foot_l is 2\d\d\d mm long"):
+        body_from_markers(trial)
+
+
+def _points_c3d(path, m: dict[str, np.ndarray]):
+    """A C3D of markers ``m`` (label -> (F, 3) m), every point seen (residual 1)."""
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [RATE]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = list(m)
+    c3d.add_parameter("POINT", "UNITS", ["m"])
+    frames = len(next(iter(m.values())))
+    pts = np.ones((4, len(m), frames))
+    pts[:3] = np.stack(list(m.values()), axis=1).transpose(2, 1, 0)
+    c3d["data"]["points"] = pts
+    c3d["data"]["meta_points"] = {"residuals": np.ones((1, len(m), frames))}
+    c3d.write(str(path))
+    return path
+
+
+def test_a_negative_description_length_is_refused_before_ezc3d_reads_it(tmp_path):
+    """ezc3d reads a description length byte above 127 as a negative count, then as an unsigned one,
+    and allocates gigabytes (found by the long fuzz run; it took half a minute and 3 GB to fail)."""
+    data = bytearray(_points_c3d(tmp_path / "ok.c3d", _markers(np.arange(20) / RATE)).read_bytes())
+    at = data.index(b"RATE") + 4 + 2 + 2 + 4  # POINT:RATE: offset, type, no dimensions (a scalar), a float
+    assert data[at] == 0  # its description's length
+    data[at] = 0xF0
+    (tmp_path / "bad.c3d").write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"bad\.c3d: parameter 'RATE' has a description length of -16 bytes"):
+        read_c3d(tmp_path / "bad.c3d")
+
+
+def test_parameter_dimensions_beyond_the_file_are_refused(tmp_path):
+    """A parameter of dimensions 255 x 255 x 255 x 255 x 0 holds no value, but ezc3d loops 255^4 times
+    over it (the long fuzz run's C3D child hung there)."""
+    block = bytearray(512)
+    block[:4] = (1, 0x50, 1, 84)  # first parameter at byte 4, one block, Intel
+    group = bytes([5, 0xFF]) + b"POINT" + (3).to_bytes(2, "little") + bytes([0])
+    param = bytes([4, 1]) + b"DIMS" + (12).to_bytes(2, "little") + bytes([1, 5, 255, 255, 255, 255, 0, 0])
+    block[4 : 4 + len(group) + len(param)] = group + param
+    header = bytearray(512)
+    header[:2] = (2, 0x50)
+    (tmp_path / "dims.c3d").write_bytes(bytes(header + block))
+    with pytest.raises(InputError, match=r"dims\.c3d: parameter 'DIMS' claims 4\.23e\+09 values"):
+        read_c3d(tmp_path / "dims.c3d")
+
+
+def test_all_zero_points_are_gaps_and_are_filled(tmp_path):
+    """Some writers put (0, 0, 0) with a valid residual in a gap: read as a gap (filled), not as a
+    marker at the lab origin."""
+    t = np.arange(200) / RATE
+    m = _markers(t)
+    m["LASI"][100:103] = 0.0
+    trial = read_c3d(_points_c3d(tmp_path / "zeros.c3d", m))
+    assert np.isnan(trial.marker("LASI")[100:103]).all() and np.isfinite(trial.marker("LASI")[99]).all()
+    take = body_from_markers(trial)
+    assert take.frames.shape[0] == 200  # the gap is filled, nothing cut
+    pelvis_x = take.frames[100:103, 0]  # the pelvis origin, from the filled LASI: near the true motion
+    reference = body_from_markers(_trial(t, RATE)).frames[100:103, 0]
+    assert np.abs(pelvis_x - reference).max() < 1e-3, (pelvis_x, reference)

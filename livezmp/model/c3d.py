@@ -11,6 +11,8 @@ mean of its four corners), plus the plate outline. Nothing here filters or zeroe
 
 from __future__ import annotations
 
+import math
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,7 +39,8 @@ class PlateRecord:
 
 @dataclass
 class C3dTrial:
-    """A C3D trial. ``points`` (F, P, 3) m with NaN where a marker was not seen; ``rate`` Hz of the
+    """A C3D trial. ``points`` (F, P, 3) m with NaN where a marker was not seen (negative residual,
+    non-finite or all-zero coordinates); ``rate`` Hz of the
     points; ``analog_rate`` Hz of the plates; ``start_time`` s, the time of frame 0 in the
     capture (events are given on the same clock); ``parameters`` the subject's
     (``Bodymass`` kg, ``Height`` m, ``LKneeWidth`` ... m) when the file has them."""
@@ -132,6 +135,48 @@ def _plates(c3d: dict, source: str) -> list[PlateRecord]:
     return out
 
 
+def _check_parameter_section(p: Path, data: bytes) -> None:
+    """Refuse, before ezc3d reads it, a parameter section that would make ezc3d allocate without
+    bound: a description length byte above 127 (read as a negative count, then as an unsigned one:
+    gigabytes) or dimensions claiming more values than the file holds bytes (also those before a zero
+    dimension, which ezc3d loops over without reading anything). The walk follows ezc3d's
+    reader; where the structure breaks off, ezc3d's own check refuses the file."""
+    size = len(data)
+    if size < 512 or not 1 <= data[0] <= size // 512:
+        return
+    start = (data[0] - 1) * 512
+    if start + 4 > size:
+        return
+    order = ">" if data[start + 3] == 86 else "<"  # processor type 84 + 2 (MIPS): big-endian
+    pos = start + 4 + data[start] - 1
+    while pos + 2 <= size:
+        n, gid = struct.unpack_from("bb", data, pos)
+        at = pos + 2 + abs(n)  # after the name
+        if n == 0 or gid == 0 or at + 2 > size:
+            return
+        (offset,) = struct.unpack_from(order + "H", data, at)
+        at += 2
+        what = data[pos + 2 : pos + 2 + abs(n)].decode("ascii", "replace")
+        if gid > 0:  # a parameter: type, dimensions, values
+            if at + 2 > size:
+                return
+            kind, ndims = struct.unpack_from("bb", data, at)
+            dims = data[at + 2 : at + 2 + max(ndims, 0)]
+            claimed = abs(kind) * math.prod(dims)
+            # ezc3d loops over the dimensions nested: the ones before a zero cost their product in loops
+            loops = math.prod(dims[: dims.index(0)] if 0 in dims else dims)
+            if max(claimed, loops) > size:
+                raise InputError(f"{p}: parameter {what!r} claims {max(claimed, loops):.3g} values, more than "
+                                 f"the file's {size} bytes")
+            at += 2 + max(ndims, 0) + claimed
+        if at < size and data[at] > 127:
+            raise InputError(f"{p}: {'parameter' if gid > 0 else 'group'} {what!r} has a description length of "
+                             f"{data[at] - 256} bytes (a corrupt C3D parameter section)")
+        if offset == 0:
+            return
+        pos = pos + 2 + abs(n) + offset
+
+
 def open_c3d(path: str | Path, plates: bool = False):
     """The ezc3d object of ``path`` (``plates``: with ezc3d's force-platform data). Raises InputError for
     files ezc3d cannot read."""
@@ -140,6 +185,10 @@ def open_c3d(path: str | Path, plates: bool = False):
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")
+    try:
+        _check_parameter_section(p, p.read_bytes())
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror})") from None
     try:
         return ezc3d.c3d(str(p), extract_forceplat_data=plates)
     except Exception as e:  # ezc3d raises plain RuntimeError/ValueError with a C++ message  # noqa: BLE001
@@ -162,8 +211,8 @@ def read_c3d(path: str | Path) -> C3dTrial:
     labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
     labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]
     residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=float)[0]  # (P, F); < 0: not seen
-    # a marker not seen: a negative residual, or (older writers) all three coordinates exactly zero
-    unseen = (residual < 0) | (pts == 0).all(axis=0)
+    # a gap: a negative residual, a non-finite coordinate, or the all-zero point some writers put in gaps
+    unseen = (residual < 0) | ~np.isfinite(pts).all(axis=0) | (pts == 0).all(axis=0)
     pts = np.where(unseen[None], np.nan, pts) * _LENGTH[unit]
     first = _first_number(_param(groups, "TRIAL", "ACTUAL_START_FIELD"))
     mass, where, height, widths = _subject(groups)

@@ -65,6 +65,10 @@ ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
+# Plausibility of marker-derived geometry: beyond these a file is corrupt, not a person
+MAX_COORDINATE_M = 1000.0  # m from the capture origin: larger than any capture volume
+STATURE_RANGE_M = (0.5, 2.6)
+SEGMENT_LENGTH_RANGE_M = (0.01, 1.5)  # joint centre to joint centre (median over the take)
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 
 
@@ -193,7 +197,10 @@ def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str,
     if mmap is not None and mmap.segments:
         return _up_from(_cluster_up_vector(_cluster_markers(renamed(trial, mmap), mmap), mmap), trial.source)
     trial = trial if mmap is None else renamed(trial, mmap)
-    return _up_rotation({k: trial.marker(v) for k, v in _need(trial).items() if v}, trial.source)
+    roles = _need(trial)
+    raw = {k: trial.marker(v) for k, v in roles.items() if v}
+    _check_coordinates(raw, roles, trial)
+    return _up_rotation(raw, trial.source)
 
 
 def _cluster_markers(trial: C3dTrial, mmap: MarkerMap) -> dict[str, np.ndarray]:
@@ -316,6 +323,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
             return _cluster_take(trial, opts, opts.marker_map)
     roles = _need(trial)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
+    _check_coordinates(raw, roles, trial)
     max_gap = max(1, round(opts.max_gap_s * trial.rate))
     optional = {k: raw.pop(k) for k in list(raw) if k[1:] in _OPTIONAL}
     try:
@@ -336,12 +344,58 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     up, r_in = _up_rotation(raw, trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _segments(m, trial)
+    _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
-    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
+    lengths = _check_lengths(seg, m, trial)
+    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes, lengths)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
         notes["optional_markers_not_used"] = sorted(dropped)
     return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
+
+
+def _check_coordinates(raw: dict[str, np.ndarray], roles: dict[str, str | None], trial: C3dTrial) -> None:
+    """Refuse a coordinate of the markers ``raw`` (role -> (F, 3) m) beyond :data:`MAX_COORDINATE_M`
+    (a corrupt value), naming the file's label and the frame."""
+    for role, x in raw.items():
+        far = np.flatnonzero(np.nanmax(np.abs(x), axis=1, initial=0.0) > MAX_COORDINATE_M)
+        if far.size:
+            f = int(far[0])
+            raise InputError(f"{trial.source}: marker {roles[role]} at frame {f} ({f / trial.rate:.3f} s): coordinate "
+                             f"{np.nanmax(np.abs(x[f])):.3g} m is beyond {MAX_COORDINATE_M:g} m of the origin")
+
+
+def _segment_lengths(seg: dict, m: dict) -> dict[str, float]:
+    """Median segment lengths (m): joint centre to the next one down the chain; a foot's from the
+    ankle centre to its toe marker, a hand's from the wrist centre to its FIN marker when there is one."""
+    chain = (("thigh", "shank"), ("shank", "foot"), ("upperarm", "forearm"), ("forearm", "hand"))
+    out = {f"{a}_{t}": float(np.median(np.linalg.norm(seg[f"{a}_{t}"][0] - seg[f"{b}_{t}"][0], axis=1)))
+           for a, b in chain for t in "lr" if f"{a}_{t}" in seg}
+    for kind, marker in (("foot", "TOE"), ("hand", "FIN")):
+        for t in "lr":
+            name, label = f"{kind}_{t}", t.upper() + marker
+            if name in seg and label in m:
+                out[name] = float(np.median(np.linalg.norm(m[label] - seg[name][0], axis=1)))
+    return out
+
+
+def _check_stature(stature: float, trial: C3dTrial) -> None:
+    """Refuse a stature (m) outside :data:`STATURE_RANGE_M`: it sizes the joint centres."""
+    lo, hi = STATURE_RANGE_M
+    if not lo <= stature <= hi:
+        where = "the file's height" if trial.height_m else "estimated from the leg markers"
+        raise InputError(f"{trial.source}: stature {stature:.3g} m ({where}) is outside {lo:g}-{hi:g} m")
+
+
+def _check_lengths(seg: dict, m: dict, trial: C3dTrial) -> dict[str, float]:
+    """The segment lengths (m); one outside :data:`SEGMENT_LENGTH_RANGE_M` is refused naming it."""
+    lengths = _segment_lengths(seg, m)
+    lo, hi = SEGMENT_LENGTH_RANGE_M
+    for name, length in lengths.items():
+        if not lo <= length <= hi:
+            raise InputError(f"{trial.source}: segment {name} is {1000 * length:.4g} mm long (median over the "
+                             f"frames used); a plausible one is {1000 * lo:g}-{1000 * hi:g} mm")
+    return lengths
 
 
 def marker_channels(take: MarkerTake, markers: dict[str, np.ndarray]) -> np.ndarray:
@@ -481,6 +535,7 @@ def _upright(x: np.ndarray) -> np.ndarray:
 def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> MarkerTake:
     """The body of a cluster set (see :mod:`livezmp.model.marker_map`)."""
     raw = _cluster_markers(trial, mmap)
+    _check_coordinates(raw, {k: k for k in raw}, trial)
     try:
         keep, open_gaps = _trim(raw, max(1, round(opts.max_gap_s * trial.rate)), trial.rate)
     except InputError as e:
@@ -490,8 +545,10 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     up, r_in = _up_from(_cluster_up_vector(raw, mmap), trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _cluster_segments(m, mmap, trial)
+    _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
-    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes)
+    lengths = _check_lengths(seg, m, trial)
+    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes, lengths)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
 
@@ -588,11 +645,8 @@ def trunk_com_below_cervicale(stature: float) -> float:
 
 
 def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarray,
-           notes: dict) -> tuple[BodyModel, np.ndarray]:
+           notes: dict, lengths: dict[str, float]) -> tuple[BodyModel, np.ndarray]:
     t = DE_LEVA_MALE
-    chain = (("thigh", "shank"), ("shank", "foot"), ("upperarm", "forearm"), ("forearm", "hand"))
-    lengths = {f"{a}_{t}": float(np.median(np.linalg.norm(seg[f"{a}_{t}"][0] - seg[f"{b}_{t}"][0], axis=1)))
-               for a, b in chain for t in "lr" if f"{a}_{t}" in seg}
     stature = notes["stature_m"]
     hat_mass, hat_height, hat_inertia = hat_table(stature)
     full = "hat" not in seg

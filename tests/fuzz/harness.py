@@ -1,7 +1,7 @@
 """Seeds, mutations and the contract for fuzzing livezmp's inputs.
 
 Contract for a file: the command (run in this process, stdout and both stderr levels
-captured) exits 2 with exactly one stderr line naming one of its input files, or exits 0
+captured; or as a process of its own) exits 2 with exactly one stderr line naming one of its input files, or exits 0
 (``replay``: 0 or 1, its verdict) with finite outputs (strict JSON, finite CSV cells);
 never an exception escaping ``main``, never longer than :data:`TIME_LIMIT_S`.
 Contract for a packet: the UDP source never raises; each packet is either delivered
@@ -11,6 +11,7 @@ Contract for a packet: the UDP source never raises; each packet is either delive
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import math
@@ -19,12 +20,17 @@ import random
 import re
 import signal
 import socket
+import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
+
+from livezmp import cli
 
 BURST = 20  # packets in flight at once
 TIME_LIMIT_S = 20.0  # one input; the slowest accepted input takes about a second
@@ -161,6 +167,35 @@ def _mcap_seed(d: Path) -> bytes:
     return (d / "seed.mcap").read_bytes()
 
 
+C3D_FRAMES = slice(130, 330)  # the data set's CGM2.4 walk: two seconds around its force-plate step
+
+
+def c3d_seed(d: Path, take: Path) -> bytes:
+    """A small C3D cut from ``take``: only the markers the marker body uses, frames :data:`C3D_FRAMES`
+    and their analog samples (a fifth of the whole take's read time; mutations reach its header and
+    parameters more often)."""
+    import ezc3d
+
+    from livezmp.model.c3d import read_c3d, strip_prefix
+    from livezmp.model.markers import marker_labels
+
+    keep = marker_labels(read_c3d(take))
+    c = ezc3d.c3d(str(take))
+    point = c["parameters"]["POINT"]
+    labels = [strip_prefix(s) for s in point["LABELS"]["value"]]
+    idx = [labels.index(k) for k in keep]
+    for name in ("LABELS", "DESCRIPTIONS"):
+        if name in point:
+            point[name]["value"] = [point[name]["value"][i] for i in idx]
+    per_frame = round(c["header"]["analogs"]["frame_rate"] / c["header"]["points"]["frame_rate"])
+    f = C3D_FRAMES
+    c["data"]["points"] = c["data"]["points"][:, idx, f]
+    c["data"]["analogs"] = c["data"]["analogs"][:, :, f.start * per_frame : f.stop * per_frame]
+    del c["data"]["meta_points"]
+    c.write(str(d / "seed.c3d"))
+    return (d / "seed.c3d").read_bytes()
+
+
 @dataclass
 class Seeds:
     """Valid inputs of every format, and the files the commands need beside them."""
@@ -170,14 +205,14 @@ class Seeds:
 
 
 def make_seeds(d: Path, c3d: Path | None = None) -> Seeds:
-    """Seeds of every format; ``c3d`` a real C3D take to mutate (the data set's), if given."""
+    """Seeds of every format; ``c3d`` a real C3D take to cut the C3D seed from (the data set's), if given."""
     d.mkdir(parents=True, exist_ok=True)
     urdf, csv, toml = _robot_seeds(d)
     (d / "robot.urdf").write_bytes(urdf)
     (d / "robot.csv").write_bytes(csv)
     files = {"bvh": _bvh_seed(d), "csv": csv, "urdf": urdf, "toml": toml, "mcap": _mcap_seed(d)}
     if c3d is not None and c3d.is_file():
-        files["c3d"] = c3d.read_bytes()
+        files["c3d"] = c3d_seed(d, c3d)
     return Seeds(d, files)
 
 
@@ -212,10 +247,14 @@ def _on_alarm(signum, frame):
     raise Hang()
 
 
-def run_cli(argv: list[str], inputs: list[Path], outputs: list[Path], ok_codes=(0,)) -> Outcome:
-    """Run ``livezmp argv`` here and judge it by the contract (module docstring)."""
-    from livezmp.cli import main
+@functools.cache
+def _grammar(build=cli.build_parser):
+    return build()
 
+
+def run_cli(argv: list[str], inputs: list[Path], outputs: list[Path], ok_codes=(0,)) -> Outcome:
+    """Run ``livezmp argv`` here and judge it by the contract (module docstring). The grammar is
+    built once per process (building it costs more than refusing most inputs; it is not what is fuzzed)."""
     for p in outputs:
         p.unlink(missing_ok=True)
     old = signal.signal(signal.SIGALRM, _on_alarm)
@@ -224,7 +263,8 @@ def run_cli(argv: list[str], inputs: list[Path], outputs: list[Path], ok_codes=(
     try:
         with _captured() as box:
             try:
-                rc = main([str(a) for a in argv])
+                with mock.patch.object(cli, "build_parser", _grammar):
+                    rc = cli.main([str(a) for a in argv])
             except SystemExit as e:
                 rc = e.code
             except Hang:
@@ -236,23 +276,42 @@ def run_cli(argv: list[str], inputs: list[Path], outputs: list[Path], ok_codes=(
         signal.signal(signal.SIGALRM, old)
     if escaped:
         return Outcome("failure", escaped)
-    lines = box["err"].splitlines()
+    return _judge(rc, box["err"], inputs, outputs, ok_codes)
+
+
+def run_process(argv: list[str], inputs: list[Path], outputs: list[Path], ok_codes=(0,)) -> Outcome:
+    """Run ``python -m livezmp argv`` as a process of its own and judge it by the same contract: what
+    the in-process run cannot show (the real exit code, every line the process writes to stderr)."""
+    for p in outputs:
+        p.unlink(missing_ok=True)
+    try:
+        r = subprocess.run([sys.executable, "-m", "livezmp", *map(str, argv)], capture_output=True, text=True,
+                           errors="replace", timeout=TIME_LIMIT_S + 10)
+    except subprocess.TimeoutExpired:
+        return Outcome("failure", f"hang: more than {TIME_LIMIT_S + 10} s")
+    if "Traceback (most recent call last)" in r.stderr:  # replay's exit 1 is also a verdict
+        return Outcome("failure", f"exit {r.returncode} with a traceback: {r.stderr[-300:]!r}")
+    return _judge(r.returncode, r.stderr, inputs, outputs, ok_codes)
+
+
+def _judge(rc, err: str, inputs: list[Path], outputs: list[Path], ok_codes) -> Outcome:
+    lines = err.splitlines()
     if rc == 2:
         names = [p.name for p in inputs]
         if len(lines) != 1:
-            return Outcome("failure", f"exit 2 with {len(lines)} stderr lines: {box['err'][:300]!r}")
+            return Outcome("failure", f"exit 2 with {len(lines)} stderr lines: {err[:300]!r}")
         if not any(n in lines[0] for n in names):
             return Outcome("failure", f"exit 2 naming none of {names}: {lines[0][:200]}")
         return Outcome("refused", lines[0])
     if rc in ok_codes:
         bad = _non_finite_outputs(outputs)
         return Outcome("failure", f"exit {rc} with {bad}") if bad else Outcome("clean")
-    return Outcome("failure", f"exit {rc}: {box['err'][-300:]!r}")
+    return Outcome("failure", f"exit {rc}: {err[-300:]!r}")
 
 
 def _non_finite_outputs(outputs: list[Path]) -> str | None:
     for p in outputs:
-        if not p.exists():
+        if not p.exists() or p.suffix not in (".json", ".csv"):
             continue
         text = p.read_text(encoding="utf-8")
         if p.suffix == ".json":
@@ -273,35 +332,40 @@ def _non_finite_outputs(outputs: list[Path]) -> str | None:
 # -- targets -----------------------------------------------------------------------------------------
 
 
-def check_file(fmt: str, data: bytes, seeds: Seeds, work: Path) -> Outcome:
-    """Write ``data`` as an input of ``fmt`` and run the command that reads it."""
+def commands(fmt: str, path: Path, seeds: Seeds, work: Path) -> list[tuple[list, list[Path], list[Path], tuple]]:
+    """The commands that read ``path`` as an input of ``fmt``: (argv, inputs to name, outputs, exit codes
+    meaning success)."""
     d = seeds.dir
     summary, table = work / "s.json", work / "zmp.csv"
     outs = [summary, table]
+    tail = ["--summary-json", summary, "--out", table]
+    if fmt in ("bvh", "c3d"):
+        return [(["analyze", path, *tail], [path], outs, (0,))]
+    if fmt == "csv":
+        return [(["analyze", path, "--robot", d / "robot.urdf", *tail], [path, d / "robot.urdf"], outs, (0,))]
+    if fmt == "urdf":
+        return [(["analyze", d / "robot.csv", "--robot", path, *tail], [path, d / "robot.csv"], outs, (0,))]
+    if fmt == "toml":
+        return [(["analyze", d / "robot.csv", "--robot", d / "robot.urdf", "--robot-config", path, *tail],
+                 [path, d / "robot.csv", d / "robot.urdf"], outs, (0,))]
+    if fmt == "mcap":
+        return [(["replay", path], [path], [], (0, 1)), (["recover", path, "-o", work / "fixed.mcap"], [path],
+                                                         [work / "fixed.mcap"], (0,))]
+    raise ValueError(fmt)
+
+
+def check_file(fmt: str, data: bytes, seeds: Seeds, work: Path, run=run_cli) -> Outcome:
+    """Write ``data`` as an input of ``fmt`` and run the commands that read it (``run``: here, or
+    :func:`run_process`); the first one's outcome unless a later one fails."""
     path = work / f"input.{fmt}"
     path.write_bytes(data)
-    if fmt == "bvh":
-        return run_cli(["analyze", path, "--summary-json", summary, "--out", table], [path], outs)
-    if fmt == "csv":
-        return run_cli(["analyze", path, "--robot", d / "robot.urdf", "--summary-json", summary, "--out", table],
-                       [path, d / "robot.urdf"], outs)
-    if fmt == "urdf":
-        return run_cli(["analyze", d / "robot.csv", "--robot", path, "--summary-json", summary, "--out", table],
-                       [path, d / "robot.csv"], outs)
-    if fmt == "toml":
-        return run_cli(["analyze", d / "robot.csv", "--robot", d / "robot.urdf", "--robot-config", path,
-                        "--summary-json", summary, "--out", table], [path, d / "robot.csv", d / "robot.urdf"], outs)
-    if fmt == "c3d":
-        return run_cli(["analyze", path, "--summary-json", summary, "--out", table], [path], outs)
-    if fmt == "mcap":
-        o = run_cli(["replay", path], [path], [], ok_codes=(0, 1))
+    first = None
+    for argv, inputs, outputs, ok in commands(fmt, path, seeds, work):
+        o = run(argv, inputs, outputs, ok)
         if o.kind == "failure":
-            return Outcome("failure", f"replay: {o.detail}")
-        fixed = work / "fixed.mcap"
-        fixed.unlink(missing_ok=True)
-        r = run_cli(["recover", path, "-o", fixed], [path], [])
-        return Outcome("failure", f"recover: {r.detail}") if r.kind == "failure" else o
-    raise ValueError(fmt)
+            return Outcome("failure", f"{argv[0]}: {o.detail}" if fmt == "mcap" else o.detail)
+        first = first or o
+    return first
 
 
 class PacketTarget:
@@ -344,14 +408,17 @@ class PacketTarget:
         start = self.counted()
         for p in packets:
             self.tx.sendto(p[:65000], ("127.0.0.1", self.src.port))
+        deadline = time.monotonic() + 1.0
         try:
             while self.counted() < start + len(packets):
-                f = self.src.read(1.0)
-                if f is None and self.counted() < start + len(packets):
+                # short reads: read() returns only with a delivered frame, so a burst ending in dropped
+                # packets would otherwise wait out the whole timeout
+                f = self.src.read(0.01)
+                if f is None and time.monotonic() > deadline:
                     return Outcome("failure", f"packet counter {self.counted() - start} of {len(packets)}: "
                                               "packets neither delivered nor counted")
                 if f is None:
-                    break
+                    continue
                 if not (math.isfinite(f.t) and np.all(np.isfinite(f.channels))):
                     return Outcome("failure", f"delivered a non-finite frame at t {f.t}")
                 if f.restart:

@@ -1,10 +1,11 @@
-"""The CI part of the fuzz suite (about a minute): hypothesis draws mutations of each
-format's seed, every corpus file is replayed, and a few thousand mutated UDP packets
-are sent; each input must meet the contract of :mod:`tests.fuzz.harness`. The longer
-run is ``python -m tests.fuzz --minutes N``."""
+"""The CI part of the fuzz suite (under a minute): hypothesis draws mutations of each
+format's seed (C3D: cut from the data set's walk), every corpus file is replayed, a few thousand
+mutated UDP packets are sent, and a sample runs as real processes; each input must meet
+the contract of :mod:`tests.fuzz.harness`. The longer run is ``python -m tests.fuzz``."""
 
 from __future__ import annotations
 
+import json
 import random
 from pathlib import Path
 
@@ -12,11 +13,24 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.fuzz.harness import EXTREMES, OPS, PacketTarget, check_file, make_seeds, mutate
+from tests.data_paths import DATA
+from tests.fuzz.harness import (
+    EXTREMES,
+    OPS,
+    PacketTarget,
+    Seeds,
+    c3d_seed,
+    check_file,
+    commands,
+    make_seeds,
+    mutate,
+    run_process,
+)
 
 CORPUS = Path(__file__).parent / "corpus"
+C3D_TAKE = DATA / "c3d" / "cgm24_walking01_forceplate.c3d"
 FILE_FORMATS = ("bvh", "csv", "urdf", "toml", "mcap")
-EXAMPLES = {"bvh": 40, "csv": 40, "urdf": 40, "toml": 40, "mcap": 40}
+EXAMPLES = {"bvh": 100, "csv": 100, "urdf": 100, "toml": 100, "mcap": 100}
 
 op = st.tuples(st.sampled_from(OPS), st.integers(0, 1 << 20), st.integers(0, 4 * len(EXTREMES)))
 
@@ -47,7 +61,44 @@ def test_mutated_inputs_meet_the_contract(fmt, seeds, tmp_path):
     check()
 
 
-@pytest.mark.parametrize("path", sorted(p for p in CORPUS.rglob("*") if p.is_file()), ids=lambda p: p.name)
+@pytest.fixture(scope="module")
+def c3d_seeds(seeds):
+    return Seeds(seeds.dir, {**seeds.files, "c3d": c3d_seed(seeds.dir, C3D_TAKE)})
+
+
+def test_c3d_seed_and_mutations_meet_the_contract(c3d_seeds, tmp_path):
+    assert check_file("c3d", c3d_seeds.files["c3d"], c3d_seeds, tmp_path).kind == "clean"
+
+    @settings(max_examples=20, deadline=None, derandomize=True, database=None,
+              suppress_health_check=list(HealthCheck))
+    @given(st.lists(op, min_size=1, max_size=4))
+    def check(ops):
+        contract("c3d", mutate(c3d_seeds.files["c3d"], ops), c3d_seeds, tmp_path)
+
+    check()
+
+
+@pytest.mark.parametrize("path", sorted((CORPUS / "c3d").glob("*.ops.json")), ids=lambda p: p.name)
+def test_c3d_corpus_meets_the_contract(path, c3d_seeds, tmp_path):
+    """C3D corpus entries are the mutations of the data set's walk (the data is never copied here)."""
+    ops = [tuple(o) for o in json.loads(path.read_text())]
+    contract("c3d", mutate(c3d_seeds.files["c3d"], ops), c3d_seeds, tmp_path)
+
+
+@pytest.mark.parametrize("fmt", ("bvh", "urdf", "mcap"))
+def test_real_processes_meet_the_contract(fmt, seeds, tmp_path):
+    """A refused corpus input as a process of its own (the real exit code and every stderr line:
+    numpy warnings, urdfdom's and the MCAP reader's output included) for the formats whose readers
+    could write more than the one line."""
+    path = tmp_path / f"input.{fmt}"
+    path.write_bytes(sorted((CORPUS / fmt).glob("refused-*"))[0].read_bytes())
+    argv, inputs, outputs, ok = commands(fmt, path, seeds, tmp_path)[0]
+    o = run_process(argv, inputs, outputs, ok)
+    assert o.kind == "refused", o.detail
+
+
+@pytest.mark.parametrize("path", sorted(p for p in CORPUS.rglob("*") if p.is_file() and p.parent.name != "c3d"),
+                         ids=lambda p: p.name)
 def test_corpus_meets_the_contract(path, seeds, tmp_path):
     fmt = path.parent.name
     if fmt == "udp":
