@@ -152,7 +152,8 @@ def _run_child(fmt: str, args, deadline: float) -> dict:
     try:
         return json.loads(r.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
-        return {"format": fmt, "tried": 0, "clean": 0, "refused": 0, "failures": 1, "examples": [r.stderr[-500:]],
+        return {"format": fmt, "tried": 0, "clean": 0, "refused": 0, "failures": 1,
+                "examples": [f"child exit {r.returncode} (a negative exit: killed by that signal): {r.stderr[-500:]}"],
                 "peak_rss_mb": 0, "seconds": 0, "rss": {}}
 
 
