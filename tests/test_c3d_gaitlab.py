@@ -472,12 +472,6 @@ def test_monitor_replays_a_c3d_and_its_recording_replays_the_same(tmp_path, caps
     assert "493 results compared" in out and "same analysis" in out
 
 
-def test_correct_refuses_a_c3d_in_one_line(capsys):
-    assert main(["correct", str(C3D / "cgm24_walking01_forceplate.c3d"), "-o", "x.bvh"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "C3D" in err
-
-
 # -- degenerate marker geometry (issue 12: the fuzz run reached Pinocchio with NaN or huge inertias) --------
 
 
