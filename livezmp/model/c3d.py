@@ -12,7 +12,10 @@ mean of its four corners), plus the plate outline. Nothing here filters or zeroe
 from __future__ import annotations
 
 import math
+import os
+import signal
 import struct
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,6 +180,42 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
         pos = pos + 2 + abs(n) + offset
 
 
+READ_SECONDS = 20.0  # a forked trial read gets this long, plus a second per 10 MB of file
+
+
+def _check_ezc3d_survives(p: Path, size: int, plates: bool) -> None:
+    """Read ``p`` with ezc3d once in a forked child first: some malformed files crash ezc3d's C++ reader
+    (a segmentation fault, found by the fuzz suite) or keep it looping, which would end or hang this
+    process without a word. A child killed by a signal or out of time refuses the file in one line;
+    a child that merely raises leaves the message to the real read. Where there is no fork, nothing."""
+    if not hasattr(os, "fork"):
+        return
+    pid = os.fork()
+    if pid == 0:  # the child: read, say whether it raised, and leave without Python's clean-up
+        code = 1
+        try:
+            import ezc3d
+
+            ezc3d.c3d(str(p), extract_forceplat_data=plates)
+            code = 0
+        finally:
+            os._exit(code)
+    deadline = time.monotonic() + READ_SECONDS + size / 10e6
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            raise InputError(f"{p}: not a readable C3D file (ezc3d did not finish reading it in "
+                             f"{READ_SECONDS + size / 10e6:.0f} s)")
+        time.sleep(0.005)
+    if os.WIFSIGNALED(status):
+        raise InputError(f"{p}: not a readable C3D file (ezc3d's reader crashed on it: "
+                         f"{signal.Signals(os.WTERMSIG(status)).name})")
+
+
 def open_c3d(path: str | Path, plates: bool = False):
     """The ezc3d object of ``path`` (``plates``: with ezc3d's force-platform data). Raises InputError for
     files ezc3d cannot read."""
@@ -186,9 +225,11 @@ def open_c3d(path: str | Path, plates: bool = False):
     if not p.exists():
         raise InputError(f"{p}: no such file")
     try:
-        _check_parameter_section(p, p.read_bytes())
+        data = p.read_bytes()
     except OSError as e:
         raise InputError(f"{p}: cannot read ({e.strerror})") from None
+    _check_parameter_section(p, data)
+    _check_ezc3d_survives(p, len(data), plates)
     try:
         return ezc3d.c3d(str(p), extract_forceplat_data=plates)
     except Exception as e:  # ezc3d raises plain RuntimeError/ValueError with a C++ message  # noqa: BLE001
