@@ -338,6 +338,7 @@ def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D takes: HAT mass and centre of mass)")
+    p.add_argument("--plot", action="store_true", help="also write each take's figure (zmp.png, as analyze --plot)")
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.batch:cmd_analyze")
 

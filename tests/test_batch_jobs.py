@@ -92,9 +92,12 @@ def test_batch_analyze_reads_c3d_takes_with_their_plates(tmp_path):
     m = read_bvh(BANDAI / "walk_normal_001.bvh")
     write_bvh(replace(m, frames=m.frames[:60]), lib / "walk.bvh")
     out = tmp_path / "out"
-    job = AnalyzeJob()
+    job = AnalyzeJob(plot=True)
     run_library(None, find_takes([str(lib)], out, job), out, job)
     assert main(["analyze", str(lib / "trial.c3d"), "--summary-json", str(tmp_path / "s.json")]) == 0
+    for take in ("trial.c3d", "walk.bvh"):  # the figures asked for, complete
+        assert (out / "takes" / take / "zmp.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert run_library(None, find_takes([str(lib)], out, AnalyzeJob()), out, AnalyzeJob()).skipped == 0
     single = json.loads((tmp_path / "s.json").read_text())
     rows = rows_of(out)
     c3d, bvh = rows["trial.c3d"], rows["walk.bvh"]

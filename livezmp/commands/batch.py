@@ -46,7 +46,7 @@ def _sources(args: argparse.Namespace) -> list[str]:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    job = AnalyzeJob(take_options(args))
+    job = AnalyzeJob(take_options(args), args.plot)
     _run(args, job, find_takes(_sources(args), args.out, job), "analysed")
     return 0
 

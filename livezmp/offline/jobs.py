@@ -22,7 +22,7 @@ from livezmp.gait.features import walk_features
 from livezmp.gait.take import load_take
 from livezmp.model.motion_file import write_motion
 from livezmp.offline.report import atomic_path, write_json
-from livezmp.offline.take import ZMP_CSV, TakeOptions, analyse_take, correct_c3d_take, take_config
+from livezmp.offline.take import ZMP_CSV, ZMP_PNG, TakeOptions, analyse_take, correct_c3d_take, take_config
 
 # (name, Arrow type) of the columns every table starts with; "error" ends every table
 COMMON_COLUMNS = (("file", "string"), ("format", "string"), ("frames", "int64"), ("fps", "float64"),
@@ -73,9 +73,10 @@ def _cop_fields(summary: dict) -> dict:
 
 @dataclass(frozen=True)
 class AnalyzeJob(Job):
-    """``livezmp analyze`` of each take: ``zmp.csv`` and the summary."""
+    """``livezmp analyze`` of each take: ``zmp.csv`` (and ``zmp.png`` with ``plot``) and the summary."""
 
     options: TakeOptions = field(default_factory=TakeOptions)
+    plot: bool = False
 
     name: ClassVar[str] = "analyze"
     columns: ClassVar = (("inside_fraction", "float64"), ("inside_fraction_tol", "float64"),
@@ -88,10 +89,10 @@ class AnalyzeJob(Job):
         return {".bvh", ".c3d"} | ({".csv"} if self.options.robot else set())
 
     def outputs(self, path: Path) -> tuple[str, ...]:
-        return (ZMP_CSV,)
+        return (ZMP_CSV, ZMP_PNG) if self.plot else (ZMP_CSV,)
 
     def run(self, path: Path, out_dir: Path) -> dict:
-        return analyse_take(path, out_dir, self.options)
+        return analyse_take(path, out_dir, self.options, self.plot)
 
     def fields(self, summary: dict) -> dict:
         verdict = (summary.get("plausibility") or {}).get("verdict")

@@ -34,6 +34,7 @@ from livezmp.offline.report import atomic_path, summarize, write_zmp_csv
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
+ZMP_PNG = "zmp.png"
 
 
 @dataclass(frozen=True)
@@ -157,12 +158,18 @@ def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None
         raise InputError(f"{options.markers}: --markers is for C3D trials (got {path or 'the built-in demo'})")
 
 
-def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions) -> dict:
-    """Analyse the take at ``path``; write its ``zmp.csv`` (atomically) into the directory
-    ``out_dir``; return the summary."""
+def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, plot: bool = False) -> dict:
+    """Analyse the take at ``path``; write its ``zmp.csv`` and, with ``plot``, its ``zmp.png`` (each
+    atomically) into the directory ``out_dir``; return the summary."""
     a = analyse_path(path, options)
     with atomic_path(Path(out_dir) / ZMP_CSV) as tmp:
         write_zmp_csv(a.body, a.result, tmp, a.columns)
+    if plot:
+        from livezmp.offline.plot import plot_analysis  # matplotlib: only when a figure is asked for
+
+        with atomic_path(Path(out_dir) / ZMP_PNG) as tmp:
+            plot_analysis(a.body, a.result, tmp, title=f"{Path(a.source).name} ({options.mode} ZMP)", cop=a.cop,
+                          complete=a.complete)
     return a.summary
 
 
