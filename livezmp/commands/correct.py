@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, pipeline_config, take_options
-from livezmp.correct.solver import correct_motion
+from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, take_options
 from livezmp.errors import InputError
-from livezmp.model.motion_file import write_motion
 from livezmp.offline.report import write_json
-from livezmp.offline.take import correct_c3d_take
+from livezmp.offline.take import correct_c3d_take, correct_loaded
 
 
 def cmd_correct(args: argparse.Namespace) -> int:
@@ -27,13 +25,9 @@ def cmd_correct(args: argparse.Namespace) -> int:
     if c3d_out:
         raise InputError(f"{args.output}: only a C3D take can be written as C3D (its markers are moved); "
                          f"{args.motion} is written in its own format")
-    loaded = load_from_args(args)
-    cfg = pipeline_config(args, loaded)
-    result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits_from_args(args),
-                            nominal_dt=1.0 / loaded.fps,
+    report = correct_loaded(load_from_args(args), args.output, take_options(args), limits_from_args(args),
                             progress=lambda message: print(f"correct: {message}", flush=True))
-    write_motion(loaded, result.frames, args.output)
-    _tell({"source": loaded.source, "output": args.output, "mode": cfg.mode, **result.report()}, args)
+    _tell(report, args)
     return 0
 
 

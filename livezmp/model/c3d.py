@@ -12,12 +12,10 @@ mean of its four corners), plus the plate outline. Nothing here filters or zeroe
 from __future__ import annotations
 
 import math
-import os
 import signal
 import struct
 import subprocess
 import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -188,41 +186,9 @@ READ_SECONDS = 20.0  # a forked trial read gets this long, plus a second per 10 
 _PROBE = "import sys, ezc3d; ezc3d.c3d(sys.argv[1], extract_forceplat_data=sys.argv[2] == '1')"
 
 
-def _single_threaded() -> bool:
-    """Whether this process runs one thread (native ones counted): only then is a fork safe."""
-    try:
-        return len(os.listdir("/proc/self/task")) == 1
-    except OSError:
-        return False
-
-
-def _forked_read(p: Path, plates: bool, seconds: float) -> int | None:
-    """ezc3d's read of ``p`` in a forked child: the signal that killed it, 0 if it ran out of time
-    (then killed), None if it ended by itself."""
-    pid = os.fork()
-    if pid == 0:  # the child: read, and leave without Python's clean-up
-        code = 1
-        try:
-            import ezc3d
-
-            ezc3d.c3d(str(p), extract_forceplat_data=plates)
-            code = 0
-        finally:
-            os._exit(code)
-    deadline = time.monotonic() + seconds
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            return os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
-        if time.monotonic() > deadline:
-            os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
-            return 0
-        time.sleep(0.005)
-
-
 def _spawned_read(p: Path, plates: bool, seconds: float) -> int | None:
-    """ezc3d's read of ``p`` in a new interpreter (0.2 s more than a fork), as :func:`_forked_read`."""
+    """ezc3d's read of ``p`` in a new interpreter: the signal that killed it, 0 if it ran out of time
+    (then killed), None if it ended by itself."""
     try:
         r = subprocess.run([sys.executable, "-c", _PROBE, str(p), "1" if plates else "0"],
                            capture_output=True, timeout=seconds)
@@ -235,14 +201,11 @@ def _check_ezc3d_survives(p: Path, size: int, plates: bool) -> None:
     """Read ``p`` with ezc3d once in a child process first: some malformed files crash ezc3d's C++ reader
     (a segmentation fault, found by the fuzz suite) or keep it looping, which would end or hang this
     process without a word. A child killed by a signal or out of time refuses the file in one line;
-    a child that merely raises leaves the message to the real read. The child is forked when this
-    process has one thread (fast), else a new interpreter: a fork of a threaded process (a live
-    capture with its client threads) can itself crash in the child."""
+    a child that merely raises leaves the message to the real read. The child is a new interpreter
+    (0.2-0.5 s), not a fork: this process has threads (BLAS's, a live capture's clients), and a fork
+    of a threaded process can itself crash in the child."""
     seconds = READ_SECONDS + size / 10e6
-    if hasattr(os, "fork") and _single_threaded():
-        sig = _forked_read(p, plates, seconds)
-    else:
-        sig = _spawned_read(p, plates, seconds)
+    sig = _spawned_read(p, plates, seconds)
     if sig == 0:
         raise InputError(f"{p}: not a readable C3D file (ezc3d did not finish reading it in {seconds:.0f} s)")
     if sig is not None:

@@ -17,12 +17,10 @@ from pathlib import Path
 from typing import ClassVar
 
 from livezmp.correct.limits import CorrectionLimits
-from livezmp.correct.solver import correct_motion
 from livezmp.gait.features import walk_features
 from livezmp.gait.take import load_take
-from livezmp.model.motion_file import write_motion
-from livezmp.offline.report import atomic_path, write_json
-from livezmp.offline.take import ZMP_CSV, ZMP_PNG, TakeOptions, analyse_take, correct_c3d_take, take_config
+from livezmp.offline.report import write_json
+from livezmp.offline.take import ZMP_CSV, ZMP_PNG, TakeOptions, analyse_take, correct_c3d_take, correct_loaded
 
 # (name, Arrow type) of the columns every table starts with; "error" ends every table
 COMMON_COLUMNS = (("file", "string"), ("format", "string"), ("frames", "int64"), ("fps", "float64"),
@@ -127,16 +125,7 @@ class CorrectJob(Job):
     def run(self, path: Path, out_dir: Path) -> dict:
         if path.suffix.lower() == ".c3d":  # the markers moved with their segments, written as C3D
             return correct_c3d_take(path, out_dir / self.outputs(path)[0], self.options, self.limits)
-        loaded = self.options.load(path)
-        cfg = take_config(loaded, self.options.mode, self.options.ground)
-        result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, self.limits,
-                                nominal_dt=1.0 / loaded.fps)
-        out = out_dir / self.outputs(path)[0]
-        with atomic_path(out) as tmp:
-            write_motion(loaded, result.frames, tmp)
-        report = result.report()
-        return {"source": loaded.source, "output": str(out), "fps": round(loaded.fps, 6),
-                "duration_s": round(float(loaded.times[-1] - loaded.times[0]), 6), "mode": cfg.mode, **report}
+        return correct_loaded(self.options.load(path), out_dir / self.outputs(path)[0], self.options, self.limits)
 
     def fields(self, summary: dict) -> dict:
         keys = [name for name, _ in self.columns]

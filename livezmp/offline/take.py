@@ -24,7 +24,7 @@ from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
-from livezmp.model.motion_file import LoadedMotion, load_motion
+from livezmp.model.motion_file import LoadedMotion, load_motion, write_motion
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import BatchResult, run_batch
@@ -171,6 +171,21 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, pl
             plot_analysis(a.body, a.result, tmp, title=f"{Path(a.source).name} ({options.mode} ZMP)", cop=a.cop,
                           complete=a.complete)
     return a.summary
+
+
+def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
+                   progress: Callable[[str], None] | None = None) -> dict:
+    """``livezmp correct`` of a loaded BVH or joint-CSV take, written (atomically) to ``output`` in the
+    take's own format. Returns the correction report."""
+    from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
+
+    cfg = take_config(loaded, options.mode, options.ground)
+    result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
+                            progress=progress)
+    with atomic_path(output) as tmp:
+        write_motion(loaded, result.frames, tmp)
+    return {"source": loaded.source, "output": str(output), "mode": cfg.mode, "fps": round(loaded.fps, 6),
+            "duration_s": round(float(loaded.times[-1] - loaded.times[0]), 6), **result.report()}
 
 
 def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
