@@ -63,7 +63,9 @@ def _xy_rows(points, name: str) -> list[list[float]]:
         for i, (x, y) in enumerate(rows):
             if not (-_MAX_COORD <= x <= _MAX_COORD and -_MAX_COORD <= y <= _MAX_COORD):
                 raise SupportError(f"{name}: row {i} has a non-finite or implausible coordinate [{x}, {y}] m")
-    return rows
+    # subnormal coordinates are taken as 0: their products with other differences underflow to 0,
+    # which made a real hull vertex look collinear and dropped it
+    return [[x if abs(x) >= _TINY else 0.0, y if abs(y) >= _TINY else 0.0] for x, y in rows]
 
 
 def _point(p_xy, name: str = "point") -> tuple[float, float]:
@@ -120,9 +122,7 @@ def _drop_slivers(hull: list, tol: float) -> list:
 
 
 def _hull_rows(rows: list[list[float]]) -> list[tuple[float, float]]:
-    # subnormal coordinates are taken as 0: their products with other differences underflow to 0,
-    # which made a real vertex look collinear and dropped it
-    pts = sorted({(x if abs(x) >= _TINY else 0.0, y if abs(y) >= _TINY else 0.0) for x, y in rows})
+    pts = sorted({(x, y) for x, y in rows})
     if len(pts) <= 1:
         return pts
     ys = [p[1] for p in pts]
