@@ -16,7 +16,9 @@ needs a ``[servos.NAME]`` entry in the robot config. Per kind:
   the factory 250 (500 us) for the link to set at open. With ``buses`` > 1 the servos are
   split in config order over that many chains (ports), one URL ``dynamixel:PATH1+PATH2...``;
 * ``can``: a `CanServoBus`, one node per servo (node id = servo id), behind an slcan adapter
-  on a pty, or with ``can_transport="socketcand"`` a socketcand daemon on loopback TCP;
+  on a pty, or with ``can_transport="socketcand"`` a socketcand daemon on loopback TCP; with
+  ``can_protocol="mit"`` MIT-mode motors instead (`mit_motor`: CAN id = servo id), split in
+  order over ``buses`` CAN buses of one socketcand daemon (no foot sensors, IMU or faults);
 * ``fw``: one `FirmwareBoard` with every joint (joint id = servo id).
 
 ``foot_sensors`` / ``imu`` providers (see `firmware_board`) reach the host on ``fw`` and
@@ -45,6 +47,7 @@ from sim_devices.dynamixel_imu_board import ImuBoard
 from sim_devices.faults import FaultCounters, FaultSpec
 from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
 from sim_devices.humanoid import SimHumanoid
+from sim_devices.mit_motor import MitMotorBuses
 from sim_devices.plant_split import split_plant
 from sim_devices.pty_port import PtyPort
 from sim_devices.servo_plant import JointPlant
@@ -138,7 +141,7 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
                   joint_names: Sequence[str] | None = None, faults: str | FaultSpec = "",
                   foot_sensors: FootProvider | None = None, imu: ImuProvider | None = None,
                   baud: int = 1_000_000, adapter: str | float = DEFAULT_ADAPTER, buses: int = 1,
-                  can_transport: str = "slcan") -> SimDevices:
+                  can_transport: str = "slcan", can_protocol: str = "firmware") -> SimDevices:
     """Start the devices of ``kind`` ("dynamixel", "can" or "fw") driving ``plant`` (see module docstring).
 
     ``baud`` is the serial line rate (dynamixel, fw) or the CAN bitrate (can); ``adapter`` the
@@ -172,7 +175,14 @@ def start_devices(kind: str, plant: JointPlant, robot_config: RobotConfig, *,
             board = None if imu is None or robot_config.imu is None else \
                 ImuBoard(robot_config.imu.id, imu, robot_config.imu.axes)
             return _dynamixel_buses(plant, servos, faults, baud, adapter, buses, board)
+        if kind == "can" and can_protocol == "mit":
+            if faults or foot_sensors is not None or imu is not None:
+                raise InputError("simulated MIT-mode motors have no faults, foot sensors or IMU")
+            motors = MitMotorBuses(plant, servos, buses=buses, bitrate=baud)
+            return SimDevices(kind, motors.url, [], [motors])
         if kind == "can":
+            if can_protocol != "firmware":
+                raise InputError(f"CAN protocol '{can_protocol}': expected firmware or mit")
             bus = CanServoBus(plant, names, ids, foot_sensors=foot_sensors, imu=imu, faults=faults, bitrate=baud,
                               rates=CAN_POWER_UP_RATES, transport=can_transport)
             if can_transport == "socketcand":

@@ -2,6 +2,7 @@
 
     dynamixel:PATH[+PATH2...][?baud=1000000&fast=auto&read=position&return_delay=0&watchdog=0.1&timeout=S]
     can:INTERFACE:CHANNEL[?bitrate=1000000&rate=30&watchdog=0.2&timeout=0.1&OPTION=VALUE...]
+    can:INTERFACE:CHANNEL[+CHANNEL2...]?protocol=mit[&kp=20&kd=0.5&bitrate=1000000&timeout=0.1&OPTION=VALUE...]
     fw:URL[?baud=1000000&rate=500&watchdog=0.2&timeout=0.1]
     mock:                       (registered by sim_devices: an in-process simulated robot)
 
@@ -153,6 +154,13 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
     from livezmp.links.can import CanBoards
     from livezmp.links.firmware import FirmwareLink
 
+    protocol = extra.pop("protocol", "firmware")
+    if protocol == "mit":
+        return _can_mit(url, target, names, config, opts, extra)
+    if protocol != "firmware":
+        raise InputError(f"link URL '{url}': option 'protocol' must be firmware or mit, got '{protocol}'")
+    if "+" in target:
+        raise InputError(f"link URL '{url}': several CAN buses (CHANNEL1+CHANNEL2) need protocol=mit")
     _check_watchdog(url, opts["watchdog"], 65.535)
     nodes = sorted({s.id for s in _servos("can", names, config)})
     bad = [n for n in nodes if not 1 <= n <= 127]
@@ -168,6 +176,35 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
         return CanBoards(interface, channel, nodes, tids, **bus_options)
 
     return FirmwareLink(url, names, connect, rate=opts["rate"], watchdog=opts["watchdog"], timeout=opts["timeout"])
+
+
+def _can_mit(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
+    import can
+
+    from livezmp.links.can_mit import MitCanLink
+    from livezmp.links.mit_protocol import MINI_CHEETAH
+
+    servos = _servos("can", names, config)
+    bad = [s.id for s in servos if not 1 <= s.id <= 255]
+    if bad:
+        raise InputError(f"{config.source}: servo id {bad[0]} cannot be an MIT-mode motor's CAN id (1..255)")
+    gains = {}
+    for name, top in (("kp", MINI_CHEETAH.kp), ("kd", MINI_CHEETAH.kd)):
+        value = _bus_option(extra.pop(name, "20" if name == "kp" else "0.5"))
+        if isinstance(value, str) or not 0 <= value <= top:
+            raise InputError(f"link URL '{url}': option '{name}' must be a number in 0..{top:g}, got '{value}'")
+        gains[name] = float(value)
+    interface, _, channels = target.partition(":")
+    buses = channels.split("+")
+    if len(set(buses)) != len(buses) or not all(buses):
+        raise InputError(f"link URL '{url}': can:INTERFACE:CHANNEL1+CHANNEL2... needs distinct, non-empty channels")
+    bitrate = opts["bitrate"] or 1_000_000
+    bus_options = {k: _bus_option(v) for k, v in extra.items()}
+
+    def open_bus(channel: str) -> can.BusABC:
+        return can.Bus(interface=interface, channel=channel, bitrate=bitrate, **bus_options)
+
+    return MitCanLink(url, names, servos, buses, open_bus, bitrate=bitrate, timeout=opts["timeout"], **gains)
 
 
 _BUILT_IN = {
