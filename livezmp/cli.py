@@ -252,7 +252,11 @@ def add_device_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--adapter", default=DEFAULT_ADAPTER,
                    help=f"the simulated bus's USB-serial adapter: {', '.join(ADAPTERS)} or a round-trip latency in "
                         f"ms (default {DEFAULT_ADAPTER}: full-speed FTDI, latency timer 1 ms)")
-    p.add_argument("--buses", type=int, default=1, help="split the servos over this many simulated Dynamixel buses")
+    p.add_argument("--buses", type=int, default=1, help="split the servos over this many simulated buses "
+                                                         "(Dynamixel, or CAN with --can-protocol mit)")
+    p.add_argument("--can-protocol", choices=("firmware", "mit"), default="firmware",
+                   help="simulated CAN servos: firmware_protocol nodes behind slcan (default), or MIT-mode motors "
+                        "(one command frame, one state frame) behind a socketcand daemon")
 
 
 # -- gait -----------------------------------------------------------------------------------------

@@ -110,9 +110,14 @@ def check_faults(spec: str) -> None:
 
 
 def device_options(args: argparse.Namespace) -> dict:
-    """--baud, --adapter and --buses as `start_devices` options (defaults left out); InputError on a bad one,
-    before anything starts."""
+    """--baud, --adapter, --buses and --can-protocol as `start_devices` options (defaults left out); InputError
+    on a bad one, before anything starts."""
     options = {}
+    mit = getattr(args, "can_protocol", "firmware") == "mit"
+    if mit:
+        if args.link != "can":
+            raise InputError("--can-protocol: only the can link has a protocol to choose")
+        options |= {"can_protocol": "mit", "can_transport": "socketcand"}
     if args.baud is not None:
         if args.baud <= 0:
             raise InputError(f"--baud {args.baud}: must be a positive number of bit/s")
@@ -124,8 +129,8 @@ def device_options(args: argparse.Namespace) -> dict:
             raise InputError(f"--adapter: {e}") from None
         options["adapter"] = args.adapter
     if args.buses != 1:
-        if args.link != "dynamixel":
-            raise InputError("--buses: only the dynamixel link has several buses")
+        if args.link != "dynamixel" and not mit:
+            raise InputError("--buses: only the dynamixel link and MIT-mode CAN motors have several buses")
         options["buses"] = args.buses
     return options
 

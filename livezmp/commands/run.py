@@ -136,7 +136,9 @@ def print_summary(s: dict) -> None:
             f"latency p99 {p99}; stopped by {s['stopped_by']}")
     if s.get("bus"):
         b = s["bus"]
-        line += (f"; bus: {b['baud']} baud x {b['buses']}, {b['read']}, {b['bytes_per_cycle']:g} bytes = "
+        size = (f"{b['frames_per_cycle']} frames, {b['bits_per_cycle']} bits" if "bits_per_cycle" in b
+                else f"{b['bytes_per_cycle']:g} bytes")
+        line += (f"; bus: {b['baud']} baud x {b['buses']}, {b['read']}, {size} = "
                  f"{b['wire_ms_per_cycle']:.2f} ms a cycle + {b['adapter_latency_ms']:.2f} ms adapter: ceiling "
                  f"{b['ceiling_hz']:.0f} Hz, {100 * b['utilisation']:.0f} % used")
     if s.get("fell") is not None:

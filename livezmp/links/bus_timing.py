@@ -124,7 +124,8 @@ class BusCeiling:
 def bus_summary(ceilings: list[BusCeiling], read: str, achieved_hz: float) -> dict:
     """The summary's ``bus`` block for buses read and written in parallel (the slowest sets the
     ceiling). ``utilisation``: achieved rate / ceiling; ``wire_busy``: share of time the
-    busiest wire carries bytes. Times in ms, rates in Hz."""
+    busiest wire carries bytes. Times in ms, rates in Hz. On a CAN bus ``bytes_per_cycle`` is the
+    frames' data and ``bits_per_cycle`` what they hold the wire for (stuff bits included)."""
     slowest = max(ceilings, key=lambda c: c.cycle_s)
     wire_busy = max(achieved_hz * c.wire_s for c in ceilings)
     return {
@@ -139,4 +140,6 @@ def bus_summary(ceilings: list[BusCeiling], read: str, achieved_hz: float) -> di
         "ceiling_hz": round(slowest.ceiling_hz, 1),
         "utilisation": round(achieved_hz / slowest.ceiling_hz, 4),
         "wire_busy": round(wire_busy, 4),
+        **({"frames_per_cycle": slowest.frames_per_cycle, "bits_per_cycle": slowest.bits_per_cycle}
+           if hasattr(slowest, "bits_per_cycle") else {}),  # a CAN bus (can_timing.CanBusCeiling)
     }

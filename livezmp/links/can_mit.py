@@ -75,6 +75,7 @@ class MitCanLink(PortLink):
     def open(self) -> None:
         """Open every bus, find each motor's bus (entering motor mode), then hold the present posture."""
         self._release()
+        self._on_bus = []
         try:
             for channel in self.channels:
                 self.buses.append(self._open_bus(channel))
@@ -260,5 +261,4 @@ class MitCanLink(PortLink):
             except (can.CanError, OSError, ValueError):
                 pass  # the adapter is gone already
         self.buses = []
-        self._on_bus = []
         self._rounds = 0
