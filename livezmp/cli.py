@@ -26,7 +26,7 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 
 # Names the grammar offers before anything heavy is imported; tests check them against
 # livezmp.live.scenarios.SCENARIOS, sim_devices.launch.KINDS and the dashboard's default.
-SCENARIO_NAMES = ("stand", "lean", "arm_swing", "squat", "slope", "push", "demo")
+SCENARIO_NAMES = ("stand", "lean", "arm_swing", "squat", "slope", "edge", "push", "demo")
 SIM_LINKS = ("dynamixel", "can", "fw")
 DEFAULT_DASHBOARD = "127.0.0.1:8765"
 

@@ -21,7 +21,14 @@ servo bus can drive it in place of a bare `ServoPlant`. Model, per fixed interna
   stance foot's x axis). The simulation works in the ground's frame (its plane z = 0, x
   uphill), where gravity is tilted: (−g sin slope, 0, −g cos slope). Everything below —
   states, ZMP, soles, polygon, pushes (along the ground) — is in that frame; only the
-  IMU, as a real one, reads the world (gravity straight down);
+  IMU, as a real one, reads the world (gravity straight down). With ``edge=(side, fraction)``
+  the ground is level but foot ``side`` stands rolled over a step's edge (the scenario's
+  ankle roll): the other foot is the flat one the base is placed from, for the whole run,
+  and only the strip of the rolled sole from its low edge across ``fraction`` of its width
+  (up to the step's edge under it) bears weight, so that strip, not the whole sole, joins the
+  support polygon; the rolled foot counts as in contact when its low edge is within
+  ``contact_tolerance`` of the floor or below it (a floor a few mm lower under it: its ankle's
+  roll lowers the edge);
 * true ZMP: exact rigid-body dynamics of the whole body
   (:func:`livezmp.balance.zmp.compute_zmp`) in the state (q, v, a), under the ground
   frame's gravity: the centre of pressure on the ground plane. v and a are second-order
@@ -198,6 +205,17 @@ def cop_weights(corners: Array, point: Array) -> Array:
     return w
 
 
+def edge_strip(sole: Array, fraction: float) -> Array:
+    """The corners (4, 3) of the strip of a rectangular ``sole`` (corners (4, 3), world) rolled over an
+    edge: from its two lowest corners across ``fraction`` of the way to the two others."""
+    order = np.argsort(sole[:, 2])
+    low, high = sole[order[:2]], sole[order[2:]]
+    # pair each high corner with the low corner across the sole's width (the nearer one)
+    if np.linalg.norm(high[0] - low[0]) > np.linalg.norm(high[0] - low[1]):
+        low = low[::-1]
+    return np.vstack([low, low + fraction * (high - low)])
+
+
 class _GoalShaper:
     """Commanded goals → a servo plant's goal: their mean over the last ``window`` steps,
     then a first-order lag (``gain`` per step); joints with torque off reset both to
@@ -240,11 +258,14 @@ class SimHumanoid:
     def __init__(self, body: BodyModel, posture: Array | None = None, *, servo: ServoPlant | None = None,
                  dt: float = 1e-3, goal_window_s: float = 0.008, goal_lag_s: float = 0.01,
                  fall_after_s: float = 0.2, contact_tolerance: float = 1e-3, clock: Callable[[], float] | None = None,
-                 torque_on: bool = False, device_steps: bool = True, slope: float = 0.0) -> None:
+                 torque_on: bool = False, device_steps: bool = True, slope: float = 0.0,
+                 edge: tuple[str, float] | None = None) -> None:
         if body.kind != "urdf" or len(body.base_channels) != 6:
             raise InputError("SimHumanoid: needs a URDF robot body with a floating base (body_from_urdf)")
         if not (math.isfinite(slope) and abs(slope) < math.radians(45)):
             raise InputError(f"SimHumanoid: slope must be a finite angle under 45 degrees (rad), got {slope!r}")
+        if edge is not None and (edge[0] not in ("left", "right") or not 0.0 < edge[1] <= 1.0):
+            raise InputError(f"SimHumanoid: edge must be (left or right, a fraction in (0, 1]), got {edge!r}")
         if not (dt > 0 and min(goal_window_s, goal_lag_s, fall_after_s, contact_tolerance) >= 0):
             raise InputError(f"SimHumanoid: need dt > 0 and goal_window_s, goal_lag_s, fall_after_s, contact_tolerance "
                              f">= 0; got {dt}, {goal_window_s}, {goal_lag_s}, {fall_after_s}, {contact_tolerance}")
@@ -289,7 +310,10 @@ class SimHumanoid:
         self._place_data = self.model.createData()  # re-placement on a stance switch
         self._sensor_data = self.model.createData()  # sensors, on request
         self._imu_frame = body.correction.root_frame_id
-        self._placer = BasePlacer(body)
+        self.edge = edge
+        # on a step's edge the flat foot carries the base all along: no stance switch
+        self._placer = BasePlacer(body) if edge is None else \
+            BasePlacer(body, switch_depth=math.inf, stance="right" if edge[0] == "left" else "left")
         self._steps = 0
         self._requested = 0.0
         self._unsupported_since: float | None = None
@@ -444,7 +468,10 @@ class SimHumanoid:
         cached = self._polygon_cache
         if cached is not None and cached[0] == support and np.abs(cached[1] - key).max(initial=0.0) <= 1e-9:
             return cached[2]
-        polygon = support_polygon(soles["left"], soles["right"], support)
+        bearing = dict(soles)
+        if self.edge is not None:
+            bearing[self.edge[0]] = edge_strip(soles[self.edge[0]], self.edge[1])
+        polygon = support_polygon(bearing["left"], bearing["right"], support)
         self._polygon_cache = (support, key, polygon)
         return polygon
 

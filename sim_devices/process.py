@@ -77,7 +77,7 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
     # the mock link steps the humanoid at each read; behind devices, only its thread does,
     # once per physics step, so no device reply waits for physics
     humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock",
-                           slope=scenario.slope)
+                           slope=scenario.slope, edge=scenario.edge)
     if kind == "mock":
         return SimRobot(humanoid, None, None, scenario)
     thread = RealtimeThread(humanoid, period=humanoid.dt).start()

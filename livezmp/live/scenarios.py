@@ -83,13 +83,16 @@ class Scenario:
     """``goals(t)``: joint goal angles (rad, ``body.joint_names`` order) at scenario time
     t (s); ``duration`` (s); ``pushes`` in scenario time; ``slope`` (rad): the ground it is
     played on rises ahead of the robot by this angle (a simulator's ground; on a robot,
-    where to stand it)."""
+    where to stand it); ``edge``: (side, fraction) when that foot stands rolled over a step's
+    edge, borne by the part of its sole that ``fraction`` of its width spans from its low edge,
+    the other foot flat (a simulator's ground)."""
 
     name: str
     goals: Callable[[float], np.ndarray]
     duration: float
     pushes: tuple[Push, ...] = ()
     slope: float = 0.0
+    edge: tuple[str, float] | None = None
 
 
 ALIGNED = 0.99  # |cos| between a joint's axis and a world axis for the joint to turn about it
@@ -426,6 +429,24 @@ def slope(body: BodyModel, degrees: float = 7.0, amplitude: float = 0.4, frequen
     return Scenario("slope", goals, duration, slope=angle)
 
 
+def step_edge(body: BodyModel, degrees: float = 8.0, support: float = 0.6, amplitude: float = 0.4,
+              frequency: float = 0.7, duration: float = 4.0, flexion: float = 0.3) -> Scenario:
+    """Stand with the left foot rolled ``degrees`` outward (its outer side up, resting on the edge
+    of a step outside it, its inner edge on the floor: ``support`` of its width bears weight), the
+    right foot flat, and swing both arms as in `slope`. A flat-foot base estimate that takes the
+    rolled foot as the flat one sees the body rolled by ``degrees`` and its ZMP sideways by about
+    the CoM height times their tangent; the IMU knows which way is down."""
+    poser = Poser(body)
+    q0 = poser.standing(flexion) + math.radians(degrees) * poser.unit("l_ank_roll", X)
+    dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
+    w = 2 * np.pi * frequency
+
+    def goals(t: float) -> np.ndarray:
+        return q0 + amplitude * smooth_step(t) * np.sin(w * max(t, 0.0)) * dq
+
+    return Scenario("edge", goals, duration, edge=("left", support))
+
+
 def front_margin(body: BodyModel, joints: np.ndarray) -> float:
     """Distance (m) from the static CoM's ground point forward to the toes' edge, standing on both feet."""
     com, poly = standing_support(body, joints)
@@ -473,6 +494,7 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
     "arm_swing": lambda body, **kw: arm_swing(body, **{**ARM_SWING, **kw}),
     "squat": squat,
     "slope": slope,
+    "edge": step_edge,
     "push": lambda body, **kw: push(body, **{**PUSH, **kw}),
     "demo": lambda body, **kw: sequence("demo", [lean(body, hold_s=2.0),
                                                   arm_swing(body, duration=3.0, **ARM_SWING)], **kw),

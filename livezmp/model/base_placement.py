@@ -7,7 +7,8 @@ other foot when, so placed, that foot's sole would go below the ground by more t
 that depth: then it is the lower foot and takes the weight (when both placements dip
 below, as with a foot rolled on its edge, the stance stays: no chatter). At the first frame the
 stance is the foot that leaves the other at or above the ground, its sole centred at
-x = y = 0. Streaming: constant cost per frame, no history.
+x = y = 0 (or, given ``stance``, that foot: a simulator that knows which foot stands flat).
+Streaming: constant cost per frame, no history.
 """
 
 from __future__ import annotations
@@ -32,8 +33,11 @@ def base_coordinates(m: pin.SE3) -> np.ndarray:
 class BasePlacer:
     """Streaming base placement for a body with ``base_channels`` (a URDF robot)."""
 
-    def __init__(self, body: BodyModel, switch_depth: float = 0.001):
+    def __init__(self, body: BodyModel, switch_depth: float = 0.001, stance: str | None = None):
+        if stance not in (None, "left", "right"):
+            raise ValueError(f"BasePlacer: stance must be left, right or None, got {stance!r}")
         self.body = body
+        self._first = stance
         self.data = body.model.createData()
         self.switch_depth = switch_depth
         self.stance: str | None = None
@@ -72,7 +76,7 @@ class BasePlacer:
 
     def _start(self, bf: dict[str, pin.SE3]) -> None:
         best = None
-        for side in ("left", "right"):
+        for side in ("left", "right") if self._first is None else (self._first,):
             self.anchor = self._anchor_flat(bf[side], side, xy=np.zeros(2))
             other = "right" if side == "left" else "left"
             depth = self._sole_min_z(self.anchor * bf[side].inverse(), other, bf)
