@@ -81,40 +81,49 @@ def test_the_simulators_zmp_on_a_slope_is_under_the_com_along_gravity(mini):
         SimHumanoid(mini, slope=math.radians(50))
 
 
-def zmp_error_on_slope(body, imu: str | None) -> tuple[np.ndarray, dict]:
-    """The loop (with corrections) on the slope scenario, simulated time; the distance (m) of each analysed
-    sample's ZMP to the simulator's true ZMP of the same sample, and the summary. ``imu``: None (no IMU),
-    "full" (orientation, gyro, accelerometer: a board's) or "raw" (gyro and accelerometer only)."""
-    scenario = make_scenario("slope", body, duration=3.0)
+def zmp_errors(body, scenario, h: SimHumanoid, imu, where=lambda zmp, soles: zmp[:2],
+               config: LoopConfig | None = None) -> tuple[np.ndarray, dict]:
+    """The loop on ``scenario`` played by ``h`` (reading ``imu``, a provider or None), simulated time; the
+    distance (m) of each analysed sample's ZMP to the simulator's true ZMP of the same sample, both taken
+    by ``where(zmp, soles)`` (default: x, y in each one's ground frame), and the summary."""
     clock = SimTime()
-    h = SimHumanoid(body, scenario.goals(0.0), slope=scenario.slope)
-    reading = humanoid_imu(h)
-    provider = None if imu is None else reading if imu == "full" else (
-        lambda: {k: v for k, v in reading().items() if k != "orientation"})
-    mock = MockLink(h, body.joint_names, clock=clock.now, imu=provider)
+    mock = MockLink(h, body.joint_names, clock=clock.now, imu=imu)
     mock.open()
     truth = []
 
     class Truthful(BusTime):
         def read(self):
             frame = super().read()
-            truth.append(h.state().zmp)
+            s = h.state()
+            truth.append(where(s.zmp, s.soles))
             return frame
 
-    loop = LiveLoop(Truthful(mock, clock), body, LoopConfig(), command=scenario.goals,
+    loop = LiveLoop(Truthful(mock, clock), body, config or LoopConfig(), command=scenario.goals,
                     clock=LoopClock(500.0, now=clock.now, sleep=clock.advance), fell=lambda: h.fallen is not None)
     errors = []
     feed = loop._feed
 
     def compare(t, channels, valid):
         feed(t, channels, valid)
-        if loop._fresh and loop.result.zmp is not None:
-            errors.append(float(np.linalg.norm(loop.result.zmp[:2] - truth[loop.result.index][:2])))
+        r = loop.result
+        if loop._fresh and r.zmp is not None:
+            errors.append(float(np.linalg.norm(where(r.zmp, r.soles) - truth[r.index])))
 
     loop._feed = compare
     summary = loop.run(scenario.duration)
     assert h.fallen is None and summary["stopped_by"] == "duration"
     return np.array(errors), summary
+
+
+def zmp_error_on_slope(body, imu: str | None) -> tuple[np.ndarray, dict]:
+    """`zmp_errors` on the slope scenario (with corrections). ``imu``: None (no IMU), "full" (orientation,
+    gyro, accelerometer: a board's) or "raw" (gyro and accelerometer only)."""
+    scenario = make_scenario("slope", body, duration=3.0)
+    h = SimHumanoid(body, scenario.goals(0.0), slope=scenario.slope)
+    reading = humanoid_imu(h)
+    provider = None if imu is None else reading if imu == "full" else (
+        lambda: {k: v for k, v in reading().items() if k != "orientation"})
+    return zmp_errors(body, scenario, h, provider)
 
 
 @pytest.mark.parametrize("robot", ["livezmp_mini", "robotis_op3"])

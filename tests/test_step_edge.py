@@ -14,18 +14,14 @@ import math
 
 import numpy as np
 import pytest
-from test_live_loop import SimTime
-from test_live_loop_closed import BusTime
+from test_ground_tilt import zmp_errors
 
 from livezmp.errors import InputError
-from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
-from livezmp.live.loop import LiveLoop
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.base_placement import BasePlacer
 from sim_devices.humanoid import SimHumanoid, edge_strip
 from sim_devices.launch import humanoid_imu
-from sim_devices.mock_link import MockLink
 
 
 def in_sole(point: np.ndarray, sole: np.ndarray) -> np.ndarray:
@@ -63,37 +59,11 @@ def test_the_edge_scenario_rolls_one_foot_and_the_flat_foot_carries_the_base(min
 
 
 def zmp_error_on_edge(body, imu: bool) -> tuple[np.ndarray, dict]:
-    """The loop (estimate only) on the edge scenario, simulated time: each analysed sample's ZMP distance (m)
-    to the simulator's true ZMP, both in the flat right sole's frame; and the summary."""
+    """`zmp_errors` on the edge scenario (estimate only), each ZMP in the flat right sole's frame."""
     scenario = make_scenario("edge", body, duration=3.0)
-    clock = SimTime()
     h = SimHumanoid(body, scenario.goals(0.0), edge=scenario.edge)
-    mock = MockLink(h, body.joint_names, clock=clock.now, imu=humanoid_imu(h) if imu else None)
-    mock.open()
-    truth = []
-
-    class Truthful(BusTime):
-        def read(self):
-            frame = super().read()
-            s = h.state()
-            truth.append(in_sole(s.zmp, s.soles["right"]))
-            return frame
-
-    loop = LiveLoop(Truthful(mock, clock), body, LoopConfig(correct=False), command=scenario.goals,
-                    clock=LoopClock(500.0, now=clock.now, sleep=clock.advance), fell=lambda: h.fallen is not None)
-    errors = []
-    feed = loop._feed
-
-    def compare(t, channels, valid):
-        feed(t, channels, valid)
-        r = loop.result
-        if loop._fresh and r.zmp is not None:
-            errors.append(float(np.linalg.norm(in_sole(r.zmp, r.soles["right"]) - truth[r.index])))
-
-    loop._feed = compare
-    summary = loop.run(scenario.duration)
-    assert h.fallen is None and summary["stopped_by"] == "duration"
-    return np.array(errors), summary
+    return zmp_errors(body, scenario, h, humanoid_imu(h) if imu else None,
+                      where=lambda zmp, soles: in_sole(zmp, soles["right"]), config=LoopConfig(correct=False))
 
 
 @pytest.mark.parametrize("robot", ["livezmp_mini", "robotis_op3"])

@@ -141,5 +141,5 @@ def bus_summary(ceilings: list[BusCeiling], read: str, achieved_hz: float) -> di
         "utilisation": round(achieved_hz / slowest.ceiling_hz, 4),
         "wire_busy": round(wire_busy, 4),
         **({"frames_per_cycle": slowest.frames_per_cycle, "bits_per_cycle": slowest.bits_per_cycle}
-           if hasattr(slowest, "bits_per_cycle") else {}),  # a CAN bus (can_timing.CanBusCeiling)
+           if hasattr(slowest, "bits_per_cycle") else {}),  # a CAN bus (can_timing.CanBusCeiling, no import circle)
     }

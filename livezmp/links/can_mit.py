@@ -162,8 +162,8 @@ class MitCanLink(PortLink):
         sent and heard (`can_timing`), plus ``adapter``'s round trip."""
         command = frame_bits(int(self._ids[0]), self._last_command)
         reply = frame_bits(mit.MASTER_ID, self._last_reply)
-        return [CanBusCeiling(self.bitrate, len(joints) * (command + reply), 2 * len(joints),
-                              len(joints) * (mit.COMMAND_BYTES + mit.REPLY_BYTES), adapter)
+        return [CanBusCeiling(self.bitrate, len(joints) * (mit.COMMAND_BYTES + mit.REPLY_BYTES), 0.0, adapter,
+                              bits_per_cycle=len(joints) * (command + reply), frames_per_cycle=2 * len(joints))
                 for joints in self._on_bus]
 
     # -- helpers --------------------------------------------------------------------------------

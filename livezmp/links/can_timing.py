@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
-from livezmp.links.bus_timing import Adapter
+from livezmp.links.bus_timing import BusCeiling
 
 CRC15_POLY = 0x4599  # x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1
 TRAILER_BITS = 13  # CRC delimiter, ACK slot, ACK delimiter, end of frame (7), interframe space (3)
@@ -79,31 +79,15 @@ def max_frame_bits(n_data: int, extended: bool = False) -> int:
 
 
 @dataclass(frozen=True)
-class CanBusCeiling:
-    """The fastest a cycle can go on one CAN bus at ``bitrate`` (bit/s): the ``bits_per_cycle`` of its
-    ``frames_per_cycle`` frames (``bytes_per_cycle`` of data in them) on the wire one after the
-    other, plus the host adapter's round trip. Nodes answer from their receive interrupt: no
-    return delay. Duck-compatible with `bus_timing.BusCeiling` for the run summary's ``bus``."""
+class CanBusCeiling(BusCeiling):
+    """The fastest a cycle can go on one CAN bus at ``baud`` (its bitrate, bit/s): the
+    ``bits_per_cycle`` of its ``frames_per_cycle`` frames (``bytes_per_cycle`` of data in them)
+    on the wire one after the other, plus the host adapter's round trip. Nodes answer from
+    their receive interrupt: ``return_delays_s`` 0."""
 
-    bitrate: int
-    bits_per_cycle: int
-    frames_per_cycle: int
-    bytes_per_cycle: int
-    adapter: Adapter
-    return_delays_s: float = 0.0
-
-    @property
-    def baud(self) -> int:
-        return self.bitrate
+    bits_per_cycle: int = 0
+    frames_per_cycle: int = 0
 
     @property
     def wire_s(self) -> float:
-        return self.bits_per_cycle / self.bitrate
-
-    @property
-    def cycle_s(self) -> float:
-        return self.wire_s + self.return_delays_s + self.adapter.round_trip_s
-
-    @property
-    def ceiling_hz(self) -> float:
-        return 1.0 / self.cycle_s
+        return self.bits_per_cycle / self.baud
