@@ -17,7 +17,8 @@ import pytest
 from livezmp.errors import InputError
 from livezmp.links import make_link
 from livezmp.links import mit_protocol as mit
-from livezmp.links.bus_timing import ADAPTERS
+from livezmp.links.base import LinkError, LinkReadError
+from livezmp.links.bus_timing import ADAPTERS, bus_summary
 from livezmp.links.can_mit import MitCanLink
 from livezmp.links.can_timing import crc15, frame_bits, max_frame_bits
 from livezmp.live.clock import LoopClock
@@ -138,6 +139,11 @@ def test_a_20_motor_can_robot_runs_the_loop_at_200_hz_on_four_buses():
     ceilings = s["link"].bus_ceilings(ADAPTERS["none"])
     assert len(ceilings) == 4 and all(c.frames_per_cycle == 10 for c in ceilings)
     assert min(c.ceiling_hz for c in ceilings) > 800
+    # the run summary's bus block: the bits of one command and one reply per motor on the busiest bus
+    bus = bus_summary(ceilings, "state", s["achieved_hz"])
+    assert bus["frames_per_cycle"] == 10 and bus["buses"] == 4
+    assert bus["ceiling_hz"] == pytest.approx(1e6 / bus["bits_per_cycle"], abs=0.1)
+    assert 5 * (111 + 95) <= bus["bits_per_cycle"] <= 5 * (max_frame_bits(8) + max_frame_bits(6))
 
 
 def test_one_bus_is_bound_by_its_wire_time():
@@ -158,3 +164,45 @@ def test_url_errors_name_the_option():
         make_link("can:socketcand:can0?protocol=rmd", ["a"], config)
     with pytest.raises(InputError, match="need protocol=mit"):
         make_link("can:socketcand:can0+can1", ["a"], config)
+
+
+def _sim_time_link(silent: set[int] = frozenset()):
+    """Four MIT motors (ids 1..4) on two simulated-time buses, those in ``silent`` absent; the link, unopened,
+    and the buses."""
+    servos = [ServoConfig(f"j{i}", i + 1, zero=0) for i in range(4)]
+    clock = SimClock()
+    joints = PlantJoints(ServoPlant(4, position=[0.1, 0.2, 0.3, 0.4]))
+    nodes = [MitMotorNode(joints, i, s, lock=_NoLock(), clock=clock.now) for i, s in enumerate(servos)]
+    buses = {"a": SimTimeCanBus([n for n in nodes[:2] if n.id not in silent], clock),
+             "b": SimTimeCanBus([n for n in nodes[2:] if n.id not in silent], clock)}
+    link = MitCanLink("sim", [s.joint for s in servos], servos, ["a", "b"], buses.__getitem__, clock=clock.now)
+    return link, buses, nodes
+
+
+def test_open_finds_each_motors_bus_and_names_one_that_does_not_answer():
+    link, buses, nodes = _sim_time_link()
+    link.open()
+    assert [list(j) for j in link._on_bus] == [[0, 1], [2, 3]]
+    assert link.read().positions == pytest.approx([0.1, 0.2, 0.3, 0.4], abs=25 / 65535)
+    link, _, _ = _sim_time_link(silent={3})
+    with pytest.raises(LinkError, match=r"motor 3 \(j2\) answered on none of a, b"):
+        link.open()
+
+
+def test_a_motor_that_stops_answering_fails_the_read_and_bad_goals_send_nothing():
+    link, buses, nodes = _sim_time_link()
+    link.open()
+    link.read()
+    sent = buses["a"].frames + buses["b"].frames
+    with pytest.raises(LinkError, match="finite"):
+        link.write_goals(np.array([0.0, np.nan, 0.0, 0.0]))
+    with pytest.raises(LinkError, match="beyond the motors"):
+        link.write_goals(np.array([0.0, 20.0, 0.0, 0.0]))
+    assert buses["a"].frames + buses["b"].frames == sent
+    link.write_goals(np.array([0.0, 0.1, 0.2, 0.3]))
+    assert nodes[3].joints.plant.goal[3] == pytest.approx(0.3, abs=25 / 65535)
+    buses["b"].nodes.remove(nodes[3])  # after its answer to those goals: the next read's request goes unanswered
+    link.read()
+    with pytest.raises(LinkReadError, match=r"no state from 1 motor\(s\) \(j3\)"):
+        link.read()
+    assert link.stats.read_errors == 1
