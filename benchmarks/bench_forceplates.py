@@ -6,12 +6,15 @@ Each row adds one change to the one above, so each error source shows its share:
   1  live estimator settings (0.4 s window, 0.1 s ahead), HAT rigid on the pelvis, raw plates
   2  + HAT upright (moves with the mid-hip, turns with the pelvis' heading)
   3  + plates low-passed like the kinematics (zero-phase, at the estimator's cutoff)
-  4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)  [livezmp analyze default]
-  5  + plates' delay behind the markers measured and undone             [livezmp analyze default]
+  4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)
+  5  + plates' delay behind the markers measured and undone
+  6  + the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip         [livezmp analyze default: 4 + 5 + 6]
 
-then the estimator's cutoff around the default, the error split by axis, support phase and the ZMP's
-linear (CoM) part with the kinematic and the plates' acceleration, `livezmp calibrate` cross-validated
-per trial, and the estimator's own gain and delay on sinusoids (why row 4 matters). Figures: over each
+then the estimator's cutoff around the default (plates low-passed with it, and at a fixed 6 Hz), the trunk's
+sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN comes from)
+and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
+with the kinematic and the plates' acceleration, `livezmp calibrate` cross-validated per trial, and the
+estimator's own gain and delay on sinusoids (why row 4 matters). Figures: over each
 trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after the CoP; bias: mean
 ZMP - CoP along the walk and to its left.
 
@@ -30,12 +33,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from livezmp.balance.plates import G
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
-from livezmp.model.markers import MarkerBodyOptions
+from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, sway_basis
 from livezmp.offline.calibrate import calibrate
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
@@ -44,16 +48,19 @@ from livezmp.offline.validation import cop_vs_zmp, walking_axes
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "c3d"
 TRIALS = ("walk_plugingait_forceplates.c3d", "cgm24_walking01_forceplate.c3d")
 LIVE = {"window_s": 0.4, "lag_s": 0.1}
-RIGID = MarkerBodyOptions(hat_follows_pelvis=True)
+RIGID = MarkerBodyOptions(hat_follows_pelvis=True, hat_sway_gain=None)
+NO_SWAY = MarkerBodyOptions(hat_sway_gain=None)
 RAW_PLATES = 1e9  # Hz: no low-pass
 STEPS = [
     ("1 live window, HAT rigid, raw plates", LabOptions(markers=RIGID, estimator=LIVE, plate_cutoff_hz=RAW_PLATES,
                                                          plate_delay_s=0.0)),
-    ("2 + HAT upright", LabOptions(estimator=LIVE, plate_cutoff_hz=RAW_PLATES, plate_delay_s=0.0)),
-    ("3 + plates low-passed as kinematics", LabOptions(estimator=LIVE, plate_delay_s=0.0)),
-    ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(plate_delay_s=0.0)),
-    ("5 + plate delay undone  [default]", LabOptions()),
+    ("2 + HAT upright", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_cutoff_hz=RAW_PLATES, plate_delay_s=0.0)),
+    ("3 + plates low-passed as kinematics", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_delay_s=0.0)),
+    ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(markers=NO_SWAY, plate_delay_s=0.0)),
+    ("5 + plate delay undone", LabOptions(markers=NO_SWAY)),
+    ("6 + trunk sway {:.2f}/{:.2f}  [default]".format(*TRUNK_SWAY_GAIN), LabOptions()),
 ]
+UPPER = ("thorax", "headarms", "head", "upperarm", "forearm", "hand")
 
 
 def row(name: str, cv: dict, extra: str = "") -> str:
@@ -86,6 +93,8 @@ def trial_table(path: Path) -> list[dict]:
     for hz in (4.0, 5.0, 8.0, 10.0):
         a = analyse_lab_take(trial, LabOptions(estimator={"cutoff_hz": hz}))
         print(row(f"  default but cutoff {hz:g} Hz", a.summary["cop_vs_zmp"]))
+        a = analyse_lab_take(trial, LabOptions(estimator={"cutoff_hz": hz}, plate_cutoff_hz=6.0))
+        print(row("  the same, plates at 6 Hz", a.summary["cop_vs_zmp"]))
     fwd, left = walking_axes(r.com)
     c = final.complete
     plate = p.force[c] / final.summary["mass"]["used_kg"] - [0.0, 0.0, G]
@@ -146,6 +155,56 @@ def extra_table(paths: list[Path]) -> dict[str, tuple]:
     return done
 
 
+def trunk_sway(done: dict[str, tuple]) -> None:
+    """On trials whose trunk is tracked by markers: how far the centre of mass of thorax, head and arms sways
+    about its straight-line trend, per unit of the mid-hip's sway (least-squares gain, fore-aft and lateral),
+    and its mean offset from the mid-hip. TRUNK_SWAY_GAIN is the mean of these gains."""
+    print("\ntrunk sway measured where the trunk is tracked (every frame of the take)")
+    print(f"{'trial':34s} {'gain fore-aft':>13s} {'r':>5s} {'gain lateral':>13s} {'r':>5s}  "
+          "HAT CoM from mid-hip fwd/left/up mm")
+    gains = []
+    for name, (_, a) in done.items():
+        model = a.take.body.model
+        upper = [j for j in range(1, model.njoints)
+                 if model.names[j].split(".")[0].split("_")[0] in UPPER and model.inertias[j].mass > 0]
+        if not upper:
+            continue
+        data, hip_joint = model.createData(), model.getJointId("pelvis.roll")
+        com, hip = [], []
+        for q in a.result.q:
+            pin.forwardKinematics(model, data, q)
+            com.append(sum(model.inertias[j].mass * data.oMi[j].act(model.inertias[j].lever) for j in upper)
+                       / sum(model.inertias[j].mass for j in upper))
+            hip.append(data.oMi[hip_joint].translation.copy())
+        com, hip = np.array(com), np.array(hip)
+        trend, fwd, left = sway_basis(hip)
+        dh, dc = hip - trend, com - sway_basis(com)[0]
+        fit = [(float((dh @ ax) @ (dc @ ax) / ((dh @ ax) @ (dh @ ax))), float(np.corrcoef(dh @ ax, dc @ ax)[0, 1]))
+               for ax in (fwd, left)]
+        gains.append([g for g, _ in fit])
+        off = com - hip
+        print(f"{name[:34]:34s} {fit[0][0]:13.2f} {fit[0][1]:5.2f} {fit[1][0]:13.2f} {fit[1][1]:5.2f}  "
+              f"{1000 * np.mean(off @ fwd):+.0f} / {1000 * np.mean(off @ left):+.0f} / {1000 * np.mean(off[:, 2]):.0f}")
+    if gains:
+        print(f"mean gain fore-aft {np.mean(gains, axis=0)[0]:.2f}, lateral {np.mean(gains, axis=0)[1]:.2f} "
+              f"(TRUNK_SWAY_GAIN = {TRUNK_SWAY_GAIN})")
+
+
+def sway_before_after(done: dict[str, tuple]) -> None:
+    """Every trial with the placed HAT moving with the mid-hip (before) and swaying TRUNK_SWAY_GAIN (after)."""
+    print("\nplaced HAT: moving with the mid-hip -> swaying {:.2f}/{:.2f} (RMS / bias fore-aft / lag)".format(
+        *TRUNK_SWAY_GAIN))
+    before, after = [], []
+    for name, (trial, a) in done.items():
+        cv0 = analyse_lab_take(trial, LabOptions(markers=NO_SWAY)).summary["cop_vs_zmp"]
+        cv1 = a.summary["cop_vs_zmp"]
+        before.append(cv0["rms_mm"])
+        after.append(cv1["rms_mm"])
+        print(f"{name[:34]:34s} {cv0['rms_mm']:6.1f} {cv0['bias_mm'][0]:+6.1f} {cv0['lag_ms']:+6.1f}  ->  "
+              f"{cv1['rms_mm']:6.1f} {cv1['bias_mm'][0]:+6.1f} {cv1['lag_ms']:+6.1f}")
+    print(f"median RMS over {len(after)} trials: {np.median(before):.1f} -> {np.median(after):.1f} mm")
+
+
 def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
     """'total (fore-aft / lateral)' RMS in mm of horizontal differences ``d`` (n, 2)."""
     fa, lat = (1000 * np.sqrt(np.mean((d @ ax[:2]) ** 2)) for ax in axes)
@@ -180,24 +239,28 @@ def error_sources(done: dict[str, tuple]) -> None:
 
 def calibration_table(done: dict[str, tuple]) -> None:
     """`livezmp calibrate` on each trial alone, cross-validated on the halves of its complete frames."""
-    print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames, "
-          "scored on the other (mm)")
+    print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames (prior "
+          "weight chosen within that half), scored on the other (mm)")
     print(f"{'trial':34s} {'frames':>6s} {'table':>7s} {'fitted':>7s} {'held-out table':>15s} {'fitted':>7s}  "
-          "HAT fraction, CoM fwd/left/up mm, sway gain fore-aft/lateral")
-    held = []
-    for name, (trial, _) in done.items():
+          "weight (all / held-out folds), HAT fraction, CoM fwd/left/up mm, sway gain fore-aft/lateral")
+    held, every = [], []
+    for name, (trial, a) in done.items():
         try:
             subject, rep = calibrate([trial])
         except InputError as e:
-            print(f"{name[:34]:34s} not calibrated: {str(e).split(': ')[-1]}")
+            print(f"{name[:34]:34s} not calibrated: {str(e).split(': ', 1)[-1][:110]}")
+            every.append(a.summary["cop_vs_zmp"]["rms_mm"])
             continue
         held.append(rep["rms_held_out_fitted_mm"])
+        every.append(rep["rms_held_out_fitted_mm"])
         off = ", ".join(f"{1000 * v:+.0f}" for v in subject.hat_offset)
+        w = ", ".join("table" if v is None else f"{v:g}" for v in [rep["prior_weight"], *rep["held_out_prior_weights"]])
         print(f"{name[:34]:34s} {rep['frames']:6d} {rep['rms_table_mm']:7.1f} {rep['rms_fitted_mm']:7.1f} "
-              f"{rep['rms_held_out_table_mm']:15.1f} {rep['rms_held_out_fitted_mm']:7.1f}  {subject.hat_fraction:.3f}, "
-              f"{off}, {subject.hat_sway_gain[0]:.2f}/{subject.hat_sway_gain[1]:.2f}")
+              f"{rep['rms_held_out_table_mm']:15.1f} {rep['rms_held_out_fitted_mm']:7.1f}  {w}; "
+              f"{subject.hat_fraction:.3f}, {off}, {subject.hat_sway_gain[0]:.2f}/{subject.hat_sway_gain[1]:.2f}")
     if held:
-        print(f"median held-out RMS, calibrated: {np.median(held):.1f} mm over {len(held)} trials")
+        print(f"median held-out RMS, calibrated: {np.median(held):.1f} mm over {len(held)} trials; over all "
+              f"{len(every)} (the others at their default): {np.median(every):.1f} mm")
 
 
 def main() -> None:
@@ -215,6 +278,8 @@ def main() -> None:
         done |= extra_table(extra_paths(args.more))
         rms = [a.summary["cop_vs_zmp"]["rms_mm"] for _, a in done.values()]
         print(f"median RMS over all {len(rms)} trials with complete frames (defaults): {np.median(rms):.1f} mm")
+    trunk_sway(done)
+    sway_before_after(done)
     error_sources(done)
     calibration_table(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")

@@ -92,13 +92,14 @@ def load_c3d_trial(path: str) -> MocapTrial:
 def with_segments(trial: MocapTrial, path: str) -> MocapTrial:
     """``trial`` (of the C3D file ``path``) with the segment poses of livezmp's marker body of that file
     (pelvis, thighs, shanks, feet, the HAT or the upper-body segments), as a capture system's skeleton
-    solver would stream them: the truth a skeleton stream of this trial carries."""
+    solver would stream them: the truth a skeleton stream of this trial carries. A placed HAT moves with the
+    mid-hip (a live solver has no whole-take trend for it to sway about)."""
     from scipy.spatial.transform import Rotation
 
     from livezmp.model.c3d import read_c3d
-    from livezmp.model.markers import body_from_markers
+    from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 
-    take = body_from_markers(read_c3d(path))
+    take = body_from_markers(read_c3d(path), MarkerBodyOptions(hat_sway_gain=None))
     if take.first_frame != 0 or len(take.frames) != trial.n_frames:
         raise InputError(f"{path}: the marker body does not cover every frame; no segment poses")
     r_in = take.body.world_from_input

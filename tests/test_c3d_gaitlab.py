@@ -34,6 +34,7 @@ UPPER_LEFT = {"FHD": (0.07, 0.06, 1.65), "BHD": (-0.08, 0.06, 1.64), "SHO": (0.0
               "ELB": (-0.01, 0.22, 1.15), "WRA": (0.03, 0.23, 0.90), "WRB": (-0.02, 0.21, 0.90),
               "FIN": (0.02, 0.22, 0.80)}
 CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
+P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 82.9 mm; 100.8 without it)
 PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # centres (m); 0.5 x 0.3 plates
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
@@ -329,17 +330,23 @@ def test_real_plugin_gait_walk(tmp_path):
     # its plates run ~24 ms behind its markers (measured, undone); then lag and fore-aft bias are small
     assert 20 < s["time_alignment"]["plate_delay_measured_ms"] < 30
     cv = s["cop_vs_zmp"]
-    assert cv["frames"] >= 130 and cv["rms_mm"] < 55 and cv["p95_mm"] < 105
+    # the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip (measured on other trials): 50.8 -> 38.9 mm
+    assert cv["frames"] >= 130 and cv["rms_mm"] < 41 and cv["p95_mm"] < P95_WALK_MM
     assert abs(cv["lag_ms"]) < 10 and abs(cv["bias_mm"][0]) < 5
     acc = s["com_acc_vs_plates"]
     assert acc["r"][0] > 0.85  # lateral CoM acceleration follows the plates
+    unswayed = analyse_lab_take(read_c3d(C3D / "walk_plugingait_forceplates.c3d"),
+                                LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None)))
+    assert unswayed.summary["cop_vs_zmp"]["rms_mm"] > 48  # the HAT moving with the mid-hip, as before
 
 
 def test_real_cgm24_walk(tmp_path):
     rc, s = _analyze(C3D / "cgm24_walking01_forceplate.c3d", tmp_path)
     assert rc == 0
     cv = s["cop_vs_zmp"]
-    assert cv["frames"] >= 40 and cv["rms_mm"] < 45 and abs(cv["lag_ms"]) < 10 and abs(cv["bias_mm"][0]) < 10
+    # this subject's trunk follows its mid-hip fore-aft (calibrated gain ~1): the population sway costs it
+    # 42.5 -> 46.9 mm and lag +6.8 -> +10.6 ms
+    assert cv["frames"] >= 40 and cv["rms_mm"] < 48 and abs(cv["lag_ms"]) < 12 and abs(cv["bias_mm"][0]) < 10
 
 
 def test_knee_and_ankle_centres_agree_with_the_files_own_model_outputs():
@@ -397,9 +404,9 @@ def test_not_a_c3d_is_one_line(tmp_path, capsys):
 
 def test_calibration_model_reproduces_the_pipelines_zmp_exactly():
     trial = read_c3d(C3D / "walk_plugingait_forceplates.c3d")
-    lab = analyse_lab_take(trial)
+    lab = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None)))
     rows = lab.complete & lab.result.has_zmp
-    terms = calibration._terms(trial, lab, rows, MarkerBodyOptions())
+    terms = calibration._terms(trial, lab, rows, MarkerBodyOptions(hat_sway_gain=None))
     fraction, height, _ = hat_table(lab.summary["markers"]["stature_m"])
     zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, 1.0, 1.0]))
     assert np.abs(zmp - lab.result.zmp[rows, :2]).max() < 1e-9
@@ -416,7 +423,8 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     """The synthetic subject's HAT sits 40 mm forward and weighs 45 %: the table is off by ~18 mm; the fit
     (prior off) finds the truth, `analyze --subject` then agrees with the plates to a millimetre."""
     path = tmp_path / "hat.c3d"
-    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(hat_offset=(0.04, 0.0, 0.33), hat_fraction=0.45))
+    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(hat_offset=(0.04, 0.0, 0.33), hat_fraction=0.45,
+                                                       hat_sway_gain=None))
     trial = read_c3d(path)
     subject, report = calibration.calibrate([trial])
     assert report["rms_table_mm"] > 15 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 2
@@ -430,7 +438,7 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
 
 def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, monkeypatch):
     """The synthetic subject's trunk sways half as far fore-aft and 0.7 times as far sideways as its mid-hip:
-    the table (gains 1) is off by 13 mm; calibrated (prior on) the held-out halves improve; with the prior
+    the table (gains TRUNK_SWAY_GAIN) is off by 6 mm; calibrated (prior on) the held-out halves improve; with the prior
     off they and `analyze --subject` agree with the plates to 3-4 mm (the fit's model sways the smoothed
     positions, the body the raw ones). (A rigid sway about the
     ankles cannot tell a lighter, higher HAT from a heavier, lower, less swaying one, so the parameters
@@ -438,7 +446,7 @@ def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, mon
     path = tmp_path / "sway.c3d"
     write_lab_c3d(path, PLATES, body=MarkerBodyOptions(hat_sway_gain=(0.5, 0.7)))
     _, report = calibration.calibrate([read_c3d(path)])
-    assert report["rms_table_mm"] > 10 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 1.5
+    assert report["rms_table_mm"] > 5 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 1.5
     monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
     _, report = calibration.calibrate([read_c3d(path)])
     assert report["rms_held_out_fitted_mm"] < 4.0
@@ -449,10 +457,35 @@ def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, mon
 
 def test_real_walk_calibrated_and_held_out():
     """The Plug-in Gait walk: fitted on one half of its complete frames, scored on the other, the HAT's mass,
-    centre of mass and sway gains take the ZMP error from 51 to 36 mm; its trunk sways less than its mid-hip."""
+    centre of mass and sway gains take the ZMP error from 38.0 (the table) to 36.7 mm; its trunk sways less
+    than its mid-hip."""
     subject, report = calibration.calibrate([read_c3d(C3D / "walk_plugingait_forceplates.c3d")])
-    assert report["rms_held_out_table_mm"] > 48 and report["rms_held_out_fitted_mm"] < 38
+    assert 36 < report["rms_held_out_table_mm"] < 40 and report["rms_held_out_fitted_mm"] < 37.5
     assert subject.hat_sway_gain[0] < 0.8 and subject.hat_sway_gain[1] < 0.9
+
+
+def test_calibration_does_not_overfit_one_stance(monkeypatch):
+    """cgm24 has one stance on its plate: a fit on its first half does not carry to its second. With the prior
+    weight fixed (as before), held out it was 6 mm worse than the table; chosen by cross-validation within
+    the fitted half (a weight must beat the table both ways round), held out it is no worse than the table."""
+    trial = read_c3d(C3D / "cgm24_walking01_forceplate.c3d")
+    _, report = calibration.calibrate([trial])
+    assert report["rms_held_out_fitted_mm"] <= report["rms_held_out_table_mm"] + 0.5
+    monkeypatch.setattr(calibration, "_cross_validated", lambda halves, prior: (1.0, []))
+    _, fixed = calibration.calibrate([trial])
+    assert fixed["rms_held_out_fitted_mm"] > fixed["rms_held_out_table_mm"] + 4.0
+
+
+def test_calibration_refuses_plates_against_the_motion(lab):
+    """A plate whose lateral force runs against the body's lateral acceleration (a sign or axis error in the
+    plate set-up) would pull the fit wherever it makes up for it: refused in one line."""
+    d, _ = lab
+    trial = read_c3d(d / "on.c3d")
+    calibration.calibrate([trial])  # the trial as written is calibrated
+    for p in trial.plates:
+        p.force[:, 1] *= -1.0
+    with pytest.raises(InputError, match="lateral force runs against the markers' motion"):
+        calibration.calibrate([trial])
 
 
 def test_bad_subject_file_is_one_line(tmp_path, capsys):

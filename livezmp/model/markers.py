@@ -70,6 +70,11 @@ MAX_COORDINATE_M = 1000.0  # m from the capture origin: larger than any capture 
 STATURE_RANGE_M = (0.5, 2.6)
 SEGMENT_LENGTH_RANGE_M = (0.01, 1.5)  # joint centre to joint centre (median over the take)
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
+# How far (fore-aft, lateral) the head-arms-trunk centre of mass sways about the walk's straight-line trend,
+# as a fraction of the mid-hip's sway (:func:`hat_sway`): measured on the two trials whose trunk is tracked by
+# markers (c3d.org samples 23 Vicon_analysis: 0.76 / 0.68, 32 vicon_zerowire: 0.71 / 0.98; their mean), never on
+# the lower-body trials it is used for (docs/validation.md, `python benchmarks/bench_forceplates.py DIR`)
+TRUNK_SWAY_GAIN = (0.73, 0.83)
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,9 @@ class MarkerBodyOptions:
     """``total_mass`` kg; ``hat_offset`` m, the HAT centre of mass in the pelvis' upright frame
     (forward, left, up from the mid-hip) replacing the table's (0, 0, h); ``hat_fraction`` of
     total mass replacing de Leva's; ``floor_z`` m (internal frame) where the soles are, None =
-    from the lowest foot markers; ``max_gap_s`` s, the longest gap filled."""
+    from the lowest foot markers; ``max_gap_s`` s, the longest gap filled; ``hat_sway_gain`` (fore-aft,
+    lateral) how far a placed HAT sways relative to the mid-hip over a whole take (:func:`hat_sway`; None:
+    it moves with the mid-hip)."""
 
     total_mass: float = DEFAULT_MASS
     hat_offset: tuple[float, float, float] | None = None
@@ -85,7 +92,7 @@ class MarkerBodyOptions:
     floor_z: float | None = None
     max_gap_s: float = 0.1
     hat_follows_pelvis: bool = False
-    hat_sway_gain: tuple[float, float] | None = None  # fore-aft, lateral: see hat_sway
+    hat_sway_gain: tuple[float, float] | None = TRUNK_SWAY_GAIN
     marker_map: MarkerMap | None = None  # labels renamed, or a cluster set (livezmp.model.marker_map)
 
 
@@ -347,7 +354,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes, lengths)
+    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
         notes["optional_markers_not_used"] = sorted(dropped)
@@ -518,8 +525,10 @@ def hat_sway(origin: np.ndarray, gain: tuple[float, float]) -> np.ndarray:
     return trend + (origin - trend) @ k.T
 
 
-def _swayed(seg: dict, opts: MarkerBodyOptions) -> dict:
-    if opts.hat_sway_gain is None or "hat" not in seg:
+def _swayed(seg: dict, opts: MarkerBodyOptions, m: dict) -> dict:
+    """``seg`` with its placed HAT swayed by ``opts.hat_sway_gain``; a HAT given by the file's HAT points
+    (a corrected take) is where they say."""
+    if opts.hat_sway_gain is None or "hat" not in seg or HAT_POINTS[0] in m:
         return seg
     origin, rot = seg["hat"]
     return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain), rot)}
@@ -548,7 +557,7 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts), m, opts, up, r_in, notes, lengths)
+    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths)
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
 
@@ -724,9 +733,10 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
                     + ("; oriented by the file's HAT points (" + ", ".join(HAT_POINTS) + ")" if "HATO" in m else
                        "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
                        f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
-                    + ("" if opts.hat_sway_gain is None or full else
-                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip (subject file)".format(
-                           *opts.hat_sway_gain)))
+                    + ("" if opts.hat_sway_gain is None or full or "HATO" in m else
+                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip{}".format(
+                           *opts.hat_sway_gain, " (trunk-marker trials)" if opts.hat_sway_gain == TRUNK_SWAY_GAIN
+                           else "")))
     names = [f"{s}.{c}" for s in seg for c in _CHANNELS]
     body = BodyModel(
         kind="markers", model=model, point_model=point_mass_copy(model), channel_names=names,

@@ -8,13 +8,19 @@ over the complete frames. The kinematics do not depend on these parameters, so t
 once: the rest of the body's wrench is computed once, and the HAT adds a point mass moving with
 the HAT frame (x, y, z, heading channels), exactly as in the body model.
 
-Cross-validation: the complete frames of every trial are split into their first and second halves;
-parameters fitted on one half are scored on the other.
+The table is the prior (the HAT sway gains' is :data:`TRUNK_SWAY_GAIN`, measured on trunk-marker trials), and
+how strongly the fit is held to it is chosen by cross-validation on the frames being fitted: each trial's
+complete frames are split into their first and second halves, every prior weight of ``PRIOR_WEIGHTS`` is fitted
+on one half and scored on the other, and the weight with the lower mean held-out error among those that beat
+the table both ways round is used (else, or when a half has fewer than ``MIN_FRAMES`` frames, the table itself,
+an infinite weight). A trial whose plates' horizontal
+force runs against the markers' motion is refused. Reported held-out error: fitted on one half (its weight
+chosen the same way within that half's own halves) and scored on the other, never seen by the fit or the choice.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +30,9 @@ from scipy.optimize import least_squares
 from livezmp.balance.plates import G
 from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table, sway_basis
-from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
+from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, body_from_markers, hat_table, sway_basis
+from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations
+from livezmp.offline.validation import walking_axes
 from livezmp.tomlfile import read_toml
 
 HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
@@ -34,6 +41,9 @@ ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP s
 # only holds them at 1 (the HAT moving with the mid-hip) where the data do not say otherwise
 PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05, 0.5, 0.5])
 PRIOR_MM = 10.0
+# multiples of that prior's weight tried by the cross-validation (inf: the table, nothing fitted)
+PRIOR_WEIGHTS = (0.3, 1.0, 3.0, 10.0, 30.0, np.inf)
+MIN_FRAMES = 20  # complete frames a fit (and each part of its cross-validation) needs
 # fraction, forward, left, up (m), sway gain fore-aft, lateral
 BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.5])
 
@@ -45,16 +55,16 @@ class Subject:
 
     hat_fraction: float
     hat_offset: tuple[float, float, float]
-    hat_sway_gain: tuple[float, float] = (1.0, 1.0)
+    hat_sway_gain: tuple[float, float] = TRUNK_SWAY_GAIN
 
     def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
         return replace(base or MarkerBodyOptions(), hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
-                       hat_sway_gain=None if self.hat_sway_gain == (1.0, 1.0) else self.hat_sway_gain)
+                       hat_sway_gain=self.hat_sway_gain)
 
 
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
-    optionally ``hat_sway_gain = [fore_aft, lateral]``)."""
+    optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_SWAY_GAIN`)."""
     p = Path(path)
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
@@ -65,7 +75,7 @@ def load_subject(path: str | Path) -> Subject:
     if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
             and all(abs(v) < 1.5 for v in off)):
         raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
-    gain = s.get("hat_sway_gain", [1.0, 1.0])
+    gain = s.get("hat_sway_gain", list(TRUNK_SWAY_GAIN))
     if not (isinstance(gain, list) and len(gain) == 2
             and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
         raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
@@ -103,6 +113,11 @@ class _Terms:
     trend: np.ndarray
     fwd: np.ndarray
     left: np.ndarray
+
+    def part(self, sel: np.ndarray) -> _Terms:
+        """The same terms on the frames ``sel`` (boolean over this one's frames)."""
+        return _Terms(**{f.name: v[sel] if isinstance(v := getattr(self, f.name), np.ndarray) and v.ndim >= 1
+                         and f.name not in ("fwd", "left") else v for f in fields(self)})
 
 
 def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerBodyOptions) -> _Terms:
@@ -146,14 +161,15 @@ def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return zmp, force / t.mass + np.array([0.0, 0.0, -G])
 
 
-def _residuals(theta: np.ndarray, terms: list[_Terms], prior: np.ndarray) -> np.ndarray:
+def _residuals(theta: np.ndarray, terms: list[_Terms], prior: np.ndarray, weight: float) -> np.ndarray:
     out = []
     for t in terms:
         zmp, acc = _model(t, theta)
         out += [(zmp - t.cop).ravel(), ACC_WEIGHT * (acc[:, :2] - t.plate_acc[:, :2]).ravel()]
     n = sum(len(t.cop) for t in terms)
-    # the table as a prior: a parameter PRIOR_SD away from it costs like PRIOR_MM of ZMP error on every frame
-    out.append(np.sqrt(n) * PRIOR_MM / 1000 * (theta - prior) / PRIOR_SD)
+    # the table as a prior: at weight 1 a parameter PRIOR_SD away from it costs like PRIOR_MM of ZMP error on
+    # every frame
+    out.append(np.sqrt(weight * n) * PRIOR_MM / 1000 * (theta - prior) / PRIOR_SD)
     return np.concatenate(out)
 
 
@@ -162,15 +178,53 @@ def _rms_mm(theta: np.ndarray, terms: list[_Terms]) -> float:
     return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
-def _fit(terms: list[_Terms], start: np.ndarray) -> np.ndarray:
-    return least_squares(_residuals, start, bounds=BOUNDS, args=(terms, start), x_scale=PRIOR_SD).x
+def _fit(terms: list[_Terms], prior: np.ndarray, weight: float) -> np.ndarray:
+    if not np.isfinite(weight):
+        return prior
+    return least_squares(_residuals, prior, bounds=BOUNDS, args=(terms, prior, weight), x_scale=PRIOR_SD).x
+
+
+def _halves(terms: list[_Terms]) -> tuple[list[_Terms], list[_Terms]]:
+    """Every trial's frames split into their first and second halves."""
+    cut = [np.arange(len(t.cop)) < len(t.cop) // 2 for t in terms]
+    return [t.part(c) for t, c in zip(terms, cut, strict=True)], [t.part(~c) for t, c in zip(terms, cut, strict=True)]
+
+
+def _cross_validated(halves: tuple[list[_Terms], list[_Terms]], prior: np.ndarray) -> tuple[float, list[float]]:
+    """The prior weight whose fits on one half score best on the other (mean RMS over both ways round) among
+    those that beat the table both ways round (else the table: a fit that helps one way and not the other
+    is a fit to that half's noise), and each weight's mean score (mm)."""
+    if min(sum(len(t.cop) for t in half) for half in halves) < MIN_FRAMES:
+        return PRIOR_WEIGHTS[-1], []
+    table = [_rms_mm(prior, halves[1 - k]) for k in (0, 1)]
+    folds = np.array([[_rms_mm(_fit(halves[k], prior, w), halves[1 - k]) for k in (0, 1)] for w in PRIOR_WEIGHTS])
+    score = folds.mean(axis=1)
+    ok = (folds < np.array(table)).all(axis=1)
+    best = int(np.flatnonzero(ok)[np.argmin(score[ok])]) if ok.any() else len(PRIOR_WEIGHTS) - 1
+    return PRIOR_WEIGHTS[best], [float(v) for v in score]
+
+
+def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> None:
+    """Refuse a trial whose plates' horizontal force runs against the markers' motion (the CoM accelerations
+    from both anticorrelated along the walk or across it): plates or markers are wrong there, and a fit to
+    them would move the subject's parameters to make up for it."""
+    kin = com_accelerations(lab.take, lab.result)[rows]
+    plate = lab.plates.force[rows] / lab.summary["mass"]["used_kg"]
+    for name, axis in zip(("fore-aft", "lateral"), walking_axes(lab.result.com), strict=True):
+        r = float(np.corrcoef(kin @ axis, plate @ axis)[0, 1])
+        if r < 0:
+            raise InputError(f"{trial.source}: the plates' {name} force runs against the markers' motion (r = "
+                             f"{r:.2f} between the CoM accelerations): plates or markers are wrong; not a trial "
+                             "to calibrate on")
 
 
 def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[Subject, dict]:
     """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
-    (RMS ZMP − CoP before, fitted, and cross-validated on held-out halves, mm)."""
+    (RMS ZMP − CoP with the table, fitted, and held out, mm; the prior weight chosen)."""
     opts = opts or LabOptions()
-    whole, halves = [], ([], [])
+    # the HAT frame's origin at the mid-hip: the fit sways it (the table's sway is its prior)
+    opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=None))
+    whole = []
     for trial in trials:
         if not trial.plates:
             raise InputError(f"{trial.source}: no force plates: nothing to calibrate against")
@@ -179,21 +233,26 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
             raise InputError(f"{trial.source}: a full-body or trunk marker set tracks the trunk: "
                              "there is no placed HAT to calibrate")
         rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
-        if rows.sum() < 20:
-            raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need 20")
+        if rows.sum() < MIN_FRAMES:
+            raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need {MIN_FRAMES}")
+        _check_agreement(trial, lab, rows)
         whole.append(_terms(trial, lab, rows, opts.markers))
         stature = lab.summary["markers"]["stature_m"]
-        idx = np.flatnonzero(rows)
-        cut = idx[len(idx) // 2]
-        for k, part in enumerate((rows & (np.arange(len(rows)) < cut), rows & (np.arange(len(rows)) >= cut))):
-            halves[k].append(_terms(trial, lab, part, opts.markers))
     fraction, height, _ = hat_table(stature)
-    start = np.array([fraction, 0.0, 0.0, height, 1.0, 1.0])
-    fitted = _fit(whole, start)
-    held_out = [_rms_mm(_fit(halves[k], start), halves[1 - k]) for k in (0, 1)]
-    table_held = [_rms_mm(start, halves[1 - k]) for k in (0, 1)]
+    prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_SWAY_GAIN])
+    halves = _halves(whole)
+    weight, scores = _cross_validated(halves, prior)
+    fitted = _fit(whole, prior, weight)
+    held_out, weights = [], []
+    for k in (0, 1):  # the held-out half sees neither the fit nor the choice of its weight
+        w, _ = _cross_validated(_halves(halves[k]), prior)
+        held_out.append(_rms_mm(_fit(halves[k], prior, w), halves[1 - k]))
+        weights.append(w)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
-              "rms_table_mm": round(_rms_mm(start, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
-              "rms_held_out_table_mm": round(float(np.mean(table_held)), 2),
-              "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2)}
+              "rms_table_mm": round(_rms_mm(prior, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
+              "rms_held_out_table_mm": round(float(np.mean([_rms_mm(prior, halves[1 - k]) for k in (0, 1)])), 2),
+              "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2),
+              "prior_weight": None if not np.isfinite(weight) else weight,
+              "prior_weight_scores_mm": [round(v, 2) for v in scores],
+              "held_out_prior_weights": [None if not np.isfinite(w) else w for w in weights]}
     return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6])), report
