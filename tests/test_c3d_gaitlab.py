@@ -557,6 +557,20 @@ def test_a_negative_description_length_is_refused_before_ezc3d_reads_it(tmp_path
         read_c3d(tmp_path / "bad.c3d")
 
 
+def test_a_zero_parameter_start_byte_is_read_as_ezc3d_reads_it(tmp_path):
+    """Codamotion and Motion Analysis files write 0 where the parameter section's first byte says 1: ezc3d
+    ignores it; the check before ezc3d must walk the same parameters (it read them a byte early and refused
+    the files with garbled parameter names)."""
+    path = _points_c3d(tmp_path / "ok.c3d", _markers(np.arange(20) / RATE))
+    data = bytearray(path.read_bytes())
+    start = (data[0] - 1) * 512
+    assert data[start] == 1
+    data[start] = 0
+    (tmp_path / "zero.c3d").write_bytes(bytes(data))
+    ok, zero = read_c3d(path), read_c3d(tmp_path / "zero.c3d")
+    assert zero.labels == ok.labels and np.array_equal(zero.points, ok.points, equal_nan=True)
+
+
 def test_parameter_dimensions_beyond_the_file_are_refused(tmp_path):
     """A parameter of dimensions 255 x 255 x 255 x 255 x 0 holds no value, but ezc3d loops 255^4 times
     over it (the long fuzz run's C3D child hung there)."""

@@ -151,7 +151,9 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
     if start + 4 > size:
         return
     order = ">" if data[start + 3] == 86 else "<"  # processor type 84 + 2 (MIPS): big-endian
-    pos = start + 4 + data[start] - 1
+    # the first parameter follows the 4-byte section header: its first byte (the parameters' start, 0 in
+    # Codamotion and Motion Analysis files) is read as 1 whatever it says, as ezc3d does
+    pos = start + 4
     while pos + 2 <= size:
         n, gid = struct.unpack_from("bb", data, pos)
         at = pos + 2 + abs(n)  # after the name
