@@ -27,6 +27,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     w = report["prior_weight"]
     print("  the cross-validation kept the table's values (no fit beat it on held-out frames)" if w is None else
           f"  prior weight {w:g} (chosen by cross-validation on the halves of the frames)")
-    if report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
+    if w is not None and report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
         print("  the fit does not beat the table on held-out frames: more plate trials are needed")
     return 0
