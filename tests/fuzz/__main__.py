@@ -1,8 +1,10 @@
 """The longer fuzz run: ``python -m tests.fuzz [--inputs 10000] [--packets 100000] [--minutes 40]
-[--jobs 2] [--formats bvh,csv,...]``.
+[--jobs 2] [--shards 1] [--formats bvh,csv,...]``.
 
-Each format runs in its own child process (so peak memory is per format, under an
-address-space limit), ``--jobs`` at a time, until it has tried its count (``--inputs`` per
+Each format runs in its own child processes (so peak memory is per format, under an
+address-space limit): ``--shards`` children per format, each with its own random seed and
+its share of the count (their tallies are summed), ``--jobs`` children at a time, until it
+has tried its count (``--inputs`` per
 file format, ``--packets`` UDP packets) or the run's ``--minutes`` are up, mutating the
 seed and the corpus at random; the commands run in the child (the CLI's ``main`` with
 argv; the CI part also runs a sample as real processes). Two tables follow: per format
@@ -144,10 +146,11 @@ def _child(fmt: str, count: int, deadline: float, seed: int) -> dict:
             "seconds": round(seconds, 1), "rss": rss}
 
 
-def _run_child(fmt: str, args, deadline: float) -> dict:
-    count = args.packets if fmt == "udp" else args.inputs
+def _run_child(fmt: str, shard: int, args, deadline: float) -> dict:
+    count = -(-(args.packets if fmt == "udp" else args.inputs) // args.shards)
+    seed = args.seed + 1000 * shard  # shards mutate differently, so their inputs add up
     r = subprocess.run([sys.executable, "-m", "tests.fuzz", "--child", fmt, "--count", str(count),
-                        "--deadline", str(deadline), "--seed", str(args.seed)], capture_output=True, text=True,
+                        "--deadline", str(deadline), "--seed", str(seed)], capture_output=True, text=True,
                        cwd=ROOT)
     try:
         return json.loads(r.stdout.strip().splitlines()[-1])
@@ -157,10 +160,23 @@ def _run_child(fmt: str, args, deadline: float) -> dict:
                 "peak_rss_mb": 0, "seconds": 0, "rss": {}}
 
 
+def _merge(shards: list[dict]) -> dict:
+    """One format's row from its shards' rows: counts summed, peaks and wall time the largest, the RSS
+    table of the first shard that has one."""
+    row = dict(shards[0])
+    for key in ("tried", "clean", "refused", "failures"):
+        row[key] = sum(s[key] for s in shards)
+    row["examples"] = [e for s in shards for e in s["examples"]][:5]
+    row["peak_rss_mb"] = max(s["peak_rss_mb"] for s in shards)
+    row["seconds"] = max(s["seconds"] for s in shards)
+    row["rss"] = next((s["rss"] for s in shards if s["rss"]), {})
+    return row
+
+
 def _print(rows: list[dict], args, wall: float, load_before: tuple) -> None:
     load = " ".join(f"{x:.2f}" for x in os.getloadavg())
     print(f"load average {' '.join(f'{x:.2f}' for x in load_before)} at the start, {load} at the end; "
-          f"{wall / 60:.1f} min wall, {args.jobs} formats at a time")
+          f"{wall / 60:.1f} min wall, {args.jobs} children at a time, {args.shards} per format")
     print(f"{'format':9} {'inputs':>8} {'exit-0 clean':>13} {'exit-2 one-line':>16} {'failures':>9} "
           f"{'peak RSS MB':>12} {'inputs/s':>9}  (inputs/s: wall time of the mutation loop, on a shared machine)")
     for r in rows:
@@ -188,7 +204,8 @@ def main() -> int:
     ap.add_argument("--inputs", type=int, default=10_000, help="inputs per file format")
     ap.add_argument("--packets", type=int, default=100_000, help="UDP packets")
     ap.add_argument("--minutes", type=float, default=40.0, help="wall time cap of the whole run")
-    ap.add_argument("--jobs", type=int, default=2, help="formats run at a time")
+    ap.add_argument("--jobs", type=int, default=2, help="children run at a time")
+    ap.add_argument("--shards", type=int, default=1, help="children per format, each with its own seed")
     ap.add_argument("--formats", default=",".join(FORMATS))
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--child", help=argparse.SUPPRESS)
@@ -200,8 +217,11 @@ def main() -> int:
         return 0
     start, load = time.time(), os.getloadavg()
     deadline = start + 60 * args.minutes - 60  # a minute kept for the RSS table
+    formats = args.formats.split(",")
     with ThreadPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(lambda f: _run_child(f, args, deadline), args.formats.split(",")))
+        runs = list(pool.map(lambda fs: _run_child(*fs, args, deadline),
+                             [(f, k) for f in formats for k in range(args.shards)]))
+    rows = [_merge(runs[i * args.shards:(i + 1) * args.shards]) for i in range(len(formats))]
     _print(rows, args, time.time() - start, load)
     return 1 if any(r["failures"] for r in rows) else 0
 
