@@ -20,9 +20,25 @@ frames, stated apart), so the work beyond the lag is measured from the capture o
   60 messages a second, so this includes up to ~17 ms of waiting for the next message).
 
 Columns: frames sent, analysed, lost + late + overflow (0 = sustained without loss), p50/p99 ms.
-Target: p99 of ``result`` within 5 ms at 240 Hz; 1000 Hz with 0 frames lost.
+Target: p99 of ``result`` within 5 ms at 240 Hz; 1000 Hz with 0 frames lost. ``result`` is taken when
+the dashboard has the frame; its recording follows on the same thread (in ``monitor`` CPU below).
 
-Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,lsl]
+CPU per frame (ms of CPU time per input frame, this process's threads; the load average of the
+minute is printed beside each row since the machine may be shared):
+
+- the monitor thread by stage: ``read`` (the source's queue and the marker body: frames already
+  waiting are converted together), ``pipeline`` (Pipeline.step), ``record`` (MCAP input, result,
+  scene), ``dash`` (the hand-off to the dashboard), and the monitor thread's total;
+- ``client``: the capture client's receiving thread (qtm-rt's asyncio loop and livezmp's parsing; the
+  NatNet receiver; LSL's pulls run in the monitor thread, under ``read``);
+- ``server``: the dashboard's thread (the page feed); ``all``: the whole process (with the page
+  client, which a browser would be).
+
+Then per-frame CPU of each stage measured offline on the same walk at 240 Hz, old against new in
+one run: QTM packets read by qtm-rt's records against livezmp's numpy blocks; the marker body
+one frame per call against 32 frames per call (what a reader behind its stream does).
+
+Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,lsl] [--rates 100,240,1000]
 """
 
 from __future__ import annotations
@@ -33,6 +49,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +66,7 @@ from livezmp.monitor.dashboard import DashboardServer  # noqa: E402
 from livezmp.monitor.loop import Monitor  # noqa: E402
 from livezmp.recording.writer import Recorder  # noqa: E402
 from livezmp.sources.factory import SourceOptions, open_source  # noqa: E402
+from livezmp.sources.interface import ErrorLog, SourceStats  # noqa: E402
 
 TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "walk_plugingait_forceplates.c3d"
 RATES = (100.0, 240.0, 1000.0)
@@ -111,6 +129,39 @@ class Timing:
         pass
 
 
+class StageClock:
+    """CPU time (``time.thread_time``, s) spent in wrapped calls, per stage."""
+
+    def __init__(self):
+        self.cpu: dict[str, float] = {}
+
+    def wrap(self, stage: str, fn):
+        self.cpu.setdefault(stage, 0.0)
+
+        def timed(*args, **kwargs):
+            t = time.thread_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.cpu[stage] += time.thread_time() - t
+        return timed
+
+
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def thread_cpu(thread: threading.Thread | None) -> float:
+    """CPU time (s, user + system) of a running thread, from /proc (10 ms resolution); 0 without."""
+    if thread is None or thread.native_id is None:
+        return 0.0
+    try:
+        with open(f"/proc/self/task/{thread.native_id}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
 class InHand:
     """The source, noting when each input frame reached livezmp (the transport's share)."""
 
@@ -140,12 +191,23 @@ def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
     dash = DashboardServer("127.0.0.1", 0, monitor.status, {"source": url})
     page = Page(dash.start())
     page.start()
+    clock = StageClock()
+    source.read = clock.wrap("read", source.read)
+    monitor.pipeline.step = clock.wrap("pipeline", monitor.pipeline.step)
+    for name in ("input", "result", "write", "tick"):
+        setattr(recorder, name, clock.wrap("record", getattr(recorder, name)))
+    dash.publish = clock.wrap("dash", dash.publish)
     monitor.listeners += [dash, timing]
     stop = threading.Event()
     loop = threading.Thread(target=monitor.run, args=(stop,), daemon=True)
     loop.start()
+    client = getattr(source.source.mocap, "_thread", None)
+    threads = {"client": client, "server": dash._thread, "monitor": loop}
     go.set()
+    cpu0 = {k: thread_cpu(t) for k, t in threads.items()} | {"all": time.process_time()}
     result = done.get(timeout=600)
+    cpu1 = {k: thread_cpu(t) for k, t in threads.items()} | {"all": time.process_time()}
+    load = os.getloadavg()[0]
     lag = monitor.pipeline.lag
     want = len(result["sent"]) - 1 - lag
     end = time.monotonic() + 10
@@ -162,33 +224,105 @@ def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
     ks = [k for k in timing.ready if k + lag in sent]
     res = np.array([timing.ready[k] - sent[k + lag] for k in ks])
     pg = np.array([page.seen[k] - sent[k + lag] for k in ks if k in page.seen])
+    per = 1e3 / max(1, len(sent))  # ms per frame sent
+    cpu = {k: v * per for k, v in clock.cpu.items()} | {k: (cpu1[k] - cpu0[k]) * per for k in cpu1}
     return {"sent": len(sent), "analysed": monitor.results, "lost": st.lost + st.late + st.overflow + st.dropped,
             "lag_frames": lag, "lag_ms": 1e3 * lag / fps, "in_hand": in_hand * 1e3, "result": res * 1e3,
-            "page": pg * 1e3}
+            "page": pg * 1e3, "cpu": cpu, "load": load}
 
 
 def pct(x: np.ndarray) -> str:
     return f"{np.percentile(x, 50):6.2f} {np.percentile(x, 99):6.2f}" if len(x) else f"{'-':>6} {'-':>6}"
 
 
+CPU_COLUMNS = ("read", "pipeline", "record", "dash", "monitor", "client", "server", "all")
+
+
+def offline_stages(rate: float = 240.0) -> None:
+    """Per-frame CPU (ms) of the stages on the walk's frames, without the network: old against new."""
+    from dataclasses import replace
+
+    from qtm_rt.packet import QRTPacket
+
+    from livezmp.model.c3d import read_c3d
+    from livezmp.model.markers import MarkerBodyOptions
+    from livezmp.sources.marker_stream import MarkerStreamSource
+    from livezmp.sources.plate_frame import plate_axes
+    from livezmp.sources.qtm import frame_of_packet, parse_parameters
+    from sim_devices import qtm_server as qs
+    from sim_devices.mocap_trial import TrialPlayer, load_c3d_trial, resampled
+
+    trial = resampled(load_c3d_trial(str(TRIAL)), rate)
+    axes = [plate_axes(c) for c in trial.corners]
+    params = parse_parameters(qs.parameters_xml(trial, "1.25", ["all"]), "bench")
+    packets = [qs.data_packet(trial, f, [qs.COMPONENT_3D, qs.COMPONENT_FORCE], axes)[qs.HEADER.size:]
+               for f in TrialPlayer(trial, speed=0).frames()]
+
+    def per_frame(fn) -> float:
+        t = time.process_time()
+        fn()
+        return 1e3 * (time.process_time() - t) / len(packets)
+
+    def qtm_rt_records():  # the client's own records, one per marker and plate sample, into the same arrays
+        for b in packets:
+            p = QRTPacket(b)
+            np.array([(m.x, m.y, m.z) for m in p.get_3d_markers()[1]], float) * 1e-3
+            for info, samples in p.get_force()[1]:
+                s, (R, origin) = samples[-1], params.axes[info.id - 1]
+                R @ (s.x, s.y, s.z), R @ (s.x_m, s.y_m, s.z_m), R @ (np.array([s.x_a, s.y_a, s.z_a]) * 1e-3) + origin
+
+    frames = [frame_of_packet(QRTPacket(b), params, 0.0) for b in packets]
+    calibration = read_c3d(str(TRIAL))
+
+    def convert(batch: int):
+        class Replay:  # the frames as a connected stream that is never waited for
+            name, nominal_dt, up, labels, finished = "bench", 1 / rate, params.up, params.labels, False
+            stats, errors = SourceStats(), ErrorLog()
+
+            def __init__(self):
+                self.left = deque(frames)
+
+            def read(self, timeout):
+                return self.left.popleft() if self.left else None
+
+            def close(self):
+                pass
+        src = MarkerStreamSource(Replay(), calibration, replace(MarkerBodyOptions(), total_mass=70.0), batch=batch)
+        return lambda: [src.read(0.0) for _ in frames]
+
+    rows = [("QTM packet -> MocapFrame", per_frame(qtm_rt_records), per_frame(
+                lambda: [frame_of_packet(QRTPacket(b), params, 0.0) for b in packets])),
+            ("marker body (channels)", per_frame(convert(1)), per_frame(convert(32)))]
+    print(f"\nper-frame CPU offline (ms), walk at {rate:g} Hz, {len(packets)} frames")
+    print(f"{'stage':28} {'old':>7} {'new':>7}   (old: qtm-rt's records / one frame per call; "
+          "new: numpy blocks / 32 frames per call)")
+    for name, old, new in rows:
+        print(f"{name:28} {old:7.3f} {new:7.3f}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--laps", type=int, default=2, help="times the 2.2 s walk is played per row")
     p.add_argument("--systems", default="qtm,natnet,lsl")
+    p.add_argument("--rates", default=",".join(f"{r:g}" for r in RATES), help="Hz, comma separated")
     args = p.parse_args()
     la = os.getloadavg()
     print(f"load average {la[0]:.2f} {la[1]:.2f} {la[2]:.2f} ({os.cpu_count()} cores); Plug-in Gait walk, "
           f"4 plates, {args.laps} laps per row; recording + dashboard page on")
     head = (f"{'system':7} {'rate':>5} {'sent':>6} {'analysed':>8} {'lost':>5} {'lag ms':>7}   "
-            f"{'in hand p50/p99':>15}   {'result p50/p99':>14}   {'page p50/p99':>13}  (ms beyond the lag)")
+            f"{'in hand p50/p99':>15}   {'result p50/p99':>14}   {'page p50/p99':>13}  (ms beyond the lag)   "
+            f"CPU ms/frame: {' '.join(f'{c:>8}' for c in CPU_COLUMNS)}   load")
     print(head)
     print("-" * len(head))
     with tempfile.TemporaryDirectory() as tmp:
         for kind in args.systems.split(","):
-            for rate in RATES:
+            for rate in (float(r) for r in args.rates.split(",")):
                 r = run_case(kind, rate, args.laps, Path(tmp))
+                cpu = " ".join(f"{r['cpu'].get(c, 0.0):8.3f}" for c in CPU_COLUMNS)
                 print(f"{kind:7} {rate:5.0f} {r['sent']:6d} {r['analysed']:8d} {r['lost']:5d} {r['lag_ms']:7.1f}   "
-                      f"{pct(r['in_hand'])}     {pct(r['result'])}     {pct(r['page'])}", flush=True)
+                      f"{pct(r['in_hand'])}     {pct(r['result'])}     {pct(r['page'])}                       "
+                      f"{cpu}   {r['load']:4.1f}", flush=True)
+    offline_stages()
 
 
 if __name__ == "__main__":

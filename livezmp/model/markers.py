@@ -114,12 +114,26 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     overhead (a live stream converts one frame at a time)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0], out[..., 1], out[..., 2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    return out
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Row-wise length (..., 1) of (..., 3) vectors: ``np.linalg.norm``'s sum of squares without its checks."""
+    return np.sqrt((v * v).sum(axis=-1, keepdims=True))
+
+
+def _columns(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) rotations whose columns are the (F, 3) axes ``x``, ``y``, ``z`` (``np.stack(axis=-1)``)."""
+    out = np.empty((*x.shape, 3))
+    out[..., 0], out[..., 1], out[..., 2] = x, y, z
+    return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):  # a zero vector gives NaN: refused by _check_turns
-        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+        return v / _norm(v)
 
 
 def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -235,9 +249,9 @@ def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: fl
     d = proximal - marker
     e1 = _unit(d)
     w = wand - marker
-    e2 = _unit(w - np.sum(w * e1, axis=-1, keepdims=True) * e1)
-    c = np.clip(delta / np.linalg.norm(d, axis=-1, keepdims=True), -1.0, 1.0)
-    s = np.sqrt(1.0 - c * c) * np.sign(np.sum(e2 * medial, axis=-1, keepdims=True))
+    e2 = _unit(w - (w * e1).sum(axis=-1, keepdims=True) * e1)
+    c = np.minimum(np.maximum(delta / _norm(d), -1.0), 1.0)
+    s = np.sqrt(1.0 - c * c) * np.sign((e2 * medial).sum(axis=-1, keepdims=True))
     return marker + delta * (c * e1 + s * e2)
 
 
@@ -245,13 +259,13 @@ def _frame(z_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     """(F, 3, 3) rotations with z along ``z_dir`` and y as close to ``y_ref`` as allowed; columns x, y, z."""
     z = _unit(z_dir)
     x = _unit(_cross(y_ref, z))
-    return np.stack([x, _cross(z, x), z], axis=-1)
+    return _columns(x, _cross(z, x), z)
 
 
 def _foot_frame(x_dir: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
     x = _unit(x_dir)
     z = _unit(_cross(x, y_ref))
-    return np.stack([x, _cross(z, x), z], axis=-1)
+    return _columns(x, _cross(z, x), z)
 
 
 def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -262,10 +276,10 @@ def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
 def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames (else
     each within ±pi)."""
-    yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
-    pitch = np.arcsin(np.clip(-rot[:, 2, 0], -1.0, 1.0))
-    roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
-    angles = np.column_stack([yaw, pitch, roll])
+    angles = np.empty((len(rot), 3))
+    angles[:, 0] = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
+    angles[:, 1] = np.arcsin(np.minimum(np.maximum(-rot[:, 2, 0], -1.0), 1.0))
+    angles[:, 2] = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
     return np.unwrap(angles, axis=0) if unwrap else angles
 
 
@@ -417,7 +431,8 @@ def marker_channels(take: MarkerTake, markers: dict[str, np.ndarray]) -> np.ndar
 def segment_channels(seg: dict, unwrap: bool = True) -> np.ndarray:
     """(F, 6 per segment) x, y, z (m), yaw, pitch, roll (rad) of segment frames ``seg`` (see _segments),
     angles unwrapped over the frames (else each within ±pi)."""
-    return np.hstack([np.hstack([origin, _euler_zyx(rot, unwrap)]) for origin, rot in seg.values()])
+    return np.concatenate([part for origin, rot in seg.values() for part in (origin, _euler_zyx(rot, unwrap))],
+                          axis=1)
 
 
 def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = None) -> tuple[dict, dict, dict]:
@@ -427,7 +442,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     back = (m["LPSI"] + m["RPSI"]) / 2 if "LPSI" in m else m["SACR"]
     y = _unit(m["LASI"] - m["RASI"])
     fwd = mid_asis - back
-    x = _unit(fwd - np.sum(fwd * y, axis=1, keepdims=True) * y)
+    x = _unit(fwd - (fwd * y).sum(axis=1, keepdims=True) * y)
     z = _cross(x, y)
     if dims is None:
         pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
@@ -460,7 +475,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
     upright = _upright(x)
-    seg = {"pelvis": (pelvis_origin, np.stack([x, y, z], axis=-1))}
+    seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
     full = "LFHD" in m
     if full:
         seg.update(_upper_segments(m, stature))

@@ -1,12 +1,13 @@
-"""The monitor loop: source → pipeline → alarms, correction → recording, dashboard, terminal.
+"""The monitor loop: source → pipeline → alarms, dashboard → recording, correction, terminal.
 
 One thread runs it, frame by frame, at constant cost per frame: every input frame is
-recorded and analysed; each result goes to the alarm tracker, the optional online
-corrector, the recorder, the dashboard (a cheap hand-off) and the terminal view (rate
-limited). When the source is idle the loop still closes due recording chunks and
-records the source's faults. It stops when the source is finished or ``stop`` is set,
-then delivers the pipeline's last frames and closes the recording.
-Listeners (the dashboard, a replay check) get every result and alarm.
+analysed and recorded; each result goes to the alarm tracker, the dashboard and other
+listeners (a cheap hand-off), then the recorder, the optional online corrector and the
+terminal view (rate limited). Recording comes after the hand-off so that it is not on the
+way from a frame to its result on the dashboard; nothing is skipped to make room. When
+the source is idle the loop still closes due recording chunks and records the source's
+faults. It stops when the source is finished or ``stop`` is set, then delivers the
+pipeline's last frames and closes the recording. Listeners (the dashboard, a replay check) get every result and alarm.
 """
 
 from __future__ import annotations
@@ -177,6 +178,8 @@ class Monitor:
         if cop is not None:
             cop = None if np.isnan(cop[0]) else cop  # plates present, unloaded
             self.cop_vs_zmp.add(cop, r.zmp, r.clamped)
+        for li in self.listeners:  # first: recording is not on the way to the dashboard
+            li.publish(r, cop)
         if self.recorder:
             self.recorder.result(r, cop)
         if ev is not None:
@@ -189,8 +192,6 @@ class Monitor:
                     "index": r.index, "t": r.t, "limited": c.limited,
                     "delta": {"x": float(c.delta[0]), "y": float(c.delta[1]), "z": float(c.delta[2])},
                     "offsets": {names[i]: float(c.offsets[i]) for i in np.flatnonzero(c.offsets)}})
-        for li in self.listeners:
-            li.publish(r, cop)
         if self.view:
             self.view.update(self.status())
 
@@ -227,8 +228,6 @@ class Monitor:
         if frame.restart and self.pipeline.frames_in:  # a new timeline: finish the old one, start over
             for r in self.pipeline.restart():
                 self._result(r)
-        if self.recorder:
-            self.recorder.input(k, frame.t, frame.channels, frame.contacts, frame.gravity)
         if frame.cop is not None:
             self._cops.append((k, self.source.body.world_from_input @ frame.cop))
         r = self.pipeline.step(frame.t, frame.channels, frame.contacts, frame.gravity)
@@ -238,6 +237,8 @@ class Monitor:
             self.beyond_lag.add(done)
             if frame.latency is not None:
                 self.from_stamp.add(frame.latency + done)
+        if self.recorder:  # after the result: the input's record is not on the result's way either
+            self.recorder.input(k, frame.t, frame.channels, frame.contacts, frame.gravity)
         if k % 64 == 0:
             self._idle()
         return True

@@ -51,12 +51,14 @@ class MarkerStreamSource:
     """``mocap`` (a connected capture stream) as marker-body frames; see the module docstring.
     ``calibration`` a C3D trial of the subject (None: the stream's first ``calibration_s``);
     ``options`` the marker body's (mass, HAT). ``ground_z`` (m, internal frame): the floor, the
-    calibration trial's plates' surface when it has plates (as ``livezmp analyze`` takes it), else None."""
+    calibration trial's plates' surface when it has plates (as ``livezmp analyze`` takes it), else None.
+    ``batch``: at most this many frames already waiting are converted in one call (1: one by one)."""
 
     def __init__(self, mocap: MocapSource, calibration: C3dTrial | None = None,
                  options: MarkerBodyOptions | None = None, calibration_s: float = CALIBRATION_S,
-                 max_gap_s: float = MAX_GAP_S, timeout: float = 10.0):
+                 max_gap_s: float = MAX_GAP_S, timeout: float = 10.0, batch: int = BATCH):
         self.mocap, self.name = mocap, mocap.name
+        self.batch = batch
         self.stats, self.errors = mocap.stats, mocap.errors
         self.max_gap_s = max_gap_s
         self.up = mocap.up
@@ -226,7 +228,7 @@ class MarkerStreamSource:
             if f is None:
                 return None
             batch = [f]
-            while len(batch) < BATCH and (f := self._next(0.0)) is not None:
+            while len(batch) < self.batch and (f := self._next(0.0)) is not None:
                 batch.append(f)
             channels = self._to_channels(batch)
             for f, ch in zip(batch, channels, strict=True):

@@ -294,6 +294,26 @@ def pack_frame(f: FrameOfData) -> bytes:
     return b"".join(out)
 
 
+ONE_SAMPLE = np.dtype([("n", "<i4"), ("value", "<f4")])  # a channel carrying one sample: its count, its value
+
+
+def _plate_channels(r: _Reader, nch: int) -> np.ndarray:
+    """(nch,) the newest sample of each of a plate's channels (NaN for a channel without samples). Channels
+    of one sample each (a plate at the camera rate) are read as one block; others one by one."""
+    end = r.pos + ONE_SAMPLE.itemsize * nch
+    if 0 <= nch and end <= len(r.data):
+        block = np.frombuffer(r.data, ONE_SAMPLE, nch, r.pos)
+        if (block["n"] == 1).all():
+            r.pos = end
+            return block["value"].astype(float)
+    values = np.empty(max(nch, 0))
+    for c in range(nch):
+        n = r.take("i")
+        samples = r.floats(n)
+        values[c] = samples[-1] if n else np.nan
+    return values
+
+
 def unpack_frame(payload: bytes) -> FrameOfData:
     r = _Reader(payload)
     frame = r.take("i")
@@ -311,12 +331,7 @@ def unpack_frame(payload: bytes) -> FrameOfData:
     plates = {}
     for _ in range(r.take("i")):
         pid, nch = r.take("ii")
-        values = np.empty(nch)
-        for c in range(nch):
-            n = r.take("i")
-            samples = r.floats(n)
-            values[c] = samples[-1] if n else np.nan
-        plates[pid] = values
+        plates[pid] = _plate_channels(r, nch)
     if r.take("i"):
         raise NatNetError(f"frame {frame}: devices are not read by livezmp's NatNet client")
     _, _, timestamp, _, _, transmit, _, _ = r.take("IIdQQQhi")  # ... params, end of data

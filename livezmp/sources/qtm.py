@@ -18,6 +18,7 @@ QTM timestamps are µs on QTM's own clock, which this machine cannot relate to i
 from __future__ import annotations
 
 import asyncio
+import struct
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -84,28 +85,47 @@ def parse_parameters(xml: str, where: str) -> QtmParameters:
     return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit], bodies)
 
 
+# component bodies after their 8-byte header, as the QTM RT protocol documentation lays them out (little
+# endian): 3D: marker count uint32, 2D drop and out-of-sync rates int16 x 2, then x y z float32 per marker;
+# force: plate count int32, per plate id, sample count, sample number int32 and 9 float32 per sample
+# (force xyz, moment xyz, application point xyz); 6D: body count int32, rates int16 x 2, per body x y z
+# and the 3x3 rotation matrix float32. Read as numpy blocks rather than one record per marker.
+COUNT_RATES = struct.Struct("<Ihh")
+PLATE = struct.Struct("<iii")
+F4 = np.dtype("<f4")
+
+
+def _block(data: bytes, pos: int, rows: int, cols: int) -> np.ndarray:
+    """(rows, cols) float of float32 at ``pos``; ValueError if the packet is shorter."""
+    return np.frombuffer(data, F4, rows * cols, pos).reshape(rows, cols).astype(float)
+
+
 def frame_of_packet(packet, p: QtmParameters, received: float) -> MocapFrame:
-    """A :class:`MocapFrame` of a ``qtm_rt.QRTPacket`` with 3D (and force) components."""
+    """A :class:`MocapFrame` of a ``qtm_rt.QRTPacket`` with 3D (and force, 6D) components; ValueError or
+    struct.error for a packet shorter than its counts say."""
     from qtm_rt.packet import QRTComponentType
 
+    data, where = packet.data, packet.components
     markers = np.full((len(p.labels), 3), np.nan)
-    if QRTComponentType.Component3d in packet.components:
-        _, pts = packet.get_3d_markers()
-        n = min(len(pts), len(p.labels))
-        markers[:n] = np.array([(m.x, m.y, m.z) for m in pts[:n]], float).reshape(n, 3) * 1e-3
+    pos = where.get(QRTComponentType.Component3d)
+    if pos is not None:
+        n = min(COUNT_RATES.unpack_from(data, pos)[0], len(p.labels))
+        markers[:n] = _block(data, pos + COUNT_RATES.size, n, 3) * 1e-3
     k = len(p.plates)
     force, moment, cop = np.zeros((k, 3)), np.zeros((k, 3)), np.full((k, 3), np.nan)
-    if k and QRTComponentType.ComponentForce in packet.components:
-        _, plates = packet.get_force()
-        for info, samples in plates:
-            i = info.id - 1
-            if not 0 <= i < k or not samples:
+    pos = where.get(QRTComponentType.ComponentForce)
+    if k and pos is not None:
+        (plates,), pos = struct.unpack_from("<i", data, pos), pos + 4
+        for _ in range(plates):
+            pid, count, _ = PLATE.unpack_from(data, pos)
+            pos += PLATE.size + 36 * count
+            i = pid - 1
+            if not 0 <= i < k or count <= 0:
                 continue
-            s = samples[-1]  # the newest sample of the frame
+            s = _block(data, pos - 36, 1, 9)[0]  # the newest sample of the frame
             R, origin = p.axes[i]
-            force[i] = R @ (s.x, s.y, s.z)
-            moment[i] = R @ (s.x_m, s.y_m, s.z_m)
-            cop[i] = R @ (np.array([s.x_a, s.y_a, s.z_a]) * p.length) + origin
+            force[i], moment[i] = R @ s[0:3], R @ s[3:6]
+            cop[i] = R @ (s[6:9] * p.length) + origin
     return MocapFrame(packet.timestamp * 1e-6, received, packet.framenumber, p.labels, markers, p.up,
                       PlateSamples(p.plates, force, moment, cop), segments=_bodies(packet, p))
 
@@ -116,11 +136,12 @@ def _bodies(packet, p: QtmParameters) -> SegmentPoses:
 
     k = len(p.bodies)
     pos, rot = np.full((k, 3), np.nan), np.tile(np.eye(3), (k, 1, 1))
-    if k and QRTComponentType.Component6d in packet.components:
-        _, bodies = packet.get_6d()
-        n = min(len(bodies), k)
-        pos[:n] = np.array([(b.x, b.y, b.z) for b, _ in bodies[:n]], float).reshape(n, 3) * 1e-3
-        rot[:n] = np.array([m.matrix for _, m in bodies[:n]], float).reshape(n, 3, 3).transpose(0, 2, 1)
+    at = packet.components.get(QRTComponentType.Component6d)
+    if k and at is not None:
+        n = min(COUNT_RATES.unpack_from(packet.data, at)[0], k)
+        block = _block(packet.data, at + COUNT_RATES.size, n, 12)
+        pos[:n] = block[:, :3] * 1e-3
+        rot[:n] = block[:, 3:].reshape(n, 3, 3).transpose(0, 2, 1)  # the matrix column by column
     tracked = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
     return SegmentPoses(p.bodies, pos, rot, tracked)
 
@@ -213,9 +234,16 @@ class QtmSource:
 
     def _on_packet(self, packet) -> None:
         received = time.monotonic()
-        if self.params is None or not self.order.admit(packet.framenumber):
+        if self.params is None:
             return
-        self.queue.put(frame_of_packet(packet, self.params, received))
+        try:  # parsed first, as NatNet's: a malformed frame is not delivered
+            frame = frame_of_packet(packet, self.params, received)
+        except (ValueError, struct.error) as e:
+            self.stats.malformed += 1
+            self.errors.report("malformed", f"{self.name}: frame {packet.framenumber}: {e}")
+            return
+        if self.order.admit(packet.framenumber):
+            self.queue.put(frame)
 
     def read(self, timeout: float) -> MocapFrame | None:
         return None if self._closed else self.queue.get(timeout)
