@@ -94,6 +94,32 @@ def test_long_gap_is_left_out_reported_and_counted(c3d):
     assert len(reports) == 1 and "RANK missing for more than 100 ms" in reports[0].message
 
 
+def test_frames_converted_together_equal_frames_converted_one_by_one(c3d, monkeypatch):
+    """A reader behind its stream converts the waiting frames in one call: the same channels (to rounding)
+    and the same gap counts as one frame per call, across batch boundaries, with short and long gaps."""
+    import livezmp.sources.marker_stream as ms
+
+    walk = c3d.points[:150].copy()
+    walk[30:40, c3d.labels.index("LASI")] = np.nan  # carried on (0.1 s)
+    walk[50:80, c3d.labels.index("RANK")] = np.nan  # left out after 0.1 s
+    walk[33:36, c3d.labels.index("LTOE")] = np.nan
+    calls = []
+    convert = ms.marker_channels
+    monkeypatch.setattr(ms, "marker_channels", lambda take, m: calls.append(len(next(iter(m.values()))))
+                        or convert(take, m))
+    single = MarkerStreamSource(FakeStream(c3d.labels, walk), c3d, batch=1)
+    one = read_all(single)
+    assert set(calls) == {1}
+    calls.clear()
+    batched = MarkerStreamSource(FakeStream(c3d.labels, walk), c3d, batch=32)
+    together = read_all(batched)
+    assert calls == [32, 32, 32, 32, 22]  # every frame was already waiting
+    assert np.isnan(one).any() and np.isfinite(one[:30]).all()
+    np.testing.assert_allclose(together, one, rtol=0, atol=1e-12)
+    assert batched.details() == single.details()
+    assert single.details()["markers"]["filled_samples"] == 10 + 3 + 10
+
+
 def test_body_calibrated_on_the_stream_when_no_trial_is_given(c3d):
     prefixed = [f"Subject:{x}" for x in c3d.labels]  # prefixes go, as in a C3D
     src = MarkerStreamSource(FakeStream(prefixed, c3d.points), None)

@@ -6,6 +6,7 @@ frames and gaps are counted exactly, and a server that goes away is re-connected
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 import time
 import uuid
@@ -251,6 +252,57 @@ def test_natnet_packets_round_trip_and_every_truncation_is_an_error():
     back = nn.unpack_modeldef(nn.pack_modeldef(model))
     assert back.marker_sets == model.marker_sets and back.plates[0].channels == ("Fx", "Cy")
     np.testing.assert_allclose(back.plates[0].corners, np.eye(4, 3))
+
+
+def test_natnet_plate_channels_read_as_one_block_or_one_by_one():
+    """Channels of one sample each are read as one block; any other count (none, several: a plate
+    faster than the cameras) one by one, the newest sample kept: both give the samples packed."""
+    import livezmp.sources.natnet_protocol as nn
+
+    def channels(samples):
+        return b"".join(struct.pack("<i", len(x)) + np.asarray(x, "<f4").tobytes() for x in samples) + b"tail"
+
+    for samples, want in (([[1.5], [-2.0], [3.25]], [1.5, -2.0, 3.25]),
+                          ([[1.5], [], [7.0, 8.0, 9.5], [4.0]], [1.5, np.nan, 9.5, 4.0])):
+        r = nn._Reader(channels(samples))
+        np.testing.assert_array_equal(nn._plate_channels(r, len(samples)), want)
+        assert r.data[r.pos:] == b"tail"
+
+
+def test_qtm_components_read_as_the_qtm_rt_client_reads_them(trial):
+    """livezmp reads the 3D, force and 6D components as numpy blocks: equal to qtm-rt's own records
+    of the same packets (markers, plates' newest sample in the lab, bodies); a packet shorter than
+    its counts say is an error, not a frame."""
+    from qtm_rt.packet import QRTPacket
+
+    from livezmp.sources.qtm import frame_of_packet, parse_parameters
+    from sim_devices import qtm_server as qs
+    from sim_devices.mocap_trial import TrialPlayer, with_segments
+
+    posed = with_segments(trial, str(TRIAL))
+    params = parse_parameters(qs.parameters_xml(posed, "1.25", ["all"]), "test")
+    axes = [plate_axes(c) for c in posed.corners]
+    player = TrialPlayer(posed, IMPAIRED, speed=0)
+    comps = [qs.COMPONENT_3D, qs.COMPONENT_FORCE, qs.COMPONENT_6D]
+    for f in list(player.frames())[::7]:
+        data = qs.data_packet(posed, f, comps, axes)[qs.HEADER.size:]
+        packet = QRTPacket(data)
+        got = frame_of_packet(packet, params, 0.0)
+        markers = np.array([(m.x, m.y, m.z) for m in packet.get_3d_markers()[1]]) * 1e-3
+        np.testing.assert_array_equal(got.markers, markers)
+        assert len(packet.get_force()[1]) == len(params.plates) == 4
+        assert len(packet.get_6d()[1]) == len(params.bodies) > 0
+        for info, samples in packet.get_force()[1]:
+            s, (R, origin) = samples[-1], params.axes[info.id - 1]
+            np.testing.assert_array_equal(got.plates.force[info.id - 1], R @ (s.x, s.y, s.z))
+            np.testing.assert_array_equal(got.plates.moment[info.id - 1], R @ (s.x_m, s.y_m, s.z_m))
+            np.testing.assert_array_equal(got.plates.cop[info.id - 1], R @ (np.array([s.x_a, s.y_a, s.z_a]) * 1e-3)
+                                          + origin)
+        for i, (pos, rot) in enumerate(packet.get_6d()[1]):
+            np.testing.assert_array_equal(got.segments.position[i], np.array([pos.x, pos.y, pos.z]) * 1e-3)
+            np.testing.assert_array_equal(got.segments.rotation[i], np.reshape(rot.matrix, (3, 3)).T)
+    with pytest.raises((ValueError, struct.error)):
+        frame_of_packet(QRTPacket(data[:-40]), params, 0.0)
 
 
 @pytest.mark.parametrize("url, message", [
