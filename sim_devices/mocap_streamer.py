@@ -223,10 +223,12 @@ def serve_capture(args: argparse.Namespace) -> str:
     if args.skeleton or args.skeleton_only:
         from sim_devices.mocap_trial import with_segments
 
-        if args.natnet is None or args.motion.startswith("generated:"):
-            raise InputError("--skeleton: a C3D trial served over --natnet")
+        if (args.natnet is None and args.qtm is None) or args.motion.startswith("generated:"):
+            raise InputError("--skeleton: a C3D trial served over --natnet or --qtm")
         trial = with_segments(trial, args.motion)
-    imp = Impairments(noise_pos=args.noise_mm * 1e-3, gap=args.gap, drop=args.drop, late=args.late, seed=args.seed)
+    # QTM always streams its 3D component: a skeleton without markers is every marker occluded
+    gap = 1.0 if args.skeleton_only and args.qtm is not None else args.gap
+    imp = Impairments(noise_pos=args.noise_mm * 1e-3, gap=gap, drop=args.drop, late=args.late, seed=args.seed)
     play = {"impairments": imp, "speed": args.speed, "loop": args.loop, "max_frames": args.frames}
     if args.lsl is not None:
         from sim_devices.lsl_publisher import LslPublisher
@@ -239,7 +241,7 @@ def serve_capture(args: argparse.Namespace) -> str:
         if args.qtm is not None:
             from sim_devices.qtm_server import QtmServer
 
-            server = QtmServer(trial, args.qtm, **play)
+            server = QtmServer(trial, args.qtm, **play, poses=("skeleton",) if trial.segment_names else ("6d",))
             print(f"serving QTM RT on qtm://127.0.0.1:{server.port}", flush=True)
         else:
             from sim_devices.natnet_server import NatNetServer
@@ -266,9 +268,10 @@ def main(argv: list[str] | None = None) -> int:
     out.add_argument("--qtm", type=int, metavar="PORT", help="serve QTM RT on 127.0.0.1:PORT (0: any)")
     out.add_argument("--natnet", type=int, metavar="PORT", help="serve NatNet commands on 127.0.0.1:PORT")
     p.add_argument("--data-port", type=int, default=1511, help="NatNet data port the client binds")
-    p.add_argument("--skeleton", action="store_true", help="NatNet: also stream the marker body's segments as a "
-                                                           "skeleton")
-    p.add_argument("--skeleton-only", action="store_true", help="NatNet: stream the skeleton without markers")
+    p.add_argument("--skeleton", action="store_true", help="NatNet, QTM: also stream the marker body's segments "
+                                                           "as a solved skeleton")
+    p.add_argument("--skeleton-only", action="store_true", help="NatNet, QTM: stream the skeleton without markers "
+                                                                "(QTM: every marker occluded)")
     p.add_argument("--noise-mm", type=float, default=0.0, help="marker noise std (mm; capture servers)")
     p.add_argument("--gap", type=float, default=0.0, help="marker occlusion probability per frame")
     p.add_argument("--format", choices=["json", "binary"], default="json", help="UDP frame format")

@@ -15,7 +15,11 @@ endian as QTM's little-endian port does:
   trial with segment poses, the ``6d`` component (header: body count int32, 2D drop and
   out-of-sync rates int16; per body position xyz float32 mm and the 3x3 rotation matrix
   as 9 float32 column by column, as Qualisys' clients read it; bodies named in the
-  parameters' ``The_6D``);
+  parameters' ``The_6D``), or, for a server started with ``poses=("skeleton",)`` (QTM's skeleton
+  solver), the ``skeleton`` component (``skeleton`` or ``skeleton:global``: skeleton count int32; per
+  skeleton its segment count int32 and per segment id int32, position xyz float32 mm, rotation
+  quaternion x y z w float32; segments named in the parameters' ``Skeletons``, each a root of its
+  own, so local and global poses are the same);
 - anything else: an error packet "Parse error".
 
 Packet layouts follow the QTM RT protocol documentation (header: size incl. header,
@@ -43,9 +47,11 @@ from sim_devices.tcp_accept import accept_until
 HEADER = struct.Struct("<II")
 TYPE_ERROR, TYPE_COMMAND, TYPE_XML, TYPE_DATA, TYPE_NO_MORE_DATA, TYPE_EVENT = 0, 1, 2, 3, 4, 6
 EVENT_CAPTURE_STARTED = 3
-COMPONENT_3D, COMPONENT_FORCE, COMPONENT_6D = 1, 4, 5
+COMPONENT_3D, COMPONENT_FORCE, COMPONENT_6D, COMPONENT_SKELETON = 1, 4, 5, 18
 VERSIONS = (1, 8), (1, 25)
-COMPONENTS = {"3d": COMPONENT_3D, "force": COMPONENT_FORCE, "6d": COMPONENT_6D}
+COMPONENTS = {"3d": COMPONENT_3D, "force": COMPONENT_FORCE, "6d": COMPONENT_6D, "skeleton": COMPONENT_SKELETON,
+              "skeleton:global": COMPONENT_SKELETON}
+SKELETON = "subject"  # the solved skeleton's name
 
 
 def packet(kind: int, body: bytes) -> bytes:
@@ -56,9 +62,10 @@ def text_packet(kind: int, text: str) -> bytes:
     return packet(kind, text.encode() + b"\0")
 
 
-def parameters_xml(trial: MocapTrial, version: str, parts: list[str]) -> str:
-    """The parameters XML of ``parts`` (general, 3d, force; "all" = every one)."""
-    want = set(parts) if "all" not in parts else {"general", "3d", "force", "6d"}
+def parameters_xml(trial: MocapTrial, version: str, parts: list[str], poses: tuple[str, ...] = ("6d",)) -> str:
+    """The parameters XML of ``parts`` (general, 3d, force, 6d, skeleton; "all" = every one); the trial's
+    segments are listed as 6DOF bodies and/or skeleton segments as ``poses`` says."""
+    want = {w.split(":")[0] for w in parts} if "all" not in parts else {"general", "3d", "force", "6d", "skeleton"}
     out = [f"<QTM_Parameters_Ver_{version}>"]
     if "general" in want:
         out.append(f"<General><Frequency>{trial.rate:g}</Frequency><Capture_Time>{trial.n_frames / trial.rate:.6f}"
@@ -81,8 +88,14 @@ def parameters_xml(trial: MocapTrial, version: str, parts: list[str]) -> str:
                           "<Origin><X>0</X><Y>0</Y><Z>0</Z></Origin></Plate>")
         out.append(f"<Force><Unit_Length>mm</Unit_Length><Unit_Force>N</Unit_Force>{''.join(plates)}</Force>")
     if "6d" in want:
-        bodies = "".join(f"<Body><Name>{n}</Name><RGBColor>255</RGBColor></Body>" for n in trial.segment_names)
-        out.append(f"<The_6D><Bodies>{len(trial.segment_names)}</Bodies>{bodies}</The_6D>")
+        names = trial.segment_names if "6d" in poses else ()
+        bodies = "".join(f"<Body><Name>{n}</Name><RGBColor>255</RGBColor></Body>" for n in names)
+        out.append(f"<The_6D><Bodies>{len(names)}</Bodies>{bodies}</The_6D>")
+    if "skeleton" in want and "skeleton" in poses and trial.segment_names:
+        segments = "".join(f'<Segment Name="{n}" ID="{i + 1}"><Solver>Global Optimization</Solver></Segment>'
+                           for i, n in enumerate(trial.segment_names))
+        out.append(f'<Skeletons><Skeleton Name="{SKELETON}"><Solver>Global Optimization</Solver><Scale>1.000000'
+                   f'</Scale><Segments>{segments}</Segments></Skeleton></Skeletons>')
     out.append(f"</QTM_Parameters_Ver_{version}>")
     return "".join(out)
 
@@ -93,6 +106,16 @@ def data_packet(trial: MocapTrial, f: TrialFrame, components: list[int], axes: l
     for comp in components:
         if comp == COMPONENT_3D:
             body = struct.pack("<Ihh", len(f.markers), 0, 0) + (f.markers * 1e3).astype("<f4").tobytes()
+        elif comp == COMPONENT_SKELETON:
+            n = len(trial.segment_names)
+            body = struct.pack("<i", 1 if n else 0)
+            if n:  # one skeleton: per segment id, position mm, quaternion x y z w
+                from scipy.spatial.transform import Rotation
+
+                quat = Rotation.from_matrix(f.segment_rot).as_quat()
+                body += struct.pack("<i", n) + b"".join(
+                    struct.pack("<i", i + 1) + np.concatenate([f.segment_pos[i] * 1e3, quat[i]]).astype("<f4").tobytes()
+                    for i in range(n))
         elif comp == COMPONENT_6D:
             n = len(trial.segment_names)
             body = struct.pack("<ihh", n, 0, 0)
@@ -119,12 +142,13 @@ class _Client:
 
 class QtmServer:
     """A QTM RT server on ``host``:``port`` (0: any free port) playing ``trial``; see the
-    module docstring. :meth:`start` starts the camera (the player thread)."""
+    module docstring. :meth:`start` starts the camera (the player thread). ``poses``: the trial's
+    segment poses (when it has them) as 6DOF bodies ("6d"), as a solved skeleton ("skeleton"), or both."""
 
     def __init__(self, trial: MocapTrial, port: int = 0, host: str = "127.0.0.1",
                  impairments: Impairments | None = None, speed: float = 1.0, loop: bool = True,
-                 max_frames: int | None = None):
-        self.trial = trial
+                 max_frames: int | None = None, poses: tuple[str, ...] = ("6d",)):
+        self.trial, self.poses = trial, poses
         self.player = TrialPlayer(trial, impairments, speed, loop, max_frames)
         self.axes = [plate_axes(c) for c in trial.corners]
         self.server = socket.create_server((host, port))
@@ -217,7 +241,8 @@ class QtmServer:
             self._write(client, packet(TYPE_EVENT, bytes([EVENT_CAPTURE_STARTED])))
         elif verb == "getparameters":
             self._write(client, text_packet(TYPE_XML, parameters_xml(self.trial, client.version,
-                                                                      [w.lower() for w in words[1:]] or ["all"])))
+                                                                      [w.lower() for w in words[1:]] or ["all"],
+                                                                      self.poses)))
         elif verb == "getcurrentframe" and self._components(words[1:]) is not None:
             f = self._current
             comps = self._components(words[1:])

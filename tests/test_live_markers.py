@@ -66,9 +66,10 @@ def offline():
 def _serve(kind: str, trial):
     """(server, URL, start): the server plays the trial once (3x real time: the analysis does not depend
     on when frames arrive, only on their stamps), from when the monitor is connected."""
-    if kind.startswith("qtm"):  # "qtm-6d": every marker occluded, the segments' 6DOF bodies tracked
-        hidden = Impairments(gap=1.0) if kind == "qtm-6d" else None
-        server = QtmServer(trial, 0, loop=False, speed=3.0, impairments=hidden)
+    if kind.startswith("qtm"):  # "qtm-6d" / "qtm-skeleton": every marker occluded, the segments' poses tracked
+        hidden = Impairments(gap=1.0) if kind != "qtm" else None  # as 6DOF bodies / as QTM's solved skeleton
+        poses = ("skeleton",) if kind == "qtm-skeleton" else ("6d",)
+        server = QtmServer(trial, 0, loop=False, speed=3.0, impairments=hidden, poses=poses)
         return server, f"qtm://127.0.0.1:{server.port}", lambda: wait_until(server.streaming_clients, 10) and \
             server.start()
     if kind.startswith("natnet"):  # "natnet-skeleton": the segment poses alone, no markers
@@ -148,10 +149,10 @@ def test_streamed_trial_gives_the_zmp_of_analyze(kind, trial, offline, tmp_path)
     assert got["max_mm"] == pytest.approx(want["max_mm"], abs=1e-3)
 
 
-@pytest.mark.parametrize("kind", ["natnet-skeleton", "qtm-6d"])
+@pytest.mark.parametrize("kind", ["natnet-skeleton", "qtm-6d", "qtm-skeleton"])
 def test_segment_poses_drive_the_body_directly(kind, skeleton_trial, offline, tmp_path):
-    """The segments' poses without markers (a NatNet skeleton; QTM 6DOF bodies with every marker
-    occluded): the body is driven by the poses and gives analyze's ZMP to float32 (positions,
+    """The segments' poses without markers (a NatNet skeleton; QTM 6DOF bodies or QTM's solved skeleton
+    with every marker occluded): the body is driven by the poses and gives analyze's ZMP to float32 (positions,
     quaternions or rotation matrices)."""
     results, summary = _monitor(kind, skeleton_trial, tmp_path)
     exact, _ = offline
@@ -202,6 +203,17 @@ def test_qtm_client_reads_6dof_bodies(skeleton_trial):
     for f in _first_frames("qtm", skeleton_trial):
         seg = f.segments
         assert seg.tracked.all()
+        i = f.frame - 1  # QTM numbers frames from 1
+        np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[i], atol=1e-6)
+        np.testing.assert_allclose(seg.rotation, skeleton_trial.segment_rot[i], atol=1e-6)
+
+
+def test_qtm_client_reads_skeleton_segments(skeleton_trial):
+    """qtm-rt's skeleton component (global poses) arrives as the segments the server solved: positions
+    mm -> m and quaternions -> rotation matrices, in QTM's z-up lab axes; no 6DOF bodies then."""
+    for f in _first_frames("qtm-skeleton", skeleton_trial):
+        seg = f.segments
+        assert seg.tracked.all() and np.isnan(f.markers).all()
         i = f.frame - 1  # QTM numbers frames from 1
         np.testing.assert_allclose(seg.position, skeleton_trial.segment_pos[i], atol=1e-6)
         np.testing.assert_allclose(seg.rotation, skeleton_trial.segment_rot[i], atol=1e-6)

@@ -7,8 +7,9 @@ every frame (``3d`` markers in mm, ``force`` per plate force N, moment N·m, app
 point in the plates' length unit, in each plate's own axes, turned into the lab's with
 the corners, :mod:`livezmp.sources.plate_frame`; ``6d`` rigid bodies named in ``The_6D``:
 position mm and rotation matrix, 9 floats column by column as Qualisys' own clients read
-them, an untracked body NaN, as the frame's segment poses). Frames go in order by QTM's frame
-number (late, duplicate, lost counted). A lost connection is reported and re-made every
+them, an untracked body NaN, as the frame's segment poses; then ``skeleton:global``: the segments of
+the skeletons QTM solves, named in ``Skeletons``, position mm and quaternion). Frames go in order by
+QTM's frame number (late, duplicate, lost counted). A lost connection is reported and re-made every
 ``retry`` s, parameters read again (a changed marker set is taken as it comes).
 
 QTM timestamps are µs on QTM's own clock, which this machine cannot relate to its own:
@@ -48,6 +49,13 @@ class QtmParameters:
     axes: tuple[tuple[np.ndarray, np.ndarray], ...]
     length: float
     bodies: tuple[str, ...] = ()  # 6DOF bodies
+    skeletons: tuple[tuple[int, ...], ...] = ()  # per skeleton its segments' ids, in the parameters' order
+    segments: tuple[str, ...] = ()  # those segments' names, skeleton after skeleton
+
+    @property
+    def poses(self) -> tuple[str, ...]:
+        """Names of the frame's segment poses: the 6DOF bodies, then the skeletons' segments."""
+        return self.bodies + self.segments
 
 
 def _text(node: ET.Element | None, path: str, where: str) -> str:
@@ -58,7 +66,7 @@ def _text(node: ET.Element | None, path: str, where: str) -> str:
 
 
 def parse_parameters(xml: str, where: str) -> QtmParameters:
-    """The :class:`QtmParameters` of a ``getparameters general 3d force 6d`` reply."""
+    """The :class:`QtmParameters` of a ``getparameters general 3d force 6d skeleton`` reply."""
     try:
         root = ET.fromstring(xml)
     except ET.ParseError as e:
@@ -82,7 +90,17 @@ def parse_parameters(xml: str, where: str) -> QtmParameters:
         axes.append(plate_axes(corners))
     six = root.find("The_6D")
     bodies = tuple(_text(b, "Name", where) for b in (six.findall("Body") if six is not None else []))
-    return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit], bodies)
+    ids, segment_names = [], []
+    for skeleton in root.findall("Skeletons/Skeleton"):
+        segments = list(skeleton.iter("Segment"))  # nested under their parents from protocol 1.22 on
+        try:
+            ids.append(tuple(int(seg.get("ID", "")) for seg in segments))
+        except ValueError:
+            raise InputError(f"{where}: parameters XML: skeleton {skeleton.get('Name')!r} has a segment "
+                             "without a numeric ID") from None
+        segment_names += [f"{seg.get('Name')}" for seg in segments]
+    return QtmParameters(rate, up, labels, tuple(names), tuple(axes), LENGTH[unit], bodies, tuple(ids),
+                         tuple(segment_names))
 
 
 # component bodies after their 8-byte header, as the QTM RT protocol documentation lays them out (little
@@ -90,9 +108,12 @@ def parse_parameters(xml: str, where: str) -> QtmParameters:
 # force: plate count int32, per plate id, sample count, sample number int32 and 9 float32 per sample
 # (force xyz, moment xyz, application point xyz); 6D: body count int32, rates int16 x 2, per body x y z
 # and the 3x3 rotation matrix float32. Read as numpy blocks rather than one record per marker.
+# skeleton: skeleton count int32, per skeleton segment count int32, per segment id int32, position xyz
+# float32 mm, rotation quaternion x y z w float32.
 COUNT_RATES = struct.Struct("<Ihh")
 PLATE = struct.Struct("<iii")
 F4 = np.dtype("<f4")
+SEGMENT = np.dtype([("id", "<i4"), ("pos", "<f4", 3), ("quat", "<f4", 4)])
 
 
 def _block(data: bytes, pos: int, rows: int, cols: int) -> np.ndarray:
@@ -131,19 +152,47 @@ def frame_of_packet(packet, p: QtmParameters, received: float) -> MocapFrame:
 
 
 def _bodies(packet, p: QtmParameters) -> SegmentPoses:
-    """The 6D component's bodies (named by the parameters) as segment poses; an untracked one NaN."""
+    """The 6D component's bodies and the skeleton component's segments (named by the parameters) as
+    segment poses; an untracked one NaN."""
     from qtm_rt.packet import QRTComponentType
 
     k = len(p.bodies)
-    pos, rot = np.full((k, 3), np.nan), np.tile(np.eye(3), (k, 1, 1))
+    names = p.poses
+    pos, rot = np.full((len(names), 3), np.nan), np.tile(np.eye(3), (len(names), 1, 1))
     at = packet.components.get(QRTComponentType.Component6d)
     if k and at is not None:
         n = min(COUNT_RATES.unpack_from(packet.data, at)[0], k)
         block = _block(packet.data, at + COUNT_RATES.size, n, 12)
         pos[:n] = block[:, :3] * 1e-3
         rot[:n] = block[:, 3:].reshape(n, 3, 3).transpose(0, 2, 1)  # the matrix column by column
+    at = packet.components.get(QRTComponentType.ComponentSkeleton)
+    if p.skeletons and at is not None:
+        _skeleton_segments(packet.data, at, p.skeletons, pos[k:], rot[k:])
     tracked = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
-    return SegmentPoses(p.bodies, pos, rot, tracked)
+    return SegmentPoses(names, pos, rot, tracked)
+
+
+def _skeleton_segments(data: bytes, at: int, skeletons: tuple[tuple[int, ...], ...], pos: np.ndarray,
+                       rot: np.ndarray) -> None:
+    """Fill ``pos`` (m) and ``rot`` (rotation matrices), rows in the parameters' segment order, from the
+    skeleton component at ``at`` (global poses); a segment the packet lacks, or without a rotation, stays NaN
+    (untracked)."""
+    from scipy.spatial.transform import Rotation
+
+    (count,), at = struct.unpack_from("<i", data, at), at + 4
+    row = 0
+    for ids in skeletons[:max(count, 0)]:
+        (n,), at = struct.unpack_from("<i", data, at), at + 4
+        block = np.frombuffer(data, SEGMENT, n, at)
+        at += SEGMENT.itemsize * n
+        index = {sid: row + i for i, sid in enumerate(ids)}
+        rows = np.array([index.get(int(sid), -1) for sid in block["id"]], int)
+        quat = block["quat"].astype(float)
+        ok = (rows >= 0) & np.isfinite(quat).all(axis=1) & (np.abs(quat).sum(axis=1) > 0)
+        if ok.any():
+            pos[rows[ok]] = block["pos"][ok] * 1e-3
+            rot[rows[ok]] = Rotation.from_quat(quat[ok]).as_matrix()
+        row += len(ids)
 
 
 class QtmSource:
@@ -197,9 +246,10 @@ class QtmSource:
             self._failure = "connection refused or version not accepted"
             return
         try:
-            xml = await conn.get_parameters(["general", "3d", "force", "6d"])
+            xml = await conn.get_parameters(["general", "3d", "force", "6d", "skeleton"])
             params = parse_parameters(xml.decode(errors="replace"), self.name)
-            components = ["3d"] + ["force"] * bool(params.plates) + ["6d"] * bool(params.bodies)
+            components = (["3d"] + ["force"] * bool(params.plates) + ["6d"] * bool(params.bodies)
+                          + ["skeleton:global"] * bool(params.skeletons))
             self.params = params
             if self._sessions:
                 self.stats.reconnects += 1
