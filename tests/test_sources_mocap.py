@@ -305,6 +305,34 @@ def test_qtm_components_read_as_the_qtm_rt_client_reads_them(trial):
         frame_of_packet(QRTPacket(data[:-40]), params, 0.0)
 
 
+def test_qtm_skeleton_segments_nested_untracked_and_unknown():
+    """QTM 1.22+ nests a skeleton's segments under their parents: they are named in document order;
+    a segment sent with a zero quaternion (not solved) or not sent is untracked, an id the parameters
+    do not name is ignored, and each pose is the quaternion's rotation (x y z w) and the position in m."""
+    from qtm_rt.packet import QRTPacket
+    from scipy.spatial.transform import Rotation
+
+    from livezmp.sources.qtm import frame_of_packet, parse_parameters
+
+    xml = ("<QTM_Parameters_Ver_1.25><General><Frequency>100</Frequency></General><The_3D><AxisUpwards>Z"
+           "</AxisUpwards></The_3D><Skeletons><Skeleton Name='a'><Segments><Segment Name='pelvis' ID='1'>"
+           "<Segment Name='thigh_l' ID='2'><Segment Name='shank_l' ID='3'/></Segment></Segment>"
+           "<Segment Name='thigh_r' ID='7'/></Segments></Skeleton></Skeletons></QTM_Parameters_Ver_1.25>")
+    p = parse_parameters(xml, "test")
+    assert p.segments == ("pelvis", "thigh_l", "shank_l", "thigh_r") and p.skeletons == ((1, 2, 3, 7),)
+    q = Rotation.from_euler("zyx", [0.3, -0.2, 0.1]).as_quat()
+    segments = [(2, (10.0, 20.0, 30.0), q), (1, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0)),
+                (9, (5.0, 5.0, 5.0), q), (3, (4.0, 4.0, 4.0), (0.0, 0.0, 0.0, 0.0))]
+    body = struct.pack("<ii", 1, len(segments)) + b"".join(struct.pack("<i3f4f", i, *x, *r) for i, x, r in segments)
+    component = struct.pack("<II", 8 + len(body), 18) + body
+    f = frame_of_packet(QRTPacket(struct.pack("<qII", 5, 1, 1) + component), p, 0.0)
+    assert f.segments.names == p.segments and f.segments.tracked.tolist() == [True, True, False, False]
+    np.testing.assert_allclose(f.segments.position[:2], [[1e-3, 2e-3, 3e-3], [0.01, 0.02, 0.03]], atol=1e-9)
+    np.testing.assert_allclose(f.segments.rotation[1], Rotation.from_euler("zyx", [0.3, -0.2, 0.1]).as_matrix(),
+                               atol=1e-6)
+    np.testing.assert_array_equal(f.segments.rotation[0], np.eye(3))
+
+
 @pytest.mark.parametrize("url, message", [
     ("vicon://127.0.0.1", "not a capture stream"),
     ("qtm://", "need a host"),
