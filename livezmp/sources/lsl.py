@@ -40,6 +40,7 @@ FORCE = {"newtons": 1.0, "n": 1.0}
 PLATE_KINDS = {"force": ("force", FORCE), "moment": ("moment", MOMENT), "cop": ("cop", LENGTH)}
 QUERY_KEYS = {"type", "source_id", "plates", "up", "timeout"}
 SILENCE = 0.5
+WAIT_S = 0.1  # s: longest single wait inside liblsl for a marker sample
 
 
 def _channels(info) -> list[dict[str, str]]:
@@ -205,10 +206,17 @@ class LslSource:
             except Exception:  # pylsl raises TimeoutError/LostError; keep the last offset
                 pass
 
-    def _pull(self) -> None:
+    def _pull(self, wait: float = 0.0) -> None:
+        """Take the samples the streams hold; with none there, wait up to ``wait`` s for the next marker
+        sample inside liblsl (which lets the interpreter run other threads meanwhile), not by polling."""
         import pylsl
 
         samples, stamps = self.inlet.pull_chunk(0.0)
+        if not stamps and wait > 0:
+            row, stamp = self.inlet.pull_sample(wait)
+            if stamp is not None:
+                more, more_stamps = self.inlet.pull_chunk(0.0)
+                samples, stamps = [row, *more], [stamp, *more_stamps]
         received, clock = time.monotonic(), pylsl.local_clock()
         if stamps:
             if received - self._last_data > SILENCE and self.stats.delivered:
@@ -260,12 +268,14 @@ class LslSource:
     def read(self, timeout: float) -> MocapFrame | None:
         deadline = time.monotonic() + timeout
         while not self._closed:
-            self._pull()
+            # wait in liblsl for the next marker sample, unless a frame already waits for its plates
+            self._pull(0.0 if self._pending else min(max(deadline - time.monotonic(), 0.0), WAIT_S))
             now = time.monotonic()
             f = self._ready(now)
             if f is not None or now >= deadline:
                 return f
-            time.sleep(min(0.0005, max(deadline - now, 0.0)))  # liblsl offers no select(); poll at 2 kHz
+            if self._pending:  # its plate sample is due within ``align`` periods: poll the plates at 2 kHz
+                time.sleep(min(0.0005, max(deadline - now, 0.0)))
         return None
 
     def close(self) -> None:
