@@ -79,6 +79,34 @@ def test_monitor_matches_the_offline_analysis(tmp_path, demo):
     assert all(name in body.channel_names for c in corr for name in c["offsets"])
 
 
+def test_result_reaches_the_dashboard_before_it_is_recorded_and_every_frame_is_recorded(tmp_path, demo):
+    """Recording is not on the way from a frame to its result on the dashboard: a listener has result k
+    while the recording holds results up to k - 1 (and inputs up to the frame before the one that
+    completed k); afterwards the recording holds every input and every result."""
+    body, spec, times, frames = demo
+    cfg = default_config(body, 100.0)
+    rec = Recorder(tmp_path / "order.mcap", spec, {"fps": 100.0}, body.channel_names)
+    src = FileReplaySource("<demo>", body, spec, times, frames, speed=0)
+    mon = Monitor(src, cfg, alarm_after=1e9, recorder=rec)
+    seen = []
+
+    class Dashboard:
+        def publish(self, r, cop=None):
+            seen.append((r.index, rec.counts["/result"], rec.counts["/input"], mon.inputs))
+
+        def alarm(self, ev):
+            pass
+
+    mon.listeners.append(Dashboard())
+    summary = mon.run()
+    assert len(seen) == summary.results == summary.inputs == len(frames)
+    streaming = [s for s in seen if s[3] < len(frames)]  # before the flush at the end
+    assert len(streaming) > len(frames) - 2 * mon.pipeline.lag
+    assert all(recorded == k and inputs == n - 1 for k, recorded, inputs, n in streaming)
+    assert [m["index"] for m in iter_messages(tmp_path / "order.mcap", "/result")] == list(range(len(frames)))
+    assert [m["index"] for m in iter_messages(tmp_path / "order.mcap", "/input")] == list(range(len(frames)))
+
+
 def fake(index: int, t: float, inside: bool | None, margin: float | None = None) -> FrameResult:
     z = np.zeros(3)
     return FrameResult(index, t, z, z, z, None if inside is None else z, z, "double", np.zeros((4, 2)), {}, 0.0,
