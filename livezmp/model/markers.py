@@ -114,14 +114,15 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     overhead (a live stream converts one frame at a time)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0], out[..., 1], out[..., 2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    out = np.empty((*c0.shape, 3))
+    out[..., 0], out[..., 1], out[..., 2] = c0, c1, c2
     return out
 
 
 def _norm(v: np.ndarray) -> np.ndarray:
     """Row-wise length (..., 1) of (..., 3) vectors: ``np.linalg.norm``'s sum of squares without its checks."""
-    return np.sqrt((v * v).sum(axis=-1, keepdims=True))
+    return np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))
 
 
 def _columns(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -132,8 +133,8 @@ def _columns(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):  # a zero vector gives NaN: refused by _check_turns
-        return v / _norm(v)
+    n = _norm(v)  # a zero vector gives NaN (as 0 / 0 would, without its warning): refused by _check_turns
+    return np.divide(v, n, out=np.full(v.shape, np.nan), where=n > 0)
 
 
 def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -249,9 +250,9 @@ def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: fl
     d = proximal - marker
     e1 = _unit(d)
     w = wand - marker
-    e2 = _unit(w - (w * e1).sum(axis=-1, keepdims=True) * e1)
+    e2 = _unit(w - np.add.reduce(w * e1, axis=-1, keepdims=True) * e1)
     c = np.minimum(np.maximum(delta / _norm(d), -1.0), 1.0)
-    s = np.sqrt(1.0 - c * c) * np.sign((e2 * medial).sum(axis=-1, keepdims=True))
+    s = np.sqrt(1.0 - c * c) * np.sign(np.add.reduce(e2 * medial, axis=-1, keepdims=True))
     return marker + delta * (c * e1 + s * e2)
 
 
@@ -442,7 +443,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     back = (m["LPSI"] + m["RPSI"]) / 2 if "LPSI" in m else m["SACR"]
     y = _unit(m["LASI"] - m["RASI"])
     fwd = mid_asis - back
-    x = _unit(fwd - (fwd * y).sum(axis=1, keepdims=True) * y)
+    x = _unit(fwd - np.add.reduce(fwd * y, axis=1, keepdims=True) * y)
     z = _cross(x, y)
     if dims is None:
         pw = float(np.median(np.linalg.norm(m["LASI"] - m["RASI"], axis=1)))
