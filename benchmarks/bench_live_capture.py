@@ -36,7 +36,8 @@ minute is printed beside each row since the machine may be shared):
 
 Then per-frame CPU of each stage measured offline on the same walk at 240 Hz, old against new in
 one run: QTM packets read by qtm-rt's records against livezmp's numpy blocks; the marker body
-one frame per call against 32 frames per call (what a reader behind its stream does).
+one frame per call against 32 frames per call (what a reader behind its stream does); then the
+pipeline, the recording (input, result and its Foxglove scene) and the dashboard hand-off.
 
 Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,lsl] [--rates 100,240,1000]
 """
@@ -61,7 +62,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_mocap_sources import spawn_server  # noqa: E402
 from bench_monitor import Page  # noqa: E402
 
-from livezmp.balance.pipeline import default_config  # noqa: E402
+from livezmp.balance.pipeline import Pipeline, default_config  # noqa: E402
 from livezmp.monitor.dashboard import DashboardServer  # noqa: E402
 from livezmp.monitor.loop import Monitor  # noqa: E402
 from livezmp.recording.writer import Recorder  # noqa: E402
@@ -274,30 +275,49 @@ def offline_stages(rate: float = 240.0) -> None:
     frames = [frame_of_packet(QRTPacket(b), params, 0.0) for b in packets]
     calibration = read_c3d(str(TRIAL))
 
+    class Replay:  # the frames as a connected stream that is never waited for
+        name, nominal_dt, up, labels, finished = "bench", 1 / rate, params.up, params.labels, False
+        stats, errors = SourceStats(), ErrorLog()
+
+        def __init__(self):
+            self.left = deque(frames)
+
+        def read(self, timeout):
+            return self.left.popleft() if self.left else None
+
+        def close(self):
+            pass
+
     def convert(batch: int):
-        class Replay:  # the frames as a connected stream that is never waited for
-            name, nominal_dt, up, labels, finished = "bench", 1 / rate, params.up, params.labels, False
-            stats, errors = SourceStats(), ErrorLog()
-
-            def __init__(self):
-                self.left = deque(frames)
-
-            def read(self, timeout):
-                return self.left.popleft() if self.left else None
-
-            def close(self):
-                pass
         src = MarkerStreamSource(Replay(), calibration, replace(MarkerBodyOptions(), total_mass=70.0), batch=batch)
         return lambda: [src.read(0.0) for _ in frames]
 
     rows = [("QTM packet -> MocapFrame", per_frame(qtm_rt_records), per_frame(
                 lambda: [frame_of_packet(QRTPacket(b), params, 0.0) for b in packets])),
             ("marker body (channels)", per_frame(convert(1)), per_frame(convert(32)))]
+    src = MarkerStreamSource(Replay(), calibration, replace(MarkerBodyOptions(), total_mass=70.0))
+    inputs = list(iter(lambda: src.read(0.0), None))
+    pipeline = Pipeline(src.body, default_config(src.body, rate, "full", src.ground_z), 1 / rate)
+    results = []
+    rows.append(("pipeline (Pipeline.step)", None, per_frame(lambda: results.extend(
+        pipeline.step(f.t, f.channels, f.contacts, f.gravity) for f in inputs))))
+    results = [r for r in results if r is not None]
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = Recorder(f"{tmp}/stages.mcap", src.body_spec, {"fps": rate}, src.body.channel_names)
+        cops = [None if f.cop is None or np.isnan(f.cop[0]) else f.cop for f in inputs]  # z up: the result's axes
+        rows.append(("recording (input + result)", None, per_frame(lambda: (
+            [rec.input(k, f.t, f.channels, f.contacts, f.gravity) for k, f in enumerate(inputs)],
+            [rec.result(r, cops[r.index]) for r in results]))))
+        rec.close()
+    dash = DashboardServer("127.0.0.1", 0, dict, {})
+    dash.start()
+    rows.append(("dashboard hand-off", None, per_frame(lambda: [dash.publish(r) for r in results])))
+    dash.stop()
     print(f"\nper-frame CPU offline (ms), walk at {rate:g} Hz, {len(packets)} frames")
     print(f"{'stage':28} {'old':>7} {'new':>7}   (old: qtm-rt's records / one frame per call; "
           "new: numpy blocks / 32 frames per call)")
     for name, old, new in rows:
-        print(f"{name:28} {old:7.3f} {new:7.3f}")
+        print(f"{name:28} {'-' if old is None else format(old, '7.3f'):>7} {new:7.3f}")
 
 
 def main() -> None:
