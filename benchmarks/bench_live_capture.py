@@ -207,13 +207,13 @@ def run_case(kind: str, rate: float, laps: int, tmp: Path) -> dict:
     go.set()
     cpu0 = {k: thread_cpu(t) for k, t in threads.items()} | {"all": time.process_time()}
     result = done.get(timeout=600)
-    cpu1 = {k: thread_cpu(t) for k, t in threads.items()} | {"all": time.process_time()}
     load = os.getloadavg()[0]
     lag = monitor.pipeline.lag
     want = len(result["sent"]) - 1 - lag
     end = time.monotonic() + 10
     while page.last < want and time.monotonic() < end:
         time.sleep(0.01)
+    cpu1 = {k: thread_cpu(t) for k, t in threads.items()} | {"all": time.process_time()}  # a late reader's too
     stop.set()
     loop.join(30)
     dash.stop()
