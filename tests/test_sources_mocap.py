@@ -352,5 +352,7 @@ def test_streamer_bad_input_is_a_one_line_error(capsys):
 
     assert main([str(C3D / "nope.c3d"), "--qtm", "0"]) == 2
     assert main(["generated:fast", "--natnet", "0"]) == 2
+    assert main([str(TRIAL), "--lsl", "x", "--skeleton"]) == 2  # skeletons: NatNet and QTM only
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "nope.c3d: not a readable C3D file" in err[0] and "generated:RATE" in err[1]
+    assert len(err) == 3 and "nope.c3d: not a readable C3D file" in err[0] and "generated:RATE" in err[1]
+    assert "--skeleton: a C3D trial served over --natnet or --qtm" in err[2]
