@@ -4,7 +4,8 @@ One thread runs it, frame by frame, at constant cost per frame: every input fram
 analysed and recorded; each result goes to the alarm tracker, the dashboard and other
 listeners (a cheap hand-off), then the recorder, the optional online corrector and the
 terminal view (rate limited). Recording comes after the hand-off so that it is not on the
-way from a frame to its result on the dashboard; nothing is skipped to make room. When
+way from a frame to its result on the dashboard; nothing is skipped to make room, and the
+input that completed a result is recorded before it (a recording cut anywhere replays). When
 the source is idle the loop still closes due recording chunks and records the source's
 faults. It stops when the source is finished or ``stop`` is set, then delivers the
 pipeline's last frames and closes the recording. Listeners (the dashboard, a replay check) get every result and alarm.
@@ -168,6 +169,10 @@ class Monitor:
             self.alarm_command.run(ev)
 
     def _result(self, r: FrameResult) -> None:
+        self._record(r, *self._publish(r))
+
+    def _publish(self, r: FrameResult) -> tuple[np.ndarray | None, AlarmEvent | None]:
+        """Count and hand ``r`` to the listeners (the dashboard); its measured CoP and alarm event."""
         self.results += 1
         self.last = r
         if r.inside is False:
@@ -178,8 +183,12 @@ class Monitor:
         if cop is not None:
             cop = None if np.isnan(cop[0]) else cop  # plates present, unloaded
             self.cop_vs_zmp.add(cop, r.zmp, r.clamped)
-        for li in self.listeners:  # first: recording is not on the way to the dashboard
+        for li in self.listeners:
             li.publish(r, cop)
+        return cop, ev
+
+    def _record(self, r: FrameResult, cop: np.ndarray | None, ev: AlarmEvent | None) -> None:
+        """After the hand-off: record ``r``, raise its alarm, correct, update the terminal view."""
         if self.recorder:
             self.recorder.result(r, cop)
         if ev is not None:
@@ -232,13 +241,15 @@ class Monitor:
             self._cops.append((k, self.source.body.world_from_input @ frame.cop))
         r = self.pipeline.step(frame.t, frame.channels, frame.contacts, frame.gravity)
         if r is not None:
-            self._result(r)
+            published = self._publish(r)
             done = time.monotonic() - frame.received
             self.beyond_lag.add(done)
             if frame.latency is not None:
                 self.from_stamp.add(frame.latency + done)
-        if self.recorder:  # after the result: the input's record is not on the result's way either
-            self.recorder.input(k, frame.t, frame.channels, frame.contacts, frame.gravity)
+        if self.recorder:  # after the hand-off, and before the result it completed: a recording cut
+            self.recorder.input(k, frame.t, frame.channels, frame.contacts, frame.gravity)  # anywhere replays
+        if r is not None:
+            self._record(r, *published)
         if k % 64 == 0:
             self._idle()
         return True
