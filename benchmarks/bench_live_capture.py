@@ -40,6 +40,7 @@ one frame per call against 32 frames per call (what a reader behind its stream d
 pipeline, the recording (input, result and its Foxglove scene) and the dashboard hand-off.
 
 Run: python benchmarks/bench_live_capture.py [--laps 2] [--systems qtm,natnet,lsl] [--rates 100,240,1000]
+     [--realtime-priority 50]
 """
 
 from __future__ import annotations
@@ -63,6 +64,7 @@ from bench_mocap_sources import spawn_server  # noqa: E402
 from bench_monitor import Page  # noqa: E402
 
 from livezmp.balance.pipeline import Pipeline, default_config  # noqa: E402
+from livezmp.live.realtime import realtime_priority  # noqa: E402
 from livezmp.monitor.dashboard import DashboardServer  # noqa: E402
 from livezmp.monitor.loop import Monitor  # noqa: E402
 from livezmp.recording.writer import Recorder  # noqa: E402
@@ -325,6 +327,8 @@ def main() -> None:
     p.add_argument("--laps", type=int, default=2, help="times the 2.2 s walk is played per row")
     p.add_argument("--systems", default="qtm,natnet,lsl")
     p.add_argument("--rates", default=",".join(f"{r:g}" for r in RATES), help="Hz, comma separated")
+    p.add_argument("--realtime-priority", type=int, default=0,
+                   help="as livezmp monitor's: this process's threads under SCHED_FIFO (0: normal scheduling)")
     args = p.parse_args()
     la = os.getloadavg()
     print(f"load average {la[0]:.2f} {la[1]:.2f} {la[2]:.2f} ({os.cpu_count()} cores); Plug-in Gait walk, "
@@ -334,7 +338,9 @@ def main() -> None:
             f"CPU ms/frame: {' '.join(f'{c:>8}' for c in CPU_COLUMNS)}   load")
     print(head)
     print("-" * len(head))
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, realtime_priority(args.realtime_priority) as refused:
+        if args.realtime_priority:
+            print(f"SCHED_FIFO priority {args.realtime_priority}: {refused or 'granted'} (the servers: normal)")
         for kind in args.systems.split(","):
             for rate in (float(r) for r in args.rates.split(",")):
                 r = run_case(kind, rate, args.laps, Path(tmp))

@@ -160,6 +160,9 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
                    help="alarm when the ZMP is out of support for this long, ms (default 200)")
     p.add_argument("--correct", action="store_true", help="run the online balance correction and record it")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
+    p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
+                   help="run the monitor, its capture client and dashboard under SCHED_FIFO at this priority, 1-99 "
+                        "(default 0: normal scheduling); if refused it runs at normal priority and says so")
     _sink_options(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.monitor:cmd_monitor")

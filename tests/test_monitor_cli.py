@@ -123,6 +123,7 @@ def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
     (["monitor", "--record", "."], "already exists; record to a new file"),
     (["replay", "missing.mcap"], "missing.mcap: no such file"),
     (["recover", "missing.mcap", "-o", "out.mcap"], "missing.mcap: no such file"),
+    (["monitor", "--realtime-priority", "100"], "--realtime-priority 100: must be 1-99"),
 ])
 def test_user_mistakes_are_one_line(argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -227,3 +228,27 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
     assert (est["lag_frames"], est["lag_s"], est["lag_ms"]) == (3, 0.1, pytest.approx(100.0))
     assert main(["replay", str(path)]) == 0
     assert "same analysis" in capsys.readouterr().out
+
+
+def test_monitor_realtime_priority_runs_the_loop_under_sched_fifo_and_gives_it_back(monkeypatch, capsys):
+    """--realtime-priority N: every frame is processed by a thread under SCHED_FIFO at N (root here; a
+    refusal would be told in one line and the run goes on); normal scheduling again afterwards."""
+    import os
+
+    from livezmp.monitor.loop import Monitor
+
+    seen = set()
+    step = Monitor.step
+    monkeypatch.setattr(Monitor, "step", lambda self: seen.add((os.sched_getscheduler(0),
+                                                                 os.sched_getparam(0).sched_priority)) or step(self))
+    before = os.sched_getscheduler(0)
+    assert main(["monitor", "--speed", "0", "--frames", "40", "--realtime-priority", "7"]) == 0
+    out = capsys.readouterr().out
+    if "running at normal priority" in out:  # not root: refused, said, and run as usual
+        assert seen == {(before, 0)}
+    else:
+        assert seen == {(os.SCHED_FIFO, 7)}
+    assert os.sched_getscheduler(0) == before
+    seen.clear()
+    assert main(["monitor", "--speed", "0", "--frames", "40"]) == 0
+    assert seen == {(before, 0)}

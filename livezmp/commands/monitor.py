@@ -16,6 +16,7 @@ from livezmp.checks import check_number
 from livezmp.commands.common import pipeline_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
+from livezmp.live.realtime import realtime_priority
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -124,6 +125,15 @@ def cmd_monitor(args: argparse.Namespace) -> int:
         raise InputError(f"--frames must be a positive number of frames, got {args.frames}")
     check_number(args.window_s, "--window-s (s)", 0.0, MAX_WINDOW_S, lo_open=True)
     check_number(args.lag_s, "--lag-s (s)", 0.0, MAX_WINDOW_S)
+    # set before the source and the dashboard start their threads: they inherit the policy
+    with realtime_priority(args.realtime_priority) as refused:
+        if refused not in (None, "off"):
+            print(f"realtime priority {refused}: running at normal priority", flush=True)
+        _monitor(args)
+    return 0
+
+
+def _monitor(args: argparse.Namespace) -> None:
     source = _source(args)
     fps = 1.0 / source.nominal_dt
     cfg = pipeline_config(args, SimpleNamespace(body=source.body, fps=fps))  # it needs only the body and rate
@@ -140,7 +150,6 @@ def cmd_monitor(args: argparse.Namespace) -> int:
     if settings:  # replay re-runs with them
         session["estimator"] = settings
     _run(source, cfg, args, session, [])
-    return 0
 
 
 class ReplayCheck:
