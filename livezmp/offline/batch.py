@@ -22,6 +22,7 @@ naming why in the result's ``path``.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
@@ -101,6 +102,21 @@ class BatchResult:
         if self.judged[i]:
             res.inside, res.margin, res.clamped = bool(self.inside[i]), float(self.margin[i]), self.clamped[i].copy()
         return res
+
+    def select(self, rows: np.ndarray) -> BatchResult:
+        """The rows ``rows`` (indices or a mask) as a result of their own."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return BatchResult(**{name: v[rows] if isinstance(v, np.ndarray) else v for name, v in fields.items()
+                              if name != "soles"}, soles={side: s[rows] for side, s in self.soles.items()})
+
+    @classmethod
+    def concatenate(cls, parts: list[BatchResult]) -> BatchResult:
+        """Results one after another, as one (``parts`` not empty)."""
+        first = parts[0]
+        fields = {f.name: getattr(first, f.name) for f in dataclasses.fields(first)}
+        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) if isinstance(v, np.ndarray) else v
+                      for name, v in fields.items() if name != "soles"},
+                   soles={side: np.concatenate([p.soles[side] for p in parts]) for side in first.soles})
 
     def put(self, part: BatchResult) -> None:
         """Copy ``part`` (consecutive frames, e.g. one chunk of :func:`batch_chunks`) into its rows."""
