@@ -211,3 +211,28 @@ def test_plot_series_keeps_every_kth_frame_within_the_bound(monkeypatch):
         series.add(part)
     kept = series.result().index
     assert np.array_equal(kept, np.arange(0, rows, 16))  # 1000 frames / 100: every 16th (a power of 2)
+
+
+def test_correct_refuses_a_take_longer_than_its_limit(tmp_path, capsys, monkeypatch):
+    """correct holds a take whole: above MAX_CORRECT_FRAMES it refuses in one line, before solving."""
+    from livezmp.offline import take
+
+    monkeypatch.setattr(take, "MAX_CORRECT_FRAMES", 264)
+    walk = BANDAI / "walk_normal_002.bvh"  # 265 frames
+    assert main(["correct", str(walk), "-o", str(tmp_path / "c.bvh")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{walk}: 265 frames; correct solves a whole take at once" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_c3d_input_has_the_input_size_limit(tmp_path, capsys, monkeypatch):
+    """ezc3d reads a C3D whole: the input limit applies to it (refused before ezc3d runs)."""
+    from data_paths import C3D
+
+    from livezmp import checks
+
+    monkeypatch.setattr(checks, "MAX_FILE_BYTES", 100_000)
+    trial = C3D / "sample01_gait_forceplates.c3d"  # 156 672 bytes
+    assert main(["analyze", str(trial)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{trial}: 156672 bytes, more than the 0 MiB limit for a C3D file" in err[0], err

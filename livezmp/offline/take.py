@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.correct.limits import CorrectionLimits
+from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
@@ -220,10 +220,18 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, pl
     return a.summary
 
 
+def check_correctable(source: str | Path, frames: int) -> None:
+    """Refuse a take too long for the correction, which holds it whole (:data:`MAX_CORRECT_FRAMES`)."""
+    if frames > MAX_CORRECT_FRAMES:
+        raise InputError(f"{source}: {frames} frames; correct solves a whole take at once and takes at most "
+                         f"{MAX_CORRECT_FRAMES} (split the take)")
+
+
 def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
                    progress: Callable[[str], None] | None = None) -> dict:
     """``livezmp correct`` of a loaded BVH or joint-CSV take, written (atomically) to ``output`` in the
     take's own format. Returns the correction report."""
+    check_correctable(loaded.source, len(loaded.frames))
     from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
 
     cfg = take_config(loaded, options.mode, options.ground)
@@ -245,6 +253,7 @@ def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions,
     from livezmp.model.marker_bvh import chain_to_bvh
 
     trial = read_c3d(path)
+    check_correctable(path, len(trial.points))
     fix = correct_marker_take(trial, lab_options(options), limits, non_position_labels(path), progress=progress)
     with atomic_path(output) as tmp:
         if str(output).lower().endswith(".c3d"):
