@@ -31,7 +31,8 @@ def per_frame_estimates(cfg: EstimatorConfig, angles: np.ndarray, t: np.ndarray,
 def batch_estimates(cfg: EstimatorConfig, angles: np.ndarray, t: np.ndarray, y: np.ndarray, chunk: int) -> np.ndarray:
     est = StreamingEstimator(y.shape[1], angles, cfg)
     out = np.full((3,) + y.shape, np.nan)
-    for start, block in estimate_chunks(est, t, y, np.ones(y.shape[1]), chunk):
+    for start, times, block in estimate_chunks(est, t, y, np.ones(y.shape[1]), chunk):
+        assert np.array_equal(times, t[start:start + block.shape[2]])  # each estimate's own times
         out[:, start:start + block.shape[2]] = block.transpose(0, 2, 1)
     return out
 

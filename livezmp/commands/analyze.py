@@ -2,7 +2,8 @@
 
 The take goes through :func:`livezmp.offline.batch.run_batch`: in chunks over arrays when it is
 uniformly sampled and complete (an hour at 120 Hz in seconds), frame by frame otherwise;
-the results are the same. A C3D gait trial goes through :mod:`livezmp.offline.gaitlab`:
+the results are the same. A BVH is read a chunk at a time too (:func:`livezmp.offline.take.stream_take`),
+so memory stays bounded whatever its length. A C3D gait trial goes through :mod:`livezmp.offline.gaitlab`:
 its markers make the body, and its force plates, when present, are compared with the ZMP.
 """
 
@@ -15,9 +16,17 @@ from rich.progress import Progress
 
 from livezmp.checks import check_output_path
 from livezmp.commands.common import check_body_options, load_from_args, take_options
+from livezmp.model.bvh import stream_bvh
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import write_json, write_zmp_csv
-from livezmp.offline.take import TakeAnalysis, analyse_c3d, analyse_motion, check_not_c3d_options
+from livezmp.offline.take import (
+    TakeAnalysis,
+    TakeOptions,
+    analyse_c3d,
+    analyse_motion,
+    check_not_c3d_options,
+    stream_take,
+)
 
 PROGRESS_FRAMES = 20_000  # takes this long or longer get a progress bar (a few seconds on the per-frame path)
 
@@ -36,19 +45,35 @@ def _analyse(args: argparse.Namespace) -> TakeAnalysis:
         return analyse_motion(loaded, options, progress=lambda done: bar.update(task, completed=done))
 
 
+def _stream(args: argparse.Namespace, options: TakeOptions) -> dict:
+    """A BVH analysed in bounded memory, its zmp.csv and figure written as it goes (the summary)."""
+    total = stream_bvh(args.motion)[0].n_frames
+    if total < PROGRESS_FRAMES:
+        return stream_take(args.motion, options, args.out, args.plot)
+    with Progress(transient=True) as bar:  # a long take: show how far the analysis is
+        task = bar.add_task("analysing", total=total)
+        return stream_take(args.motion, options, args.out, args.plot,
+                           progress=lambda done: bar.update(task, completed=done))
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot")):
         check_output_path(path, option)
     check_body_options(args)
-    a = _analyse(args)
-    summary, source = a.summary, a.source
-    if args.out:
-        write_zmp_csv(a.body, a.result, args.out, a.columns)
+    options = take_options(args)
+    if options.streams(args.motion):
+        summary = _stream(args, options)
+    else:
+        a = _analyse(args)
+        summary = a.summary
+        if args.out:
+            write_zmp_csv(a.body, a.result, args.out, a.columns)
+        if args.plot:
+            plot_analysis(a.body, a.result, args.plot, title=f"{Path(a.source).name} ({args.mode} ZMP)", cop=a.cop,
+                          complete=a.complete)
+    source = summary["source"]
     if args.summary_json:
         write_json(summary, args.summary_json)
-    if args.plot:
-        plot_analysis(a.body, a.result, args.plot, title=f"{Path(source).name} ({args.mode} ZMP)", cop=a.cop,
-                      complete=a.complete)
     inside = summary["inside_fraction"]
     print(f"{source}: {summary['frames']} frames at {summary['fps']:.1f} Hz, "
           f"{summary['support_frames']} with support, {summary['flight_frames']} flight, "

@@ -12,6 +12,11 @@ if TYPE_CHECKING:  # a type only: this module stays light for the command line's
     from livezmp.balance.pipeline import FrameResult
 
 
+# The correction solves all of a take's frames together (its sequence couples them), so a take is in
+# memory whole; longer takes are refused (docs/archive.md, Limits): split them.
+MAX_CORRECT_FRAMES = 100_000
+
+
 @dataclass(frozen=True)
 class CorrectionLimits:
     """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""

@@ -60,8 +60,9 @@ def read_skeleton(path: str | Path) -> Skeleton:
     p = Path(path)
     text = read_input_text(p, "skeleton")
     joints, cur = parse_hierarchy(text, str(p))
-    hierarchy = "\n".join(cur.lines[: cur.i]) + "\n"
-    if any(ln.strip() for ln in cur.lines[cur.i :]):
+    lines = text.splitlines()
+    hierarchy = "\n".join(lines[: cur.lineno]) + "\n"
+    if any(ln.strip() for ln in lines[cur.lineno :]):
         return Skeleton(parse_bvh(text, str(p)), hierarchy, True)
     rest = [j.offset["XYZ".index(c[0])] if c.endswith("position") else 0.0 for j in joints for c in j.channels]
     return Skeleton(BvhMotion(joints, 1.0 / 30.0, np.array([rest]), str(p)), hierarchy, False)

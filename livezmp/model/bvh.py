@@ -10,15 +10,23 @@ file length units) here; the body model converts to SI.
 
 from __future__ import annotations
 
+import codecs
 import io
-import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import MAX_CHANNEL_VALUE, check_frame_period, first_out_of_range, read_input_text
+from livezmp.checks import (
+    MAX_CHANNEL_VALUE,
+    UTF8_BOM,
+    UTF16_BOMS,
+    check_frame_period,
+    check_input_file,
+    first_out_of_range,
+    read_input_text,
+)
 from livezmp.errors import InputError
 
 MAX_JOINTS = 256  # joints of a skeleton; mocap skeletons have 20-100 (hands included)
@@ -67,28 +75,30 @@ class BvhMotion:
         return [f"{j.name}.{c}" for j in self.joints for c in j.channels]
 
 
-class _Lines:
-    """Line cursor that remembers line numbers for error messages."""
+class _Cursor:
+    """Lazy line cursor over (line number, line) pairs, remembering the last line number read
+    (for error messages); the hierarchy and the motion rows are read through the same one."""
 
-    def __init__(self, text: str, source: str):
-        self.lines = text.splitlines()
-        self.i = 0
-        self.source = source
+    def __init__(self, lines: Iterator[tuple[int, str]], source: str):
+        self.lines, self.lineno, self.source = lines, 0, source
+
+    def __iter__(self) -> Iterator[tuple[int, str]]:
+        for lineno, line in self.lines:
+            self.lineno = lineno
+            yield lineno, line
 
     def error(self, msg: str, line: int | None = None) -> InputError:
-        n = self.i if line is None else line
-        return InputError(f"{self.source}:{n}: {msg}")
+        return InputError(f"{self.source}:{self.lineno if line is None else line}: {msg}")
 
     def next_tokens(self) -> list[str]:
-        while self.i < len(self.lines):
-            self.i += 1
-            toks = self.lines[self.i - 1].split()
+        for _, line in self:
+            toks = line.split()
             if toks:
                 return toks
         raise self.error("unexpected end of file (truncated BVH?)")
 
 
-def _floats(cur: _Lines, toks: list[str], what: str) -> np.ndarray:
+def _floats(cur: _Cursor, toks: list[str], what: str) -> np.ndarray:
     try:
         vals = np.array([float(t) for t in toks], dtype=float)
     except ValueError:
@@ -99,7 +109,7 @@ def _floats(cur: _Lines, toks: list[str], what: str) -> np.ndarray:
     return vals
 
 
-def _parse_end_site(cur: _Lines, joint: BvhJoint) -> None:
+def _parse_end_site(cur: _Cursor, joint: BvhJoint) -> None:
     name = joint.name
     if cur.next_tokens() != ["{"]:
         raise cur.error(f"joint {name}: expected '{{' after End Site")
@@ -111,7 +121,7 @@ def _parse_end_site(cur: _Lines, joint: BvhJoint) -> None:
         raise cur.error(f"End Site of {name}: expected '}}'")
 
 
-def _open_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, first_channel: int) -> BvhJoint:
+def _open_joint(cur: _Cursor, joints: list[BvhJoint], name: str, parent: int, first_channel: int) -> BvhJoint:
     """Read a joint's '{', OFFSET and CHANNELS lines and append it to ``joints``."""
     if len(joints) >= MAX_JOINTS:
         raise cur.error(f"more than {MAX_JOINTS} joints: not a skeleton this tool analyses")
@@ -144,7 +154,7 @@ def _open_joint(cur: _Lines, joints: list[BvhJoint], name: str, parent: int, fir
     return joint
 
 
-def _parse_joints(cur: _Lines, joints: list[BvhJoint], root_name: str) -> None:
+def _parse_joints(cur: _Cursor, joints: list[BvhJoint], root_name: str) -> None:
     """The joint tree, read with an explicit stack (no recursion limit on deep hierarchies)."""
     _open_joint(cur, joints, root_name, -1, 0)
     stack = [0]
@@ -164,13 +174,18 @@ def _parse_joints(cur: _Lines, joints: list[BvhJoint], root_name: str) -> None:
             raise cur.error(f"joint {joints[idx].name}: unexpected {' '.join(toks)!r}")
 
 
-def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint], _Lines]:
-    """Parse the HIERARCHY section; returns the joints and the cursor after it."""
-    cur = _Lines(text, source)
+def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint], _Cursor]:
+    """Parse the HIERARCHY section; returns the joints and the cursor after it (its ``lineno``: the
+    hierarchy's last line)."""
+    cur = _Cursor(_numbered_lines(_text_pieces(text)), source)
+    return _read_hierarchy(cur), cur
+
+
+def _read_hierarchy(cur: _Cursor) -> list[BvhJoint]:
     try:
         toks = cur.next_tokens()
     except InputError:
-        raise InputError(f"{source}:1: empty file, not a BVH") from None
+        raise InputError(f"{cur.source}:1: empty file, not a BVH") from None
     if toks != ["HIERARCHY"]:
         raise cur.error("not a BVH file: first line must be HIERARCHY")
     toks = cur.next_tokens()
@@ -185,142 +200,187 @@ def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint]
     n_ch = sum(len(j.channels) for j in joints)
     if n_ch > MAX_CHANNELS:
         raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses")
-    return joints, cur
+    return joints
 
 
-_MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.M)
-MOTION_BLOCK_CHARS = 1 << 20  # the motion text is split into lines this much at a time
+MOTION_BLOCK_CHARS = 1 << 20  # the text is split into lines this much at a time
 MOTION_BLOCK_ROWS = 4096  # rows converted to numbers at a time
 
 
-def _numbered_lines(text: str, start: int, lineno: int) -> Iterator[tuple[int, str]]:
-    """(line number, line) of ``text[start:]`` (``start`` at a line's beginning, ``lineno`` lines
-    before it), split as :meth:`str.splitlines` does but a block at a time, so a long take's text is
-    never held twice."""
+def _text_pieces(text: str) -> Iterator[str]:
+    """``text`` in pieces of about :data:`MOTION_BLOCK_CHARS`, each ending after a newline (the last
+    at the end), so splitting each into lines splits the text as :meth:`str.splitlines` does."""
+    start = 0
     while start < len(text):
         end = text.find("\n", start + MOTION_BLOCK_CHARS)
         end = len(text) if end < 0 else end + 1
-        for line in text[start:end].splitlines():
-            lineno += 1
-            yield lineno, line
+        yield text[start:end]
         start = end
 
 
-class _Rows:
-    """The motion section's lines, with the last line number seen (for end-of-file messages)."""
+def _file_pieces(path: Path) -> Iterator[str]:
+    """The text of the file at ``path`` in pieces as :func:`_text_pieces` cuts them, read and decoded
+    (as :func:`livezmp.checks.decode_text` does, with the same messages) a block at a time."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    lines = 0  # newlines before the current block, for the line of a bad byte
+    rest = ""
+    with open(path, "rb") as f:
+        first = True
+        while True:
+            data = f.read(MOTION_BLOCK_CHARS)
+            if first:
+                if data.startswith(UTF16_BOMS):
+                    raise InputError(f"{path}:1: UTF-16 text; save it as UTF-8")
+                data = data[len(UTF8_BOM):] if data.startswith(UTF8_BOM) else data
+                first = False
+            try:
+                text = rest + decoder.decode(data, final=not data)
+            except UnicodeDecodeError as e:
+                line = lines + e.object.count(b"\n", 0, e.start) + 1  # e.object: this block (and a split character)
+                raise InputError(f"{path}:{line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save it as UTF-8") \
+                    from None
+            lines += data.count(b"\n")
+            cut = text.rfind("\n") + 1 if data else len(text)
+            if cut:
+                yield text[:cut]
+            rest = text[cut:]
+            if not data:
+                return
 
-    def __init__(self, lines: Iterator[tuple[int, str]], lineno: int, source: str):
-        self.lines, self.lineno, self.source = lines, lineno, source
 
-    def __iter__(self) -> Iterator[tuple[int, str]]:
-        for lineno, line in self.lines:
-            self.lineno = lineno
+def _numbered_lines(pieces: Iterator[str]) -> Iterator[tuple[int, str]]:
+    """(line number, line) of the text in ``pieces`` (see :func:`_text_pieces`), so a long take's
+    text is never held twice."""
+    lineno = 0
+    for piece in pieces:
+        for line in piece.splitlines():
+            lineno += 1
             yield lineno, line
 
-    def error(self, msg: str, line: int | None = None) -> InputError:
-        return InputError(f"{self.source}:{self.lineno if line is None else line}: {msg}")
 
-    def next_tokens(self) -> list[str]:
-        for _, line in self:
-            toks = line.split()
-            if toks:
-                return toks
-        raise self.error("unexpected end of file (truncated BVH?)")
+@dataclass
+class BvhHeader:
+    """A BVH's hierarchy and motion header: ``frame_time`` s, ``n_frames`` as the file says."""
+
+    joints: list[BvhJoint]
+    frame_time: float
+    n_frames: int
+    source: str
+
+    @property
+    def n_channels(self) -> int:
+        return sum(len(j.channels) for j in self.joints)
 
 
-def _motion_rows(text: str, source: str) -> tuple[list[BvhJoint], _Rows]:
-    """The hierarchy, and the lines from MOTION on. The hierarchy is parsed on the text before the
-    MOTION line only, and the motion read from the text lazily (see :func:`_numbered_lines`)."""
-    cut = _MOTION_LINE.search(text)
-    head = text if cut is None else text[: cut.start()]
-    joints, cur = parse_hierarchy(head, source)
-    if cut is None:  # no MOTION line of its own: what follows the hierarchy says what is wrong
-        rest = ((cur.i + k + 1, line) for k, line in enumerate(cur.lines[cur.i :]))
-        return joints, _Rows(rest, cur.i, source)
+def _read_header(cur: _Cursor) -> BvhHeader:
+    """The hierarchy, then MOTION, ``Frames: N`` and ``Frame Time: s``; the cursor is left on the rows."""
+    joints = _read_hierarchy(cur)
+    if cur.next_tokens() != ["MOTION"]:
+        raise cur.error("expected MOTION after the hierarchy")
+    toks = cur.next_tokens()
+    if toks[0] != "Frames:" or len(toks) != 2:
+        raise cur.error("expected 'Frames: N'")
     try:
-        cur.next_tokens()
-    except InputError:  # only blank lines between the hierarchy and MOTION
-        return joints, _Rows(_numbered_lines(text, cut.start(), len(cur.lines)), cur.i, source)
-    raise cur.error("expected MOTION after the hierarchy")
+        n_frames = int(toks[1]) if len(toks[1]) <= 12 else -1
+    except ValueError:
+        raise cur.error(f"bad frame count {toks[1]!r}") from None
+    if n_frames <= 0:
+        raise cur.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
+    toks = cur.next_tokens()
+    if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
+        raise cur.error("expected 'Frame Time: seconds'")
+    try:
+        frame_time = float(toks[2])
+    except ValueError:
+        raise cur.error(f"Frame Time {toks[2]!r} is not a number") from None
+    check_frame_period(frame_time, f"{cur.source}:{cur.lineno}: Frame Time")
+    return BvhHeader(joints, frame_time, n_frames, cur.source)
 
 
-def _fill_block(block: list[tuple[int, str]], out: np.ndarray, first: int, source: str) -> None:
-    """Rows ``first``… of ``out`` from the (line number, line) ``block``, or the first bad line's error."""
-    n_ch = out.shape[1]
+def _convert_block(block: list[tuple[int, str]], first: int, n_ch: int, source: str) -> np.ndarray:
+    """The rows (len(block), n_ch) of the (line number, line) ``block`` (frames ``first``…), or the
+    first bad line's error."""
     try:
         data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in block)), ndmin=2)
-        ok = data.shape == (len(block), n_ch) and first_out_of_range(data, MAX_CHANNEL_VALUE) is None
+        if data.shape == (len(block), n_ch) and first_out_of_range(data, MAX_CHANNEL_VALUE) is None:
+            return data
     except ValueError:
-        ok = False
-    if ok:
-        out[first : first + len(block)] = data
-        return
-    for k, (lineno, line) in enumerate(block, start=first):  # find the offending line for the message
+        pass
+    out = np.empty((len(block), n_ch))
+    for k, (lineno, line) in enumerate(block):  # find the offending line for the message
         toks = line.split()
         if len(toks) != n_ch:
-            raise InputError(f"{source}:{lineno}: frame {k} has {len(toks)} values, hierarchy needs {n_ch}")
+            raise InputError(f"{source}:{lineno}: frame {first + k} has {len(toks)} values, hierarchy needs {n_ch}")
         try:
             vals = np.array([float(t) for t in toks], dtype=float)
         except ValueError:
-            raise InputError(f"{source}:{lineno}: non-numeric value in frame {k}: {' '.join(toks)!r}") from None
+            raise InputError(f"{source}:{lineno}: non-numeric value in frame {first + k}: {' '.join(toks)!r}") from None
         bad = first_out_of_range(vals, MAX_CHANNEL_VALUE)
         if bad is not None:
-            raise InputError(f"{source}:{lineno}: value {toks[bad[0]]} in frame {k} is not finite or beyond "
+            raise InputError(f"{source}:{lineno}: value {toks[bad[0]]} in frame {first + k} is not finite or beyond "
                              f"±{MAX_CHANNEL_VALUE:g}")
         out[k] = vals
+    return out
+
+
+def _frame_blocks(cur: _Cursor, header: BvhHeader, convert: bool, rows: int) -> Iterator[np.ndarray]:
+    """The frames (k, C) after the header, ``rows`` at a time; every row is checked (count, values)
+    before the generator ends. With ``convert`` False the rows are only counted (nothing yielded)."""
+    n_frames, n_ch, source = header.n_frames, header.n_channels, header.source
+    count, block = 0, []
+    for lineno, line in cur:
+        if not line.strip():
+            continue
+        if count == n_frames:
+            raise InputError(f"{source}:{lineno}: extra rows: header says Frames: {n_frames}, file has "
+                             f"{n_frames + 1 + sum(1 for _, ln in cur if ln.strip())} rows")
+        count += 1
+        if convert:
+            block.append((lineno, line))
+            if len(block) == rows:
+                yield _convert_block(block, count - len(block), n_ch, source)
+                block = []
+    if count < n_frames:
+        raise InputError(f"{source}:{cur.lineno}: truncated: header says Frames: {n_frames}, file has {count} rows")
+    if block:
+        yield _convert_block(block, count - len(block), n_ch, source)
+
+
+def _fits(header: BvhHeader, chars: int) -> bool:
+    """Whether the header's frames can be in a text of ``chars`` characters: a row takes at least
+    2 characters per value (more frames are only counted, for the message, never allocated)."""
+    return header.n_frames <= chars // (2 * header.n_channels) + 1
 
 
 def parse_bvh(text: str, source: str = "<memory>") -> BvhMotion:
     """Parse a whole BVH text. Raises :class:`InputError` naming file and line. Memory: the frames
     array and one block of rows beside the text (the rows are converted a block at a time)."""
-    joints, rows = _motion_rows(text, source)
-    if rows.next_tokens() != ["MOTION"]:
-        raise rows.error("expected MOTION after the hierarchy")
-    toks = rows.next_tokens()
-    if toks[0] != "Frames:" or len(toks) != 2:
-        raise rows.error("expected 'Frames: N'")
-    try:
-        n_frames = int(toks[1]) if len(toks[1]) <= 12 else -1
-    except ValueError:
-        raise rows.error(f"bad frame count {toks[1]!r}") from None
-    if n_frames <= 0:
-        raise rows.error(f"frame count {toks[1]}: zero frames or fewer, nothing to analyse")
-    toks = rows.next_tokens()
-    if toks[:2] != ["Frame", "Time:"] or len(toks) != 3:
-        raise rows.error("expected 'Frame Time: seconds'")
-    try:
-        frame_time = float(toks[2])
-    except ValueError:
-        raise rows.error(f"Frame Time {toks[2]!r} is not a number") from None
-    check_frame_period(frame_time, f"{source}:{rows.lineno}: Frame Time")
-    n_ch = sum(len(j.channels) for j in joints)
-    # a row takes at least 2 characters per value: more frames than that cannot be in the text, and
-    # then nothing is allocated (only counted, for the message)
-    frames = np.empty((n_frames, n_ch)) if n_frames <= len(text) // (2 * n_ch) + 1 else None
-    count, block = 0, []
-    for lineno, line in rows:
-        if not line.strip():
-            continue
-        if count == n_frames:
-            raise InputError(f"{source}:{lineno}: extra rows: header says Frames: {n_frames}, file has "
-                             f"{n_frames + 1 + sum(1 for _, ln in rows if ln.strip())} rows")
-        count += 1
-        if frames is not None:
-            block.append((lineno, line))
-            if len(block) == MOTION_BLOCK_ROWS:
-                _fill_block(block, frames, count - len(block), source)
-                block = []
-    if count < n_frames:
-        raise InputError(f"{source}:{rows.lineno}: truncated: header says Frames: {n_frames}, file has {count} rows")
-    if block:
-        _fill_block(block, frames, count - len(block), source)
-    return BvhMotion(joints, frame_time, frames, source)
+    cur = _Cursor(_numbered_lines(_text_pieces(text)), source)
+    header = _read_header(cur)
+    convert = _fits(header, len(text))
+    frames = np.empty((header.n_frames, header.n_channels)) if convert else None
+    done = 0
+    for block in _frame_blocks(cur, header, convert, MOTION_BLOCK_ROWS):
+        frames[done:done + len(block)] = block
+        done += len(block)
+    return BvhMotion(header.joints, header.frame_time, frames, source)
 
 
 def read_bvh(path: str | Path) -> BvhMotion:
     """Read a BVH file (see :func:`parse_bvh`)."""
     p = Path(path)
     return parse_bvh(read_input_text(p, "BVH file"), str(p))
+
+
+def stream_bvh(path: str | Path, rows: int = MOTION_BLOCK_ROWS) -> tuple[BvhHeader, Iterator[np.ndarray]]:
+    """A BVH file's header and its frames (k, C) ``rows`` at a time, read lazily: memory is one
+    block, whatever the take's length. The rows are checked as :func:`read_bvh` checks them, with
+    the same messages, as they come (a bad row ends the iteration with its error; the count of
+    rows is checked at the end, so iterate to the end)."""
+    p = check_input_file(path, "BVH file")
+    cur = _Cursor(_numbered_lines(_file_pieces(p)), str(p))
+    header = _read_header(cur)
+    return header, _frame_blocks(cur, header, _fits(header, p.stat().st_size), rows)
 
 
 def _fmt(v: np.ndarray) -> str:

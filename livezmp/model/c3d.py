@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 
 _LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -219,9 +220,7 @@ def open_c3d(path: str | Path, plates: bool = False):
     files ezc3d cannot read."""
     import ezc3d  # imported here: only C3D input needs it
 
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
+    p = check_input_file(path, "C3D file")  # the 1 GiB limit: ezc3d holds the whole trial (docs/archive.md)
     try:
         data = p.read_bytes()
     except OSError as e:

@@ -22,7 +22,8 @@ naming why in the result's ``path``.
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +34,7 @@ from livezmp.balance.support import SUPPORT_LABELS, support_polygon
 from livezmp.estimate.estimator import StreamingEstimator
 from livezmp.model.body import BodyModel
 from livezmp.offline.contacts import detect_contacts
-from livezmp.offline.estimator import NotBatchable, estimate_chunks
+from livezmp.offline.estimator import NotBatchable, estimate_stream
 from livezmp.offline.kinematics import (
     BatchKinematics,
     UnsupportedModel,
@@ -43,7 +44,8 @@ from livezmp.offline.kinematics import (
 )
 from livezmp.offline.support import support_clamp
 
-__all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch", "analyse_frames", "run_batch"]
+__all__ = ["DEFAULT_CHUNK", "BatchResult", "NotBatchable", "analyse_batch", "analyse_frames", "batch_chunks",
+           "run_batch"]
 
 DEFAULT_CHUNK = 8192  # frames per chunk: a few tens of MB of working arrays for a 132-channel skeleton
 _NONE = SUPPORT_LABELS.index("none")
@@ -100,6 +102,32 @@ class BatchResult:
         if self.judged[i]:
             res.inside, res.margin, res.clamped = bool(self.inside[i]), float(self.margin[i]), self.clamped[i].copy()
         return res
+
+    def select(self, rows: np.ndarray) -> BatchResult:
+        """The rows ``rows`` (indices or a mask) as a result of their own."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return BatchResult(**{name: v[rows] if isinstance(v, np.ndarray) else v for name, v in fields.items()
+                              if name != "soles"}, soles={side: s[rows] for side, s in self.soles.items()})
+
+    @classmethod
+    def concatenate(cls, parts: list[BatchResult]) -> BatchResult:
+        """Results one after another, as one (``parts`` not empty)."""
+        first = parts[0]
+        fields = {f.name: getattr(first, f.name) for f in dataclasses.fields(first)}
+        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) if isinstance(v, np.ndarray) else v
+                      for name, v in fields.items() if name != "soles"},
+                   soles={side: np.concatenate([p.soles[side] for p in parts]) for side in first.soles})
+
+    def put(self, part: BatchResult) -> None:
+        """Copy ``part`` (consecutive frames, e.g. one chunk of :func:`batch_chunks`) into its rows."""
+        rows = slice(int(part.index[0]), int(part.index[-1]) + 1)
+        for name in ("index", "t", "zmp", "has_zmp", "com", "support", "judged", "inside", "clamped", "margin",
+                     "ground_z", "load", "q", "v", "a"):
+            mine = getattr(self, name)
+            if mine is not None:
+                mine[rows] = getattr(part, name)
+        for side, s in part.soles.items():
+            self.soles[side][rows] = s
 
     def frames(self) -> list[FrameResult]:
         """Every row as a :class:`FrameResult`."""
@@ -195,7 +223,7 @@ def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingE
                   keep_states: bool = False,
                   progress: Callable[[int], None] | None = None) -> tuple[BatchResult, ContactDetector]:
     """Analyse a whole take (``times`` (N,) s, ``frames`` (N, nq) raw channels) as the per-frame
-    pipeline would, chunk by chunk (see the module docstring).
+    pipeline would, chunk by chunk (see the module docstring), into one result.
 
     ``estimator``: the pipeline's fresh estimator (used for the first frames, reset at the
     end); ``detector``: the pipeline's contact detector, left as it was. Returns the result and
@@ -209,6 +237,25 @@ def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingE
         raise NotBatchable(f"frames of shape {frames.shape} for {count} times and {body.nq} channels")
     if not all(np.isfinite(frames[i:i + chunk]).all() for i in range(0, count, chunk)):
         raise NotBatchable("missing samples")
+    out = _empty(count, body, keep_states)
+    detector = copy.deepcopy(detector)
+    pieces = ((times[i:i + chunk], frames[i:i + chunk]) for i in range(0, count, chunk))
+    for part in batch_chunks(body, config, estimator, detector, count, pieces, chunk, keep_states):
+        out.put(part)
+        if progress is not None:
+            progress(int(part.index[-1]) + 1)
+    return out, detector
+
+
+def batch_chunks(body: BodyModel, config: PipelineConfig, estimator: StreamingEstimator, detector: ContactDetector,
+                 total: int, pieces: Iterable[tuple[np.ndarray, np.ndarray]], chunk: int = DEFAULT_CHUNK,
+                 keep_states: bool = False) -> Iterator[BatchResult]:
+    """The batch path over a take of ``total`` frames read in ``pieces`` (times (c,) s, frames (c, nq)
+    raw channels; ``chunk`` frames each but the last): one result per chunk of consecutive frames,
+    in order, each equal to those rows of :func:`analyse_batch`'s. Memory: O(chunk) whatever ``total``.
+
+    ``estimator``: the pipeline's fresh estimator; ``detector``: updated in place as stepping would.
+    Raises :class:`NotBatchable` (possibly after some chunks) when the take needs the per-frame path."""
     model = body.model if config.mode == "full" else body.point_model
     try:
         kin = BatchKinematics(model, body_frame_ids(body))
@@ -216,13 +263,13 @@ def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingE
         raise NotBatchable(str(e)) from None
     gravity = np.array(model.gravity.linear)
     weight = kin.mass * -gravity[2]
-    out = _empty(count, body, keep_states)
-    out.t[:] = times
-    detector = copy.deepcopy(detector)
-    chunks = estimate_chunks(estimator, times, frames, body.channel_scale, chunk)
+    chunks = estimate_stream(estimator, total, _complete(pieces), body.channel_scale, chunk)
     try:
-        for start, est in chunks:
-            rows = slice(start, start + est.shape[2])
+        for start, times, est in chunks:
+            count = len(times)
+            out = _empty(count, body, keep_states)
+            out.index += start
+            out.t[:] = times
             dyn = kin.dynamics(*est)
             soles = batch_soles(body, dyn.frames)
             vel = batch_sole_velocities(body, dyn.frames, soles)
@@ -232,19 +279,25 @@ def analyse_batch(body: BodyModel, config: PipelineConfig, estimator: StreamingE
             zmp, has = _zmp(dyn.com, force, dyn.moment, ground, config.flight_fraction * weight)
             judged = has & (codes != _NONE)
             clamped, inside, margin = support_clamp(zmp[:, :2], codes, soles, judged)
-            out.zmp[rows], out.has_zmp[rows], out.com[rows], out.support[rows] = zmp, has, dyn.com, codes
-            out.judged[rows], out.inside[rows], out.margin[rows] = judged, inside, margin
-            out.clamped[rows, :2], out.clamped[rows, 2] = clamped, np.where(judged, ground, 0.0)
-            out.ground_z[rows], out.load[rows] = ground, force[:, 2] / weight
-            for side, s in soles.items():
-                out.soles[side][rows] = s
+            out.zmp, out.has_zmp, out.com, out.support = zmp, has, dyn.com, codes
+            out.judged, out.inside, out.margin = judged, inside, margin
+            out.clamped[:, :2], out.clamped[:, 2] = clamped, np.where(judged, ground, 0.0)
+            out.ground_z, out.load = ground, force[:, 2] / weight
+            out.soles = soles
             if keep_states:
-                out.q[rows], out.v[rows], out.a[rows] = (x.T for x in est)
-            if progress is not None:
-                progress(rows.stop)
+                out.q, out.v, out.a = (x.T for x in est)
+            yield out
     finally:
         chunks.close()
-    return out, detector
+
+
+def _complete(pieces: Iterable[tuple[np.ndarray, np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """``pieces`` as floats, refusing (:class:`NotBatchable`) a piece with a missing (non-finite) sample."""
+    for times, frames in pieces:
+        frames = np.asarray(frames, dtype=float)
+        if not np.isfinite(frames).all():
+            raise NotBatchable("missing samples")
+        yield np.asarray(times, dtype=float), frames
 
 
 def _zmp(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground: np.ndarray,

@@ -22,7 +22,7 @@ O(chunk × channels) whatever the take's length.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 from scipy.signal import lfilter, lfiltic, ss2tf
@@ -42,17 +42,21 @@ class NotBatchable(Exception):
     """The take needs the per-frame path; the message says why."""
 
 
-def uniform_step(times: np.ndarray, estimator: StreamingEstimator) -> float:
+def uniform_step(times: np.ndarray, estimator: StreamingEstimator, before: float | None = None,
+                 dt0: float | None = None) -> float:
     """The take's sample period (s) if the batch path reproduces the per-frame estimator on it.
 
     The per-frame Kalman filter reuses its transition while each interval stays within
     1e-9 of the first, and the spline its precomputed weights while each lies within
-    ``jitter_tol`` of the nominal period: both must hold for every interval. Raises
-    :class:`NotBatchable` otherwise."""
+    ``jitter_tol`` of the nominal period: both must hold for every interval. A take read in
+    pieces is checked piece by piece: ``before`` the previous piece's last time (s) and ``dt0``
+    the first interval (s), None for the first piece. Raises :class:`NotBatchable` otherwise."""
+    if before is not None:
+        times = np.concatenate([[before], times])
     if len(times) < 2 or not np.isfinite(times).all():
         raise NotBatchable("fewer than two frames or a non-finite time")
     steps = np.diff(times)
-    dt0 = float(steps[0])
+    dt0 = float(steps[0]) if dt0 is None else dt0
     cfg = estimator.config
     if not dt0 > 0 or np.max(np.abs(steps - dt0)) > 1e-9 * dt0:
         raise NotBatchable("timestamps are not uniform")
@@ -122,54 +126,75 @@ def _sliding(samples: np.ndarray, matrix: np.ndarray, count: int) -> np.ndarray:
 
 
 def estimate_chunks(estimator: StreamingEstimator, times: np.ndarray, frames: np.ndarray, scale: np.ndarray,
-                    chunk: int) -> Iterator[tuple[int, np.ndarray]]:
-    """The per-frame estimator's output over a whole take, chunk by chunk.
+                    chunk: int) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """:func:`estimate_stream` over whole arrays: ``times`` (N,) s, ``frames`` (N, n)."""
+    pieces = ((times[i:i + chunk], frames[i:i + chunk]) for i in range(0, len(times), chunk))
+    return estimate_stream(estimator, len(times), pieces, scale, chunk)
+
+
+def estimate_stream(estimator: StreamingEstimator, total: int, pieces: Iterable[tuple[np.ndarray, np.ndarray]],
+                    scale: np.ndarray, chunk: int) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """The per-frame estimator's output over a take of ``total`` frames read in ``pieces``, chunk by chunk.
 
     ``estimator``: a fresh :class:`StreamingEstimator` (its filter runs the first frames;
-    it is reset at the end). ``times`` (N,) s, uniform (see :func:`uniform_step`);
-    ``frames`` (N, n) raw samples, all finite, times ``scale`` (n,) = the estimator's
-    input. Yields (first frame index, (3, n, c) position / velocity / acceleration),
-    channel-major, for consecutive frames, about ``chunk`` at a time.
-    Raises :class:`NotBatchable` if an angle's innovation reaches ±π."""
+    it is reset at the end). ``pieces``: (times (c,) s, frames (c, n) raw samples) of consecutive
+    frames, ``chunk`` each but the last; times uniform (see :func:`uniform_step`), samples finite,
+    times ``scale`` (n,) = the estimator's input. Yields (first frame index, times (k,) s,
+    (3, n, k) position / velocity / acceleration), channel-major, for consecutive frames.
+    Memory: O(chunk × n) whatever ``total``. Raises :class:`NotBatchable` if the take is not
+    uniform or an angle's innovation reaches ±π (possibly after some chunks were yielded)."""
     cfg = estimator.config
     win, lag = cfg.window, cfg.lag
-    total = len(times)
     if total < 2 * win or chunk < 2 * win:
         raise NotBatchable("take or chunk shorter than two spline windows")
-    dt = uniform_step(times, estimator)
-    settle, gain = settled_gain(estimator.kalman, dt)
-    head = max(settle, 3)
-    recursion = kalman_recursion(gain, dt)
-    matrix = _fir_matrix(estimator.spline.weights)
     lam = estimator.spline.lam
     angles = estimator.angle_mask
-    period = 1.0 - float(gain[0])  # innovation = (y - filtered position) / period
     state = None  # (lfilter state (n, 3), last unwrapped sample (n,), its wrap count (n,))
     kept = np.empty((len(scale), 0))  # filtered positions from frame ``first_kept`` on
     recent = kept  # the last samples before the chunk
+    pending = np.empty(0)  # times of the frames not estimated yet
+    last_t = dt = None
     first_kept = 0
     done = 0  # frames estimated so far
+    start = 0
     try:
-        for start in range(0, total, chunk):
-            stop = min(start + chunk, total)
-            y = np.ascontiguousarray((frames[start:stop] * scale).T)
+        for times, frames in pieces:
+            stop = start + len(times)
+            if start == 0:
+                dt = uniform_step(times, estimator)
+                settle, gain = settled_gain(estimator.kalman, dt)
+                head = max(settle, 3)
+                recursion = kalman_recursion(gain, dt)
+                matrix = _fir_matrix(estimator.spline.weights)
+                period = 1.0 - float(gain[0])  # innovation = (y - filtered position) / period
+                head_times = times[:win]  # the window filling: its weights use the first times
+                tail_times = np.empty(0)
+            else:
+                uniform_step(times, estimator, last_t, dt)
+            tail_times = np.concatenate([tail_times, times])[-win:]  # the flush's weights: the last times
+            y = np.ascontiguousarray((frames * scale).T)
             pos = np.empty_like(y)
             exact = min(max(head - start, 0), stop - start)
             for k in range(exact):
-                i = start + k
-                pos[:, k] = estimator.kalman.step(None if i == 0 else float(times[i]) - float(times[i - 1]), y[:, k])
+                step = None if start + k == 0 else float(times[k]) - float(times[k - 1] if k else last_t)
+                pos[:, k] = estimator.kalman.step(step, y[:, k])
             if exact < stop - start:
                 if state is None:
                     state = _recursion_state(recursion, np.hstack([kept, pos[:, :exact]])[:, -3:],
                                              np.hstack([recent, y[:, :exact]])[:, -3:], angles)
                 pos[:, exact:], state = _filter(recursion, state, y[:, exact:], angles, period)
+            last_t = float(times[-1])
             kept = np.hstack([kept, pos])
             recent = y[:, -3:]
+            pending = np.concatenate([pending, times])
             end = total if stop == total else stop - lag  # frames estimable now
-            yield done, _estimates(kept, first_kept, done, end, total, times, lam, lag, win, matrix)
+            yield done, pending[:end - done], _estimates(kept, first_kept, done, end, total, head_times, tail_times,
+                                                         lam, lag, win, matrix)
+            pending = pending[end - done:]
             done = end
             first_kept = max(0, done + lag - win + 1)
             kept = kept[:, first_kept - (stop - kept.shape[1]):]
+            start = stop
     finally:
         estimator.reset()
 
@@ -210,10 +235,11 @@ def _filter(recursion, state, y: np.ndarray, angles: np.ndarray, period: float):
     return pos, (zf, y[:, -1].copy(), turns)
 
 
-def _estimates(pos: np.ndarray, first: int, start: int, end: int, total: int, times: np.ndarray, lam: float,
-               lag: int, win: int, matrix: np.ndarray) -> np.ndarray:
+def _estimates(pos: np.ndarray, first: int, start: int, end: int, total: int, head_times: np.ndarray,
+               tail_times: np.ndarray, lam: float, lag: int, win: int, matrix: np.ndarray) -> np.ndarray:
     """(3, n, end - start) estimates of frames [start, end) from the filtered positions ``pos``
-    of frames [first, first + pos.shape[1])."""
+    of frames [first, first + pos.shape[1]); ``head_times`` the take's first ``win`` times (s),
+    ``tail_times`` its last ``win`` ones (read only for the flush, in the last chunk)."""
 
     def window(lo: int, hi: int) -> np.ndarray:
         return pos[:, lo - first:hi - first]
@@ -223,12 +249,12 @@ def _estimates(pos: np.ndarray, first: int, start: int, end: int, total: int, ti
         return _sliding(window(start + lag - win + 1, end + lag), matrix, end - start)[:, :, :end - start]
     out = np.empty((3, pos.shape[0], end - start))
     for i in range(start, regular_lo):  # the window still filling: fits on the first i + lag + 1 samples
-        out[:, :, i - start] = (window(0, i + lag + 1) @ window_weights(times[:i + lag + 1], lam, i).T).T
+        out[:, :, i - start] = (window(0, i + lag + 1) @ window_weights(head_times[:i + lag + 1], lam, i).T).T
     if regular_hi > regular_lo:
         samples = window(regular_lo + lag - win + 1, regular_hi + lag)
         count = regular_hi - regular_lo
         out[:, :, regular_lo - start:regular_hi - start] = _sliding(samples, matrix, count)[:, :, :count]
     k = min(total, win)
     for i in range(max(start, total - lag), end):  # the flush: the last window at lags lag - 1 ... 0
-        out[:, :, i - start] = (window(total - k, total) @ window_weights(times[total - k:], lam, i - total + k).T).T
+        out[:, :, i - start] = (window(total - k, total) @ window_weights(tail_times[-k:], lam, i - total + k).T).T
     return out

@@ -10,14 +10,18 @@ jumping or dancing will exceed them without being wrong, and the verdict says "f
 
 from __future__ import annotations
 
+import tempfile
+
 import numpy as np
 
+from livezmp.offline.upper_quantile import UpperQuantile
 from livezmp.offline.validation import walking_axes
 
 # m/s², fore-aft, lateral, vertical (see the module docstring)
 WALK_COM_ACC_P99 = (3.4, 1.2, 3.4)
 WALK_ZMP_COM_P99_M = 0.30  # m, horizontal CoP-to-CoM distance, same frames
 PLAUSIBLE_RATIO = 1.5
+CHUNK_BYTES = 16 << 16  # horizontal accelerations read back 65536 frames at a time
 
 
 def com_accelerations(com: np.ndarray, dt: float) -> np.ndarray:
@@ -31,13 +35,75 @@ def com_accelerations(com: np.ndarray, dt: float) -> np.ndarray:
 def plausibility(com: np.ndarray, zmp: np.ndarray, has_zmp: np.ndarray, dt: float) -> dict:
     """CoM acceleration p99 (fore-aft, lateral, vertical; m/s²) and ZMP–CoM distance p99 (m) of a take
     (internal frame), their ratios to a real walk's, and a one-line verdict."""
-    acc = com_accelerations(com, dt)
-    fwd, left = walking_axes(com)
-    parts = (acc @ fwd, acc @ left, acc[:, 2])
-    p99 = [float(np.percentile(np.abs(x), 99)) for x in parts]
+    stats = PlausibilityStats(len(com), dt)
+    stats.add(com, zmp, has_zmp)
+    return stats.result()
+
+
+def _gradient(f: np.ndarray, first: int, total: int, dt: float, lo: int, hi: int) -> np.ndarray:
+    """:func:`numpy.gradient` (spacing ``dt``, first-order edges) of a series of ``total`` samples, at
+    samples [lo, hi), from its samples ``f`` of [first, first + len(f)): the same arithmetic."""
+    out = np.empty((hi - lo, *f.shape[1:]))
+    i = np.arange(max(lo, 1), min(hi, total - 1)) - first
+    out[max(lo, 1) - lo:min(hi, total - 1) - lo] = (f[i + 1] - f[i - 1]) / (2.0 * dt)
+    if lo == 0:
+        out[0] = (f[1 - first] - f[-first]) / dt
+    if hi == total:
+        out[-1] = (f[total - 1 - first] - f[total - 2 - first]) / dt
+    return out
+
+
+class PlausibilityStats:
+    """:func:`plausibility` of a take of ``total`` frames ``dt`` s apart, its results added chunk by
+    chunk in bounded memory: the CoM accelerations (:func:`com_accelerations`, two frames of CoM
+    carried between chunks) and ZMP–CoM distances go into exact upper percentiles
+    (:class:`UpperQuantile`); the horizontal accelerations, whose fore-aft and lateral parts depend on
+    the take's net travel (known at the end), wait in a temporary file (16 bytes a frame)."""
+
+    def __init__(self, total: int, dt: float):
+        self.total, self.dt = total, dt
+        self.vertical, self.distance = UpperQuantile(total), UpperQuantile(total)
+        self.spill = tempfile.TemporaryFile()  # noqa: SIM115 (closed by result)
+        self.com = np.empty((0, 3))  # CoM of frames [self.first, self.received)
+        self.first = self.received = self.done = 0  # self.done: frames whose acceleration is out
+        self.start: np.ndarray | None = None  # the first frame's CoM
+
+    def add(self, com: np.ndarray, zmp: np.ndarray, has_zmp: np.ndarray) -> None:
+        """The next chunk's CoM, ZMP (C, 3) and where there is a ZMP (C,)."""
+        if self.start is None:
+            self.start = com[0].copy()
+        self.com = np.concatenate([self.com, com])
+        self.received += len(com)
+        self.distance.add(np.linalg.norm(zmp[has_zmp, :2] - com[has_zmp, :2], axis=1))
+        done = self.received - 2 if self.received < self.total else self.total  # frame i needs CoM to i + 2
+        if done <= self.done:
+            return
+        if self.total < 3:  # as com_accelerations: too short to differentiate
+            acc = np.zeros((done - self.done, 3))
+        else:
+            v_lo, v_hi = max(self.done - 1, 0), min(done + 1, self.total)
+            vel = _gradient(self.com, self.first, self.total, self.dt, v_lo, v_hi)
+            acc = _gradient(vel, v_lo, self.total, self.dt, self.done, done)
+        self.vertical.add(np.abs(acc[:, 2]))
+        self.spill.write(np.ascontiguousarray(acc[:, :2]).tobytes())
+        self.done = done
+        drop = max(done - 2, 0) - self.first
+        self.com, self.first = self.com[drop:], self.first + drop
+
+    def result(self) -> dict:
+        fwd, left = walking_axes(np.stack([self.start, self.com[-1]]))
+        parts = (UpperQuantile(self.total), UpperQuantile(self.total))
+        self.spill.seek(0)
+        while block := self.spill.read(CHUNK_BYTES):
+            acc = np.frombuffer(block).reshape(-1, 2)
+            for part, axis in zip(parts, (fwd, left), strict=True):
+                part.add(np.abs(acc[:, 0] * axis[0] + acc[:, 1] * axis[1]))
+        self.spill.close()
+        return _verdict([parts[0].value(), parts[1].value(), self.vertical.value()], self.distance.value() or 0.0)
+
+
+def _verdict(p99: list[float], d99: float) -> dict:
     ratio = [p / r for p, r in zip(p99, WALK_COM_ACC_P99, strict=True)]
-    dist = np.linalg.norm(zmp[has_zmp, :2] - com[has_zmp, :2], axis=1)
-    d99 = float(np.percentile(dist, 99)) if len(dist) else 0.0
     names = ("fore-aft", "lateral", "vertical")
     worst = int(np.argmax(ratio))
     if ratio[worst] > PLAUSIBLE_RATIO:

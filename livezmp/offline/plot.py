@@ -17,6 +17,31 @@ from livezmp.model.body import BodyModel  # noqa: E402
 from livezmp.offline.batch import BatchResult  # noqa: E402
 
 TOP_VIEW_SPAN_M = 3.0  # the top view shows at most this much of the walk
+PLOT_FRAMES = 20_000  # a figure of a longer take draws every k-th frame (k a power of 2), at most this many
+
+
+class PlotSeries:
+    """The frames a figure draws of a take whose results come chunk by chunk: all of them up to
+    :data:`PLOT_FRAMES`, then every k-th frame, k doubling as the take goes on (bounded memory;
+    a long take's figure is drawn from this decimated series)."""
+
+    def __init__(self) -> None:
+        self.start()
+
+    def start(self) -> None:
+        """(Re)start: no frame kept."""
+        self.step, self.parts, self.kept = 1, [], 0
+
+    def add(self, part: BatchResult) -> None:
+        self.parts.append(part.select(part.index % self.step == 0))
+        self.kept += len(self.parts[-1])
+        while self.kept > PLOT_FRAMES:
+            self.step *= 2
+            self.parts = [p.select(p.index % self.step == 0) for p in self.parts]
+            self.kept = sum(len(p) for p in self.parts)
+
+    def result(self) -> BatchResult:
+        return BatchResult.concatenate(self.parts)
 
 
 def _top_view_frames(com: np.ndarray, g: list[int]) -> tuple[np.ndarray, str]:

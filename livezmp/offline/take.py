@@ -9,6 +9,7 @@ so a run killed at any point leaves either the old file or the complete new one.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.correct.limits import CorrectionLimits
+from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
@@ -27,10 +28,11 @@ from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import LoadedMotion, load_motion, write_motion
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
-from livezmp.offline.batch import BatchResult, run_batch
-from livezmp.offline.calibrate import load_subject
+from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
+from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
-from livezmp.offline.report import atomic_path, summarize, write_zmp_csv
+from livezmp.offline.report import TakeStats, ZmpCsvWriter, atomic_path, summarize, write_zmp_csv
+from livezmp.offline.take_stream import TakeStream, analyse_stream, open_bvh_take
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
@@ -58,18 +60,26 @@ class TakeOptions:
     markers: str | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
-        mapping = load_mapping(self.mapping) if self.mapping else None
         subject = load_subject(self.subject) if self.subject else None
-        if subject is not None and self.robot is not None:
-            raise InputError(f"{self.subject}: a subject file describes a person (BVH or C3D takes), not a robot")
-        bvh = BvhBodyOptions(total_mass=self.mass or DEFAULT_MASS, units=self.units, up_axis=self.up, mapping=mapping,
-                             sole_width=self.sole_width, hat_fraction=subject and subject.hat_fraction)
-        return load_motion(path, self.robot, bvh, UrdfBodyOptions(config=self.robot_config),
+        return load_motion(path, self.robot, self.bvh_options(subject), UrdfBodyOptions(config=self.robot_config),
                            c3d_mass=self.mass, markers=subject.marker_options() if subject else None)
 
+    def bvh_options(self, subject: Subject | None = None) -> BvhBodyOptions:
+        """How a BVH's body is made (``subject``: the loaded subject file, if any)."""
+        if subject is not None and self.robot is not None:
+            raise InputError(f"{self.subject}: a subject file describes a person (BVH or C3D takes), not a robot")
+        return BvhBodyOptions(total_mass=self.mass or DEFAULT_MASS, units=self.units, up_axis=self.up,
+                              mapping=load_mapping(self.mapping) if self.mapping else None,
+                              sole_width=self.sole_width, hat_fraction=subject and subject.hat_fraction)
 
-def take_config(loaded: LoadedMotion, mode: str, ground: float | None) -> PipelineConfig:
-    """:func:`default_config` for the take, with ``ground`` (m, in the input frame) if given."""
+    def streams(self, path: str | Path | None) -> bool:
+        """Whether the take at ``path`` is analysed in bounded memory (:mod:`livezmp.offline.take_stream`):
+        a BVH (a robot's joint CSV and a C3D are read whole)."""
+        return path is not None and Path(path).suffix.lower() == ".bvh" and self.robot is None
+
+
+def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None) -> PipelineConfig:
+    """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) if given."""
     ground_z = None
     if ground is not None:
         p = np.zeros(3)
@@ -110,11 +120,45 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
     """The analysis of a loaded take; the summary keeps the estimator's settings, so a user sees what
     smoothed the take (README: choosing them)."""
     result = analyse_loaded(loaded, options.mode, options.ground, progress)
-    estimator = replace(take_config(loaded, options.mode, options.ground).estimator, rate_hz=loaded.fps)
     summary = {"source": loaded.source,
                **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
-               "estimator": asdict(estimator)}
+               "estimator": _estimator_settings(loaded, options)}
     return TakeAnalysis(loaded.body, result, loaded.fps, loaded.source, summary)
+
+
+def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -> dict:
+    return asdict(replace(take_config(take, options.mode, options.ground).estimator, rate_hz=take.fps))
+
+
+def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None = None, plot: str | Path | None = None,
+                progress: Callable[[int], None] | None = None, chunk: int = DEFAULT_CHUNK) -> dict:
+    """The analysis of the BVH at ``path`` in bounded memory (:mod:`livezmp.offline.take_stream`): its
+    zmp.csv written to ``csv`` and its figure (from a decimated series,
+    :class:`livezmp.offline.plot.PlotSeries`) to ``plot`` when given, each atomically; returns the
+    summary, equal to :func:`analyse_motion`'s to rounding. ``progress(frames_done)`` after each chunk."""
+    check_not_c3d_options(options, path)
+    subject = load_subject(options.subject) if options.subject else None
+    take = open_bvh_take(path, options.bvh_options(subject))
+    cfg = take_config(take, options.mode, options.ground)
+    stats = TakeStats(take.total, take.fps, options.tolerance_mm)
+    series = None
+    if plot:
+        from livezmp.offline.plot import PlotSeries, plot_analysis  # matplotlib: only when a figure is asked for
+
+        series = PlotSeries()
+    with contextlib.ExitStack() as stack:
+        consumers = [stats] + ([series] if series else [])
+        if csv:
+            writer = ZmpCsvWriter(take.body, stack.enter_context(atomic_path(csv)))
+            stack.callback(writer.close)  # before the file replaces ``csv``
+            consumers.append(writer)
+        analyse_stream(take, cfg, consumers, chunk, progress)
+    summary = {"source": take.source, **stats.summary(take.body, options.mode),
+               "estimator": _estimator_settings(take, options)}
+    if series:
+        with atomic_path(plot) as tmp:
+            plot_analysis(take.body, series.result(), tmp, title=f"{Path(take.source).name} ({options.mode} ZMP)")
+    return summary
 
 
 def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
@@ -160,7 +204,10 @@ def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None
 
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, plot: bool = False) -> dict:
     """Analyse the take at ``path``; write its ``zmp.csv`` and, with ``plot``, its ``zmp.png`` (each
-    atomically) into the directory ``out_dir``; return the summary."""
+    atomically) into the directory ``out_dir``; return the summary. A BVH is analysed in bounded
+    memory (:func:`stream_take`), other takes whole."""
+    if options.streams(path):
+        return stream_take(path, options, Path(out_dir) / ZMP_CSV, Path(out_dir) / ZMP_PNG if plot else None)
     a = analyse_path(path, options)
     with atomic_path(Path(out_dir) / ZMP_CSV) as tmp:
         write_zmp_csv(a.body, a.result, tmp, a.columns)
@@ -173,10 +220,18 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, pl
     return a.summary
 
 
+def check_correctable(source: str | Path, frames: int) -> None:
+    """Refuse a take too long for the correction, which holds it whole (:data:`MAX_CORRECT_FRAMES`)."""
+    if frames > MAX_CORRECT_FRAMES:
+        raise InputError(f"{source}: {frames} frames; correct solves a whole take at once and takes at most "
+                         f"{MAX_CORRECT_FRAMES} (split the take)")
+
+
 def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
                    progress: Callable[[str], None] | None = None) -> dict:
     """``livezmp correct`` of a loaded BVH or joint-CSV take, written (atomically) to ``output`` in the
     take's own format. Returns the correction report."""
+    check_correctable(loaded.source, len(loaded.frames))
     from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
 
     cfg = take_config(loaded, options.mode, options.ground)
@@ -198,6 +253,7 @@ def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions,
     from livezmp.model.marker_bvh import chain_to_bvh
 
     trial = read_c3d(path)
+    check_correctable(path, len(trial.points))
     fix = correct_marker_take(trial, lab_options(options), limits, non_position_labels(path), progress=progress)
     with atomic_path(output) as tmp:
         if str(output).lower().endswith(".c3d"):

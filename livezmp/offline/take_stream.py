@@ -1,0 +1,121 @@
+"""One take's analysis in bounded memory: ``livezmp analyze`` and ``livezmp batch analyze`` of a BVH.
+
+The file is read a chunk of frames at a time (:func:`livezmp.model.bvh.stream_bvh`), the body is
+made from its first seconds (all :func:`livezmp.model.bvh_body.body_from_bvh` reads), and each
+chunk goes through the batch path (:func:`livezmp.offline.batch.batch_chunks`, the estimator's and
+contact detector's state carried from chunk to chunk) to the consumers: the zmp.csv writer, the
+summary statistics, the figure's series. A worker's peak memory is then a few chunks, whatever the
+take's length, and the results equal the whole-take path's (:func:`livezmp.offline.take.analyse_loaded`
+and :func:`livezmp.offline.report.summarize`) to rounding. A take the batch path cannot reproduce
+(:class:`NotBatchable`, e.g. an angle's Kalman innovation reaching ±π in a late chunk) is read again
+from the start and stepped frame by frame, the consumers restarted, as the whole-take path does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from livezmp.balance.pipeline import Pipeline, PipelineConfig
+from livezmp.checks import check_input_file
+from livezmp.errors import InputError
+from livezmp.model.body import BodyModel
+from livezmp.model.bvh import BvhMotion, stream_bvh
+from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, NotBatchable, batch_chunks
+
+
+class Consumer(Protocol):
+    """Takes a take's results chunk by chunk; ``start`` (again) forgets what it was given."""
+
+    def start(self) -> None: ...
+
+    def add(self, part: BatchResult) -> None: ...
+
+
+@dataclass
+class TakeStream:
+    """A take read lazily: its ``body``, frame rate ``fps`` (Hz, as :class:`LoadedMotion` computes it),
+    ``total`` frames, ``source``; ``pieces(chunk)`` reads it (again) from its first frame as
+    (times (c,) s, frames (c, nq) raw channels), ``chunk`` frames each but the last."""
+
+    body: BodyModel
+    fps: float
+    total: int
+    source: str
+    pieces: Callable[[int], Iterator[tuple[np.ndarray, np.ndarray]]]
+
+
+def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
+    """A BVH file as a :class:`TakeStream`: the header and the first seconds are read now (the body),
+    the frames when ``pieces`` is iterated. Bad rows raise :class:`InputError` when they are reached."""
+    header, blocks = stream_bvh(check_input_file(path, "motion file"))
+    calibration = max(1, round(CALIBRATION_S / header.frame_time))
+    first, count = [], 0
+    for block in blocks:
+        first.append(block)
+        count += len(block)
+        if count >= calibration:
+            break
+    blocks.close()
+    body = body_from_bvh(BvhMotion(header.joints, header.frame_time, np.concatenate(first), header.source), options)
+    ends = np.array([0, header.n_frames - 1]) * header.frame_time  # as load_motion's times
+    fps = float((header.n_frames - 1) / (ends[1] - ends[0])) if header.n_frames > 1 else 0.0
+
+    def pieces(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        start = 0
+        for block in stream_bvh(path, rows=chunk)[1]:
+            yield np.arange(start, start + len(block)) * header.frame_time, block
+            start += len(block)
+
+    return TakeStream(body, fps, header.n_frames, header.source, pieces)
+
+
+def analyse_stream(take: TakeStream, config: PipelineConfig, consumers: Sequence[Consumer],
+                   chunk: int = DEFAULT_CHUNK, progress: Callable[[int], None] | None = None) -> str:
+    """Run the pipeline (``config``) over ``take`` chunk by chunk, giving each chunk's results to every
+    consumer; returns which path made them ("batch", or "per-frame: WHY" as
+    :func:`livezmp.offline.batch.run_batch` says). ``progress(frames_done)`` after each chunk."""
+    if take.total < 2:
+        raise InputError(f"{take.source}: need at least 2 frames, got {take.total}")
+    pipe = Pipeline(take.body, config, nominal_dt=1.0 / take.fps)
+    try:
+        _feed(batch_chunks(take.body, config, pipe.estimator, pipe.contacts, take.total, take.pieces(chunk), chunk),
+              consumers, progress)
+        return "batch"
+    except NotBatchable as e:
+        reason = str(e)
+    _feed(_stepped(Pipeline(take.body, config, nominal_dt=1.0 / take.fps), take.pieces(chunk), chunk), consumers,
+          progress)
+    return f"per-frame: {reason}"
+
+
+def _feed(parts: Iterator[BatchResult], consumers: Sequence[Consumer],
+          progress: Callable[[int], None] | None) -> None:
+    for c in consumers:
+        c.start()
+    for part in parts:
+        for c in consumers:
+            c.add(part)
+        if progress is not None:
+            progress(int(part.index[-1]) + 1)
+
+
+def _stepped(pipe: Pipeline, pieces: Iterator[tuple[np.ndarray, np.ndarray]], chunk: int) -> Iterator[BatchResult]:
+    """The per-frame pipeline over the pieces (as :meth:`Pipeline.run`), ``chunk`` results at a time."""
+    done = []
+    for times, frames in pieces:
+        for t, f in zip(times, frames, strict=True):
+            r = pipe.step(float(t), f)
+            if r is not None:
+                done.append(r)
+            if len(done) == chunk:
+                yield BatchResult.from_frames(done, keep_states=False)
+                done = []
+    done += pipe.flush()
+    if done:
+        yield BatchResult.from_frames(done, keep_states=False)
