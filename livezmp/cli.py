@@ -198,9 +198,11 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-correction-deg", type=float, default=math.degrees(s.max_correction_rad),
                    help="largest correction of any joint, degrees")
     p.add_argument("--quiet", action="store_true", help="no live status line (events are still told)")
-    p.add_argument("--realtime-priority", type=int, default=LOOP_PRIORITY,
-                   help=f"run the loop under SCHED_FIFO at this priority, 1-99 (default {LOOP_PRIORITY}; "
-                        "0 = normal scheduling); if refused it runs at normal priority and says so")
+    p.add_argument("--realtime-priority", type=int,
+                   help=f"run the loop under SCHED_FIFO at this priority, 1-99, with its memory locked; given, a "
+                        f"refusal is an error; by default it asks for {LOOP_PRIORITY} and, if refused, runs at "
+                        "normal priority and says so (0 = normal scheduling)")
+    p.add_argument("--cpu", help="pin the loop to these CPUs, e.g. 1 or 2,3 (default: anywhere)")
     p.add_argument("--contacts", choices=CONTACT_MODES, default=d.contacts,
                    help="where the feet's contacts come from: the link's foot sensors (a foot is down above "
                         f"{100 * d.contact_fraction:g} %% of the body weight), the kinematics, or auto: the sensors "

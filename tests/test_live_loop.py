@@ -159,6 +159,30 @@ def test_clock_keeps_absolute_deadlines_despite_sleep_overshoot():
     assert stats.slack.quantile(0.5) == pytest.approx(T - 3e-4 - 5e-4, abs=1e-5)
 
 
+def test_hybrid_wait_sleeps_short_of_the_deadline_then_spins_to_it():
+    """With spin_s, a sleep overshooting by 0.15 ms (< spin_s) no longer makes the cycle late: the
+    clock sleeps until spin_s before the deadline and spins on now() (each call 1 us) to it."""
+    time = SimTime(overshoot=1.5e-4)
+    reads = []
+
+    def now() -> float:
+        time.t += 1e-6
+        reads.append(time.t)
+        return time.t
+
+    sleeps = []
+    clock = LoopClock(RATE, now=now, sleep=lambda d: (sleeps.append(d), time.advance(d)), spin_s=2e-4)
+    clock.start()
+    for _ in range(100):
+        time.t += 5e-4  # the cycle's work
+        tick = clock.wait()
+    assert tick.index == 100
+    # each sleep ends spin_s before the deadline: the slack (period - work, less a clock read or two) - spin_s
+    assert sleeps == pytest.approx([T - 5e-4 - 2e-4] * 100, abs=3e-6)
+    assert clock.stats().wake_late.quantile(0.99) < 3e-6  # woke within a clock read of each deadline
+    assert len(reads) > 100 * (2e-4 - 1.5e-4) / 1e-6  # it did spin through the 50 us the sleep left
+
+
 def test_clock_counts_misses_and_skips_overrun_deadlines():
     time = SimTime()
     clock = LoopClock(RATE, now=time.now, sleep=time.advance)

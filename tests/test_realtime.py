@@ -7,7 +7,7 @@ import os
 import pytest
 
 from livezmp.errors import InputError
-from livezmp.live.realtime import check_priority, realtime_priority
+from livezmp.live.realtime import check_priority, parse_cpus, realtime_priority
 
 
 def test_priority_zero_asks_for_nothing():
@@ -40,3 +40,54 @@ def test_restored_after_an_exception():
 def test_out_of_range_priority_is_a_user_error(bad):
     with pytest.raises(InputError, match="must be 1-99"):
         check_priority(bad)
+
+
+def permitted(priority: int) -> bool:
+    """Whether this process may ask for SCHED_FIFO ``priority``: root (CAP_SYS_NICE) or an rtprio limit."""
+    import resource
+    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
+
+
+def vm_locked_kb() -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmLck:"))
+
+
+def test_affinity_and_locked_memory_given_and_given_back():
+    """One CPU, SCHED_FIFO and mlockall inside; the CPUs, the policy and VmLck as before after."""
+    cpus = os.sched_getaffinity(0)
+    one = frozenset({max(cpus)})
+    before = os.sched_getscheduler(0), vm_locked_kb()
+    with realtime_priority(20, one, lock_memory=True) as refused:
+        assert os.sched_getaffinity(0) == one
+        if permitted(20):
+            assert refused is None and os.sched_getscheduler(0) == os.SCHED_FIFO
+            assert vm_locked_kb() > 10_000  # the whole interpreter, numpy included, is resident and locked
+        else:
+            assert refused.startswith("refused (")
+    assert os.sched_getaffinity(0) == cpus
+    assert (os.sched_getscheduler(0), vm_locked_kb()) == before
+
+
+def test_a_required_priority_refused_is_a_one_line_user_error(monkeypatch):
+    def refuse(*_):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    with pytest.raises(InputError) as e, realtime_priority(30, required=True):
+        pass
+    assert str(e.value) == ("--realtime-priority 30: SCHED_FIFO refused (Operation not permitted; needs root, "
+                            "CAP_SYS_NICE or an rtprio limit)")
+    with realtime_priority(30) as refused:  # not required: the loop runs on and is told why
+        assert refused.startswith("refused (Operation not permitted")
+
+
+@pytest.mark.parametrize(("text", "cpus"), [("0", {0}), ("0-1", {0, 1}), ("1,0", {0, 1})])
+def test_cpu_lists(text, cpus):
+    assert parse_cpus(text) == cpus
+
+
+@pytest.mark.parametrize("text", ["", "x", "0-", str(os.cpu_count() + 3)])
+def test_bad_cpu_lists_are_user_errors(text):
+    with pytest.raises(InputError, match=f"--cpu {text}: expected CPU numbers"):
+        parse_cpus(text)

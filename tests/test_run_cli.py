@@ -132,6 +132,45 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     assert s["realtime_priority"] in (0, 50)
 
 
+def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch):
+    """--realtime-priority 30 --cpu N: the loop runs under SCHED_FIFO 30 on CPU N with its memory
+    locked (seen from inside the loop), and the thread gets its policy and CPUs back afterwards."""
+    import livezmp.commands.run as run_command
+    seen = []
+
+    class Watched(run_command.LiveLoop):
+        def run(self, duration=None):
+            seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)))
+            return super().run(duration)
+
+    monkeypatch.setattr(run_command, "LiveLoop", Watched)
+    cpu = max(os.sched_getaffinity(0))
+    before = os.sched_getscheduler(0), os.sched_getaffinity(0)
+    path = tmp_path / "s.json"
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.1", "--quiet",
+                 "--realtime-priority", "30", "--cpu", str(cpu), "--summary-json", str(path)]) == 0
+    s = json.loads(path.read_text())
+    assert seen == [(os.SCHED_FIFO, 30, {cpu})]
+    assert s["realtime_priority"] == 30 and s["memory_locked"] is True
+    assert (os.sched_getscheduler(0), os.sched_getaffinity(0)) == before
+
+
+def test_a_required_realtime_priority_refused_stops_before_the_link_opens(monkeypatch, capsys):
+    def refuse(*_):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    argv = ["run", "--robot", str(demo_robot_path()), "--link", "dynamixel:/nonexistent", "--realtime-priority", "50"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == ("livezmp: error: --realtime-priority 50: SCHED_FIFO refused (Operation not permitted; needs root, "
+                   "CAP_SYS_NICE or an rtprio limit)\n")
+    # not given, the same refusal only makes the loop run at normal priority (and say so)
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.05", "--quiet"]) == 0
+    out = capsys.readouterr()
+    assert "real-time priority refused (Operation not permitted" in out.err + out.out
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: no such file"),
     (["run", "--robot", str(demo_robot_path()), "--link", "serial:/dev/x"], "link URL 'serial:/dev/x': expected"),

@@ -15,10 +15,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from livezmp.commands.run import check_outputs, duration_of, finish, run_loop
+from livezmp.commands.run import check_outputs, check_realtime, duration_of, finish, loop_priority, run_loop
 from livezmp.links import LinkError, open_link
 from livezmp.live import scenarios as sc
-from livezmp.live.realtime import check_priority
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.launch import humanoid_sensors
@@ -44,7 +43,7 @@ def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenari
 def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
     with SimProcess(args.link, (args.scenario, {}), args.fault, urdf=args.robot, config=args.robot_config,
-                    realtime_priority=max(args.realtime_priority - 1, 0), devices=device_options(args)) as sim:
+                    realtime_priority=max(loop_priority(args)[0] - 1, 0), devices=device_options(args)) as sim:
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -57,7 +56,7 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    check_priority(args.realtime_priority)
+    check_realtime(args)
     check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     robot = load_robot(args.robot, args.robot_config)

@@ -32,7 +32,7 @@ from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, pars
 from livezmp.live import scenarios as sc
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import LiveLoop
-from livezmp.live.realtime import check_priority, realtime_priority
+from livezmp.live.realtime import LOOP_PRIORITY, check_priority, memory_locked, parse_cpus, realtime_priority
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
@@ -172,17 +172,20 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
     try:
         loop = LiveLoop(link, robot.body, config, command=command, fell=fell, on_event=status.event,
                         on_status=status, recorder=recorder)
-        with (stop_on_signals(loop.request_stop), realtime_priority(args.realtime_priority) as refused,
+        priority, required = loop_priority(args)
+        with (stop_on_signals(loop.request_stop),
+              realtime_priority(priority, loop_cpus(args), lock_memory=True, required=required) as refused,
               switch_interval(RECORD_SWITCH_INTERVAL_S if recorder else None)):
             if refused not in (None, "off"):
                 status.event(f"real-time priority {refused}: the loop runs at normal priority")
+            locked = memory_locked()
             summary = loop.run(duration)
     except BaseException as e:
         if recorder is not None:
             recorder.close({"stopped_by": f"error: {type(e).__name__}: {e}"})
         raise
     status.done()
-    summary = {**summary, "realtime_priority": args.realtime_priority if refused is None else 0}
+    summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked}
     if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
         summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:
@@ -191,6 +194,30 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
             status.event(f"recording {args.record}: {summary['recording']['dropped_total']} messages dropped "
                          f"(queue full), {summary['recording']['failed']} failed ({summary['recording']['error']})")
     return summary
+
+
+def loop_priority(args: argparse.Namespace) -> tuple[int, bool]:
+    """(SCHED_FIFO priority, whether a refusal is an error): --realtime-priority given is a
+    requirement (0: normal scheduling); not given, LOOP_PRIORITY is asked for, best effort."""
+    if args.realtime_priority is None:
+        return LOOP_PRIORITY, False
+    check_priority(args.realtime_priority)
+    return args.realtime_priority, args.realtime_priority > 0
+
+
+def loop_cpus(args: argparse.Namespace) -> frozenset[int] | None:
+    """--cpu as a set of CPU numbers (None: not pinned); InputError on a bad one."""
+    return None if args.cpu is None else parse_cpus(args.cpu)
+
+
+def check_realtime(args: argparse.Namespace) -> None:
+    """Bad --realtime-priority or --cpu, or a required priority the system refuses: InputError,
+    before anything is opened (the policy is asked for and given back at once)."""
+    priority, required = loop_priority(args)
+    loop_cpus(args)
+    if required:
+        with realtime_priority(priority, required=True):
+            pass
 
 
 def adapter_option(text: str) -> Adapter:
@@ -222,7 +249,7 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    check_priority(args.realtime_priority)
+    check_realtime(args)
     check_outputs(args)
     assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     robot = load_robot(args.robot, args.robot_config)

@@ -1,4 +1,4 @@
-"""Real-time scheduling for the live loop (Linux SCHED_FIFO), asked for and given back.
+"""Real-time scheduling for the live loop (Linux SCHED_FIFO, CPU affinity, locked memory), asked for and given back.
 
 A 500 Hz loop has 2 ms a cycle. Under the default time-sharing scheduler any other
 runnable process on the machine can hold the loop's core for a scheduler slice (several
@@ -6,23 +6,31 @@ milliseconds) just when the loop should wake or when a servo reply arrives: the 
 is missed although the loop's own work takes well under a millisecond. Under SCHED_FIFO
 the loop runs as soon as it is runnable; it sleeps and waits on the port between cycles,
 and the kernel keeps 5 % of each second for everything else (``sched_rt_runtime_us``),
-so it cannot lock a machine up. This is what robot control frameworks do on Linux.
+so it cannot lock a machine up. This is what robot control frameworks do on Linux
+(ros2_control's controller manager asks for SCHED_FIFO 50 and locks its memory).
 
-The policy is per thread: :func:`realtime_priority` sets it for the calling thread (and
-threads it starts afterwards inherit it) and restores the previous policy on exit. Asking
-needs root or CAP_SYS_NICE (or an ``rtprio`` limit); when refused the loop runs on at
-normal priority and the reason is reported.
+The policy and the CPU affinity are per thread: :func:`realtime_priority` sets them for the
+calling thread (threads it starts afterwards inherit them) and restores the previous ones
+on exit. Locked memory (``mlockall``: no page fault in the cycle waits for the disk) is the
+process's, unlocked on exit. Asking for SCHED_FIFO needs root or CAP_SYS_NICE (or an
+``rtprio`` limit), locking memory CAP_IPC_LOCK or a ``memlock`` limit above the process's
+size; when refused the loop runs on at normal priority and the reason is reported, or,
+where the priority is ``required``, the refusal is a one-line user error.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import os
+import re
 from collections.abc import Iterator
 
 from livezmp.errors import InputError
 
 LOOP_PRIORITY = 50  # the loop; a simulator's devices run just below it (LOOP_PRIORITY - 1)
+_MCL_CURRENT, _MCL_FUTURE = 1, 2  # <sys/mman.h>
 
 
 def check_priority(priority: int) -> None:
@@ -31,25 +39,83 @@ def check_priority(priority: int) -> None:
         raise InputError(f"--realtime-priority {priority}: must be 1-99 (SCHED_FIFO), or 0 for normal scheduling")
 
 
+def parse_cpus(text: str) -> frozenset[int]:
+    """--cpu: CPU numbers as ``2`` or ``2,3`` or ``0-1``, each one this machine has (InputError otherwise)."""
+    cpus: set[int] = set()
+    for part in text.split(","):
+        bounds = re.fullmatch(r"\s*(\d+)(?:-(\d+))?\s*", part)
+        if bounds is None:
+            cpus = set()
+            break
+        cpus.update(range(int(bounds[1]), int(bounds[2] or bounds[1]) + 1))
+    have = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else set()
+    if not cpus or not cpus <= have:
+        raise InputError(f"--cpu {text}: expected CPU numbers such as 1 or 0,1 among {sorted(have)}")
+    return frozenset(cpus)
+
+
+def _libc_call(name: str, *args: int) -> str | None:
+    """Call libc's ``name``; None when it succeeded, else the reason (one line)."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+    if getattr(libc, name)(*args) == 0:
+        return None
+    return os.strerror(ctypes.get_errno())
+
+
 @contextlib.contextmanager
-def realtime_priority(priority: int) -> Iterator[str | None]:
-    """Run the calling thread under SCHED_FIFO at ``priority`` (1–99) inside the block;
-    yields None when granted, else one line saying why not (0 asks for nothing: "off").
-    The thread's previous policy and priority are restored on exit."""
+def realtime_priority(priority: int, cpus: frozenset[int] | None = None, lock_memory: bool = False,
+                      required: bool = False) -> Iterator[str | None]:
+    """Run the calling thread under SCHED_FIFO at ``priority`` (1–99) inside the block, on
+    ``cpus`` (None: where it was), with the process's memory locked if ``lock_memory`` (only
+    once SCHED_FIFO was granted). Yields None when granted, else one line saying why not (0
+    asks for nothing: "off"); with ``required``, a refusal raises InputError instead. A memory
+    lock refused is not a refusal (the loop still runs first; it is reported by
+    :func:`memory_locked`). The thread's previous policy, priority and CPUs are restored on exit."""
     check_priority(priority)
-    if priority == 0:
-        yield "off"
+    with _affinity(cpus):
+        if priority == 0:
+            yield "off"
+            return
+        if not hasattr(os, "sched_setscheduler"):
+            refused = "not available on this system"
+        else:
+            before = os.sched_getscheduler(0), os.sched_getparam(0)
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+                refused = None
+            except OSError as e:
+                refused = f"refused ({e.strerror}; needs root, CAP_SYS_NICE or an rtprio limit)"
+        if refused is not None:
+            if required:
+                raise InputError(f"--realtime-priority {priority}: SCHED_FIFO {refused}")
+            yield refused
+            return
+        locked = lock_memory and _libc_call("mlockall", _MCL_CURRENT | _MCL_FUTURE) is None
+        try:
+            yield None
+        finally:
+            if locked:
+                _libc_call("munlockall")
+            os.sched_setscheduler(0, before[0], before[1])
+
+
+@contextlib.contextmanager
+def _affinity(cpus: frozenset[int] | None) -> Iterator[None]:
+    if cpus is None:
+        yield
         return
-    if not hasattr(os, "sched_setscheduler"):
-        yield "not available on this system"
-        return
-    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, cpus)
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except OSError as e:
-        yield f"refused ({e.strerror}; needs root, CAP_SYS_NICE or an rtprio limit)"
-        return
-    try:
-        yield None
+        yield
     finally:
-        os.sched_setscheduler(0, before[0], before[1])
+        os.sched_setaffinity(0, before)
+
+
+def memory_locked() -> bool:
+    """Whether this process has memory locked now (Linux: VmLck in /proc/self/status)."""
+    try:
+        with open("/proc/self/status") as f:
+            return any(line.startswith("VmLck:") and int(line.split()[1]) > 0 for line in f)
+    except OSError:
+        return False
