@@ -5,19 +5,23 @@ process, as `livezmp demo` runs it, behind XM430 chains whose bytes take their w
 (10 bits at the baud), whose servos wait their Return Delay Time, and whose USB-serial
 adapter adds its latency (full-speed FTDI, latency timer 1 ms: 0.5 ms out + 1 ms back; or
 a high-speed adapter: 0.06 + 0.13 ms). The loop runs here on absolute deadlines under
-SCHED_FIFO (the simulator just below it). Each configuration is run twice, side by side:
+SCHED_FIFO with its memory locked, waking by sleep then spin (the simulator just below it,
+standing in for the servos' own hardware). Each configuration is run side by side:
 
 * bus only (baseline): the same clock and link, read + write of the present posture each
   cycle, no estimation or correction: what the bus and simulator alone allow;
-* the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario.
+* the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario;
+  where the target was not met under SCHED_FIFO, also under normal scheduling (loop and
+  simulator both), the ``sched`` column says which.
 
 Each row asks for 85 % of its bus's ceiling (the physical maximum of one read + one write
 cycle: wire time of the packet sizes + return delays + the adapter's round trip; see
 livezmp.links.bus_timing), capped at 500 Hz (1 kHz for the two-bus row): the target is that
 rate with < 1 % missed deadlines. Columns: robot, bus, read, adapter, return delay, ceiling,
-asked and achieved rate, achieved / ceiling, missed deadlines, p99 sense-to-command latency,
-the mean read and loop-work (estimate + correct) time, whether the simulated robot fell,
-failed reads. The first rows are the loop's own work flat out on the mock link (no bus).
+scheduling, asked and achieved rate, achieved / ceiling, missed deadlines, p99
+sense-to-command latency, the mean read and loop-work (estimate + correct) time, whether the
+simulated robot fell, failed reads, the 1-minute load average after the row (others share
+the machine). The first rows are the loop's own work flat out on the mock link (no bus).
 
 Run: python benchmarks/bench_live_loop.py [--seconds 10]
 """
@@ -32,7 +36,7 @@ from pathlib import Path
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync_write_bytes
-from livezmp.live.clock import LoopClock
+from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
@@ -47,7 +51,7 @@ OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 
 def bus_only(link, rate: float, seconds: float) -> dict:
     """Read + write every cycle on the loop's clock: the baseline."""
-    clock = LoopClock(rate)
+    clock = LoopClock(rate, spin_s=SPIN_BEFORE_DEADLINE_S)
     latency, read, write = TimingHistogram(), TimingHistogram(), TimingHistogram()
     clock.start()
     failed = 0
@@ -104,7 +108,7 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
         baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY) -> dict:
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
-                    devices=devices) as sim, realtime_priority(priority):
+                    devices=devices) as sim, realtime_priority(priority, lock_memory=True):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -121,19 +125,20 @@ def predicted_ceiling(n_servos: int, buses: int, fast: bool, return_delay_us: fl
     return BusCeiling(baud, per_cycle, n * return_delay_us * 1e-6, ADAPTERS[adapter]).ceiling_hz
 
 
-CONFIGS = [  # robot, baud, buses, fast, return delay (us), adapter, rate cap (Hz), faults
-    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("livezmp_mini", 2_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("livezmp_mini", 4_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("livezmp_mini", 1_000_000, 1, False, 0, "ftdi-fs", 500, ""),
-    ("livezmp_mini", 1_000_000, 1, True, 500, "ftdi-fs", 500, ""),
-    ("livezmp_mini", 4_000_000, 1, True, 0, "hs", 500, ""),
-    ("OP3", 1_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("OP3", 2_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("OP3", 4_000_000, 1, True, 0, "ftdi-fs", 500, ""),
-    ("OP3", 2_000_000, 1, True, 0, "hs", 500, ""),
-    ("livezmp_mini", 4_000_000, 2, True, 0, "hs", 1000, ""),
-    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, "drop=0.05,corrupt=0.05"),
+# robot, baud, buses, fast, return delay (us), adapter, rate cap (Hz), faults, the loop also without SCHED_FIFO
+CONFIGS = [
+    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, "", False),
+    ("livezmp_mini", 2_000_000, 1, True, 0, "ftdi-fs", 500, "", True),
+    ("livezmp_mini", 4_000_000, 1, True, 0, "ftdi-fs", 500, "", True),
+    ("livezmp_mini", 1_000_000, 1, False, 0, "ftdi-fs", 500, "", False),
+    ("livezmp_mini", 1_000_000, 1, True, 500, "ftdi-fs", 500, "", False),
+    ("livezmp_mini", 4_000_000, 1, True, 0, "hs", 500, "", True),
+    ("OP3", 1_000_000, 1, True, 0, "ftdi-fs", 500, "", False),
+    ("OP3", 2_000_000, 1, True, 0, "ftdi-fs", 500, "", True),
+    ("OP3", 4_000_000, 1, True, 0, "ftdi-fs", 500, "", True),
+    ("OP3", 2_000_000, 1, True, 0, "hs", 500, "", True),
+    ("livezmp_mini", 4_000_000, 2, True, 0, "hs", 1000, "", True),
+    ("livezmp_mini", 1_000_000, 1, True, 0, "ftdi-fs", 500, "drop=0.05,corrupt=0.05", False),
 ]
 
 
@@ -155,11 +160,12 @@ def main() -> None:
         x = compute_only(mini, 500.0, min(sec, 5.0), correct_hz)
         print(f"loop work only (mock link, no bus), livezmp_mini, correct at {correct_hz:g} Hz: "
               f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
-    header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | asked Hz | "
-              "achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | failed reads |")
+    header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
+              "sched  | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
+              "failed reads | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
-    for name, baud, buses, fast, delay, adapter, cap, faults in CONFIGS:
+    for name, baud, buses, fast, delay, adapter, cap, faults, both in CONFIGS:
         urdf, robot = robots[name]
         ceiling = predicted_ceiling(len(robot.body.joint_names), buses, fast, delay, baud, adapter)
         rate = min(cap, round(0.85 * ceiling))
@@ -167,14 +173,16 @@ def main() -> None:
         devices = {"baud": baud, "adapter": adapter, "buses": buses}
         bus = f"{baud / 1e6:g} Mbps" + (f" x {buses}" if buses > 1 else "")
         read = "fast sync" if fast else "sync"
-        for baseline in (True, False):
-            x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults)
+        runs = [(True, LOOP_PRIORITY)] + [(False, 0)] * both + [(False, LOOP_PRIORITY)]
+        for baseline, priority in runs:
+            x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults, priority=priority)
             fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
             loop = "bus only" if baseline else ("loop, 5+5%" if faults else "live loop")
+            sched = f"FIFO{priority}" if priority and refused is None else "normal"
             print(f"| {name:<12} | {bus:<14} | {read:<9} | {adapter:<7} | {delay:8d} | {ceiling:10.0f} | {loop:<9} | "
-                  f"{rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
+                  f"{sched:<6} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
-                  f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} |", flush=True)
+                  f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {os.getloadavg()[0]:4.1f} |", flush=True)
     print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

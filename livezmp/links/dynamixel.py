@@ -85,6 +85,7 @@ from dynamixel_sdk.port_handler import LATENCY_TIMER
 
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, LinkUnusable, PortLink
 from livezmp.links.bus_timing import Adapter, BusCeiling, bulk_read_bytes, sync_read_bytes, sync_write_bytes
+from livezmp.links.dynamixel_cycle_packets import FastReply, GoalPacket
 from livezmp.links.dynamixel_imu import IMU_ADDRESS, IMU_LENGTH, decode_imu
 from livezmp.links.reply_loss import ReplyLoss
 from livezmp.model.robot_config import ImuConfig, ServoConfig
@@ -242,8 +243,11 @@ class DynamixelLink(PortLink):
         self._traffic = np.zeros(4)  # bytes read, reads, bytes written, writes: since open finished
         self._pending = False  # a `request`ed read's instruction is out, its replies not taken in
         self._requested_bytes = 0
-        self._prepared: tuple[bytes, bytes] | None = None  # (sync write of goals, read instruction), not sent yet
+        # (goals' sync write + next read instruction, the goals' bytes): built, not sent yet
+        self._prepared: tuple[bytes | bytearray, int] | None = None
         self._instruction: bytes | None = None  # `read`'s instruction, once built
+        self._fast_reply: FastReply | None = None  # `read`'s Fast Sync Read reply buffer, once made
+        self._goal_packet: GoalPacket | None = None  # `prepare_goals`' packet (+ read instruction), once made
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -311,14 +315,20 @@ class DynamixelLink(PortLink):
         port = self._require_port()
         sent, self._pending = self._pending, False
         before = self._requested_bytes if sent else port.bytes_out + port.bytes_in
+        fields = _STATE if self.read_what == "state" else _POSITION
         try:
-            errors, data = self._sync_read(*READS[self.read_what], self.fast_read,
-                                           retries=0 if self.fast_read else 1, sent=sent, extra=self._extra)
+            if self.fast_read and self._extra is None:  # the loop's usual read: straight into a buffer
+                state = self._fast_sync_read(fields, sent)
+                alerted = self._fast_reply.alerted()
+            else:
+                errors, data = self._sync_read(*READS[self.read_what], self.fast_read,
+                                               retries=0 if self.fast_read else 1, sent=sent, extra=self._extra)
+                state = np.frombuffer(data, dtype=fields)
+                alerted = [i for i, e in enumerate(errors) if e & ALERT]
         finally:
             self._traffic[:2] += (port.bytes_out + port.bytes_in - before, 1)
         t = time.monotonic()
-        alerts = {i: self._hardware_error(i) for i, e in enumerate(errors) if e & ALERT}
-        state = np.frombuffer(data, dtype=_STATE if self.read_what == "state" else _POSITION)
+        alerts = {i: self._hardware_error(i) for i in alerted}
         self._present = state["position"].astype(np.int64)
         full = self.read_what == "state"
         return LinkFrame(
@@ -334,24 +344,18 @@ class DynamixelLink(PortLink):
         """Build the sync write of ``positions`` (rad, checked as by `write_goals`) and the next read's
         instruction now, for `send_prepared` to send in one write (a loop builds them while it would
         otherwise sleep, so the moment a read verified costs only the write)."""
-        writer = self._fill_goals(self.goal_ticks(positions))
-        port = self._require_port()
-        with port.held() as goals:
-            try:
-                result = writer.txPacket()
-            finally:
-                port.is_using = False
-        port.bytes_out -= len(goals)  # counted when sent
-        if result != COMM_SUCCESS:
-            raise LinkError(f"{self.path}: sync write not built: {self._ph.getTxRxResult(result)}")
-        self._prepared = (bytes(goals), self._read_instruction())
+        ticks = self.goal_ticks(positions)
+        if self._goal_packet is None:
+            self._require_port()
+            self._goal_packet = GoalPacket(self.ids, GOAL_POSITION, self._read_instruction())
+        self._prepared = self._goal_packet.fill(ticks)
 
     def send_prepared(self) -> None:
         """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
         if self._prepared is None:
             raise LinkError(f"{self.path}: no goals prepared")
         port = self._require_port()
-        goals, instruction = self._prepared
+        payload, goal_bytes = self._prepared
         self._prepared = None
         if self._pending:  # as in `write_ticks`: the requested replies are taken in first
             try:
@@ -361,14 +365,14 @@ class DynamixelLink(PortLink):
         self.stats.writes += 1
         try:
             port.clearPort()
-            port.ser.write(goals + instruction)
+            port.ser.write(payload)
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
             raise LinkError(f"{self.path}: port failed: {err}") from None
-        port.bytes_out += len(goals)
-        self._traffic[2:] += (len(goals), 1)
+        port.bytes_out += goal_bytes
+        self._traffic[2:] += (goal_bytes, 1)
         self._requested_bytes = port.bytes_out + port.bytes_in
-        port.bytes_out += len(instruction)
+        port.bytes_out += len(payload) - goal_bytes
         self._pending = True
 
     def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
@@ -441,7 +445,7 @@ class DynamixelLink(PortLink):
             raise LinkError(f"{self.path}: this dynamixel-sdk has no Fast Sync Read: use fast=0 or upgrade it")
         self._port = port
         self._readers = {}
-        self._instruction = None
+        self._instruction = self._goal_packet = None
         self._goal_writer = GroupSyncWrite(port, self._ph, GOAL_POSITION, 4)
         for dxl_id in self.ids:
             self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
@@ -457,7 +461,7 @@ class DynamixelLink(PortLink):
             # Read is not something the servos' firmware versions tell
             self.fast_read = hasattr(GroupSyncRead, "fastSyncRead") and min(firmware) >= FAST_SYNC_READ_FIRMWARE \
                 and self._extra is None
-            self._instruction = None
+            self._instruction = self._goal_packet = None
         limits = np.frombuffer(self._read_at_open(POSITION_LIMITS, 8), dtype="<i4").reshape(-1, 2)
         limited = np.frombuffer(modes, dtype=np.uint8) == 3
         self._highest = np.where(limited, limits[:, 0], 2.0**31 - 1)
@@ -599,6 +603,36 @@ class DynamixelLink(PortLink):
             raise LinkReadError(f"{self.path}: sync read failed: {', '.join(f'{n} {k}' for k, n in failures.items())}"
                                 f"; nothing usable from {detail}")
         return [replies[i][0] for i in self.ids], b"".join(replies[i][1] for i in self.ids)
+
+    def _fast_sync_read(self, fields: np.dtype, sent: bool) -> np.ndarray:
+        """`read`'s Fast Sync Read (``sent``: its instruction is out already, by `request`): the
+        servos' records (error, id, ``fields``, crc) in joint order, a view over the receive
+        buffer valid until the next read. LinkReadError when the reply is lost or rejected,
+        LinkUnusable when the bus loses too many (as `_sync_read`)."""
+        port = self._require_port()
+        reply = self._fast_reply
+        if reply is None or reply.records_dtype.names[2:-1] != fields.names:
+            reply = self._fast_reply = FastReply(self.ids, fields)
+        try:
+            if not sent:
+                port.clearPort()
+                port.writePort(self._read_instruction())
+            # the wait starts now: a `request`ed read's reply may have been waiting for a whole cycle
+            timeout_ms = self._run_timeout_ms or 2.0 * LATENCY_TIMER + 2.0
+            failure, got = reply.receive(port.ser.fileno(), timeout_ms / 1e3)
+        except _PORT_ERRORS as err:
+            raise LinkError(f"{self.path}: port failed: {err}") from None
+        port.bytes_in += got
+        self.loss.add(1, failure is not None)
+        if failure is not None:
+            self.stats.read_errors += 1
+            self.stats.count(failure)
+        if self.loss.exceeded():
+            raise LinkUnusable(f"{self.path}: {self.loss.describe()}: check the cable, its termination and the baud "
+                               "rate")
+        if failure is not None:
+            raise LinkReadError(f"{self.path}: fast sync read failed: 1 {failure}; nothing usable from any servo")
+        return reply.records
 
     def _transaction(self, address: int, length: int, fast: bool, ids: tuple[int, ...], sent: bool = False,
                      extra: tuple[int, int, int] | None = None) -> tuple[dict[int, tuple[int, bytes]], dict[str, int]]:

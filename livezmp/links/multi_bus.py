@@ -46,6 +46,7 @@ class MultiBusLink:
         self._options = options
         self.buses: list[DynamixelLink] = []
         self._joints: list[np.ndarray] = []  # per bus: the robot joint index of each of its servos
+        self._order = np.zeros(0, dtype=int)  # see `open`
         self._reads = self._writes = 0
         self._prepared = False  # every bus has goals prepared
         self._reconnects = 0
@@ -67,6 +68,8 @@ class MultiBusLink:
             self._release()
             raise
         self._joints = [np.asarray(j, dtype=int) for j in found]
+        # the buses' frames end to end, taken in this order, are in the robot's joint order
+        self._order = np.argsort(np.concatenate(self._joints))
 
     def request(self) -> None:
         """Every bus's next read instruction sent now (see `DynamixelLink.request`)."""
@@ -194,15 +197,11 @@ class MultiBusLink:
         return goals
 
     def _merge(self, frames: list[LinkFrame]) -> LinkFrame:
-        n = len(self.joint_names)
+        order = self._order
 
         def gather(name: str) -> np.ndarray | None:
-            if any(getattr(f, name) is None for f in frames):
-                return None
-            out = np.empty(n)
-            for f, joints in zip(frames, self._joints, strict=True):
-                out[joints] = getattr(f, name)
-            return out
+            parts = [getattr(f, name) for f in frames]
+            return None if any(p is None for p in parts) else np.concatenate(parts)[order]
 
         errors = {joint: bits for f in frames for joint, bits in f.hardware_errors.items()}
         return LinkFrame(t=max(f.t for f in frames), positions=gather("positions"), velocities=gather("velocities"),
