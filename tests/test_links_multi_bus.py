@@ -35,6 +35,27 @@ def test_two_buses_are_one_robot_read_and_driven_in_joint_order():
         assert [c.bytes_per_cycle for c in r.link.bus_ceilings(ADAPTERS["hs"])] == [24 + 88 + 64] * 2
 
 
+def test_joints_interleaved_over_the_buses_come_back_in_the_links_joint_order():
+    """The link's joints in an order that alternates between the buses (the simulated robot puts its first
+    ten servos on one port, the rest on the other): each frame and each goal is still in the link's order."""
+    config = servo_config(20)
+    plant = ServoPlant(20, position=start_posture(20))
+    order = [k // 2 + 10 * (k % 2) for k in range(20)]  # joints 0, 10, 1, 11, ...
+    names = [list(config.servos)[j] for j in order]
+    with start_devices("dynamixel", plant, config, buses=2) as sim:
+        link = make_link(f"{sim.url}&timeout=0.1", names, config)
+        link.open()
+        try:
+            assert [list(joints) for joints in link._joints] == [list(range(0, 20, 2)), list(range(1, 20, 2))]
+            np.testing.assert_allclose(link.read().positions, start_posture(20)[order], atol=HALF_TICK)
+            link.prepare_goals(start_posture(20)[order] * 0.5)
+            link.send_prepared()
+            read_until(link, lambda p: np.abs(p - start_posture(20)[order] * 0.5).max() <= 2 * HALF_TICK + 1e-9)
+            np.testing.assert_allclose(plant.goal, start_posture(20) * 0.5, atol=HALF_TICK)  # in the plant's order
+        finally:
+            link.close()
+
+
 def mean_read_time(url: str, names, config, reads: int = 4) -> float:
     link = make_link(url, names, config)
     link.open()
