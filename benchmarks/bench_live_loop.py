@@ -5,7 +5,7 @@ process, as `livezmp demo` runs it, behind XM430 chains whose bytes take their w
 (10 bits at the baud), whose servos wait their Return Delay Time, and whose USB-serial
 adapter adds its latency (full-speed FTDI, latency timer 1 ms: 0.5 ms out + 1 ms back; or
 a high-speed adapter: 0.06 + 0.13 ms). The loop runs here on absolute deadlines under
-SCHED_FIFO with its memory locked, waking by sleep then spin (the simulator just below it,
+SCHED_FIFO with its memory locked (the simulator just below it,
 standing in for the servos' own hardware). Each configuration is run side by side:
 
 * bus only (baseline): the same clock and link, read + write of the present posture each
@@ -36,7 +36,7 @@ from pathlib import Path
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync_write_bytes
-from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock
+from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
@@ -51,7 +51,7 @@ OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 
 def bus_only(link, rate: float, seconds: float) -> dict:
     """Read + write every cycle on the loop's clock: the baseline."""
-    clock = LoopClock(rate, spin_s=SPIN_BEFORE_DEADLINE_S)
+    clock = LoopClock(rate)
     latency, read, write = TimingHistogram(), TimingHistogram(), TimingHistogram()
     clock.start()
     failed = 0

@@ -134,13 +134,15 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
 
 def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch):
     """--realtime-priority 30 --cpu N: the loop runs under SCHED_FIFO 30 on CPU N with its memory
-    locked (seen from inside the loop), and the thread gets its policy and CPUs back afterwards."""
+    locked, waking by sleep then spin (seen from inside the loop), and the thread gets its policy
+    and CPUs back afterwards."""
     import livezmp.commands.run as run_command
     seen = []
 
     class Watched(run_command.LiveLoop):
         def run(self, duration=None):
-            seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0)))
+            seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.sched_getaffinity(0),
+                         self.clock.spin_s))
             return super().run(duration)
 
     monkeypatch.setattr(run_command, "LiveLoop", Watched)
@@ -150,7 +152,7 @@ def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch
     assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.1", "--quiet",
                  "--realtime-priority", "30", "--cpu", str(cpu), "--summary-json", str(path)]) == 0
     s = json.loads(path.read_text())
-    assert seen == [(os.SCHED_FIFO, 30, {cpu})]
+    assert seen == [(os.SCHED_FIFO, 30, {cpu}, 2e-4)]  # on its own CPU it spins the last 0.2 ms to each deadline
     assert s["realtime_priority"] == 30 and s["memory_locked"] is True
     assert (os.sched_getscheduler(0), os.sched_getaffinity(0)) == before
 

@@ -30,6 +30,7 @@ from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, parse_adapter
 from livezmp.live import scenarios as sc
+from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.realtime import LOOP_PRIORITY, check_priority, memory_locked, parse_cpus, realtime_priority
@@ -170,11 +171,14 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
     # made here, its writer thread keeps normal scheduling when this thread asks for SCHED_FIFO
     recorder = open_recorder(args, robot, config, source) if args.record else None
     try:
-        loop = LiveLoop(link, robot.body, config, command=command, fell=fell, on_event=status.event,
+        cpus = loop_cpus(args)
+        # on its own CPUs the loop wakes by sleep then spin (livezmp.live.clock); sharing them, it sleeps
+        clock = LoopClock(config.rate_hz, spin_s=SPIN_BEFORE_DEADLINE_S if cpus else 0.0)
+        loop = LiveLoop(link, robot.body, config, command=command, clock=clock, fell=fell, on_event=status.event,
                         on_status=status, recorder=recorder)
         priority, required = loop_priority(args)
         with (stop_on_signals(loop.request_stop),
-              realtime_priority(priority, loop_cpus(args), lock_memory=True, required=required) as refused,
+              realtime_priority(priority, cpus, lock_memory=True, required=required) as refused,
               switch_interval(RECORD_SWITCH_INTERVAL_S if recorder else None)):
             if refused not in (None, "off"):
                 status.event(f"real-time priority {refused}: the loop runs at normal priority")

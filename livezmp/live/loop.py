@@ -68,7 +68,7 @@ from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.ground_tilt import GroundTilt
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkUnusable
-from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock, Tick
+from livezmp.live.clock import LoopClock, Tick
 from livezmp.live.config import CONTACT_MODES, LoopConfig
 from livezmp.live.fall_detection import FallDetector
 from livezmp.live.recorder import LoopRecorder
@@ -129,7 +129,7 @@ class LiveLoop:
             raise InputError(f"corrector rate {cfg.correct_hz!r} Hz: must be a positive number")
         if cfg.contacts not in CONTACT_MODES:
             raise InputError(f"contacts {cfg.contacts!r}: expected one of {', '.join(CONTACT_MODES)}")
-        self.clock = clock or LoopClock(cfg.rate_hz, spin_s=SPIN_BEFORE_DEADLINE_S)
+        self.clock = clock or LoopClock(cfg.rate_hz)
         self.dt = self.clock.period
         self.correct_every = max(1, round(1.0 / (self.dt * cfg.correct_hz)))
         self.command = command
