@@ -26,7 +26,7 @@ def recording(tmp_path_factory):
     sk = read_skeleton(WALK)
     body, spec = skeleton_body(sk)
     path = tmp_path_factory.mktemp("fox") / "s.mcap"
-    rec = Recorder(path, spec, {"fps": 30.0}, body.channel_names)
+    rec = Recorder(path, spec, {"fps": 30.0}, body.channel_names, scene_hz=None)
     pipe = Pipeline(body, default_config(body, 30.0), sk.motion.frame_time)
     results = []
     for k in range(120):
@@ -95,3 +95,32 @@ def test_scene_draws_the_result_of_its_frame(recording):
         np.testing.assert_allclose(centres, expect, atol=1e-12)
         polygon = [(p.x, p.y) for p in e.lines[1].points] if len(r.polygon) else []
         np.testing.assert_allclose(np.reshape(polygon, (-1, 2)), np.reshape(r.polygon, (-1, 2)), atol=1e-12)
+
+
+def test_a_fast_stream_draws_its_scene_at_the_display_rate_and_keeps_every_result(tmp_path):
+    """240 results a second: a scene every fourth (60 Hz, the default), each the scene of the result
+    logged at its time; /result has all 240."""
+    sk = read_skeleton(WALK)
+    body, spec = skeleton_body(sk)
+    rec = Recorder(tmp_path / "fast.mcap", spec, {"fps": 240.0}, body.channel_names)
+    pipe = Pipeline(body, default_config(body, 30.0), sk.motion.frame_time)
+    logged = {}
+    for k in range(240):
+        r = pipe.step(k * sk.motion.frame_time, sk.motion.frames[k % len(sk.motion.frames)])
+        if r is not None:
+            t = 10**9 + round(k * 1e9 / 240)
+            rec.result(r, log_time_ns=t)
+            logged[t] = r
+    rec.close()
+    with open(tmp_path / "fast.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        scenes = [(m.log_time, d) for _, _, m, d in reader.iter_decoded_messages(topics=["/foxglove/scene"])]
+    with open(tmp_path / "fast.mcap", "rb") as f:
+        n_results = sum(1 for _ in make_reader(f).iter_messages(topics=["/result"]))
+    times = sorted(logged)
+    assert n_results == len(logged) > 200
+    assert [t for t, _ in scenes] == times[::4]
+    for t, scene in scenes:
+        (e,) = scene.entities
+        com = e.spheres[-1].pose.position  # the last sphere: no plate CoP is drawn here
+        np.testing.assert_allclose([com.x, com.y, com.z], logged[t].com, atol=1e-12)

@@ -3,8 +3,8 @@
 Beside the JSON channels, a recording carries protobuf messages of Foxglove's published
 schemas (``foxglove-schemas-protobuf``; each schema stored as its FileDescriptorSet):
 
-- ``/foxglove/scene`` (``foxglove.SceneUpdate``): one entity ``balance`` per analysed
-  frame with the ZMP (red sphere), the clamped ZMP (orange), the CoM (blue) and its
+- ``/foxglove/scene`` (``foxglove.SceneUpdate``): one entity ``balance`` per drawn
+  frame (the recorder's ``scene_hz``, 60 a second by default; ``/result`` has them all) with the ZMP (red sphere), the clamped ZMP (orange), the CoM (blue) and its
   plumb line to the ground, force-plate centres of pressure (green), the support
   polygon (white loop) and the footprints (grey loops);
 - ``/foxglove/zmp``, ``/foxglove/com`` (``foxglove.PoseInFrame``) and ``/foxglove/cop``

@@ -31,17 +31,24 @@ from livezmp.recording.schemas import BODY_PREFIX, PROFILE, SCHEMAS, input_messa
 CHUNK_SECONDS = 0.5
 IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
 CHUNK_BYTES = 1 << 20
+SCENE_HZ = 60.0  # Foxglove scene messages a second at most: a display's rate (/result keeps every frame)
 
 class Recorder:
     """Writes one session to ``path`` (see the module docstring). ``session`` holds the
     monitor settings (plain JSON values); ``channel_names`` the body's input channels;
     ``extra_schemas`` further topics (e.g. :data:`LOOP_SCHEMAS`); ``scene``: register the
-    Foxglove scene channels that :meth:`result` fills (:mod:`livezmp.recording.foxglove`)."""
+    Foxglove scene channels that :meth:`result` fills (:mod:`livezmp.recording.foxglove`),
+    at most ``scene_hz`` results a second of log time (None: every result). Building and
+    writing a frame's scene costs about twice its ``/result`` (0.1 ms); a 1 kHz capture
+    needs it no more often than a screen shows it."""
 
     def __init__(self, path: str | Path, body_spec: BodySpec, session: dict, channel_names: list[str],
                  chunk_seconds: float = CHUNK_SECONDS, chunk_bytes: int = CHUNK_BYTES,
-                 extra_schemas: dict[str, tuple[str, dict]] | None = None, scene: bool = True):
+                 extra_schemas: dict[str, tuple[str, dict]] | None = None, scene: bool = True,
+                 scene_hz: float | None = SCENE_HZ):
         self.path = Path(path)
+        self.scene_period_ns = 0 if scene_hz is None else int(1e9 / scene_hz)
+        self._next_scene_ns = None
         try:
             self._file = open(self.path, "xb")  # noqa: SIM115 - closed in close(); never overwrite a session
         except FileExistsError:
@@ -77,14 +84,17 @@ class Recorder:
         self.tick()
 
     def result(self, r, cop: np.ndarray | None = None, log_time_ns: int | None = None) -> None:
-        """The ``/result`` of a FrameResult ``r`` and its Foxglove scene, with the plates'
-        measured centre of pressure ``cop`` (3,) m in the result's frame if any, at one
-        log time."""
+        """The ``/result`` of a FrameResult ``r`` and its Foxglove scene (when one is due), with
+        the plates' measured centre of pressure ``cop`` (3,) m in the result's frame if any, at
+        one log time."""
         now = time.time_ns() if log_time_ns is None else log_time_ns
         message = result_message(r)
         if cop is not None:
             message["cop"] = point_message(cop)
         self.write("/result", message, now)
+        if not self.scene_channels or (self._next_scene_ns is not None and now < self._next_scene_ns):
+            return
+        self._next_scene_ns = now + self.scene_period_ns
         for topic, data in foxglove.scene_messages(r, now, [] if cop is None else [cop]).items():
             self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
             self.counts[topic] += 1
