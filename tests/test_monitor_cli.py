@@ -96,10 +96,11 @@ def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
     path, broken, fixed = tmp_path / "demo.mcap", tmp_path / "broken.mcap", tmp_path / "fixed.mcap"
     body, spec = robot_body(demo_robot_path())
     traj = demo_trajectory(body.joint_names)
-    rec = Recorder(path, spec, {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False},
-                   body.channel_names, chunk_bytes=16384)  # many chunks
+    cfg = default_config(body, 100.0)
+    rec = Recorder(path, spec, {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False,
+                                "cutoff_hz": cfg.estimator.cutoff_hz}, body.channel_names, chunk_bytes=16384)
     Monitor(FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), speed=0),
-            default_config(body, 100.0), recorder=rec).run()
+            cfg, recorder=rec).run()
     total = sum(open_recording(path).counts.values())
     data = path.read_bytes()
     broken.write_bytes(data[: len(data) // 2])  # the summary and the last chunks are gone
@@ -224,8 +225,9 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
     lat = summary["latency"]["result_after_input"]
     assert 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
     assert summary["latency"]["result_after_source_stamp"] is None  # UDP frames' times are the sender's clock
-    est = summary["estimator"]  # 30 Hz skeleton: the 0.1 s lag is 3 frames
-    assert (est["lag_frames"], est["lag_s"], est["lag_ms"]) == (3, 0.1, pytest.approx(100.0))
+    est = summary["estimator"]  # 30 Hz skeleton: cutoff 3.03 Hz, lag 0.6 / cutoff = 0.198 s, 6 frames
+    assert est["cutoff_hz"] == pytest.approx(4.0 * 0.25**0.2) and est["lag_s"] == pytest.approx(0.6 / est["cutoff_hz"])
+    assert (est["lag_frames"], est["lag_ms"]) == (6, pytest.approx(200.0))
     assert main(["replay", str(path)]) == 0
     assert "same analysis" in capsys.readouterr().out
 

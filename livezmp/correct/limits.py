@@ -28,6 +28,7 @@ class CorrectionLimits:
     rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
     accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
     iterations: int = 30
+    foot_hold_m: float = 0.0006  # how far a weight-bearing foot may move (the promise is 1 mm)
 
 
 def stance_weights(results: list[FrameResult], ramp_frames: int) -> np.ndarray:

@@ -45,6 +45,7 @@ class TakeOptions:
     ``mass`` kg (None: the file's subject mass for a C3D, else 70 kg), ``sole_width`` m, ``ground`` m in
     the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``; ``subject``
     and ``markers``: a subject file and a marker map (C3D only)."""
+    cutoff_hz: float | None = None
 
     robot: str | None = None
     robot_config: str | None = None
@@ -58,6 +59,7 @@ class TakeOptions:
     tolerance_mm: float = VALIDATED_P95_MM
     subject: str | None = None  # subject file (livezmp calibrate): a BVH's HAT mass fraction, a C3D's HAT
     markers: str | None = None
+    cutoff_hz: float | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
         subject = load_subject(self.subject) if self.subject else None
@@ -78,22 +80,24 @@ class TakeOptions:
         return path is not None and Path(path).suffix.lower() == ".bvh" and self.robot is None
 
 
-def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None) -> PipelineConfig:
-    """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) if given."""
+def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None,
+                cutoff_hz: float | None = None) -> PipelineConfig:
+    """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) and
+    the estimator's ``cutoff_hz`` (Hz) if given."""
     ground_z = None
     if ground is not None:
         p = np.zeros(3)
         p["xyz".index(loaded.body.up_axis)] = ground
         ground_z = float((loaded.body.world_from_input @ p)[2])
-    return default_config(loaded.body, loaded.fps, mode, ground_z)
+    return default_config(loaded.body, loaded.fps, mode, ground_z, cutoff_hz)
 
 
 def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | None = None,
-                   progress: Callable[[int], None] | None = None) -> BatchResult:
+                   progress: Callable[[int], None] | None = None, cutoff_hz: float | None = None) -> BatchResult:
     """The pipeline over a loaded take: its per-frame results."""
     if len(loaded.frames) < 2:
         raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
-    cfg = take_config(loaded, mode, ground)
+    cfg = take_config(loaded, mode, ground, cutoff_hz)
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
 
@@ -119,7 +123,7 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
                    progress: Callable[[int], None] | None = None) -> TakeAnalysis:
     """The analysis of a loaded take; the summary keeps the estimator's settings, so a user sees what
     smoothed the take (README: choosing them)."""
-    result = analyse_loaded(loaded, options.mode, options.ground, progress)
+    result = analyse_loaded(loaded, options.mode, options.ground, progress, options.cutoff_hz)
     summary = {"source": loaded.source,
                **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
                "estimator": _estimator_settings(loaded, options)}
@@ -127,7 +131,8 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
 
 
 def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -> dict:
-    return asdict(replace(take_config(take, options.mode, options.ground).estimator, rate_hz=take.fps))
+    return asdict(replace(take_config(take, options.mode, options.ground, options.cutoff_hz).estimator,
+                          rate_hz=take.fps))
 
 
 def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None = None, plot: str | Path | None = None,
@@ -139,7 +144,7 @@ def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None =
     check_not_c3d_options(options, path)
     subject = load_subject(options.subject) if options.subject else None
     take = open_bvh_take(path, options.bvh_options(subject))
-    cfg = take_config(take, options.mode, options.ground)
+    cfg = take_config(take, options.mode, options.ground, options.cutoff_hz)
     stats = TakeStats(take.total, take.fps, options.tolerance_mm)
     series = None
     if plot:
