@@ -11,8 +11,10 @@ Choosing the parameters (all in seconds or Hz, converted with ``rate_hz``):
 
 * ``cutoff_hz``: the smoothing spline passes motion below it and has gain 1/2
   at it; velocity goes through one such stage, acceleration through two.
-  6 Hz (the usual low-pass for human marker data) suits gait and whole-body
-  motion; raise it for fast robot joints with clean encoders.  Errors scale
+  6 Hz (the usual low-pass for human marker data) suits clean gait and
+  whole-body motion; raise it for fast robot joints with clean encoders.  The
+  analysis commands' defaults lower it with the frame rate so that measurement
+  noise hurts equally at every rate (:func:`default_cutoff`).  Errors scale
   with (motion frequency / cutoff_hz), noise grows as cutoff_hz^2.5 in
   acceleration.
 * ``lag_s``: delay of the output.  A smoothing spline is least accurate at
