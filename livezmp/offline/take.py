@@ -44,8 +44,8 @@ class TakeOptions:
     """How a take is loaded and analysed (the body options of ``livezmp analyze``):
     ``mass`` kg (None: the file's subject mass for a C3D, else 70 kg), ``sole_width`` m, ``ground`` m in
     the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``; ``subject``
-    and ``markers``: a subject file and a marker map (C3D only)."""
-    cutoff_hz: float | None = None
+    and ``markers``: a subject file and a marker map (C3D only); ``cutoff_hz`` the estimator's
+    cutoff, Hz (None: the default for the take's rate)."""
 
     robot: str | None = None
     robot_config: str | None = None
