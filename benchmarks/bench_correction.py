@@ -30,7 +30,7 @@ import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.correct.edit import apply_delta
-from livezmp.correct.limits import stance_weights
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, stance_weights
 from livezmp.correct.root_motion import RootMover
 from livezmp.correct.seed_search import seed_grid_search
 from livezmp.correct.solver import correct_motion
@@ -65,7 +65,7 @@ def skeleton_table(walk: str, frames: int) -> None:
         motion = sv.compose(variant)
         body = body_from_bvh(motion)
         times = np.arange(len(motion.frames)) * motion.frame_time
-        cfg = default_config(body, motion.fps)
+        cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct`
         with_check = correct_motion(body, times, motion.frames, cfg, nominal_dt=motion.frame_time).report()
         with mock.patch("livezmp.correct.solver.hold_feet", lambda mover, body, fr, delta, *a: (delta, [])):
             without = correct_motion(body, times, motion.frames, cfg, nominal_dt=motion.frame_time).report()
@@ -89,7 +89,7 @@ def main() -> None:
     body = body_from_bvh(motion)
     frames = motion.frames[: args.frames]
     times = np.arange(len(frames)) * motion.frame_time
-    cfg = default_config(body, motion.fps)
+    cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct`
 
     s = time.perf_counter()
     solved = correct_motion(body, times, frames, cfg, nominal_dt=motion.frame_time)

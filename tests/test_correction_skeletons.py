@@ -13,6 +13,7 @@ from data_paths import BANDAI
 
 from livezmp.balance.pipeline import default_config
 from livezmp.correct.edit import foot_displacement, hold_feet
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ
 from livezmp.correct.root_motion import RootMover
 from livezmp.correct.solver import correct_motion
 from livezmp.model.bvh import read_bvh
@@ -39,7 +40,8 @@ def test_feet_held_within_1_mm_on_other_skeletons(name):
     motion = sv.compose(VARIANTS[name]())
     body = body_from_bvh(motion)
     times = np.arange(len(motion.frames)) * motion.frame_time
-    result = correct_motion(body, times, motion.frames, default_config(body, motion.fps), nominal_dt=motion.frame_time)
+    cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct` judges it
+    result = correct_motion(body, times, motion.frames, cfg, nominal_dt=motion.frame_time)
     rep = result.report()
     # measured independently of the solver's own report: every foot frame, both takes' kinematics
     feet = foot_displacement(body, motion.frames, result.frames, [r.support for r in result.before])

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,9 +34,9 @@ from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, defa
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.balance.zmp import compute_zmp
 from livezmp.correct.edit import apply_delta, changed_channels, foot_displacement, hold_feet
-from livezmp.correct.limits import CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
 from livezmp.correct.root_motion import RootMover
-from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
@@ -56,6 +56,7 @@ class CorrectionResult:
     solver_s: float
     history: list[int] = field(default_factory=list)  # frames outside after each iteration
     foot_held_frames: list[int] = field(default_factory=list)  # rotations scaled down to keep a loaded foot
+    estimator: EstimatorConfig | None = None  # the settings the motion was judged with
 
     def report(self) -> dict:
         judged_b = [r for r in self.before if r.inside is not None]
@@ -80,6 +81,7 @@ class CorrectionResult:
             "max_swing_foot_displacement_mm": round(1000 * self.foot_displacement_m["swing"], 4),
             "solver_ms_per_frame": round(1000 * self.solver_s / max(n, 1), 4),
             "outside_after_iteration": self.history,
+            "estimator": asdict(self.estimator) if self.estimator else None,
         }
 
     def _fps(self) -> float:
@@ -412,7 +414,8 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     after = analyse(corrected)
     solver_s = time.perf_counter() - t0
     feet = foot_displacement(body, frames, corrected, supports)
-    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history, sorted(held_feet))
+    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history, sorted(held_feet),
+                            config.estimator)
 
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
@@ -421,6 +424,7 @@ def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
     what the correction did."""
     body = body_from_bvh(motion, BvhBodyOptions(total_mass=total_mass))
     times = np.arange(len(motion.frames)) * motion.frame_time
-    result = correct_motion(body, times, motion.frames, default_config(body, motion.fps, mode), limits,
+    result = correct_motion(body, times, motion.frames,
+                            default_config(body, motion.fps, mode, cutoff_hz=CORRECTION_CUTOFF_HZ), limits,
                             nominal_dt=motion.frame_time)
     return replace(motion, frames=result.frames), result

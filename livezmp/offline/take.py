@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits
+from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits, correction_cutoff
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
@@ -175,19 +175,22 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
             "complete": lab.complete.astype(float)}
 
 
-def lab_options(options: TakeOptions) -> LabOptions:
-    """How a C3D take is read: the marker map and the subject file's parameters, if given."""
+def lab_options(options: TakeOptions, cutoff_hz: float | None) -> LabOptions:
+    """How a C3D take is read: the marker map and the subject file's parameters, if given, and the
+    estimator's ``cutoff_hz`` (Hz; None: the lab's own, :data:`livezmp.offline.gaitlab.LAB_ESTIMATOR`)."""
     markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
     markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
-    return LabOptions(mass=options.mass, mode=options.mode, markers=markers)
+    return LabOptions(mass=options.mass, mode=options.mode, markers=markers,
+                      estimator=None if cutoff_hz is None else {"cutoff_hz": cutoff_hz})
 
 
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
-    lab = analyse_lab_take(read_c3d(path), lab_options(options))
+    lab = analyse_lab_take(read_c3d(path), lab_options(options, options.cutoff_hz))
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
-                                                options.tolerance_mm), **lab.summary}
+                                                options.tolerance_mm), **lab.summary,
+               "estimator": asdict(lab.config.estimator)}
     plates = lab.plates is not None
     return TakeAnalysis(lab.take.body, lab.result, lab.rate, str(path), summary, _lab_columns(lab),
                         lab.plates.cop if plates else None, lab.complete if plates else None)
@@ -239,7 +242,7 @@ def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOption
     check_correctable(loaded.source, len(loaded.frames))
     from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
 
-    cfg = take_config(loaded, options.mode, options.ground)
+    cfg = take_config(loaded, options.mode, options.ground, correction_cutoff(options.cutoff_hz))
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
                             progress=progress)
     with atomic_path(output) as tmp:
@@ -259,7 +262,8 @@ def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions,
 
     trial = read_c3d(path)
     check_correctable(path, len(trial.points))
-    fix = correct_marker_take(trial, lab_options(options), limits, non_position_labels(path), progress=progress)
+    fix = correct_marker_take(trial, lab_options(options, correction_cutoff(options.cutoff_hz)), limits,
+                              non_position_labels(path), progress=progress)
     with atomic_path(output) as tmp:
         if str(output).lower().endswith(".c3d"):
             write_moved_points(path, tmp, fix.moved, fix.added, fix.first_frame)
