@@ -46,8 +46,8 @@ def skeleton_table(walk: str, frames: int) -> None:
 
     s = sv.decompose(read_bvh(BANDAI / walk))
     s.trans, s.rot = s.trans[:frames], s.rot[:frames]
-    short = sv.decompose(read_bvh(BANDAI / walk))
-    short.trans, short.rot = short.trans[: frames // 4 + 1], short.rot[: frames // 4 + 1]
+    short = sv.decompose(read_bvh(BANDAI / walk))  # from frame 40, as the test: the walk's first frames are inside
+    short.trans, short.rot = short.trans[40: 40 + frames // 4 + 1], short.rot[40: 40 + frames // 4 + 1]
     thighs = {"L": "UpperLeg_L", "R": "UpperLeg_R"}
     variants = {
         "bandai (cm, y up, ZXY, 30 Hz)": s,
@@ -58,7 +58,7 @@ def skeleton_table(walk: str, frames: int) -> None:
         "120 Hz (slerped)": sv.resampled(short, 4),
     }
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}; {walk}, first {frames} frames "
-          f"(120 Hz: the first {frames // 4 + 1}, resampled)")
+          f"(120 Hz: {frames // 4 + 1} from frame 40, resampled)")
     print(f"{'skeleton':32s} {'frames':>6s} {'outside before':>14s} {'after':>6s} "
           f"{'loaded feet mm: feet check':>27s} {'without':>8s} {'frames held':>11s}")
     for name, variant in variants.items():
