@@ -8,19 +8,29 @@ Printed side by side: rotation size on the frames both treat, time per frame, an
 many frames are inside when each result is re-analysed as a motion.
 
     python benchmarks/bench_correction.py [--walk walk_normal_001.bvh] [--frames 120]
+
+With ``--skeletons`` it corrects the walk's first ``--frames`` frames re-expressed exactly on
+other skeletons (tests/skeleton_variants.py) and prints, per skeleton, how far the
+weight-bearing feet move with the final check on the feet (livezmp.correct.edit.hold_feet)
+and without it (the solver's first-order rotation bounds alone), and the frames outside:
+
+    python benchmarks/bench_correction.py --skeletons [--frames 90]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.correct.edit import apply_delta
-from livezmp.correct.limits import stance_weights
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, stance_weights
 from livezmp.correct.root_motion import RootMover
 from livezmp.correct.seed_search import seed_grid_search
 from livezmp.correct.solver import correct_motion
@@ -30,17 +40,56 @@ from livezmp.model.bvh_body import body_from_bvh
 BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh" / "bandai"
 
 
+def skeleton_table(walk: str, frames: int) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import skeleton_variants as sv
+
+    s = sv.decompose(read_bvh(BANDAI / walk))
+    s.trans, s.rot = s.trans[:frames], s.rot[:frames]
+    short = sv.decompose(read_bvh(BANDAI / walk))  # from frame 40, as the test: the walk's first frames are inside
+    short.trans, short.rot = short.trans[40: 40 + frames // 4 + 1], short.rot[40: 40 + frames // 4 + 1]
+    thighs = {"L": "UpperLeg_L", "R": "UpperLeg_R"}
+    variants = {
+        "bandai (cm, y up, ZXY, 30 Hz)": s,
+        "CMU-style hip joints, ZYX": sv.channel_orders(sv.cmu_hip_joints(sv.positions_below_root_dropped(s), thighs),
+                                                       "ZYX"),
+        "rotations YXZ, positions ZYX": sv.channel_orders(s, "YXZ", "ZYX"),
+        "z up, metres, XYZ": sv.channel_orders(sv.scaled(sv.z_up(s), 0.01), "XYZ", "ZXY"),
+        "120 Hz (slerped)": sv.resampled(short, 4),
+    }
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}; {walk}, first {frames} frames "
+          f"(120 Hz: {frames // 4 + 1} from frame 40, resampled)")
+    print(f"{'skeleton':32s} {'frames':>6s} {'outside before':>14s} {'after':>6s} "
+          f"{'loaded feet mm: feet check':>27s} {'without':>8s} {'frames held':>11s}")
+    for name, variant in variants.items():
+        motion = sv.compose(variant)
+        body = body_from_bvh(motion)
+        times = np.arange(len(motion.frames)) * motion.frame_time
+        cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct`
+        with_check = correct_motion(body, times, motion.frames, cfg, nominal_dt=motion.frame_time).report()
+        with mock.patch("livezmp.correct.solver.hold_feet", lambda mover, body, fr, delta, *a: (delta, [])):
+            without = correct_motion(body, times, motion.frames, cfg, nominal_dt=motion.frame_time).report()
+        print(f"{name:32s} {len(motion.frames):>6d} {with_check['out_of_support_before']:>14d} "
+              f"{with_check['out_of_support_after']:>6d} {with_check['max_foot_displacement_mm']:>27.3f} "
+              f"{without['max_foot_displacement_mm']:>8.3f} {len(with_check['foot_held_frames']):>11d}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--walk", default="walk_normal_001.bvh")
     ap.add_argument("--frames", type=int, default=120, help="frames of the walk to use (from its start)")
     ap.add_argument("--step-deg", type=float, default=0.5)
+    ap.add_argument("--skeletons", action="store_true",
+                    help="the walk on other skeletons: loaded feet, with and without the final check")
     args = ap.parse_args()
+    if args.skeletons:
+        skeleton_table(args.walk, args.frames)
+        return
     motion = read_bvh(BANDAI / args.walk)
     body = body_from_bvh(motion)
     frames = motion.frames[: args.frames]
     times = np.arange(len(frames)) * motion.frame_time
-    cfg = default_config(body, motion.fps)
+    cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct`
 
     s = time.perf_counter()
     solved = correct_motion(body, times, frames, cfg, nominal_dt=motion.frame_time)

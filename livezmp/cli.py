@@ -80,6 +80,8 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ground", type=float, help="ground height in the input frame, m (default: detected)")
     p.add_argument("--mode", choices=["full", "seed"], default="full",
                    help="ZMP of rigid segments (full) or point masses as in the seed paper (seed)")
+    p.add_argument("--cutoff-hz", type=float,
+                   help="estimator smoothing cutoff, Hz (default 4 x (rate / 120 Hz)^0.2: 3.0 at 30 Hz, 4 at 120)")
 
 
 def _analysis_commands(sub: argparse._SubParsersAction) -> None:

@@ -82,7 +82,8 @@ def test_bandai_walk_equals_per_frame(mode):
     worst = assert_same(got, want)
     labels = set(got.labels)
     assert labels == {"left", "right", "double", "none"}  # every support, flight included
-    assert (~got.has_zmp).sum() >= 5 and got.judged.sum() > 150 and (~got.inside[got.judged]).sum() > 10
+    # flight: the hop's step to free fall, smoothed at 3 Hz (30 Hz default), is near -g for 4 frames
+    assert (~got.has_zmp).sum() >= 3 and got.judged.sum() > 150 and (~got.inside[got.judged]).sum() > 10
     print(f"\n{mode}: largest batch - per-frame differences {worst}")
 
 

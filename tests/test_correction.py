@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.cli import main
-from livezmp.correct.limits import CorrectionLimits, rate_limit
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, rate_limit
 from livezmp.correct.online import OnlineCorrector
 from livezmp.correct.root_motion import RootMover, euler_from_matrix, hip_axes
 from livezmp.model.base_placement import BasePlacer
@@ -105,9 +105,12 @@ def test_correct_cli_on_a_bandai_walk(tmp_path):
                 "max_root_rotation_deg", "rms_root_rotation_deg", "max_foot_displacement_mm", "solver_ms_per_frame"):
         assert key in report
     assert report["out_of_support_before"] > 50
-    assert main(["analyze", str(out), "--summary-json", str(summ)]) == 0
+    # judged with the correction's own estimator settings, which the report gives (README: correct)
+    assert report["estimator"]["cutoff_hz"] == CORRECTION_CUTOFF_HZ
+    assert main(["analyze", str(out), "--cutoff-hz", str(report["estimator"]["cutoff_hz"]),
+                 "--summary-json", str(summ)]) == 0
     after = json.loads(summ.read_text())
-    assert after["inside_fraction"] >= 0.99
+    assert after["inside_fraction"] >= 0.99 and after["estimator"] == report["estimator"]
     assert after["out_of_support_frames"] == report["out_of_support_after"]
     a, b = read_bvh(src), read_bvh(out)
     assert [j.name for j in a.joints] == [j.name for j in b.joints]
@@ -211,8 +214,11 @@ def test_correct_cli_on_a_robot_csv(tmp_path, op3_body):
     np.savetxt(src, np.column_stack([t, q]), delimiter=",", header=",".join(["time", *names]), comments="")
     assert main(["analyze", str(src), "--robot", str(OP3_URDF), "--summary-json", str(summ)]) == 0
     assert json.loads(summ.read_text())["out_of_support_frames"] > 50
-    assert main(["correct", str(src), "--robot", str(OP3_URDF), "-o", str(out), "--report", str(rep)]) == 0
-    assert main(["analyze", str(out), "--robot", str(OP3_URDF), "--summary-json", str(summ)]) == 0
+    # --cutoff-hz overrides the correction's own estimator cutoff too; the report says which was used
+    assert main(["correct", str(src), "--robot", str(OP3_URDF), "--cutoff-hz", "5", "-o", str(out),
+                 "--report", str(rep)]) == 0
+    assert json.loads(rep.read_text())["estimator"]["cutoff_hz"] == 5.0
+    assert main(["analyze", str(out), "--robot", str(OP3_URDF), "--cutoff-hz", "5", "--summary-json", str(summ)]) == 0
     after = json.loads(summ.read_text())
     assert after["inside_fraction"] >= 0.99
     fixed = np.loadtxt(out, delimiter=",", skiprows=1)

@@ -37,7 +37,7 @@ from sim_devices.natnet_server import NatNetServer
 from sim_devices.qtm_server import QtmServer
 
 TRIAL = C3D / "walk_plugingait_forceplates.c3d"
-SAME_ESTIMATOR = ["--window-s", "0.8", "--lag-s", "0.4"]  # analyze's for a C3D take (offline.gaitlab)
+SAME_ESTIMATOR = ["--cutoff-hz", "6", "--window-s", "0.8", "--lag-s", "0.4"]  # analyze's for a C3D take (gaitlab)
 # NatNet's y-up axes (x, z, -y) of the z-up file, turned into the internal frame as y-up input is: (-y, x, z)
 NATNET_TURN = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 

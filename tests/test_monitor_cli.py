@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import threading
+from dataclasses import replace
 
 import pytest
 from data_paths import BANDAI, ROOT
@@ -25,6 +26,7 @@ from sim_support import wait_until
 
 from livezmp.balance.pipeline import default_config
 from livezmp.cli import main
+from livezmp.estimate.estimator import EstimatorConfig, default_cutoff
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh import read_bvh
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -96,10 +98,11 @@ def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
     path, broken, fixed = tmp_path / "demo.mcap", tmp_path / "broken.mcap", tmp_path / "fixed.mcap"
     body, spec = robot_body(demo_robot_path())
     traj = demo_trajectory(body.joint_names)
-    rec = Recorder(path, spec, {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False},
-                   body.channel_names, chunk_bytes=16384)  # many chunks
+    cfg = default_config(body, 100.0)
+    rec = Recorder(path, spec, {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False,
+                                "cutoff_hz": cfg.estimator.cutoff_hz}, body.channel_names, chunk_bytes=16384)
     Monitor(FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), speed=0),
-            default_config(body, 100.0), recorder=rec).run()
+            cfg, recorder=rec).run()
     total = sum(open_recording(path).counts.values())
     data = path.read_bytes()
     broken.write_bytes(data[: len(data) // 2])  # the summary and the last chunks are gone
@@ -112,6 +115,29 @@ def test_a_recovered_recording_replays_the_same(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "same analysis" in out
 
+
+
+def test_a_recording_without_a_cutoff_replays_at_the_old_6_hz(tmp_path, capsys):
+    """Monitor recordings made before the per-rate defaults (issue 12) carry no cutoff: they ran at the
+    fixed 6 Hz settings (0.4 s window, 0.1 s lag), and replay re-runs with those and reproduces them; the
+    same results said to be made at the per-rate default (3.9 Hz at 100 Hz) replay as different."""
+    body, spec = robot_body(demo_robot_path())
+    traj = demo_trajectory(body.joint_names, duration=7.5)  # its lean (from 6 s) goes out of support
+    fixed_6_hz = replace(default_config(body, 100.0), estimator=EstimatorConfig(rate_hz=100.0))  # the settings then
+    session = {"fps": 100.0, "mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False}  # as then
+    paths = {}
+    for name, extra in (("old", {}), ("labelled_per_rate", {"cutoff_hz": default_cutoff(100.0)})):
+        paths[name] = tmp_path / f"{name}.mcap"
+        Monitor(FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), speed=0), fixed_6_hz,
+                recorder=Recorder(paths[name], spec, {**session, **extra}, body.channel_names)).run()
+    assert "cutoff_hz" not in open_recording(paths["old"]).session
+    assert sum(m["event"] == "raised" for m in iter_messages(str(paths["old"]), "/alarm")) >= 1
+    capsys.readouterr()
+    assert main(["replay", str(paths["old"])]) == 0
+    out = capsys.readouterr().out
+    assert "max ZMP difference 0.000000 mm, 0 support differences" in out and "same analysis" in out
+    assert main(["replay", str(paths["labelled_per_rate"])]) == 1
+    assert "DIFFERENT analysis" in capsys.readouterr().out
 
 @pytest.mark.parametrize("argv, message", [
     (["monitor", "--dashboard", "0.0.0.0:0"], "serving beyond loopback needs --allow-remote"),
@@ -224,8 +250,9 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
     lat = summary["latency"]["result_after_input"]
     assert 0 < lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
     assert summary["latency"]["result_after_source_stamp"] is None  # UDP frames' times are the sender's clock
-    est = summary["estimator"]  # 30 Hz skeleton: the 0.1 s lag is 3 frames
-    assert (est["lag_frames"], est["lag_s"], est["lag_ms"]) == (3, 0.1, pytest.approx(100.0))
+    est = summary["estimator"]  # 30 Hz skeleton: cutoff 3.03 Hz, lag 0.6 / cutoff = 0.198 s, 6 frames
+    assert est["cutoff_hz"] == pytest.approx(4.0 * 0.25**0.2) and est["lag_s"] == pytest.approx(0.6 / est["cutoff_hz"])
+    assert (est["lag_frames"], est["lag_ms"]) == (6, pytest.approx(200.0))
     assert main(["replay", str(path)]) == 0
     assert "same analysis" in capsys.readouterr().out
 

@@ -19,7 +19,7 @@ from livezmp.balance.contacts import ContactConfig, ContactDetector, GroundConfi
 from livezmp.balance.support import support_and_clamp
 from livezmp.balance.zmp import compute_zmp, zmp_on_plane
 from livezmp.errors import InputError
-from livezmp.estimate.estimator import Estimate, EstimatorConfig, StreamingEstimator
+from livezmp.estimate.estimator import Estimate, EstimatorConfig, StreamingEstimator, default_estimator
 from livezmp.model.body import BodyModel, foot_soles, lowest_sole_points
 
 MODES = ("full", "seed")
@@ -64,13 +64,17 @@ class FrameResult:
     load: float = 0.0  # vertical ground force over body weight (1 standing still, 0 in flight)
 
 
-def default_config(body: BodyModel, fps: float, mode: str = "full", ground_z: float | None = None) -> PipelineConfig:
+def default_config(body: BodyModel, fps: float, mode: str = "full", ground_z: float | None = None,
+                   cutoff_hz: float | None = None) -> PipelineConfig:
     """The configuration ``livezmp analyze`` uses: human or small-robot contact thresholds
     by body kind, contacts debounced over about 1/60 s whatever the frame rate (one frame
-    at 30 Hz, two at 120 Hz); ``ground_z`` in the internal frame (m), None = detected."""
+    at 30 Hz, two at 120 Hz); ``ground_z`` in the internal frame (m), None = detected; the
+    estimator's defaults for ``fps`` (:func:`livezmp.estimate.estimator.default_estimator`),
+    with ``cutoff_hz`` (Hz) if given."""
     contacts = ContactConfig.small_robot() if body.kind == "urdf" else ContactConfig()
     contacts = replace(contacts, min_frames=max(1, round(fps / 60)))
-    return PipelineConfig(mode=mode, contacts=contacts, ground_z=ground_z)
+    return PipelineConfig(mode=mode, estimator=default_estimator(fps, cutoff_hz), contacts=contacts,
+                          ground_z=ground_z)
 
 
 class Pipeline:

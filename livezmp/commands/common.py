@@ -47,7 +47,8 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
     return TakeOptions(robot=args.robot, robot_config=args.robot_config, mass=args.mass, units=args.units,
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
-                       subject=getattr(args, "subject", None), markers=getattr(args, "markers", None))
+                       subject=getattr(args, "subject", None), markers=getattr(args, "markers", None),
+                       cutoff_hz=args.cutoff_hz)
 
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
@@ -59,8 +60,8 @@ def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
 
 
 def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
-    """:func:`default_config` with the command line's mode and ground height."""
-    return take_config(loaded, args.mode, args.ground)
+    """:func:`default_config` with the command line's mode, ground height and estimator cutoff."""
+    return take_config(loaded, args.mode, args.ground, args.cutoff_hz)
 
 
 @contextlib.contextmanager

@@ -49,6 +49,7 @@ def _tell(report: dict, args: argparse.Namespace) -> None:
     print(f"{report['source']}: {report['out_of_support_before']} → {report['out_of_support_after']} of "
           f"{report['support_frames']} support frames outside; root rotation max "
           f"{report['max_root_rotation_deg']:.2f}°, rms {report['rms_root_rotation_deg']:.2f}°; stance feet moved "
-          f"≤ {report['max_foot_displacement_mm']:.3f} mm; wrote {args.output}")
+          f"≤ {report['max_foot_displacement_mm']:.3f} mm; judged at {report['estimator']['cutoff_hz']:g} Hz "
+          f"(analyze --cutoff-hz to compare); wrote {args.output}")
     if report["infeasible_frames"]:
         print(f"not fully corrected within the limits: frames {report['infeasible_frames']}")

@@ -146,6 +146,7 @@ def _monitor(args: argparse.Namespace) -> None:
         except EstimatorError as e:
             raise InputError(f"--window-s / --lag-s: {e}") from None
     session = {"source": source.name, "fps": fps, "mode": cfg.mode, "ground_z": cfg.ground_z,
+               "cutoff_hz": cfg.estimator.cutoff_hz,
                "alarm_after": args.alarm_after / 1000.0, "correct": args.correct}
     if settings:  # replay re-runs with them
         session["estimator"] = settings
@@ -187,7 +188,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     source = McapReplaySource(args.recording, args.speed)
     s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
-    cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"])
+    # sessions recorded before the per-rate defaults (issue 12) carry no cutoff: they ran at 6 Hz
+    cfg = default_config(source.body, s["fps"], s["mode"], s["ground_z"], s.get("cutoff_hz", 6.0))
     if "live_loop" in s:  # recorded by `livezmp run/demo --record`: the loop's own estimator settings
         cfg = replace(cfg, estimator=EstimatorConfig(rate_hz=s["fps"], **s["live_loop"]["estimator"]))
     elif "estimator" in s:  # a monitor session with --window-s / --lag-s

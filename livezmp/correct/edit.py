@@ -21,6 +21,47 @@ def apply_delta(mover: RootMover, body: BodyModel, frames: np.ndarray, delta: np
     return out
 
 
+def hold_feet(mover: RootMover, body: BodyModel, frames: np.ndarray, delta: np.ndarray, w: np.ndarray,
+              stance: list[str], tolerance: float, steps: int = 12) -> tuple[np.ndarray, list[int]]:
+    """``delta`` (F, 3, rad) with each frame's rotation scaled down, where needed, until every
+    foot bearing weight there (per the support labels ``stance``) moves at most ``tolerance``
+    (m) once the legs are re-solved; and the frames scaled.
+
+    The solver's rotation bounds come from a first-order model of how far a hip moves; this
+    measures the feet themselves, with the same kinematics as :func:`foot_displacement`, so
+    the promise holds on any skeleton the body model accepts whatever its joint layout,
+    channel orders, axes, units or rate. Bisection on the scale, ``steps`` halvings."""
+    out = delta.copy()
+    held = []
+    data_a, data_b = body.model.createData(), body.model.createData()
+    for k in range(len(frames)):
+        loaded = [s for s in ("left", "right") if stance[k] in (s, "double")]
+        if not loaded or not np.any(delta[k]):
+            continue
+        q = body.channels_to_q(frames[k])
+        pin.framesForwardKinematics(body.model, data_a, q)
+        feet = [f for s in loaded for f in body.correction.foot_frames[s]]
+        if _drift(mover, body, data_a, data_b, q, delta[k], w[k], feet) <= tolerance:
+            continue
+        lo, hi = 0.0, 1.0
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            if _drift(mover, body, data_a, data_b, q, mid * delta[k], w[k], feet) <= tolerance:
+                lo = mid
+            else:
+                hi = mid
+        out[k] = lo * delta[k]
+        held.append(k)
+    return out, held
+
+
+def _drift(mover: RootMover, body: BodyModel, before: pin.Data, after: pin.Data, q: np.ndarray, delta: np.ndarray,
+           w_left: float, feet: list[int]) -> float:
+    """Largest displacement (m) of the frames ``feet`` (placed in ``before``) once ``delta`` is applied to ``q``."""
+    pin.framesForwardKinematics(body.model, after, mover.apply(q, delta, w_left))
+    return max(float(np.linalg.norm(before.oMf[f].translation - after.oMf[f].translation)) for f in feet)
+
+
 def changed_channels(body: BodyModel) -> list[int]:
     """The raw channels a correction changes: the root's and each leg's correction channels."""
     corr = body.correction

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,10 +33,10 @@ from scipy.optimize import lsq_linear
 from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.balance.zmp import compute_zmp
-from livezmp.correct.edit import apply_delta, changed_channels, foot_displacement
-from livezmp.correct.limits import CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
+from livezmp.correct.edit import apply_delta, changed_channels, foot_displacement, hold_feet
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
 from livezmp.correct.root_motion import RootMover
-from livezmp.estimate.estimator import StreamingEstimator
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
@@ -55,6 +55,8 @@ class CorrectionResult:
     rate_limited_frames: list[int]
     solver_s: float
     history: list[int] = field(default_factory=list)  # frames outside after each iteration
+    foot_held_frames: list[int] = field(default_factory=list)  # rotations scaled down to keep a loaded foot
+    estimator: EstimatorConfig | None = None  # the settings the motion was judged with
 
     def report(self) -> dict:
         judged_b = [r for r in self.before if r.inside is not None]
@@ -71,6 +73,7 @@ class CorrectionResult:
             "inside_fraction_after": round(np.mean([r.inside for r in judged_a]), 6) if judged_a else None,
             "infeasible_frames": out_a,
             "rate_limited_frames": self.rate_limited_frames,
+            "foot_held_frames": self.foot_held_frames,
             "max_root_rotation_deg": round(float(np.abs(deg).max()), 4) if n else 0.0,
             "rms_root_rotation_deg": round(float(np.sqrt(np.mean(np.sum(deg**2, axis=1)))), 4) if n else 0.0,
             "max_root_rate_deg_s": round(float(np.abs(np.diff(deg, axis=0)).max() * self._fps()), 3) if n > 1 else 0.0,
@@ -78,6 +81,7 @@ class CorrectionResult:
             "max_swing_foot_displacement_mm": round(1000 * self.foot_displacement_m["swing"], 4),
             "solver_ms_per_frame": round(1000 * self.solver_s / max(n, 1), 4),
             "outside_after_iteration": self.history,
+            "estimator": asdict(self.estimator) if self.estimator else None,
         }
 
     def _fps(self) -> float:
@@ -268,12 +272,14 @@ def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimit
 
 
 def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str], body: BodyModel,
-                     q_base: np.ndarray, foot_tolerance: float = 0.0006) -> tuple[np.ndarray, np.ndarray]:
+                     q_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame bounds on δ. Roll about the pivot P lifts or lowers each hip by
     |h − P|·δ, yaw moves it fore and aft; where the legs may only turn at the thigh (a
     skeleton) a hip that moves along the leg moves its foot. So for every foot bearing
     weight (per the support label) roll and yaw are bounded to keep it within
-    ``foot_tolerance``; the pivot weight ``w`` (of the left hip) sets |h − P|."""
+    ``limits.foot_hold_m`` to first order (the final correction is checked on the feet
+    themselves: :func:`livezmp.correct.edit.hold_feet`); the pivot weight ``w`` (of the
+    left hip) sets |h − P|."""
     hi = np.tile(np.radians(limits.max_rotation_deg), (len(w), 1))
     if not body.correction.full_foot_pose:
         import pinocchio as pin
@@ -287,7 +293,7 @@ def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str
                 continue
             pin.framesForwardKinematics(body.model, data, q_base[k])
             width = np.linalg.norm(data.oMf[hips["left"]].translation - data.oMf[hips["right"]].translation)
-            hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], foot_tolerance / (width * lever))
+            hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], limits.foot_hold_m / (width * lever))
     return -hi.ravel(), hi.ravel()
 
 
@@ -396,12 +402,20 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
                                                lambda d: (apply_delta(mover, body, frames, d, w), d),
                                                (reg_size, reg_acc), max(1, round(0.3 / dt)))
-    delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt)
+    supports = [r.support for r in before]
+    held_feet: set[int] = set()
+    for _ in range(3):  # both only shrink rotations; the feet are checked last
+        delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt)
+        delta, held = hold_feet(mover, body, frames, delta, w, supports, limits.foot_hold_m)
+        held_feet.update(held)
+        if not held:
+            break
     corrected = apply_delta(mover, body, frames, delta, w)
     after = analyse(corrected)
     solver_s = time.perf_counter() - t0
-    feet = foot_displacement(body, frames, corrected, [r.support for r in before])
-    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history)
+    feet = foot_displacement(body, frames, corrected, supports)
+    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history, sorted(held_feet),
+                            config.estimator)
 
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
@@ -410,6 +424,7 @@ def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
     what the correction did."""
     body = body_from_bvh(motion, BvhBodyOptions(total_mass=total_mass))
     times = np.arange(len(motion.frames)) * motion.frame_time
-    result = correct_motion(body, times, motion.frames, default_config(body, motion.fps, mode), limits,
+    result = correct_motion(body, times, motion.frames,
+                            default_config(body, motion.fps, mode, cutoff_hz=CORRECTION_CUTOFF_HZ), limits,
                             nominal_dt=motion.frame_time)
     return replace(motion, frames=result.frames), result

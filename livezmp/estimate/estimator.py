@@ -11,8 +11,10 @@ Choosing the parameters (all in seconds or Hz, converted with ``rate_hz``):
 
 * ``cutoff_hz``: the smoothing spline passes motion below it and has gain 1/2
   at it; velocity goes through one such stage, acceleration through two.
-  6 Hz (the usual low-pass for human marker data) suits gait and whole-body
-  motion; raise it for fast robot joints with clean encoders.  Errors scale
+  6 Hz (the usual low-pass for human marker data) suits clean gait and
+  whole-body motion; raise it for fast robot joints with clean encoders.  The
+  analysis commands' defaults lower it with the frame rate so that measurement
+  noise hurts equally at every rate (:func:`default_cutoff`).  Errors scale
   with (motion frequency / cutoff_hz), noise grows as cutoff_hz^2.5 in
   acceleration.
 * ``lag_s``: delay of the output.  A smoothing spline is least accurate at
@@ -130,6 +132,33 @@ class EstimatorConfig:
     def lag(self) -> int:
         """Output delay, samples."""
         return math.floor(self.lag_s * self.rate_hz + 0.5)
+
+
+REFERENCE_CUTOFF_HZ = 4.0  # the default cutoff at REFERENCE_RATE_HZ; see default_estimator
+REFERENCE_RATE_HZ = 120.0
+
+
+def default_cutoff(rate_hz: float) -> float:
+    """The default smoothing cutoff (Hz) for input at ``rate_hz`` (Hz).
+
+    White noise of s per sample leaves about s * cutoff^2.5 / sqrt(rate) in acceleration
+    (the spline's gain), so a fixed cutoff lets the same noise disturb the ZMP twice as
+    much at 30 Hz as at 120 Hz.  The cutoff scales as rate^(1/5), which holds that noise
+    constant: 4 Hz at 120 Hz, 3.0 at 30, 3.5 at 60, 4.6 at 240
+    (benchmarks/bench_estimator_noise.py).
+    """
+    return REFERENCE_CUTOFF_HZ * (rate_hz / REFERENCE_RATE_HZ) ** 0.2
+
+
+def default_estimator(rate_hz: float, cutoff_hz: float | None = None) -> EstimatorConfig:
+    """Estimator settings for input at ``rate_hz`` (Hz): ``cutoff_hz`` (None: :func:`default_cutoff`),
+    window 2.4 / cutoff and lag 0.6 / cutoff seconds (module docstring)."""
+    if not (isinstance(rate_hz, int | float) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise EstimatorError(f"rate_hz = {rate_hz!r}: must be a positive number")
+    cutoff = default_cutoff(rate_hz) if cutoff_hz is None else cutoff_hz
+    if not (math.isfinite(cutoff) and cutoff > 0):
+        raise EstimatorError(f"cutoff_hz = {cutoff!r}: must be a positive number")
+    return EstimatorConfig(rate_hz=rate_hz, window_s=2.4 / cutoff, lag_s=0.6 / cutoff, cutoff_hz=cutoff)
 
 
 @dataclass

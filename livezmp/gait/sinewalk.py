@@ -81,6 +81,22 @@ def sine_bvh(spec: dict[str, tuple[float, float, float]], frequency: float, spee
     return BvhMotion(joints, 1.0 / fps, frames, "<sine walk>")
 
 
+def sine_bvh_rates(motion: BvhMotion, spec: dict[str, tuple[float, float, float]], frequency: float,
+                   speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """The exact first and second time derivatives (F, n) of the channels of ``motion``, a
+    :func:`sine_bvh` walk with ``heading`` 0 made from ``spec``, ``frequency`` and ``speed``
+    (file units: degrees and cm per s and per s^2): the truth an estimator is measured against."""
+    t = np.arange(len(motion.frames)) * motion.frame_time
+    labels = motion.channel_labels()
+    rate, accel = np.zeros_like(motion.frames), np.zeros_like(motion.frames)
+    w = 2 * np.pi * frequency
+    for name, (_dc, amp, phase) in spec.items():
+        rate[:, labels.index(name)] = amp * w * np.cos(w * t + phase)
+        accel[:, labels.index(name)] = -amp * w**2 * np.sin(w * t + phase)
+    rate[:, 2] = 100.0 * speed  # the root's z position, cm
+    return rate, accel
+
+
 def sine_trajectory(joint_names: list[str], spec: dict[str, tuple[float, float, float]], frequency: float,
                     speed: float, duration: float, rate: float = 125.0, base_height: float = 0.25) -> JointTrajectory:
     """A robot walk: ``spec`` maps joint names to (dc rad, amplitude rad, phase rad); the

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits
+from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits, correction_cutoff
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
@@ -44,7 +44,8 @@ class TakeOptions:
     """How a take is loaded and analysed (the body options of ``livezmp analyze``):
     ``mass`` kg (None: the file's subject mass for a C3D, else 70 kg), ``sole_width`` m, ``ground`` m in
     the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``; ``subject``
-    and ``markers``: a subject file and a marker map (C3D only)."""
+    and ``markers``: a subject file and a marker map (C3D only); ``cutoff_hz`` the estimator's
+    cutoff, Hz (None: the default for the take's rate)."""
 
     robot: str | None = None
     robot_config: str | None = None
@@ -58,6 +59,7 @@ class TakeOptions:
     tolerance_mm: float = VALIDATED_P95_MM
     subject: str | None = None  # subject file (livezmp calibrate): a BVH's HAT mass fraction, a C3D's HAT
     markers: str | None = None
+    cutoff_hz: float | None = None
 
     def load(self, path: str | Path) -> LoadedMotion:
         subject = load_subject(self.subject) if self.subject else None
@@ -78,22 +80,24 @@ class TakeOptions:
         return path is not None and Path(path).suffix.lower() == ".bvh" and self.robot is None
 
 
-def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None) -> PipelineConfig:
-    """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) if given."""
+def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None,
+                cutoff_hz: float | None = None) -> PipelineConfig:
+    """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) and
+    the estimator's ``cutoff_hz`` (Hz) if given."""
     ground_z = None
     if ground is not None:
         p = np.zeros(3)
         p["xyz".index(loaded.body.up_axis)] = ground
         ground_z = float((loaded.body.world_from_input @ p)[2])
-    return default_config(loaded.body, loaded.fps, mode, ground_z)
+    return default_config(loaded.body, loaded.fps, mode, ground_z, cutoff_hz)
 
 
 def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | None = None,
-                   progress: Callable[[int], None] | None = None) -> BatchResult:
+                   progress: Callable[[int], None] | None = None, cutoff_hz: float | None = None) -> BatchResult:
     """The pipeline over a loaded take: its per-frame results."""
     if len(loaded.frames) < 2:
         raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
-    cfg = take_config(loaded, mode, ground)
+    cfg = take_config(loaded, mode, ground, cutoff_hz)
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
 
@@ -119,7 +123,7 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
                    progress: Callable[[int], None] | None = None) -> TakeAnalysis:
     """The analysis of a loaded take; the summary keeps the estimator's settings, so a user sees what
     smoothed the take (README: choosing them)."""
-    result = analyse_loaded(loaded, options.mode, options.ground, progress)
+    result = analyse_loaded(loaded, options.mode, options.ground, progress, options.cutoff_hz)
     summary = {"source": loaded.source,
                **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
                "estimator": _estimator_settings(loaded, options)}
@@ -127,7 +131,8 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
 
 
 def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -> dict:
-    return asdict(replace(take_config(take, options.mode, options.ground).estimator, rate_hz=take.fps))
+    return asdict(replace(take_config(take, options.mode, options.ground, options.cutoff_hz).estimator,
+                          rate_hz=take.fps))
 
 
 def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None = None, plot: str | Path | None = None,
@@ -139,7 +144,7 @@ def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None =
     check_not_c3d_options(options, path)
     subject = load_subject(options.subject) if options.subject else None
     take = open_bvh_take(path, options.bvh_options(subject))
-    cfg = take_config(take, options.mode, options.ground)
+    cfg = take_config(take, options.mode, options.ground, options.cutoff_hz)
     stats = TakeStats(take.total, take.fps, options.tolerance_mm)
     series = None
     if plot:
@@ -170,19 +175,22 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
             "complete": lab.complete.astype(float)}
 
 
-def lab_options(options: TakeOptions) -> LabOptions:
-    """How a C3D take is read: the marker map and the subject file's parameters, if given."""
+def lab_options(options: TakeOptions, cutoff_hz: float | None) -> LabOptions:
+    """How a C3D take is read: the marker map and the subject file's parameters, if given, and the
+    estimator's ``cutoff_hz`` (Hz; None: the lab's own, :data:`livezmp.offline.gaitlab.LAB_ESTIMATOR`)."""
     markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
     markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
-    return LabOptions(mass=options.mass, mode=options.mode, markers=markers)
+    return LabOptions(mass=options.mass, mode=options.mode, markers=markers,
+                      estimator=None if cutoff_hz is None else {"cutoff_hz": cutoff_hz})
 
 
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
-    lab = analyse_lab_take(read_c3d(path), lab_options(options))
+    lab = analyse_lab_take(read_c3d(path), lab_options(options, options.cutoff_hz))
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
-                                                options.tolerance_mm), **lab.summary}
+                                                options.tolerance_mm), **lab.summary,
+               "estimator": asdict(lab.config.estimator)}
     plates = lab.plates is not None
     return TakeAnalysis(lab.take.body, lab.result, lab.rate, str(path), summary, _lab_columns(lab),
                         lab.plates.cop if plates else None, lab.complete if plates else None)
@@ -234,7 +242,7 @@ def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOption
     check_correctable(loaded.source, len(loaded.frames))
     from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
 
-    cfg = take_config(loaded, options.mode, options.ground)
+    cfg = take_config(loaded, options.mode, options.ground, correction_cutoff(options.cutoff_hz))
     result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
                             progress=progress)
     with atomic_path(output) as tmp:
@@ -254,7 +262,8 @@ def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions,
 
     trial = read_c3d(path)
     check_correctable(path, len(trial.points))
-    fix = correct_marker_take(trial, lab_options(options), limits, non_position_labels(path), progress=progress)
+    fix = correct_marker_take(trial, lab_options(options, correction_cutoff(options.cutoff_hz)), limits,
+                              non_position_labels(path), progress=progress)
     with atomic_path(output) as tmp:
         if str(output).lower().endswith(".c3d"):
             write_moved_points(path, tmp, fix.moved, fix.added, fix.first_frame)
