@@ -4,9 +4,10 @@ Beside the JSON channels, a recording carries protobuf messages of Foxglove's pu
 schemas (``foxglove-schemas-protobuf``; each schema stored as its FileDescriptorSet):
 
 - ``/foxglove/scene`` (``foxglove.SceneUpdate``): one entity ``balance`` per drawn
-  frame (the recorder's ``scene_hz``, 60 a second by default; ``/result`` has them all) with the ZMP (red sphere), the clamped ZMP (orange), the CoM (blue) and its
-  plumb line to the ground, force-plate centres of pressure (green), the support
-  polygon (white loop) and the footprints (grey loops);
+  frame (the recorder's ``scene_hz``, 60 a second by default; ``/result`` has them all)
+  with the ZMP (red sphere), the clamped ZMP (orange), the CoM (blue) and its plumb line
+  to the ground, force-plate centres of pressure (green), the support polygon (white
+  loop) and the footprints (grey loops);
 - ``/foxglove/zmp``, ``/foxglove/com`` (``foxglove.PoseInFrame``) and ``/foxglove/cop``
   (``foxglove.PosesInFrame``, one pose per loaded plate), for plots and the 3D panel;
 - ``/foxglove/tf`` (``foxglove.FrameTransforms``): ``world`` → ``ground`` (the detected
