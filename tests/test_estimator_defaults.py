@@ -13,7 +13,8 @@ import pytest
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.balance.zmp import compute_zmp
 from livezmp.cli import main
-from livezmp.estimate.estimator import EstimatorConfig, default_cutoff, default_estimator
+from livezmp.correct.limits import CORRECTION_CUTOFF_HZ
+from livezmp.estimate.estimator import FILE_CUTOFF_HZ, EstimatorConfig, default_cutoff, default_estimator
 from livezmp.gait.sinewalk import sine_bvh, sine_bvh_rates, walk_spec
 from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import body_from_bvh
@@ -72,7 +73,9 @@ def test_analyze_reports_the_settings_and_takes_the_override(walk, tmp_path, cap
     path, summary = tmp_path / "walk.bvh", tmp_path / "s.json"
     write_bvh(walk[0], path)
     assert main(["analyze", str(path), "--summary-json", str(summary)]) == 0
-    assert json.loads(summary.read_text())["estimator"]["cutoff_hz"] == pytest.approx(default_cutoff(FPS))
+    # a file's default at every rate, the one `correct` judges with: analyze reads a corrected take as
+    # the correction saw it
+    assert json.loads(summary.read_text())["estimator"]["cutoff_hz"] == FILE_CUTOFF_HZ == CORRECTION_CUTOFF_HZ
     assert main(["analyze", str(path), "--cutoff-hz", "5", "--summary-json", str(summary)]) == 0
     est = json.loads(summary.read_text())["estimator"]
     assert (est["cutoff_hz"], est["window_s"], est["lag_s"]) == pytest.approx((5.0, 0.48, 0.12))

@@ -14,7 +14,7 @@ import pytest
 from data_paths import BANDAI
 
 from livezmp.cli import main
-from livezmp.estimate.estimator import default_estimator
+from livezmp.estimate.estimator import FILE_CUTOFF_HZ, default_estimator
 from livezmp.model import bvh as bvh_module
 from livezmp.model.bvh import read_bvh, stream_bvh, write_bvh
 from livezmp.offline.batch import BatchResult, run_batch
@@ -26,7 +26,7 @@ from livezmp.offline.take_stream import analyse_stream, open_bvh_take
 from livezmp.offline.upper_quantile import UpperQuantile
 
 OPTIONS = TakeOptions()
-WINDOW_30HZ = default_estimator(30.0).window  # the spline window at 30 Hz (samples): a chunk holds two
+WINDOW_30HZ = default_estimator(30.0, FILE_CUTOFF_HZ).window  # a file's spline window at 30 Hz: a chunk holds two
 
 
 def whole(path, tmp_path):

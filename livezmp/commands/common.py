@@ -13,6 +13,7 @@ from livezmp.balance.pipeline import PipelineConfig
 from livezmp.checks import check_number
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
+from livezmp.estimate.estimator import default_cutoff
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -59,9 +60,12 @@ def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
                    max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
 
 
-def pipeline_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
-    """:func:`default_config` with the command line's mode, ground height and estimator cutoff."""
-    return take_config(loaded, args.mode, args.ground, args.cutoff_hz)
+def stream_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
+    """:func:`default_config` of a stream with the command line's mode, ground height and estimator
+    cutoff; without ``--cutoff-hz``, a stream's default for its rate (:func:`default_cutoff`), not a
+    file's: a stream's noise is unknown."""
+    cutoff = default_cutoff(loaded.fps) if args.cutoff_hz is None else args.cutoff_hz
+    return take_config(loaded, args.mode, args.ground, cutoff)
 
 
 @contextlib.contextmanager

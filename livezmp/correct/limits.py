@@ -31,14 +31,14 @@ class CorrectionLimits:
     foot_hold_m: float = 0.0006  # how far a weight-bearing foot may move (the promise is 1 mm)
 
 
-# The estimator cutoff (Hz) a correction judges the motion with, whatever its frame rate (window
-# 2.4 / cutoff, lag 0.6 / cutoff: 0.4 s and 0.1 s). Not the analysis default, which lowers the cutoff
-# at low rates to keep measurement noise out of a reading (3.0 Hz at 30 Hz): the correction edits the
-# motion, so it needs the ZMP of the motion as it is and as it will be played. Behind a low cutoff a
-# rotation's acceleration is halved and spread over a window twice as long, so the solver needs
-# larger rotations for the same ZMP shift and reaches its limits (walk_active_001 at 30 Hz: 119 of
-# 207 frames left outside, rotations at 15°, at 3.0 Hz; none, 5.65° at 6 Hz).
-CORRECTION_CUTOFF_HZ = 6.0
+# The estimator cutoff (Hz) a correction judges the motion with, whatever its frame rate: a file's
+# default (window 0.4 s, lag 0.1 s), so that `analyze` of the corrected file reads what the correction
+# saw. Not a stream's per-rate default (3.0 Hz at 30 Hz, which keeps unknown noise out of a live
+# reading): the correction edits the motion, so it needs the ZMP of the motion as it is. Behind a low
+# cutoff a rotation's acceleration is halved and spread over a window twice as long, so the solver
+# needs larger rotations for the same ZMP shift and reaches its limits (walk_active_001 at 30 Hz: 119
+# of 207 frames left outside, rotations at 15°, at 3.0 Hz; none, 5.65° at 6 Hz).
+CORRECTION_CUTOFF_HZ = 6.0  # the value of estimate.estimator.FILE_CUTOFF_HZ, not imported: scipy (0.3 s)
 
 
 def correction_cutoff(cutoff_hz: float | None) -> float:

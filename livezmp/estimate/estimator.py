@@ -136,6 +136,11 @@ class EstimatorConfig:
 
 REFERENCE_CUTOFF_HZ = 4.0  # the default cutoff at REFERENCE_RATE_HZ; see default_estimator
 REFERENCE_RATE_HZ = 120.0
+# The default for a whole take read from a file (analyze, correct, batch) at every rate: exported
+# takes come filtered by the capture software, 6 Hz is gait analysis' usual cutoff, and it is what
+# compares best with force plates here (docs/validation.md). Streams, whose noise is unknown, take
+# default_cutoff; a noisy file takes --cutoff-hz.
+FILE_CUTOFF_HZ = 6.0
 
 
 def default_cutoff(rate_hz: float) -> float:

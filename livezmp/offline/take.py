@@ -19,6 +19,7 @@ import numpy as np
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits, correction_cutoff
 from livezmp.errors import InputError
+from livezmp.estimate.estimator import FILE_CUTOFF_HZ
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
@@ -83,13 +84,14 @@ class TakeOptions:
 def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None,
                 cutoff_hz: float | None = None) -> PipelineConfig:
     """:func:`default_config` for the take (its body and fps), with ``ground`` (m, in the input frame) and
-    the estimator's ``cutoff_hz`` (Hz) if given."""
+    the estimator's ``cutoff_hz`` (Hz; None: :data:`FILE_CUTOFF_HZ`, a file's default at every rate)."""
     ground_z = None
     if ground is not None:
         p = np.zeros(3)
         p["xyz".index(loaded.body.up_axis)] = ground
         ground_z = float((loaded.body.world_from_input @ p)[2])
-    return default_config(loaded.body, loaded.fps, mode, ground_z, cutoff_hz)
+    cutoff = FILE_CUTOFF_HZ if cutoff_hz is None else cutoff_hz
+    return default_config(loaded.body, loaded.fps, mode, ground_z, cutoff)
 
 
 def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | None = None,
