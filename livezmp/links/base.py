@@ -18,6 +18,7 @@ exit path.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -129,3 +130,23 @@ class PortLink:
         """Hold, then release the port (the device's watchdog then holds)."""
         self.safe_stop()
         self._release()
+
+
+def joints_per_bus(ids: Sequence[int], joint_names: Sequence[str], heard: Sequence[set[int]],
+                   buses: Sequence[str], device: str, hint: str) -> list[list[int]]:
+    """The robot's joint indices on each of ``buses`` (their names), from the device ids ``heard``
+    answering on each; ``ids[j]`` is joint ``j``'s device. Raises LinkError naming the joint whose
+    ``device`` answered on no bus (with ``hint``) or on two, or a bus where none answered."""
+    found: list[list[int]] = [[] for _ in buses]
+    for j, ident in enumerate(ids):
+        where = [k for k, h in enumerate(heard) if int(ident) in h]
+        who = f"{device} {ident} ({joint_names[j]})"
+        if not where:
+            raise LinkError(f"{who} answered on none of {', '.join(buses)}: {hint}")
+        if len(where) > 1:
+            raise LinkError(f"{who} answered on {' and '.join(buses[k] for k in where)}: two {device}s share its id")
+        found[where[0]].append(j)
+    empty = [buses[k] for k, joints in enumerate(found) if not joints]
+    if empty:
+        raise LinkError(f"{empty[0]}: none of the robot's {device}s answered on this bus")
+    return found

@@ -34,7 +34,7 @@ import can
 import numpy as np
 
 from livezmp.links import mit_protocol as mit
-from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, PortLink
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, PortLink, joints_per_bus
 from livezmp.links.bus_timing import Adapter
 from livezmp.links.can_timing import CanBusCeiling, frame_bits
 from livezmp.model.robot_config import ServoConfig
@@ -181,20 +181,11 @@ class MitCanLink(PortLink):
             while (msg := self._recv(bus, deadline - self._clock())) is not None:
                 if self._take(msg, heard):
                     heard_on[k].add(int(msg.data[0]))
-        on_bus: list[list[int]] = [[] for _ in self.buses]
-        for j, ident in enumerate(self._ids):
-            where = [k for k, h in enumerate(heard_on) if int(ident) in h]
-            who = f"motor {ident} ({self.joint_names[j]})"
-            if not where:
-                raise LinkError(f"{self.name}: {who} answered on none of {', '.join(self.channels)}: check power, "
-                                "CAN ids and bitrate")
-            if len(where) > 1:
-                raise LinkError(f"{self.name}: {who} answered on {' and '.join(self.channels[k] for k in where)}: "
-                                "two motors share its id")
-            on_bus[where[0]].append(j)
-        empty = [self.channels[k] for k, joints in enumerate(on_bus) if not joints]
-        if empty:
-            raise LinkError(f"{self.name}: none of the robot's motors answered on {empty[0]}")
+        try:
+            on_bus = joints_per_bus(self._ids, self.joint_names, heard_on, self.channels, "motor",
+                                    "check power, CAN ids and bitrate")
+        except LinkError as e:
+            raise LinkError(f"{self.name}: {e}") from None
         self._on_bus = [np.asarray(j, dtype=int) for j in on_bus]
 
     def _send(self, motor_goals: np.ndarray) -> None:

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
+from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats, joints_per_bus
 from livezmp.links.bus_timing import Adapter, BusCeiling
 from livezmp.links.dynamixel import DynamixelLink, find_servos
 from livezmp.model.robot_config import ServoConfig
@@ -175,20 +175,7 @@ class MultiBusLink:
         ids = [s.id for s in self._servos]
         baud = self._options.get("baud", 1_000_000)
         heard = [find_servos(path, ids, baud) for path in self.paths]
-        found: list[list[int]] = [[] for _ in self.paths]
-        for i, servo in enumerate(self._servos):
-            where = [k for k, on in enumerate(heard) if servo.id in on]
-            who = f"servo {servo.id} ({self.joint_names[i]})"
-            if not where:
-                raise LinkError(f"{who} answered on none of {', '.join(self.paths)}: check power, ids and baud rate")
-            if len(where) > 1:
-                raise LinkError(f"{who} answered on {' and '.join(self.paths[k] for k in where)}: two servos "
-                                "share its id")
-            found[where[0]].append(i)
-        empty = [self.paths[k] for k, joints in enumerate(found) if not joints]
-        if empty:
-            raise LinkError(f"{empty[0]}: none of the robot's servos answered on this port")
-        return found
+        return joints_per_bus(ids, self.joint_names, heard, self.paths, "servo", "check power, ids and baud rate")
 
     def _checked(self, positions: np.ndarray) -> np.ndarray:
         goals = np.asarray(positions, dtype=float)
