@@ -35,6 +35,28 @@ def test_two_buses_are_one_robot_read_and_driven_in_joint_order():
         assert [c.bytes_per_cycle for c in r.link.bus_ceilings(ADAPTERS["hs"])] == [24 + 88 + 64] * 2
 
 
+def test_a_bus_left_idle_while_the_next_one_opens_still_takes_goals(monkeypatch):
+    """The second bus opens slowly (0.3 s: a loaded host, a slow adapter) while the first, already open,
+    hears nothing: its servos' 0.1 s Bus Watchdog trips and they refuse goals until it is cleared. The
+    link arms every bus again once all are open, so both buses follow the goals."""
+    from livezmp.links.dynamixel import DynamixelLink
+
+    opened = []
+    original = DynamixelLink.open
+
+    def slow_second_open(self):
+        if opened:
+            time.sleep(0.3)  # the slow open being modelled, not a wait for a condition
+        original(self)
+        opened.append(self)
+
+    monkeypatch.setattr(DynamixelLink, "open", slow_second_open)
+    with rig("dynamixel", devices={"buses": 2}, options="timeout=0.1&watchdog=0.1") as r:
+        target = start_posture(20)[::-1] * 0.5
+        r.link.write_goals(target)
+        read_until(r.link, lambda p: np.abs(p - target).max() <= 2 * HALF_TICK + 1e-9)
+
+
 def test_joints_interleaved_over_the_buses_come_back_in_the_links_joint_order():
     """The link's joints in an order that alternates between the buses (the simulated robot puts its first
     ten servos on one port, the rest on the other): each frame and each goal is still in the link's order."""

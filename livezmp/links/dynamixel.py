@@ -478,9 +478,7 @@ class DynamixelLink(PortLink):
                                     f"on, so it cannot be set to {self.return_delay} us: switch its torque off and "
                                     "reopen")
                 self._write_one(i, RETURN_DELAY_TIME, want)
-        if self.watchdog:
-            self._write_all(BUS_WATCHDOG, 1, 0)  # writing 0 first clears a tripped watchdog
-            self._write_all(BUS_WATCHDOG, 1, round(self.watchdog / WATCHDOG_UNIT))
+        self.arm_watchdog()
         self._write_all(TORQUE_ENABLE, 1, 1)
         state = self._read_at_open(TORQUE_ENABLE, HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1)
         stride = HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1
@@ -494,6 +492,16 @@ class DynamixelLink(PortLink):
             self._check_imu()
         self._run_timeout_ms = self._measure_timeout() if self.timeout is None else 1e3 * self.timeout
         self._traffic[:] = 0
+
+    def arm_watchdog(self) -> None:
+        """(Re)arm the servos' Bus Watchdog (``watchdog`` s; off: nothing), clearing one that tripped: a
+        tripped servo takes no goal until then. The link arms it at open; a robot on several buses arms
+        every bus again once all are open, since a bus left idle while the next one opens trips."""
+        if self.watchdog:
+            counted = self._traffic.copy()  # set-up, not the loop's cycles (the bus summary's bytes)
+            self._write_all(BUS_WATCHDOG, 1, 0)  # writing 0 first clears a tripped watchdog
+            self._write_all(BUS_WATCHDOG, 1, round(self.watchdog / WATCHDOG_UNIT))
+            self._traffic[:] = counted
 
     def _check_imu(self) -> None:
         """The IMU sub-controller answers a read of its registers; LinkError naming it after OPEN_TRIES."""

@@ -64,6 +64,8 @@ class MultiBusLink:
                                     **self._options)
                 bus.open()
                 self.buses.append(bus)
+            for bus in self.buses:  # the first buses sat idle while the others opened: their watchdogs may trip
+                bus.arm_watchdog()
         except LinkError:
             self._release()
             raise
