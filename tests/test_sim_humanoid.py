@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,9 @@ from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.correct.online import OnlineCorrector
 from livezmp.errors import InputError
+from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.live import scenarios as sc
+from livezmp.live.config import LoopConfig
 from livezmp.live.scenarios import Push
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import sole_velocities
@@ -506,7 +509,10 @@ def _closed_loop_lean(body, correct: bool, rate: float = 125.0):
     pipeline and the online corrector, whose leg offsets are added to the goals."""
     scenario = sc.lean(body, beyond=0.004)
     h = SimHumanoid(body, scenario.goals(0.0))
-    pipe = Pipeline(body, default_config(body, rate), nominal_dt=1.0 / rate)
+    live = LoopConfig()  # the live loop's estimator (clean encoders), not a stream's default
+    est = EstimatorConfig(rate_hz=rate, window_s=live.estimator_window_s, lag_s=live.estimator_lag_s,
+                          cutoff_hz=live.estimator_cutoff_hz)
+    pipe = Pipeline(body, replace(default_config(body, rate), estimator=est), nominal_dt=1.0 / rate)
     corrector = OnlineCorrector(body, 1.0 / rate)
     measured, commanded = BasePlacer(body), BasePlacer(body)
     deltas = []

@@ -60,11 +60,12 @@ def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
                    max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
 
 
-def stream_config(args: argparse.Namespace, loaded: LoadedMotion) -> PipelineConfig:
-    """:func:`default_config` of a stream with the command line's mode, ground height and estimator
-    cutoff; without ``--cutoff-hz``, a stream's default for its rate (:func:`default_cutoff`), not a
-    file's: a stream's noise is unknown."""
-    cutoff = default_cutoff(loaded.fps) if args.cutoff_hz is None else args.cutoff_hz
+def monitor_config(args: argparse.Namespace, loaded: LoadedMotion, from_file: bool) -> PipelineConfig:
+    """:func:`default_config` of a monitored source with the command line's mode, ground height and
+    estimator cutoff. Without ``--cutoff-hz``: a file replayed (``from_file``) gets a file's default, as
+    `analyze` of it does; a live stream, whose noise is unknown, the default for its rate
+    (:func:`default_cutoff`)."""
+    cutoff = default_cutoff(loaded.fps) if args.cutoff_hz is None and not from_file else args.cutoff_hz
     return take_config(loaded, args.mode, args.ground, cutoff)
 
 

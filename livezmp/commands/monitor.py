@@ -13,7 +13,7 @@ import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
 from livezmp.checks import check_number
-from livezmp.commands.common import stop_on_signals, stream_config
+from livezmp.commands.common import monitor_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
 from livezmp.live.realtime import realtime_priority
@@ -136,7 +136,8 @@ def cmd_monitor(args: argparse.Namespace) -> int:
 def _monitor(args: argparse.Namespace) -> None:
     source = _source(args)
     fps = 1.0 / source.nominal_dt
-    cfg = stream_config(args, SimpleNamespace(body=source.body, fps=fps))  # it needs only the body and rate
+    cfg = monitor_config(args, SimpleNamespace(body=source.body, fps=fps),  # it needs only the body and rate
+                         isinstance(source, FileReplaySource))
     if args.ground is None and getattr(source, "ground_z", None) is not None:  # a capture stream's plates
         cfg = replace(cfg, ground_z=source.ground_z)
     settings = {k: v for k, v in (("window_s", args.window_s), ("lag_s", args.lag_s)) if v is not None}
