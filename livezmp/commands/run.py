@@ -178,7 +178,7 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
                         on_status=status, recorder=recorder)
         priority, required = loop_priority(args)
         with (stop_on_signals(loop.request_stop),
-              realtime_priority(priority, cpus, lock_memory=True, required=required) as refused,
+              realtime_priority(priority, cpus, lock_memory=required, required=required) as refused,
               switch_interval(RECORD_SWITCH_INTERVAL_S if recorder else None)):
             if refused not in (None, "off"):
                 status.event(f"real-time priority {refused}: the loop runs at normal priority")
