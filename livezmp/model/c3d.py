@@ -186,14 +186,18 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
 READ_SECONDS = 20.0  # a forked trial read gets this long, plus a second per 10 MB of file
 
 
-_PROBE = "import sys, ezc3d; ezc3d.c3d(sys.argv[1], extract_forceplat_data=sys.argv[2] == '1')"
+# the child caps its own CPU time too (the kernel ends it with SIGXCPU): if this process is killed while
+# the child reads a file ezc3d loops on, nobody is left to stop it
+_PROBE = ("import resource, sys; n = int(sys.argv[3]); resource.setrlimit(resource.RLIMIT_CPU, (n, n + 1)); "
+          "import ezc3d; "
+          "ezc3d.c3d(sys.argv[1], extract_forceplat_data=sys.argv[2] == '1')")
 
 
 def _spawned_read(p: Path, plates: bool, seconds: float) -> int | None:
     """ezc3d's read of ``p`` in a new interpreter: the signal that killed it, 0 if it ran out of time
     (then killed), None if it ended by itself."""
     try:
-        r = subprocess.run([sys.executable, "-c", _PROBE, str(p), "1" if plates else "0"],
+        r = subprocess.run([sys.executable, "-c", _PROBE, str(p), "1" if plates else "0", str(math.ceil(seconds) + 5)],
                            capture_output=True, timeout=seconds)
     except subprocess.TimeoutExpired:
         return 0

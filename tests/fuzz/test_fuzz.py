@@ -7,12 +7,16 @@ from __future__ import annotations
 
 import json
 import random
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from livezmp.model.c3d import _PROBE
 from tests.data_paths import DATA
 from tests.fuzz.harness import (
     EXTREMES,
@@ -129,3 +133,13 @@ def test_mutated_packets_are_delivered_or_counted():
         assert st_.delivered + st_.dropped == 2000 and st_.delivered > 300 and st_.dropped > 300
     finally:
         target.close()
+
+
+def test_an_ezc3d_probe_left_alone_on_a_looping_file_ends_by_itself(c3d_seeds, tmp_path):
+    """The corpus file ezc3d loops on (the pre-check now refuses it before any probe), read by the probe
+    program with nobody to time it out, as when livezmp is killed mid-read: its own CPU cap ends it."""
+    ops = json.loads((CORPUS / "c3d" / "failure-f615488c5c67.ops.json").read_text())
+    path = tmp_path / "loops.c3d"
+    path.write_bytes(mutate(c3d_seeds.files["c3d"], [tuple(o) for o in ops]))
+    r = subprocess.run([sys.executable, "-c", _PROBE, str(path), "1", "1"], capture_output=True, timeout=60)
+    assert r.returncode == -signal.SIGXCPU
