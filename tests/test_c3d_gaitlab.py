@@ -33,6 +33,7 @@ FOOT = ("ANK", "HEE", "TOE")
 UPPER_LEFT = {"FHD": (0.07, 0.06, 1.65), "BHD": (-0.08, 0.06, 1.64), "SHO": (0.0, 0.18, 1.43),
               "ELB": (-0.01, 0.22, 1.15), "WRA": (0.03, 0.23, 0.90), "WRB": (-0.02, 0.21, 0.90),
               "FIN": (0.02, 0.22, 0.80)}
+TOP_ROLL = 0.15  # rad: the trunk-top set's trunk rolls this far over the hips
 CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
 P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 82.9 mm; 100.8 without it)
 PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # centres (m); 0.5 x 0.3 plates
@@ -40,14 +41,16 @@ OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded 
 
 
 def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
-             trunk: bool = False) -> dict[str, np.ndarray]:
+             trunk: bool | str = False) -> dict[str, np.ndarray]:
     """(F, 3) m per label: the body above the ankles sways fore-aft and sideways about the ankle line;
     ``full_body`` adds Plug-in Gait's trunk, head and arm markers (the arms also swing); ``cluster``
     gives instead a cluster set (CLUSTER: 3-4 markers a segment, no standard label) plus medial knee
-    and ankle markers; ``trunk`` the lower body and the trunk's four markers only (C7 T10 CLAV STRN)."""
+    and ankle markers; ``trunk`` the lower body and the trunk's four markers only (C7 T10 CLAV STRN), or
+    ``"top"``: only C7 and the clavicles' LCLA and RCLA, the trunk also rolling sideways over the hips by up
+    to TOP_ROLL (as a trunk leaning over the stance leg does)."""
     if cluster:
         return _cluster_markers(_markers(t))
-    if trunk:
+    if trunk is True:
         return {k: v for k, v in _markers(t, full_body=True).items() if k in CENTRE or k[1:] in LEFT}
     pitch = 0.05 * np.sin(2 * np.pi * 0.4 * t)
     roll = 0.03 * np.sin(2 * np.pi * 0.3 * t + 1.0)
@@ -58,6 +61,11 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
         for side, sign in (("L", 1.0), ("R", -1.0)):
             q = np.array([p[0], sign * p[1], p[2]])
             out[side + name] = np.repeat(q[None], len(t), 0) if name in FOOT else (rot @ (q - pivot)) + pivot
+    if trunk == "top":  # carried by the sway, then rolled about the hips' mid-point
+        hips = (out["LASI"] + out["RASI"] + out["LPSI"] + out["RPSI"]) / 4
+        lean = np.array([pin.utils.rotate("x", a) for a in TOP_ROLL * np.sin(2 * np.pi * 0.5 * t)])
+        for name, p in (("C7", CENTRE["C7"]), ("LCLA", (0.05, 0.07, 1.41)), ("RCLA", (0.05, -0.07, 1.41))):
+            out[name] = hips + np.einsum("fij,fj->fi", lean, (rot @ (np.array(p) - pivot)) + pivot - hips)
     if full_body:
         for name, p in CENTRE.items():
             out[name] = (rot @ (np.array(p) - pivot)) + pivot
@@ -100,14 +108,14 @@ def _medial(side: str) -> np.ndarray:
 
 
 def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = False,
-           trunk: bool = False) -> C3dTrial:
+           trunk: bool | str = False) -> C3dTrial:
     m = _markers(t, full_body, cluster, trunk)
     return C3dTrial("synthetic", list(m), np.stack(list(m.values()), axis=1), rate, rate, 0.0, [], MASS,
                     "PROCESSING:Bodymass", 1.75)
 
 
 def _true_wrench(body: MarkerBodyOptions, full_body: bool = False, cluster: bool = False,
-                 trunk: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 trunk: bool | str = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
     marker body's own rigid-body dynamics driven by the motion sampled at 10 kHz (central differences)."""
     fine = 10
@@ -138,7 +146,7 @@ def _add_int(c3d, group: str, name: str, value) -> None:
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
-                  cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool = False) -> np.ndarray:
+                  cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool | str = False) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
     true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map);
     ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the second half."""
@@ -287,6 +295,24 @@ def test_trunk_markers_alone_track_the_thorax(tmp_path):
     ha, ha_height, _ = hat_table(stature, head_and_arms=True)
     assert ha == pytest.approx(sum(f for f, _ in parts))
     assert ha_height == pytest.approx(sum(f * z for f, z in parts) / ha)  # ~0.14 m below: arms outweigh the head
+
+
+def test_trunk_top_markers_track_a_leaning_thorax(tmp_path):
+    """A lower-body set with only the trunk's top (C7 and the clavicles' LCLA, RCLA), the trunk rolling over
+    the hips on its own: the thorax is tracked, its axis from the mid-hip, and the ZMP matches the plates
+    written from that body's dynamics to a millimetre. Without C7 the HAT is placed upright on the mid-hip
+    and misses the lean by centimetres."""
+    path = tmp_path / "top.c3d"
+    write_lab_c3d(path, PLATES, trunk="top")
+    trial = read_c3d(path)
+    a = analyse_lab_take(trial)
+    assert {"thorax", "headarms"} <= {n.split(".")[0] for n in a.take.body.channel_names}
+    assert "thorax from C7 LCLA RCLA (its axis from the mid-hip)" in a.summary["markers"]["marker_set"]
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    trial.labels[trial.labels.index("C7")] = "unused"
+    placed = analyse_lab_take(trial)
+    assert "hat" in {n.split(".")[0] for n in placed.take.body.channel_names}
+    assert placed.summary["cop_vs_zmp"]["rms_mm"] > 10.0
 
 
 def test_late_plates_are_measured_and_realigned(lab):

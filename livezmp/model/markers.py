@@ -1,8 +1,9 @@
 """A body model from gait-lab markers: marker set -> joint centres -> segment frames -> body.
 
 Supported by their standard labels (prefixes already stripped): Vicon Plug-in Gait lower body
-and its full-body superset (or the trunk's four markers C7 T10 CLAV STRN alone: the thorax is tracked,
-head and arms placed on it), Helen Hayes / modified Helen Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
+and its full-body superset (or the trunk's four markers C7 T10 CLAV STRN alone, or only its top, C7 with
+CLAV or LCLA + RCLA: the thorax is tracked, head and arms placed on it), Helen Hayes / modified Helen
+Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
 Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional THI/TIB wands (chord
 function), medial knee/ankle markers, HEE. Other labels and cluster sets: :mod:`livezmp.model.marker_map`.
 
@@ -57,6 +58,8 @@ _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
           "LWRB", "RWRB")
 _TRUNK = ("C7", "T10", "CLAV", "STRN")
+# the trunk's top alone: the cervicale and the sternal notch, or the two clavicles' markers (Helen Hayes sets)
+_TRUNK_TOPS = (("C7", "CLAV"), ("C7", "LCLA", "RCLA"))
 # the HAT's frame as virtual points (origin, anterior, left, proximal axis tips: Plug-in Gait's segment-axis
 # convention), written by `livezmp correct` when it leans the HAT; when present they orient the placed HAT
 HAT_POINTS = ("HATO", "HATA", "HATL", "HATP")
@@ -73,7 +76,8 @@ _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 # How far (fore-aft, lateral) the head-arms-trunk centre of mass sways about the walk's straight-line trend,
 # as a fraction of the mid-hip's sway (:func:`hat_sway`): measured on the two trials whose trunk is tracked by
 # markers (c3d.org samples 23 Vicon_analysis: 0.76 / 0.68, 32 vicon_zerowire: 0.71 / 0.98; their mean), never on
-# the lower-body trials it is used for (docs/validation.md, `python benchmarks/bench_forceplates.py DIR`)
+# the lower-body trials it is used for (docs/validation.md, `python benchmarks/bench_forceplates.py DIR`); the
+# median over the four trials whose trunk is tracked (with 04 sub_labels and 09 PlugInC3D) is 0.74 / 0.83
 TRUNK_SWAY_GAIN = (0.73, 0.83)
 
 
@@ -186,6 +190,8 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
         roles.update({s + "FIN": s + "FIN" for s in "LR" if s + "FIN" in have})
     elif set(_TRUNK) <= have:  # the thorax is seen; head and arms are placed on it
         roles.update({u: u for u in _TRUNK})
+    elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
+        roles.update({u: u for u in top})
     if missing:
         missing = [f"{m} (never seen)" if m in trial.labels else m for m in missing]
         seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
@@ -482,7 +488,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         seg.update(_upper_segments(m, stature))
         rules["elbows"] = f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
     elif "C7" in m:
-        seg["thorax"] = seg["headarms"] = _thorax(m)
+        seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin)
     else:
         seg["hat"] = (pelvis_origin, upright) if "HATO" not in m else \
             (m["HATO"], np.stack([_unit(m[p] - m["HATO"]) for p in HAT_POINTS[1:]], axis=-1))
@@ -495,7 +501,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
-             + ("; thorax from C7 T10 CLAV STRN" if "C7" in m else ""),
+             + (f"; thorax from {_trunk_labels(m)}" if "C7" in m else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -631,10 +637,22 @@ def _upper_note(m: dict, trial: C3dTrial) -> str:
     return f"; upper-body markers incomplete (missing {', '.join(u for u in _UPPER if u not in have)}): not used"
 
 
-def _thorax(m: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The thorax' origin (between C7 and CLAV) and frame (z up the trunk, x forward)."""
-    top, bottom = (m["C7"] + m["CLAV"]) / 2, (m["T10"] + m["STRN"]) / 2
-    fwd = (m["CLAV"] + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
+def _trunk_labels(m: dict[str, np.ndarray]) -> str:
+    """The trunk markers the thorax is tracked by, and where its axis starts without T10 and STRN."""
+    used = " ".join(u for u in (*_TRUNK, "LCLA", "RCLA") if u in m)
+    return used if "T10" in m else used + " (its axis from the mid-hip)"
+
+
+def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The thorax' origin (between C7 and CLAV, or the clavicles' mid-point) and frame (z up the trunk,
+    x forward). Its axis runs from the mid-point of T10 and STRN, or, with the trunk's top markers alone,
+    from the mid-hip ``mid_hip`` (F, 3): the trunk then leans as the line from the hips to its top."""
+    front = m["CLAV"] if "CLAV" in m else (m["LCLA"] + m["RCLA"]) / 2
+    top = (m["C7"] + front) / 2
+    if "T10" in m:
+        bottom, fwd = (m["T10"] + m["STRN"]) / 2, (front + m["STRN"]) / 2 - (m["C7"] + m["T10"]) / 2
+    else:
+        bottom, fwd = mid_hip, front - m["C7"]
     return top, _frame(top - bottom, _cross(top - bottom, fwd))
 
 
@@ -643,7 +661,7 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     markers, x forward) and each arm: shoulder centre ``SHOULDER_DROP`` below SHO along the thorax,
     wrist centre between WRA and WRB, elbow centre by the chord rule, hand towards FIN (else along the
     forearm)."""
-    top, thorax = _thorax(m)
+    top, thorax = _thorax(m, None)
     front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
     head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
     out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
@@ -741,7 +759,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
     notes["hat"] = ("head, arms and trunk tracked by their own markers" if "head" in seg else
-                    "trunk tracked by C7 T10 CLAV STRN; head and arms (de Leva) placed on it, arms hanging"
+                    f"trunk tracked by {_trunk_labels(m)}; head and arms (de Leva) placed on it, arms hanging"
                     if full else
                     f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
