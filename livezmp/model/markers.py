@@ -11,10 +11,11 @@ function), medial knee/ankle markers, HEE. Other labels and cluster sets: :mod:`
   regression in the ASIS/PSIS pelvis frame (x anterior, z lateral, y superior; mm):
   x = -0.24 PD - 9.9, y = -0.30 PW - 10.9, z = ±(0.33 PW + 7.3).
 - Knee / ankle centres: the mid-point of the lateral and medial markers when both exist; else
-  Plug-in Gait's chord rule: the centre lies half the knee (ankle) width plus a marker radius
-  from the lateral marker, in the plane of the proximal joint centre, the wand and the marker,
-  with the proximal centre–joint centre–marker angle 90°; without a wand, medially along the
-  pelvis' lateral axis.
+  half the knee (ankle) width plus a marker radius from the lateral marker: the knee medially along
+  the pelvis' lateral axis (a THI wand's plane needs the static trial's thigh-rotation offset, which
+  a walking trial lacks), the ankle by Plug-in Gait's chord rule, in the plane of the knee centre, the
+  TIB wand and the marker, with the knee centre–ankle centre–marker angle 90° (without a wand,
+  medially along the pelvis' lateral axis too).
 - Segments: pelvis (lower trunk), thighs, shanks, feet, each a rigid body with six
   degrees of freedom (three prismatic, then yaw, pitch, roll) placed on its own markers every frame
   (no joint constraints: soft-tissue motion cannot break a chain). Masses, centres of mass and
@@ -464,7 +465,10 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
     for side, (s, sign, _) in _SIDES.items():
-        for joint, mk, wand, prox, frac in (("knee", "KNE", "THI", "hip", KNEE_WIDTH_OF_STATURE),
+        # the knee's chord rule takes no THI wand: without the static trial's thigh-rotation offset its plane
+        # is not the knee's frontal plane (the Plug-in Gait walk's knees came out 36 mm forward and 16 mm
+        # lateral of the lab's own knee centres; medially along the pelvis' lateral axis, within 5 mm)
+        for joint, mk, wand, prox, frac in (("knee", "KNE", None, "hip", KNEE_WIDTH_OF_STATURE),
                                             ("ankle", "ANK", "TIB", "knee", ANKLE_WIDTH_OF_STATURE)):
             lateral = m[s + mk]
             medial = m.get(s + mk + "_med")
@@ -474,7 +478,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 continue
             width = trial.widths_m.get(f"{s}{joint.capitalize()}Width") or frac * stature
             delta = width / 2 + MARKER_RADIUS
-            if s + wand in m:
+            if wand and s + wand in m:
                 centres[joint][side] = _chord(centres[prox][side], m[s + wand], lateral, delta, -sign * y)
                 rules[f"{side}_{joint}"] = f"chord rule ({s}{wand} wand, width {1000 * width:.0f} mm)"
             else:
