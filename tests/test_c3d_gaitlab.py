@@ -35,7 +35,7 @@ UPPER_LEFT = {"FHD": (0.07, 0.06, 1.65), "BHD": (-0.08, 0.06, 1.64), "SHO": (0.0
               "FIN": (0.02, 0.22, 0.80)}
 TOP_ROLL = 0.15  # rad: the trunk-top set's trunk rolls this far over the hips
 CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
-P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 82.9 mm; 100.8 without it)
+P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 83.2 mm; 101.7 without it)
 PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # centres (m); 0.5 x 0.3 plates
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
@@ -356,9 +356,10 @@ def test_real_plugin_gait_walk(tmp_path):
     # its plates run ~24 ms behind its markers (measured, undone); then lag and fore-aft bias are small
     assert 20 < s["time_alignment"]["plate_delay_measured_ms"] < 30
     cv = s["cop_vs_zmp"]
-    # the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip (measured on other trials): 50.8 -> 38.9 mm
-    assert cv["frames"] >= 130 and cv["rms_mm"] < 41 and cv["p95_mm"] < P95_WALK_MM
-    assert abs(cv["lag_ms"]) < 10 and abs(cv["bias_mm"][0]) < 5
+    # the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip (measured on other trials): 50.8 -> 38.9 mm; knee
+    # centres without the THI wands: 36.7 mm, lag -8.5 -> -3.3 ms
+    assert cv["frames"] >= 130 and cv["rms_mm"] < 38.5 and cv["p95_mm"] < P95_WALK_MM
+    assert abs(cv["lag_ms"]) < 6 and abs(cv["bias_mm"][0]) < 5
     acc = s["com_acc_vs_plates"]
     assert acc["r"][0] > 0.85  # lateral CoM acceleration follows the plates
     unswayed = analyse_lab_take(read_c3d(C3D / "walk_plugingait_forceplates.c3d"),
@@ -371,8 +372,8 @@ def test_real_cgm24_walk(tmp_path):
     assert rc == 0
     cv = s["cop_vs_zmp"]
     # this subject's trunk follows its mid-hip fore-aft (calibrated gain ~1): the population sway costs it
-    # 42.5 -> 46.9 mm and lag +6.8 -> +10.6 ms
-    assert cv["frames"] >= 40 and cv["rms_mm"] < 48 and abs(cv["lag_ms"]) < 12 and abs(cv["bias_mm"][0]) < 10
+    # 41.7 -> 45.2 mm and lag +7.1 -> +11.0 ms (knee centres without the THI wands: 46.9 -> 45.2 mm)
+    assert cv["frames"] >= 40 and cv["rms_mm"] < 46.5 and abs(cv["lag_ms"]) < 12 and abs(cv["bias_mm"][0]) < 10
 
 
 def test_knee_and_ankle_centres_agree_with_the_files_own_model_outputs():
