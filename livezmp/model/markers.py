@@ -4,8 +4,9 @@ Supported by their standard labels (prefixes already stripped): Vicon Plug-in Ga
 and its full-body superset (or the trunk's four markers C7 T10 CLAV STRN alone, or only its top, C7 with
 CLAV or LCLA + RCLA: the thorax is tracked, head and arms placed on it), Helen Hayes / modified Helen
 Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
-Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional THI/TIB wands (chord
-function), medial knee/ankle markers, HEE. Other labels and cluster sets: :mod:`livezmp.model.marker_map`.
+Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional TIB wands (the ankle's chord
+rule; THI wands are read but do not place the knee), medial knee/ankle markers, HEE. Other labels and
+cluster sets: :mod:`livezmp.model.marker_map`.
 
 - Hip joint centres: Harrington et al. 2007 (J Biomech 40:595-602), the pelvic-width-only
   regression in the ASIS/PSIS pelvis frame (x anterior, z lateral, y superior; mm):
