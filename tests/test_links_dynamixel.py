@@ -26,7 +26,7 @@ from test_links_support import (
 from livezmp.links import make_link
 from livezmp.links.base import LinkError, LinkReadError
 from livezmp.links.bus_timing import ADAPTERS
-from livezmp.links.dynamixel import FAST_SYNC_READ_FIRMWARE
+from livezmp.links.dynamixel import FAST_SYNC_READ_FIRMWARE, DynamixelLink
 from livezmp.links.reply_loss import ReplyLoss
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.dynamixel_control_table import OVERLOAD_ERROR
@@ -174,6 +174,34 @@ def test_bus_watchdog_stops_the_servos_when_the_host_goes_quiet():
         position = r.plant.position
         assert np.abs(position - target).min() > 0.3
         assert np.abs(position - start_posture(20)).min() > 0.05
+
+
+@pytest.mark.parametrize(("ahead", "rearm"), [(False, True), (True, True), (True, False)])
+def test_after_a_host_stall_the_tripped_watchdog_is_cleared_before_the_goals(ahead, rearm, monkeypatch):
+    """The host stalls after open (here: it waits until the simulated servos report the trip; on a robot a
+    memory lock or a page-in) longer than the 0.1 s Bus Watchdog: the servos trip it, and a goal sync write,
+    which has no reply, would be ignored without a word. The link saw the silence and clears and re-arms the
+    watchdog before its next goals, which the servos then follow; without that (rearm False) they are refused."""
+    if not rearm:
+        monkeypatch.setattr(DynamixelLink, "_rearm_after_silence", lambda self: None)
+    with rig("dynamixel", options="fast=1&timeout=0.1&watchdog=0.1") as r:
+        chain, ids = chain_of(r), [s.id for s in r.config.servos.values()]
+        before = [chain.register(i, "goal_position") for i in ids]
+        assert wait_until(lambda: all(chain.register(i, "bus_watchdog") == -1 for i in ids), timeout=2.0)
+        target = r.link.read().positions + 0.2
+        if ahead:
+            r.link.prepare_goals(target)
+            r.link.send_prepared()
+        else:
+            r.link.write_goals(target)
+        r.link.read()  # its instruction follows the goals on the wire: the servos handled them before it
+        goals = [chain.register(i, "goal_position") for i in ids]
+        if not rearm:
+            assert goals == before and "watchdog_rearmed" not in r.link.stats.errors_by_kind
+            return
+        assert goals == list(r.link.goal_ticks(target)) and chain.register(ids[0], "bus_watchdog") == 5
+        assert r.link.stats.errors_by_kind["watchdog_rearmed"] == 1
+        read_until(r.link, lambda p: np.abs(p - target).max() <= 2 * HALF_TICK)
 
 
 def test_goal_beyond_a_servos_position_limits_is_refused():

@@ -37,8 +37,8 @@ def test_two_buses_are_one_robot_read_and_driven_in_joint_order():
 
 def test_a_bus_left_idle_while_the_next_one_opens_still_takes_goals(monkeypatch):
     """The second bus opens slowly (0.3 s: a loaded host, a slow adapter) while the first, already open,
-    hears nothing: its servos' 0.1 s Bus Watchdog trips and they refuse goals until it is cleared. The
-    link arms every bus again once all are open, so both buses follow the goals."""
+    hears nothing: its servos' 0.1 s Bus Watchdog trips and they refuse goals until it is cleared. Each
+    bus saw its silence and re-arms its watchdog before its next goals, so both buses follow them."""
     from livezmp.links.dynamixel import DynamixelLink
 
     opened = []

@@ -132,6 +132,9 @@ class WaitingPortHandler(PortHandler):
     bytes_out = 0
     bytes_in = 0
     _held: bytearray | None = None  # packets kept for one write (`one_write`)
+    silence_limit = math.inf  # s: a longer gap between two writes may have tripped the servos' Bus Watchdog
+    last_out = -math.inf  # time.monotonic() of the last bytes written
+    silent_too_long = False  # a gap longer than silence_limit came before a write since it was cleared
 
     def readPort(self, length):
         data = self.ser.read(length)
@@ -148,9 +151,17 @@ class WaitingPortHandler(PortHandler):
             self._held += bytes(packet)
             self.bytes_out += len(packet)
             return len(packet)
+        self.stamp()
         written = self.ser.write(packet)
         self.bytes_out += written or 0
         return written
+
+    def stamp(self) -> None:
+        """Bytes go out now: note a silence before them longer than ``silence_limit``."""
+        now = time.monotonic()
+        if now - self.last_out > self.silence_limit:
+            self.silent_too_long = True
+        self.last_out = now
 
     def clearPort(self):
         if self._held is None:  # while packets are held, the input was cleared before the first
@@ -163,6 +174,7 @@ class WaitingPortHandler(PortHandler):
         with self.held() as data:
             yield
         if data:
+            self.stamp()
             self.ser.write(bytes(data))
 
     @contextmanager
@@ -362,9 +374,11 @@ class DynamixelLink(PortLink):
                 self.read()
             except LinkReadError:
                 pass
+        self._rearm_after_silence()
         self.stats.writes += 1
         try:
             port.clearPort()
+            port.stamp()
             port.ser.write(payload)
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
@@ -478,7 +492,7 @@ class DynamixelLink(PortLink):
                                     f"on, so it cannot be set to {self.return_delay} us: switch its torque off and "
                                     "reopen")
                 self._write_one(i, RETURN_DELAY_TIME, want)
-        self.arm_watchdog()
+        self._arm_watchdog()
         self._write_all(TORQUE_ENABLE, 1, 1)
         state = self._read_at_open(TORQUE_ENABLE, HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1)
         stride = HARDWARE_ERROR_STATUS - TORQUE_ENABLE + 1
@@ -493,15 +507,28 @@ class DynamixelLink(PortLink):
         self._run_timeout_ms = self._measure_timeout() if self.timeout is None else 1e3 * self.timeout
         self._traffic[:] = 0
 
-    def arm_watchdog(self) -> None:
+    def _arm_watchdog(self) -> None:
         """(Re)arm the servos' Bus Watchdog (``watchdog`` s; off: nothing), clearing one that tripped: a
-        tripped servo takes no goal until then. The link arms it at open; a robot on several buses arms
-        every bus again once all are open, since a bus left idle while the next one opens trips."""
+        tripped servo takes no goal until then (Bus Watchdog(98) reads -1; XM430 e-Manual)."""
         if self.watchdog:
+            port = self._require_port()
             counted = self._traffic.copy()  # set-up, not the loop's cycles (the bus summary's bytes)
             self._write_all(BUS_WATCHDOG, 1, 0)  # writing 0 first clears a tripped watchdog
             self._write_all(BUS_WATCHDOG, 1, round(self.watchdog / WATCHDOG_UNIT))
             self._traffic[:] = counted
+            # a margin below the servos' period: their timer starts when our bytes arrive, not when sent
+            port.silence_limit = 0.9 * self.watchdog
+            port.silent_too_long = False
+
+    def _rearm_after_silence(self) -> None:
+        """Before goals: if the bus was silent longer than the Bus Watchdog since it was armed (the host
+        stalled: a memory lock or page-in, a bus left idle while the next one opened), the servos may have
+        tripped it and would ignore these goals without a word (a sync write has no reply): clear and
+        re-arm it first, and count it (``watchdog_rearmed``)."""
+        port = self._port
+        if port is not None and (port.silent_too_long or time.monotonic() - port.last_out > port.silence_limit):
+            self.stats.count("watchdog_rearmed")
+            self._arm_watchdog()
 
     def _check_imu(self) -> None:
         """The IMU sub-controller answers a read of its registers; LinkError naming it after OPEN_TRIES."""
@@ -736,6 +763,7 @@ class DynamixelLink(PortLink):
                 self.read()
             except LinkReadError:
                 pass  # counted; the write goes on
+        self._rearm_after_silence()
         writer = self._fill_goals(ticks)
         if not request:
             self._send(writer)

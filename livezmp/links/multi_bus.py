@@ -62,10 +62,8 @@ class MultiBusLink:
             for path, joints in zip(self.paths, found, strict=True):
                 bus = DynamixelLink(path, [self.joint_names[i] for i in joints], [self._servos[i] for i in joints],
                                     **self._options)
-                bus.open()
+                bus.open()  # a bus idle while the next ones open re-arms its watchdog before its first goals
                 self.buses.append(bus)
-            for bus in self.buses:  # the first buses sat idle while the others opened: their watchdogs may trip
-                bus.arm_watchdog()
         except LinkError:
             self._release()
             raise
