@@ -21,14 +21,20 @@ rate with < 1 % missed deadlines. Columns: robot, bus, read, adapter, return del
 scheduling, asked and achieved rate, achieved / ceiling, missed deadlines, p99
 sense-to-command latency, the mean read and loop-work (estimate + correct) time, whether the
 simulated robot fell, failed reads, the 1-minute load average after the row (others share
-the machine). The first rows are the loop's own work flat out on the mock link (no bus).
+the machine), and the CPU time per cycle of the loop's process and of the simulator's (all its
+threads: port service, physics; its port service spins through the last 0.1 ms before each
+reply is due). The first rows are the loop's own work flat out on the mock link (no bus).
 
-Run: python benchmarks/bench_live_loop.py [--seconds 10]
+Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...]
+
+``--only`` keeps the rows whose label (robot, bus, read, adapter, return delay, faults, e.g.
+``livezmp_mini 4 Mbps x 2 fast sync hs 0 us``) contains TEXT; ``--only "x 2"`` runs the two-bus row.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 from pathlib import Path
@@ -112,9 +118,15 @@ def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
-            return bus_only(link, rate, seconds) if baseline else live(link, robot, sim, rate, seconds, correct_hz)
+            loop0, sim0 = time.process_time(), sim.cpu_seconds()
+            x = bus_only(link, rate, seconds) if baseline else live(link, robot, sim, rate, seconds, correct_hz)
+            loop1, sim1 = time.process_time(), sim.cpu_seconds()
         finally:
             link.close()
+    cycles = max(x["cycles"], 1)
+    x["loop_cpu"] = 1e6 * (loop1 - loop0) / cycles
+    x["sim_cpu"] = math.nan if sim0 is None or sim1 is None else 1e6 * (sim1 - sim0) / cycles
+    return x
 
 
 def predicted_ceiling(n_servos: int, buses: int, fast: bool, return_delay_us: float, baud: int,
@@ -142,10 +154,23 @@ CONFIGS = [
 ]
 
 
+def label(config: tuple) -> str:
+    """A row's name for --only: robot, bus, read, adapter, return delay, faults."""
+    name, baud, buses, fast, delay, adapter, _, faults, _ = config
+    bus = f"{baud / 1e6:g} Mbps" + (f" x {buses}" if buses > 1 else "")
+    return f"{name} {bus} {'fast sync' if fast else 'sync'} {adapter} {delay} us" + (f" {faults}" if faults else "")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="seconds per row (default 10)")
+    parser.add_argument("--only", action="append", metavar="TEXT",
+                        help="run only the rows whose label contains TEXT (repeatable), e.g. 'x 2'")
+    parser.add_argument("--no-mock", action="store_true", help="skip the loop-work-only lines (mock link)")
     args = parser.parse_args()
+    configs = [c for c in CONFIGS if not args.only or any(text in label(c) for text in args.only)]
+    if not configs:
+        parser.error(f"--only {args.only}: no row matches; the rows: " + "; ".join(map(label, CONFIGS)))
     robots = {"livezmp_mini": (None, load_robot(None, None)), "OP3": (str(OP3), load_robot(str(OP3), None))}
     sec = args.seconds
     with realtime_priority(LOOP_PRIORITY) as refused:
@@ -156,16 +181,16 @@ def main() -> None:
     print("the live loop reads, writes and estimates every cycle and corrects at 125 Hz (every round(rate / 125)-th "
           "cycle: the summary's correct_every, 8 at 1 kHz)\n")
     mini = robots["livezmp_mini"][1]
-    for correct_hz in (125.0, 500.0):
+    for correct_hz in () if args.no_mock else (125.0, 500.0):
         x = compute_only(mini, 500.0, min(sec, 5.0), correct_hz)
         print(f"loop work only (mock link, no bus), livezmp_mini, correct at {correct_hz:g} Hz: "
               f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
     header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
               "sched  | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
-              "failed reads | load |")
+              "failed reads | loop CPU us | sim CPU us | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
-    for name, baud, buses, fast, delay, adapter, cap, faults, both in CONFIGS:
+    for name, baud, buses, fast, delay, adapter, cap, faults, both in configs:
         urdf, robot = robots[name]
         ceiling = predicted_ceiling(len(robot.body.joint_names), buses, fast, delay, baud, adapter)
         rate = min(cap, round(0.85 * ceiling))
@@ -182,7 +207,8 @@ def main() -> None:
             print(f"| {name:<12} | {bus:<14} | {read:<9} | {adapter:<7} | {delay:8d} | {ceiling:10.0f} | {loop:<9} | "
                   f"{sched:<6} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
-                  f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {os.getloadavg()[0]:4.1f} |", flush=True)
+                  f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
+                  f"{os.getloadavg()[0]:4.1f} |", flush=True)
     print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

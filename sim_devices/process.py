@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import multiprocessing
+import os
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -224,6 +225,16 @@ class SimProcess:
 
     def servos(self) -> dict:
         return self._ask("servos")
+
+    def cpu_seconds(self) -> float | None:
+        """CPU time (user + system, s) the child process has used so far, all its threads; None where
+        /proc cannot tell (not Linux, or the child is gone)."""
+        try:
+            with open(f"/proc/{self._proc.pid}/stat") as f:
+                fields = f.read().rpartition(")")[2].split()
+        except OSError:
+            return None
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (clock ticks)
 
     def close(self) -> None:
         """Stop the child (politely, then by force after 5 s)."""
