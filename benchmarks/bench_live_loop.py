@@ -21,11 +21,16 @@ rate with < 1 % missed deadlines. Columns: robot, bus, read, adapter, return del
 scheduling, asked and achieved rate, achieved / ceiling, missed deadlines, p99
 sense-to-command latency, the mean read and loop-work (estimate + correct) time, whether the
 simulated robot fell, failed reads, the 1-minute load average after the row (others share
-the machine), and the CPU time per cycle of the loop's process and of the simulator's (all its
-threads: port service, physics; its port service spins through the last 0.1 ms before each
-reply is due). The first rows are the loop's own work flat out on the mock link (no bus).
+the machine), and the CPU time per cycle of the loop's process and of the simulator's (its
+devices' process, whose port service spins through the last 0.1 ms before each reply is due,
+and its physics process), and of that the physics process's alone. The first rows are the loop's
+own work flat out on the mock link (no bus).
 
-Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...]
+Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...] [--physics thread]
+
+``--physics thread`` steps the simulated humanoid in a thread of the devices' process (sharing its
+GIL with the port service), as the simulator did before its physics got a process of its own: the
+baseline for the simulator's own timing.
 
 ``--only`` keeps the rows whose label (robot, bus, read, adapter, return delay, faults, e.g.
 ``livezmp_mini 4 Mbps x 2 fast sync hs 0 us``) contains TEXT; ``--only "x 2"`` runs the two-bus row.
@@ -112,9 +117,10 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 
 
 def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
-        baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY) -> dict:
+        baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY,
+        physics: str = "process") -> dict:
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
-                    devices=devices) as sim, realtime_priority(priority, lock_memory=True):
+                    devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -125,7 +131,11 @@ def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float
             link.close()
     cycles = max(x["cycles"], 1)
     x["loop_cpu"] = 1e6 * (loop1 - loop0) / cycles
-    x["sim_cpu"] = math.nan if sim0 is None or sim1 is None else 1e6 * (sim1 - sim0) / cycles
+    if sim0 is None or sim1 is None:
+        x["sim_cpu"] = x["physics_cpu"] = math.nan
+    else:
+        x["sim_cpu"] = 1e6 * (sum(sim1) - sum(sim0)) / cycles
+        x["physics_cpu"] = 1e6 * (sim1[1] - sim0[1]) / cycles
     return x
 
 
@@ -167,6 +177,9 @@ def main() -> None:
     parser.add_argument("--only", action="append", metavar="TEXT",
                         help="run only the rows whose label contains TEXT (repeatable), e.g. 'x 2'")
     parser.add_argument("--no-mock", action="store_true", help="skip the loop-work-only lines (mock link)")
+    parser.add_argument("--physics", choices=("process", "thread"), default="process",
+                        help="the simulated humanoid's physics in a process of its own (default) or in a thread "
+                             "of the devices' process (the old way: the baseline)")
     args = parser.parse_args()
     configs = [c for c in CONFIGS if not args.only or any(text in label(c) for text in args.only)]
     if not configs:
@@ -177,7 +190,8 @@ def main() -> None:
         scheduling = (f"SCHED_FIFO {LOOP_PRIORITY} for the loop, {LOOP_PRIORITY - 1} for the simulator"
                       if refused is None else f"normal scheduling (real-time priority {refused})")
     print(f"20 simulated XM430s per robot (simulator in its own process); {os.cpu_count()} CPUs; {sec:g} s per row; "
-          f"{scheduling}; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+          f"{scheduling}; physics in a {args.physics}; "
+          f"load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print("the live loop reads, writes and estimates every cycle and corrects at 125 Hz (every round(rate / 125)-th "
           "cycle: the summary's correct_every, 8 at 1 kHz)\n")
     mini = robots["livezmp_mini"][1]
@@ -187,7 +201,7 @@ def main() -> None:
               f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
     header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
               "sched  | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
-              "failed reads | loop CPU us | sim CPU us | load |")
+              "failed reads | loop CPU us | sim CPU us | physics us | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
     for name, baud, buses, fast, delay, adapter, cap, faults, both in configs:
@@ -200,7 +214,8 @@ def main() -> None:
         read = "fast sync" if fast else "sync"
         runs = [(True, LOOP_PRIORITY)] + [(False, 0)] * both + [(False, LOOP_PRIORITY)]
         for baseline, priority in runs:
-            x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults, priority=priority)
+            x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults, priority=priority,
+                    physics=args.physics)
             fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
             loop = "bus only" if baseline else ("loop, 5+5%" if faults else "live loop")
             sched = f"FIFO{priority}" if priority and refused is None else "normal"
@@ -208,6 +223,7 @@ def main() -> None:
                   f"{sched:<6} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
+                  f"{x['physics_cpu']:10.0f} | "
                   f"{os.getloadavg()[0]:4.1f} |", flush=True)
     print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
 

@@ -26,14 +26,17 @@ from livezmp.model.robot import Robot, load_robot
 from sim_devices.faults import parse_faults
 from sim_devices.humanoid import RealtimeThread, SimHumanoid
 from sim_devices.launch import KINDS, humanoid_imu, humanoid_sensors, start_devices
+from sim_devices.physics_process import PhysicsProcess, RemoteHumanoid
 
 
 @dataclass
 class SimRobot:
-    """A simulated humanoid stepping in real time, and the devices that serve it."""
+    """A simulated humanoid stepping in real time, and the devices that serve it. ``humanoid``: the
+    `SimHumanoid` itself (mock link) or its face in this process (`RemoteHumanoid`) while a
+    `PhysicsProcess` steps it."""
 
-    humanoid: SimHumanoid
-    thread: RealtimeThread | None
+    humanoid: SimHumanoid | RemoteHumanoid
+    physics: PhysicsProcess | RealtimeThread | None
     devices: object | None  # sim_devices.launch.SimDevices; None for the in-process mock link
     scenario: sc.Scenario
 
@@ -59,41 +62,55 @@ class SimRobot:
                 "true_inside_fraction": 1.0 - (c.unsupported_steps - unsupported0) / steps if steps else None}
 
     def close(self) -> None:
-        if self.thread is not None:
-            self.thread.stop()
-        if self.devices is not None:
-            self.devices.close()
+        try:
+            if self.devices is not None:
+                self.devices.close()
+        finally:
+            if isinstance(self.physics, RealtimeThread):
+                self.physics.stop()
+            elif self.physics is not None:
+                self.physics.close()
 
 
-def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", **devices) -> SimRobot:
+def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", physics: str = "process",
+              **devices) -> SimRobot:
     """The humanoid at the scenario's first posture (torque off until a link opens it),
     stepping in real time, behind devices of ``kind`` (a firmware board with its foot
     sensors). For ``mock`` there are no devices and no stepping thread: the in-process
-    mock link steps it at each read. ``devices``: `start_devices` options (baud, adapter, buses,
-    can_transport)."""
+    mock link steps it at each read. Behind devices, it steps in a `PhysicsProcess` of its own, so no
+    device's reply waits for a physics step (``physics="thread"``: in a `RealtimeThread` of this process
+    instead, sharing its GIL with the devices, the benchmarks' baseline). ``devices``: `start_devices`
+    options (baud, adapter, buses, can_transport)."""
     if kind not in (*KINDS, "mock"):
         raise InputError(f"--link {kind}: expected one of {', '.join((*KINDS, 'mock'))}")
     if kind == "mock" and faults:
         raise InputError("--fault: the mock link has no devices to inject faults into")
-    # the mock link steps the humanoid at each read; behind devices, only its thread does,
-    # once per physics step, so no device reply waits for physics
+    # the mock link steps the humanoid at each read; behind devices, only its physics process does
     humanoid = SimHumanoid(robot.body, scenario.goals(0.0), clock=time.monotonic, device_steps=kind == "mock",
                            slope=scenario.slope, edge=scenario.edge)
     if kind == "mock":
         return SimRobot(humanoid, None, None, scenario)
-    thread = RealtimeThread(humanoid, period=humanoid.dt).start()
+    # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
+    # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly); so does the
+    # robot's IMU sub-controller on a Dynamixel bus
+    sensors = kind == "fw" or (kind == "dynamixel" and robot.config.imu is not None)
+    if physics == "thread":
+        stepper, remote = RealtimeThread(humanoid, period=humanoid.dt).start(), humanoid
+    elif physics == "process":
+        stepper = PhysicsProcess(humanoid, sensors=sensors)  # before the devices: forked without their threads
+        remote = stepper.humanoid
+    else:
+        raise InputError(f"physics '{physics}': expected process or thread")
     try:
-        # the firmware board reads the humanoid's foot cells (its true centre of pressure) and its IMU (the CAN
-        # nodes do not: on slcan their frames would crowd a bus python-can already reads slowly)
-        feet, imu = humanoid_sensors(humanoid) if kind == "fw" else (None, None)
-        if kind == "dynamixel" and robot.config.imu is not None:  # the robot's IMU sub-controller on its bus
-            imu = humanoid_imu(humanoid)
-        devices = start_devices(kind, humanoid, robot.config, joint_names=robot.body.joint_names, faults=faults,
+        feet, imu = humanoid_sensors(remote) if kind == "fw" else (None, None)
+        if kind == "dynamixel" and sensors:
+            imu = humanoid_imu(remote)
+        devices = start_devices(kind, remote, robot.config, joint_names=robot.body.joint_names, faults=faults,
                                 foot_sensors=feet, imu=imu, **devices)
     except BaseException:
-        thread.stop()
+        SimRobot(remote, stepper, None, scenario).close()
         raise
-    return SimRobot(humanoid, thread, devices, scenario)
+    return SimRobot(remote, stepper, devices, scenario)
 
 
 def sim_process_setup() -> None:
@@ -141,7 +158,7 @@ FELL_FLAG_EVERY_S = 0.02  # how often a SimProcess's child looks for a fall to f
 
 
 def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
-               faults: str, priority: int, devices: dict) -> None:
+               faults: str, priority: int, devices: dict, physics: str) -> None:
     """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
     ``fell_flag`` (a multiprocessing Event) once the robot has fallen."""
     sim = None
@@ -150,7 +167,8 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
         try:
             sim_process_setup()
             robot = load_robot(urdf, config)
-            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults, **devices)
+            sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults, physics,
+                            **devices)
             conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})
             while True:
                 if not conn.poll(FELL_FLAG_EVERY_S):
@@ -164,8 +182,7 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
                 elif request == "verdict":
                     conn.send({**sim.verdict(), "injected_faults": vars(sim.devices.fault_counters)})
                 elif request == "servos":
-                    servo = sim.humanoid.servo
-                    conn.send({"goal": servo.goal.copy(), "position": servo.position.copy()})
+                    conn.send({"goal": sim.humanoid.goal.copy(), "position": sim.humanoid.position.copy()})
                 else:
                     break
         except (InputError, ValueError) as e:
@@ -177,23 +194,31 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
                 sim.close()
 
 
+def _cpu_seconds(pid: int) -> float:
+    """CPU time (user + system, s) process ``pid`` has used, all its threads (OSError if it is gone)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rpartition(")")[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (clock ticks)
+
+
 class SimProcess:
     """The simulated humanoid and its devices in a child process — its own core and
     interpreter, as a real robot is another machine — driven over a pipe: ``url`` and
     ``ports`` of its devices; :meth:`start_scenario`, :meth:`fell`, :meth:`verdict`;
     :meth:`vanish` / :meth:`restore` its ports. ``scenario``: (name, keyword arguments);
     ``realtime_priority``: SCHED_FIFO priority of the child's threads (0: normal; if refused,
-    normal); ``devices``: `start_devices` options (baud, adapter, buses, can_transport)."""
+    normal); ``devices``: `start_devices` options (baud, adapter, buses, can_transport); ``physics``: as
+    `start_sim`'s."""
 
     def __init__(self, kind: str, scenario: tuple[str, dict], faults: str = "", urdf: str | None = None,
                  config: str | None = None, start_timeout: float = 60.0, realtime_priority: int = 0,
-                 devices: dict | None = None):
+                 devices: dict | None = None, physics: str = "process"):
         ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no threads or locks inherited
         self._conn, child = ctx.Pipe()
         # the fall is a flag the child raises, so the loop's frequent question costs no round trip
         self._fell = ctx.Event()
         self._proc = ctx.Process(target=_sim_child, args=(child, self._fell, urdf, config, kind, scenario, faults,
-                                                             realtime_priority, devices or {}),
+                                                             realtime_priority, devices or {}, physics),
                                  name="livezmp-sim", daemon=True)
         self._proc.start()
         child.close()
@@ -226,15 +251,16 @@ class SimProcess:
     def servos(self) -> dict:
         return self._ask("servos")
 
-    def cpu_seconds(self) -> float | None:
-        """CPU time (user + system, s) the child process has used so far, all its threads; None where
-        /proc cannot tell (not Linux, or the child is gone)."""
+    def cpu_seconds(self) -> tuple[float, float] | None:
+        """CPU time (user + system, s) used so far by the child process (all its threads: the devices) and
+        by its children (the physics process); None where /proc cannot tell (not Linux, or the child is gone)."""
         try:
-            with open(f"/proc/{self._proc.pid}/stat") as f:
-                fields = f.read().rpartition(")")[2].split()
+            devices = _cpu_seconds(self._proc.pid)
+            with open(f"/proc/{self._proc.pid}/task/{self._proc.pid}/children") as f:
+                physics = sum(_cpu_seconds(int(pid)) for pid in f.read().split())
         except OSError:
             return None
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (clock ticks)
+        return devices, physics
 
     def close(self) -> None:
         """Stop the child (politely, then by force after 5 s)."""

@@ -1,0 +1,49 @@
+"""The simulated humanoid stepping in a process of its own (sim_devices.physics_process): goals and torque
+written in this process drive its joints there, its state and sensors come back, and it stops cleanly."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from livezmp.errors import InputError
+from livezmp.live.scenarios import make_scenario
+from sim_devices.humanoid import SimHumanoid
+from sim_devices.physics_process import PhysicsProcess
+from tests.sim_support import wait_until
+
+
+def test_goals_in_this_process_move_the_joints_stepped_in_another(mini):
+    posture = make_scenario("stand", mini).goals(0.0)
+    humanoid = SimHumanoid(mini, posture, clock=time.monotonic, device_steps=False)
+    physics = PhysicsProcess(humanoid, sensors=True)
+    try:
+        remote = physics.humanoid
+        assert physics.pid != os.getpid()
+        t0 = remote.t
+        assert wait_until(lambda: remote.t >= t0 + 0.05)  # it steps on its own, to the clock
+        knee = mini.joint_names.index("l_knee")
+        goal = posture[knee] + 0.2
+        remote.set_torque(knee, True)
+        remote.set_goal(knee, goal)
+        # the servo plant tracks the goal (first order, limited speed): there within the deadline
+        assert wait_until(lambda: abs(remote.position[knee] - goal) < 1e-3, timeout=5.0)
+        others = np.delete(np.arange(len(posture)), knee)
+        np.testing.assert_allclose(remote.position[others], posture[others], atol=1e-12)  # torque off: held
+        # its sensors: the foot cells carry the robot's weight, the IMU reads gravity along the base's z
+        weight = mini.total_mass * 9.81
+        assert wait_until(lambda: abs(remote.foot_forces().total - weight) < 0.02 * weight)
+        assert np.linalg.norm(remote.imu().specific_force) == pytest.approx(9.81, rel=0.02)
+        assert remote.fallen is None and remote.counters.steps > 0
+    finally:
+        physics.close()
+    with pytest.raises(ChildProcessError):  # reaped by close()
+        os.waitpid(physics.pid, os.WNOHANG)
+
+
+def test_only_a_clocked_humanoid_left_to_its_thread_can_be_stepped_elsewhere(mini):
+    with pytest.raises(InputError, match="device_steps=False"):
+        PhysicsProcess(SimHumanoid(mini, clock=time.monotonic))
