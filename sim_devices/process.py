@@ -3,7 +3,8 @@
 :func:`start_sim` starts the humanoid stepping in real time behind devices of one link
 kind (``livezmp sim``, the in-process ``mock`` demo); :class:`SimProcess` runs the same in
 a child process — its own core and interpreter, as a real robot is another machine — for
-``livezmp demo``, the tests and the benchmarks.
+``livezmp demo``, the tests and the benchmarks. Either way the humanoid's physics steps in a
+process of its own (:mod:`sim_devices.physics_process`), beside its devices.
 """
 
 from __future__ import annotations
@@ -114,8 +115,8 @@ def start_sim(robot: Robot, kind: str, scenario: sc.Scenario, faults: str = "", 
 
 
 def sim_process_setup() -> None:
-    """The simulator's threads (port server, physics) hand the GIL over within 0.1 ms
-    rather than 5 ms, so a reply is not held up behind a physics step."""
+    """The simulator's threads (port servers; the physics too when it is a thread) hand the GIL
+    over within 0.1 ms rather than 5 ms, so a reply is not held up behind another thread."""
     sys.setswitchinterval(1e-4)
 
 
