@@ -1,9 +1,9 @@
 """The simulated humanoid's physics in a process of its own, its joint state in shared memory.
 
 Why: a bus's port service and a 1 kHz physics step in one interpreter take turns on the
-GIL, so a reply due while a step runs leaves late (on this 2-core machine, a Fast Sync Read's
-handling took 0.38 ms at the median and 1.3 ms at the 90th percentile with the physics thread
-beside it, 0.26 / 0.33 ms without; the step itself costs about 0.2 ms of CPU). Here the
+GIL, so a reply due while a step runs leaves late (on a loaded 2-CPU machine, normal scheduling, a
+Fast Sync Read's handling took 0.38 ms at the median and 1.3 ms at the 90th percentile with the
+physics thread beside it, 0.26 / 0.33 ms without; the step itself costs about 0.2 ms of CPU). Here the
 physics runs in a forked child; the devices' process only reads and writes arrays.
 
 `PhysicsProcess(humanoid, sensors)` forks a child that steps ``humanoid`` to the monotonic
@@ -170,10 +170,6 @@ class PhysicsProcess:
             raise answer
         return answer
 
-    def cpu_seconds(self) -> float:
-        """CPU time (s, user + system) the physics process has used."""
-        return self._ask("cpu")
-
     def close(self) -> None:
         """Stop the child (an error it met is raised here)."""
         error = None
@@ -216,9 +212,12 @@ def _take_inputs(humanoid: SimHumanoid, a: dict[str, np.ndarray]) -> None:
 
 def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensors: bool) -> None:
     """The physics loop; ``a``: the shared arrays, mapped in this forked child as in its parent."""
+    # its parent ends it (stop, or the pipe's end when the parent dies): a Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # normal scheduling even under a real-time simulator: a pty's bytes reach the devices through a kernel
     # worker of normal priority, which a real-time physics step would hold off (measured: the instruction's
-    # pickup 30 % slower at the median with the physics at SCHED_FIFO)
+    # pickup 81 us after the write at the median with the physics at SCHED_FIFO, 44-66 us with it at normal
+    # priority, a loaded 2-CPU machine)
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     conn.send("ready")
@@ -231,7 +230,7 @@ def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensor
                     _take_inputs(humanoid, a)
                     humanoid.sync()
                     _publish(humanoid, a, sensors)
-                except BaseException as e:  # handed to close()
+                except Exception as e:  # handed to close()
                     error = e
             due = max(due + humanoid.dt, time.monotonic() - humanoid.dt)  # no burst after a stall
             if not conn.poll(max(0.0, due - time.monotonic())):
@@ -245,7 +244,5 @@ def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensor
                 conn.send(None)
             elif request == "fallen":
                 conn.send(humanoid.fallen)
-            elif request == "cpu":
-                conn.send(time.process_time())
-    except (EOFError, KeyboardInterrupt):
+    except EOFError:
         pass

@@ -47,3 +47,14 @@ def test_goals_in_this_process_move_the_joints_stepped_in_another(mini):
 def test_only_a_clocked_humanoid_left_to_its_thread_can_be_stepped_elsewhere(mini):
     with pytest.raises(InputError, match="device_steps=False"):
         PhysicsProcess(SimHumanoid(mini, clock=time.monotonic))
+
+
+def test_an_error_in_the_physics_process_is_raised_by_close(mini):
+    humanoid = SimHumanoid(mini, make_scenario("stand", mini).goals(0.0), clock=time.monotonic, device_steps=False)
+    physics = PhysicsProcess(humanoid)
+    remote = physics.humanoid
+    remote.goal[0] = float("nan")  # past set_goal's check: the physics process's own check refuses it
+    t = remote.t
+    assert not wait_until(lambda: remote.t > t + 0.01, timeout=0.2)  # it stopped stepping
+    with pytest.raises(InputError, match="not finite"):
+        physics.close()
