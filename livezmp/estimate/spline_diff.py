@@ -84,45 +84,56 @@ def window_weights(t: np.ndarray, lam: float, index: int) -> np.ndarray:
     solves with one or two right-hand sides, O(k), whatever the channel count.
     """
     k = t.shape[0]
-    unit = np.zeros((k, 1))
-    unit[index] = 1.0
     if k == 1:
         return np.array([[1.0], [0.0], [0.0]])
     h = np.diff(t)
     if k == 2:
+        unit = np.zeros((k, 1))
+        unit[index] = 1.0
         vel, _ = _slopes_adjoint(unit, h)
         acc, _ = _slopes_adjoint(vel, h)
         return np.hstack([unit, vel, acc]).T
     # Columns of the k x (k-2) second-difference matrix Q: entries at rows a, a+1, a+2.
-    lo = (1.0 / h[:-1])[:, None]
-    hi = (1.0 / h[1:])[:, None]
+    lo = 1.0 / h[:-1]
+    hi = 1.0 / h[1:]
     mid = -lo - hi
-    # Upper banded form of A = R + lam Q^T Q (symmetric positive definite).
+    # Lower banded form of A = R + lam Q^T Q (symmetric positive definite); LAPACK's
+    # unblocked band Cholesky costs half as much in lower as in upper storage.
     ab = np.zeros((3, k - 2))
-    ab[2] = (h[:-1] + h[1:]) / 3.0 + lam * (lo**2 + mid**2 + hi**2)[:, 0]
-    ab[1, 1:] = h[1:-1] / 6.0 + lam * (mid[:-1] * lo[1:] + hi[:-1] * mid[1:])[:, 0]
-    ab[0, 2:] = lam * (hi[:-2] * lo[2:])[:, 0]
+    ab[0] = (h[:-1] + h[1:]) / 3.0 + lam * (lo**2 + mid**2 + hi**2)
+    ab[1, :-1] = h[1:-1] / 6.0 + lam * (mid[:-1] * lo[1:] + hi[:-1] * mid[1:])
+    ab[2, :-2] = lam * (hi[:-2] * lo[2:])
     # LAPACK directly: the scipy.linalg wrappers cost more than the O(k) work here.
-    factor, info = dpbtrf(ab)
+    factor, info = dpbtrf(ab, lower=1)
     if info != 0:
         raise ValueError(f"smoothing system not positive definite (info {info}): times must increase")
+    lo, mid, hi = lo[:, None], mid[:, None], hi[:, None]
 
     def hat_t(base: np.ndarray, extra: np.ndarray) -> np.ndarray:
         # base + Q A^-1 (extra[1:-1] - lam Q^T base): the transposed smoothing map.  With extra = 0 it
         # is a row of the hat matrix; with (base, extra) = (Dg^T u, Dc^T u) it is V^T u for the
         # knot-velocity map V = Dg H + Dc A^-1 Q^T.
         rhs = extra[1:-1] - lam * (lo * base[:-2] + mid * base[1:-1] + hi * base[2:])
-        inner, _ = dpbtrs(factor, rhs)
-        out = base.copy()
-        out[:-2] += lo * inner
-        out[1:-1] += mid * inner
-        out[2:] += hi * inner
-        return out
+        inner, _ = dpbtrs(factor, rhs, lower=1)
+        base[:-2] += lo * inner
+        base[1:-1] += mid * inner
+        base[2:] += hi * inner
+        return base
 
-    zg, zc = _slopes_adjoint(unit, h)
-    pos_vel = hat_t(np.hstack([unit, zg]), np.hstack([np.zeros_like(unit), zc]))
+    # Column 0: the unit vector at ``index``; column 1: (Dg^T, Dc^T) of it, which touch the two
+    # knots of the interval its slope is taken on (_slopes_adjoint, written out for one nonzero).
+    base, extra = np.zeros((k, 2)), np.zeros((k, 2))
+    base[index, 0] = 1.0
+    a = min(index, k - 2)
+    arm = h[a] / 6.0
+    base[a, 1], base[a + 1, 1] = -1.0 / h[a], 1.0 / h[a]
+    extra[a, 1], extra[a + 1, 1] = (-2.0 * arm, -arm) if index < k - 1 else (arm, 2.0 * arm)
+    pos_vel = hat_t(base, extra)
     acc = hat_t(*_slopes_adjoint(pos_vel[:, 1:], h))
-    return np.hstack([pos_vel, acc]).T
+    out = np.empty((3, k))
+    out[:2] = pos_vel.T
+    out[2] = acc[:, 0]
+    return out
 
 
 def uniform_weights(window: int, lag: int, dt: float, lam: float) -> np.ndarray:
