@@ -299,7 +299,8 @@ class DynamixelChain(PtyDevice):
             if servo is None or servo.table[68] < 2:
                 return []
             return self._schedule(now, packet.size, [(servo.return_delay,
-                                                     encode_status(servo.id, self._error(servo, ErrorCode.CRC)))])
+                                                     encode_status(servo.id, self._error(servo, ErrorCode.CRC)))],
+                                  line)
         self.stats.packets += 1
         self._last_packet = now
         handler = self._handlers.get(packet.instruction)
@@ -308,7 +309,7 @@ class DynamixelChain(PtyDevice):
             entries = [] if servo is None else self._status(servo, ErrorCode.INSTRUCTION, level=2)
         else:
             entries = handler(packet, now, line)
-        return self._schedule(now, packet.size, entries)
+        return self._schedule(now, packet.size, entries, line)
 
     def _readdress(self) -> None:
         """Rebuild the id lookups after an id or baud-rate change."""
@@ -350,14 +351,16 @@ class DynamixelChain(PtyDevice):
         reply_id = servo.id if reply_id is None else reply_id
         return [(servo.return_delay, encode_status(reply_id, self._error(servo, code), params))]
 
-    def _schedule(self, now: float, instruction_size: int, entries: list[tuple[float, bytes]]) -> list[Reply]:
+    def _schedule(self, now: float, instruction_size: int, entries: list[tuple[float, bytes]],
+                  line: int | None) -> list[Reply]:
         """Due times for replies sent one after the other, each after its delay; faults applied.
 
         The instruction reaches the bus the adapter's ``out_s`` after the host wrote it, and once
         the bus is free (after earlier instructions and replies); with wire time every byte takes
-        10 bit times; each reply reaches the host the adapter's ``in_s`` after its last byte.
+        10 bit times (at the host's line speed ``line``, baud, as `on_bytes` read it; None: the first
+        servo's); each reply reaches the host the adapter's ``in_s`` after its last byte.
         """
-        byte_time = wire_time(1, self._port.line_speed() or self._servos[0].baud) if self._emulate_wire else 0.0
+        byte_time = wire_time(1, line or self._servos[0].baud) if self._emulate_wire else 0.0
         t = max(now + self.adapter.out_s, self._bus_free) + instruction_size * byte_time
         replies = []
         for delay, payload in entries:

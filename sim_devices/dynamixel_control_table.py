@@ -61,7 +61,7 @@ class Field:
     def eeprom(self) -> bool:
         return self.address < EEPROM_END
 
-    @property
+    @functools.cached_property  # read for every servo of every sync write: made once
     def fmt(self) -> str:
         code = {1: "b", 2: "h", 4: "i"}[self.size]
         return "<" + (code if self.signed else code.upper())

@@ -18,7 +18,7 @@ import enum
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from livezmp.links.dynamixel_crc import MAX_PACKET, crc16
+from livezmp.links.dynamixel_crc import MAX_PACKET, crc16, crc16_after_itself
 
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
@@ -96,7 +96,7 @@ def encode_fast_status(segments: Iterable[tuple[int, int, bytes]]) -> bytes:
         segment = bytes((error, dxl_id)) + data
         crc = crc16(segment, crc)
         tail = bytes((crc & 0xFF, crc >> 8))
-        crc = crc16(tail, crc)
+        crc = crc16_after_itself(crc)
         out += segment
         out += tail
     return bytes(out)

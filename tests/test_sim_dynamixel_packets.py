@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sim_support import short_gil_switch  # noqa: F401 - a fixture
 
+from livezmp.links.dynamixel_crc import crc16_after_itself
 from sim_devices.dynamixel_chain import STALL_CURRENT, DynamixelChain
 from sim_devices.dynamixel_packet import PacketReader, crc16, encode_fast_status, encode_packet, stuff, unstuff
 
@@ -307,6 +308,7 @@ def test_return_delay_time_delays_the_reply(bus):
 def test_crc16_matches_dynamixel_sdk(data, start):
     assert crc16(data) == SDK.updateCRC(0, list(data), len(data))
     assert crc16(data, start) == SDK.updateCRC(start, list(data), len(data))
+    assert crc16_after_itself(start) == SDK.updateCRC(start, [start & 0xFF, start >> 8], 2)
 
 
 _STUFFY = st.lists(st.sampled_from([0xFF, 0xFD, 0x00, 0x42]), max_size=60).map(bytes)
