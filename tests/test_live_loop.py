@@ -22,7 +22,8 @@ from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import LiveLoop
 from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, Watchdog, joint_limits
-from livezmp.model.demo_robot import demo_robot_path
+from livezmp.live.scenarios import smooth_step
+from livezmp.model.demo_robot import demo_robot_path, smooth_ramp
 
 RATE = 500.0
 T = 1.0 / RATE
@@ -501,3 +502,16 @@ def test_corrections_are_bounded_and_rate_limited(mini):
     offsets = goals - np.array([command(i * T) for i in range(len(goals))])
     assert np.abs(offsets).max() <= 0.1 + 1e-9
     assert np.abs(np.diff(offsets, axis=0)).max() <= 1.0 * T + 1e-9
+
+
+def test_ramps_at_one_time_match_their_closed_forms_and_the_array_evaluation():
+    # the loop evaluates them at one float time each cycle (a path of their own): the same values,
+    # clamped outside the ramp, as over an array
+    times = [-0.5, 0.0, 0.1, 0.37, 0.5, 0.9, 1.0, 2.0]
+    for x in times:
+        c = min(max(x, 0.0), 1.0)
+        assert smooth_step(x) == pytest.approx(0.5 - 0.5 * math.cos(math.pi * c), abs=1e-15)
+        assert smooth_ramp(2.0 + 3.0 * x, 2.0, 5.0) == pytest.approx(c**3 * (10 - 15 * c + 6 * c * c), abs=1e-14)
+    np.testing.assert_allclose(smooth_step(np.array(times)), [smooth_step(x) for x in times], atol=1e-15)
+    np.testing.assert_allclose(smooth_ramp(2.0 + 3.0 * np.array(times), 2.0, 5.0),
+                               [smooth_ramp(2.0 + 3.0 * x, 2.0, 5.0) for x in times], atol=1e-14)

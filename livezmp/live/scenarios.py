@@ -243,6 +243,8 @@ class Poser:
 
 def smooth_step(x: np.ndarray | float) -> np.ndarray | float:
     """0 → 1 over x in [0, 1] with zero slope at both ends (half a cosine)."""
+    if isinstance(x, float):  # a scenario's goals at one time, every loop cycle: no numpy scalar round trip
+        return 0.5 - 0.5 * math.cos(math.pi * min(max(x, 0.0), 1.0))
     return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
 
 
@@ -476,7 +478,7 @@ def sequence(name: str, parts: list[Scenario], blend_s: float = BLEND_S) -> Scen
     ends = [p.goals(p.duration) for p in parts]
 
     def goals(t: float) -> np.ndarray:
-        k = int(np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(parts) - 1))
+        k = min(max(int(np.searchsorted(starts, t, side="right")) - 1, 0), len(parts) - 1)
         local = t - starts[k]
         q = parts[k].goals(local)
         if k == 0 or local >= blend_s:

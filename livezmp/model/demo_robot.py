@@ -22,7 +22,9 @@ def demo_robot_path() -> Path:
 
 def smooth_ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
     """0 before t0, 1 after t1, a smooth (C2) ramp between."""
-    s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
+    s = (t - t0) / (t1 - t0)
+    # one time (the live loop's command ramp, every cycle): no numpy scalar round trip
+    s = min(max(s, 0.0), 1.0) if isinstance(s, float) else np.clip(s, 0.0, 1.0)
     return s * s * s * (10 - 15 * s + 6 * s * s)
 
 
