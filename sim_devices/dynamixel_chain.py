@@ -184,6 +184,7 @@ class DynamixelChain(PtyDevice):
         # refresh the plant-driven registers of all servos in one assignment.
         memory = bytearray(len(ids) * ct.TABLE_SIZE)
         self._tables = np.frombuffer(memory, dtype=np.uint8).reshape(len(ids), ct.TABLE_SIZE)
+        self._live = self._tables[:, _LIVE_START:_LIVE_END].view(_LIVE)[:, 0]  # those registers, by field
         rows = memoryview(memory)
         self._servos = [_Servo(dxl_id, index, rows[index * ct.TABLE_SIZE: (index + 1) * ct.TABLE_SIZE])
                         for index, dxl_id in enumerate(ids)]
@@ -743,7 +744,7 @@ class DynamixelChain(PtyDevice):
         plant = self.plant
         n = len(self._servos)
         sign = self._sign
-        live = np.empty(n, dtype=_LIVE)
+        live = self._live
         position = np.rint(self._zero + sign * plant.position[:n] * TICKS_PER_RAD + self._offset)
         velocity = np.rint(sign * plant.velocity[:n] / ct.VELOCITY_UNIT)
         current = sign * plant.current[:n]
@@ -758,7 +759,6 @@ class DynamixelChain(PtyDevice):
         live["position"] = position
         live["velocity_trajectory"] = velocity
         live["position_trajectory"] = self._goal
-        self._tables[:, _LIVE_START:_LIVE_END] = live.view(np.uint8).reshape(n, _LIVE.itemsize)
 
     def _restart(self, servo: _Servo, now: float) -> None:
         """State after power-up with the table already reset: torque off, errors and registrations cleared."""
