@@ -172,7 +172,7 @@ class RootMover:
                         continue
                     cols, frames = corr.legs[side], corr.foot_frames[side]
                     e = self._residual(frames, targets[n][side])
-                    if np.max(np.abs(e)) < self.ik_tolerance:
+                    if np.abs(e).max() < self.ik_tolerance:
                         pending[n, i] = False
                         continue
                     ns, jacs, errs = work[side]

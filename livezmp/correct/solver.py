@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import lsq_linear
+from scipy.sparse.linalg import LinearOperator
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
 from livezmp.balance.support import clamp_to_polygon
@@ -250,10 +251,14 @@ def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, 
         steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)),
                                (np.repeat(np.arange(len(keys)), 2), np.ravel([[c, c - 3] for c in keys]))),
                               shape=(len(keys), 3 * f))
-        a = sp.vstack([jz, reg_size, reg_acc, trust, steps]).tocsr()
+        a = sp.csr_array(sp.vstack([jz, reg_size, reg_acc, trust, steps]))
         b = np.concatenate([rhs, np.zeros(3 * f), np.zeros(reg_acc.shape[0]), trust @ x0,
                             stiff * np.array([rate[c] for c in keys])])
-        x = lsq_linear(a, b, bounds=bounds, method="trf", lsmr_tol="auto", max_iter=200).x
+        # as an operator with the transpose built once (the sparse matrix itself would be
+        # transposed anew for each of the solver's thousands of products; same arithmetic)
+        at = a.T
+        op = LinearOperator(a.shape, matvec=a.__matmul__, rmatvec=at.__matmul__, dtype=float)
+        x = lsq_linear(op, b, bounds=bounds, method="trf", lsmr_tol="auto", max_iter=200).x
         pred = zall + (jall @ (x - x0)).reshape(-1, 2) * limits.zmp_tolerance_m
         grew = False
         for i, k in enumerate(judged):
