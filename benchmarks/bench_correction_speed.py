@@ -5,7 +5,9 @@ each: with the baseline revision's ``livezmp`` (extracted with ``git archive``) 
 checkout's. Printed per take: CPU ms per frame (process time, so the machine's other load
 counts less than in wall-clock; the load average is printed beside), the speed-up, and how
 far the results agree: frames outside after, max root rotation, max loaded-foot displacement,
-and the largest difference of the corrected channels (raw BVH units: cm and degrees).
+and the largest difference of the corrected channels (raw BVH units: cm and degrees). The
+Gauss-Newton iterations are printed beside the times: where the two runs take different paths
+(below) their counts differ, and the cost per frame with them.
 
 The correction's outcome is sensitive to rounding (each Gauss-Newton step is an iterative
 least-squares solve stopped at its iteration cap, and a Levenberg-Marquardt step is kept or
@@ -92,7 +94,8 @@ def main() -> None:
                 takes[name] = tmp / f"variant{i}.bvh"
                 write_bvh(motion, takes[name])
         print(f"baseline {args.baseline} against this checkout; CPU ms per frame")
-        print(f"{'take':30s} {'frames':>6s} {'baseline':>9s} {'now':>7s} {'speed-up':>8s} {'outside after':>13s} "
+        print(f"{'take':30s} {'frames':>6s} {'baseline':>9s} {'now':>7s} {'speed-up':>8s} {'GN iterations':>13s} "
+              f"{'outside after':>13s} "
               f"{'max rot °':>15s} {'feet mm':>13s} {'max |Δ channel|':>15s} {'load':>5s}"
               + ("   baseline ×(1+1e-14): outside, max rot °, feet mm, max |Δ channel|" if args.noise_floor else ""))
         for name, path in takes.items():
@@ -102,6 +105,7 @@ def main() -> None:
             n = len(new["frames"])
             ms_old, ms_new = 1000 * old["cpu"] / n, 1000 * new["cpu"] / n
             print(f"{name:30s} {n:>6d} {ms_old:>9.1f} {ms_new:>7.1f} {ms_old / ms_new:>8.1f} "
+                  f"{len(ro['outside_after_iteration']):>6d} {len(rn['outside_after_iteration']):>6d} "
                   f"{ro['out_of_support_after']:>6d} {rn['out_of_support_after']:>6d} "
                   f"{ro['max_root_rotation_deg']:>7.3f} {rn['max_root_rotation_deg']:>7.3f} "
                   f"{ro['max_foot_displacement_mm']:>6.3f} {rn['max_foot_displacement_mm']:>6.3f} "

@@ -177,8 +177,8 @@ class RootMover:
                         continue
                     ns, jacs, errs = work[side]
                     ns.append(n)
-                    jacs.append(np.vstack([pin.getFrameJacobian(self.model, self.data, f, ref)[:rows, cols]
-                                           for f in frames]))
+                    jacs.append(np.concatenate([pin.getFrameJacobian(self.model, self.data, f, ref)[:rows, cols]
+                                                for f in frames]))
                     errs.append(e)
             for side, (ns, jacs, errs) in work.items():
                 if not ns:
@@ -195,10 +195,9 @@ class RootMover:
                 q[np.ix_(ns, cols)] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
             if not pending.any():
                 break
-        err = np.zeros(len(q))
+        e = []
         for n in range(len(q)):
             self._fk(q[n])
-            for side, frames in corr.foot_frames.items():
-                e = self._residual(frames, targets[n][side]).reshape(-1, rows)[:, :3]
-                err[n] = max(err[n], float(np.linalg.norm(e, axis=1).max()))
-        return err
+            e.append(np.concatenate([self._residual(frames, targets[n][side])
+                                     for side, frames in corr.foot_frames.items()]))
+        return np.linalg.norm(np.reshape(e, (len(q), -1, rows))[:, :, :3], axis=2).max(axis=1, initial=0.0)
