@@ -34,13 +34,14 @@ from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, stance_weights
 from livezmp.correct.root_motion import RootMover
 from livezmp.correct.seed_search import seed_grid_search
 from livezmp.correct.solver import correct_motion
-from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import body_from_bvh
 
 BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh" / "bandai"
 
 
-def skeleton_table(walk: str, frames: int) -> None:
+def variant_motions(walk: str, frames: int) -> dict[str, BvhMotion]:
+    """The walk's first ``frames`` frames re-expressed exactly on other skeletons (tests/skeleton_variants.py)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     import skeleton_variants as sv
 
@@ -57,12 +58,15 @@ def skeleton_table(walk: str, frames: int) -> None:
         "z up, metres, XYZ": sv.channel_orders(sv.scaled(sv.z_up(s), 0.01), "XYZ", "ZXY"),
         "120 Hz (slerped)": sv.resampled(short, 4),
     }
+    return {name: sv.compose(v) for name, v in variants.items()}
+
+
+def skeleton_table(walk: str, frames: int) -> None:
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}; {walk}, first {frames} frames "
           f"(120 Hz: {frames // 4 + 1} from frame 40, resampled)")
     print(f"{'skeleton':32s} {'frames':>6s} {'outside before':>14s} {'after':>6s} "
           f"{'loaded feet mm: feet check':>27s} {'without':>8s} {'frames held':>11s}")
-    for name, variant in variants.items():
-        motion = sv.compose(variant)
+    for name, motion in variant_motions(walk, frames).items():
         body = body_from_bvh(motion)
         times = np.arange(len(motion.frames)) * motion.frame_time
         cfg = default_config(body, motion.fps, cutoff_hz=CORRECTION_CUTOFF_HZ)  # as `livezmp correct`

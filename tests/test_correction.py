@@ -259,3 +259,21 @@ def test_root_mover_warm_start_gives_the_same_legs(op3_body):
     mover.ik_iterations = 2  # and without the warm start two iterations are not enough
     mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5)
     assert mover.last_foot_error > 1e-7
+
+
+def test_root_mover_batch_matches_one_at_a_time(op3_body):
+    # the offline solver moves many configurations at once (their legs' steps stacked): each must come out as
+    # alone, whatever the others need: δ = 0 is done before the first step, larger δ take more iterations
+    mover = RootMover(op3_body)
+    rng = np.random.default_rng(3)
+    q = np.array([full_q(op3_body, op3_pose(op3_body) + rng.normal(0, 0.05, op3_body.model.nq - 6)) for _ in range(6)])
+    delta = np.radians(rng.uniform(-8, 8, (6, 3)) * np.array([[0], [1], [0.1], [1], [0.5], [1]]))
+    w = np.array([0.0, 0.5, 1.0, 0.3, 1.0, 0.0])
+    batch = mover.apply_many(q, delta, w)
+    errors = []
+    for n in range(6):
+        np.testing.assert_allclose(batch[n], mover.apply(q[n], delta[n], w[n]), atol=1e-12)
+        errors.append(mover.last_foot_error)
+    np.testing.assert_allclose(batch[0], q[0], atol=1e-12)  # δ = 0: nothing moves (the root channels round-trip)
+    mover.apply_many(q, delta, w)
+    assert mover.last_foot_error == max(errors) < 1e-7

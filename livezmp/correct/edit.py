@@ -10,14 +10,16 @@ from livezmp.model.body import BodyModel
 
 
 def apply_delta(mover: RootMover, body: BodyModel, frames: np.ndarray, delta: np.ndarray,
-                w: np.ndarray) -> np.ndarray:
-    """Corrected raw channels (F, nq): only the root and leg correction channels change."""
+                w: np.ndarray, block: int = 1024) -> np.ndarray:
+    """Corrected raw channels (F, nq): only the root and leg correction channels change; the
+    frames with a correction go through the legs' solve ``block`` at a time."""
     out = frames.copy()
     cols = changed_channels(body)
-    for k in range(len(frames)):
-        if np.any(delta[k]):
-            q = mover.apply(body.channels_to_q(frames[k]), delta[k], w[k])
-            out[k, cols] = q[cols] / body.channel_scale[cols]
+    moved = np.nonzero(np.any(delta, axis=1))[0]
+    for lo in range(0, len(moved), block):  # a block at a time: bounded memory
+        ks = moved[lo:lo + block]
+        q = mover.apply_many(np.array([body.channels_to_q(frames[k]) for k in ks]), delta[ks], w[ks])
+        out[np.ix_(ks, cols)] = q[:, cols] / body.channel_scale[cols]
     return out
 
 

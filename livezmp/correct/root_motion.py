@@ -117,21 +117,31 @@ class RootMover:
         ``leg_start`` (nq,): offsets added to the leg channels of ``q`` as the IK's starting
         point (a warm start from the last solution: the IK then needs one or two iterations);
         the solution is the same to the IK tolerance."""
+        return self.apply_many(np.asarray(q, dtype=float)[None], np.asarray(delta, dtype=float)[None],
+                               np.array([w_left]), None if leg_start is None else np.asarray(leg_start)[None])[0]
+
+    def apply_many(self, q: np.ndarray, delta: np.ndarray, w_left: np.ndarray,
+                   leg_start: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`apply` to N configurations at once: ``q`` (N, nq), ``delta`` (N, 3), ``w_left``
+        (N,), ``leg_start`` (N, nq) or None; the legs' Gauss-Newton steps of all N are solved
+        as one stacked system, each configuration and leg stopping as :meth:`apply` does.
+        ``last_foot_error`` is then the largest over the N."""
         q_new = np.array(q, dtype=float)
-        self._fk(q_new)
         corr = self.body.correction
-        targets = self.foot_targets()
-        h_left = self.data.oMf[corr.hips["left"]].translation
-        h_right = self.data.oMf[corr.hips["right"]].translation
-        pivot = w_left * h_left + (1.0 - w_left) * h_right
-        root = self.data.oMf[corr.root_frame_id]
-        r = pin.exp3(hip_axes(h_left, h_right) @ np.asarray(delta, dtype=float))
-        new_root = pin.SE3(r @ root.rotation, pivot + r @ (root.translation - pivot))
-        self.set_root_pose(q_new, new_root)
+        targets = []
+        for n, qn in enumerate(q_new):
+            self._fk(qn)
+            targets.append(self.foot_targets())
+            h_left = self.data.oMf[corr.hips["left"]].translation
+            h_right = self.data.oMf[corr.hips["right"]].translation
+            pivot = w_left[n] * h_left + (1.0 - w_left[n]) * h_right
+            root = self.data.oMf[corr.root_frame_id]
+            r = pin.exp3(hip_axes(h_left, h_right) @ delta[n])
+            self.set_root_pose(qn, pin.SE3(r @ root.rotation, pivot + r @ (root.translation - pivot)))
         if leg_start is not None:
             for cols in corr.legs.values():
-                q_new[cols] += leg_start[cols]
-        self.last_foot_error = self._solve_legs(q_new, targets)
+                q_new[:, cols] += leg_start[:, cols]
+        self.last_foot_error = float(self._solve_legs(q_new, targets).max(initial=0.0))
         return q_new
 
     def _residual(self, frames: list[int], targets: list[pin.SE3]) -> np.ndarray:
@@ -141,39 +151,53 @@ class RootMover:
         return np.concatenate([t.translation - self.data.oMf[f].translation for f, t in zip(frames, targets,
                                                                                            strict=True)])
 
-    def _solve_legs(self, q: np.ndarray, targets: dict[str, list[pin.SE3]]) -> float:
-        """Damped Gauss-Newton on each leg's channels, the legs side by side (each leg moves
-        only its own feet, so one Jacobian evaluation per iteration serves both); returns
-        the largest remaining foot position error (m)."""
+    def _solve_legs(self, q: np.ndarray, targets: list[dict[str, list[pin.SE3]]]) -> np.ndarray:
+        """Damped Gauss-Newton on each leg's channels of the N configurations ``q`` (N, nq, in
+        place), the legs side by side (each leg moves only its own feet, so one Jacobian
+        evaluation per iteration serves both) and the N steps of a leg solved as one stacked
+        system; returns each configuration's largest remaining foot position error (m)."""
         corr = self.body.correction
         full = corr.full_foot_pose
         ref = pin.LOCAL if full else pin.LOCAL_WORLD_ALIGNED
         rows = 6 if full else 3
-        pending = list(corr.legs)
+        sides = list(corr.legs)
+        pending = np.ones((len(q), len(sides)), dtype=bool)
         for _ in range(self.ik_iterations):
-            pin.computeJointJacobians(self.model, self.data, q)
-            pin.updateFramePlacements(self.model, self.data)
-            still = []
-            for side in pending:
-                cols, frames = corr.legs[side], corr.foot_frames[side]
-                e = self._residual(frames, targets[side])
-                if np.max(np.abs(e)) < self.ik_tolerance:
+            work: dict[str, tuple[list[int], list[np.ndarray], list[np.ndarray]]] = {s: ([], [], []) for s in sides}
+            for n in np.nonzero(pending.any(axis=1))[0]:
+                pin.computeJointJacobians(self.model, self.data, q[n])
+                pin.updateFramePlacements(self.model, self.data)
+                for i, side in enumerate(sides):
+                    if not pending[n, i]:
+                        continue
+                    cols, frames = corr.legs[side], corr.foot_frames[side]
+                    e = self._residual(frames, targets[n][side])
+                    if np.abs(e).max() < self.ik_tolerance:
+                        pending[n, i] = False
+                        continue
+                    ns, jacs, errs = work[side]
+                    ns.append(n)
+                    jacs.append(np.concatenate([pin.getFrameJacobian(self.model, self.data, f, ref)[:rows, cols]
+                                                for f in frames]))
+                    errs.append(e)
+            for side, (ns, jacs, errs) in work.items():
+                if not ns:
                     continue
-                still.append(side)
-                jac = np.vstack([pin.getFrameJacobian(self.model, self.data, f, ref)[:rows, cols] for f in frames])
+                cols = corr.legs[side]
+                jac, e = np.array(jacs), np.array(errs)
+                jt = np.swapaxes(jac, 1, 2)
                 # damped, and every step bounded, so a leg that cannot reach exactly (a thigh alone
                 # moving ankle and toe) settles at the nearby least-squares pose instead of
                 # swinging to another branch; a robot's six-joint leg reaches exactly: damp lightly
-                jtj = jac.T @ jac
-                damping = (1e-6 if full else 1e-3) * np.trace(jtj) / len(cols) + 1e-12
-                step = np.linalg.solve(jtj + damping * np.eye(len(cols)), jac.T @ e)
-                q[cols] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
-            pending = still
-            if not pending:
+                jtj = jt @ jac
+                damping = (1e-6 if full else 1e-3) * np.trace(jtj, axis1=1, axis2=2) / len(cols) + 1e-12
+                step = np.linalg.solve(jtj + damping[:, None, None] * np.eye(len(cols)), (jt @ e[:, :, None]))[..., 0]
+                q[np.ix_(ns, cols)] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
+            if not pending.any():
                 break
-        self._fk(q)
-        err = 0.0
-        for side, frames in corr.foot_frames.items():
-            e = self._residual(frames, targets[side]).reshape(-1, rows)[:, :3]
-            err = max(err, float(np.linalg.norm(e, axis=1).max()))
-        return err
+        e = []
+        for n in range(len(q)):
+            self._fk(q[n])
+            e.append(np.concatenate([self._residual(frames, targets[n][side])
+                                     for side, frames in corr.foot_frames.items()]))
+        return np.linalg.norm(np.reshape(e, (len(q), -1, rows))[:, :, :3], axis=2).max(axis=1, initial=0.0)

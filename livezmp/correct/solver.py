@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import lsq_linear
+from scipy.sparse.linalg import LinearOperator
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, PipelineConfig, default_config
 from livezmp.balance.support import clamp_to_polygon
@@ -147,18 +148,21 @@ class _Linearisation:
         self.changed = changed
         self.est = est
 
-    def channel_jacobians(self, q_base: np.ndarray, delta: np.ndarray, w: np.ndarray, eps: float = 1e-4):
-        """C_j = ∂q_changed/∂δ at each frame (F, m, 3), by central differences."""
+    def channel_jacobians(self, q_base: np.ndarray, delta: np.ndarray, w: np.ndarray, eps: float = 1e-4,
+                          block: int = 256):
+        """C_j = ∂q_changed/∂δ at each frame (F, m, 3), by central differences; the six
+        perturbed configurations of ``block`` frames at a time go through the legs' solve together."""
         f = len(q_base)
         out = np.zeros((f, len(self.changed), 3))
-        for j in range(f):
+        for lo in range(0, f, block):
+            js = np.arange(lo, min(lo + block, f))
+            d = np.repeat(delta[js], 6, axis=0).reshape(len(js), 3, 2, 3)  # frame, axis, ±, δ
             for a in range(3):
-                d = delta[j].copy()
-                d[a] += eps
-                qp = self.mover.apply(q_base[j], d, w[j])[self.changed]
-                d[a] -= 2 * eps
-                qm = self.mover.apply(q_base[j], d, w[j])[self.changed]
-                out[j, :, a] = (qp - qm) / (2 * eps)
+                d[:, a, 0, a] += eps
+                d[:, a, 1, a] = d[:, a, 0, a] - 2 * eps
+            q = self.mover.apply_many(np.repeat(q_base[js], 6, axis=0), d.reshape(-1, 3), np.repeat(w[js], 6))
+            q = q[:, self.changed].reshape(len(js), 3, 2, -1)
+            out[js] = np.swapaxes((q[:, :, 0] - q[:, :, 1]) / (2 * eps), 1, 2)
         return out
 
     def zmp_partials(self, r: FrameResult, eps: float = 1e-6) -> tuple[np.ndarray, float] | None:
@@ -189,20 +193,32 @@ class _Linearisation:
         f = len(cjac)
         data, ri, ci = [], [], []
         weight = np.zeros(len(rows))
-        e0, e1, e2 = self.est
+        for e in self.est:
+            e.sort_indices()  # for the searchsorted look-ups of one row's entries
         for row, k in enumerate(rows):
             part = self.zmp_partials(results[k])
             if part is None:
                 continue
             g, weight[row] = part[0], min(1.0, part[1])
-            js = np.union1d(np.union1d(e0[k].indices, e1[k].indices), e2[k].indices)
-            for j in js:
-                gk = g[0] * e0[k, j] + g[1] * e1[k, j] + g[2] * e2[k, j]
-                block = gk @ cjac[j]  # (2, 3)
-                data.extend(block.ravel())
-                ri.extend([2 * row] * 3 + [2 * row + 1] * 3)
-                ci.extend([3 * j, 3 * j + 1, 3 * j + 2] * 2)
+            js = np.union1d(np.union1d(self.est[0][k].indices, self.est[1][k].indices), self.est[2][k].indices)
+            c0, c1, c2 = (_row_values(e, k, js)[:, None, None] for e in self.est)
+            gk = g[0] * c0 + g[1] * c1 + g[2] * c2  # (nj, 2, m)
+            blocks = gk @ cjac[js]  # (nj, 2, 3)
+            data.append(blocks.reshape(-1, 6))
+            ri.append(np.repeat([[2 * row] * 3 + [2 * row + 1] * 3], len(js), axis=0))
+            ci.append(3 * js[:, None] + np.array([0, 1, 2, 0, 1, 2]))
+        if data:
+            data, ri, ci = (np.concatenate(x).ravel() for x in (data, ri, ci))
         return sp.csr_matrix((data, (ri, ci)), shape=(2 * len(rows), 3 * f)), weight
+
+
+def _row_values(e: sp.csr_matrix, k: int, js: np.ndarray) -> np.ndarray:
+    """Entries (k, js) of ``e`` (sorted indices), zero where not stored."""
+    idx, val = e.indices[e.indptr[k]:e.indptr[k + 1]], e.data[e.indptr[k]:e.indptr[k + 1]]
+    if not len(idx):
+        return np.zeros(len(js))
+    pos = np.minimum(np.searchsorted(idx, js), len(idx) - 1)
+    return np.where(idx[pos] == js, val[pos], 0.0)
 
 
 def _second_difference(f: int, dt: float) -> sp.csr_matrix:
@@ -235,10 +251,14 @@ def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, 
         steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)),
                                (np.repeat(np.arange(len(keys)), 2), np.ravel([[c, c - 3] for c in keys]))),
                               shape=(len(keys), 3 * f))
-        a = sp.vstack([jz, reg_size, reg_acc, trust, steps]).tocsr()
+        a = sp.csr_array(sp.vstack([jz, reg_size, reg_acc, trust, steps]))
         b = np.concatenate([rhs, np.zeros(3 * f), np.zeros(reg_acc.shape[0]), trust @ x0,
                             stiff * np.array([rate[c] for c in keys])])
-        x = lsq_linear(a, b, bounds=bounds, method="trf", lsmr_tol="auto", max_iter=200).x
+        # as an operator with the transpose built once (the sparse matrix itself would be
+        # transposed anew for each of the solver's thousands of products; same arithmetic)
+        at = a.T
+        op = LinearOperator(a.shape, matvec=a.__matmul__, rmatvec=at.__matmul__, dtype=float)
+        x = lsq_linear(op, b, bounds=bounds, method="trf", lsmr_tol="auto", max_iter=200).x
         pred = zall + (jall @ (x - x0)).reshape(-1, 2) * limits.zmp_tolerance_m
         grew = False
         for i, k in enumerate(judged):
