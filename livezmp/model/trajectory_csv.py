@@ -53,6 +53,7 @@ def read_csv_rows(path: Path, what: str = "file") -> list[list[str]]:
 
 
 JOINT_CSV_BLOCK_ROWS = 4096  # rows converted to numbers at a time
+JOINT_CSV_TEXT_BYTES = 1 << 20  # bytes of the file read and split into lines at a time
 
 
 def read_joint_csv(path: str | Path, joint_names: list[str]) -> JointTrajectory:
@@ -115,7 +116,7 @@ def _trajectory(data: np.ndarray, joint_names: list[str], source: str) -> JointT
 
 def _records(p: Path) -> Iterator[list[str]]:
     """The CSV records of the file, read lazily (the lines as ``io.StringIO(text, newline="")`` splits them)."""
-    lines = (line for piece in read_input_pieces(p) for line in io.StringIO(piece, newline=""))
+    lines = (line for piece in read_input_pieces(p, JOINT_CSV_TEXT_BYTES) for line in io.StringIO(piece, newline=""))
     try:
         yield from csv.reader(lines)
     except csv.Error as e:
