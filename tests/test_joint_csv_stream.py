@@ -6,8 +6,11 @@ the file it is; and the time column's median period decided from counts as numpy
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from data_paths import BANDAI
 
 from livezmp.checks import FRAME_PERIOD_RANGE
 from livezmp.cli import main
@@ -15,6 +18,7 @@ from livezmp.errors import InputError
 from livezmp.estimate.estimator import FILE_CUTOFF_HZ, default_estimator
 from livezmp.model import trajectory_csv
 from livezmp.model.base_placement import BasePlacer, place_base
+from livezmp.model.bvh import read_bvh, write_bvh
 from livezmp.model.demo_robot import demo_robot_path
 from livezmp.model.trajectory_csv import (
     JointTrajectory,
@@ -201,3 +205,14 @@ def test_median_period_from_counts_is_numpys():
         assert got == want, (d, got, want)
         seen.add(want)
     assert seen == {True, False}
+
+
+def test_a_one_frame_take_is_refused_before_its_rate_is_used(body, tmp_path, capsys):
+    """One frame (a rate of 0 Hz): the whole-take path's one line, for a joint CSV and for a BVH."""
+    write_joint_csv(stepping(body, 1), tmp_path / "one.csv")
+    walk = read_bvh(BANDAI / "walk_normal_002.bvh")
+    write_bvh(replace(walk, frames=walk.frames[:1]), tmp_path / "one.bvh")
+    for path, extra in ((tmp_path / "one.csv", ["--robot", str(ROBOT)]), (tmp_path / "one.bvh", [])):
+        assert main(["analyze", str(path), *extra, "--out", str(tmp_path / "zmp.csv")]) == 2
+        assert capsys.readouterr().err.splitlines() == [f"livezmp: error: {path}: need at least 2 frames, got 1"]
+        assert not (tmp_path / "zmp.csv").exists()

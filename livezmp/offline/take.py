@@ -158,6 +158,7 @@ def stream_take(take: str | Path | TakeStream, options: TakeOptions, csv: str | 
     ``progress(frames_done)`` after each chunk."""
     if not isinstance(take, TakeStream):
         take = options.open(take)
+    take.check_length()
     cfg = take_config(take, options.mode, options.ground, options.cutoff_hz)
     stats = TakeStats(take.total, take.fps, options.tolerance_mm)
     series = None

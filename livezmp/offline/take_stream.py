@@ -56,6 +56,11 @@ class TakeStream:
     source: str
     pieces: Callable[[int], Iterator[tuple[np.ndarray, np.ndarray]]]
 
+    def check_length(self) -> None:
+        """Refuse a take too short to analyse (before its rate, 0 Hz for one frame, is used)."""
+        if self.total < 2:
+            raise InputError(f"{self.source}: need at least 2 frames, got {self.total}")
+
 
 def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     """A BVH file as a :class:`TakeStream`: the header and the first seconds are read now (the body),
@@ -104,8 +109,7 @@ def analyse_stream(take: TakeStream, config: PipelineConfig, consumers: Sequence
     """Run the pipeline (``config``) over ``take`` chunk by chunk, giving each chunk's results to every
     consumer; returns which path made them ("batch", or "per-frame: WHY" as
     :func:`livezmp.offline.batch.run_batch` says). ``progress(frames_done)`` after each chunk."""
-    if take.total < 2:
-        raise InputError(f"{take.source}: need at least 2 frames, got {take.total}")
+    take.check_length()
     pipe = Pipeline(take.body, config, nominal_dt=1.0 / take.fps)
     try:
         _feed(batch_chunks(take.body, config, pipe.estimator, pipe.contacts, take.total, take.pieces(chunk), chunk),
