@@ -7,7 +7,7 @@ loads the take and imports the correction's modules, the other also corrects it 
 result. The table gives both peak resident memories (``ru_maxrss``), the solve's own (their
 difference) per frame, the slope between consecutive sizes, and the correction's CPU time per frame.
 
-    python benchmarks/bench_correct_memory.py [--sizes 500 1000 2000] [--keep DIR]
+    python benchmarks/bench_correct_memory.py [--sizes 265 530 1000] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def measure(mode: str, take: Path, out: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[500, 1000, 2000])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[265, 530, 1000])
     ap.add_argument("--keep", type=Path, help="make the takes here and keep them (default: a temporary directory)")
     ap.add_argument("--child", nargs=3, metavar=("MODE", "TAKE", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args()

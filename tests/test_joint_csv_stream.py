@@ -11,6 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from data_paths import BANDAI
+from test_take_stream import chunked, whole
 
 from livezmp.checks import FRAME_PERIOD_RANGE
 from livezmp.cli import main
@@ -28,8 +29,7 @@ from livezmp.model.trajectory_csv import (
     write_joint_csv,
 )
 from livezmp.model.urdf_body import body_from_urdf
-from livezmp.offline.report import write_zmp_csv
-from livezmp.offline.take import TakeOptions, analyse_motion, stream_take
+from livezmp.offline.take import TakeOptions
 
 ROBOT = demo_robot_path()
 OPTIONS = TakeOptions(robot=str(ROBOT))
@@ -58,17 +58,6 @@ def stepping(body, frames: int, rate: float = RATE) -> JointTrajectory:
     return JointTrajectory(t, q, list(body.joint_names))
 
 
-def whole(path, tmp_path):
-    a = analyse_motion(OPTIONS.load(path), OPTIONS)
-    write_zmp_csv(a.body, a.result, tmp_path / "whole.csv")
-    return a.summary, (tmp_path / "whole.csv").read_bytes()
-
-
-def chunked(path, tmp_path, chunk):
-    summary = stream_take(path, OPTIONS, tmp_path / "chunked.csv", chunk=chunk)
-    return summary, (tmp_path / "chunked.csv").read_bytes()
-
-
 @pytest.mark.parametrize("tail", [0, 1, 7])
 def test_chunked_equals_whole_across_chunk_boundaries(body, tmp_path, tail):
     """5 chunks plus ``tail`` frames, the base placed from the joints (no base columns): the same bytes
@@ -78,9 +67,9 @@ def test_chunked_equals_whole_across_chunk_boundaries(body, tmp_path, tail):
     traj = stepping(body, 5 * chunk + tail)
     path = tmp_path / "steps.csv"
     write_joint_csv(traj, path)
-    want = whole(path, tmp_path)
+    want = whole(path, tmp_path, OPTIONS)
     assert want[0]["frames"] == 5 * chunk + tail
-    assert chunked(path, tmp_path, chunk) == want
+    assert chunked(path, tmp_path, chunk, OPTIONS) == want
     placed = place_base(body, traj.q)
     assert not np.allclose(place_base(body, traj.q[2 * chunk:]), placed[2 * chunk:], atol=1e-3)  # a fresh placer
     carried = BasePlacer(body)
@@ -97,8 +86,8 @@ def test_uneven_time_column_with_a_base(body, tmp_path):
     base = place_base(body, traj.q)[:, [0, 1, 2, 5, 4, 3]]  # the CSV's x, y, z, roll, pitch, yaw
     path = tmp_path / "jitter.csv"
     write_joint_csv(JointTrajectory(t, traj.q, traj.joint_names, base), path)
-    want = whole(path, tmp_path)
-    assert chunked(path, tmp_path, 2 * WINDOW) == want
+    want = whole(path, tmp_path, OPTIONS)
+    assert chunked(path, tmp_path, 2 * WINDOW, OPTIONS) == want
 
 
 ROWS = 40  # rows a block in the error tests: a 200-frame take spans five blocks
