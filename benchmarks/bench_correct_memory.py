@@ -12,17 +12,11 @@ difference) per frame, the slope between consecutive sizes, and the correction's
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import resource
-import subprocess
-import sys
-import tempfile
 import time
-from pathlib import Path
 
-from bench_take_memory import make_take
+from bench_take_memory import bench_arguments, load_average, make_take, measure, start
 
 
 def child(mode: str, take: str, out: str) -> None:
@@ -41,24 +35,12 @@ def child(mode: str, take: str, out: str) -> None:
                       "outside": [report.get("out_of_support_before"), report.get("out_of_support_after")]}))
 
 
-def measure(mode: str, take: Path, out: Path) -> dict:
-    run = subprocess.run([sys.executable, __file__, "--child", mode, str(take), str(out)], capture_output=True,
-                         text=True, check=True)
-    return json.loads(run.stdout.splitlines()[-1])
-
-
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[265, 530, 1000])
-    ap.add_argument("--keep", type=Path, help="make the takes here and keep them (default: a temporary directory)")
-    ap.add_argument("--child", nargs=3, metavar=("MODE", "TAKE", "OUT"), help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    args = bench_arguments(__doc__, [265, 530, 1000]).parse_args()
     if args.child:
         child(*args.child)
         return
-    work = args.keep or Path(tempfile.mkdtemp(prefix="correct_memory_"))
-    work.mkdir(parents=True, exist_ok=True)
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} (shared machine), {os.cpu_count()} CPUs")
+    work = start(args.keep, "correct_memory_")
     print(f"{'frames':>7} | {'load peak MiB':>13} {'correct peak MiB':>16} | {'solve KiB/frame':>15} "
           f"{'slope KiB/frame':>15} | {'correct CPU ms/frame':>19} | outside before → after")
     last = None
@@ -66,8 +48,8 @@ def main() -> None:
         take = work / f"take_{n}.bvh"
         if not take.exists():
             make_take(take, n)
-        base = measure("load", take, work / "out.bvh")
-        got = measure("correct", take, work / "out.bvh")
+        base = measure("load", take, work / "out.bvh", __file__)
+        got = measure("correct", take, work / "out.bvh", __file__)
         solve = got["peak_mib"] - base["peak_mib"]
         slope = "" if last is None else f"{1024 * (solve - last[1]) / (n - last[0]):.1f}"
         print(f"{n:>7} | {base['peak_mib']:>13.0f} {got['peak_mib']:>16.0f} | {1024 * solve / n:>15.1f} {slope:>15} | "
@@ -75,7 +57,7 @@ def main() -> None:
         last = (n, solve)
         if not args.keep:
             take.unlink()
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} after")
+    print(f"load average {load_average()} after")
 
 
 if __name__ == "__main__":

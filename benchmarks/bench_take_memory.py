@@ -77,25 +77,42 @@ def child(mode: str, take: str, out: str) -> None:
     print(json.dumps({"peak_mib": peak, "cpu_s": cpu, "summary": summary}))
 
 
-def measure(mode: str, take: Path, out: Path) -> dict:
-    run = subprocess.run([sys.executable, __file__, "--child", mode, str(take), str(out)], capture_output=True,
+def measure(mode: str, take: Path, out: Path, script: str = __file__) -> dict:
+    """``script --child MODE TAKE OUT`` in a fresh process: the JSON its child printed last."""
+    run = subprocess.run([sys.executable, script, "--child", mode, str(take), str(out)], capture_output=True,
                          text=True, check=True)
     return json.loads(run.stdout.splitlines()[-1])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
-    ap.add_argument("--formats", nargs="+", choices=("bvh", "csv"), default=["bvh", "csv"])
+def load_average() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def start(keep: Path | None, prefix: str) -> Path:
+    """The directory the takes are made in (``keep``, or a temporary one); prints the load average."""
+    work = keep or Path(tempfile.mkdtemp(prefix=prefix))
+    work.mkdir(parents=True, exist_ok=True)
+    print(f"load average {load_average()} (shared machine), {os.cpu_count()} CPUs")
+    return work
+
+
+def bench_arguments(doc: str, sizes: list[int]) -> argparse.ArgumentParser:
+    """The options both memory benchmarks take: ``--sizes`` (frames), ``--keep DIR``, the hidden ``--child``."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=sizes)
     ap.add_argument("--keep", type=Path, help="make the takes here and keep them (default: a temporary directory)")
     ap.add_argument("--child", nargs=3, metavar=("MODE", "TAKE", "OUT"), help=argparse.SUPPRESS)
+    return ap
+
+
+def main() -> None:
+    ap = bench_arguments(__doc__, [10_000, 100_000, 1_000_000])
+    ap.add_argument("--formats", nargs="+", choices=("bvh", "csv"), default=["bvh", "csv"])
     args = ap.parse_args()
     if args.child:
         child(*args.child)
         return
-    work = args.keep or Path(tempfile.mkdtemp(prefix="take_memory_"))
-    work.mkdir(parents=True, exist_ok=True)
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} (shared machine), {os.cpu_count()} CPUs")
+    work = start(args.keep, "take_memory_")
     print(f"{'take':>4} {'frames':>9} {'file MiB':>9} | {'whole peak MiB':>14} {'chunked peak MiB':>16} | "
           f"{'whole µs/frame':>14} {'chunked µs/frame':>16} | same zmp.csv, summary")
     for fmt, n in ((fmt, n) for fmt in args.formats for n in args.sizes):
@@ -112,7 +129,7 @@ def main() -> None:
             (work / f"zmp_{mode}_{n}.csv").unlink()
         if not args.keep:
             take.unlink()
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} after")
+    print(f"load average {load_average()} after")
 
 
 if __name__ == "__main__":
