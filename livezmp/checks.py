@@ -9,9 +9,11 @@ of one line naming the file, line, option or field.
 
 from __future__ import annotations
 
+import codecs
 import math
 import os
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +65,42 @@ def read_input_text(path: str | Path, what: str = "file") -> str:
     except OSError as e:
         raise InputError(f"{p}: cannot read {what}: {e.strerror}") from None
     return decode_text(data, str(p))
+
+
+def read_input_pieces(path: Path, block: int = 1 << 20, what: str = "file") -> Iterator[str]:
+    """The text of the input file at ``path`` (already passed :func:`check_input_file`), read and
+    decoded as :func:`decode_text` does, with the same messages, ``block`` bytes at a time: pieces
+    each ending after a newline (the last at the end of the file), so splitting each into lines
+    splits the text as a whole would be, and a long file's text is never held whole."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    lines = 0  # newlines before the current block, for the line of a bad byte
+    rest = ""
+    try:
+        f = open(path, "rb")  # closed by the with below; an error worded first
+    except OSError as e:
+        raise InputError(f"{path}: cannot read {what}: {e.strerror}") from None
+    with f:
+        first = True
+        while True:
+            data = f.read(block)
+            if first:
+                if data.startswith(UTF16_BOMS):
+                    raise InputError(f"{path}:1: UTF-16 text; save it as UTF-8")
+                data = data[len(UTF8_BOM):] if data.startswith(UTF8_BOM) else data
+                first = False
+            try:
+                text = rest + decoder.decode(data, final=not data)
+            except UnicodeDecodeError as e:
+                line = lines + e.object.count(b"\n", 0, e.start) + 1  # e.object: this block (and a split character)
+                raise InputError(f"{path}:{line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save it as UTF-8") \
+                    from None
+            lines += data.count(b"\n")
+            cut = text.rfind("\n") + 1 if data else len(text)
+            if cut:
+                yield text[:cut]
+            rest = text[cut:]
+            if not data:
+                return
 
 
 def check_output_path(path: str | Path | None, option: str) -> None:

@@ -29,15 +29,15 @@ OPTIONS = TakeOptions()
 WINDOW_30HZ = default_estimator(30.0, FILE_CUTOFF_HZ).window  # a file's spline window at 30 Hz: a chunk holds two
 
 
-def whole(path, tmp_path):
+def whole(path, tmp_path, options=OPTIONS):
     """Today's whole-take path: its summary and zmp.csv bytes."""
-    a = analyse_motion(OPTIONS.load(path), OPTIONS)
+    a = analyse_motion(options.load(path), options)
     write_zmp_csv(a.body, a.result, tmp_path / "whole.csv")
     return a.summary, (tmp_path / "whole.csv").read_bytes()
 
 
-def chunked(path, tmp_path, chunk):
-    summary = stream_take(path, OPTIONS, tmp_path / "chunked.csv", chunk=chunk)
+def chunked(path, tmp_path, chunk, options=OPTIONS):
+    summary = stream_take(path, options, tmp_path / "chunked.csv", chunk=chunk)
     return summary, (tmp_path / "chunked.csv").read_bytes()
 
 

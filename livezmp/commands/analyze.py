@@ -2,9 +2,10 @@
 
 The take goes through :func:`livezmp.offline.batch.run_batch`: in chunks over arrays when it is
 uniformly sampled and complete (an hour at 120 Hz in seconds), frame by frame otherwise;
-the results are the same. A BVH is read a chunk at a time too (:func:`livezmp.offline.take.stream_take`),
-so memory stays bounded whatever its length. A C3D gait trial goes through :mod:`livezmp.offline.gaitlab`:
-its markers make the body, and its force plates, when present, are compared with the ZMP.
+the results are the same. A BVH or a robot's joint CSV is read a chunk at a time too
+(:func:`livezmp.offline.take.stream_take`), so memory stays bounded whatever its length. A C3D gait
+trial goes through :mod:`livezmp.offline.gaitlab`: its markers make the body, and its force plates,
+when present, are compared with the ZMP.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ from rich.progress import Progress
 
 from livezmp.checks import check_output_path
 from livezmp.commands.common import check_body_options, load_from_args, take_options
-from livezmp.model.bvh import stream_bvh
 from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import write_json, write_zmp_csv
 from livezmp.offline.take import (
@@ -46,14 +46,14 @@ def _analyse(args: argparse.Namespace) -> TakeAnalysis:
 
 
 def _stream(args: argparse.Namespace, options: TakeOptions) -> dict:
-    """A BVH analysed in bounded memory, its zmp.csv and figure written as it goes (the summary)."""
-    total = stream_bvh(args.motion)[0].n_frames
-    if total < PROGRESS_FRAMES:
-        return stream_take(args.motion, options, args.out, args.plot)
+    """A BVH or a robot's joint CSV analysed in bounded memory, its zmp.csv and figure written as it
+    goes (the summary)."""
+    take = options.open(args.motion)
+    if take.total < PROGRESS_FRAMES:
+        return stream_take(take, options, args.out, args.plot)
     with Progress(transient=True) as bar:  # a long take: show how far the analysis is
-        task = bar.add_task("analysing", total=total)
-        return stream_take(args.motion, options, args.out, args.plot,
-                           progress=lambda done: bar.update(task, completed=done))
+        task = bar.add_task("analysing", total=take.total)
+        return stream_take(take, options, args.out, args.plot, progress=lambda done: bar.update(task, completed=done))
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:

@@ -12,9 +12,12 @@ if TYPE_CHECKING:  # a type only: this module stays light for the command line's
     from livezmp.balance.pipeline import FrameResult
 
 
-# The correction solves all of a take's frames together (its sequence couples them), so a take is in
-# memory whole; longer takes are refused (docs/archive.md, Limits): split them.
-MAX_CORRECT_FRAMES = 100_000
+# The correction solves all of a take's frames together (one Levenberg-Marquardt loop whose steps are
+# kept by the whole take's cost: chunks would not give the same rotations), so a take is in memory
+# whole. Measured (benchmarks/bench_correct_memory.py, fresh-process peak RSS, Bandai skeleton): ~640 MiB
+# whatever the length plus 20-42 KiB a frame; from the upper figure a 4 GiB worker holds ~84 000 frames.
+# Longer takes are refused (docs/archive.md, Limits): split them.
+MAX_CORRECT_FRAMES = 80_000
 
 
 @dataclass(frozen=True)

@@ -89,7 +89,8 @@ class BasePlacer:
         self.anchor = pin.SE3(self.anchor.rotation, self.anchor.translation - np.array([shift[0], shift[1], 0.0]))
 
 
-def place_base(body: BodyModel, q_joints: np.ndarray) -> np.ndarray:
-    """Base coordinates (F, 6) for joint angles (F, n) — :class:`BasePlacer` over a take."""
-    placer = BasePlacer(body)
+def place_base(body: BodyModel, q_joints: np.ndarray, placer: BasePlacer | None = None) -> np.ndarray:
+    """Base coordinates (F, 6) for joint angles (F, n) — :class:`BasePlacer` over a take, or, given
+    ``placer``, over the take's next frames (a take read in pieces)."""
+    placer = placer or BasePlacer(body)
     return np.array([placer.update(q) for q in q_joints])

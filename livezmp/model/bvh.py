@@ -10,7 +10,6 @@ file length units) here; the body model converts to SI.
 
 from __future__ import annotations
 
-import codecs
 import io
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -20,11 +19,10 @@ import numpy as np
 
 from livezmp.checks import (
     MAX_CHANNEL_VALUE,
-    UTF8_BOM,
-    UTF16_BOMS,
     check_frame_period,
     check_input_file,
     first_out_of_range,
+    read_input_pieces,
     read_input_text,
 )
 from livezmp.errors import InputError
@@ -218,36 +216,6 @@ def _text_pieces(text: str) -> Iterator[str]:
         start = end
 
 
-def _file_pieces(path: Path) -> Iterator[str]:
-    """The text of the file at ``path`` in pieces as :func:`_text_pieces` cuts them, read and decoded
-    (as :func:`livezmp.checks.decode_text` does, with the same messages) a block at a time."""
-    decoder = codecs.getincrementaldecoder("utf-8")()
-    lines = 0  # newlines before the current block, for the line of a bad byte
-    rest = ""
-    with open(path, "rb") as f:
-        first = True
-        while True:
-            data = f.read(MOTION_BLOCK_CHARS)
-            if first:
-                if data.startswith(UTF16_BOMS):
-                    raise InputError(f"{path}:1: UTF-16 text; save it as UTF-8")
-                data = data[len(UTF8_BOM):] if data.startswith(UTF8_BOM) else data
-                first = False
-            try:
-                text = rest + decoder.decode(data, final=not data)
-            except UnicodeDecodeError as e:
-                line = lines + e.object.count(b"\n", 0, e.start) + 1  # e.object: this block (and a split character)
-                raise InputError(f"{path}:{line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save it as UTF-8") \
-                    from None
-            lines += data.count(b"\n")
-            cut = text.rfind("\n") + 1 if data else len(text)
-            if cut:
-                yield text[:cut]
-            rest = text[cut:]
-            if not data:
-                return
-
-
 def _numbered_lines(pieces: Iterator[str]) -> Iterator[tuple[int, str]]:
     """(line number, line) of the text in ``pieces`` (see :func:`_text_pieces`), so a long take's
     text is never held twice."""
@@ -378,7 +346,7 @@ def stream_bvh(path: str | Path, rows: int = MOTION_BLOCK_ROWS) -> tuple[BvhHead
     the same messages, as they come (a bad row ends the iteration with its error; the count of
     rows is checked at the end, so iterate to the end)."""
     p = check_input_file(path, "BVH file")
-    cur = _Cursor(_numbered_lines(_file_pieces(p)), str(p))
+    cur = _Cursor(_numbered_lines(read_input_pieces(p, MOTION_BLOCK_CHARS)), str(p))
     header = _read_header(cur)
     return header, _frame_blocks(cur, header, _fits(header, p.stat().st_size), rows)
 

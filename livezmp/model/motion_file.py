@@ -10,7 +10,7 @@ import numpy as np
 
 from livezmp.checks import check_input_file
 from livezmp.errors import InputError
-from livezmp.model.base_placement import place_base
+from livezmp.model.base_placement import BasePlacer, place_base
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
@@ -67,12 +67,13 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
     raise InputError(f"{p}: unknown motion format {suffix!r} (.bvh, .c3d, or .csv with --robot)")
 
 
-def trajectory_frames(body: BodyModel, traj: JointTrajectory) -> np.ndarray:
+def trajectory_frames(body: BodyModel, traj: JointTrajectory, placer: BasePlacer | None = None) -> np.ndarray:
     """Robot frames in the body's channel order (base x, y, z, yaw, pitch, roll, joints).
 
-    Without base columns the base is placed so the stance foot stays flat on the ground."""
+    Without base columns the base is placed so the stance foot stays flat on the ground (by
+    ``placer`` when given: a take read in pieces carries it from one piece to the next)."""
     if traj.base is None:
-        base = place_base(body, traj.q)
+        base = place_base(body, traj.q, placer)
     else:
         x, y, z, roll, pitch, yaw = traj.base.T
         base = np.column_stack([x, y, z, yaw, pitch, roll])

@@ -33,7 +33,7 @@ from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
 from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.offline.report import TakeStats, ZmpCsvWriter, atomic_path, summarize, write_zmp_csv
-from livezmp.offline.take_stream import TakeStream, analyse_stream, open_bvh_take
+from livezmp.offline.take_stream import TakeStream, analyse_stream, open_bvh_take, open_joint_csv_take
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
@@ -77,8 +77,19 @@ class TakeOptions:
 
     def streams(self, path: str | Path | None) -> bool:
         """Whether the take at ``path`` is analysed in bounded memory (:mod:`livezmp.offline.take_stream`):
-        a BVH (a robot's joint CSV and a C3D are read whole)."""
-        return path is not None and Path(path).suffix.lower() == ".bvh" and self.robot is None
+        a BVH, or a joint CSV with its robot (a C3D is read whole)."""
+        suffix = Path(path).suffix.lower() if path is not None else None
+        return (suffix == ".bvh" and self.robot is None) or (suffix == ".csv" and self.robot is not None)
+
+    def open(self, path: str | Path) -> TakeStream:
+        """The take at ``path`` (see :meth:`streams`) opened for :func:`stream_take`, checked as
+        :meth:`load` checks it."""
+        check_not_c3d_options(self, path)
+        subject = load_subject(self.subject) if self.subject else None
+        bvh = self.bvh_options(subject)  # refuses a subject file for a robot, as load does
+        if Path(path).suffix.lower() == ".csv":
+            return open_joint_csv_take(path, self.robot, UrdfBodyOptions(config=self.robot_config))
+        return open_bvh_take(path, bvh)
 
 
 def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | None,
@@ -137,15 +148,17 @@ def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -
                           rate_hz=take.fps))
 
 
-def stream_take(path: str | Path, options: TakeOptions, csv: str | Path | None = None, plot: str | Path | None = None,
-                progress: Callable[[int], None] | None = None, chunk: int = DEFAULT_CHUNK) -> dict:
-    """The analysis of the BVH at ``path`` in bounded memory (:mod:`livezmp.offline.take_stream`): its
-    zmp.csv written to ``csv`` and its figure (from a decimated series,
-    :class:`livezmp.offline.plot.PlotSeries`) to ``plot`` when given, each atomically; returns the
-    summary, equal to :func:`analyse_motion`'s to rounding. ``progress(frames_done)`` after each chunk."""
-    check_not_c3d_options(options, path)
-    subject = load_subject(options.subject) if options.subject else None
-    take = open_bvh_take(path, options.bvh_options(subject))
+def stream_take(take: str | Path | TakeStream, options: TakeOptions, csv: str | Path | None = None,
+                plot: str | Path | None = None, progress: Callable[[int], None] | None = None,
+                chunk: int = DEFAULT_CHUNK) -> dict:
+    """The analysis of a BVH or a robot's joint CSV (a path, or a take :meth:`TakeOptions.open` opened)
+    in bounded memory (:mod:`livezmp.offline.take_stream`): its zmp.csv written to ``csv`` and its
+    figure (from a decimated series, :class:`livezmp.offline.plot.PlotSeries`) to ``plot`` when given,
+    each atomically; returns the summary, equal to :func:`analyse_motion`'s to rounding.
+    ``progress(frames_done)`` after each chunk."""
+    if not isinstance(take, TakeStream):
+        take = options.open(take)
+    take.check_length()
     cfg = take_config(take, options.mode, options.ground, options.cutoff_hz)
     stats = TakeStats(take.total, take.fps, options.tolerance_mm)
     series = None
@@ -214,8 +227,8 @@ def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None
 
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, plot: bool = False) -> dict:
     """Analyse the take at ``path``; write its ``zmp.csv`` and, with ``plot``, its ``zmp.png`` (each
-    atomically) into the directory ``out_dir``; return the summary. A BVH is analysed in bounded
-    memory (:func:`stream_take`), other takes whole."""
+    atomically) into the directory ``out_dir``; return the summary. A BVH or a robot's joint CSV is
+    analysed in bounded memory (:func:`stream_take`), a C3D whole."""
     if options.streams(path):
         return stream_take(path, options, Path(out_dir) / ZMP_CSV, Path(out_dir) / ZMP_PNG if plot else None)
     a = analyse_path(path, options)

@@ -1,7 +1,10 @@
-"""One take's analysis in bounded memory: ``livezmp analyze`` and ``livezmp batch analyze`` of a BVH.
+"""One take's analysis in bounded memory: ``livezmp analyze`` and ``livezmp batch analyze`` of a BVH
+or of a robot's joint CSV.
 
-The file is read a chunk of frames at a time (:func:`livezmp.model.bvh.stream_bvh`), the body is
-made from its first seconds (all :func:`livezmp.model.bvh_body.body_from_bvh` reads), and each
+The file is read a chunk of frames at a time (:func:`livezmp.model.bvh.stream_bvh`; a joint CSV,
+which has no frame count and whose times are a column, is first checked from end to end in bounded
+memory, :func:`livezmp.model.trajectory_csv.scan_joint_csv`, then read again a chunk at a time), a
+BVH's body is made from its first seconds (all :func:`livezmp.model.bvh_body.body_from_bvh` reads), and each
 chunk goes through the batch path (:func:`livezmp.offline.batch.batch_chunks`, the estimator's and
 contact detector's state carried from chunk to chunk) to the consumers: the zmp.csv writer, the
 summary statistics, the figure's series. A worker's peak memory is then a few chunks, whatever the
@@ -23,9 +26,13 @@ import numpy as np
 from livezmp.balance.pipeline import Pipeline, PipelineConfig
 from livezmp.checks import check_input_file
 from livezmp.errors import InputError
+from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, stream_bvh
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.trajectory_csv import joint_csv_blocks, scan_joint_csv
+from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, NotBatchable, batch_chunks
 
 
@@ -48,6 +55,11 @@ class TakeStream:
     total: int
     source: str
     pieces: Callable[[int], Iterator[tuple[np.ndarray, np.ndarray]]]
+
+    def check_length(self) -> None:
+        """Refuse a take too short to analyse (before its rate, 0 Hz for one frame, is used)."""
+        if self.total < 2:
+            raise InputError(f"{self.source}: need at least 2 frames, got {self.total}")
 
 
 def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
@@ -75,13 +87,29 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     return TakeStream(body, fps, header.n_frames, header.source, pieces)
 
 
+def open_joint_csv_take(path: str | Path, robot: str | Path, options: UrdfBodyOptions) -> TakeStream:
+    """A robot's joint CSV (with its URDF ``robot``) as a :class:`TakeStream`: the file is checked from
+    end to end now (:func:`scan_joint_csv`: its frame count and rate, every bad row, time column or
+    period reported as :func:`read_joint_csv` reports it), its frames read again when ``pieces`` is
+    iterated, the floating base placed as the whole take's is when the file has none."""
+    p = check_input_file(path, "motion file")
+    body = body_from_urdf(robot, options)
+    scan = scan_joint_csv(p, body.joint_names)
+
+    def pieces(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        placer = BasePlacer(body)
+        for traj in joint_csv_blocks(p, body.joint_names, chunk):
+            yield traj.t, trajectory_frames(body, traj, placer)
+
+    return TakeStream(body, scan.fps, scan.count, str(p), pieces)
+
+
 def analyse_stream(take: TakeStream, config: PipelineConfig, consumers: Sequence[Consumer],
                    chunk: int = DEFAULT_CHUNK, progress: Callable[[int], None] | None = None) -> str:
     """Run the pipeline (``config``) over ``take`` chunk by chunk, giving each chunk's results to every
     consumer; returns which path made them ("batch", or "per-frame: WHY" as
     :func:`livezmp.offline.batch.run_batch` says). ``progress(frames_done)`` after each chunk."""
-    if take.total < 2:
-        raise InputError(f"{take.source}: need at least 2 frames, got {take.total}")
+    take.check_length()
     pipe = Pipeline(take.body, config, nominal_dt=1.0 / take.fps)
     try:
         _feed(batch_chunks(take.body, config, pipe.estimator, pipe.contacts, take.total, take.pieces(chunk), chunk),
