@@ -121,11 +121,10 @@ class BatchResult:
     def put(self, part: BatchResult) -> None:
         """Copy ``part`` (consecutive frames, e.g. one chunk of :func:`batch_chunks`) into its rows."""
         rows = slice(int(part.index[0]), int(part.index[-1]) + 1)
-        for name in ("index", "t", "zmp", "has_zmp", "com", "support", "judged", "inside", "clamped", "margin",
-                     "ground_z", "load", "q", "v", "a"):
-            mine = getattr(self, name)
-            if mine is not None:
-                mine[rows] = getattr(part, name)
+        for f in dataclasses.fields(self):  # every array field (q, v, a only when kept), as `select` takes
+            mine = getattr(self, f.name)
+            if isinstance(mine, np.ndarray):
+                mine[rows] = getattr(part, f.name)
         for side, s in part.soles.items():
             self.soles[side][rows] = s
 
