@@ -12,6 +12,7 @@ from data_paths import BANDAI
 from scipy.interpolate import CubicSpline
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
+from livezmp.errors import InputError
 from livezmp.model.base_placement import place_base
 from livezmp.model.bvh import read_bvh
 from livezmp.model.bvh_body import body_from_bvh
@@ -202,3 +203,19 @@ def test_zmp_csv_is_the_row_by_row_text(tmp_path):
     write_zmp_csv(body, BatchResult.from_frames(results, keep_states=False), got)
     assert got.read_bytes() == want.read_bytes()
     assert ",,,," in want.read_text()  # flight rows were compared too
+
+
+def test_a_zmp_csv_refused_for_a_non_finite_cell_leaves_no_file(tmp_path, bandai_walk):
+    """A result whose ZMP went non-finite is refused in one line naming the frame and column, before
+    the file is opened: no header-only zmp.csv is left behind."""
+    body = body_from_bvh(bandai_walk)
+    times = np.arange(len(bandai_walk.frames)) * bandai_walk.frame_time
+    cfg = default_config(body, bandai_walk.fps)
+    pipe = Pipeline(body, cfg, bandai_walk.frame_time)
+    result, _ = analyse_batch(body, cfg, pipe.estimator, pipe.contacts, times, bandai_walk.frames)
+    k = int(np.flatnonzero(result.has_zmp)[5])
+    result.zmp[k, 0] = np.nan
+    path = tmp_path / "zmp.csv"
+    with pytest.raises(InputError, match=rf"zmp.csv: frame {k} column zmp_\w is not finite"):
+        write_zmp_csv(body, result, path)
+    assert not path.exists()

@@ -41,9 +41,10 @@ def write_zmp_csv(body: BodyModel, result: BatchResult, path: str | Path,
     (and frames without support) leave the ZMP/clamp cells empty. ``extra`` columns (name ->
     (N,) values) follow, ``%.6f``, empty where not finite (see :class:`ZmpCsvWriter`)."""
     writer = ZmpCsvWriter(body, path, tuple(extra or ()))
+    checked = writer.rows(result)  # before the file is opened: a refused result leaves no file
     writer.start()
     try:
-        writer.add(result, extra)
+        writer.write(checked, extra)
     finally:
         writer.close()
 
@@ -65,6 +66,11 @@ class ZmpCsvWriter:
 
     def add(self, result: BatchResult, extra: dict[str, np.ndarray] | None = None) -> None:
         """The rows of ``result`` (consecutive frames); ``extra`` its extra columns' values."""
+        self.write(self.rows(result), extra)
+
+    def rows(self, result: BatchResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells of ``result``'s rows (values, which are filled, each row's template), checked:
+        InputError naming the frame and column of a non-finite filled cell."""
         body = self.body
         values = np.column_stack([result.index, result.t, body.to_input_frame(result.zmp),
                                   body.to_input_frame(result.com), result.inside,
@@ -77,7 +83,12 @@ class ZmpCsvWriter:
         if bad is not None:
             raise InputError(f"{self.path}: frame {result.index[bad[0]]} column {ZMP_COLUMNS[bad[1]]} is not finite; "
                              "the input drives the analysis out of range, not written")
-        for lo in range(0, len(result), CSV_ROWS):
+        return values, filled, kind
+
+    def write(self, checked: tuple[np.ndarray, np.ndarray, np.ndarray], extra: dict[str, np.ndarray] | None) -> None:
+        """The rows :meth:`rows` checked, with their ``extra`` columns' values."""
+        values, filled, kind = checked
+        for lo in range(0, len(values), CSV_ROWS):
             rows = slice(lo, lo + CSV_ROWS)
             text = "".join(_TEMPLATES[kind[rows]].tolist()) % tuple(values[rows][filled[rows]].tolist())
             if extra:
