@@ -43,7 +43,7 @@ from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, sway_basis
 from livezmp.offline.calibrate import calibrate
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
-from livezmp.offline.validation import cop_vs_zmp, walking_axes
+from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "c3d"
 TRIALS = ("walk_plugingait_forceplates.c3d", "cgm24_walking01_forceplate.c3d")
@@ -63,12 +63,17 @@ STEPS = [
 UPPER = ("thorax", "headarms", "head", "upperarm", "forearm", "hand")
 
 
+def lag(cv: dict) -> str:
+    """The lag (ms), or 'n.d.' when its two halves disagree (validation.lag_with_halves)."""
+    return f"{cv['lag_ms']:+7.1f}" if cv["lag_ms"] is not None else f"{'n.d.':>7s}"
+
+
 def row(name: str, cv: dict, extra: str = "") -> str:
     if not cv["frames"]:
         return f"{name:40s} {'-':>6s}"
     fa, lat = cv["bias_mm"]
     return (f"{name:40s} {cv['frames']:6d} {cv['rms_mm']:7.1f} {cv['p95_mm']:7.1f} {fa:+7.1f} {lat:+7.1f} "
-            f"{cv['lag_ms']:+7.1f}  {extra}")
+            f"{lag(cv)}  {extra}")
 
 
 def header() -> str:
@@ -203,8 +208,8 @@ def sway_before_after(done: dict[str, tuple]) -> None:
         cv1 = a.summary["cop_vs_zmp"]
         before.append(cv0["rms_mm"])
         after.append(cv1["rms_mm"])
-        print(f"{name[:34]:34s} {cv0['rms_mm']:6.1f} {cv0['bias_mm'][0]:+6.1f} {cv0['lag_ms']:+6.1f}  ->  "
-              f"{cv1['rms_mm']:6.1f} {cv1['bias_mm'][0]:+6.1f} {cv1['lag_ms']:+6.1f}")
+        print(f"{name[:34]:34s} {cv0['rms_mm']:6.1f} {cv0['bias_mm'][0]:+6.1f} {lag(cv0)}  ->  "
+              f"{cv1['rms_mm']:6.1f} {cv1['bias_mm'][0]:+6.1f} {lag(cv1)}")
     print(f"median RMS over {len(after)} trials: {np.median(before):.1f} -> {np.median(after):.1f} mm")
 
 
@@ -240,6 +245,69 @@ def error_sources(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
 
 
+def _rms_by_shift(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """RMS (mm) of a(t + shift frames) - b(t) over ``rows``, per shift."""
+    idx = np.flatnonzero(rows)
+    out = []
+    for s in shifts:
+        i = idx[(idx + s >= 0) & (idx + s < len(a))]
+        d = a[i + s] - b[i]
+        d = d[np.isfinite(d).all(axis=1)]
+        out.append(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))) if len(d) else np.nan)
+    return np.array(out)
+
+
+def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
+    """Whether each trial's ZMP-CoP lag and plate delay are determined: the same estimate over the first and
+    second halves of the complete frames (validation.LAG_AGREE_S); with ``figures``, the ZMP-CoP RMS against
+    the shift, whole and per half (lag_conditioning.png)."""
+    print(f"\nlag and plate delay: whole / first half / second half (ms), determined when the halves agree within "
+          f"{1000 * LAG_AGREE_S:.0f} ms")
+    print(f"{'trial':34s} {'ZMP-CoP lag':>30s} {'plate delay (applied)':>34s}  RMS at lag 0 / at best shift mm")
+    curves = {}
+    for name, (trial, a) in done.items():
+        cv, ta = a.summary["cop_vs_zmp"], a.summary["time_alignment"]
+        r, p = a.result, a.plates
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        zmp = np.where(r.has_zmp[:, None], r.zmp, np.nan)[:, :2]
+        whole, _, halves = lag_with_halves(zmp, p.cop[:, :2], rows, 1.0 / trial.rate)
+        k = int(round(MAX_LAG_S * trial.rate))
+        shifts = np.arange(-k, k + 1)
+        idx = np.flatnonzero(rows)
+        parts = [rows] + [np.isin(np.arange(len(rows)), part) for part in (idx[: len(idx) // 2], idx[len(idx) // 2 :])]
+        curves[name] = (1000 * shifts / trial.rate, [_rms_by_shift(zmp, p.cop[:, :2], x, shifts) for x in parts])
+        ms = [f"{1000 * v:+.0f}" if v is not None else "-" for v in (whole, *halves)]
+        d = ta["plate_delay_halves_ms"]
+        print(f"{name[:34]:34s} {' / '.join(ms):>22s} {'yes' if cv['lag_ms'] is not None else 'no':>7s} "
+              f"{ta['plate_delay_measured_ms']:+7.1f} / {d[0]:+.0f} / {d[1]:+.0f} "
+              f"{'yes' if ta['plate_delay_determined'] else 'no':>4s} ({ta['plate_delay_applied_ms']:+.0f})  "
+              f"{curves[name][1][0][k]:6.1f} / {np.nanmin(curves[name][1][0]):6.1f}")
+    if figures is None:
+        return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    n = len(curves)
+    fig, axes = plt.subplots((n + 3) // 4, 4, figsize=(13, 2.6 * ((n + 3) // 4)), squeeze=False)
+    for ax, (name, (t, (w, h1, h2))) in zip(axes.ravel(), curves.items(), strict=False):
+        ax.plot(t, w, "k", lw=2, label="all complete frames")
+        ax.plot(t, h1, "C0", label="first half")
+        ax.plot(t, h2, "C1", label="second half")
+        for c, col in ((w, "k"), (h1, "C0"), (h2, "C1")):
+            ax.axvline(t[np.nanargmin(c)], color=col, ls=":", lw=1)
+        ax.axvspan(-10, 10, color="0.9", zorder=0)
+        ax.set_title(name.replace("sample_", "").replace(".c3d", "")[:30], fontsize=9)
+        ax.set_xlabel("shift of the ZMP, ms")
+        ax.set_ylabel("RMS ZMP - CoP, mm")
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    figures.mkdir(parents=True, exist_ok=True)
+    fig.savefig(figures / "lag_conditioning.png", dpi=90)
+    print(f"wrote {figures / 'lag_conditioning.png'}")
+
+
 def calibration_table(done: dict[str, tuple]) -> None:
     """`livezmp calibrate` on each trial alone, cross-validated on the halves of its complete frames."""
     print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames (prior "
@@ -269,6 +337,7 @@ def calibration_table(done: dict[str, tuple]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("more", nargs="*", help="more C3D trials, or directories holding them")
+    ap.add_argument("--figures", type=Path, help="write the figures (docs/validation/) into this directory")
     args = ap.parse_args()
     t0 = time.perf_counter()
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
@@ -284,6 +353,7 @@ def main() -> None:
     trunk_sway(done)
     sway_before_after(done)
     error_sources(done)
+    lag_conditioning(done, args.figures)
     calibration_table(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
     print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")

@@ -87,7 +87,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if cv and cv["frames"]:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
-              f"lag {cv['lag_ms']:+.1f} ms")
+              + (f"lag {cv['lag_ms']:+.1f} ms" if cv["lag_ms"] is not None else "lag not determined (its halves give "
+                 + " / ".join("-" if h is None else f"{h:+.0f}" for h in cv["lag_halves_ms"]) + " ms)"))
     if "markers" in summary:
         print(f"  {summary['markers']['hat']}")
         if "note" in summary["mass"]:

@@ -162,7 +162,9 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         take, times, cfg, result = _run(trial, opts, used, floor)
         com_acc = com_accelerations(take, result)
     # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
-    measured = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete, 1.0 / trial.rate)
+    # applied even when its halves disagree: tried, applying only determined delays was worse (docs/validation.md)
+    measured, determined, halves = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete,
+                                               1.0 / trial.rate)
     applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
     if applied:
         shift = measured
@@ -177,6 +179,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                    "set_aside": plates.set_aside},
         "time_alignment": {"plate_delay_measured_ms": None if measured is None else round(1000 * measured, 1),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
+                           "plate_delay_determined": determined,
+                           "plate_delay_halves_ms": [None if h is None else round(1000 * h, 1) for h in halves],
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),

@@ -12,6 +12,10 @@ import numpy as np
 from livezmp.balance.plates import G
 
 MAX_LAG_S = 0.1  # s: the lag search covers ± this
+# A lag is *determined* when the first and second halves of the frames give lags this close (and neither at the
+# search's edge): their difference estimates the lag's own uncertainty, and one wider than the ±10 ms a lag is
+# judged against cannot tell a clock offset from noise (on one stance the RMS hardly depends on the shift).
+LAG_AGREE_S = 0.02
 
 
 def walking_axes(com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -48,35 +52,61 @@ def best_lag(a: np.ndarray, b: np.ndarray, rows: np.ndarray, dt: float) -> float
     return float((shifts[i] + frac) * dt)
 
 
+def lag_with_halves(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
+                    dt: float) -> tuple[float | None, bool, list]:
+    """:func:`best_lag` over ``rows`` (s), whether it is determined (see ``LAG_AGREE_S``), and the lags over
+    the first and second halves of ``rows`` (s, None where there is none)."""
+    idx = np.flatnonzero(rows)
+    halves = []
+    for part in (idx[: len(idx) // 2], idx[len(idx) // 2 :]):
+        sel = np.zeros(len(rows), dtype=bool)
+        sel[part] = True
+        halves.append(best_lag(a, b, sel, dt) if len(part) else None)
+    lag = best_lag(a, b, rows, dt)
+    edge = MAX_LAG_S - dt / 2
+    ok = (lag is not None and all(h is not None and abs(h) < edge for h in halves)
+          and abs(halves[0] - halves[1]) <= LAG_AGREE_S)
+    return lag, ok, halves
+
+
+def _ms(v: float | None) -> float | None:
+    return None if v is None else round(1000 * v, 1)
+
+
 def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: np.ndarray, com: np.ndarray,
                dt: float) -> dict:
     """ZMP against plate CoP over the complete frames that have a ZMP: count, RMS, p95 and max of the
     horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left (mm), and
-    the lag (ms, see :func:`best_lag`; reported, not applied)."""
+    the lag (ms, see :func:`best_lag`; reported, not applied; None when not determined, see
+    :func:`lag_with_halves`) and the lags over the first and second halves of those frames (ms)."""
     rows = complete & has_zmp & np.isfinite(cop).all(axis=1)
     d = zmp[rows, :2] - cop[rows, :2]
     if not len(d):
-        return {"frames": 0, "rms_mm": None, "p95_mm": None, "max_mm": None, "bias_mm": None, "lag_ms": None}
+        return {"frames": 0, "rms_mm": None, "p95_mm": None, "max_mm": None, "bias_mm": None, "lag_ms": None,
+                "lag_halves_ms": None}
     dist = np.hypot(d[:, 0], d[:, 1])
     mean = d.mean(axis=0)
     fwd, left = walking_axes(com)
-    lag = best_lag(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
+    lag, determined, halves = lag_with_halves(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
     return {
         "frames": int(rows.sum()),
         "rms_mm": round(1000 * float(np.sqrt(np.mean(dist ** 2))), 2),
         "p95_mm": round(1000 * float(np.percentile(dist, 95)), 2),
         "max_mm": round(1000 * float(dist.max()), 2),
         "bias_mm": [round(1000 * float(mean @ fwd[:2]), 2), round(1000 * float(mean @ left[:2]), 2)],
-        "lag_ms": None if lag is None else round(1000 * lag, 1),
+        "lag_ms": _ms(lag) if determined else None,
+        "lag_halves_ms": [_ms(h) for h in halves],
     }
 
 
-def plate_delay(com_acc: np.ndarray, plate_acc: np.ndarray, rows: np.ndarray, dt: float) -> float | None:
+def plate_delay(com_acc: np.ndarray, plate_acc: np.ndarray, rows: np.ndarray,
+                dt: float) -> tuple[float | None, bool, list]:
     """How late (s) the plates' acceleration (GRF − m g) / m (N, 3) comes after the kinematic CoM
     acceleration (N, 3) over ``rows``: the plates' clock against the markers'. Both sides measure the
-    whole body's acceleration, so a shift between them is timing, not the body model."""
-    lag = best_lag(com_acc, plate_acc, rows, dt)
-    return None if lag is None else -lag
+    whole body's acceleration, so a shift between them is timing, not the body model. Also whether it is
+    determined (:func:`lag_with_halves`) and the delays over the two halves of ``rows`` (s)."""
+    lag, determined, halves = lag_with_halves(com_acc, plate_acc, rows, dt)
+    return (None if lag is None else -lag), determined, [None if h is None else -h for h in halves]
 
 
 def com_acc_vs_plates(com_acc: np.ndarray, force: np.ndarray, mass: float, complete: np.ndarray) -> dict:
