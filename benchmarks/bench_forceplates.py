@@ -308,6 +308,57 @@ def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
     print(f"wrote {figures / 'lag_conditioning.png'}")
 
 
+def _axis_map(z: np.ndarray, c: np.ndarray, offset: bool, gain: bool) -> np.ndarray:
+    """Per axis (fore-aft, lateral): gain g and offset b (2, 2) of c = g z + b by least squares (g = 1 or b = 0
+    when not fitted); ``z`` ZMP - CoM, ``c`` CoP - CoM (n, 2), m."""
+    out = np.array([[1.0, 0.0], [1.0, 0.0]])
+    for k in (0, 1):
+        if gain and offset:
+            out[k] = np.linalg.lstsq(np.column_stack([z[:, k], np.ones(len(z))]), c[:, k], rcond=None)[0]
+        elif gain:
+            out[k, 0] = z[:, k] @ c[:, k] / (z[:, k] @ z[:, k])
+        else:
+            out[k, 1] = np.mean(c[:, k] - z[:, k])
+    return out
+
+
+def _mapped_rms(z: np.ndarray, c: np.ndarray, coef: np.ndarray) -> float:
+    d = z * coef[:, 0] + coef[:, 1] - c
+    return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def calibration_floor(done: dict[str, tuple]) -> None:
+    """What simple per-subject constants could do, at best: the ZMP mapped onto the plate CoP (both relative to
+    the CoM's ground point, along and across the walk) by a constant offset (the bias), by a gain per axis on
+    the dynamic term ZMP - CoM, and by both (4 numbers), fitted on the very frames they are scored on (an
+    oracle), and the same fitted on one half of the complete frames and scored on the other."""
+    print("\nfloor of per-subject constants: ZMP - CoP RMS mm after the best map of (ZMP - CoM) onto (CoP - CoM), "
+          "in-sample (oracle) / held out (fit on one half, score the other)")
+    print(f"{'trial':34s} {'default':>7s} {'offset':>15s} {'gain per axis':>15s} {'gain+offset':>15s}")
+    cols = {k: [] for k in ("default", "offset", "gain", "both")}
+    for name, (_, a) in done.items():
+        r, p = a.result, a.plates
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        fwd, left = walking_axes(r.com)
+        axes = np.array([fwd[:2], left[:2]]).T
+        z, c = (r.zmp[rows, :2] - r.com[rows, :2]) @ axes, (p.cop[rows, :2] - r.com[rows, :2]) @ axes
+        h = len(z) // 2
+        parts = ((slice(0, h), slice(h, None)), (slice(h, None), slice(0, h)))
+        cells = [f"{a.summary['cop_vs_zmp']['rms_mm']:7.1f}"]
+        cols["default"].append(a.summary["cop_vs_zmp"]["rms_mm"])
+        for key, offset, gain in (("offset", True, False), ("gain", False, True), ("both", True, True)):
+            oracle = _mapped_rms(z, c, _axis_map(z, c, offset, gain))
+            sq = [_mapped_rms(z[b], c[b], _axis_map(z[f], c[f], offset, gain)) ** 2 * len(z[b]) for f, b in parts]
+            held = float(np.sqrt(sum(sq) / len(z)))
+            cols[key].append((oracle, held))
+            cells.append(f"{oracle:7.1f} {held:7.1f}")
+        print(f"{name[:34]:34s} " + " ".join(cells))
+    med = [f"{np.median(cols['default']):7.1f}"] + [
+        f"{np.median([v[0] for v in cols[k]]):7.1f} {np.median([v[1] for v in cols[k]]):7.1f}"
+        for k in ("offset", "gain", "both")]
+    print(f"{'median':34s} " + " ".join(med))
+
+
 def calibration_table(done: dict[str, tuple]) -> None:
     """`livezmp calibrate` on each trial alone, cross-validated on the halves of its complete frames."""
     print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames (prior "
@@ -355,6 +406,7 @@ def main() -> None:
     error_sources(done)
     lag_conditioning(done, args.figures)
     calibration_table(done)
+    calibration_floor(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
     print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")
     for rate in (50.0, 100.0, 240.0):

@@ -478,6 +478,7 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     trial = read_c3d(path)
     subject, report = calibration.calibrate([trial])
     assert report["rms_table_mm"] > 15 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 2
+    assert report["rms_fitted_unconstrained_mm"] < 1.0  # the true HAT is among the parameters: the floor is ~0
     monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
     assert main(["calibrate", str(path), "-o", str(tmp_path / "s.toml")]) == 0
     exact = calibration.load_subject(tmp_path / "s.toml")
@@ -511,6 +512,8 @@ def test_real_walk_calibrated_and_held_out():
     than its mid-hip."""
     subject, report = calibration.calibrate([read_c3d(C3D / "walk_plugingait_forceplates.c3d")])
     assert 36 < report["rms_held_out_table_mm"] < 40 and report["rms_held_out_fitted_mm"] < 37.5
+    # even unconstrained and scored on the frames it is fitted on, no HAT reaches the 25 mm target here (30.1 mm)
+    assert 27 < report["rms_fitted_unconstrained_mm"] < report["rms_fitted_mm"]
     assert subject.hat_sway_gain[0] < 0.8 and subject.hat_sway_gain[1] < 0.9
 
 

@@ -24,6 +24,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
           f"{report['rms_fitted_mm']:.1f} mm; on held-out halves: table {report['rms_held_out_table_mm']:.1f} mm, "
           f"fitted {report['rms_held_out_fitted_mm']:.1f} mm")
+    print("  unconstrained (prior off, scored on the frames it is fitted on): "
+          f"{report['rms_fitted_unconstrained_mm']:.1f} mm, the least any HAT parameters reach on these trials")
     w = report["prior_weight"]
     print("  the cross-validation kept the table's values (no fit beat it on held-out frames)" if w is None else
           f"  prior weight {w:g} (chosen by cross-validation on the halves of the frames)")
