@@ -40,7 +40,7 @@ from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, sway_basis
-from livezmp.offline.calibrate import calibrate
+from livezmp.offline.calibrate import PARAMETERS, calibrate
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
 from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
@@ -245,6 +245,38 @@ def error_sources(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
 
 
+def foot_frame(done: dict[str, tuple]) -> None:
+    """CoP and ZMP in the stance foot's frame over single-support complete frames: along the foot from the heel
+    (0) to the toe (1) by the sole model's corners, and sideways from its heel-toe line (mm, + left). A plate
+    whose origin or corners were misplaced puts the CoP off the foot; a CoP that stays put over a stance is a
+    plate that does not see the roll-over; a ZMP off the foot while the CoP is on it is the kinematics."""
+    print("\nCoP / ZMP in the stance foot (single support): along heel 0 -> toe 1, min..max (mean); sideways mean mm")
+    for name, (trial, a) in done.items():
+        r, p = a.result, a.plates
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        fwd, _ = walking_axes(r.com)
+        load = {s: may_bear_weight(sole, p.surface_z, 1.0 / trial.rate) for s, sole in r.soles.items()}
+        cells = []
+        for side, other in (("left", "right"), ("right", "left")):
+            sel = rows & load[side] & ~load[other]
+            if sel.sum() < 3:
+                continue
+            sole = r.soles[side][sel][:, :, :2]
+            along = sole @ fwd[:2]
+            n = np.arange(len(sole))
+            heel, toe = sole[n, np.argmin(along, axis=1)], sole[n, np.argmax(along, axis=1)]
+            length = np.linalg.norm(toe - heel, axis=1)
+            ax = (toe - heel) / length[:, None]
+            lat = np.column_stack([-ax[:, 1], ax[:, 0]])
+            parts = []
+            for x in (p.cop[sel, :2], r.zmp[sel, :2]):
+                u = np.sum((x - heel) * ax, axis=1) / length
+                w = 1000 * np.mean(np.sum((x - (heel + toe) / 2) * lat, axis=1))
+                parts.append(f"{u.min():+.2f}..{u.max():+.2f} ({u.mean():+.2f}) {w:+4.0f}")
+            cells.append(f"{side[0]} {int(sel.sum()):3d} fr: CoP {parts[0]}, ZMP {parts[1]}")
+        print(f"{name[:34]:34s} " + " | ".join(cells))
+
+
 def _rms_by_shift(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """RMS (mm) of a(t + shift frames) - b(t) over ``rows``, per shift."""
     idx = np.flatnonzero(rows)
@@ -327,6 +359,30 @@ def _mapped_rms(z: np.ndarray, c: np.ndarray, coef: np.ndarray) -> float:
     return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
+SUBSETS = {"offset fa+lat": ("forward", "left"), "offset fa": ("forward",), "sway": ("sway_fore_aft", "sway_lateral"),
+           "fraction+offset": ("hat_fraction", "forward", "left"),
+           "offset+sway": ("forward", "left", "sway_fore_aft", "sway_lateral")}
+
+
+def calibration_subsets(done: dict[str, tuple]) -> None:
+    """`livezmp calibrate` fitting only some of the HAT's parameters (the others at the table), held out as in
+    the calibration table, on the trials it accepts; and each fit without the prior on its own frames."""
+    print("\ncalibrated with fewer parameters: held out (fit on one half, scored on the other) / unconstrained on "
+          "its own frames, mm")
+    print(f"{'trial':34s} {'table':>6s} {'all six':>13s} " + " ".join(f"{k:>15s}" for k in SUBSETS))
+    for name, (trial, _) in done.items():
+        cells = []
+        for fit in (PARAMETERS, *SUBSETS.values()):
+            try:
+                _, rep = calibrate([trial], fit=fit)
+            except InputError:
+                break
+            cells.append(f"{rep['rms_held_out_fitted_mm']:6.1f} / {rep['rms_fitted_unconstrained_mm']:4.1f}")
+        if cells:
+            print(f"{name[:34]:34s} {rep['rms_held_out_table_mm']:6.1f} {cells[0]:>13s} "
+                  + " ".join(f"{c:>15s}" for c in cells[1:]))
+
+
 def calibration_floor(done: dict[str, tuple]) -> None:
     """What simple per-subject constants could do, at best: the ZMP mapped onto the plate CoP (both relative to
     the CoM's ground point, along and across the walk) by a constant offset (the bias), by a gain per axis on
@@ -404,8 +460,10 @@ def main() -> None:
     trunk_sway(done)
     sway_before_after(done)
     error_sources(done)
+    foot_frame(done)
     lag_conditioning(done, args.figures)
     calibration_table(done)
+    calibration_subsets(done)
     calibration_floor(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")
     print(f"{'rate Hz':>8s} {'freq Hz':>8s} {'live 0.4/0.1 s':>18s} {'lab 0.8/0.4 s':>18s}")

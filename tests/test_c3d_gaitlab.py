@@ -479,6 +479,13 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     subject, report = calibration.calibrate([trial])
     assert report["rms_table_mm"] > 15 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 2
     assert report["rms_fitted_unconstrained_mm"] < 1.0  # the true HAT is among the parameters: the floor is ~0
+    # its offset alone: mass fraction and sway stay the table's (not the true 0.45), so the truth is out of reach
+    part, partial = calibration.calibrate([trial], fit=("forward", "left"))
+    assert part.hat_fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12) and part.hat_fraction > 0.47
+    assert part.hat_sway_gain == calibration.TRUNK_SWAY_GAIN
+    assert partial["rms_fitted_unconstrained_mm"] > 5 * report["rms_fitted_unconstrained_mm"]
+    with pytest.raises(ValueError, match="fit takes some of"):
+        calibration.calibrate([trial], fit=("knee",))
     monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
     assert main(["calibrate", str(path), "-o", str(tmp_path / "s.toml")]) == 0
     exact = calibration.load_subject(tmp_path / "s.toml")
@@ -524,7 +531,7 @@ def test_calibration_does_not_overfit_one_stance(monkeypatch):
     trial = read_c3d(C3D / "cgm24_walking01_forceplate.c3d")
     _, report = calibration.calibrate([trial])
     assert report["rms_held_out_fitted_mm"] <= report["rms_held_out_table_mm"] + 0.5
-    monkeypatch.setattr(calibration, "_cross_validated", lambda halves, prior: (1.0, []))
+    monkeypatch.setattr(calibration, "_cross_validated", lambda halves, prior, free: (1.0, []))
     _, fixed = calibration.calibrate([trial])
     assert fixed["rms_held_out_fitted_mm"] > fixed["rms_held_out_table_mm"] + 4.0
 

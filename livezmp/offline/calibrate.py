@@ -47,6 +47,7 @@ MIN_FRAMES = 20  # complete frames a fit (and each part of its cross-validation)
 # the prior's weight for the unconstrained fit (bounds only): on the very frames it is fitted on, the least error
 # any HAT parameters reach on these trials, reported as their floor
 FREE_WEIGHT = 1e-3
+PARAMETERS = ("hat_fraction", "forward", "left", "up", "sway_fore_aft", "sway_lateral")  # theta's entries
 # fraction, forward, left, up (m), sway gain fore-aft, lateral
 BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.5])
 
@@ -181,10 +182,20 @@ def _rms_mm(theta: np.ndarray, terms: list[_Terms]) -> float:
     return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
-def _fit(terms: list[_Terms], prior: np.ndarray, weight: float) -> np.ndarray:
+def _fit(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray) -> np.ndarray:
+    """Least squares over the parameters ``free`` (bool (6,)); the others stay at the prior."""
     if not np.isfinite(weight):
         return prior
-    return least_squares(_residuals, prior, bounds=BOUNDS, args=(terms, prior, weight), x_scale=PRIOR_SD).x
+
+    def theta(x: np.ndarray) -> np.ndarray:
+        out = prior.copy()
+        out[free] = x
+        return out
+
+    lo, hi = (np.asarray(b)[free] for b in BOUNDS)
+    x = least_squares(lambda x: _residuals(theta(x), terms, prior, weight), prior[free], bounds=(lo, hi),
+                      x_scale=PRIOR_SD[free]).x
+    return theta(x)
 
 
 def _halves(terms: list[_Terms]) -> tuple[list[_Terms], list[_Terms]]:
@@ -193,14 +204,16 @@ def _halves(terms: list[_Terms]) -> tuple[list[_Terms], list[_Terms]]:
     return [t.part(c) for t, c in zip(terms, cut, strict=True)], [t.part(~c) for t, c in zip(terms, cut, strict=True)]
 
 
-def _cross_validated(halves: tuple[list[_Terms], list[_Terms]], prior: np.ndarray) -> tuple[float, list[float]]:
+def _cross_validated(halves: tuple[list[_Terms], list[_Terms]], prior: np.ndarray,
+                     free: np.ndarray) -> tuple[float, list[float]]:
     """The prior weight whose fits on one half score best on the other (mean RMS over both ways round) among
     those that beat the table both ways round (else the table: a fit that helps one way and not the other
     is a fit to that half's noise), and each weight's mean score (mm)."""
     if min(sum(len(t.cop) for t in half) for half in halves) < MIN_FRAMES:
         return PRIOR_WEIGHTS[-1], []
     table = [_rms_mm(prior, halves[1 - k]) for k in (0, 1)]
-    folds = np.array([[_rms_mm(_fit(halves[k], prior, w), halves[1 - k]) for k in (0, 1)] for w in PRIOR_WEIGHTS])
+    folds = np.array([[_rms_mm(_fit(halves[k], prior, w, free), halves[1 - k]) for k in (0, 1)]
+                      for w in PRIOR_WEIGHTS])
     score = folds.mean(axis=1)
     ok = (folds < np.array(table)).all(axis=1)
     best = int(np.flatnonzero(ok)[np.argmin(score[ok])]) if ok.any() else len(PRIOR_WEIGHTS) - 1
@@ -221,10 +234,16 @@ def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> Non
                              "to calibrate on")
 
 
-def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[Subject, dict]:
+def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
+              fit: tuple[str, ...] = PARAMETERS) -> tuple[Subject, dict]:
     """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
     (RMS ZMP − CoP with the table, fitted, fitted without the prior on the same frames (the floor of what
-    these parameters can do there), and held out, mm; the prior weight chosen)."""
+    these parameters can do there), and held out, mm; the prior weight chosen). ``fit``: which of
+    ``PARAMETERS`` are fitted (the others keep the table's value)."""
+    unknown = set(fit) - set(PARAMETERS)
+    if unknown or not fit:
+        raise ValueError(f"calibrate: fit takes some of {PARAMETERS}, got {fit}")
+    free = np.isin(PARAMETERS, fit)
     opts = opts or LabOptions()
     # the HAT frame's origin at the mid-hip: the fit sways it (the table's sway is its prior)
     opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=None))
@@ -245,17 +264,17 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None) -> tuple[S
     fraction, height, _ = hat_table(stature)
     prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_SWAY_GAIN])
     halves = _halves(whole)
-    weight, scores = _cross_validated(halves, prior)
-    fitted = _fit(whole, prior, weight)
-    free = _fit(whole, prior, FREE_WEIGHT)
+    weight, scores = _cross_validated(halves, prior, free)
+    fitted = _fit(whole, prior, weight, free)
+    unconstrained = _fit(whole, prior, FREE_WEIGHT, free)
     held_out, weights = [], []
     for k in (0, 1):  # the held-out half sees neither the fit nor the choice of its weight
-        w, _ = _cross_validated(_halves(halves[k]), prior)
-        held_out.append(_rms_mm(_fit(halves[k], prior, w), halves[1 - k]))
+        w, _ = _cross_validated(_halves(halves[k]), prior, free)
+        held_out.append(_rms_mm(_fit(halves[k], prior, w, free), halves[1 - k]))
         weights.append(w)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
               "rms_table_mm": round(_rms_mm(prior, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
-              "rms_fitted_unconstrained_mm": round(_rms_mm(free, whole), 2),
+              "rms_fitted_unconstrained_mm": round(_rms_mm(unconstrained, whole), 2),
               "rms_held_out_table_mm": round(float(np.mean([_rms_mm(prior, halves[1 - k]) for k in (0, 1)])), 2),
               "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2),
               "prior_weight": None if not np.isfinite(weight) else weight,
