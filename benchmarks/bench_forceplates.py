@@ -295,8 +295,9 @@ def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
     the shift, whole and per half (lag_conditioning.png)."""
     print(f"\nlag and plate delay: whole / first half / second half (ms), determined when the halves agree within "
           f"{1000 * LAG_AGREE_S:.0f} ms")
-    print(f"{'trial':34s} {'ZMP-CoP lag':>30s} {'plate delay (applied)':>34s}  RMS at lag 0 / at best shift mm")
-    curves = {}
+    print(f"{'trial':34s} {'ZMP-CoP lag':>30s} {'plate delay (applied)':>34s}  RMS at lag 0 / at best shift mm; "
+          "RMS undoing determined delays only")
+    curves, only = {}, []
     for name, (trial, a) in done.items():
         cv, ta = a.summary["cop_vs_zmp"], a.summary["time_alignment"]
         r, p = a.result, a.plates
@@ -310,10 +311,14 @@ def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
         curves[name] = (1000 * shifts / trial.rate, [_rms_by_shift(zmp, p.cop[:, :2], x, shifts) for x in parts])
         ms = [f"{1000 * v:+.0f}" if v is not None else "-" for v in (whole, *halves)]
         d = ta["plate_delay_halves_ms"]
+        keep = ta["plate_delay_determined"] or not ta["plate_delay_applied_ms"]
+        only.append(cv["rms_mm"] if keep else
+                    analyse_lab_take(trial, LabOptions(plate_delay_s=0.0)).summary["cop_vs_zmp"]["rms_mm"])
         print(f"{name[:34]:34s} {' / '.join(ms):>22s} {'yes' if cv['lag_ms'] is not None else 'no':>7s} "
               f"{ta['plate_delay_measured_ms']:+7.1f} / {d[0]:+.0f} / {d[1]:+.0f} "
               f"{'yes' if ta['plate_delay_determined'] else 'no':>4s} ({ta['plate_delay_applied_ms']:+.0f})  "
-              f"{curves[name][1][0][k]:6.1f} / {np.nanmin(curves[name][1][0]):6.1f}")
+              f"{curves[name][1][0][k]:6.1f} / {np.nanmin(curves[name][1][0]):6.1f}; {only[-1]:6.1f}")
+    print(f"median RMS undoing only determined plate delays: {np.median(only):.1f} mm")
     if figures is None:
         return
     import matplotlib
