@@ -131,20 +131,20 @@ def test_cluster_set_through_a_map_agrees_with_its_plates(tmp_path, capsys):
 
 
 def test_labels_map_reads_a_renamed_standard_set(tmp_path, capsys):
-    """A Helen Hayes set whose toe and sacrum markers have other names (as some labs write L.TO, VSAC):
-    refused naming them, read through [labels] with the same ZMP as the standard file."""
+    """A set whose toe markers have names no built-in convention knows: refused naming them, read through
+    [labels] with the same ZMP as the standard file."""
     std = tmp_path / "std.c3d"
     write_lab_c3d(std, PLATES)
     c3d = ezc3d.c3d(str(std))
     labels = c3d["parameters"]["POINT"]["LABELS"]["value"]
-    rename = {"Sub01:LTOE": "L.TO", "Sub01:RTOE": "R.TO"}
+    rename = {"Sub01:LTOE": "L.ToeTip", "Sub01:RTOE": "R.ToeTip"}
     c3d["parameters"]["POINT"]["LABELS"]["value"] = [rename.get(v, v) for v in labels]
     other = tmp_path / "other.c3d"
     c3d.write(str(other))
     assert main(["analyze", str(other)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "missing LTOE, RTOE" in err
-    map_path = _map_file('[labels]\nLTOE = "L.TO"\nRTOE = "R.TO"\n', tmp_path)
+    map_path = _map_file('[labels]\nLTOE = "L.ToeTip"\nRTOE = "R.ToeTip"\n', tmp_path)
     rc, s = _analyze(other, tmp_path, "--markers", str(map_path))
     _, ref = _analyze(std, tmp_path)
     assert rc == 0 and s["cop_vs_zmp"] == ref["cop_vs_zmp"]

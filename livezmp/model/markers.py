@@ -47,6 +47,7 @@ from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE, WORLD_FROM_INPUT
 from livezmp.model.c3d import C3dTrial
+from livezmp.model.marker_labels import LabelMatch, standard_trial
 from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
 
 MARKER_RADIUS = 0.007  # m: Plug-in Gait's default 14 mm markers
@@ -54,7 +55,7 @@ KNEE_WIDTH_OF_STATURE = 0.064  # typical knee / ankle widths (m / m) when the fi
 ANKLE_WIDTH_OF_STATURE = 0.040
 FOOT_LENGTH_OF_STATURE = 258.1 / 1741  # de Leva foot length over stature
 SOLE_WIDTH_OF_STATURE = 0.055
-_MEDIAL = {"KNE": ("KNM", "MKNE", "KNEM", "MFC", "MEPI"), "ANK": ("MED", "MMA", "ANKM", "MANK", "MMAL")}
+_MEDIAL = {"KNE": "KNM", "ANK": "MED"}  # the medial markers' roles (their other names: marker_labels)
 _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 # Plug-in Gait full body: trunk, head and arm markers (FIN optional); all present or the HAT is placed
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
@@ -163,8 +164,9 @@ def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, 
     return out, left_open
 
 
-def _need(trial: C3dTrial) -> dict[str, str | None]:
-    """Marker roles -> labels found; raises InputError naming what a usable set lacks."""
+def _need(trial: C3dTrial, match: LabelMatch | None = None) -> dict[str, str | None]:
+    """Marker roles -> labels found; raises InputError naming what a usable set lacks (a role that several
+    labels claim in ``match``: naming them)."""
     seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
     have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}  # a label never seen is missing
     roles: dict[str, str | None] = {"LASI": "LASI", "RASI": "RASI"}
@@ -183,8 +185,8 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
                 missing.append(s + m)
         for m in ("THI", "TIB", "HEE"):
             roles[s + m] = s + m if s + m in have else None
-        for m, alts in _MEDIAL.items():
-            roles[s + m + "_med"] = next((s + a for a in alts if s + a in have), None)
+        for m, medial in _MEDIAL.items():
+            roles[s + m + "_med"] = s + medial if s + medial in have else None
     roles.update({p: p for p in HAT_POINTS if set(HAT_POINTS) <= have})
     upper = [u for u in _UPPER if u in have]
     if len(upper) == len(_UPPER):
@@ -195,7 +197,12 @@ def _need(trial: C3dTrial) -> dict[str, str | None]:
     elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
         roles.update({u: u for u in top})
     if missing:
-        missing = [f"{m} (never seen)" if m in trial.labels else m for m in missing]
+        ambiguous = match.ambiguous if match is not None else {}
+        if all(m in ambiguous for m in missing):
+            match.check(trial.source, missing)
+        missing = [f"{m} (never seen)" if m in trial.labels else
+                   f"{m} ({' and '.join(map(repr, ambiguous[m]))} claim it)" if m in ambiguous else m
+                   for m in missing]
         seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
         raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
                          f"(markers in the file: {seen})")
@@ -217,17 +224,27 @@ def _up_from(pelvis_above_feet: np.ndarray, source: str) -> tuple[str, np.ndarra
     raise InputError(f"{source}: cannot tell the up axis (pelvis-to-ankle vector {np.round(v, 3)} m)")
 
 
+def _standard(trial: C3dTrial, mmap: MarkerMap | None) -> tuple[C3dTrial, dict[str, str | None], LabelMatch]:
+    """``trial`` with its markers under their roles' names (a map's [labels], then the built-in conventions of
+    :mod:`livezmp.model.marker_labels`), the roles the body needs -> those names, and the match."""
+    pinned = frozenset(role for role, _ in mmap.labels) if mmap is not None else frozenset()
+    trial, match = standard_trial(trial if mmap is None else renamed(trial, mmap), pinned)
+    roles = _need(trial, match)
+    match.check(trial.source)
+    return trial, roles, match
+
+
 def marker_labels(trial: C3dTrial) -> list[str]:
-    """The labels of ``trial``'s markers that its marker body is built from."""
-    return [label for label in _need(trial).values() if label is not None]
+    """The labels of ``trial``'s markers that its marker body is built from (as the file writes them)."""
+    _, roles, match = _standard(trial, None)
+    return [match.roles.get(label, label) for label in roles.values() if label is not None]
 
 
 def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
     """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
     if mmap is not None and mmap.segments:
         return _up_from(_cluster_up_vector(_cluster_markers(renamed(trial, mmap), mmap), mmap), trial.source)
-    trial = trial if mmap is None else renamed(trial, mmap)
-    roles = _need(trial)
+    trial, roles, _ = _standard(trial, mmap)
     raw = {k: trial.marker(v) for k, v in roles.items() if v}
     _check_coordinates(raw, roles, trial)
     return _up_rotation(raw, trial.source)
@@ -347,11 +364,9 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     opts = opts or MarkerBodyOptions()
     if not opts.total_mass > 0:
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
-    if opts.marker_map is not None:
-        trial = renamed(trial, opts.marker_map)
-        if opts.marker_map.segments:
-            return _cluster_take(trial, opts, opts.marker_map)
-    roles = _need(trial)
+    if opts.marker_map is not None and opts.marker_map.segments:
+        return _cluster_take(renamed(trial, opts.marker_map), opts, opts.marker_map)
+    trial, roles, match = _standard(trial, opts.marker_map)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
     _check_coordinates(raw, roles, trial)
     max_gap = max(1, round(opts.max_gap_s * trial.rate))
@@ -378,9 +393,16 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
     body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths)
+    open_gaps = [{**g, "marker": match.roles.get(g["marker"], g["marker"])} for g in open_gaps]
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
-        notes["optional_markers_not_used"] = sorted(dropped)
+        notes["optional_markers_not_used"] = sorted(match.roles.get(d, d) for d in dropped)
+    if match.aliases:
+        notes["labels"] = match.summary()
+        notes["marker_set"] = notes["marker_set"].replace(
+            "(standard labels)", f"(labels read as {', '.join(match.conventions)})")
+    # the roles' labels as the file (or a live stream of the same set) writes them
+    roles = {r: None if lab is None else match.roles.get(lab, lab) for r, lab in roles.items()}
     return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
 
 

@@ -1,0 +1,86 @@
+"""Built-in label conventions: a synthetic gait lab's C3D relabelled as other systems and marker sets write
+it gives the same ZMP as its Plug-in Gait labels; two labels claiming one marker are refused in one line."""
+
+from __future__ import annotations
+
+import ezc3d
+import numpy as np
+import pytest
+
+from livezmp.cli import main
+from livezmp.model.c3d import read_c3d
+from livezmp.model.marker_labels import role_of
+from livezmp.offline.gaitlab import analyse_lab_take
+from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
+
+SIDE_NAMES = {"ASI": "ASIS", "PSI": "PSIS", "KNE": "Knee", "ANK": "Ankle", "HEE": "Heel", "TOE": "Toe"}
+CAST = {"ASI": "IAS", "PSI": "IPS", "KNE": "FLE", "ANK": "FAL", "HEE": "FCC", "TOE": "FM2"}
+# the synthetic lab's labels (PiG, prefixed Sub01:) -> each convention's; wands keep Plug-in Gait's names
+CONVENTIONS = {
+    "Motion Analysis / Codamotion": lambda s, m: f"{s}.{SIDE_NAMES.get(m, m)}",
+    "QTM / Visual3D CAST": lambda s, m: f"{s}_{CAST.get(m, m)}",
+    "side words, lower case": lambda s, m: ("left" if s == "L" else "right") + SIDE_NAMES.get(m, m).lower(),
+    "side behind, subject prefix on every label": lambda s, m: f"{SIDE_NAMES.get(m, m)}_{s}",
+    "lab's anatomical names": lambda s, m: s + {"KNE": "LFC", "ANK": "LMA", "HEE": "CAL", "TOE": "TO"}.get(m, m),
+}
+
+
+@pytest.mark.parametrize("label, role", [
+    ("V.Sacral", "SACR"), ("VSAC", "SACR"), ("SACRUM", "SACR"), ("L.TO", "LTOE"), ("R.Toe", "RTOE"),
+    ("LLKN", "LKNE"), ("LMKN", "LKNM"), ("RLFC", "RKNE"), ("RLMA", "RANK"), ("RCAL", "RHEE"),
+    ("L_IAS", "LASI"), ("R_IPS", "RPSI"), ("R_FLE", "RKNE"), ("L_FME", "LKNM"), ("L_FAL", "LANK"),
+    ("L_TAM", "LMED"), ("R_FM2", "RTOE"), ("LeftASIS", "LASI"), ("l.asis", "LASI"), ("ASIS_L", "LASI"),
+    ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"),
+])
+def test_labels_of_the_common_conventions_name_their_roles(label, role):
+    assert role_of(label)[0] == role
+
+
+@pytest.mark.parametrize("label", ["LKneeAngles", "R_THIGH_1", "VLKN", "LFEO", "L.Sac.Wand", "LTHI2", "LMT5",
+                                   "r knee 1", "PELO", "LHipPower"])
+def test_other_labels_name_no_role(label):
+    assert role_of(label) is None
+
+
+def _relabelled(src, dst, rename) -> None:
+    c3d = ezc3d.c3d(str(src))
+    labels = c3d["parameters"]["POINT"]["LABELS"]["value"]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = [rename(v.split(":")[-1]) for v in labels]
+    c3d.write(str(dst))
+
+
+@pytest.fixture(scope="module")
+def std(tmp_path_factory):
+    path = tmp_path_factory.mktemp("labels") / "pig.c3d"
+    write_lab_c3d(path, PLATES)
+    return path, analyse_lab_take(read_c3d(path))
+
+
+@pytest.mark.parametrize("convention", CONVENTIONS)
+def test_a_relabelled_trial_gives_the_plug_in_gait_zmp(std, tmp_path, convention):
+    path, ref = std
+    name = CONVENTIONS[convention]
+    other = tmp_path / "other.c3d"
+    prefix = "p07_" if "prefix" in convention else ""
+    _relabelled(path, other, lambda lab: prefix + (name(lab[0], lab[1:]) if lab[0] in "LR" and lab[1:] in SIDE_NAMES
+                                                   else lab))
+    trial = read_c3d(other)
+    assert "LKNE" not in trial.labels  # really renamed
+    a = analyse_lab_take(trial)
+    assert a.summary["cop_vs_zmp"]["frames"] == ref.summary["cop_vs_zmp"]["frames"] > 250
+    assert np.abs(a.result.zmp - ref.result.zmp).max() < 1e-4  # m
+    labels = a.summary["markers"]["labels"]
+    assert labels["aliases"]["LKNE"] == prefix + name("L", "KNE") and labels["conventions"]
+    assert "labels read as" in a.summary["markers"]["marker_set"]
+    # the long gap is reported under the file's own label
+    assert a.summary["markers"]["marker_gaps_open"][0]["marker"] == prefix + name("R", "TOE")
+
+
+def test_two_labels_claiming_one_marker_are_refused_naming_both(std, tmp_path, capsys):
+    path, _ = std
+    other = tmp_path / "twice.c3d"
+    _relabelled(path, other, lambda lab: {"LKNE": "L.Knee", "LTHI": "LLFC"}.get(lab, lab))
+    assert main(["analyze", str(other), "--out", str(tmp_path / "z.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "labels 'LLFC' and 'L.Knee' both name the LKNE marker" in err
+    assert not (tmp_path / "z.csv").exists()
