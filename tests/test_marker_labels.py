@@ -10,7 +10,9 @@ import pytest
 from livezmp.cli import main
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_labels import role_of
-from livezmp.offline.gaitlab import analyse_lab_take
+from livezmp.model.marker_map import load_marker_map
+from livezmp.model.markers import MarkerBodyOptions
+from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
 from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
 
 SIDE_NAMES = {"ASI": "ASIS", "PSI": "PSIS", "KNE": "Knee", "ANK": "Ankle", "HEE": "Heel", "TOE": "Toe"}
@@ -77,10 +79,29 @@ def test_a_relabelled_trial_gives_the_plug_in_gait_zmp(std, tmp_path, convention
 
 
 def test_two_labels_claiming_one_marker_are_refused_naming_both(std, tmp_path, capsys):
-    path, _ = std
+    path, ref = std
     other = tmp_path / "twice.c3d"
     _relabelled(path, other, lambda lab: {"LKNE": "L.Knee", "LTHI": "LLFC"}.get(lab, lab))
     assert main(["analyze", str(other), "--out", str(tmp_path / "z.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "labels 'LLFC' and 'L.Knee' both name the LKNE marker" in err
     assert not (tmp_path / "z.csv").exists()
+    # a marker map says which one: then read, with the Plug-in Gait ZMP
+    map_path = tmp_path / "map.toml"
+    map_path.write_text('[labels]\nLKNE = "L.Knee"\n')
+    a = analyse_lab_take(read_c3d(other), LabOptions(markers=MarkerBodyOptions(marker_map=load_marker_map(map_path))))
+    assert np.abs(a.result.zmp - ref.result.zmp).max() < 1e-4
+
+
+def test_a_map_naming_a_role_sets_the_files_own_marker_of_that_name_apart(std, tmp_path, capsys):
+    """TYPE-3's case: its LANK and LLMA both claim the ankle (refused); a map naming LLMA as LANK sets the
+    file's LANK apart (here LLMA carries the ankle marker and LANK the thigh wand's, which the knee does not use)."""
+    path, ref = std
+    other = tmp_path / "type3.c3d"
+    _relabelled(path, other, lambda lab: {"LANK": "LLMA", "LTHI": "LANK"}.get(lab, lab))
+    assert main(["analyze", str(other)]) == 2
+    assert "labels 'LANK' and 'LLMA' both name the LANK marker" in capsys.readouterr().err
+    map_path = tmp_path / "map.toml"
+    map_path.write_text('[labels]\nLANK = "LLMA"\n')
+    a = analyse_lab_take(read_c3d(other), LabOptions(markers=MarkerBodyOptions(marker_map=load_marker_map(map_path))))
+    assert np.abs(a.result.zmp - ref.result.zmp).max() < 1e-4

@@ -113,7 +113,10 @@ def renamed(trial: C3dTrial, mmap: MarkerMap) -> C3dTrial:
     for role, label in mmap.labels:
         if label not in labels:
             raise InputError(f"{mmap.source}: labels.{role}: no marker {label!r} in {trial.source}")
-        labels[labels.index(label)] = role
+        i = labels.index(label)
+        # the file's own marker of that name, if another, is not the role: set apart
+        labels = [f"{role}?" if lab == role and k != i else lab for k, lab in enumerate(labels)]
+        labels[i] = role
     return replace(trial, labels=labels)
 
 
