@@ -150,10 +150,13 @@ def extra_table(paths: list[Path]) -> dict[str, tuple]:
             continue
         cv = a.summary["cop_vs_zmp"]
         info = f"{trial.rate:g} Hz, {len(trial.plates)} plates, {a.summary['markers']['marker_set'][:28]}"
+        if "labels" in a.summary["markers"]:
+            info += f" (labels: {len(a.summary['markers']['labels']['aliases'])} aliases)"
         aside = a.summary["plates"]["set_aside"]
         info += f"; plate(s) {', '.join(str(p['plate']) for p in aside)} set aside (pulling)" if aside else ""
         if not cv["frames"]:
-            print(f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}")
+            why = a.summary["plates"]["no_complete_frame"]
+            print(f"{path.name[:40]:40s} {0:6d}  no complete frames; {info}; {why}")
             continue
         print(row(path.name[:40], cv, info))
         done[path.name] = (trial, a)

@@ -352,6 +352,17 @@ def test_a_foot_off_the_plates_leaves_no_complete_frame(lab, tmp_path):
     rc, s = _analyze(d / "off.c3d", tmp_path)
     assert rc == 0
     assert s["plates"]["complete_frames"] == 0 and s["cop_vs_zmp"]["frames"] == 0
+    assert "has every foot that may bear weight on a plate" in s["plates"]["no_complete_frame"]
+
+
+def test_plates_carrying_less_than_the_mass_needs_say_so(lab):
+    """newwalk's case: no mass in the file, its plates carry ~55 kg, the default 70 kg leaves no complete frame."""
+    d, _ = lab
+    s = analyse_lab_take(read_c3d(d / "on.c3d"), LabOptions(mass=1.5 * MASS)).summary
+    assert s["plates"]["complete_frames"] == 0
+    why = s["plates"]["no_complete_frame"]
+    carried = int(why.split("at most ")[1].split(" %")[0])
+    assert abs(carried - 100 / 1.5) <= 3 and "lighter subject" in why
 
 
 def test_analyze_c3d_writes_cop_columns_and_validation(lab, tmp_path):

@@ -8,15 +8,21 @@ after a separator (``ASIS_L``, ``Knee.Left``). A prefix shared by every label (`
 
 Where each name comes from:
 
-- Plug-in Gait / CGM (Vicon, "Plug-in Gait Reference Guide"; pyCGM2): ``ASI PSI SACR THI KNE TIB ANK HEE TOE``,
-  medial ``KNM``/``MED``, trunk ``C7 T10 CLAV STRN``.
-- Helen Hayes / modified Helen Hayes as Motion Analysis (EVaRT, Cortex) and Codamotion write it: ``L.ASIS``,
-  ``R.Knee``, ``L.Ankle``, ``L.Heel``, ``L.Toe``, ``V.Sacral`` (``VSAC``), toes ``L.TO``
-  (Kadaba et al. 1990, J Orthop Res 8:383; the c3d.org sample files Walk1, newwalk, gaitwands).
-- Anatomical names of the CAST model as Qualisys (QTM) and Visual3D label it, after the ISB landmark names of
-  Van Sint Jan (2007, Color Atlas of Skeletal Landmark Definitions): ``IAS IPS FLE FME FAL TAM FCC FM2``.
-- Lab descriptions of the lateral markers: ``LFC`` lateral femoral condyle, ``LMA`` lateral malleolus, ``CAL``
-  calcaneus (Innovative Sports Training), ``LKN``/``MKN`` lateral / medial knee (c3d.org sample TYPE-3).
+- Plug-in Gait / CGM (Vicon's Plug-in Gait reference; pyCGM2): ``ASI PSI SACR THI KNE TIB ANK HEE TOE``, medial
+  ``KNM``/``MED``, trunk ``C7 T10 CLAV STRN``, clavicles ``LCLA RCLA`` (Helen Hayes sets).
+- Codamotion: ``L.ASIS L.PSIS L.Knee L.Ankle L.Heel L.Toe`` (Charnwood Dynamics, Coda cx1 User Guide 2004,
+  "Gait Analysis II": the marker names its gait model needs; its wands ``L.Ant.Fem.`` ... are not Plug-in Gait's
+  THI/TIB and are not read). Motion Analysis (EVaRT / Cortex Helen Hayes templates, as the c3d.org samples
+  Walk1, newwalk, Sample_Jump2 write them): sacrum ``VSAC`` (``V.Sacral``), toes ``L.TO``/``R.TO``.
+- CAST (Cappozzo et al. 1995, Clin Biomech 10:171) as Qualisys' gait and running projects (QTM, with Visual3D)
+  and OptiTrack's "Conventional Lower" set label it, with the ISB landmark names of Van Sint Jan (2007, Color
+  Atlas of Skeletal Landmark Definitions): ``L_IAS L_IPS SACR L_FLE L_FME L_FAL L_TAM L_FCC L_FM2``.
+  Trunk: ``CV7``, ``TV10``, incisura jugularis ``IJ`` (Plug-in Gait's CLAV), processus xiphoideus ``PX`` (its
+  STRN) (Wu et al. 2005, J Biomech 38:981).
+- Landmark names seen in the c3d.org samples: ``RLFC`` lateral femoral condyle, ``RLMA`` lateral malleolus,
+  ``RCAL`` calcaneus, medial ``RMFC``/``RMMA`` (Innovative Sports Training), ``RLKN``/``RMKN`` lateral / medial
+  knee (TYPE-3), ``SACRUM`` (Walking_Hybrid, Capture0002); medial ``MKNE KNEM MFC MEPI ANKM MANK MMAL``
+  (read before these conventions).
 
 Two labels of a file claiming one role (``LANK`` and ``LLMA``) are refused in one line naming both: which one
 the lab meant cannot be told from the names. A label never seen in the take claims nothing.
@@ -33,29 +39,27 @@ from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial
 
 PIG = "Plug-in Gait"
-HH = "Helen Hayes (Motion Analysis / Codamotion names)"
-CAST = "CAST / ISB landmark names (Qualisys, Visual3D)"
-LAB = "lab's anatomical names"
+HH = "Helen Hayes as Codamotion / Motion Analysis write it"
+CAST = "CAST / ISB landmark names (Qualisys, Visual3D, OptiTrack)"
+LAB = "lateral / medial landmark names"
 # role suffix (after the side letter) -> (name after the side, convention) ...
 SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "ASI": (("ASI", PIG), ("ASIS", HH), ("IAS", CAST)),
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
-    "THI": (("THI", PIG), ("THIGH", HH)),
-    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("LATKNEE", LAB)),
-    "KNM": (("KNM", PIG), ("MKNE", PIG), ("KNEM", PIG), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
-            ("MEDKNEE", LAB)),
+    "THI": (("THI", PIG),),
+    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB)),
+    "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
-    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LATMAL", LAB)),
-    "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", PIG), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
-            ("MEDMAL", LAB)),
+    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB)),
+    "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST)),
     "CLA": (("CLA", PIG),),
 }
 UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
-    "SACR": (("SACR", PIG), ("SACRUM", HH), ("SACRAL", HH), ("VSAC", HH), ("VSACRAL", HH)),
+    "SACR": (("SACR", PIG), ("VSAC", HH), ("VSACRAL", HH), ("SACRUM", LAB)),
     "C7": (("C7", PIG), ("CV7", CAST)),
     "T10": (("T10", PIG), ("TV10", CAST)),
     "CLAV": (("CLAV", PIG), ("IJ", CAST)),

@@ -111,18 +111,30 @@ def com_accelerations(take: MarkerTake, result: BatchResult) -> np.ndarray:
 
 def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult, times: np.ndarray,
                          cfg: PipelineConfig, floor: float, cutoff: float, shift: float, com_acc: np.ndarray,
-                         mass: float) -> tuple[PlateFrames, np.ndarray]:
+                         mass: float) -> tuple[PlateFrames, np.ndarray, str | None]:
+    """The plates per frame, the complete frames and, when there is none, why (one line)."""
     frames = np.rint(times * trial.rate).astype(int)
     plates = plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input,
                           cutoff, shift_s=shift)
     contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
-    # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
-    needed = mass * (G + com_acc[:, 2])
-    complete = complete_frames(result.soles, contact, plates.outlines, plates.force[:, 2] > FORCE_SEEN * needed)
     # half a spline window from either end of the take the estimate is one-sided (and the plates' filter too);
     # at least the lab window's, so that estimator settings are compared on the same frames
     edge = max(cfg.estimator.window_s, LAB_ESTIMATOR["window_s"]) / 2
-    return plates, complete & (times >= times[0] + edge) & (times <= times[-1] - edge)
+    inner = (times >= times[0] + edge) & (times <= times[-1] - edge)
+    feet_on = complete_frames(result.soles, contact, plates.outlines, np.ones(len(times), dtype=bool)) & inner
+    # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
+    needed = mass * (G + com_acc[:, 2])
+    complete = feet_on & (plates.force[:, 2] > FORCE_SEEN * needed)
+    why = None
+    if not feet_on.any():
+        why = f"no frame ({edge:g} s or more from the take's ends) has every foot that may bear weight on a plate"
+    elif not complete.any():
+        carried = np.max(plates.force[feet_on, 2] / np.maximum(needed[feet_on], 1e-9))
+        why = (f"where the feet are on the plates, these carry at most {100 * carried:.0f} % of m (g + a_z) with "
+               f"m = {mass:.1f} kg (complete: {100 * FORCE_SEEN:.0f} %): "
+               + ("a lighter subject? (--mass)" if carried > 0.5 else
+                  "the plates do not read the feet on them (plate corners or channels wrong?)"))
+    return plates, complete, why
 
 
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float) -> dict:
@@ -154,7 +166,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
-    plates, complete = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
+    plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
     mass_info = _decide_mass(trial, opts, m_plates, cycles, first)
     used = mass_info["used_kg"]
@@ -168,7 +180,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
     if applied:
         shift = measured
-        plates, complete = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, used)
+        plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc,
+                                                     used)
     summary = {
         "markers": take.notes,
         "mass": mass_info,
@@ -176,7 +189,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                    "offsets_removed_n": [None if o is None else [round(float(v), 2) for v in o[0]]
                                          for o in plates.offsets],
                    "lowpass_hz": cutoff, "complete_frames": int(complete.sum()),
-                   "set_aside": plates.set_aside},
+                   "set_aside": plates.set_aside, **({"no_complete_frame": why} if why else {})},
         "time_alignment": {"plate_delay_measured_ms": None if measured is None else round(1000 * measured, 1),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
                            "plate_delay_determined": determined,
