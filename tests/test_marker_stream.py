@@ -157,3 +157,15 @@ def test_monitor_capture_options_refused_in_one_line(args, message, capsys):
     assert main(["monitor", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and message in err
+
+
+def test_a_stream_labelled_in_another_convention_gives_the_same_frames(c3d):
+    """Codamotion's names (L.ASIS, R.Knee ...) from a live stream: the body calibrated on it reads them as
+    the Plug-in Gait labels (the built-in conventions), and looks them up under the stream's own names."""
+    coda = {"ASI": "ASIS", "PSI": "PSIS", "KNE": "Knee", "ANK": "Ankle", "HEE": "Heel", "TOE": "Toe"}
+    labels = [f"{x[0]}.{coda[x[1:]]}" if x[:1] in "LR" and x[1:] in coda else x for x in c3d.labels]
+    assert labels != c3d.labels
+    pig = read_all(MarkerStreamSource(FakeStream(c3d.labels, c3d.points[:260]), None))
+    src = MarkerStreamSource(FakeStream(labels, c3d.points[:260]), None)
+    assert src.take.roles["LKNE"] == "L.Knee"
+    np.testing.assert_array_equal(read_all(src), pig)

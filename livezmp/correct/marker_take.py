@@ -23,7 +23,7 @@ from livezmp.correct.solver import CorrectionResult, correct_motion
 from livezmp.model.body import BodyModel
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, segment_names, world_poses
-from livezmp.model.markers import HAT_POINTS, _need
+from livezmp.model.markers import HAT_POINTS, marker_roles
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
 
 HAT_AXIS_M = 0.1  # m from the HAT origin to each axis point
@@ -67,8 +67,13 @@ def attach(trial: C3dTrial, skip: set[str], segments: list[str]) -> dict[int, st
     """Point index -> segment (of ``segments``): the marker set's markers by role; other position points
     (not in ``skip``, seen at least once, or markers whose role has no segment here) with the marker
     nearest to them (median distance over the frames)."""
-    roles = {label: role for role, label in _need(trial).items() if label is not None}
-    out = {trial.labels.index(lab): role_segment(role) for lab, role in roles.items()
+    seen = np.isfinite(trial.points).all(axis=2).sum(axis=0)
+    index = {}
+    for i, label in enumerate(trial.labels):  # a label written twice: the copy with data (as the body reads it)
+        if label not in index or seen[i] > seen[index[label]]:
+            index[label] = i
+    roles = {label: role for role, label in marker_roles(trial).items() if label is not None}
+    out = {index[lab]: role_segment(role) for lab, role in roles.items()
            if role not in HAT_POINTS and role_segment(role) in segments}
     known = list(out)
     for i, label in enumerate(trial.labels):

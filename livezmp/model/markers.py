@@ -164,9 +164,9 @@ def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, 
     return out, left_open
 
 
-def _need(trial: C3dTrial, match: LabelMatch | None = None) -> dict[str, str | None]:
+def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str | None]:
     """Marker roles -> labels found; raises InputError naming what a usable set lacks (a role that several
-    labels claim in ``match``: naming them)."""
+    labels claim in ``match``: naming them; the file's labels ``shown`` as it writes them)."""
     seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
     have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}  # a label never seen is missing
     roles: dict[str, str | None] = {"LASI": "LASI", "RASI": "RASI"}
@@ -197,13 +197,13 @@ def _need(trial: C3dTrial, match: LabelMatch | None = None) -> dict[str, str | N
     elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
         roles.update({u: u for u in top})
     if missing:
-        ambiguous = match.ambiguous if match is not None else {}
+        ambiguous = match.ambiguous
         if all(m in ambiguous for m in missing):
             match.check(trial.source, missing)
         missing = [f"{m} (never seen)" if m in trial.labels else
                    f"{m} ({' and '.join(map(repr, ambiguous[m]))} claim it)" if m in ambiguous else m
                    for m in missing]
-        seen = ", ".join(trial.labels[:12]) + (" ..." if len(trial.labels) > 12 else "")
+        seen = ", ".join(shown[:12]) + (" ..." if len(shown) > 12 else "")
         raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
                          f"(markers in the file: {seen})")
     return roles
@@ -228,25 +228,35 @@ def _standard(trial: C3dTrial, mmap: MarkerMap | None) -> tuple[C3dTrial, dict[s
     """``trial`` with its markers under their roles' names (a map's [labels], then the built-in conventions of
     :mod:`livezmp.model.marker_labels`), the roles the body needs -> those names, and the match."""
     pinned = frozenset(role for role, _ in mmap.labels) if mmap is not None else frozenset()
-    trial, match = standard_trial(trial if mmap is None else renamed(trial, mmap), pinned)
-    roles = _need(trial, match)
+    std, match = standard_trial(trial if mmap is None else renamed(trial, mmap), pinned)
+    roles = _need(std, match, trial.labels)
     match.check(trial.source)
-    return trial, roles, match
+    return std, roles, match
+
+
+def _as_written(roles: dict[str, str | None], match: LabelMatch) -> dict[str, str | None]:
+    """``roles`` (role -> the standard trial's label) with the file's own labels."""
+    return {r: None if lab is None else match.roles.get(lab, lab) for r, lab in roles.items()}
+
+
+def marker_roles(trial: C3dTrial) -> dict[str, str | None]:
+    """Role -> the label (as the file writes it) of each marker ``trial``'s marker body reads; None: absent."""
+    _, roles, match = _standard(trial, None)
+    return _as_written(roles, match)
 
 
 def marker_labels(trial: C3dTrial) -> list[str]:
     """The labels of ``trial``'s markers that its marker body is built from (as the file writes them)."""
-    _, roles, match = _standard(trial, None)
-    return [match.roles.get(label, label) for label in roles.values() if label is not None]
+    return [label for label in marker_roles(trial).values() if label is not None]
 
 
 def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
     """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
     if mmap is not None and mmap.segments:
         return _up_from(_cluster_up_vector(_cluster_markers(renamed(trial, mmap), mmap), mmap), trial.source)
-    trial, roles, _ = _standard(trial, mmap)
+    trial, roles, match = _standard(trial, mmap)
     raw = {k: trial.marker(v) for k, v in roles.items() if v}
-    _check_coordinates(raw, roles, trial)
+    _check_coordinates(raw, _as_written(roles, match), trial)
     return _up_rotation(raw, trial.source)
 
 
@@ -368,7 +378,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         return _cluster_take(renamed(trial, opts.marker_map), opts, opts.marker_map)
     trial, roles, match = _standard(trial, opts.marker_map)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
-    _check_coordinates(raw, roles, trial)
+    _check_coordinates(raw, _as_written(roles, match), trial)
     max_gap = max(1, round(opts.max_gap_s * trial.rate))
     optional = {k: raw.pop(k) for k in list(raw) if k[1:] in _OPTIONAL}
     try:
@@ -402,8 +412,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         notes["marker_set"] = notes["marker_set"].replace(
             "(standard labels)", f"(labels read as {', '.join(match.conventions)})")
     # the roles' labels as the file (or a live stream of the same set) writes them
-    roles = {r: None if lab is None else match.roles.get(lab, lab) for r, lab in roles.items()}
-    return MarkerTake(body, frames, keep.start, notes, centres, roles, trial)
+    return MarkerTake(body, frames, keep.start, notes, centres, _as_written(roles, match), trial)
 
 
 def _check_coordinates(raw: dict[str, np.ndarray], roles: dict[str, str | None], trial: C3dTrial) -> None:
