@@ -22,7 +22,7 @@ CONVENTIONS = {
     "Motion Analysis / Codamotion": lambda s, m: f"{s}.{SIDE_NAMES.get(m, m)}",
     "QTM / Visual3D CAST": lambda s, m: f"{s}_{CAST.get(m, m)}",
     "side words, lower case": lambda s, m: ("left" if s == "L" else "right") + SIDE_NAMES.get(m, m).lower(),
-    "side behind, subject prefix on every label": lambda s, m: f"{SIDE_NAMES.get(m, m)}_{s}",
+    "side behind, subject prefix and suffix on every label": lambda s, m: f"{SIDE_NAMES.get(m, m)}_{s}",
     "lab's anatomical names": lambda s, m: s + {"KNE": "LFC", "ANK": "LMA", "HEE": "CAL", "TOE": "TO"}.get(m, m),
 }
 
@@ -64,18 +64,19 @@ def test_a_relabelled_trial_gives_the_plug_in_gait_zmp(std, tmp_path, convention
     name = CONVENTIONS[convention]
     other = tmp_path / "other.c3d"
     prefix = "p07_" if "prefix" in convention else ""
+    suffix = ".trial3" if "prefix" in convention else ""
     _relabelled(path, other, lambda lab: prefix + (name(lab[0], lab[1:]) if lab[0] in "LR" and lab[1:] in SIDE_NAMES
-                                                   else lab))
+                                                   else lab) + suffix)
     trial = read_c3d(other)
     assert "LKNE" not in trial.labels  # really renamed
     a = analyse_lab_take(trial)
     assert a.summary["cop_vs_zmp"]["frames"] == ref.summary["cop_vs_zmp"]["frames"] > 250
     assert np.abs(a.result.zmp - ref.result.zmp).max() < 1e-4  # m
     labels = a.summary["markers"]["labels"]
-    assert labels["aliases"]["LKNE"] == prefix + name("L", "KNE") and labels["conventions"]
+    assert labels["aliases"]["LKNE"] == prefix + name("L", "KNE") + suffix and labels["conventions"]
     assert "labels read as" in a.summary["markers"]["marker_set"]
     # the long gap is reported under the file's own label
-    assert a.summary["markers"]["marker_gaps_open"][0]["marker"] == prefix + name("R", "TOE")
+    assert a.summary["markers"]["marker_gaps_open"][0]["marker"] == prefix + name("R", "TOE") + suffix
 
 
 def test_two_labels_claiming_one_marker_are_refused_naming_both(std, tmp_path, capsys):

@@ -3,8 +3,8 @@
 A C3D's marker labels are matched to the Plug-in Gait roles the marker body reads (``LASI``, ``RKNE``,
 ``SACR`` ...). A label is compared in capitals with its separators (``. _ - `` and blanks) removed, after
 its side: ``L``/``R`` or ``Left``/``Right`` in front (``LASI``, ``L.ASIS``, ``l_asis``, ``LeftASIS``), or behind
-after a separator (``ASIS_L``, ``Knee.Left``). A prefix shared by every label (``sub01_LASI``) is dropped (the
-``Subject:`` prefix is already gone, :func:`livezmp.model.c3d.strip_prefix`).
+after a separator (``ASIS_L``, ``Knee.Left``). A prefix or suffix shared by every label (``sub01_LASI``,
+``LASI_sub01``) is dropped (the ``Subject:`` prefix is already gone, :func:`livezmp.model.c3d.strip_prefix`).
 
 Where each name comes from:
 
@@ -127,16 +127,23 @@ def _common_prefix(labels: list[str]) -> str:
     return head[:cut]
 
 
+def _bare(labels: list[str]) -> dict[str, str]:
+    """Each label without the prefix and the suffix (from a separator on: ``LASI_sub01``) every label shares."""
+    prefix = _common_prefix(labels)
+    suffix = _common_prefix([lab[::-1] for lab in labels])[::-1]
+    return {lab: lab[len(prefix):len(lab) - len(suffix)] for lab in labels}
+
+
 def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> LabelMatch:
     """Match ``trial``'s seen labels to roles (see the module docstring). ``pinned``: roles a marker map already
     named (only the label equal to the role fills them)."""
     seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
     labels = [lab for lab, ok in zip(trial.labels, seen, strict=True) if ok]
-    prefix = _common_prefix(labels)
+    bare = _bare(labels)
     claims: dict[str, list[str]] = {}
     convention = {}
     for lab in labels:
-        found = role_of(lab[len(prefix):])
+        found = role_of(bare[lab])
         if found and (found[0] not in pinned or lab == found[0]):
             claims.setdefault(found[0], []).append(lab)
             convention[lab] = found[1]
