@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import os
 
 import pytest
@@ -15,6 +17,20 @@ def test_priority_zero_asks_for_nothing():
     with realtime_priority(0) as refused:
         assert refused == "off"
         assert os.sched_getscheduler(0) == before
+
+
+def timer_slack_ns() -> int:
+    """The calling thread's timer slack, as the kernel reports it (prctl PR_GET_TIMERSLACK)."""
+    return ctypes.CDLL(ctypes.util.find_library("c")).prctl(30, 0, 0, 0, 0)
+
+
+def test_timer_slack_is_fine_inside_and_given_back():
+    before = timer_slack_ns()
+    assert before > 1  # the kernel's default for a normal thread (50 us)
+    for priority in (0, 20):  # normal scheduling (where the slack applies), and SCHED_FIFO or its refusal
+        with realtime_priority(priority):
+            assert timer_slack_ns() in (0, 1)  # 0: the kernel's own under SCHED_FIFO
+        assert timer_slack_ns() == before
 
 
 def test_granted_or_refused_and_restored():

@@ -1,0 +1,212 @@
+"""Benchmark: where a simulated Dynamixel bus cycle's time goes, request by request.
+
+The bus-only cycle of `bench_live_loop.py` (read the present positions, write them back as goals,
+sleep to the next absolute deadline) against the simulator in its own process (devices, physics
+process), with timestamps on both sides of the pty (one clock, ``time.monotonic``):
+
+* ``write``: the client writes the read's instruction;
+* ``pickup``: the simulated chain has read it (its port thread's ``now``);
+* ``due``: when the bus model says the reply reaches the host (adapter out, wire, return delays,
+  adapter in), counted from the pickup;
+* ``sent``: the port wrote the reply to the pty;
+* ``have``: the client has the whole verified reply.
+
+Printed per configuration: the medians and 99th percentiles of the stages (``pickup - write``: the
+pty's delivery to the simulator; ``sent - due``: the simulator's lateness against its model;
+``have - sent``: the pty's delivery back and the client's wake-up), the read's excess over what the
+bus model allows from the client's write (``have - write - model``), missed deadlines, and the CPU
+per cycle of the client, of the devices' process and of the simulated chain's packet handling alone.
+
+Run: python benchmarks/bench_bus_timeline.py [--seconds 5] [--only TEXT ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import functools
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.links import LinkError, open_link
+from livezmp.live.clock import LoopClock
+from livezmp.live.realtime import LOOP_PRIORITY, fine_timer_slack, realtime_priority
+from livezmp.model.robot import load_robot
+from sim_devices import process as sim_process
+from sim_devices.process import SimProcess
+
+OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
+
+MAX_EVENTS = 200_000  # per kind, bounded: a 5 s row at 1 kHz is 5 000 cycles
+
+
+def _traced_child(trace_path: str, *args) -> None:
+    """`sim_process._sim_child` with the simulated chains' packet timing recorded, saved on exit."""
+    from sim_devices.dynamixel_chain import DynamixelChain
+    from sim_devices.pty_port import PtyPort
+
+    picked, sent = [], []
+    cpu = [0.0]
+    on_bytes, flush = DynamixelChain.on_bytes, PtyPort._flush
+
+    import cProfile
+    prof = cProfile.Profile(time.thread_time) if os.environ.get("H16_PROF") else None
+
+    def traced_on_bytes(self, data, now):
+        c0 = time.thread_time()
+        if prof:
+            prof.enable()
+        replies = on_bytes(self, data, now)
+        if prof:
+            prof.disable()
+        cpu[0] += time.thread_time() - c0
+        if len(picked) < MAX_EVENTS:
+            picked.append((now, len(data), min((due for due, _ in replies), default=np.nan)))
+        return replies
+
+    def traced_flush(self, master, now):
+        before = len(self._out) + sum(len(p[2]) for p in self._pending if p[0] <= now)
+        flush(self, master, now)
+        if before and len(sent) < MAX_EVENTS:
+            sent.append((time.monotonic(), before - len(self._out)))
+
+    DynamixelChain.on_bytes, PtyPort._flush = traced_on_bytes, traced_flush
+    import sim_devices.pty_port as pp
+    pp.SPIN_BEFORE_DUE_S = float(os.environ.get("H16_SPIN", pp.SPIN_BEFORE_DUE_S))
+    try:
+        sim_process._sim_child(*args)
+    finally:
+        if prof:
+            prof.dump_stats(os.environ["H16_PROF"])
+        np.savez(trace_path, picked=np.array(picked).reshape(-1, 3), sent=np.array(sent).reshape(-1, 2),
+                 chain_cpu=np.array(cpu))
+
+
+def bus_cycles(link, rate: float, seconds: float) -> dict:
+    """The bus-only cycle (read, write back, sleep to the deadline) with the client's times."""
+    clock = LoopClock(rate)
+    n = int(seconds * rate)
+    times = np.full((n, 2), np.nan)
+    clock.start()
+    cpu0 = time.process_time()
+    for k in range(n):
+        times[k, 0] = time.monotonic()
+        try:
+            frame = link.read()
+        except LinkError:
+            clock.wait()
+            continue
+        times[k, 1] = time.monotonic()
+        link.write_goals(frame.positions)
+        clock.wait()
+    cpu = time.process_time() - cpu0
+    st = clock.stats()
+    return {"times": times, "cpu_us": 1e6 * cpu / n, "missed": 100 * st.deadline_misses / max(st.cycles, 1),
+            "achieved": st.achieved_hz}
+
+
+def timeline(client: np.ndarray, picked: np.ndarray, sent: np.ndarray) -> dict:
+    """Per read: the stages (s), matching each client read with the first pickup after its write that
+    scheduled a reply, and the first reply write after that pickup."""
+    reads = picked[~np.isnan(picked[:, 2])]
+    ok = ~np.isnan(client[:, 1])
+    write, have = client[ok, 0], client[ok, 1]
+    i = np.searchsorted(reads[:, 0], write)
+    keep = i < len(reads)
+    write, have, i = write[keep], have[keep], i[keep]
+    pickup, due = reads[i, 0], reads[i, 2]
+    j = np.minimum(np.searchsorted(sent[:, 0], due - 2e-4), len(sent) - 1)  # the port spins from due - 0.1 ms
+    return {"pickup": pickup - write, "late": sent[j, 0] - due, "back": have - sent[j, 0],
+            "model": due - pickup, "excess": have - write - (due - pickup)}
+
+
+def run(robot, options: str, devices: dict, rate: float, seconds: float) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        trace = os.path.join(tmp, "trace.npz")
+        original = sim_process._sim_child
+        sim_process._sim_child = functools.partial(_traced_child, trace)
+        try:
+            sim = SimProcess("dynamixel", ("demo", {}), realtime_priority=int(os.environ.get("H16_SIMPRIO", LOOP_PRIORITY - 1)), devices=devices, physics=os.environ.get("H16_PHYS", "process"))
+        finally:
+            sim_process._sim_child = original
+        with sim, realtime_priority(LOOP_PRIORITY, lock_memory=True):
+            if POLICY[0] is not None:
+                with open(f"/proc/{sim._proc.pid}/task/{sim._proc.pid}/children") as f:
+                    for pid in f.read().split():
+                        os.sched_setscheduler(int(pid), POLICY[0], os.sched_param(0))
+            link = open_link(f"{sim.url}&{options}", robot.body.joint_names, robot.config)
+            try:
+                sim0 = sim.cpu_seconds()
+                x = bus_cycles(link, rate, seconds)
+                sim1 = sim.cpu_seconds()
+            finally:
+                link.close()
+        data = np.load(trace)
+        picked, sent, chain_cpu = data["picked"], data["sent"], float(data["chain_cpu"][0])
+    n = len(x["times"])
+    x["devices_us"] = 1e6 * (sim1[0] - sim0[0]) / n if sim0 and sim1 else np.nan
+    x["physics_us"] = 1e6 * (sim1[1] - sim0[1]) / n if sim0 and sim1 else np.nan
+    x["chain_us"] = 1e6 * chain_cpu / max(len(picked), 1)
+    x.update(timeline(x["times"], picked, sent))
+    return x
+
+
+POLICY = [None]
+CONFIGS = [  # label, robot, baud, adapter, buses, rate
+    ("mini 4 Mbps ftdi-fs", "livezmp_mini", 4_000_000, "ftdi-fs", 1, 371),
+    ("OP3 2 Mbps hs", "OP3", 2_000_000, "hs", 1, 481),
+    ("mini 4 Mbps x 2 hs", "livezmp_mini", 4_000_000, "hs", 2, 1000),
+]
+
+
+def clock_lateness(rate: float, seconds: float) -> np.ndarray:
+    """How late (s) the loop's clock wakes for each deadline, sleeping between them (no work)."""
+    clock = LoopClock(rate)
+    clock.start()
+    ticks = [clock.wait() for _ in range(int(rate * seconds))]
+    return np.array([tick.woke - tick.deadline for tick in ticks])
+
+
+def quantiles(v: np.ndarray) -> str:
+    return f"{1e6 * np.median(v):5.0f} / {1e6 * np.quantile(v, 0.99):5.0f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0, help="seconds per row (default 5)")
+    parser.add_argument("--only", action="append", metavar="TEXT", help="rows whose label contains TEXT")
+    parser.add_argument("--physics-policy", choices=("other", "batch", "idle"))
+    args = parser.parse_args()
+    if args.physics_policy:
+        POLICY[0] = {"other": os.SCHED_OTHER, "batch": os.SCHED_BATCH, "idle": os.SCHED_IDLE}[args.physics_policy]
+    for fine in (False, True):
+        with fine_timer_slack() if fine else contextlib.nullcontext():
+            late = clock_lateness(500.0, min(args.seconds, 2.0))
+        print(f"loop clock at 500 Hz, normal scheduling, timer slack {'1 ns' if fine else 'default (50 us)'}: "
+              f"wakes {quantiles(late)} us late (median / p99)")
+    robots = {"livezmp_mini": load_robot(None, None), "OP3": load_robot(str(OP3), None)}
+    print(f"bus-only cycle (read, write back, sleep), SCHED_FIFO {LOOP_PRIORITY} / {LOOP_PRIORITY - 1}; "
+          f"{os.cpu_count()} CPUs; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print("stages in us, median / p99: pickup = sim read - client write; model = due - pickup; "
+          "late = reply written - due; back = client has - reply written; excess = have - write - model\n")
+    header = ("| row                 | Hz   | achieved | missed % | pickup      | model       | late        | "
+              "back        | excess      | client CPU us | devices CPU us | chain us/packet | physics us | load |")
+    print(header)
+    print("|" + "|".join("-" * len(c) for c in header.split("|")[1:-1]) + "|", flush=True)
+    for name, robot_name, baud, adapter, buses, rate in CONFIGS:
+        if args.only and not any(t in name for t in args.only):
+            continue
+        x = run(robots[robot_name], "fast=1&return_delay=0", {"baud": baud, "adapter": adapter, "buses": buses},
+                rate, args.seconds)
+        print(f"| {name:<19} | {rate:4d} | {x['achieved']:8.1f} | {x['missed']:8.2f} | {quantiles(x['pickup'])} | "
+              f"{quantiles(x['model'])} | {quantiles(x['late'])} | {quantiles(x['back'])} | "
+              f"{quantiles(x['excess'])} | {x['cpu_us']:13.0f} | {x['devices_us']:14.0f} | {x['chain_us']:15.0f} | "
+              f"{x['physics_us']:10.0f} | {os.getloadavg()[0]:4.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
