@@ -259,7 +259,7 @@ class DynamixelLink(PortLink):
         self._prepared: tuple[bytes | bytearray, int] | None = None
         self._instruction: bytes | None = None  # `read`'s instruction, once built
         self._fast_reply: FastReply | None = None  # `read`'s Fast Sync Read reply buffer, once made
-        self._goal_packet: GoalPacket | None = None  # `prepare_goals`' packet (+ read instruction), once made
+        self._goal_packet: GoalPacket | None = None  # the goals' sync write (+ read instruction), once made
         direction = np.array([s.direction for s in servos], dtype=float)
         ticks_per_rad = np.array([s.ticks_per_rev for s in servos], dtype=float) / (2.0 * math.pi)
         self._zero = np.array([s.zero for s in servos], dtype=float)
@@ -270,7 +270,6 @@ class DynamixelLink(PortLink):
         self._ph = PacketHandler(2.0)
         self._port: PortHandler | None = None
         self._readers: dict[tuple[int, int], GroupSyncRead] = {}
-        self._goal_writer: GroupSyncWrite | None = None
         self._present: np.ndarray | None = None  # raw ticks of the last verified read
         self._lowest = np.full(len(ids), -2.0**31)  # goal limits in ticks, from the servos at open
         self._highest = np.full(len(ids), 2.0**31 - 1)
@@ -356,38 +355,14 @@ class DynamixelLink(PortLink):
         """Build the sync write of ``positions`` (rad, checked as by `write_goals`) and the next read's
         instruction now, for `send_prepared` to send in one write (a loop builds them while it would
         otherwise sleep, so the moment a read verified costs only the write)."""
-        ticks = self.goal_ticks(positions)
-        if self._goal_packet is None:
-            self._require_port()
-            self._goal_packet = GoalPacket(self.ids, GOAL_POSITION, self._read_instruction())
-        self._prepared = self._goal_packet.fill(ticks)
+        self._prepared = self._goals_packet().fill(self.goal_ticks(positions))
 
     def send_prepared(self) -> None:
         """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
         if self._prepared is None:
             raise LinkError(f"{self.path}: no goals prepared")
-        port = self._require_port()
-        payload, goal_bytes = self._prepared
-        self._prepared = None
-        if self._pending:  # as in `write_ticks`: the requested replies are taken in first
-            try:
-                self.read()
-            except LinkReadError:
-                pass
-        self._rearm_after_silence()
-        self.stats.writes += 1
-        try:
-            port.clearPort()
-            port.stamp()
-            port.ser.write(payload)
-        except _PORT_ERRORS as err:
-            self.stats.write_errors += 1
-            raise LinkError(f"{self.path}: port failed: {err}") from None
-        port.bytes_out += goal_bytes
-        self._traffic[2:] += (goal_bytes, 1)
-        self._requested_bytes = port.bytes_out + port.bytes_in
-        port.bytes_out += len(payload) - goal_bytes
-        self._pending = True
+        prepared, self._prepared = self._prepared, None
+        self._send_goals(*prepared)
 
     def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
         """Goal positions (n,) rad in ``joint_names`` order, as one sync write (with ``request``:
@@ -460,9 +435,6 @@ class DynamixelLink(PortLink):
         self._port = port
         self._readers = {}
         self._instruction = self._goal_packet = None
-        self._goal_writer = GroupSyncWrite(port, self._ph, GOAL_POSITION, 4)
-        for dxl_id in self.ids:
-            self._goal_writer.addParam(dxl_id, b"\0\0\0\0")
 
     def _configure(self) -> None:
         # firmware version, id, baud rate, return delay, drive mode, operating mode
@@ -757,33 +729,44 @@ class DynamixelLink(PortLink):
 
     def write_ticks(self, ticks: np.ndarray, request: bool = False) -> None:
         """Goal ticks (n,) int32 from `goal_ticks`, as one sync write; with ``request``, the next
-        read's instruction (`request`) goes out with it, in the same write to the port."""
-        if self._pending:  # sending clears the port's input: take the requested replies in (and drop them)
+        read's instruction (`request`) goes out with it, in the same write to the port. Goals
+        `prepare_goals` built and not sent are dropped: they share the packet's buffer, and these are newer."""
+        self._prepared = None
+        payload, goal_bytes = self._goals_packet().fill(ticks)
+        self._send_goals(payload if request else payload[:goal_bytes], goal_bytes)
+
+    def _goals_packet(self) -> GoalPacket:
+        """The goals' sync write with the next read's instruction behind it, laid out once."""
+        if self._goal_packet is None:
+            self._require_port()
+            self._goal_packet = GoalPacket(self.ids, GOAL_POSITION, self._read_instruction())
+        return self._goal_packet
+
+    def _send_goals(self, payload: bytes | bytearray, goal_bytes: int) -> None:
+        """Write ``payload``: a sync write of goals (its first ``goal_bytes``) and, when it holds more, the
+        next read's instruction (that read is then pending, as after `request`), in one write to the port.
+        Sending clears the port's input: the replies of a pending read are taken in (and dropped) first."""
+        port = self._require_port()
+        if self._pending:
             try:
                 self.read()
             except LinkReadError:
                 pass  # counted; the write goes on
         self._rearm_after_silence()
-        writer = self._fill_goals(ticks)
-        if not request:
-            self._send(writer)
-            return
-        port = self._require_port()
+        self.stats.writes += 1
         try:
-            with port.one_write():
-                self._send(writer)
-                self.request()
+            port.clearPort()
+            port.stamp()
+            port.ser.write(payload)
         except _PORT_ERRORS as err:
             self.stats.write_errors += 1
             raise LinkError(f"{self.path}: port failed: {err}") from None
-
-    def _fill_goals(self, ticks: np.ndarray) -> GroupSyncWrite:
-        """The goal writer with ``ticks`` (n,) int32 as its data."""
-        raw = ticks.tobytes()
-        writer = self._goal_writer
-        for k, dxl_id in enumerate(self.ids):
-            writer.changeParam(dxl_id, raw[4 * k: 4 * k + 4])
-        return writer
+        port.bytes_out += goal_bytes
+        self._traffic[2:] += (goal_bytes, 1)
+        if len(payload) > goal_bytes:
+            self._requested_bytes = port.bytes_out + port.bytes_in
+            port.bytes_out += len(payload) - goal_bytes
+            self._pending = True
 
     def _write_all(self, address: int, size: int, value: int) -> None:
         """The same value to every servo, one sync write (no reply)."""
