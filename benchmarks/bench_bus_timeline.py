@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
+import itertools
 import os
 import tempfile
 import time
@@ -53,16 +54,9 @@ def _traced_child(trace_path: str, *args) -> None:
     cpu = [0.0]
     on_bytes, flush = DynamixelChain.on_bytes, PtyPort._flush
 
-    import cProfile
-    prof = cProfile.Profile(time.thread_time) if os.environ.get("H16_PROF") else None
-
     def traced_on_bytes(self, data, now):
         c0 = time.thread_time()
-        if prof:
-            prof.enable()
         replies = on_bytes(self, data, now)
-        if prof:
-            prof.disable()
         cpu[0] += time.thread_time() - c0
         if len(picked) < MAX_EVENTS:
             picked.append((now, len(data), min((due for due, _ in replies), default=np.nan)))
@@ -75,33 +69,40 @@ def _traced_child(trace_path: str, *args) -> None:
             sent.append((time.monotonic(), before - len(self._out)))
 
     DynamixelChain.on_bytes, PtyPort._flush = traced_on_bytes, traced_flush
-    import sim_devices.pty_port as pp
-    pp.SPIN_BEFORE_DUE_S = float(os.environ.get("H16_SPIN", pp.SPIN_BEFORE_DUE_S))
     try:
         sim_process._sim_child(*args)
     finally:
-        if prof:
-            prof.dump_stats(os.environ["H16_PROF"])
         np.savez(trace_path, picked=np.array(picked).reshape(-1, 3), sent=np.array(sent).reshape(-1, 2),
                  chain_cpu=np.array(cpu))
 
 
-def bus_cycles(link, rate: float, seconds: float) -> dict:
-    """The bus-only cycle (read, write back, sleep to the deadline) with the client's times."""
+def bus_cycles(link, rate: float, seconds: float, pipelined: bool) -> dict:
+    """The bus-only cycle with the client's times: read, write back, sleep to the deadline; or
+    ``pipelined`` as the live loop's bus sees it: at the deadline the goals and the next read's
+    instruction in one write, then that read's reply waited for, the next goals built, sleep."""
     clock = LoopClock(rate)
     n = int(seconds * rate)
     times = np.full((n, 2), np.nan)
+    if pipelined:
+        link.prepare_goals(link.read().positions)
     clock.start()
     cpu0 = time.process_time()
     for k in range(n):
         times[k, 0] = time.monotonic()
         try:
+            if pipelined:
+                link.send_prepared()
             frame = link.read()
         except LinkError:
+            if pipelined:
+                link.prepare_goals(link.read().positions)
             clock.wait()
             continue
         times[k, 1] = time.monotonic()
-        link.write_goals(frame.positions)
+        if pipelined:
+            link.prepare_goals(frame.positions)
+        else:
+            link.write_goals(frame.positions)
         clock.wait()
     cpu = time.process_time() - cpu0
     st = clock.stats()
@@ -124,24 +125,20 @@ def timeline(client: np.ndarray, picked: np.ndarray, sent: np.ndarray) -> dict:
             "model": due - pickup, "excess": have - write - (due - pickup)}
 
 
-def run(robot, options: str, devices: dict, rate: float, seconds: float) -> dict:
+def run(robot, options: str, devices: dict, rate: float, seconds: float, pipelined: bool) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         trace = os.path.join(tmp, "trace.npz")
         original = sim_process._sim_child
         sim_process._sim_child = functools.partial(_traced_child, trace)
         try:
-            sim = SimProcess("dynamixel", ("demo", {}), realtime_priority=int(os.environ.get("H16_SIMPRIO", LOOP_PRIORITY - 1)), devices=devices, physics=os.environ.get("H16_PHYS", "process"))
+            sim = SimProcess("dynamixel", ("demo", {}), realtime_priority=LOOP_PRIORITY - 1, devices=devices)
         finally:
             sim_process._sim_child = original
         with sim, realtime_priority(LOOP_PRIORITY, lock_memory=True):
-            if POLICY[0] is not None:
-                with open(f"/proc/{sim._proc.pid}/task/{sim._proc.pid}/children") as f:
-                    for pid in f.read().split():
-                        os.sched_setscheduler(int(pid), POLICY[0], os.sched_param(0))
             link = open_link(f"{sim.url}&{options}", robot.body.joint_names, robot.config)
             try:
                 sim0 = sim.cpu_seconds()
-                x = bus_cycles(link, rate, seconds)
+                x = bus_cycles(link, rate, seconds, pipelined)
                 sim1 = sim.cpu_seconds()
             finally:
                 link.close()
@@ -155,7 +152,6 @@ def run(robot, options: str, devices: dict, rate: float, seconds: float) -> dict
     return x
 
 
-POLICY = [None]
 CONFIGS = [  # label, robot, baud, adapter, buses, rate
     ("mini 4 Mbps ftdi-fs", "livezmp_mini", 4_000_000, "ftdi-fs", 1, 371),
     ("OP3 2 Mbps hs", "OP3", 2_000_000, "hs", 1, 481),
@@ -179,10 +175,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="seconds per row (default 5)")
     parser.add_argument("--only", action="append", metavar="TEXT", help="rows whose label contains TEXT")
-    parser.add_argument("--physics-policy", choices=("other", "batch", "idle"))
+    parser.add_argument("--cycle", choices=("both", "plain", "pipelined"), default="both",
+                        help="the bus-only cycle: read then write (plain), as the live loop (pipelined), or both")
     args = parser.parse_args()
-    if args.physics_policy:
-        POLICY[0] = {"other": os.SCHED_OTHER, "batch": os.SCHED_BATCH, "idle": os.SCHED_IDLE}[args.physics_policy]
     for fine in (False, True):
         with fine_timer_slack() if fine else contextlib.nullcontext():
             late = clock_lateness(500.0, min(args.seconds, 2.0))
@@ -193,16 +188,19 @@ def main() -> None:
           f"{os.cpu_count()} CPUs; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print("stages in us, median / p99: pickup = sim read - client write; model = due - pickup; "
           "late = reply written - due; back = client has - reply written; excess = have - write - model\n")
-    header = ("| row                 | Hz   | achieved | missed % | pickup      | model       | late        | "
-              "back        | excess      | client CPU us | devices CPU us | chain us/packet | physics us | load |")
+    header = ("| row                 | cycle     | Hz   | achieved | missed % | pickup      | model       | "
+              "late        | back        | excess      | client CPU us | devices CPU us | chain us/pickup | "
+              "physics us | load |")
     print(header)
     print("|" + "|".join("-" * len(c) for c in header.split("|")[1:-1]) + "|", flush=True)
-    for name, robot_name, baud, adapter, buses, rate in CONFIGS:
+    cycles = {"both": (False, True), "plain": (False,), "pipelined": (True,)}[args.cycle]
+    for (name, robot_name, baud, adapter, buses, rate), pipelined in itertools.product(CONFIGS, cycles):
         if args.only and not any(t in name for t in args.only):
             continue
         x = run(robots[robot_name], "fast=1&return_delay=0", {"baud": baud, "adapter": adapter, "buses": buses},
-                rate, args.seconds)
-        print(f"| {name:<19} | {rate:4d} | {x['achieved']:8.1f} | {x['missed']:8.2f} | {quantiles(x['pickup'])} | "
+                rate, args.seconds, pipelined)
+        print(f"| {name:<19} | {'pipelined' if pipelined else 'plain':<9} | {rate:4d} | {x['achieved']:8.1f} | "
+              f"{x['missed']:8.2f} | {quantiles(x['pickup'])} | "
               f"{quantiles(x['model'])} | {quantiles(x['late'])} | {quantiles(x['back'])} | "
               f"{quantiles(x['excess'])} | {x['cpu_us']:13.0f} | {x['devices_us']:14.0f} | {x['chain_us']:15.0f} | "
               f"{x['physics_us']:10.0f} | {os.getloadavg()[0]:4.1f} |", flush=True)

@@ -19,7 +19,7 @@ fields a record view over it: no allocation per cycle but the frame handed on.
 
 from __future__ import annotations
 
-import io
+import os
 import select
 import time
 
@@ -64,16 +64,18 @@ class FastReply:
         view, size = self._view, self.size
         got = 0
         deadline = time.monotonic() + timeout
-        with io.FileIO(fd, "rb", closefd=False) as port:
-            while got < size:
-                n = port.readinto(view[got:])
-                if n:
-                    got += n
-                    continue
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                select.select([fd], [], [], remaining)
+        while got < size:
+            try:
+                n = os.readv(fd, (view[got:],))  # straight into the buffer, no file object per read
+            except BlockingIOError:
+                n = 0
+            if n:
+                got += n
+                continue
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            select.select([fd], [], [], remaining)
         if got < size:
             return ("short_reply" if got else "no_reply"), got
         buffer = self.buffer
