@@ -79,7 +79,7 @@ from sim_devices.dynamixel_packet import (
     encode_status,
 )
 from sim_devices.faults import FaultInjector, FaultSpec
-from sim_devices.pty_port import PtyDevice, PtyPort, Reply
+from sim_devices.pty_port import PortServer, PtyDevice, PtyPort, Reply
 from sim_devices.servo_plant import JointPlant, ServoPlant
 
 SUPPORTED_FAULTS = frozenset({"drop", "corrupt", "delay", "overload", "vanish"})
@@ -145,7 +145,8 @@ class DynamixelChain(PtyDevice):
     control-table field names to values written to every servo at start (e.g.
     ``{"return_delay_time": 0}``); ``faults`` is a fault spec (see `faults`);
     ``adapter``: the USB-serial adapter's latency (a name or ms, see `bus_timing.parse_adapter`);
-    ``sub_controller``: a board sharing the bus (module docstring).
+    ``sub_controller``: a board sharing the bus (module docstring); ``port_server``: the thread that serves
+    its pty, shared with the robot's other buses (None: a thread of its own).
     Bad arguments raise ValueError, an unknown field name KeyError, naming it.
     """
 
@@ -153,7 +154,7 @@ class DynamixelChain(PtyDevice):
                  baud_rate: int = 1_000_000, settings: Mapping[str, int] | None = None,
                  zero_tick: int = 2048, emulate_wire_time: bool = True,
                  adapter: str | float | Adapter = DEFAULT_ADAPTER, name: str = "ttyDXL",
-                 sub_controller: ImuBoard | None = None) -> None:
+                 sub_controller: ImuBoard | None = None, port_server: PortServer | None = None) -> None:
         ids = list(ids)
         if not ids or len(set(ids)) != len(ids) or not all(0 <= i <= 252 for i in ids):
             raise ValueError(f"DynamixelChain: ids must be distinct integers in 0..252, got {ids}")
@@ -223,7 +224,8 @@ class DynamixelChain(PtyDevice):
             if "goal_position" not in config:  # the goal starts where the joint is
                 self._hold_present(servo, now)
         self._faults.start(now)
-        self._port = PtyPort(self, name, spin=emulate_wire_time)  # last: its thread calls back into this object
+        # last: its thread calls back into this object
+        self._port = PtyPort(self, name, spin=emulate_wire_time, server=port_server)
 
     # -- public API -------------------------------------------------------------------------------
 

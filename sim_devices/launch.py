@@ -49,7 +49,7 @@ from sim_devices.firmware_board import FirmwareBoard, FootProvider, ImuProvider
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.mit_motor import MitMotorBuses
 from sim_devices.plant_split import split_plant
-from sim_devices.pty_port import PtyPort
+from sim_devices.pty_port import PortServer, PtyPort
 from sim_devices.servo_plant import JointPlant
 
 KINDS = ("dynamixel", "can", "fw")
@@ -203,13 +203,15 @@ def _dynamixel_buses(plant: JointPlant, servos: list, faults: str | FaultSpec, b
     sizes = [len(part) for part in np.array_split(np.arange(len(servos)), buses)]
     shares = [plant] if buses == 1 else split_plant(plant, sizes)
     chains = []
+    server = PortServer(name="pty-dynamixel") if buses > 1 else None  # one thread serves every bus
     try:
         first = 0
         for share, size in zip(shares, sizes, strict=True):
             group = servos[first: first + size]
             first += size
             chain = DynamixelChain([s.id for s in group], share, faults=faults, baud_rate=baud, adapter=adapter,
-                                   name=f"ttyDXL{len(chains)}", sub_controller=None if chains else board)
+                                   name=f"ttyDXL{len(chains)}", sub_controller=None if chains else board,
+                                   port_server=server)
             chains.append(chain)
             for s in group:
                 chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)

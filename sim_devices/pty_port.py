@@ -78,7 +78,8 @@ class PtyPort:
     re-raised by :meth:`close`, so device bugs surface in the caller.
     """
 
-    def __init__(self, device: ByteDevice, name: str = "ttySIM", spin: bool = False) -> None:
+    def __init__(self, device: ByteDevice, name: str = "ttySIM", spin: bool = False,
+                 server: PortServer | None = None) -> None:
         self._device = device
         self._spin_s = SPIN_BEFORE_DUE_S if spin else 0.0
         self._dir = tempfile.mkdtemp(prefix="livezmp-pty-")
@@ -97,9 +98,14 @@ class PtyPort:
         self._closed = False
         self.error: Exception | None = None
         self.dropped_output_bytes = 0
+        self._selected = -1  # the master the last select watched
         self._open_pty()
-        self._thread = threading.Thread(target=self._run, name=f"pty-{name}", daemon=True)
-        self._thread.start()
+        self._server = server
+        if server is None:
+            self._thread = threading.Thread(target=self._run, name=f"pty-{name}", daemon=True)
+            self._thread.start()
+        else:
+            server.add(self)
 
     # -- public API -------------------------------------------------------------------------------
 
@@ -110,7 +116,7 @@ class PtyPort:
 
     def vanish(self) -> None:
         """Unplug: close the pty, drop queued output and remove the symlink; returns when done."""
-        if threading.current_thread() is self._thread or not self._thread.is_alive():
+        if not self._served_elsewhere():
             self._unplug()
             return
         # The serving thread may be blocked in select() on the pty: let it close the descriptors.
@@ -119,6 +125,12 @@ class PtyPort:
             self._unplug_requests.append(done)
         self._wake()
         done.wait(timeout=5.0)
+
+    def _served_elsewhere(self) -> bool:
+        """Whether another thread than this one serves the port (and so must be asked to unplug it)."""
+        if self._server is None:
+            return self._thread.is_alive() and threading.current_thread() is not self._thread
+        return self._server.serves(self) and threading.current_thread() is not self._server.thread
 
     def restore(self) -> None:
         """Plug back in: open a new pty and point :attr:`path` at it."""
@@ -144,7 +156,10 @@ class PtyPort:
                 return
             self._closed = True
         self._wake()
-        self._thread.join(timeout=5.0)
+        if self._server is None:
+            self._thread.join(timeout=5.0)
+        else:
+            self._server.remove(self)
         self.vanish()
         os.close(self._wake_r)
         os.close(self._wake_w)
@@ -194,42 +209,55 @@ class PtyPort:
             self.error = exc
 
     def _serve(self) -> None:
-        device = self._device
         while True:
-            with self._lock:
-                if self._closed:
-                    return
-                if self._unplug_requests:
-                    self._unplug()
-                    for done in self._unplug_requests:
-                        done.set()
-                    self._unplug_requests.clear()
-                master = self._master
-                spin_from = self._pending[0][0] - self._spin_s if self._pending else math.inf
-                due = min(device.next_deadline(), spin_from)
-                writers = [master] if master >= 0 and self._out else []
+            waits = self._waits()
+            if waits is None:
+                return
+            readers, writers, due = waits
             timeout = None if due == math.inf else max(0.0, due - time.monotonic())
-            readers = [self._wake_r] if master < 0 else [self._wake_r, master]
             readable, _, _ = select.select(readers, writers, [], timeout)
-            if self._wake_r in readable:
-                with contextlib.suppress(BlockingIOError):
-                    os.read(self._wake_r, 4096)
             now = time.monotonic()
-            with self._lock:
-                # The pty may have vanished or been replaced while we waited: only read the one we
-                # selected on if it is still current.
-                if master >= 0 and master == self._master and master in readable:
-                    data = self._read(master)
-                    if data:
-                        self._queue(device.on_bytes(data, now))
-                if now >= device.next_deadline():
-                    self._queue(device.poll(now))
-                reply_due = self._pending[0][0] if self._pending else math.inf
-            while time.monotonic() < reply_due <= now + self._spin_s:
-                pass  # a reply due within the spin time: written when due, not after select's late wake-up
-            with self._lock:
-                if self._master >= 0:
-                    self._flush(self._master, time.monotonic())
+            _spin_to(self._serve_selected(readable, now), now, self._spin_s)
+            self._flush_due()
+
+    def _waits(self) -> tuple[list[int], list[int], float] | None:
+        """What the next select waits on: (readers, writers, when to wake at the latest); None once closed."""
+        with self._lock:
+            if self._closed:
+                return None
+            if self._unplug_requests:
+                self._unplug()
+                for done in self._unplug_requests:
+                    done.set()
+                self._unplug_requests.clear()
+            master = self._selected = self._master
+            spin_from = self._pending[0][0] - self._spin_s if self._pending else math.inf
+            due = min(self._device.next_deadline(), spin_from)
+            writers = [master] if master >= 0 and self._out else []
+        return ([self._wake_r] if master < 0 else [self._wake_r, master]), writers, due
+
+    def _serve_selected(self, readable: list[int], now: float) -> float:
+        """After the select: the client's bytes to the device, its timed work; when the next reply is due."""
+        if self._wake_r in readable:
+            with contextlib.suppress(BlockingIOError):
+                os.read(self._wake_r, 4096)
+        device = self._device
+        with self._lock:
+            # The pty may have vanished or been replaced while we waited: only read the one we
+            # selected on if it is still current.
+            master = self._selected
+            if master >= 0 and master == self._master and master in readable:
+                data = self._read(master)
+                if data:
+                    self._queue(device.on_bytes(data, now))
+            if now >= device.next_deadline():
+                self._queue(device.poll(now))
+            return self._pending[0][0] if self._pending else math.inf
+
+    def _flush_due(self) -> None:
+        with self._lock:
+            if self._master >= 0:
+                self._flush(self._master, time.monotonic())
 
     def _read(self, master: int) -> bytes:
         try:
@@ -260,6 +288,91 @@ class PtyPort:
         except BlockingIOError:
             return
         del self._out[:written]
+
+
+def _spin_to(reply_due: float, now: float, spin_s: float) -> None:
+    """Return at ``reply_due`` if it is within ``spin_s`` of ``now`` (s), at once otherwise."""
+    while time.monotonic() < reply_due <= now + spin_s:
+        pass  # a reply due within the spin time: written when due, not after select's late wake-up
+
+
+class PortServer:
+    """One thread serving several `PtyPort`s (``PtyPort(..., server=...)``): the buses of one simulated
+    robot. Their replies due at the same time leave together, and no port's spin before its reply
+    holds the GIL against another port's thread (with a thread each, the second bus's reply waited
+    for the first's spin). A device's exception stops its port only (kept in its ``error``). The
+    thread runs while there are ports to serve."""
+
+    def __init__(self, name: str = "pty-server") -> None:
+        self._name = name
+        self._ports: list[PtyPort] = []
+        self._changed = threading.Condition()
+        self.thread: threading.Thread | None = None
+
+    def add(self, port: PtyPort) -> None:
+        """Serve ``port`` from now on."""
+        with self._changed:
+            self._ports.append(port)
+            if self.thread is None:
+                self.thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+                self.thread.start()
+
+    def serves(self, port: PtyPort) -> bool:
+        with self._changed:
+            return port in self._ports
+
+    def remove(self, port: PtyPort) -> None:
+        """Wait (up to 5 s) until the thread has dropped ``port`` (closed: its next select sees it)."""
+        if threading.current_thread() is self.thread:
+            self._drop(port)
+            return
+        with self._changed:
+            self._changed.wait_for(lambda: port not in self._ports, timeout=5.0)
+
+    def _drop(self, port: PtyPort) -> None:
+        with self._changed:
+            if port in self._ports:
+                self._ports.remove(port)
+            self._changed.notify_all()
+
+    def _run(self) -> None:
+        while True:
+            with self._changed:
+                ports = list(self._ports)
+                if not ports:
+                    self.thread = None  # the next add starts another
+                    return
+            waits = {}
+            for port in ports:
+                w = self._step(port, port._waits)
+                if w is None:
+                    self._drop(port)
+                else:
+                    waits[port] = w
+            if not waits:
+                continue
+            due = min(w[2] for w in waits.values())
+            timeout = None if due == math.inf else max(0.0, due - time.monotonic())
+            readable, _, _ = select.select([fd for w in waits.values() for fd in w[0]],
+                                           [fd for w in waits.values() for fd in w[1]], [], timeout)
+            now = time.monotonic()
+            replies = [self._step(port, port._serve_selected, readable, now) for port in waits]
+            _spin_to(min((r for r in replies if r is not None), default=math.inf), now,
+                     max(port._spin_s for port in waits))
+            for port in waits:
+                self._step(port, port._flush_due)
+
+    def _step(self, port: PtyPort, step, *args):
+        """``step(*args)`` of ``port``; a device's exception is kept in the port's ``error`` (re-raised by its
+        close) and the port dropped: None."""
+        if port.error is not None:
+            return None
+        try:
+            return step(*args)
+        except Exception as exc:
+            port.error = exc
+            self._drop(port)
+            return None
 
 
 class PtyDevice:

@@ -10,7 +10,7 @@ import pytest
 import serial
 from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 
-from sim_devices.pty_port import MAX_PENDING_OUTPUT, PtyPort
+from sim_devices.pty_port import MAX_PENDING_OUTPUT, PortServer, PtyPort
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
@@ -128,3 +128,31 @@ def test_device_errors_surface_on_close():
         assert wait_until(lambda: port.error is not None)
     with pytest.raises(RuntimeError, match="device bug"):
         port.close()
+
+
+def test_ports_served_by_one_thread_work_as_ports_of_their_own():
+    server = PortServer()
+    device = Echo(delay=0.02)
+    with PtyPort(device, name="ttyA", server=server) as a, PtyPort(Echo(), name="ttyB", server=server) as b:
+        broken = PtyPort(Broken(), name="ttyC", server=server)
+        assert server.thread is not None and a._served_elsewhere()
+        with serial.Serial(a.path, 115200, timeout=1.0) as ca, serial.Serial(b.path, 115200, timeout=1.0) as cb, \
+                serial.Serial(broken.path, 115200, timeout=1.0) as cc:
+            start = time.perf_counter()
+            ca.write(b"a")
+            cb.write(b"b")
+            cc.write(b"c")  # its device fails: that port stops, the others go on
+            assert cb.read(1) == b"B"
+            assert ca.read(1) == b"A" and time.perf_counter() - start >= 0.02  # timed as on a port of its own
+            assert wait_until(lambda: broken.error is not None)
+            ca.write(b"x")
+            assert ca.read(1) == b"X"
+            b.vanish()  # unplugged through the serving thread
+            assert not os.path.exists(b.path)
+            b.restore()
+        with pytest.raises(RuntimeError, match="device bug"):
+            broken.close()
+        with serial.Serial(b.path, 115200, timeout=1.0) as again:
+            again.write(b"back")
+            assert again.read(4) == b"BACK"
+    assert wait_until(lambda: server.thread is None)  # no port left: the thread ended
