@@ -1,7 +1,8 @@
 """A simulated serial device served on a real pseudo-terminal.
 
 `PtyPort` opens a pty pair (``os.openpty``, slave side in raw mode) and serves the
-master side from one background thread. Unmodified clients (pyserial,
+master side from one background thread (or from a `PortServer`'s, shared by the ports of
+one robot's buses). Unmodified clients (pyserial,
 dynamixel-sdk, python-can's slcan) open :attr:`PtyPort.path`, a symlink in a
 private temporary directory that points at the current ``/dev/pts/N``. The
 symlink is the stable name: :meth:`PtyPort.vanish` closes the pty and removes the
