@@ -323,14 +323,31 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
     return float(brentq(excess, 0.0, 1.0, xtol=1e-9))
 
 
-def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: float = 2.0, hold_s: float = 3.0,
-         flexion: float = 0.3) -> Scenario:
-    """Lean forward at the ankles, slowly (over ``ramp_s``), until the static CoM is
-    ``beyond`` (m) past the toes; hold it ``hold_s``; lean back. Uncorrected, the robot
+LEAN_LEAD = 0.0025  # m: the most the lean's own acceleration may move the ZMP ahead of the CoM
+LEAN_RAMP_S = 2.0  # s: the shortest lean (livezmp_mini's and the OP3's: their leads are 2.3 and 2.5 mm)
+
+
+def lean_ramp(body: BodyModel, q0: np.ndarray, dq: np.ndarray) -> float:
+    """The time (s) to lean from ``q0`` to ``q0 + dq`` (half a cosine) so that its acceleration moves the ZMP at
+    most `LEAN_LEAD` ahead of the CoM: a CoM travel D at height h over T peaks at D pi^2 / (2 T^2) m/s^2, which
+    moves the ZMP h / g times that (linear inverted pendulum); at least `LEAN_RAMP_S`. A taller robot's longer
+    feet need a longer lean, which a fixed time would make a shove that topples it before its CoM is past its
+    toes, corrected or not."""
+    c0, c1 = standing_support(body, q0)[0], standing_support(body, q0 + dq)[0]
+    travel, height = float(np.linalg.norm(c1[:2] - c0[:2])), float(c0[Z])
+    return max(LEAN_RAMP_S, math.pi * math.sqrt(travel * height / (2 * G * LEAN_LEAD)))
+
+
+def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: float | None = None,
+         hold_s: float = 3.0, flexion: float = 0.3) -> Scenario:
+    """Lean forward at the ankles, slowly (over ``ramp_s``; None: `lean_ramp`), until the static CoM
+    is ``beyond`` (m) past the toes; hold it ``hold_s``; lean back. Uncorrected, the robot
     falls during the hold; a few degrees of root rotation keep the ZMP inside."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.ankles_lean(lean_angle(body, beyond, flexion))
+    if ramp_s is None:
+        ramp_s = lean_ramp(body, q0, dq)
     up_end = settle_s + ramp_s + hold_s
 
     def goals(t: float) -> np.ndarray:
@@ -349,12 +366,16 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     CoM stays inside the feet; the ZMP swings with the arms' acceleration, past the toes
     on every swing. ``frequency=None``: the frequency whose swing puts this robot's ZMP
     ``beyond`` (m) past its toes at the peak (`swing_frequency`: from its masses and
-    inertias), so robots of any size are asked the same of their balance."""
+    inertias), so robots of any size are asked the same of their balance. The lean stays back from the toes
+    by more than the arms' weight alone moves the CoM at the swing's ends (`ARMS_CLEAR` more): a big
+    robot's arms held forward would otherwise put it past its toes at any pace."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
-    if toe_margin is not None:
-        q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
+    if toe_margin is not None:
+        reach = max(front_margin(body, q0) - front_margin(body, q0 + sign * amplitude * dq) for sign in (1, -1))
+        toe_margin = max(toe_margin, reach + ARMS_CLEAR)
+        q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     if frequency is None:
         frequency = swing_frequency(body, q0, dq, amplitude, beyond)
     w = 2 * np.pi * frequency
@@ -363,6 +384,9 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
         return q0 + amplitude * smooth_step(t / 0.5) * np.sin(w * max(t, 0.0)) * dq
 
     return Scenario("arm_swing", goals, duration)
+
+
+ARMS_CLEAR = 0.0004  # m: the static CoM at the swing's ends stays this far inside the toes (livezmp_mini: 0.8 mm)
 
 
 def swing_zmp_beyond_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float,
