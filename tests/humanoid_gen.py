@@ -348,3 +348,9 @@ def malformed(out: Path) -> list[Path]:
         paths.append(out / f"{name}.urdf")
         paths[-1].write_text(text)
     return paths
+
+
+def com_height(spec: HumanoidSpec) -> float:
+    """Height (m, above the generator's ground) of the humanoid's centre of mass in its zero posture."""
+    links = _build(spec).links.values()
+    return sum(v["mass"] * v["com"][2] for v in links) / sum(v["mass"] for v in links)

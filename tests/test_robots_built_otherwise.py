@@ -13,11 +13,12 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-from humanoid_gen import CONVENTIONS, HumanoidSpec, build_humanoid, malformed
+from humanoid_gen import CONVENTIONS, HumanoidSpec, build_humanoid, com_height, malformed
 from test_live_loop_closed import balance
 
 from livezmp.cli import main
-from livezmp.live.scenarios import Poser, joint_roles, make_scenario
+from livezmp.correct.online import size_scaled_accel
+from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
 from livezmp.model.robot import load_robot
 
 # the sweep's "combined" robot: every way of being built otherwise that a fix was needed for, at once
@@ -131,3 +132,32 @@ def test_a_robot_without_arms_stands_but_is_told_it_cannot_swing_them(tmp_path, 
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "arm_swing", "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and "found no l_sho_pitch" in err[0] and "an arm on each side" in err[0]
+
+
+def test_a_tall_light_robot_swinging_its_arms_is_held_by_a_gentler_trunk(tmp_path):
+    # before: the trunk's 100 deg/s^2 swung this 1 m, 2 kg robot's ZMP past its toes by itself: corrected, it
+    # fell at 0.27 s; the limit now scales as (0.3 m / CoM height)^2
+    spec = HumanoidSpec(height=1.0, mass=2.0, seed=25)
+    body = load_robot(str(build_humanoid(tmp_path / "t.urdf", spec)), None).body
+    ground = (0.06 - 0.12 * (0.54 - 0.06)) * spec.height  # default soles: 0.12 hip heights below the ankle
+    assert size_scaled_accel(body, 100.0) == pytest.approx(100.0 * (0.3 / (com_height(spec) - ground)) ** 2)
+    scenario = make_scenario("arm_swing", body, duration=3.0)
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    print(f"uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}")
+    assert off.fallen is not None and on.fallen is None
+
+
+def test_a_taller_robot_leans_slower_so_the_lean_itself_does_not_shove_it(mini, tmp_path):
+    # before: a 1.2 m robot leaned over the same 2 s as the mini: the lean's deceleration put its ZMP past the
+    # toes before its CoM got there, and it fell at 2.3 s whether corrected or not
+    assert make_scenario("lean", mini).duration == pytest.approx(8.0)  # 2 s ramps: unchanged
+    body = load_robot(str(build_humanoid(tmp_path / "k.urdf", HumanoidSpec(height=1.2, mass=20.0))), None).body
+    poser = Poser(body)
+    q0 = poser.standing()
+    dq = poser.ankles_lean(lean_angle(body, 0.004))
+    ramp = lean_ramp(body, q0, dq)
+    (c0, _), (c1, _) = standing_support(body, q0), standing_support(body, q0 + dq)
+    # the half-cosine's peak acceleration D pi^2 / (2 T^2) times h / g is the lean's ZMP lead: LEAN_LEAD
+    lead = (c1[0] - c0[0]) * np.pi ** 2 / (2 * ramp ** 2) * c0[2] / 9.81
+    assert ramp > 4.0 and lead == pytest.approx(LEAN_LEAD, rel=0.01)
