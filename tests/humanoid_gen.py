@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import random
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
 
 from livezmp.model.demo_robot import demo_robot_path
 
@@ -58,3 +62,295 @@ def generate_humanoid(path: Path, scale: float = 1.0, leg_scale: float = 1.0, se
     robot.extend(joints)
     tree.write(path)
     return path
+
+
+# -- humanoids built from a spec: leg and arm joint orders, axes, frames, names, extras ---------------------
+
+AXES = {"yaw": (0.0, 0.0, 1.0), "roll": (1.0, 0.0, 0.0), "pitch": (0.0, 1.0, 0.0)}
+# role -> name, per naming convention ({s}: l/r, {S}: L/R, {side}: left/right); roles not listed: "{s}_{role}"
+CONVENTIONS = {
+    "op3": {"hip_yaw": "{s}_hip_yaw", "hip_roll": "{s}_hip_roll", "hip_pitch": "{s}_hip_pitch", "knee": "{s}_knee",
+            "ank_pitch": "{s}_ank_pitch", "ank_roll": "{s}_ank_roll", "sho_pitch": "{s}_sho_pitch",
+            "sho_roll": "{s}_sho_roll", "arm_yaw": "{s}_arm_yaw", "el": "{s}_el", "head": "head_pan"},
+    "poppy": {"hip_yaw": "{s}_hip_z", "hip_roll": "{s}_hip_x", "hip_pitch": "{s}_hip_y", "knee": "{s}_knee_y",
+              "ank_pitch": "{s}_ankle_y", "ank_roll": "{s}_ankle_x", "sho_pitch": "{s}_shoulder_y",
+              "sho_roll": "{s}_shoulder_x", "arm_yaw": "{s}_arm_z", "el": "{s}_elbow_y", "waist_yaw": "abs_z",
+              "waist_pitch": "abs_y", "head": "head_z"},
+    "nao": {"hip_yaw": "{S}HipYaw", "hip_roll": "{S}HipRoll", "hip_pitch": "{S}HipPitch", "knee": "{S}KneePitch",
+            "ank_pitch": "{S}AnklePitch", "ank_roll": "{S}AnkleRoll", "sho_pitch": "{S}ShoulderPitch",
+            "sho_roll": "{S}ShoulderRoll", "arm_yaw": "{S}ElbowYaw", "el": "{S}ElbowRoll", "waist_yaw": "TorsoYaw",
+            "waist_pitch": "TorsoPitch", "head": "HeadYaw"},
+    "darwin": {"hip_yaw": "j_pelvis_{s}", "hip_roll": "j_thigh1_{s}", "hip_pitch": "j_thigh2_{s}",
+               "knee": "j_tibia_{s}", "ank_pitch": "j_ankle1_{s}", "ank_roll": "j_ankle2_{s}",
+               "sho_pitch": "j_shoulder_{s}", "sho_roll": "j_high_arm_{s}", "arm_yaw": "j_mid_arm_{s}",
+               "el": "j_low_arm_{s}", "head": "j_pan"},
+}
+
+
+@dataclass(frozen=True)
+class HumanoidSpec:
+    """A humanoid to generate: ``height`` (m, sole to head top), ``mass`` (kg); ``hip`` the hip joints from the
+    pelvis down (``y`` yaw, ``r`` roll, ``p`` pitch: "yrp" is OP3's, "rp" a 5-DOF leg), ``ankle`` likewise;
+    ``arm`` the arm joints from the trunk (``p``/``r`` shoulder pitch/roll, ``y`` upper-arm yaw, ``e`` elbow; ""
+    none); ``waist`` joints between pelvis and torso (``y``, ``p``), ``torso_root``: the torso is the root link
+    (the waist then sits above the legs' chains); ``flip``: share of joints whose axis is given negated;
+    ``frames``: "aligned" link frames, "pitch_z" (leg links rotated so the pitch axis is local z) or "random";
+    ``names``: a `CONVENTIONS` key or "numbered" (joint_1...); ``limits``: "wide", "tight" (what standing needs and
+    a little) or "absent" (no <limit> on any joint); ``continuous``: head and upper-arm yaw continuous;
+    ``grippers``: a two-finger gripper on each hand, one finger mimicking the other; ``extras``: camera, IMU and
+    sole frames as fixed massless links, and a massless root link; ``root``: the root link's name, its frame at its
+    centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
+    humanoid_SEED); ``foot``: "box", "mesh" or "none" collision;
+    ``seed``: the file's link and joint order, flipped axes, random frames."""
+
+    height: float = 0.5
+    mass: float = 3.0
+    hip: str = "yrp"
+    ankle: str = "pr"
+    arm: str = "pre"
+    waist: str = ""
+    torso_root: bool = False
+    flip: float = 0.0
+    frames: str = "aligned"
+    names: str = "op3"
+    limits: str = "wide"
+    continuous: bool = False
+    grippers: bool = False
+    extras: bool = False
+    foot: str = "box"
+    root: str = "base_link"
+    root_at_ground: bool = False
+    robot_name: str = ""
+    seed: int = 0
+
+
+ROLE_OF = {"y": "yaw", "r": "roll", "p": "pitch"}
+ARM_ROLE = {"p": ("sho_pitch", "pitch"), "r": ("sho_roll", "roll"), "y": ("arm_yaw", "yaw"), "e": ("el", "pitch")}
+
+
+def _rot(rpy) -> np.ndarray:
+    return pin.rpy.rpyToMatrix(*map(float, rpy))
+
+
+def _fmt(v) -> str:
+    return " ".join(f"{float(x):.9g}" for x in v)
+
+
+class _Builder:
+    """Links and joints in world coordinates in the zero posture; written with per-link frames."""
+
+    def __init__(self, spec: HumanoidSpec):
+        self.spec, self.rng = spec, random.Random(spec.seed)
+        self.links: dict[str, dict] = {}
+        self.joints: list[dict] = []
+        self.count = 0
+
+    def link(self, role: str, mass: float, com, size, frame: np.ndarray | None = None) -> str:
+        name = f"link_{len(self.links) + 1}" if self.spec.names == "numbered" else role
+        h = self.spec.height
+        self.links[role] = {"name": name, "mass": mass, "com": np.asarray(com, float) * h,
+                            "size": np.asarray(size, float) * h, "R": frame if frame is not None else np.eye(3)}
+        return role
+
+    def joint(self, role: str, side: str, parent: str, child: str, at, axis: str | None, kind: str = "revolute",
+              **extra) -> None:
+        self.count += 1
+        convention = CONVENTIONS.get(self.spec.names, {})
+        pattern = convention.get(role, "{s}_" + role if side else role)
+        name = (f"joint_{self.count}" if self.spec.names == "numbered" else
+                pattern.format(s=side, S=side.upper(), side={"l": "left", "r": "right"}.get(side, "")))
+        sign = -1.0 if axis and self.rng.random() < self.spec.flip else 1.0
+        self.joints.append({"name": name, "role": role, "side": side, "parent": parent, "child": child,
+                            "at": np.asarray(at, float) * self.spec.height, "kind": kind,
+                            "axis": None if axis is None else sign * np.array(AXES[axis]), **extra})
+
+    def frame(self, leg: bool) -> np.ndarray | None:
+        if self.spec.frames == "pitch_z" and leg:
+            return _rot((-np.pi / 2, 0.0, 0.0))  # local z = world y (the pitch axis), local y = world -z
+        if self.spec.frames == "random":
+            return _rot([self.rng.uniform(-np.pi, np.pi) for _ in range(3)])
+        return None
+
+
+def _limits(spec: HumanoidSpec, role: str, axis: np.ndarray) -> tuple[float, float] | None:
+    """(lower, upper) rad: wide ±2.8; tight: the standing posture's range (knee bent 0-1.4 rad forward of its
+    axis sign, hips and ankles ±0.7, rolls ±0.35, arms ±1.2)."""
+    if spec.limits == "absent":
+        return None
+    if spec.limits == "wide":
+        return (-2.8, 2.8)
+    if role == "knee":
+        return (0.0, 1.4) if axis[1] > 0 else (-1.4, 0.0)
+    if role in ("hip_roll", "ank_roll", "hip_yaw"):
+        return (-0.35, 0.35)
+    return (-0.7, 0.7) if role in ("hip_pitch", "ank_pitch") else (-1.2, 1.2)
+
+
+def _build(spec: HumanoidSpec) -> _Builder:
+    b = _Builder(spec)
+    trunk = b.link("torso", 0.30, (0.0, 0.0, 0.72), (0.12, 0.2, 0.24))
+    pelvis = b.link("pelvis", 0.10, (0.0, 0.0, 0.58), (0.1, 0.16, 0.06)) if spec.waist else trunk
+    if spec.waist:  # the chain from pelvis up to torso (or down, when the torso is the root)
+        chain = [pelvis] + [b.link(f"waist_{k}", 0.01, (0.0, 0.0, 0.6), (0.04, 0.04, 0.02))
+                            for k in range(len(spec.waist) - 1)] + [trunk]
+        if spec.torso_root:
+            chain = chain[::-1]
+        for k, axis in enumerate(spec.waist):
+            b.joint(f"waist_{ROLE_OF[axis]}", "", chain[k], chain[k + 1], (0.0, 0.0, 0.6), ROLE_OF[axis])
+    head = b.link("head", 0.07, (0.0, 0.0, 0.93), (0.1, 0.1, 0.12))
+    b.joint("head", "", trunk, head, (0.0, 0.0, 0.86), "yaw", "continuous" if spec.continuous else "revolute")
+    for s, y in (("l", 1.0), ("r", -1.0)):
+        w = 0.055 * y
+        parent = pelvis
+        hips = list(spec.hip)
+        for k, axis in enumerate(hips):
+            last = k == len(hips) - 1
+            child = (b.link(f"{s}_thigh", 0.09, (0.0, w, 0.42), (0.06, 0.06, 0.24), b.frame(True)) if last else
+                     b.link(f"{s}_hip{k}", 0.01, (0.0, w, 0.54), (0.03, 0.03, 0.03), b.frame(True)))
+            b.joint(f"hip_{ROLE_OF[axis]}", s, parent, child, (0.0, w, 0.54), ROLE_OF[axis])
+            parent = child
+        shank = b.link(f"{s}_shank", 0.05, (0.0, w, 0.18), (0.05, 0.05, 0.24), b.frame(True))
+        b.joint("knee", s, parent, shank, (0.0, w, 0.30), "pitch")
+        parent = shank
+        for k, axis in enumerate(spec.ankle):
+            last = k == len(spec.ankle) - 1
+            child = (b.link(f"{s}_foot", 0.025, (0.02, w, 0.03), (0.16, 0.08, 0.03), b.frame(True)) if last else
+                     b.link(f"{s}_ankle{k}", 0.005, (0.0, w, 0.06), (0.02, 0.02, 0.02), b.frame(True)))
+            b.joint(f"ank_{ROLE_OF[axis]}", s, parent, child, (0.0, w, 0.06), ROLE_OF[axis])
+            parent = child
+        if spec.extras:
+            b.link(f"{s}_sole", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
+            b.joint("sole", s, parent, f"{s}_sole", (0.02, w, 0.0), None, "fixed")
+        parent, shoulder = trunk, (0.0, 0.12 * y, 0.82)
+        for k, a in enumerate(spec.arm):
+            role, axis = ARM_ROLE[a]
+            at = (0.0, 0.12 * y, 0.68) if a == "e" else shoulder
+            last = k == len(spec.arm) - 1
+            com, size = ((0.0, 0.12 * y, 0.62), (0.04, 0.04, 0.13)) if last else \
+                ((0.0, 0.12 * y, 0.75), (0.04, 0.04, 0.14))
+            child = b.link(f"{s}_arm{k}", 0.03 if last or a == "e" else 0.01, com, size, b.frame(False))
+            b.joint(role, s, parent, child, at, axis, "continuous" if spec.continuous and a == "y" else "revolute")
+            parent = child
+        if spec.grippers and spec.arm:
+            for k, finger in enumerate((0.01, -0.01)):
+                tip = b.link(f"{s}_finger{k}", 0.002, (0.0, 0.12 * y + finger, 0.54), (0.01, 0.01, 0.03))
+                b.joint(f"finger{k}", s, parent, tip, (0.0, 0.12 * y + finger, 0.56), "roll",
+                        mimic=b.joints[-1]["name"] if k else None)
+    if spec.extras:
+        for role, parent, at in (("camera", head, (0.05, 0.0, 0.95)), ("imu", trunk, (0.0, 0.0, 0.7))):
+            b.link(role, 0.0, at, (0.0, 0.0, 0.0))
+            b.joint(f"{role}_fixed", "", parent, role, at, None, "fixed")
+        b.link("dummy_root", 0.0, (0.0, 0.0, 0.58), (0.0, 0.0, 0.0))
+        b.joint("root_fixed", "", "dummy_root", pelvis if not spec.torso_root else trunk, (0.0, 0.0, 0.58), None,
+                "fixed")
+    total = sum(v["mass"] for v in b.links.values())
+    for v in b.links.values():
+        v["mass"] *= spec.mass / total
+    return b
+
+
+def _write(b: _Builder, path: Path) -> Path:
+    spec = b.spec
+    robot = ET.Element("robot", name=spec.robot_name or f"humanoid_{spec.seed}")
+    root_role = "dummy_root" if spec.extras else ("torso" if spec.torso_root or not spec.waist else "pelvis")
+    names = {role: v["name"] for role, v in b.links.items()}
+    names[root_role] = spec.root if spec.names != "numbered" else names[root_role]
+    origin_of = {root_role: np.zeros(3) if spec.root_at_ground else b.links[root_role]["com"]}
+    for j in b.joints:
+        origin_of[j["child"]] = j["at"]
+    elements = []
+    for role, v in b.links.items():
+        link = ET.Element("link", name=names[role])
+        R, p = v["R"], origin_of[role]
+        if v["mass"] > 0:
+            inertial = ET.SubElement(link, "inertial")
+            ET.SubElement(inertial, "origin", xyz=_fmt(R.T @ (v["com"] - p)), rpy="0 0 0")
+            ET.SubElement(inertial, "mass", value=f"{v['mass']:.9g}")
+            dx, dy, dz = v["size"]
+            inertia = R.T @ np.diag([dy * dy + dz * dz, dx * dx + dz * dz, dx * dx + dy * dy]) @ R * v["mass"] / 12
+            ET.SubElement(inertial, "inertia", **{k: f"{inertia[i, j]:.9g}" for k, (i, j) in zip(
+                ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
+                strict=True)})
+        if role.endswith("_foot") and spec.foot != "none":
+            collision = ET.SubElement(link, "collision")
+            ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (v["com"] - p)), rpy=_fmt(pin.rpy.matrixToRpy(R.T)))
+            geometry = ET.SubElement(collision, "geometry")
+            if spec.foot == "box":
+                ET.SubElement(geometry, "box", size=_fmt(v["size"]))
+            else:
+                ET.SubElement(geometry, "mesh", filename=f"package://humanoid/meshes/{names[role]}.stl")
+        elements.append(link)
+    for j in b.joints:
+        Rp, Rc = b.links[j["parent"]]["R"], b.links[j["child"]]["R"]
+        pp = origin_of[j["parent"]]
+        joint = ET.Element("joint", name=j["name"], type=j["kind"])
+        ET.SubElement(joint, "parent", link=names[j["parent"]])
+        ET.SubElement(joint, "child", link=names[j["child"]])
+        ET.SubElement(joint, "origin", xyz=_fmt(Rp.T @ (j["at"] - pp)), rpy=_fmt(pin.rpy.matrixToRpy(Rp.T @ Rc)))
+        if j["axis"] is not None:
+            ET.SubElement(joint, "axis", xyz=_fmt(Rc.T @ j["axis"]))
+            bounds = _limits(spec, j["role"], j["axis"])
+            if bounds is not None and j["kind"] == "revolute":
+                ET.SubElement(joint, "limit", lower=f"{bounds[0]:g}", upper=f"{bounds[1]:g}", effort="10",
+                              velocity="6")
+        if j.get("mimic"):
+            ET.SubElement(joint, "mimic", joint=j["mimic"], multiplier="-1", offset="0")
+        elements.append(joint)
+    random.Random(spec.seed).shuffle(elements)
+    robot.extend(elements)
+    ET.ElementTree(robot).write(path)
+    return path
+
+
+def build_humanoid(path: Path, spec: HumanoidSpec) -> Path:
+    """Write the humanoid of ``spec`` (see `HumanoidSpec`) to ``path``."""
+    return _write(_build(spec), path)
+
+
+# -- URDFs that are no humanoid, or no URDF ---------------------------------------------------------------
+
+def _link(name: str, mass: float = 1.0) -> str:
+    return (f'<link name="{name}"><inertial><mass value="{mass}"/>'
+            '<inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>')
+
+
+def _joint(name: str, parent: str, child: str, axis: str | None = "0 1 0", z: float = -0.1,
+           kind: str = "revolute") -> str:
+    ax = f'<axis xyz="{axis}"/>' if axis else ""
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="0 0 {z}"/>{ax}<limit lower="-2" upper="2" effort="5" velocity="5"/></joint>')
+
+
+def malformed(out: Path) -> list[Path]:
+    """Non-humanoid or broken URDFs, written to ``out``, each named after what is wrong with it: one leg; a
+    loop; one link, no foot; a humanoid whose joints have no <axis> (x, by the URDF spec: no lateral axis in its
+    legs); a floating joint; no masses; not XML; a joint to a link that is not there."""
+    one_leg = "".join([_link("pelvis"), _link("thigh"), _link("shank"), _link("foot"),
+                       _joint("hip", "pelvis", "thigh"), _joint("knee", "thigh", "shank"),
+                       _joint("ankle", "shank", "foot")])
+    loop = one_leg + _joint("closing", "foot", "pelvis")
+    no_leaf = _link("pelvis")
+    no_axes = build_humanoid(out / "no_axes_src.urdf", HumanoidSpec()).read_text().replace('<axis xyz="0 1 0" />', "")
+    texts = {
+        "one_leg": f'<robot name="one_leg">{one_leg}</robot>',
+        "loop": f'<robot name="loop">{loop}</robot>',
+        "no_feet": f'<robot name="blob">{no_leaf}</robot>',
+        "no_axes": no_axes,
+        "floating": f'<robot name="fl">{_link("world")}{_link("pelvis")}'
+                    f'{_joint("free", "world", "pelvis", None, kind="floating")}</robot>',
+        "no_masses": '<robot name="m"><link name="a"/><link name="b"/>'
+                     f'{_joint("j", "a", "b")}</robot>',
+        "not_xml": "robot name='x'",
+        "missing_child": f'<robot name="mc">{_link("a")}{_joint("j", "a", "ghost")}</robot>',
+    }
+    paths = []
+    for name, text in texts.items():
+        paths.append(out / f"{name}.urdf")
+        paths[-1].write_text(text)
+    return paths
+
+
+def com_height(spec: HumanoidSpec) -> float:
+    """Height (m, above the generator's ground) of the humanoid's centre of mass in its zero posture."""
+    links = _build(spec).links.values()
+    return sum(v["mass"] * v["com"][2] for v in links) / sum(v["mass"] for v in links)

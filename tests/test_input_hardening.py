@@ -258,10 +258,16 @@ def test_robot_config_types_one_line_per_field(tmp_path, capsys, robot, toml, sa
             names="cfg.toml", says=says)
 
 
-def test_robot_name_with_path_separator(tmp_path, capsys, robot):
-    urdf, csv_text = robot
-    u = put(tmp_path, "r.urdf", re.sub(r'<robot name="[^"]*"', '<robot name="../../../etc/x"', urdf, count=1))
-    refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u, names="r.urdf", says="robot name")
+def test_a_robot_name_that_is_no_file_name_looks_up_no_config(tmp_path, robot):
+    # a URDF's robot name is free text ("My Humanoid v2"): not a reason to refuse the robot; a name with a path
+    # in it must not reach a config file by it (this one would reach the built-in livezmp_mini.toml)
+    from livezmp.model.robot import load_robot
+
+    urdf, _ = robot
+    for name, source in (("livezmp_mini", "livezmp:livezmp_mini.toml"), ("../robots/livezmp_mini", "<defaults>"),
+                         ("My Humanoid v2", "<defaults>")):
+        u = put(tmp_path, "r.urdf", re.sub(r'<robot name="[^"]*"', f'<robot name="{name}"', urdf, count=1))
+        assert load_robot(str(u), None).config.source == source
 
 
 def test_good_robot_still_loads(tmp_path, capsys, robot):

@@ -69,7 +69,8 @@ def test_the_push_moves_the_zmp_the_stated_distance_past_the_toes(generated):
     assert s.zmp[0] - toe == pytest.approx(0.005, abs=0.0015)
 
 
-@pytest.mark.parametrize(("spec", "name"), [(SMALL, "lean"), (SMALL, "arm_swing"), (BIG, "arm_swing")])
+# (BIG, "lean") fell corrected too while the lean took 2 s whatever the robot's size (its lean now takes 2.9 s)
+@pytest.mark.parametrize(("spec", "name"), [(SMALL, "lean"), (SMALL, "arm_swing"), (BIG, "arm_swing"), (BIG, "lean")])
 def test_a_robot_never_seen_falls_uncorrected_and_stands_corrected(generated, spec, name):
     body = generated[spec]
     scenario = make_scenario(name, body, **({"hold_s": 1.0} if name == "lean" else {"duration": 3.0}))

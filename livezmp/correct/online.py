@@ -36,7 +36,7 @@ from livezmp.balance.pipeline import FrameResult
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.correct.limits import CorrectionLimits, zmp_target
 from livezmp.correct.root_motion import RootMover, hip_axes
-from livezmp.model.body import BodyModel
+from livezmp.model.body import BodyModel, foot_soles
 
 
 @dataclass
@@ -48,6 +48,23 @@ class OnlineCorrection:
     delta: np.ndarray
     offsets: np.ndarray
     limited: bool
+
+
+TRUNK_SIZE_M = 0.3  # CoM height up to which the trunk acceleration limit holds as given (mini 0.28 m, OP3 0.26 m)
+
+
+def size_scaled_accel(body: BodyModel, accel_deg_s2: float) -> float:
+    """The root rotation's angular acceleration limit (deg/s^2) for ``body``: the ZMP swing a trunk acceleration
+    α causes is about I α / (m g), and I / m grows as the square of the robot's size, so a robot whose CoM
+    stands higher than `TRUNK_SIZE_M` above its soles (zero posture) gets ``accel_deg_s2`` × (TRUNK_SIZE_M /
+    h)^2 (measured: a 1 m humanoid of 2 kg fell corrected in its arm swing at 100 deg/s^2, stood at 25)."""
+    model, data = body.model, body.model.createData()
+    q = np.zeros(model.nq)
+    pin.centerOfMass(model, data, q)
+    pin.framesForwardKinematics(model, data, q)
+    ground = min(float(sole[:, 2].min()) for sole in foot_soles(body, data).values())
+    height = float(data.com[0][2]) - ground
+    return accel_deg_s2 * min(1.0, (TRUNK_SIZE_M / height) ** 2) if height > 0 else accel_deg_s2
 
 
 class OnlineCorrector:

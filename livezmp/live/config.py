@@ -48,7 +48,9 @@ class LoopConfig:
     ``estimator_*``: window, lag (s) and cutoff (Hz) of the estimator;
     ``trunk_accel_deg_s2`` and ``correction_limits``: the corrector's limits on the root
     rotation (its angular acceleration pushes the ZMP the other way first, so it is kept
-    gentle); ``status_every_s``: period of the status callback.
+    gentle; the acceleration limit is for a robot whose CoM stands at most 0.3 m high, scaled
+    down for taller ones: :func:`livezmp.correct.online.size_scaled_accel`);
+    ``status_every_s``: period of the status callback.
     ``contacts``: where the feet's contacts come from: ``"sensors"`` (the link's foot
     sensors: a foot is down when its cells carry more than ``contact_fraction`` of the
     body's weight; a frame without a reading falls back to kinematic detection, counted

@@ -62,7 +62,7 @@ import numpy as np
 
 from livezmp.balance.foot_sensors import CopLocator, CopVsZmp, contact_force, sensor_contacts
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
-from livezmp.correct.online import OnlineCorrector
+from livezmp.correct.online import OnlineCorrector, size_scaled_accel
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.ground_tilt import GroundTilt
@@ -183,7 +183,8 @@ class LiveLoop:
         cfg = self.config
         every = self.correct_every
         self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
-                                         max_accel_deg_s2=cfg.trunk_accel_deg_s2) if cfg.correct else None
+                                         max_accel_deg_s2=size_scaled_accel(self.body, cfg.trunk_accel_deg_s2)
+                                         ) if cfg.correct else None
         self.limiter.reset()
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))

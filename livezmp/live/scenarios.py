@@ -122,20 +122,26 @@ def _limb(model: pin.Model, frame: int, names: set[str]) -> list[str]:
     return out[::-1]
 
 
+def leg_chains(body: BodyModel) -> dict[str, list[str]]:
+    """Foot side -> the actuated joints from the trunk down to that foot that the other foot's chain does not
+    share (a waist above both legs is the trunk's), top first."""
+    names = set(body.joint_names)
+    chains = {side: _limb(body.model, foot.frame_id, names) for side, foot in body.feet.items()}
+    shared = set.intersection(*(set(c) for c in chains.values())) if chains else set()
+    return {side: [n for n in chain if n not in shared] for side, chain in chains.items()}
+
+
 def joint_roles(body: BodyModel) -> dict[str, str]:
     """Role (``l_hip_pitch``, ``r_knee``, ``l_sho_roll``...) -> joint name, from the kinematic tree
     (module docstring). Roles not found are left out (`Poser.index` names what is missing)."""
-    model, names = body.model, set(body.joint_names)
     axis, origin = joint_axes(body)
 
     def about(joint: str, k: int) -> bool:
         return abs(float(axis[joint][k])) >= ALIGNED
 
     roles: dict[str, str] = {}
-    legs: set[str] = set()
-    for side, foot in body.feet.items():
-        chain = _limb(model, foot.frame_id, names)
-        legs |= set(chain)
+    chains = leg_chains(body)
+    for side, chain in chains.items():
         pitch = [n for n in chain if about(n, Y)]
         if len(pitch) >= 3:
             hip, ankle = pitch[0], pitch[-1]
@@ -145,6 +151,30 @@ def joint_roles(body: BodyModel) -> dict[str, str]:
         roll = [n for n in chain if about(n, X)]
         if len(roll) >= 2:
             roles.update({f"{side[0]}_hip_roll": roll[0], f"{side[0]}_ank_roll": roll[-1]})
+    for s, arm in arms(body, set().union(*chains.values())).items():
+        roles.update({f"{s}_{role}": joint for role, joint in
+                      (("sho_pitch", arm.pitch), ("sho_roll", arm.roll), ("el", arm.elbow)) if joint})
+    return roles
+
+
+@dataclass(frozen=True)
+class Arm:
+    """An arm found in the tree: its shoulder pitch and roll joints and its elbow (None where it has none), and
+    ``upper``: the world point (zero posture, m) the upper arm reaches from the shoulder (the elbow, else the
+    centre of mass of the arm's last link)."""
+
+    pitch: str | None
+    roll: str | None
+    elbow: str | None
+    upper: np.ndarray
+
+
+def arms(body: BodyModel, legs: set[str]) -> dict[str, Arm]:
+    """Side ("l", "r") -> its `Arm`: the chain from the trunk to a leaf link on that side that no leg and no
+    other side shares, with a joint about the lateral (pitch) or forward (roll) axis; its elbow the first joint
+    after the shoulder's whose origin lies a fifth of the way or more from the shoulder to the hand."""
+    model, names = body.model, set(body.joint_names)
+    axis, origin = joint_axes(body)
     children = np.zeros(model.njoints, dtype=int)
     for j in range(1, model.njoints):
         children[model.parents[j]] += 1
@@ -160,24 +190,25 @@ def joint_roles(body: BodyModel) -> dict[str, str]:
             continue
         y = float(data.oMf[f].translation[Y])
         sign = 0 if abs(y) < 0.01 else int(np.sign(y))
-        chains.append((sign, chain))
+        j = model.frames[f].parentJoint
+        chains.append((sign, chain, data.oMi[j].act(model.inertias[j].lever)))
         for n in chain:
             side_of.setdefault(n, set()).add(sign)
-    arms = {}
-    for sign, chain in chains:
+    found: dict[str, Arm] = {}
+    for sign, chain, hand in chains:
+        side = {1: "l", -1: "r"}.get(sign)
         own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
-        pitch = next((n for n in own if about(n, Y)), None)
-        roll = next((n for n in own if about(n, X)), None)
-        if not sign or pitch is None or roll is None or sign in arms:
+        pitch = next((n for n in own if abs(float(axis[n][Y])) >= ALIGNED), None)
+        roll = next((n for n in own if abs(float(axis[n][X])) >= ALIGNED), None)
+        if side is None or side in found or (pitch is None and roll is None):
             continue
-        after = max(own.index(pitch), own.index(roll)) + 1
-        if after < len(own):
-            arms[sign] = (pitch, roll, own[after])
-    for sign, s in ((1, "l"), (-1, "r")):
-        if sign in arms:
-            pitch, roll, elbow = arms[sign]
-            roles.update({f"{s}_sho_pitch": pitch, f"{s}_sho_roll": roll, f"{s}_el": elbow})
-    return roles
+        shoulder = [n for n in (pitch, roll) if n]
+        start = origin[shoulder[-1] if roll is None else roll]
+        reach = float(np.linalg.norm(hand - start))
+        after = own[max(own.index(n) for n in shoulder) + 1:]
+        elbow = next((n for n in after if np.linalg.norm(origin[n] - start) >= 0.2 * reach), None)
+        found[side] = Arm(pitch, roll, elbow, origin[elbow] if elbow else hand)
+    return found
 
 
 class Poser:
@@ -188,13 +219,16 @@ class Poser:
         self.names = list(body.joint_names)
         self.axis, self.origin = joint_axes(body)
         self.roles = joint_roles(body)
+        self.arms = arms(body, set().union(*leg_chains(body).values()))
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
         if role not in self.roles:
-            raise InputError(f"{self.body.model.name}: found no {role} in its kinematic tree (scenarios need two "
-                             "legs of hip, knee and ankle pitch joints and two arms with shoulder pitch and roll "
-                             "joints and an elbow)")
+            need = ("an arm on each side: a chain from the trunk to a hand with a shoulder joint about the lateral "
+                    "axis" if "sho" in role or role.endswith("_el") else "two legs: hip, knee and ankle joints "
+                    "about the lateral axis, and hip and ankle joints about the forward axis")
+            raise InputError(f"{self.body.model.name}: found no {role} in its kinematic tree (this scenario needs "
+                             f"{need})")
         return self.names.index(self.roles[role])
 
     def unit(self, role: str, world_axis: int) -> np.ndarray:
@@ -223,14 +257,16 @@ class Poser:
         return -angle * (self.unit("l_ank_pitch", Y) + self.unit("r_ank_pitch", Y))
 
     def arms_down(self, out_angle: float) -> np.ndarray:
-        """Shoulder rolls that make each upper arm hang down, ``out_angle`` rad away from the body."""
+        """Shoulder rolls that make each upper arm hang down, ``out_angle`` rad away from the body
+        (arms without a shoulder roll, and a robot without arms, stay as they are)."""
         out = np.zeros(len(self.names))
         for s, lateral in (("l", 1.0), ("r", -1.0)):
-            i = self.index(f"{s}_sho_roll")
-            self.index(f"{s}_el")
-            roll, elbow = self.roles[f"{s}_sho_roll"], self.roles[f"{s}_el"]
-            a = self.axis[roll]
-            d = self.origin[elbow] - self.origin[roll]  # upper arm in the zero posture
+            arm = self.arms.get(s)
+            if arm is None or arm.roll is None:
+                continue
+            i = self.names.index(arm.roll)
+            a = self.axis[arm.roll]
+            d = arm.upper - self.origin[arm.roll]  # upper arm in the zero posture
             target = np.array([0.0, lateral * np.sin(out_angle), -np.cos(out_angle)])
             d, target = d - (d @ a) * a, target - (target @ a) * a
             out[i] = np.arctan2(a @ np.cross(d, target), d @ target)
@@ -287,14 +323,31 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
     return float(brentq(excess, 0.0, 1.0, xtol=1e-9))
 
 
-def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: float = 2.0, hold_s: float = 3.0,
-         flexion: float = 0.3) -> Scenario:
-    """Lean forward at the ankles, slowly (over ``ramp_s``), until the static CoM is
-    ``beyond`` (m) past the toes; hold it ``hold_s``; lean back. Uncorrected, the robot
+LEAN_LEAD = 0.0025  # m: the most the lean's own acceleration may move the ZMP ahead of the CoM
+LEAN_RAMP_S = 2.0  # s: the shortest lean (livezmp_mini's and the OP3's: their leads are 2.3 and 2.5 mm)
+
+
+def lean_ramp(body: BodyModel, q0: np.ndarray, dq: np.ndarray) -> float:
+    """The time (s) to lean from ``q0`` to ``q0 + dq`` (half a cosine) so that its acceleration moves the ZMP at
+    most `LEAN_LEAD` ahead of the CoM: a CoM travel D at height h over T peaks at D pi^2 / (2 T^2) m/s^2, which
+    moves the ZMP h / g times that (linear inverted pendulum); at least `LEAN_RAMP_S`. A taller robot's longer
+    feet need a longer lean, which a fixed time would make a shove that topples it before its CoM is past its
+    toes, corrected or not."""
+    c0, c1 = standing_support(body, q0)[0], standing_support(body, q0 + dq)[0]
+    travel, height = float(np.linalg.norm(c1[:2] - c0[:2])), float(c0[Z])
+    return max(LEAN_RAMP_S, math.pi * math.sqrt(travel * height / (2 * G * LEAN_LEAD)))
+
+
+def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: float | None = None,
+         hold_s: float = 3.0, flexion: float = 0.3) -> Scenario:
+    """Lean forward at the ankles, slowly (over ``ramp_s``; None: `lean_ramp`), until the static CoM
+    is ``beyond`` (m) past the toes; hold it ``hold_s``; lean back. Uncorrected, the robot
     falls during the hold; a few degrees of root rotation keep the ZMP inside."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.ankles_lean(lean_angle(body, beyond, flexion))
+    if ramp_s is None:
+        ramp_s = lean_ramp(body, q0, dq)
     up_end = settle_s + ramp_s + hold_s
 
     def goals(t: float) -> np.ndarray:
@@ -313,12 +366,16 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     CoM stays inside the feet; the ZMP swings with the arms' acceleration, past the toes
     on every swing. ``frequency=None``: the frequency whose swing puts this robot's ZMP
     ``beyond`` (m) past its toes at the peak (`swing_frequency`: from its masses and
-    inertias), so robots of any size are asked the same of their balance."""
+    inertias), so robots of any size are asked the same of their balance. The lean stays back from the toes
+    by more than the arms' weight alone moves the CoM at the swing's ends (`ARMS_CLEAR` more): a big
+    robot's arms held forward would otherwise put it past its toes at any pace."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
-    if toe_margin is not None:
-        q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
+    if toe_margin is not None:
+        reach = max(front_margin(body, q0) - front_margin(body, q0 + sign * amplitude * dq) for sign in (1, -1))
+        toe_margin = max(toe_margin, reach + ARMS_CLEAR)
+        q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     if frequency is None:
         frequency = swing_frequency(body, q0, dq, amplitude, beyond)
     w = 2 * np.pi * frequency
@@ -327,6 +384,9 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
         return q0 + amplitude * smooth_step(t / 0.5) * np.sin(w * max(t, 0.0)) * dq
 
     return Scenario("arm_swing", goals, duration)
+
+
+ARMS_CLEAR = 0.0004  # m: the static CoM at the swing's ends stays this far inside the toes (livezmp_mini: 0.8 mm)
 
 
 def swing_zmp_beyond_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float,
@@ -398,7 +458,7 @@ def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 
     """Stand (leaning forward at the ankles until the static CoM is ``toe_margin`` (m) inside
     the toes; None: upright), and get pushed: a horizontal ``force`` (N, world x, y) for
     ``duration`` from ``at``, growing over ``rise_s`` (see `Push`), at ``height`` (m above the
-    ground; default the base link's height). ``force=None``: the forward push that moves this
+    ground; default the hips' height, `hip_height`). ``force=None``: the forward push that moves this
     robot's ZMP ``beyond`` (m) past its toes: a push F at height h moves the ZMP by h F / (m g)
     (m the robot's mass), so F = (toe distance + beyond) m g / h, whatever the robot's size."""
     poser = Poser(body)
@@ -406,7 +466,7 @@ def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 
     if toe_margin is not None:
         q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     if height is None:
-        height = float(BasePlacer(body).update(q0)[2])
+        height = hip_height(body, q0)
     if force is None:
         force = ((front_margin(body, q0) + beyond) * body.total_mass * G / height, 0.0)
     return Scenario("push", lambda t: q0.copy(), total, (Push(tuple(force), height, at, duration, rise_s),))
@@ -447,6 +507,15 @@ def step_edge(body: BodyModel, degrees: float = 8.0, support: float = 0.6, ampli
         return q0 + amplitude * smooth_step(t) * np.sin(w * max(t, 0.0)) * dq
 
     return Scenario("edge", goals, duration, edge=("left", support))
+
+
+def hip_height(body: BodyModel, joints: np.ndarray) -> float:
+    """Mean height (m above the soles' ground) of the two legs' top joints, standing on both feet in ``joints``:
+    where a hand pushes the trunk, wherever the URDF puts its root link's frame."""
+    q = np.concatenate([BasePlacer(body).update(joints), joints])
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, q)
+    return float(np.mean([data.oMf[f].translation[Z] for f in body.correction.hips.values()]))
 
 
 def front_margin(body: BodyModel, joints: np.ndarray) -> float:

@@ -192,12 +192,12 @@ def find_robot_config(urdf: str | Path, robot_name: str) -> RobotConfig:
     """The config beside the URDF, else the built-in one for ``robot_name``, else defaults.
 
     A robot name that is not a plain file name (letters, digits, ``_ . -``; e.g. one with
-    ``/`` or ``..``) is refused rather than looked up."""
+    a space, ``/`` or ``..``) names no built-in config: it is not looked up (defaults)."""
     beside = Path(urdf).with_suffix(".toml")
     if beside.is_file():
         return load_robot_config(beside)
     if not NAME_RE.fullmatch(robot_name) or robot_name.startswith("."):
-        raise InputError(f"{urdf}: <robot name={robot_name!r}>: a robot name is letters, digits, '_', '.', '-'"[:300])
+        return RobotConfig()
     builtin = resources.files("livezmp") / "data" / "robots" / f"{robot_name}.toml"
     if builtin.is_file():
         return _parse(tomllib.loads(builtin.read_text(encoding="utf-8")), f"livezmp:{robot_name}.toml")

@@ -2,9 +2,13 @@
 
 Masses and inertias come from the URDF's ``<inertial>`` tags. Feet and soles come from
 the robot config (:mod:`livezmp.model.robot_config`); without one, the feet are the two
-lowest leaf links in the zero pose (left = +y) and each sole a box under the link's
-centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin,
-by default 0.5 × / 0.28 × / 0.12 × the hip-to-foot height.
+lowest leaf links in the zero pose (left = +y), level and side by side at the ends of two
+legs, and each sole a level box under the link's centre of mass: ``sole_length`` ×
+``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × / 0.28 × / 0.12 × the
+hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
+chain does not share (a waist above the legs is the trunk's). Continuous joints, and
+revolute ones without a ``<limit>``, are revolute joints without bounds; mimic joints
+are independent joints; a link named as a joint is renamed ``<name>_link``.
 """
 
 from __future__ import annotations
@@ -87,11 +91,61 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
                          "kg m^2 break the triangle inequality (no rigid body has them)")
 
 
-def _check_joints(root: ET.Element, path: Path) -> None:
+def _check_tree(root: ET.Element, path: Path) -> None:
+    """Names unique, every joint between two existing links, every link but one (the root) the child of
+    exactly one joint, and no loop: a tree, as a URDF must be."""
+    links = [link.get("name") for link in root.findall("link")]
+    joints = [j.get("name") for j in root.findall("joint")]
+    for what, names in (("link", links), ("joint", joints)):
+        seen = set()
+        for name in names:
+            if not name:
+                raise InputError(f"{path}: a <{what}> without a name")
+            if name in seen:
+                raise InputError(f"{path}: {what} name {name!r} is used twice")
+            seen.add(name)
+    parent_of: dict[str, str] = {}
+    link_set = set(links)
+    for j in root.findall("joint"):
+        ends = []
+        for end in ("parent", "child"):
+            el = j.find(end)
+            link = el.get("link") if el is not None else None
+            if link not in link_set:
+                raise InputError(f"{path}: joint {j.get('name')!r} <{end}>: no link {link!r} in the file")
+            ends.append(link)
+        if ends[1] in parent_of:
+            raise InputError(f"{path}: link {ends[1]!r} is the child of two joints (a kinematic loop; a URDF is a "
+                             "tree)")
+        parent_of[ends[1]] = ends[0]
+    for link in links:
+        seen, up = set(), link
+        while up in parent_of:
+            if up in seen:
+                raise InputError(f"{path}: link {up!r} is its own ancestor (a kinematic loop; a URDF is a tree)")
+            seen.add(up)
+            up = parent_of[up]
+    roots = [name for name in links if name not in parent_of]
+    if len(roots) != 1:
+        raise InputError(f"{path}: {len(roots)} root links ({', '.join(map(repr, roots[:4]))}); a URDF is one "
+                         "tree (give every link but one a parent joint)")
+
+
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+UNBOUNDED = '<limit lower="-1" upper="1" effort="0" velocity="0"/>'  # placeholder, made ±inf once built
+
+
+def _check_joints(root: ET.Element, path: Path) -> list[str]:
+    """Check every joint; turn continuous joints, and revolute ones without a <limit>, into revolute joints
+    without bounds (one angle each, as a servo reports it; the URDF parser needs a limit on a revolute joint);
+    rename links named as a joint (Pinocchio needs frame names unique). Returns the unbounded joints' names."""
+    _check_tree(root, path)
+    unbounded = []
+    joint_names = {j.get("name") for j in root.findall("joint")}
     for j in root.findall("joint"):
         where = f"{path}: joint {j.get('name')!r}"
-        if j.get("type") not in ("revolute", "prismatic", "fixed"):
-            raise InputError(f"{where}: type {j.get('type')!r} not supported (revolute, prismatic, fixed)")
+        if j.get("type") not in JOINT_TYPES:
+            raise InputError(f"{where}: type {j.get('type')!r} not supported ({', '.join(JOINT_TYPES)})")
         origin = j.find("origin")
         if origin is not None:
             for attr in ("xyz", "rpy"):
@@ -100,6 +154,24 @@ def _check_joints(root: ET.Element, path: Path) -> None:
         axis = j.find("axis")
         if axis is not None and not np.any(_numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
             raise InputError(f"{where} <axis>: zero vector")
+        if j.get("type") == "continuous" or (j.get("type") == "revolute" and j.find("limit") is None):
+            j.set("type", "revolute")
+            for limit in j.findall("limit"):
+                j.remove(limit)
+            j.append(ET.fromstring(UNBOUNDED))
+            unbounded.append(j.get("name"))
+    links = {link.get("name") for link in root.findall("link")}
+    for link in root.findall("link"):
+        name = link.get("name")
+        if name in joint_names:
+            new = next(f"{name}_link{k or ''}" for k in range(len(links) + 1)
+                       if f"{name}_link{k or ''}" not in links | joint_names)
+            links.add(new)
+            link.set("name", new)
+            for ref in root.iter():
+                if ref.tag in ("parent", "child") and ref.get("link") == name:
+                    ref.set("link", new)
+    return unbounded
 
 
 @contextlib.contextmanager
@@ -132,13 +204,17 @@ def _load_fixed(path: Path) -> pin.Model:
         raise InputError(f"{path}: URDF has no <inertial> on any link; masses are needed for the ZMP")
     for link in links:
         _check_inertial(link, path)
-    _check_joints(root, path)
+    unbounded = _check_joints(root, path)
     try:
         with _quiet_stderr():
-            return pin.buildModelFromXML(text)
+            model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
     except (RuntimeError, ValueError) as e:
         first = str(e).splitlines()[0] if str(e).strip() else type(e).__name__
         raise InputError(f"{path}: Pinocchio cannot load it: {first}") from None
+    for name in unbounded:
+        k = model.joints[model.getJointId(name)].idx_q
+        model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
+    return model
 
 
 def _with_base(fixed: pin.Model) -> pin.Model:
@@ -162,8 +238,21 @@ def _chain(model: pin.Model, frame_id: int) -> list[int]:
     return out[::-1]
 
 
+def _legs(model: pin.Model, feet: dict[str, int]) -> dict[str, list[int]]:
+    """Each foot's leg: the actuated joints from the trunk to it that the other foot's chain does not share
+    (a waist above both legs is the trunk's, not a leg's), top first."""
+    chains = {side: _chain(model, f) for side, f in feet.items()}
+    shared = set.intersection(*(set(c) for c in chains.values())) if len(chains) > 1 else set()
+    return {side: [j for j in chain if j not in shared] for side, chain in chains.items()}
+
+
+FEET_LEVEL = 0.05  # a pair of feet differ in height by at most this share of the legs' length in the zero pose
+
+
 def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int]:
-    """The two lowest leaf links in the zero pose: left has the larger y."""
+    """The two lowest leaf links in the zero pose: left has the larger y. They must be level (`FEET_LEVEL`),
+    side by side and each at the end of its own leg: else this is not a two-legged robot standing in its
+    zero pose (a one-legged robot's lowest leaves are its foot and a hand)."""
     children = {j: 0 for j in range(model.njoints)}
     for j in range(1, model.njoints):
         children[model.parents[j]] += 1
@@ -176,7 +265,27 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
     a, b = leaves[0], leaves[1]
     if data.oMf[a].translation[1] < data.oMf[b].translation[1]:
         a, b = b, a
+    pa, pb = data.oMf[a].translation, data.oMf[b].translation
+    legs = _legs(model, {"left": a, "right": b})
+    top = min((data.oMi[c[0]].translation[2] for c in legs.values() if c), default=max(pa[2], pb[2]))
+    length = top - min(pa[2], pb[2])
+    names = f"{model.frames[a].name!r} and {model.frames[b].name!r}"
+    if not all(legs.values()) or length <= 0 or abs(pa[2] - pb[2]) > FEET_LEVEL * length:
+        raise InputError(f"{path}: no two feet: its lowest leaf links {names} are not level at the ends of two legs "
+                         "in the zero pose; give a robot config with [feet]")
     return {"left": a, "right": b}
+
+
+def _level_frame(model: pin.Model, fid: int, rotation: np.ndarray) -> int:
+    """A frame at the foot link's origin, on its joint, level in the zero pose (z up, x forward: the axes soles
+    and the base placement use): the link's own frame when it already is, else a new ``<link>_level`` frame
+    (a URDF may turn a leg's link frames, e.g. so a pitch axis is local z). ``rotation``: the link frame's
+    world rotation in the zero pose."""
+    if np.allclose(rotation, np.eye(3), atol=1e-9):
+        return fid
+    frame = model.frames[fid]
+    level = frame.placement * pin.SE3(rotation.T, np.zeros(3))
+    return model.addFrame(pin.Frame(f"{frame.name}_level", frame.parentJoint, level, pin.FrameType.OP_FRAME))
 
 
 def _box(length: float, width: float, center: np.ndarray) -> np.ndarray:
@@ -201,34 +310,43 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
         feet_frames[side] = model.getFrameId(f["link"])
     if len(feet_frames) < 2:
         feet_frames = {**_default_feet(model, data, path), **feet_frames}
-    hip_h = float(np.mean([data.oMi[_chain(model, f)[0]].translation[2] - data.oMf[f].translation[2]
-                           for f in feet_frames.values()]))
+    leg_joints = _legs(model, feet_frames)
+    for side, chain in leg_joints.items():
+        if not chain:
+            raise InputError(f"{path}: foot {model.frames[feet_frames[side]].name!r} has no joint of its own "
+                             "between it and the trunk (not a leg)")
+    hip_h = float(np.mean([data.oMi[leg_joints[s][0]].translation[2] - data.oMf[f].translation[2]
+                           for s, f in feet_frames.items()]))
+    turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
+    feet_frames = {side: _level_frame(model, fid, turns[side]) for side, fid in feet_frames.items()}
     feet = {}
     for side, fid in feet_frames.items():
         spec = cfg.feet.get(side, {})
+        turn = turns[side]  # a config's sole and box centre are in the link's frame: into the level one
         if "sole" in spec:
-            sole = spec["sole"]
+            sole = np.asarray(spec["sole"], dtype=float) @ turn.T
         else:
             box = spec.get("box", {})
             com = model.inertias[model.frames[fid].parentJoint].lever
             placement = model.frames[fid].placement
             com_in_link = placement.actInv(com) if np.any(com) else np.zeros(3)
             drop = opts.sole_drop if opts.sole_drop is not None else 0.12 * hip_h
-            center = np.asarray(box.get("center", [com_in_link[0], com_in_link[1], -drop]), dtype=float)
+            center = (turn @ np.asarray(box["center"], dtype=float) if "center" in box
+                      else np.array([com_in_link[0], com_in_link[1], -drop]))
             sole = _box(box.get("length", opts.sole_length or 0.5 * hip_h),
                         box.get("width", opts.sole_width or 0.28 * hip_h), center)
         feet[side] = Foot(side, fid, sole_local=sole)
     names = [model.names[j] for j in range(1, model.njoints)]
     jid = {n: model.getJointId(n) for n in names}
     legs = {}
-    for side, fid in feet_frames.items():
-        chain = [model.names[j] for j in _chain(model, fid)]
+    for side in feet_frames:
+        chain = [model.names[j] for j in leg_joints[side]]
         wanted = cfg.legs.get(side, chain)
         for n in wanted:
             if n not in jid:
                 raise InputError(f"{cfg.source}: correction leg joint {n!r} is not in {path}")
         legs[side] = [model.joints[jid[n]].idx_q for n in wanted]
-    hips = {s: model.getFrameId(model.names[_chain(model, f)[0]]) for s, f in feet_frames.items()}
+    hips = {s: model.getFrameId(model.names[leg_joints[s][0]], pin.FrameType.JOINT) for s in feet_frames}
     named = {f"{s}_foot": f for s, f in feet_frames.items()}
     return BodyModel(
         kind="urdf", model=model, point_model=point_mass_copy(model), channel_names=names,
