@@ -4,8 +4,9 @@ labels, a short and a long marker gap), then `livezmp analyze` on it; and the sh
 
 from __future__ import annotations
 
+import functools
 import json
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import ezc3d
 import numpy as np
@@ -115,15 +116,17 @@ def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = 
                     "PROCESSING:Bodymass", 1.75)
 
 
+@functools.lru_cache(maxsize=4)  # variants of one lab share it (the arrays are not modified)
 def _true_wrench(body: MarkerBodyOptions, full_body: bool = False, cluster: bool = False,
-                 trunk: bool | str = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 trunk: bool | str = False, analog: float = ANALOG,
+                 seconds: float = SECONDS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
-    marker body's own rigid-body dynamics driven by the motion sampled at 10 kHz (central differences)."""
-    fine = 10
-    t = np.arange(int(SECONDS * ANALOG) * fine + 2 * fine) / (ANALOG * fine) - 1.0 / ANALOG
-    take = body_from_markers(_trial(t, ANALOG * fine, full_body, cluster, trunk), replace(body, total_mass=MASS))
+    marker body's own rigid-body dynamics driven by the motion sampled at >= 10 kHz (central differences)."""
+    fine = int(np.ceil(10_000 / analog))
+    t = np.arange(int(seconds * analog) * fine + 2 * fine) / (analog * fine) - 1.0 / analog
+    take = body_from_markers(_trial(t, analog * fine, full_body, cluster, trunk), replace(body, total_mass=MASS))
     q = take.frames
-    h = 1.0 / (ANALOG * fine)
+    h = 1.0 / (analog * fine)
     model, data = take.body.model, take.body.model.createData()
     force, moment = [], []
     for k in range(fine, len(t) - fine, fine):
@@ -133,7 +136,7 @@ def _true_wrench(body: MarkerBodyOptions, full_body: bool = False, cluster: bool
         f = data.dhg.linear - MASS * model.gravity.linear
         force.append(f)
         moment.append(data.dhg.angular + np.cross(data.com[0], f))
-    force, moment = np.array(force)[: int(SECONDS * ANALOG)], np.array(moment)[: int(SECONDS * ANALOG)]
+    force, moment = np.array(force)[: int(seconds * analog)], np.array(moment)[: int(seconds * analog)]
     cop = np.column_stack([-moment[:, 1] / force[:, 2], moment[:, 0] / force[:, 2]])
     return force, moment, cop
 
@@ -145,52 +148,144 @@ def _add_int(c3d, group: str, name: str, value) -> None:
     c3d["parameters"][group][name]["value"] = v.astype(int)
 
 
+IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+PER_METRE = {"mm": 1000.0, "cm": 100.0, "m": 1.0}
+KISTLER_AB = (0.21, 0.12)  # m: a Kistler plate's half sensor spacings along its x and y (ORIGIN(1), ORIGIN(2))
+
+
+@dataclass(frozen=True)
+class Lab:
+    """How a lab writes the synthetic trial; the defaults are the reference (z up, mm, 100 / 1000 Hz, TYPE-2
+    plates whose axes are the lab's).
+
+    ``rot`` (3, 3) and ``origin`` (3,) m place the reference in the lab (p_lab = rot @ p_ref + origin): a y-up lab,
+    walking along -x, a far origin; ``units``
+    POINT:UNITS; ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels) or 4 (CAL_MATRIX);
+    ``spec_plates``: the plates as the C3D spec has them (z axis down, corner 1 in the plate's +x +y quadrant, then
+    -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
+    negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention);
+    ``plate_turn`` deg the plates turned in the floor; ``scale`` (ANALOG:SCALE, OFFSET, GEN_SCALE) the channels
+    are stored with; ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and height."""
+
+    rot: tuple = IDENTITY
+    origin: tuple = (0.0, 0.0, 0.0)
+    units: str = "mm"
+    rate: int = RATE
+    analog: int = ANALOG
+    seconds: float = SECONDS
+    plate_type: int = 2
+    spec_plates: bool = False
+    origin_sign: float = 1.0
+    plate_turn: float = 0.0
+    scale: tuple = (1.0, 0, 1.0)
+    prefix: str = "Sub01:"
+    mass: bool = True
+
+
+def _plate_axes(lab: Lab) -> np.ndarray:
+    """(3, 3) the plates' axes (columns x, y, z) in reference coordinates."""
+    c, s = np.cos(np.radians(lab.plate_turn)), np.sin(np.radians(lab.plate_turn))
+    ux, uy = np.array([c, s, 0.0]), np.array([-s, c, 0.0])
+    return np.column_stack([ux, -uy, [0.0, 0.0, -1.0]] if lab.spec_plates else [ux, uy, [0.0, 0.0, 1.0]])
+
+
+def _plate_origin(lab: Lab) -> np.ndarray:
+    """(3,) m: FORCE_PLATFORM:ORIGIN as meant (transducer origin to surface centre, plate axes)."""
+    if lab.plate_type == 3:
+        return np.array([*KISTLER_AB, -0.045])
+    return np.array([0.002, -0.001, -0.04]) if lab.spec_plates else np.zeros(3)
+
+
+CAL = np.eye(6) + 0.02 * np.sin(np.arange(36).reshape(6, 6))  # a TYPE-4 plate's calibration matrix (cross-talk)
+
+
+def _channels(force: np.ndarray, moment: np.ndarray, lab: Lab) -> np.ndarray:
+    """(S, 6 or 8) a plate's channels for force (S, 3) N and moment (S, 3) N·m about its surface centre, both in
+    plate axes: forces and moments (N·POINT:UNITS) about the transducer origin, through the inverse CAL_MATRIX for
+    TYPE 4; TYPE 3: Kistler's eight forces (fx12 fx34 fy14 fy23 fz1..fz4, sensors k at (±a, ±b) in the corners'
+    quadrant order), which give back the wrench through the C3D spec's TYPE-3 formulae."""
+    o = _plate_origin(lab)
+    if lab.plate_type == 3:
+        (a, b), (fx, fy, fz) = KISTLER_AB, force.T
+        mx, my, mz = (moment - np.cross(force, [0.0, 0.0, o[2]])).T
+        return np.column_stack([fx / 2 - mz / (4 * b), fx / 2 + mz / (4 * b),
+                                fy / 2 + mz / (4 * a), fy / 2 - mz / (4 * a),
+                                fz / 4 + mx / (4 * b) - my / (4 * a), fz / 4 + mx / (4 * b) + my / (4 * a),
+                                fz / 4 - mx / (4 * b) + my / (4 * a), fz / 4 - mx / (4 * b) - my / (4 * a)])
+    w = np.hstack([force, PER_METRE[lab.units] * (moment - np.cross(force, o))])
+    return w @ np.linalg.inv(CAL).T if lab.plate_type == 4 else w
+
+
+def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenches: list) -> None:
+    """FORCE_PLATFORM and ANALOG for ``wrenches`` [(force (S, 3) N, moment (S, 3) N·m about the plate's surface
+    centre)] in reference axes, one per plate of ``plates`` (centres, m, reference frame; 0.5 x 0.3 m)."""
+    rot, axes, per_m = np.asarray(lab.rot), _plate_axes(lab), PER_METRE[lab.units]
+    n = 8 if lab.plate_type == 3 else 6
+    channels = np.hstack([_channels(f @ axes, m @ axes, lab) for f, m in wrenches])
+    scale, offset, gen = lab.scale
+    names = ("Fx12", "Fx34", "Fy14", "Fy23", "Fz1", "Fz2", "Fz3", "Fz4") if n == 8 else \
+        ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+    c3d["parameters"]["ANALOG"]["RATE"]["value"] = [lab.analog]
+    c3d["parameters"]["ANALOG"]["LABELS"]["value"] = [f"{c}{k + 1}" for k in range(len(plates)) for c in names]
+    c3d["data"]["analogs"] = channels.T[None]
+    if (scale, gen) != (1.0, 1.0):
+        c3d.add_parameter("ANALOG", "SCALE", [scale] * channels.shape[1])
+        c3d["parameters"]["ANALOG"]["GEN_SCALE"]["value"] = [gen]
+    _add_int(c3d, "FORCE_PLATFORM", "USED", [len(plates)])
+    _add_int(c3d, "FORCE_PLATFORM", "TYPE", [lab.plate_type] * len(plates))
+    _add_int(c3d, "FORCE_PLATFORM", "ZERO", [1, 0])
+    quadrants = ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    corners = np.array([[rot @ (np.array([x, y, 0.0]) + axes[:, 0] * 0.25 * sx + axes[:, 1] * 0.15 * sy)
+                         + lab.origin for sx, sy in quadrants] for x, y in plates.values()])
+    c3d.add_parameter("FORCE_PLATFORM", "CORNERS", per_m * corners.transpose(2, 1, 0))
+    origin = np.tile(lab.origin_sign * _plate_origin(lab) * per_m, (len(plates), 1))
+    c3d.add_parameter("FORCE_PLATFORM", "ORIGIN", origin.T)
+    _add_int(c3d, "FORCE_PLATFORM", "CHANNEL", np.arange(1, n * len(plates) + 1).reshape(len(plates), n).T)
+    if lab.plate_type == 4:
+        c3d.add_parameter("FORCE_PLATFORM", "CAL_MATRIX", np.repeat(CAL[:, :, None], len(plates), axis=2))
+
+
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
-                  cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool | str = False) -> np.ndarray:
-    """The synthetic trial as a C3D at ``path``, its plates ``delay_samples`` analog samples late; returns the
-    true CoP (S, 2) m at the analog rate. ``cluster``: the cluster set (its body from ``body``'s map);
-    ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the second half."""
-    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk)
+                  cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool | str = False,
+                  lab: Lab | None = None) -> np.ndarray:
+    """The synthetic trial as a C3D at ``path``, written as ``lab`` does, its plates ``delay_samples`` analog samples
+    late; returns the true CoP (S, 2) m at the analog rate (reference frame). ``cluster``: the cluster set (its
+    body from ``body``'s map); ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the
+    second half."""
+    lab = lab or Lab()
+    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk, lab.analog, lab.seconds)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
-    t = np.arange(int(SECONDS * RATE)) / RATE
+    t = np.arange(int(lab.seconds * lab.rate)) / lab.rate
     m = _markers(t, full_body, cluster, trunk)
-    m["LTH1" if cluster else "LTHI"][150:155] = np.nan  # a short gap (filled)
-    m["RFT1" if cluster else "RTOE"][:30] = np.nan  # a long gap at the start (the take is cut)
+    m["LTH1" if cluster else "LTHI"][round(1.5 * lab.rate):round(1.55 * lab.rate)] = np.nan  # a short gap (filled)
+    m["RFT1" if cluster else "RTOE"][:round(0.3 * lab.rate)] = np.nan  # a long gap at the start (the take is cut)
     c3d = ezc3d.c3d()
-    c3d["parameters"]["POINT"]["RATE"]["value"] = [RATE]
-    c3d["parameters"]["POINT"]["LABELS"]["value"] = [f"Sub01:{k}" for k in m]
-    c3d.add_parameter("POINT", "UNITS", ["mm"])
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [lab.rate]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = [f"{lab.prefix}{k}" for k in m]
+    c3d.add_parameter("POINT", "UNITS", [lab.units])
     pts = np.ones((4, len(m), len(t)))
-    pts[:3] = np.stack(list(m.values()), axis=1).transpose(2, 1, 0) * 1000.0
+    xyz = np.stack(list(m.values()), axis=1) @ np.asarray(lab.rot).T + lab.origin  # (F, P, 3) m, lab frame
+    pts[:3] = xyz.transpose(2, 1, 0) * PER_METRE[lab.units]
     c3d["data"]["points"] = pts
     residual = np.where(np.isnan(pts[0]), -1.0, 1.0)[None]
     c3d["data"]["meta_points"] = {"residuals": residual}
-    c3d["parameters"]["ANALOG"]["RATE"]["value"] = [ANALOG]
-    c3d["parameters"]["ANALOG"]["LABELS"]["value"] = [f"{c}{k + 1}" for k in range(3)
-                                                      for c in ("Fx", "Fy", "Fz", "Mx", "My", "Mz")]
-    share = 0.5 + 0.2 * np.sin(2 * np.pi * 0.25 * np.arange(len(force)) / ANALOG)[:, None]
+    share = 0.5 + 0.2 * np.sin(2 * np.pi * 0.25 * np.arange(len(force)) / lab.analog)[:, None]
     centres = {k: np.array([x, y, 0.0]) for k, (x, y) in plates.items()}
     foot = np.array([0.05, 0.11, 0.0])
     f1 = share * force
     m1 = np.cross(foot - centres["left"], f1)  # the left foot's force acts at its sole centre
     f2 = force - f1
     m2 = moment - (m1 + np.cross(centres["left"], f1)) - np.cross(centres["right"], f2)
-    spare = np.tile(OFFSET * (1.0, 1.0, 1.0, 1000, 1000, 1000) * with_offsets, (len(force), 1))
-    spare[:, 2] += spare_drift_n * np.clip(np.linspace(-1.0, 1.0, len(force)), 0.0, None)
-    channels = [np.hstack([f1, 1000 * m1]), np.hstack([f2, 1000 * m2]), spare]
-    c3d["data"]["analogs"] = np.hstack(channels).T[None]
-    _add_int(c3d, "FORCE_PLATFORM", "USED", [3])
-    _add_int(c3d, "FORCE_PLATFORM", "TYPE", [2, 2, 2])
-    _add_int(c3d, "FORCE_PLATFORM", "ZERO", [1, 0])
-    corners = np.array([[[x + dx, y + dy, 0.0] for dx, dy in ((0.25, 0.15), (-0.25, 0.15), (-0.25, -0.15),
-                                                              (0.25, -0.15))] for x, y in plates.values()])
-    c3d.add_parameter("FORCE_PLATFORM", "CORNERS", 1000 * corners.transpose(2, 1, 0))
-    c3d.add_parameter("FORCE_PLATFORM", "ORIGIN", np.zeros((3, 3)))
-    _add_int(c3d, "FORCE_PLATFORM", "CHANNEL", np.arange(1, 19).reshape(3, 6).T)
-    c3d.add_parameter("PROCESSING", "Bodymass", [MASS])
-    c3d.add_parameter("PROCESSING", "Height", [1750.0])
+    axes = _plate_axes(lab)
+    spare = np.tile(OFFSET * with_offsets, (len(force), 1))  # in the plate's own axes
+    drift = spare_drift_n * np.clip(np.linspace(-1.0, 1.0, len(force)), 0.0, None)
+    spare[:, :3] += np.outer(drift, axes[2])  # along the vertical
+    _write_plates(c3d, lab, plates, [(f1, m1), (f2, m2), (spare[:, :3] @ axes.T, spare[:, 3:] @ axes.T)])
+    if lab.mass:
+        c3d.add_parameter("PROCESSING", "Bodymass", [MASS])
+        c3d.add_parameter("PROCESSING", "Height", [1750.0])
     c3d.write(str(path))
     return cop
 
@@ -239,7 +334,7 @@ def test_offset_removal_gives_the_unoffset_cop_and_without_it_the_cop_moves(lab,
 
     with_offsets, without = cop("on.c3d"), cop("raw.c3d")
     assert np.abs(with_offsets - without).max() < 1e-6
-    monkeypatch.setattr(plates_mod, "unloaded_offset", lambda plate, rate: None)
+    monkeypatch.setattr(plates_mod, "unloaded_offset", lambda plate, rate, up: None)
     assert np.linalg.norm(cop("on.c3d") - without, axis=1).min() > 0.01  # the spare plate's 30 N pulls it
 
 

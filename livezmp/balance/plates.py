@@ -25,6 +25,7 @@ UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not
 PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
+UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass
@@ -52,12 +53,14 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
     return float(np.mean([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates]))
 
 
-def unloaded_offset(plate: PlateRecord, analog_rate: float) -> tuple[np.ndarray, np.ndarray] | None:
+def unloaded_offset(plate: PlateRecord, analog_rate: float,
+                    up: np.ndarray = UP) -> tuple[np.ndarray, np.ndarray] | None:
     """The plate's reading at rest: mean force (3,) N and moment (3,) N·m over its quietest unloaded
     stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| < ``UNLOADED_MAX_N``,
-    the smallest |mean| among those); None when there is none (loaded all along)."""
+    the smallest |mean| among those); None when there is none (loaded all along). ``up`` (3,): the vertical
+    in the file's axes (a y-up lab's is its y: its z force is a horizontal one, quiet under load)."""
     n = max(2, round(QUIET_WINDOW_S * analog_rate))
-    fz = plate.force[:, 2]
+    fz = plate.force @ up
     if len(fz) < n:
         return None
     starts = np.arange(0, len(fz) - n + 1, max(1, n // 4))
@@ -93,12 +96,12 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
     moment = np.zeros_like(force)
     offsets, outlines, aside = [], [], []
     for k, p in enumerate(plates):
-        off = unloaded_offset(p, analog_rate)
+        off = unloaded_offset(p, analog_rate, r[2])
         offsets.append(off)
         f, mom = p.force, p.moment
         if off is not None:
             f, mom = f - off[0], mom - off[1]
-        low = float(lowpass(f[:, 2], analog_rate, cutoff_hz).min()) if len(f) else 0.0
+        low = float(lowpass(f @ r[2], analog_rate, cutoff_hz).min()) if len(f) else 0.0
         if low < -PULL_N:
             aside.append({"plate": k + 1, "min_fz_n": round(low, 1)})
             continue
@@ -176,3 +179,11 @@ def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: 
         n += int((rows & complete).sum())
         used += 1
     return (total / n / G if n else None), used
+
+
+def plate_mass_fit(fz: np.ndarray, com_acc_z: np.ndarray, rows: np.ndarray) -> float | None:
+    """Body mass (kg) that best explains the plates' vertical force ``fz`` (N) by the weight and the
+    kinematic vertical CoM acceleration ``com_acc_z`` (m/s²) over ``rows``: least squares on
+    Fz = m (g + a_z). For takes without a whole gait cycle (standing, one stance); None without rows."""
+    w = G + com_acc_z[rows]
+    return float(fz[rows] @ w / (w @ w)) if rows.any() else None

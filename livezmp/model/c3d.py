@@ -25,7 +25,7 @@ from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 
 _LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-_MOMENT = {"nmm": 1e-3, "n.mm": 1e-3, "nm": 1.0, "n.m": 1.0}
+_FORCE = {"n": 1.0, "n.": 1.0}  # ezc3d names a plate's moment unit FORCE_PLATFORM:UNITS + POINT:UNITS ("Nmm", "Ncm")
 
 
 @dataclass
@@ -61,6 +61,7 @@ class C3dTrial:
     height_m: float | None = None
     widths_m: dict[str, float] = field(default_factory=dict)
     events: list[tuple[str, str, float]] = field(default_factory=list)  # (context, label, time s)
+    units: str = "m"
 
     def marker(self, label: str) -> np.ndarray | None:
         """(F, 3) trajectory of ``label`` (m), or None when the file has no such marker."""
@@ -127,8 +128,10 @@ def _events(groups: dict, source: str) -> list[tuple[str, str, float]]:
 def _plates(c3d: dict, source: str) -> list[PlateRecord]:
     out = []
     for k, p in enumerate(c3d["data"].get("platform", [])):
-        length = _LENGTH.get(str(p["unit_position"]).strip().lower())
-        moment = _MOMENT.get(str(p["unit_moment"]).strip().lower().replace(" ", ""))
+        position = str(p["unit_position"]).strip().lower()
+        length = _LENGTH.get(position)
+        force_unit = str(p["unit_moment"]).strip().lower().replace(" ", "").removesuffix(position)
+        moment = None if length is None or force_unit not in _FORCE else _FORCE[force_unit] * length
         if length is None or moment is None:
             raise InputError(f"{source}: force platform {k + 1}: unknown units "
                              f"{p['unit_position']!r} / {p['unit_moment']!r}")
@@ -262,5 +265,5 @@ def read_c3d(path: str | Path) -> C3dTrial:
         source=str(p), labels=labels, points=pts.transpose(2, 1, 0), rate=rate,
         analog_rate=_first_number(_param(groups, "ANALOG", "RATE")) or rate,
         start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p)), mass_kg=mass, mass_field=where,
-        height_m=height, widths_m=widths, events=_events(groups, str(p)),
+        height_m=height, widths_m=widths, events=_events(groups, str(p)), units=unit,
     )

@@ -561,24 +561,27 @@ def _check_turns(seg: dict, first: int, source: str) -> None:
                              f"{first + k} and {first + k + 1}: its markers give no stable frame there")
 
 
-def sway_basis(origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sway_basis(origin: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The straight-line trend (F, 3) m of a walking take's point ``origin`` (F, 3) (least squares over
     frames: the steady progression), and the walk's fore-aft and lateral unit axes (3,) (the trend's
-    horizontal travel; +x when it travels less than 0.1 m)."""
+    horizontal travel; when it travels less than 0.1 m, ``facing`` (horizontal, internal frame: the way the
+    subject faces, so that the lab's axes do not matter), else +x)."""
     k = np.arange(len(origin), dtype=float)
     slope, icpt = np.polyfit(k, origin, 1)
     trend = np.outer(k, slope) + icpt
     d = trend[-1, :2] - trend[0, :2]
-    fwd = d / np.linalg.norm(d) if np.linalg.norm(d) > 0.1 else np.array([1.0, 0.0])
+    if np.linalg.norm(d) <= 0.1:
+        d = np.array([1.0, 0.0]) if facing is None else np.asarray(facing, dtype=float)[:2]
+    fwd = d / np.linalg.norm(d)
     return trend, np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
 
 
-def hat_sway(origin: np.ndarray, gain: tuple[float, float]) -> np.ndarray:
+def hat_sway(origin: np.ndarray, gain: tuple[float, float], facing: np.ndarray | None = None) -> np.ndarray:
     """The HAT's base (F, 3) m when the trunk sways ``gain`` (fore-aft, lateral) times as far as the
     mid-hip ``origin`` (F, 3) about the walk's straight-line trend (:func:`sway_basis`); height
     unchanged. Its acceleration is the gain times the mid-hip's along each axis (the trend has none).
     Whole takes only: a live stream has no trend, and :func:`marker_channels` does not sway."""
-    trend, fwd, left = sway_basis(origin)
+    trend, fwd, left = sway_basis(origin, facing)
     k = gain[0] * np.outer(fwd, fwd) + gain[1] * np.outer(left, left) + np.diag([0.0, 0.0, 1.0])
     return trend + (origin - trend) @ k.T
 
@@ -589,7 +592,8 @@ def _swayed(seg: dict, opts: MarkerBodyOptions, m: dict) -> dict:
     if opts.hat_sway_gain is None or "hat" not in seg or HAT_POINTS[0] in m:
         return seg
     origin, rot = seg["hat"]
-    return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain), rot)}
+    facing = np.nanmean(rot[:, :, 0], axis=0)  # the upright HAT's forward axis: the way the subject faces
+    return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain, facing), rot)}
 
 
 def _upright(x: np.ndarray) -> np.ndarray:

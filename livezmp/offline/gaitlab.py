@@ -3,8 +3,9 @@ the plates at the marker frames, the frames they saw whole, and the comparison.
 
 Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
 they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
-else 70 kg. The ZMP does not depend on the total mass (every segment scales with it); the
-flight threshold and the plate-side CoM acceleration do.
+else the plates' fitted to the CoM's vertical acceleration over the complete frames; else 70 kg. The
+ZMP does not depend on the total mass (every segment scales with it); the flight threshold and the
+plate-side CoM acceleration do.
 """
 
 from __future__ import annotations
@@ -15,7 +16,16 @@ import numpy as np
 import pinocchio as pin
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
-from livezmp.balance.plates import G, PlateFrames, complete_frames, gait_cycles, plate_frames, plate_mass, plates_floor
+from livezmp.balance.plates import (
+    G,
+    PlateFrames,
+    complete_frames,
+    gait_cycles,
+    plate_frames,
+    plate_mass,
+    plate_mass_fit,
+    plates_floor,
+)
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
@@ -137,13 +147,16 @@ def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult,
     return plates, complete, why
 
 
-def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float) -> dict:
+def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
+                 m_fit: float | None = None) -> dict:
     info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
             "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles}
     if opts.mass:
         used, source = opts.mass, "--mass"
     elif m_plates is not None:
         used, source = m_plates, "plates"
+    elif not trial.mass_kg and m_fit is not None:
+        used, source = m_fit, "plates (fitted to the CoM's vertical acceleration)"
     else:
         used, source = first, "file" if trial.mass_kg else "default"
     info.update(used_kg=round(used, 2), source=source)
@@ -151,6 +164,18 @@ def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycl
         info["note"] = (f"the file says {trial.mass_kg:.1f} kg, the plates {m_plates:.1f} kg "
                         f"({100 * (trial.mass_kg / m_plates - 1):+.1f} %); using the {source}")
     return info
+
+
+def _facing(take: MarkerTake) -> np.ndarray:
+    """(2,) the horizontal way the pelvis faces on average (internal frame)."""
+    yaw = take.frames[:, take.body.channel_names.index("pelvis.yaw")]
+    return np.array([np.nanmean(np.cos(yaw)), np.nanmean(np.sin(yaw))])
+
+
+def _input(trial: C3dTrial, take: MarkerTake) -> dict:
+    """How the file was written: its up axis (found from the markers), POINT:UNITS, point and analog rates (Hz)."""
+    return {"up_axis": take.body.up_axis, "point_units": trial.units, "point_rate_hz": trial.rate,
+            "analog_rate_hz": trial.analog_rate}
 
 
 def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnalysis:
@@ -162,13 +187,14 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)
         return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
-                           {"markers": take.notes, "mass": mass_info, "plates": None})
+                           {"input": _input(trial, take), "markers": take.notes, "mass": mass_info, "plates": None})
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
     plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
-    mass_info = _decide_mass(trial, opts, m_plates, cycles, first)
+    m_fit = plate_mass_fit(plates.force[:, 2], com_acc[:, 2], complete)
+    mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_fit)
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
         take, times, cfg, result = _run(trial, opts, used, floor)
@@ -183,6 +209,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc,
                                                      used)
     summary = {
+        "input": _input(trial, take),
         "markers": take.notes,
         "mass": mass_info,
         "plates": {"count": len(trial.plates), "surface_z_m": round(plates.surface_z, 4),
@@ -195,7 +222,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                            "plate_delay_determined": determined,
                            "plate_delay_halves_ms": [None if h is None else round(1000 * h, 1) for h in halves],
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
-        "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate),
+        "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
+                                 _facing(take)),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
     }
     return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)

@@ -18,11 +18,13 @@ MAX_LAG_S = 0.1  # s: the lag search covers ± this
 LAG_AGREE_S = 0.02
 
 
-def walking_axes(com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit horizontal (3,) fore-aft (the CoM's net travel; +x when it barely moves) and lateral
-    (left of it) directions."""
+def walking_axes(com: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unit horizontal (3,) fore-aft (the CoM's net travel; when it barely moves, ``facing`` (horizontal: the way
+    the subject faces), else +x) and lateral (left of it) directions."""
     d = com[-1, :2] - com[0, :2]
-    fwd = d / np.linalg.norm(d) if np.linalg.norm(d) > 0.1 else np.array([1.0, 0.0])
+    if np.linalg.norm(d) <= 0.1:
+        d = np.array([1.0, 0.0]) if facing is None else np.asarray(facing, dtype=float)[:2]
+    fwd = d / np.linalg.norm(d)
     return np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
 
 
@@ -74,7 +76,7 @@ def _ms(v: float | None) -> float | None:
 
 
 def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: np.ndarray, com: np.ndarray,
-               dt: float) -> dict:
+               dt: float, facing: np.ndarray | None = None) -> dict:
     """ZMP against plate CoP over the complete frames that have a ZMP: count, RMS, p95 and max of the
     horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left (mm), and
     the lag (ms, see :func:`best_lag`; reported, not applied; None when not determined, see
@@ -86,7 +88,7 @@ def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: 
                 "lag_halves_ms": None}
     dist = np.hypot(d[:, 0], d[:, 1])
     mean = d.mean(axis=0)
-    fwd, left = walking_axes(com)
+    fwd, left = walking_axes(com, facing)
     lag, determined, halves = lag_with_halves(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
     return {
         "frames": int(rows.sum()),

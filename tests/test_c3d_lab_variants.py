@@ -1,0 +1,91 @@
+"""The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up lab, walking
+along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz with analog
+rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order, ORIGIN below
+the surface) and with ORIGIN's z written positive, TYPE-4 (CAL_MATRIX), TYPE-3 (Kistler's eight channels); ANALOG
+SCALE and GEN_SCALE; plates turned 90 and 180 degrees in the floor; labels without a subject prefix and no mass in
+the file. Each must give the true CoP from its plates and the ZMP on it to a millimetre, the up axis and units it
+was written in, and the reference's summary figures."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from livezmp.model.c3d import read_c3d
+from livezmp.offline.gaitlab import analyse_lab_take
+from tests.test_c3d_gaitlab import PLATES, Lab, write_lab_c3d
+
+SECONDS = 3.0  # s: short takes keep the file fast
+Y_UP = ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0))  # lab y = up, lab z = the subject's right
+
+
+def _turn(deg: float) -> tuple:
+    """The reference turned ``deg`` about the vertical (the subject then faces that way in the lab)."""
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+
+
+SPEC = {"spec_plates": True}
+VARIANTS = {
+    "y-up": Lab(rot=Y_UP),
+    "walk -x": Lab(rot=_turn(180)),
+    "walk +y": Lab(rot=_turn(90)),
+    "walk diagonal": Lab(rot=_turn(-135)),
+    "far origin": Lab(origin=(12.5, -7.25, 0.0)),
+    "y-up, diagonal, far, cm": Lab(rot=tuple(map(tuple, np.asarray(Y_UP) @ np.asarray(_turn(30)))),
+                                   origin=(-9.0, 0.0, 6.0), units="cm", **SPEC),
+    "cm": Lab(units="cm"),
+    "m": Lab(units="m"),
+    "50 Hz x20": Lab(rate=50, analog=1000),
+    "100 Hz x1": Lab(rate=100, analog=100),
+    "120 Hz x5": Lab(rate=120, analog=600),
+    "240 Hz x2": Lab(rate=240, analog=480),
+    "240 Hz x10": Lab(rate=240, analog=2400),
+    "type 2 spec": Lab(**SPEC),
+    "type 2 origin z>0": Lab(origin_sign=-1.0, **SPEC),
+    "type 4 scaled": Lab(plate_type=4, scale=(0.25, 0, 2.0), **SPEC),
+    "type 3": Lab(plate_type=3, **SPEC),
+    "type 3 y-up m": Lab(plate_type=3, rot=Y_UP, units="m", **SPEC),
+    "plates turned 90": Lab(plate_turn=90.0, **SPEC),
+    "plates turned 180": Lab(plate_turn=180.0, plate_type=3, **SPEC),
+    "no prefix, no mass": Lab(prefix="", mass=False),
+}
+
+
+def _analysis(tmp_path_factory, lab: Lab):
+    path = tmp_path_factory.mktemp("variant") / "trial.c3d"
+    cop = write_lab_c3d(path, PLATES, lab=replace(lab, seconds=SECONDS))
+    trial = read_c3d(path)
+    return trial, analyse_lab_take(trial), cop
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    return _analysis(tmp_path_factory, Lab())
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory):
+    lab = VARIANTS[name]
+    trial, a, true_cop = _analysis(tmp_path_factory, lab)
+    _, ref, _ = reference
+    body = a.take.body
+    assert body.up_axis == ("y" if lab.rot[1][2] else "z")
+    assert a.summary["input"]["point_units"] == lab.units
+    # the plates' CoP, back in the reference frame, is the true one
+    rows = a.complete & (a.times > 0.5) & (a.times < SECONDS - 0.5)
+    k = np.rint(a.times[rows] * lab.analog).astype(int)
+    cop_lab = body.to_input_frame(a.plates.cop[rows])
+    cop_ref = (cop_lab - lab.origin) @ np.asarray(lab.rot)
+    assert np.abs(cop_ref[:, :2] - true_cop[k]).max() < 2e-4
+    assert np.abs(cop_ref[:, 2]).max() < 1e-6
+    cv, rv = a.summary["cop_vs_zmp"], ref.summary["cop_vs_zmp"]
+    assert cv["max_mm"] < 1.0 and cv["rms_mm"] < 0.5
+    assert cv["frames"] == pytest.approx(rv["frames"] * lab.rate / 100, rel=0.05)
+    assert cv["bias_mm"] == pytest.approx(rv["bias_mm"], abs=0.3)
+    # no mass in the file and no whole gait cycle: the plates' weight fitted to the CoM's vertical acceleration
+    assert a.summary["mass"]["used_kg"] == pytest.approx(75.0, abs=0.2)
+    assert a.summary["mass"]["source"].startswith("file" if lab.mass else "plates")
+    assert a.summary["com_acc_vs_plates"]["r"] == pytest.approx(ref.summary["com_acc_vs_plates"]["r"], abs=0.02)
