@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import functools
 import json
+import struct
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import ezc3d
 import numpy as np
@@ -165,7 +167,9 @@ class Lab:
     -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
     negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention);
     ``plate_turn`` deg the plates turned in the floor; ``scale`` (ANALOG:SCALE, OFFSET, GEN_SCALE) the channels
-    are stored with; ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and height."""
+    are stored with; ``integer``: POINT:SCALE (> 0, POINT:UNITS per count) of an integer file, None: floating
+    point (POINT:SCALE -1); ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and
+    height."""
 
     rot: tuple = IDENTITY
     origin: tuple = (0.0, 0.0, 0.0)
@@ -178,6 +182,7 @@ class Lab:
     origin_sign: float = 1.0
     plate_turn: float = 0.0
     scale: tuple = (1.0, 0, 1.0)
+    integer: float | None = None
     prefix: str = "Sub01:"
     mass: bool = True
 
@@ -228,9 +233,10 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
     c3d["parameters"]["ANALOG"]["RATE"]["value"] = [lab.analog]
     c3d["parameters"]["ANALOG"]["LABELS"]["value"] = [f"{c}{k + 1}" for k in range(len(plates)) for c in names]
     c3d["data"]["analogs"] = channels.T[None]
-    if (scale, gen) != (1.0, 1.0):
-        c3d.add_parameter("ANALOG", "SCALE", [scale] * channels.shape[1])
-        c3d["parameters"]["ANALOG"]["GEN_SCALE"]["value"] = [gen]
+    if lab.integer:  # counts, offset included, fit int16
+        scale = np.maximum(np.abs(channels).max(axis=0), 1.0) / (30_000 - abs(offset)) / gen
+    c3d.add_parameter("ANALOG", "SCALE", np.broadcast_to(scale, channels.shape[1]).astype(float))
+    c3d["parameters"]["ANALOG"]["GEN_SCALE"]["value"] = [gen]
     _add_int(c3d, "FORCE_PLATFORM", "USED", [len(plates)])
     _add_int(c3d, "FORCE_PLATFORM", "TYPE", [lab.plate_type] * len(plates))
     _add_int(c3d, "FORCE_PLATFORM", "ZERO", [1, 0])
@@ -287,7 +293,56 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
         c3d.add_parameter("PROCESSING", "Bodymass", [MASS])
         c3d.add_parameter("PROCESSING", "Height", [1750.0])
     c3d.write(str(path))
+    if lab.integer or lab.scale[1]:  # ezc3d writes floats and zeroes ANALOG:OFFSET: rewrite its data section
+        _store(path, pts, c3d["data"]["analogs"][0].T, lab)
     return cop
+
+
+def parameter_at(data: bytes) -> dict[tuple[str, str], int]:
+    """Byte position of each parameter's values in a little-endian C3D, by (group, name)."""
+    pos = (data[0] - 1) * 512 + 4
+    groups, params = {}, {}
+    while (n := struct.unpack_from("b", data, pos)[0]) != 0:
+        gid = struct.unpack_from("b", data, pos + 1)[0]
+        name = data[pos + 2:pos + 2 + abs(n)].decode()
+        (step,) = struct.unpack_from("<H", data, pos + 2 + abs(n))
+        if gid < 0:
+            groups[-gid] = name
+        else:
+            at = pos + 4 + abs(n)
+            ndims = data[at + 1]
+            params[(gid, name)] = at + 2 + ndims
+        if step == 0:
+            break
+        pos += 2 + abs(n) + step
+    return {(groups[g], name): at for (g, name), at in params.items()}
+
+
+def _store(path, points: np.ndarray, analogs: np.ndarray, lab: Lab) -> None:
+    """Rewrite the data section of ezc3d's float file ``path`` as ``lab`` stores it: int16 counts of
+    POINT:SCALE (x, y, z; a fourth word of -1 for an unseen point, the spec's invalid mark) and of ANALOG:SCALE x
+    GEN_SCALE offset by ANALOG:OFFSET (raw = value / (SCALE GEN_SCALE) + OFFSET, the spec's ANALOG:OFFSET
+    read backwards), or floats with that OFFSET. ``points`` (4, P, F) in POINT:UNITS, ``analogs`` (S, C) values."""
+    data = bytearray(Path(path).read_bytes())
+    at = parameter_at(bytes(data))
+    c = analogs.shape[1]
+    scale = np.frombuffer(data, "<f4", c, at[("ANALOG", "SCALE")]) * lab.scale[2]
+    raw = analogs / scale + lab.scale[1]
+    struct.pack_into(f"<{c}h", data, at[("ANALOG", "OFFSET")], *[lab.scale[1]] * c)
+    xyz = points[:3].transpose(2, 1, 0)  # (F, P, 3)
+    unseen = np.isnan(xyz).any(axis=2)
+    if lab.integer:
+        struct.pack_into("<f", data, at[("POINT", "SCALE")], lab.integer)
+        struct.pack_into("<f", data, 12, lab.integer)  # the header's copy
+        counts = np.concatenate([np.rint(np.nan_to_num(xyz) / lab.integer), np.where(unseen, -1, 0)[..., None]], 2)
+        frames, kind = [counts.reshape(len(xyz), -1), np.rint(raw).reshape(len(xyz), -1)], "<i2"
+    else:
+        w4 = np.where(unseen, -1.0, 0.0)[..., None]
+        frames, kind = [np.concatenate([xyz, w4], 2).reshape(len(xyz), -1), raw.reshape(len(xyz), -1)], "<f4"
+    block = np.hstack(frames)
+    assert np.abs(block).max() < 32_000 or kind == "<f4"
+    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
+    Path(path).write_bytes(bytes(data[:start]) + block.astype(kind).tobytes())
 
 
 @pytest.fixture(scope="module")
