@@ -108,7 +108,7 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     assert cv["bias_mm"] == pytest.approx(rv["bias_mm"], abs=0.011 if same else 0.07)
     if same:  # the same samples: the same figures
         assert (cv["rms_mm"], cv["max_mm"]) == pytest.approx((rv["rms_mm"], rv["max_mm"]), abs=0.011)
-    # no mass in the file and no whole gait cycle: the plates' weight fitted to the CoM's vertical acceleration
+    # no mass in the file and no whole gait cycle: the plates' mean vertical force over the take stood on them
     assert a.summary["mass"]["used_kg"] == pytest.approx(75.0, abs=0.2)
     assert a.summary["mass"]["source"].startswith("file" if lab.mass else "plates")
     assert a.summary["com_acc_vs_plates"]["r"] == pytest.approx(ref.summary["com_acc_vs_plates"]["r"], abs=0.02)

@@ -25,6 +25,7 @@ UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not
 PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
+STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
 UP = np.array([0.0, 0.0, 1.0])
 
 
@@ -181,9 +182,11 @@ def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: 
     return (total / n / G if n else None), used
 
 
-def plate_mass_fit(fz: np.ndarray, com_acc_z: np.ndarray, rows: np.ndarray) -> float | None:
-    """Body mass (kg) that best explains the plates' vertical force ``fz`` (N) by the weight and the
-    kinematic vertical CoM acceleration ``com_acc_z`` (m/s²) over ``rows``: least squares on
-    Fz = m (g + a_z). For takes without a whole gait cycle (standing, one stance); None without rows."""
-    w = G + com_acc_z[rows]
-    return float(fz[rows] @ w / (w @ w)) if rows.any() else None
+def standing_span(times: np.ndarray, complete: np.ndarray, min_s: float = STANDING_S) -> list[tuple[float, float]]:
+    """[(start, end)] s: the span from the first to the last complete frame when it lasts ``min_s`` or more (longer
+    than any walking stance: someone standing or swaying on the plates, whose mean vertical force over it is the
+    weight as over a gait cycle); [] otherwise."""
+    idx = np.flatnonzero(complete)
+    if not len(idx) or times[idx[-1]] - times[idx[0]] < min_s:
+        return []
+    return [(float(times[idx[0]]), float(np.nextafter(times[idx[-1]], np.inf)))]

@@ -3,9 +3,9 @@ the plates at the marker frames, the frames they saw whole, and the comparison.
 
 Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
 they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
-else the plates' fitted to the CoM's vertical acceleration over the complete frames; else 70 kg. The
-ZMP does not depend on the total mass (every segment scales with it); the flight threshold and the
-plate-side CoM acceleration do.
+else the plates' mean vertical force ÷ g over a standing take (complete frames, 95 % of them, over at
+least ``STANDING_S``); else 70 kg. The ZMP does not depend on the total mass (every segment scales with
+it); the flight threshold and the plate-side CoM acceleration do.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from livezmp.balance.plates import (
     gait_cycles,
     plate_frames,
     plate_mass,
-    plate_mass_fit,
     plates_floor,
+    standing_span,
 )
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.model.bvh_body import DEFAULT_MASS
@@ -148,15 +148,15 @@ def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult,
 
 
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
-                 m_fit: float | None = None) -> dict:
+                 m_standing: float | None = None) -> dict:
     info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
             "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles}
     if opts.mass:
         used, source = opts.mass, "--mass"
     elif m_plates is not None:
         used, source = m_plates, "plates"
-    elif not trial.mass_kg and m_fit is not None:
-        used, source = m_fit, "plates (fitted to the CoM's vertical acceleration)"
+    elif not trial.mass_kg and m_standing is not None:
+        used, source = m_standing, "plates (standing)"
     else:
         used, source = first, "file" if trial.mass_kg else "default"
     info.update(used_kg=round(used, 2), source=source)
@@ -193,8 +193,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     shift = opts.plate_delay_s or 0.0
     plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
-    m_fit = plate_mass_fit(plates.force[:, 2], com_acc[:, 2], complete)
-    mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_fit)
+    m_standing, _ = plate_mass(plates.force[:, 2], times, complete, standing_span(times, complete))
+    mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing)
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
         take, times, cfg, result = _run(trial, opts, used, floor)
