@@ -117,6 +117,8 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
 @pytest.mark.parametrize(("lab", "says"), [
     (Lab(rot=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0))), "cannot tell the up axis"),  # x up
     (Lab(plate_type=5, spec_plates=True), "Type 5 is not supported"),  # ezc3d reads plate TYPEs 1-4
+    # ezc3d subtracts |OFFSET|: a negative one on signed data would shift the channel (0 complete frames here)
+    (Lab(scale=(0.5, -500, 1.0)), "ANALOG:OFFSET of force-plate channel 1 is negative (-500)"),
 ])
 def test_a_lab_it_cannot_read_is_refused_in_one_line(lab, says, tmp_path, capsys):
     path = tmp_path / "trial.c3d"

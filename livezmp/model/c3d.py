@@ -125,7 +125,26 @@ def _events(groups: dict, source: str) -> list[tuple[str, str, float]]:
     return [(str(c).strip(), str(lab).strip(), float(s)) for c, lab, s in zip(contexts, labels, t, strict=True)]
 
 
+def _check_plate_offsets(groups: dict, source: str) -> None:
+    """Refuse a negative ANALOG:OFFSET on a force-plate channel of signed analog data. The C3D spec's value is
+    (raw − OFFSET) × SCALE × GEN_SCALE with OFFSET signed; ezc3d subtracts |OFFSET| (right for the unsigned
+    offsets above 32767 that an int16 parameter stores negative), which for signed data shifts that channel by
+    2 OFFSET SCALE GEN_SCALE before its platform filter: the plate's force would be off by a constant."""
+    try:
+        offsets = np.asarray(_param(groups, "ANALOG", "OFFSET"), dtype=float).ravel()
+        channels = np.asarray(_param(groups, "FORCE_PLATFORM", "CHANNEL"), dtype=float).ravel()
+    except (TypeError, ValueError):  # not numbers: ezc3d's platform filter has read them as it could
+        return
+    fmt = _param(groups, "ANALOG", "FORMAT")
+    unsigned = fmt is not None and len(fmt) > 0 and str(fmt[0]).strip().upper() == "UNSIGNED"
+    bad = [int(c) for c in channels if 0 < c <= len(offsets) and offsets[int(c) - 1] < 0]
+    if bad and not unsigned:
+        raise InputError(f"{source}: ANALOG:OFFSET of force-plate channel {bad[0]} is negative "
+                         f"({offsets[bad[0] - 1]:.0f}): ezc3d reads signed data with its magnitude, not supported")
+
+
 def _plates(c3d: dict, source: str) -> list[PlateRecord]:
+    _check_plate_offsets(c3d["parameters"], source)
     out = []
     for k, p in enumerate(c3d["data"].get("platform", [])):
         position = str(p["unit_position"]).strip().lower()
