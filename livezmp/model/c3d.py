@@ -7,6 +7,16 @@ taken from ezc3d's platform filter: per analog sample, the force the plate exert
 subject (N, world axes) and its moment (N·m) about the centre of the plate's top surface (the
 mean of its four corners), plus the plate outline. Nothing here filters or zeroes; see
 :mod:`livezmp.balance.plates` for that.
+
+ezc3d's plate filter follows the C3D spec (c3d.org user guide, FORCE_PLATFORM): the plate's axes from its
+corners, x = corner 1 − corner 2 and y = corner 1 − corner 4 (the corners are numbered by the plate's quadrants
++x+y, −x+y, −x−y, +x−y; its z then points down into the floor); moments moved to the surface centre as
+M + F × ORIGIN, ORIGIN being the vector from the plate's measurement origin to that centre in plate axes (its z
+negative; a positive z, the original AMTI convention, is negated, as Visual3D does); TYPE 3 from Kistler's
+eight channels with ORIGIN's x, y the sensor offsets; TYPE 4 through CAL_MATRIX stored by columns. The
+synthetic labs of tests/test_c3d_lab_variants.py write every one of these and meet their true CoP. Its analog
+scaling subtracts |ANALOG:OFFSET| where the spec's offset is signed: a negative offset on a plate channel of
+signed data is refused.
 """
 
 from __future__ import annotations
