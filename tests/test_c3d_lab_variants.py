@@ -2,9 +2,10 @@
 along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz with analog
 rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order, ORIGIN below
 the surface) and with ORIGIN's z written positive, TYPE-4 (CAL_MATRIX), TYPE-3 (Kistler's eight channels); ANALOG
-SCALE and GEN_SCALE; plates turned 90 and 180 degrees in the floor; labels without a subject prefix and no mass in
-the file. Each must give the true CoP from its plates and the ZMP on it to a millimetre, the up axis and units it
-was written in, and the reference's summary figures."""
+SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in the floor; labels
+without a subject prefix and no mass in the file. Each must give the true CoP from its plates and the ZMP on it to a
+millimetre, the up axis and units it was written in, and the reference's summary figures. What cannot be read is
+refused in one line."""
 
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ VARIANTS = {
     "walk diagonal": Lab(rot=_turn(-135)),
     "far origin": Lab(origin=(12.5, -7.25, 0.0)),
     "y-up, diagonal, far, cm": Lab(rot=tuple(map(tuple, np.asarray(Y_UP) @ np.asarray(_turn(30)))),
-                                   origin=(-9.0, 0.0, 6.0), units="cm", **SPEC),
+                                   origin=(-9.0, 0.35, 6.0), units="cm", **SPEC),  # the floor 0.35 m up
     "cm": Lab(units="cm"),
     "m": Lab(units="m"),
     "50 Hz x20": Lab(rate=50, analog=1000),
@@ -119,7 +120,7 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     (Lab(plate_type=5, spec_plates=True), "Type 5 is not supported"),  # ezc3d reads plate TYPEs 1-4
     # ezc3d subtracts |OFFSET|: a negative one on signed data would shift the channel (0 complete frames here)
     (Lab(scale=(0.5, -500, 1.0)), "ANALOG:OFFSET of force-plate channel 1 is negative (-500)"),
-])
+], ids=["x-up", "type 5", "negative offset"])
 def test_a_lab_it_cannot_read_is_refused_in_one_line(lab, says, tmp_path, capsys):
     path = tmp_path / "trial.c3d"
     write_lab_c3d(path, PLATES, lab=replace(lab, seconds=SECONDS))
