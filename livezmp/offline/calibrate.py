@@ -31,7 +31,7 @@ from livezmp.balance.plates import G
 from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, body_from_markers, hat_table, sway_basis
-from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations
+from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing
 from livezmp.offline.validation import walking_axes
 from livezmp.tomlfile import read_toml
 
@@ -143,7 +143,7 @@ def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerB
     d2 = np.stack([np.stack([-c, s, zero], -1), np.stack([-s, -c, zero], -1), np.stack([zero] * 3, -1)], 1)
     B = a[:, 3, None, None] * d1 + (v[:, 3] ** 2)[:, None, None] * d2
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
-    trend, fwd, left = sway_basis(r.q[:, HAT][:, :3])
+    trend, fwd, left = sway_basis(r.q[:, HAT][:, :3], facing(lab.take))
     return _Terms(f_rest, m_rest, q[:, :3], a[:, :3], A, B, lab.plates.cop[idx, :2], plate_acc, mass,
                   lab.plates.surface_z, trend[idx], fwd, left)
 
@@ -226,7 +226,7 @@ def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> Non
     them would move the subject's parameters to make up for it."""
     kin = com_accelerations(lab.take, lab.result)[rows]
     plate = lab.plates.force[rows] / lab.summary["mass"]["used_kg"]
-    for name, axis in zip(("fore-aft", "lateral"), walking_axes(lab.result.com), strict=True):
+    for name, axis in zip(("fore-aft", "lateral"), walking_axes(lab.result.com, facing(lab.take)), strict=True):
         r = float(np.corrcoef(kin @ axis, plate @ axis)[0, 1])
         if r < 0:
             raise InputError(f"{trial.source}: the plates' {name} force runs against the markers' motion (r = "

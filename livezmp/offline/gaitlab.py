@@ -166,7 +166,7 @@ def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycl
     return info
 
 
-def _facing(take: MarkerTake) -> np.ndarray:
+def facing(take: MarkerTake) -> np.ndarray:
     """(2,) the horizontal way the pelvis faces on average (internal frame)."""
     yaw = take.frames[:, take.body.channel_names.index("pelvis.yaw")]
     return np.array([np.nanmean(np.cos(yaw)), np.nanmean(np.sin(yaw))])
@@ -223,7 +223,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                            "plate_delay_halves_ms": [None if h is None else round(1000 * h, 1) for h in halves],
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
-                                 _facing(take)),
+                                 facing(take)),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
     }
     return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)
