@@ -161,8 +161,8 @@ class Lab:
     plates whose axes are the lab's).
 
     ``rot`` (3, 3) and ``origin`` (3,) m place the reference in the lab (p_lab = rot @ p_ref + origin): a y-up lab,
-    walking along -x, a far origin; ``units``
-    POINT:UNITS; ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels) or 4 (CAL_MATRIX);
+    walking along -x, a far origin; ``units`` POINT:UNITS (``units_given`` False: left empty, the data in
+    ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels) or 4 (CAL_MATRIX);
     ``spec_plates``: the plates as the C3D spec has them (z axis down, corner 1 in the plate's +x +y quadrant, then
     -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
     negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention);
@@ -174,6 +174,7 @@ class Lab:
     rot: tuple = IDENTITY
     origin: tuple = (0.0, 0.0, 0.0)
     units: str = "mm"
+    units_given: bool = True
     rate: int = RATE
     analog: int = ANALOG
     seconds: float = SECONDS
@@ -270,7 +271,7 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     c3d = ezc3d.c3d()
     c3d["parameters"]["POINT"]["RATE"]["value"] = [lab.rate]
     c3d["parameters"]["POINT"]["LABELS"]["value"] = [f"{lab.prefix}{k}" for k in m]
-    c3d.add_parameter("POINT", "UNITS", [lab.units])
+    c3d.add_parameter("POINT", "UNITS", [lab.units] if lab.units_given else [])
     pts = np.ones((4, len(m), len(t)))
     xyz = np.stack(list(m.values()), axis=1) @ np.asarray(lab.rot).T + lab.origin  # (F, P, 3) m, lab frame
     pts[:3] = xyz.transpose(2, 1, 0) * PER_METRE[lab.units]

@@ -44,6 +44,7 @@ VARIANTS = {
                                    origin=(-9.0, 0.35, 6.0), units="cm", **SPEC),  # the floor 0.35 m up
     "cm": Lab(units="cm"),
     "m": Lab(units="m"),
+    "no POINT:UNITS (mm)": Lab(units_given=False),  # ezc3d then labels its plates m: the plates were 1000x off
     "50 Hz x20": Lab(rate=50, analog=1000),
     "100 Hz x1": Lab(rate=100, analog=100),
     "120 Hz x5": Lab(rate=120, analog=600),

@@ -35,7 +35,7 @@ from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 
 _LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-_FORCE = {"n": 1.0, "n.": 1.0}  # ezc3d names a plate's moment unit FORCE_PLATFORM:UNITS + POINT:UNITS ("Nmm", "Ncm")
+_NEWTONS = {"n": 1.0, "newton": 1.0, "newtons": 1.0}  # FORCE_PLATFORM:UNITS
 
 
 @dataclass
@@ -153,19 +153,20 @@ def _check_plate_offsets(groups: dict, source: str) -> None:
                          f"({offsets[bad[0] - 1]:.0f}): ezc3d reads signed data with its magnitude, not supported")
 
 
-def _plates(c3d: dict, source: str) -> list[PlateRecord]:
+def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
+    """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
+    numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
     _check_plate_offsets(c3d["parameters"], source)
     out = []
+    length = _LENGTH[unit]
     for k, p in enumerate(c3d["data"].get("platform", [])):
-        position = str(p["unit_position"]).strip().lower()
-        length = _LENGTH.get(position)
-        force_unit = str(p["unit_moment"]).strip().lower().replace(" ", "").removesuffix(position)
-        moment = None if length is None or force_unit not in _FORCE else _FORCE[force_unit] * length
-        if length is None or moment is None:
-            raise InputError(f"{source}: force platform {k + 1}: unknown units "
-                             f"{p['unit_position']!r} / {p['unit_moment']!r}")
+        newtons = _NEWTONS.get(str(p["unit_force"]).strip().lower())
+        if newtons is None:
+            raise InputError(f"{source}: force platform {k + 1}: unknown force unit {p['unit_force']!r} "
+                             "(FORCE_PLATFORM:UNITS)")
+        moment = newtons * length
         corners = np.asarray(p["corners"], dtype=float).T * length
-        force = np.asarray(p["force"], dtype=float).T
+        force = np.asarray(p["force"], dtype=float).T * newtons
         mom = np.asarray(p["moment"], dtype=float).T * moment
         out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners))
     return out
@@ -275,7 +276,9 @@ def read_c3d(path: str | Path) -> C3dTrial:
     p = Path(path)
     c3d = open_c3d(p, plates=True)
     groups = c3d["parameters"]
-    unit = str((_param(groups, "POINT", "UNITS") or ["mm"])[0]).strip().lower()
+    units = _param(groups, "POINT", "UNITS")
+    # missing or empty: mm, the unit nearly every writer uses (a metre file is then refused by its stature)
+    unit = (str(units[0]).strip().lower() if units is not None and len(units) else "") or "mm"
     if unit not in _LENGTH:
         raise InputError(f"{p}: POINT:UNITS {unit!r} is not a length unit (mm, cm, m)")
     rate = _first_number(_param(groups, "POINT", "RATE"))
@@ -293,6 +296,6 @@ def read_c3d(path: str | Path) -> C3dTrial:
     return C3dTrial(
         source=str(p), labels=labels, points=pts.transpose(2, 1, 0), rate=rate,
         analog_rate=_first_number(_param(groups, "ANALOG", "RATE")) or rate,
-        start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p)), mass_kg=mass, mass_field=where,
+        start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p), unit), mass_kg=mass, mass_field=where,
         height_m=height, widths_m=widths, events=_events(groups, str(p)), units=unit,
     )
