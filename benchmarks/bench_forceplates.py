@@ -35,11 +35,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from livezmp.balance.plates import G
+from livezmp.balance.plates import G, lowpass
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
-from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, sway_basis
+from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, input_rotation, sway_basis
 from livezmp.offline.calibrate import PARAMETERS, calibrate
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
@@ -214,6 +214,65 @@ def sway_before_after(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} {cv0['rms_mm']:6.1f} {cv0['bias_mm'][0]:+6.1f} {lag(cv0)}  ->  "
               f"{cv1['rms_mm']:6.1f} {cv1['bias_mm'][0]:+6.1f} {lag(cv1)}")
     print(f"median RMS over {len(after)} trials: {np.median(before):.1f} -> {np.median(after):.1f} mm")
+
+
+GROUPS = ("pelvis", "hat", "thorax", "headarms", "head", "upperarm", "forearm", "hand", "thigh", "shank", "foot")
+LATERAL_GAINS = (0.59, 0.40)  # the four tracked trunks' mean lateral sway gain, and lower
+
+
+def _group_accelerations(a, dt: float) -> dict[str, np.ndarray]:
+    """Each segment kind's share of the whole-body CoM acceleration (F, 3) m/s² (sum over kinds = the CoM's)."""
+    model, data = a.take.body.model, a.take.body.model.createData()
+    joints: dict[str, list[int]] = {}
+    for j in range(1, model.njoints):
+        if model.inertias[j].mass > 0:
+            joints.setdefault(model.names[j].split(".")[0].split("_")[0], []).append(j)
+    total = sum(model.inertias[j].mass for js in joints.values() for j in js)
+    pos = {k: np.empty((len(a.result.q), 3)) for k in joints}
+    for f, q in enumerate(a.result.q):
+        pin.forwardKinematics(model, data, q)
+        for k, js in joints.items():
+            pos[k][f] = sum(model.inertias[j].mass * data.oMi[j].act(model.inertias[j].lever) for j in js) / total
+    return {k: com_accelerations(v, dt) for k, v in pos.items()}
+
+
+def lateral_sources(done: dict[str, tuple]) -> None:
+    """Where the markers' lateral CoM acceleration departs from the plates' (GRF_lat / m), over complete frames:
+    the residual (kinematic - plates) SD; each segment kind's share of the kinematic acceleration (SD, and its
+    correlation with the residual); the pelvis points' own lateral acceleration (markers low-passed at 6 Hz like
+    the kinematics): SD and the least-squares gain onto the plates'; the RMS with the placed HAT's lateral
+    sway gain lowered (LATERAL_GAINS)."""
+    print("\nlateral CoM acceleration, markers vs plates (complete frames), m/s2: SD, r with the residual "
+          "(kin - plates); pelvis points: SD, r with the plates, gain onto the plates")
+    for name, (trial, a) in done.items():
+        r, p, dt = a.result, a.plates, 1.0 / trial.rate
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        _, left = walking_axes(r.com)
+        plate = (p.force[rows] / a.summary["mass"]["used_kg"]) @ left
+        res = com_accelerations(r.com, dt)[rows] @ left - plate
+        groups = _group_accelerations(a, dt)
+        shares = " ".join(f"{k} {np.std(v[rows] @ left):.2f}/{np.corrcoef(v[rows] @ left, res)[0, 1]:+.2f}"
+                          for k, v in sorted(groups.items(), key=lambda kv: GROUPS.index(kv[0])))
+        _, r_in = input_rotation(trial)
+        span = slice(a.take.first_frame, a.take.first_frame + len(r.com))
+
+        def lat(x: np.ndarray, rate: float = trial.rate, rows: np.ndarray = rows,
+                left: np.ndarray = left) -> np.ndarray:
+            return com_accelerations(lowpass(x, rate, 6.0), 1.0 / rate)[rows] @ left
+
+        hips = a.take.centres["hip"]
+        points = {"mid-hip": lat((hips["left"] + hips["right"]) / 2)}
+        for label, roles in (("mid-ASIS", ("LASI", "RASI")), ("mid-PSIS", ("LPSI", "RPSI")), ("sacrum", ("SACR",))):
+            xs = [trial.marker(a.take.roles.get(k) or "") for k in roles]
+            if all(x is not None and np.isfinite(x[span]).all() for x in xs):
+                points[label] = lat(np.mean([x[span] @ r_in.T for x in xs], axis=0))
+        pts = " ".join(f"{k} {np.std(v):.2f}/{np.corrcoef(v, plate)[0, 1]:+.2f}/{(v @ plate) / (v @ v):.2f}"
+                       for k, v in points.items())
+        gains = [analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=(TRUNK_SWAY_GAIN[0], g))))
+                 .summary["cop_vs_zmp"]["rms_mm"] for g in LATERAL_GAINS] if "hat" in groups else []
+        print(f"{name[:34]:34s} plates {np.std(plate):.2f} residual {np.std(res):.2f} | {shares} | {pts} | RMS "
+              f"{a.summary['cop_vs_zmp']['rms_mm']:.1f}" + "".join(f", lateral sway {g}: {v:.1f}"
+                                                                   for g, v in zip(LATERAL_GAINS, gains, strict=False)))
 
 
 def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
@@ -468,6 +527,7 @@ def main() -> None:
     trunk_sway(done)
     sway_before_after(done)
     error_sources(done)
+    lateral_sources(done)
     foot_frame(done)
     lag_conditioning(done, args.figures)
     calibration_table(done)
