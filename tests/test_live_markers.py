@@ -56,10 +56,11 @@ def skeleton_trial(trial):
 @pytest.fixture(scope="module")
 def offline():
     """analyze's analysis of the file, and of the file with its markers rounded to float32 metres; the placed
-    HAT moving with the mid-hip, as in a stream (which has no whole-take trend for the HAT to sway about)."""
+    HAT moving with the mid-hip and no lateral band, as in a stream (which has no whole-take trend for the HAT to
+    sway about, nor the future a zero-phase filter needs)."""
     c3d = read_c3d(TRIAL)
     rounded = replace(c3d, points=c3d.points.astype(np.float32).astype(float))
-    opts = LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None))
+    opts = LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None), lateral_cutoff_fraction=None)
     return analyse_lab_take(c3d, opts), analyse_lab_take(rounded, opts)
 
 

@@ -21,6 +21,7 @@ from livezmp.balance.plates import (
     PlateFrames,
     complete_frames,
     gait_cycles,
+    lowpass,
     plate_frames,
     plate_mass,
     plates_floor,
@@ -29,7 +30,7 @@ from livezmp.balance.plates import (
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers
+from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers, sway_basis
 from livezmp.offline.batch import BatchResult, run_batch
 from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, plate_delay
 
@@ -42,6 +43,11 @@ LOADED_SPEED_MPS = 1.0  # m/s: ... and this slow may carry load (completeness ch
 # per-rate default (a noise rule: 3.9 Hz at 100 Hz), is the one kept after comparing cutoffs against
 # force plates on marker data at 50-240 Hz (docs/validation.md, "Cutoff for marker data").
 LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4, "cutoff_hz": 6.0}
+# Walking's lateral motion repeats once a stride, its fore-aft and vertical motion once a step (twice a stride:
+# Smidt et al. 1971; the harmonic ratios of Menz, Lord & Fitzpatrick 2003, Gait Posture 18:35): the same
+# harmonics of the lateral motion lie below half the frequency. The segments' lateral positions are low-passed at
+# this part of the estimator's cutoff (whole takes; docs/validation.md, "The lateral band").
+LATERAL_CUTOFF_FRACTION = 0.5
 FORCE_SEEN = 0.75  # complete frames: the plates carry at least this part of m (g + CoM vertical acceleration)
 
 
@@ -65,7 +71,9 @@ class LabOptions:
     plates' zero-phase low-pass (None: the estimator's cutoff, so both sides see the same band);
     ``plate_delay_s``: the plates' delay behind the markers (s; they are sampled that much later), None =
     measured from the CoM acceleration and applied when at least half a frame; ``markers``: body options
-    (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults)."""
+    (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults);
+    ``lateral_cutoff_fraction``: the segments' positions across the walk are low-passed at this part of the
+    estimator's cutoff before it (None: not; :func:`lateral_band`)."""
 
     mass: float | None = None
     mode: str = "full"
@@ -73,6 +81,7 @@ class LabOptions:
     plate_delay_s: float | None = None
     markers: MarkerBodyOptions = MarkerBodyOptions()
     estimator: dict | None = None
+    lateral_cutoff_fraction: float | None = LATERAL_CUTOFF_FRACTION
 
 
 def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
@@ -96,8 +105,32 @@ def _run(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
     times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
     cfg = default_config(take.body, trial.rate, opts.mode, floor)
     cfg = replace(cfg, estimator=replace(cfg.estimator, **{**LAB_ESTIMATOR, **(opts.estimator or {})}))
-    result = run_batch(Pipeline(take.body, cfg, nominal_dt=1.0 / trial.rate), times, take.frames, keep_states=True)
+    band = lateral_band_hz(opts, take, cfg)
+    frames = take.frames if band is None else lateral_band(take.frames, trial.rate, band, facing(take))
+    result = run_batch(Pipeline(take.body, cfg, nominal_dt=1.0 / trial.rate), times, frames, keep_states=True)
     return take, times, cfg, result
+
+
+def lateral_band_hz(opts: LabOptions, take: MarkerTake, cfg: PipelineConfig) -> float | None:
+    """The cutoff (Hz) of :func:`lateral_band` for ``take``, or None: not asked, or a corrected take
+    (livezmp's own output, its HAT given by HAT points), which is analysed as written."""
+    if opts.lateral_cutoff_fraction is None or HAT_POINTS[0] in take.roles:
+        return None
+    return opts.lateral_cutoff_fraction * cfg.estimator.cutoff_hz
+
+
+def lateral_band(frames: np.ndarray, rate: float, cutoff_hz: float, facing: np.ndarray | None = None) -> np.ndarray:
+    """``frames`` (F, 6 per segment: x, y, z m, yaw, pitch, roll rad, internal frame) with every segment's
+    position across the walk (the lateral axis of the first segment's straight-line trend, or of ``facing``
+    when it barely travels: :func:`livezmp.model.markers.sway_basis`) low-passed at ``cutoff_hz`` (zero phase);
+    along the walk, height and angles unchanged. Whole takes only (zero phase needs the future)."""
+    _, _, left = sway_basis(frames[:, :3], facing)
+    out = frames.copy()
+    for k in range(0, frames.shape[1], 6):
+        pos = frames[:, k:k + 3]
+        across = pos @ left
+        out[:, k:k + 3] = pos + np.outer(lowpass(across, rate, cutoff_hz) - across, left)
+    return out
 
 
 def may_bear_weight(sole: np.ndarray, floor: float, dt: float) -> np.ndarray:
@@ -187,7 +220,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)
         return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
-                           {"input": _input(trial, take), "markers": take.notes, "mass": mass_info, "plates": None})
+                           {"input": _input(trial, take), "markers": take.notes, "mass": mass_info, "plates": None,
+                            "lateral_band_hz": lateral_band_hz(opts, take, cfg)})
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
@@ -225,5 +259,6 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
                                  facing(take)),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
+        "lateral_band_hz": lateral_band_hz(opts, take, cfg),
     }
     return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)
