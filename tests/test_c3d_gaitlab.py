@@ -41,6 +41,7 @@ TOP_ROLL = 0.15  # rad: the trunk-top set's trunk rolls this far over the hips
 CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
 P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 83.2 mm; 101.7 without it)
 PLATES = {"left": (0.05, 0.15), "right": (0.05, -0.15), "spare": (1.2, 0.0)}  # centres (m); 0.5 x 0.3 plates
+WOBBLE_HZ = 5.0  # Hz: between half the estimator's 6 Hz cutoff and the cutoff
 OFFSET = np.array([3.0, -2.0, 30.0, 4.0, -6.0, 1.0])  # N, N·m on the unloaded plate
 
 
@@ -255,17 +256,20 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
                   cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool | str = False,
-                  lab: Lab | None = None) -> np.ndarray:
+                  lab: Lab | None = None, pelvis_wobble_m: float = 0.0) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, written as ``lab`` does, its plates ``delay_samples`` analog samples
     late; returns the true CoP (S, 2) m at the analog rate (reference frame). ``cluster``: the cluster set (its
     body from ``body``'s map); ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the
-    second half."""
+    second half; ``pelvis_wobble_m``: the pelvis markers (not the body, nor its plates) shake sideways this far
+    at WOBBLE_HZ (skin on the pelvis)."""
     lab = lab or Lab()
     force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk, lab.analog, lab.seconds)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(lab.seconds * lab.rate)) / lab.rate
     m = _markers(t, full_body, cluster, trunk)
+    for k in ("LASI", "RASI", "LPSI", "RPSI"):
+        m[k][:, 1] += pelvis_wobble_m * np.sin(2 * np.pi * WOBBLE_HZ * t)
     m["LTH1" if cluster else "LTHI"][round(1.5 * lab.rate):round(1.55 * lab.rate)] = np.nan  # a short gap (filled)
     m["RFT1" if cluster else "RTOE"][:round(0.3 * lab.rate)] = np.nan  # a long gap at the start (the take is cut)
     c3d = ezc3d.c3d()
@@ -501,6 +505,18 @@ def test_lateral_band_keeps_the_stride_harmonics_across_the_walk_and_leaves_the_
     np.testing.assert_allclose(out[:, 3:6], frames[:, 3:6], atol=0)
     np.testing.assert_allclose(out[inner, 6:9], frames[inner, 6:9], atol=0.0005)  # 0.9 Hz: gain > 0.95
     assert np.abs(frames[inner, :3] @ left - sway[inner]).max() > 0.0039  # the wobble was there
+
+
+def test_pelvis_markers_shaking_sideways_are_kept_out_of_the_zmp(tmp_path):
+    """The pelvis markers shake 2 mm sideways at 5 Hz (skin, not the body: the plates see none of it). The
+    segments' lateral positions in the lateral band (3 Hz) keep the ZMP on the CoP; at the estimator's 6 Hz
+    the shake, through the pelvis, hip centres and placed HAT, moves the ZMP ~50 mm."""
+    write_lab_c3d(tmp_path / "shake.c3d", PLATES, pelvis_wobble_m=0.002)
+    trial = read_c3d(tmp_path / "shake.c3d")
+    banded = analyse_lab_take(trial).summary["cop_vs_zmp"]
+    assert banded["rms_mm"] < 2.0 and banded["max_mm"] < 3.0
+    unbanded = analyse_lab_take(trial, LabOptions(lateral_cutoff_fraction=None)).summary["cop_vs_zmp"]
+    assert unbanded["rms_mm"] > 30
 
 
 def test_a_lag_is_determined_only_when_both_halves_agree():
