@@ -8,7 +8,9 @@ Each row adds one change to the one above, so each error source shows its share:
   3  + plates low-passed like the kinematics (zero-phase, at the estimator's cutoff)
   4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)
   5  + plates' delay behind the markers measured and undone
-  6  + the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip         [livezmp analyze default: 4 + 5 + 6]
+  6  + the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip
+  7  + the segments' positions across the walk low-passed at half the cutoff (the lateral band)
+                                                                   [livezmp analyze default: 4 + 5 + 6 + 7]
 
 then the estimator's cutoff around the default (plates low-passed with it, and at a fixed 6 Hz), the trunk's
 sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN comes from)
@@ -51,14 +53,18 @@ LIVE = {"window_s": 0.4, "lag_s": 0.1}
 RIGID = MarkerBodyOptions(hat_follows_pelvis=True, hat_sway_gain=None)
 NO_SWAY = MarkerBodyOptions(hat_sway_gain=None)
 RAW_PLATES = 1e9  # Hz: no low-pass
+UNBANDED = {"lateral_cutoff_fraction": None}  # steps before the lateral band
 STEPS = [
     ("1 live window, HAT rigid, raw plates", LabOptions(markers=RIGID, estimator=LIVE, plate_cutoff_hz=RAW_PLATES,
-                                                         plate_delay_s=0.0)),
-    ("2 + HAT upright", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_cutoff_hz=RAW_PLATES, plate_delay_s=0.0)),
-    ("3 + plates low-passed as kinematics", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_delay_s=0.0)),
-    ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(markers=NO_SWAY, plate_delay_s=0.0)),
-    ("5 + plate delay undone", LabOptions(markers=NO_SWAY)),
-    ("6 + trunk sway {:.2f}/{:.2f}  [default]".format(*TRUNK_SWAY_GAIN), LabOptions()),
+                                                         plate_delay_s=0.0, **UNBANDED)),
+    ("2 + HAT upright", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_cutoff_hz=RAW_PLATES, plate_delay_s=0.0,
+                                   **UNBANDED)),
+    ("3 + plates low-passed as kinematics", LabOptions(markers=NO_SWAY, estimator=LIVE, plate_delay_s=0.0,
+                                                       **UNBANDED)),
+    ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(markers=NO_SWAY, plate_delay_s=0.0, **UNBANDED)),
+    ("5 + plate delay undone", LabOptions(markers=NO_SWAY, **UNBANDED)),
+    ("6 + trunk sway {:.2f}/{:.2f}".format(*TRUNK_SWAY_GAIN), LabOptions(**UNBANDED)),
+    ("7 + lateral band (half the cutoff) [default]", LabOptions()),
 ]
 UPPER = ("thorax", "headarms", "head", "upperarm", "forearm", "hand")
 
