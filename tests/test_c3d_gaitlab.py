@@ -268,7 +268,7 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(lab.seconds * lab.rate)) / lab.rate
     m = _markers(t, full_body, cluster, trunk)
-    for k in ("LASI", "RASI", "LPSI", "RPSI"):
+    for k in ("LASI", "RASI", "LPSI", "RPSI") if pelvis_wobble_m else ():
         m[k][:, 1] += pelvis_wobble_m * np.sin(2 * np.pi * WOBBLE_HZ * t)
     m["LTH1" if cluster else "LTHI"][round(1.5 * lab.rate):round(1.55 * lab.rate)] = np.nan  # a short gap (filled)
     m["RFT1" if cluster else "RTOE"][:round(0.3 * lab.rate)] = np.nan  # a long gap at the start (the take is cut)
