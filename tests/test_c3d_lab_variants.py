@@ -1,11 +1,11 @@
-"""The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up lab, walking
-along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz with analog
-rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order, ORIGIN below
-the surface) and with ORIGIN's z written positive, TYPE-4 (CAL_MATRIX), TYPE-3 (Kistler's eight channels); ANALOG
-SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in the floor; labels
-without a subject prefix and no mass in the file. Each must give the true CoP from its plates and the ZMP on it to a
-millimetre, the up axis and units it was written in, and the reference's summary figures. What cannot be read is
-refused in one line."""
+"""The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up, an x-up and a
+z-down lab, walking along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates
+50-240 Hz with analog rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant
+order, ORIGIN below the surface) and with ORIGIN's z written positive, TYPE-4 (CAL_MATRIX), TYPE-3 (Kistler's eight
+channels); ANALOG SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in
+the floor; labels without a subject prefix and no mass in the file. Each must give the true CoP from its plates and
+the ZMP on it to a millimetre, the up axis and units it was written in, and the reference's summary figures. What
+cannot be read is refused in one line."""
 
 from __future__ import annotations
 
@@ -60,7 +60,16 @@ VARIANTS = {
     "plates turned 90": Lab(plate_turn=90.0, **SPEC),
     "plates turned 180": Lab(plate_turn=180.0, plate_type=3, **SPEC),
     "no prefix, no mass": Lab(prefix="", mass=False),
+    "x-up": Lab(rot=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0))),
+    "z down (-z up), type 3": Lab(rot=((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0)), plate_type=3, **SPEC),
 }
+
+
+def _up(lab: Lab) -> str:
+    """The lab axis (signed) the reference's z points along."""
+    col = np.asarray(lab.rot)[:, 2]
+    ax = int(np.argmax(np.abs(col)))
+    return ("-" if col[ax] < 0 else "") + "xyz"[ax]
 
 
 def _analysis(tmp_path_factory, lab: Lab):
@@ -94,7 +103,7 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     trial, a, true_cop = _analysis(tmp_path_factory, lab)
     _, ref, _ = reference
     body = a.take.body
-    assert body.up_axis == ("y" if lab.rot[1][2] else "z")
+    assert body.up_axis == _up(lab)
     assert a.summary["input"]["point_units"] == lab.units
     # the plates' CoP, back in the reference frame, is the true one
     rows = a.complete & (a.times > 0.5) & (a.times < SECONDS - 0.5)
@@ -119,11 +128,11 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
 
 
 @pytest.mark.parametrize(("lab", "says"), [
-    (Lab(rot=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0))), "cannot tell the up axis"),  # x up
+    (Lab(rot=((1.0, 0.0, 0.0), (0.0, 0.7071, -0.7071), (0.0, 0.7071, 0.7071))), "cannot tell the up axis"),  # 45 deg
     (Lab(plate_type=5, spec_plates=True), "Type 5 is not supported"),  # ezc3d reads plate TYPEs 1-4
     # ezc3d subtracts |OFFSET|: a negative one on signed data would shift the channel (0 complete frames here)
     (Lab(scale=(0.5, -500, 1.0)), "ANALOG:OFFSET of force-plate channel 1 is negative (-500)"),
-], ids=["x-up", "type 5", "negative offset"])
+], ids=["tilted 45 deg", "type 5", "negative offset"])
 def test_a_lab_it_cannot_read_is_refused_in_one_line(lab, says, tmp_path, capsys):
     path = tmp_path / "trial.c3d"
     write_lab_c3d(path, PLATES, lab=replace(lab, seconds=SECONDS))

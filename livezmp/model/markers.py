@@ -44,8 +44,8 @@ from scipy.interpolate import CubicSpline
 
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import DE_LEVA_MALE
-from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE, WORLD_FROM_INPUT
+from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy, world_from_up_axis
+from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.marker_labels import LabelMatch, standard_trial
 from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
@@ -209,19 +209,26 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
     return roles
 
 
+# the mean pelvis-above-ankles vector within ~35 deg of a lab axis: that axis is up (a standing or walking
+# subject leans far less; a lab's axes are level)
+UPRIGHT_COS = 0.8
+
+
 def _up_rotation(m: dict[str, np.ndarray], source: str) -> tuple[str, np.ndarray]:
     """The input's up axis (pelvis above the feet) and the rotation into the internal z-up frame."""
     return _up_from((m["LASI"] + m["RASI"]) / 2 - (m["LANK"] + m["RANK"]) / 2, source)
 
 
 def _up_from(pelvis_above_feet: np.ndarray, source: str) -> tuple[str, np.ndarray]:
+    """The lab axis, signed ("z", "y", "x", "-z" ...), along which the pelvis stands above the feet, and the
+    rotation into the internal z-up frame; InputError when no axis carries most of that vector (a subject
+    not upright: lying, or markers mislabelled)."""
     v = np.nanmean(pelvis_above_feet, axis=0)
     ax = int(np.argmax(np.abs(v)))
-    if ax == 2 and v[2] > 0:
-        return "z", WORLD_FROM_INPUT["z"]
-    if ax == 1 and v[1] > 0:
-        return "y", WORLD_FROM_INPUT["y"]
-    raise InputError(f"{source}: cannot tell the up axis (pelvis-to-ankle vector {np.round(v, 3)} m)")
+    if not np.isfinite(v).all() or abs(v[ax]) < UPRIGHT_COS * np.linalg.norm(v):
+        raise InputError(f"{source}: cannot tell the up axis (pelvis-to-ankle vector {np.round(v, 3)} m)")
+    up = ("-" if v[ax] < 0 else "") + "xyz"[ax]
+    return up, world_from_up_axis(up)
 
 
 def _standard(trial: C3dTrial, mmap: MarkerMap | None) -> tuple[C3dTrial, dict[str, str | None], LabelMatch]:
