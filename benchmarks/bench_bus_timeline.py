@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine_load import load_averages
 
 from livezmp.links import LinkError, open_link
 from livezmp.live.clock import LoopClock
@@ -185,7 +186,7 @@ def main() -> None:
               f"wakes {quantiles(late)} us late (median / p99)")
     robots = {"livezmp_mini": load_robot(None, None), "OP3": load_robot(str(OP3), None)}
     print(f"bus-only cycle (read, write back, sleep), SCHED_FIFO {LOOP_PRIORITY} / {LOOP_PRIORITY - 1}; "
-          f"{os.cpu_count()} CPUs; load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+          f"{os.cpu_count()} CPUs; load average at the start: {load_averages()}")
     print("stages in us, median / p99: pickup = sim read - client write; model = due - pickup; "
           "late = reply written - due; back = client has - reply written; excess = have - write - model\n")
     header = ("| row                 | cycle     | Hz   | achieved | missed % | pickup      | model       | "

@@ -29,6 +29,8 @@ import os
 import random
 import time
 
+from machine_load import load_averages
+
 from livezmp.links import open_link
 from livezmp.links.bus_timing import ADAPTERS
 from livezmp.links.can_timing import frame_bits
@@ -96,7 +98,7 @@ def main() -> None:
         scheduling = "SCHED_FIFO" if refused is None else f"normal scheduling (real-time priority {refused})"
     print(f"livezmp_mini, {len(robot.body.joint_names)} servos, CAN at 1 Mbit/s (simulator in its own process); "
           f"{os.cpu_count()} CPUs; {args.seconds:g} s per row; {scheduling}; load average at the start: "
-          f"{', '.join(f'{v:.2f}' for v in os.getloadavg())}\n")
+          f"{load_averages()}\n")
     header = ("| protocol | buses | frames/cycle/bus | bits/cycle/bus | wire ms | ceiling Hz | asked Hz | "
               "achieved Hz | of ceiling | missed % | p99 ms | read ms | cpu ms/cycle | fell | failed reads |")
     print(header)
@@ -110,7 +112,7 @@ def main() -> None:
               f"{100 * x['hz'] / x['ceiling']:9.1f}% | "
               f"{100 * x['misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
               f"{x['cpu_ms']:12.2f} | {fell:>4} | {x['failed']:12d} |", flush=True)
-    print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ import json
 import resource
 import time
 
-from bench_take_memory import bench_arguments, load_average, make_take, measure, start
+from bench_take_memory import bench_arguments, make_take, measure, start
+from machine_load import load_averages
 
 
 def child(mode: str, take: str, out: str) -> None:
@@ -57,7 +58,7 @@ def main() -> None:
         last = (n, solve)
         if not args.keep:
             take.unlink()
-    print(f"load average {load_average()} after")
+    print(f"load average {load_averages(' ')} after")
 
 
 if __name__ == "__main__":

@@ -20,13 +20,13 @@ and without it (the solver's first-order rotation bounds alone), and the frames 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 from unittest import mock
 
 import numpy as np
+from machine_load import load_averages
 
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.correct.edit import apply_delta
@@ -62,7 +62,7 @@ def variant_motions(walk: str, frames: int) -> dict[str, BvhMotion]:
 
 
 def skeleton_table(walk: str, frames: int) -> None:
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}; {walk}, first {frames} frames "
+    print(f"load average {load_averages(' ')}; {walk}, first {frames} frames "
           f"(120 Hz: {frames // 4 + 1} from frame 40, resampled)")
     print(f"{'skeleton':32s} {'frames':>6s} {'outside before':>14s} {'after':>6s} "
           f"{'loaded feet mm: feet check':>27s} {'without':>8s} {'frames held':>11s}")

@@ -23,6 +23,7 @@ import tty
 
 import numpy as np
 from dynamixel_sdk import BROADCAST_ID, GroupSyncWrite, PacketHandler, PortHandler
+from machine_load import load_averages
 
 from livezmp.links.dynamixel_cycle_packets import FastReply, GoalPacket
 from sim_devices.dynamixel_packet import encode_fast_status
@@ -99,7 +100,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=5000)
     args = parser.parse_args()
-    print(f"load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}; {args.cycles} cycles each\n")
+    print(f"load average at the start: {load_averages()}; {args.cycles} cycles each\n")
     print("| servos | packets        | CPU us/cycle | build p50 us | build p99 us | take p50 us | take p99 us |")
     print("|--------|----------------|--------------|--------------|--------------|-------------|-------------|")
     rng = np.random.default_rng(0)
@@ -108,7 +109,7 @@ def main() -> None:
             print(f"| {n:6d} | {name:<14} | {cpu:12.1f} | {np.median(builds):12.1f} | "
                   f"{np.percentile(builds, 99):12.1f} | {np.median(takes):11.1f} | {np.percentile(takes, 99):11.1f} |",
                   flush=True)
-    print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":

@@ -17,10 +17,10 @@ is the smoothing's own cost on clean data. ``--cutoffs`` adds rows with other cu
 from __future__ import annotations
 
 import argparse
-import os
 from dataclasses import replace
 
 import numpy as np
+from machine_load import load_averages
 
 from livezmp.balance.pipeline import Pipeline, default_config
 from livezmp.balance.zmp import compute_zmp
@@ -63,7 +63,7 @@ def main() -> None:
     ap.add_argument("--noise-deg", type=float, nargs="+", default=[0.0, 0.1, 0.3, 1.0])
     ap.add_argument("--cutoffs", type=float, nargs="*", default=[], help="extra rows: these cutoffs (Hz)")
     args = ap.parse_args()
-    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"load average {load_averages(' ')}")
     print("p95 horizontal ZMP error (mm) against the exact ZMP of a sine walk, per added joint-angle noise")
     head = " ".join(f"{f'{n:g} deg':>8}" for n in args.noise_deg)
     print(f"{'rate Hz':>7} {'settings':>9} {'cutoff Hz':>9} {'lag ms':>7} {head}")

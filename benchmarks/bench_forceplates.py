@@ -30,12 +30,12 @@ complete frames (the shared ones included).
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from machine_load import load_averages
 
 from livezmp.balance.plates import G, lowpass
 from livezmp.errors import InputError
@@ -520,7 +520,7 @@ def main() -> None:
     ap.add_argument("--figures", type=Path, help="write the figures (docs/validation/) into this directory")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
+    print(f"load average {load_averages(' ')}")
     results = {name: trial_table(DATA / name) for name in TRIALS}
     print("\nmedian RMS over the trials per step (mm):")
     for k, (name, _) in enumerate(STEPS):

@@ -44,6 +44,8 @@ import os
 import time
 from pathlib import Path
 
+from machine_load import load_averages
+
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync_write_bytes
@@ -191,7 +193,7 @@ def main() -> None:
                       if refused is None else f"normal scheduling (real-time priority {refused})")
     print(f"20 simulated XM430s per robot (simulator in its own process); {os.cpu_count()} CPUs; {sec:g} s per row; "
           f"{scheduling}; physics in a {args.physics}; "
-          f"load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+          f"load average at the start: {load_averages()}")
     print("the live loop reads, writes and estimates every cycle and corrects at 125 Hz (every round(rate / 125)-th "
           "cycle: the summary's correct_every, 8 at 1 kHz)\n")
     mini = robots["livezmp_mini"][1]
@@ -225,7 +227,7 @@ def main() -> None:
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
                   f"{x['physics_cpu']:10.0f} | "
                   f"{os.getloadavg()[0]:4.1f} |", flush=True)
-    print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":

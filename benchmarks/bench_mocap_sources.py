@@ -40,6 +40,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from machine_load import load_averages
+
 from livezmp.sources import natnet_protocol as nn  # noqa: E402
 from livezmp.sources.mocap_factory import open_mocap_source  # noqa: E402
 from sim_devices.mocap_trial import generated_trial  # noqa: E402
@@ -232,7 +234,7 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=3.0)
     p.add_argument("--systems", default="lsl,qtm,natnet")
     args = p.parse_args()
-    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} "
+    print(f"load average {load_averages(' ')} "
           f"({os.cpu_count()} cores); {MARKERS} markers + {PLATES} plates, {args.seconds:g} s per row")
     head = (f"{'system':7} {'reader':8} {'rate':>6} {'sent':>6} {'got':>6} {'lost':>5} {'late':>5} {'ovfl':>5} "
             f"{'Hz got':>8} {'p50 ms':>7} {'p99 ms':>7}  delay measured")

@@ -24,6 +24,7 @@ import struct
 import time
 
 import serial
+from machine_load import load_averages
 
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.dynamixel_packet import Instruction, PacketReader, encode_packet
@@ -88,14 +89,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=4000)
     args = parser.parse_args()
-    print(f"load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}; {args.cycles} cycles each\n")
+    print(f"load average at the start: {load_averages()}; {args.cycles} cycles each\n")
     print("| servos | framing only us | read us | write us | read + write us | load |")
     print("|--------|-----------------|---------|----------|-----------------|------|")
     for n in (10, 20):
         x = measure(n, args.cycles)
         print(f"| {n:6d} | {x['framing']:15.1f} | {x['read']:7.1f} | {x['write']:8.1f} | "
               f"{x['read'] + x['write']:15.1f} | {os.getloadavg()[0]:4.1f} |", flush=True)
-    print(f"\nload average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine_load import load_averages
 
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, sync_read_bytes, wire_time
@@ -80,7 +81,7 @@ def main() -> None:
     args = parser.parse_args()
     robots = {"livezmp_mini": (None, load_robot(None, None)), "OP3": (str(OP3), load_robot(str(OP3), None))}
     print(f"20 simulated XM430s; {os.cpu_count()} CPUs; {args.seconds:g} s per row; "
-          f"load average at the start: {', '.join(f'{v:.2f}' for v in os.getloadavg())}\n")
+          f"load average at the start: {load_averages()}\n")
     header = ("| robot        | bus    | adapter | rate Hz | physics | model read ms | excess p50 us | p90 us | "
               "p99 us | max us | client CPU us/read | failed | devices CPU us/cycle | physics CPU us/cycle | load |")
     print(header)

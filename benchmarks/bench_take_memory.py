@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine_load import load_averages
 
 from livezmp.model.bvh import format_hierarchy, read_bvh
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -84,15 +85,11 @@ def measure(mode: str, take: Path, out: Path, script: str = __file__) -> dict:
     return json.loads(run.stdout.splitlines()[-1])
 
 
-def load_average() -> str:
-    return " ".join(f"{x:.2f}" for x in os.getloadavg())
-
-
 def start(keep: Path | None, prefix: str) -> Path:
     """The directory the takes are made in (``keep``, or a temporary one); prints the load average."""
     work = keep or Path(tempfile.mkdtemp(prefix=prefix))
     work.mkdir(parents=True, exist_ok=True)
-    print(f"load average {load_average()} (shared machine), {os.cpu_count()} CPUs")
+    print(f"load average {load_averages(' ')} (shared machine), {os.cpu_count()} CPUs")
     return work
 
 
@@ -129,7 +126,7 @@ def main() -> None:
             (work / f"zmp_{mode}_{n}.csv").unlink()
         if not args.keep:
             take.unlink()
-    print(f"load average {load_average()} after")
+    print(f"load average {load_averages(' ')} after")
 
 
 if __name__ == "__main__":
