@@ -32,7 +32,7 @@ from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers, sway_basis
 from livezmp.offline.batch import BatchResult, run_batch
-from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, plate_delay
+from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, ms, plate_delay
 
 MASS_DISAGREE = 0.03
 LOADED_HEIGHT_M = 0.04  # m: a sole corner this low ...
@@ -251,10 +251,10 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                                          for o in plates.offsets],
                    "lowpass_hz": cutoff, "complete_frames": int(complete.sum()),
                    "set_aside": plates.set_aside, **({"no_complete_frame": why} if why else {})},
-        "time_alignment": {"plate_delay_measured_ms": None if measured is None else round(1000 * measured, 1),
+        "time_alignment": {"plate_delay_measured_ms": ms(measured),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
                            "plate_delay_determined": determined,
-                           "plate_delay_halves_ms": [None if h is None else round(1000 * h, 1) for h in halves],
+                           "plate_delay_halves_ms": [ms(h) for h in halves],
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
                                  facing(take)),

@@ -71,7 +71,8 @@ def lag_with_halves(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
     return lag, ok, halves
 
 
-def _ms(v: float | None) -> float | None:
+def ms(v: float | None) -> float | None:
+    """Seconds (or None) as milliseconds rounded to 0.1 ms, for summaries."""
     return None if v is None else round(1000 * v, 1)
 
 
@@ -96,8 +97,8 @@ def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: 
         "p95_mm": round(1000 * float(np.percentile(dist, 95)), 2),
         "max_mm": round(1000 * float(dist.max()), 2),
         "bias_mm": [round(1000 * float(mean @ fwd[:2]), 2), round(1000 * float(mean @ left[:2]), 2)],
-        "lag_ms": _ms(lag) if determined else None,
-        "lag_halves_ms": [_ms(h) for h in halves],
+        "lag_ms": ms(lag) if determined else None,
+        "lag_halves_ms": [ms(h) for h in halves],
     }
 
 
