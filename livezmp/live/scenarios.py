@@ -134,27 +134,34 @@ def leg_chains(body: BodyModel) -> dict[str, list[str]]:
 def joint_roles(body: BodyModel) -> dict[str, str]:
     """Role (``l_hip_pitch``, ``r_knee``, ``l_sho_roll``...) -> joint name, from the kinematic tree
     (module docstring). Roles not found are left out (`Poser.index` names what is missing)."""
+    return _roles_and_arms(body)[0]
+
+
+def _about(axis: dict[str, np.ndarray], joint: str, k: int) -> bool:
+    """Whether ``joint`` turns about world axis ``k`` (zero posture)."""
+    return abs(float(axis[joint][k])) >= ALIGNED
+
+
+def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
+    """`joint_roles` and the arms (`_arms`) they came from, from one pass over the tree."""
     axis, origin = joint_axes(body)
-
-    def about(joint: str, k: int) -> bool:
-        return abs(float(axis[joint][k])) >= ALIGNED
-
     roles: dict[str, str] = {}
     chains = leg_chains(body)
     for side, chain in chains.items():
-        pitch = [n for n in chain if about(n, Y)]
+        pitch = [n for n in chain if _about(axis, n, Y)]
         if len(pitch) >= 3:
             hip, ankle = pitch[0], pitch[-1]
             middle = 0.5 * (origin[hip][Z] + origin[ankle][Z])
             knee = min(pitch[1:-1], key=lambda n: abs(origin[n][Z] - middle))
             roles.update({f"{side[0]}_hip_pitch": hip, f"{side[0]}_knee": knee, f"{side[0]}_ank_pitch": ankle})
-        roll = [n for n in chain if about(n, X)]
+        roll = [n for n in chain if _about(axis, n, X)]
         if len(roll) >= 2:
             roles.update({f"{side[0]}_hip_roll": roll[0], f"{side[0]}_ank_roll": roll[-1]})
-    for s, arm in arms(body, set().union(*chains.values())).items():
+    found = _arms(body, set().union(*chains.values()), axis, origin)
+    for s, arm in found.items():
         roles.update({f"{s}_{role}": joint for role, joint in
                       (("sho_pitch", arm.pitch), ("sho_roll", arm.roll), ("el", arm.elbow)) if joint})
-    return roles
+    return roles, found
 
 
 @dataclass(frozen=True)
@@ -169,12 +176,13 @@ class Arm:
     upper: np.ndarray
 
 
-def arms(body: BodyModel, legs: set[str]) -> dict[str, Arm]:
+def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
+          origin: dict[str, np.ndarray]) -> dict[str, Arm]:
     """Side ("l", "r") -> its `Arm`: the chain from the trunk to a leaf link on that side that no leg and no
     other side shares, with a joint about the lateral (pitch) or forward (roll) axis; its elbow the first joint
-    after the shoulder's whose origin lies a fifth of the way or more from the shoulder to the hand."""
+    after the shoulder's whose origin lies a fifth of the way or more from the shoulder to the hand. ``axis``,
+    ``origin``: `joint_axes`."""
     model, names = body.model, set(body.joint_names)
-    axis, origin = joint_axes(body)
     children = np.zeros(model.njoints, dtype=int)
     for j in range(1, model.njoints):
         children[model.parents[j]] += 1
@@ -198,8 +206,8 @@ def arms(body: BodyModel, legs: set[str]) -> dict[str, Arm]:
     for sign, chain, hand in chains:
         side = {1: "l", -1: "r"}.get(sign)
         own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
-        pitch = next((n for n in own if abs(float(axis[n][Y])) >= ALIGNED), None)
-        roll = next((n for n in own if abs(float(axis[n][X])) >= ALIGNED), None)
+        pitch = next((n for n in own if _about(axis, n, Y)), None)
+        roll = next((n for n in own if _about(axis, n, X)), None)
         if side is None or side in found or (pitch is None and roll is None):
             continue
         shoulder = [n for n in (pitch, roll) if n]
@@ -218,8 +226,7 @@ class Poser:
         self.body = body
         self.names = list(body.joint_names)
         self.axis, self.origin = joint_axes(body)
-        self.roles = joint_roles(body)
-        self.arms = arms(body, set().union(*leg_chains(body).values()))
+        self.roles, self.arms = _roles_and_arms(body)
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
