@@ -39,6 +39,7 @@ from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.trajectory_csv import read_joint_csv
+from livezmp.model.urdf_body import leg_joints
 
 SIDES = ("l", "r")
 G = 9.81  # m/s^2
@@ -126,9 +127,8 @@ def leg_chains(body: BodyModel) -> dict[str, list[str]]:
     """Foot side -> the actuated joints from the trunk down to that foot that the other foot's chain does not
     share (a waist above both legs is the trunk's), top first."""
     names = set(body.joint_names)
-    chains = {side: _limb(body.model, foot.frame_id, names) for side, foot in body.feet.items()}
-    shared = set.intersection(*(set(c) for c in chains.values())) if chains else set()
-    return {side: [n for n in chain if n not in shared] for side, chain in chains.items()}
+    legs = leg_joints(body.model, {side: foot.frame_id for side, foot in body.feet.items()})
+    return {side: [body.model.names[j] for j in chain if body.model.names[j] in names] for side, chain in legs.items()}
 
 
 def joint_roles(body: BodyModel) -> dict[str, str]:

@@ -238,9 +238,9 @@ def _chain(model: pin.Model, frame_id: int) -> list[int]:
     return out[::-1]
 
 
-def _legs(model: pin.Model, feet: dict[str, int]) -> dict[str, list[int]]:
-    """Each foot's leg: the actuated joints from the trunk to it that the other foot's chain does not share
-    (a waist above both legs is the trunk's, not a leg's), top first."""
+def leg_joints(model: pin.Model, feet: dict[str, int]) -> dict[str, list[int]]:
+    """Each foot's leg (``feet``: side -> frame id): the actuated joint ids from the trunk to it that the other
+    foot's chain does not share (a waist above both legs is the trunk's, not a leg's), top first."""
     chains = {side: _chain(model, f) for side, f in feet.items()}
     shared = set.intersection(*(set(c) for c in chains.values())) if len(chains) > 1 else set()
     return {side: [j for j in chain if j not in shared] for side, chain in chains.items()}
@@ -266,7 +266,7 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
     if data.oMf[a].translation[1] < data.oMf[b].translation[1]:
         a, b = b, a
     pa, pb = data.oMf[a].translation, data.oMf[b].translation
-    legs = _legs(model, {"left": a, "right": b})
+    legs = leg_joints(model, {"left": a, "right": b})
     top = min((data.oMi[c[0]].translation[2] for c in legs.values() if c), default=max(pa[2], pb[2]))
     length = top - min(pa[2], pb[2])
     names = f"{model.frames[a].name!r} and {model.frames[b].name!r}"
@@ -310,12 +310,12 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
         feet_frames[side] = model.getFrameId(f["link"])
     if len(feet_frames) < 2:
         feet_frames = {**_default_feet(model, data, path), **feet_frames}
-    leg_joints = _legs(model, feet_frames)
-    for side, chain in leg_joints.items():
+    leg_ids = leg_joints(model, feet_frames)
+    for side, chain in leg_ids.items():
         if not chain:
             raise InputError(f"{path}: foot {model.frames[feet_frames[side]].name!r} has no joint of its own "
                              "between it and the trunk (not a leg)")
-    hip_h = float(np.mean([data.oMi[leg_joints[s][0]].translation[2] - data.oMf[f].translation[2]
+    hip_h = float(np.mean([data.oMi[leg_ids[s][0]].translation[2] - data.oMf[f].translation[2]
                            for s, f in feet_frames.items()]))
     turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
     feet_frames = {side: _level_frame(model, fid, turns[side]) for side, fid in feet_frames.items()}
@@ -340,13 +340,13 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     jid = {n: model.getJointId(n) for n in names}
     legs = {}
     for side in feet_frames:
-        chain = [model.names[j] for j in leg_joints[side]]
+        chain = [model.names[j] for j in leg_ids[side]]
         wanted = cfg.legs.get(side, chain)
         for n in wanted:
             if n not in jid:
                 raise InputError(f"{cfg.source}: correction leg joint {n!r} is not in {path}")
         legs[side] = [model.joints[jid[n]].idx_q for n in wanted]
-    hips = {s: model.getFrameId(model.names[leg_joints[s][0]], pin.FrameType.JOINT) for s in feet_frames}
+    hips = {s: model.getFrameId(model.names[leg_ids[s][0]], pin.FrameType.JOINT) for s in feet_frames}
     named = {f"{s}_foot": f for s, f in feet_frames.items()}
     return BodyModel(
         kind="urdf", model=model, point_model=point_mass_copy(model), channel_names=names,
