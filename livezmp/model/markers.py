@@ -576,11 +576,18 @@ def sway_basis(origin: np.ndarray, facing: np.ndarray | None = None) -> tuple[np
     k = np.arange(len(origin), dtype=float)
     slope, icpt = np.polyfit(k, origin, 1)
     trend = np.outer(k, slope) + icpt
-    d = trend[-1, :2] - trend[0, :2]
+    return (trend, *travel_axes(trend[-1, :2] - trend[0, :2], facing))
+
+
+def travel_axes(travel: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unit horizontal fore-aft and lateral (left of it) axes (3,) of a walk that travels ``travel`` (2,) m:
+    along it; when it is under 0.1 m, ``facing`` (horizontal: the way the subject faces, so that the lab's
+    axes do not matter), else +x."""
+    d = travel
     if np.linalg.norm(d) <= 0.1:
         d = np.array([1.0, 0.0]) if facing is None else np.asarray(facing, dtype=float)[:2]
     fwd = d / np.linalg.norm(d)
-    return trend, np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
+    return np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
 
 
 def hat_sway(origin: np.ndarray, gain: tuple[float, float], facing: np.ndarray | None = None) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from livezmp.balance.plates import G
+from livezmp.model.markers import travel_axes
 
 MAX_LAG_S = 0.1  # s: the lag search covers ± this
 # A lag is *determined* when the first and second halves of the frames give lags this close (and neither at the
@@ -21,11 +22,7 @@ LAG_AGREE_S = 0.02
 def walking_axes(com: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Unit horizontal (3,) fore-aft (the CoM's net travel; when it barely moves, ``facing`` (horizontal: the way
     the subject faces), else +x) and lateral (left of it) directions."""
-    d = com[-1, :2] - com[0, :2]
-    if np.linalg.norm(d) <= 0.1:
-        d = np.array([1.0, 0.0]) if facing is None else np.asarray(facing, dtype=float)[:2]
-    fwd = d / np.linalg.norm(d)
-    return np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
+    return travel_axes(com[-1, :2] - com[0, :2], facing)
 
 
 def _errors(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shift: int) -> np.ndarray:
