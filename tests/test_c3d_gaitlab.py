@@ -24,6 +24,7 @@ from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
 from livezmp.offline import calibrate as calibration
+from livezmp.offline import gaitlab
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, lateral_band
 from livezmp.offline.validation import lag_with_halves
 from tests.data_paths import DATA
@@ -553,6 +554,19 @@ def test_plates_carrying_less_than_the_mass_needs_say_so(lab):
     assert abs(carried - 100 / 1.5) <= 3 and "lighter subject" in why
 
 
+def test_a_step_on_the_plates_without_a_file_mass_weighs_the_subject(tmp_path, monkeypatch):
+    """No mass in the file, no whole gait cycle and too short to be a standing take: the plates weigh the subject
+    over the frames where every loaded foot is on them, F_z / (g + a_z) with the kinematics' a_z (75 kg true)."""
+    path = tmp_path / "short.c3d"
+    write_lab_c3d(path, PLATES, lab=Lab(mass=False, seconds=1.6))
+    trial = read_c3d(path)
+    m = analyse_lab_take(trial).summary["mass"]
+    assert m["source"] == "plates (stance)" and m["used_kg"] == pytest.approx(MASS, rel=0.005)
+    assert m["stance_spread"] < 0.05
+    monkeypatch.setattr(gaitlab, "stance_mass", lambda *a: (None, None))
+    assert analyse_lab_take(trial).summary["mass"]["source"] == "default"  # the 70 kg default without it
+
+
 def test_analyze_c3d_writes_cop_columns_and_validation(lab, tmp_path):
     d, _ = lab
     rc, s = _analyze(d / "on.c3d", tmp_path, "--plot", str(tmp_path / "zmp.png"))
@@ -571,6 +585,8 @@ def test_real_plugin_gait_walk(tmp_path):
     assert rc == 0
     assert s["mass"]["plates_kg"] == pytest.approx(82.6, abs=1.0) and s["mass"]["source"] == "plates"
     assert "73.4 kg" in s["mass"]["note"]
+    # Newton frame by frame over the complete frames agrees with the mean force over its gait cycle (82.2 / 82.5 kg)
+    assert s["mass"]["stance_kg"] == pytest.approx(s["mass"]["plates_kg"], rel=0.01)
     # its plates run ~24 ms behind its markers (measured, undone); then lag and fore-aft bias are small
     assert 20 < s["time_alignment"]["plate_delay_measured_ms"] < 30
     cv = s["cop_vs_zmp"]
@@ -591,6 +607,8 @@ def test_real_plugin_gait_walk(tmp_path):
 def test_real_cgm24_walk(tmp_path):
     rc, s = _analyze(C3D / "cgm24_walking01_forceplate.c3d", tmp_path)
     assert rc == 0
+    # one stance on its plate: weighed frame by frame, the subject is the file's 77.6 kg (77.3)
+    assert s["mass"]["source"] == "file" and s["mass"]["stance_kg"] == pytest.approx(s["mass"]["file_kg"], rel=0.01)
     cv = s["cop_vs_zmp"]
     # this subject's trunk follows its mid-hip fore-aft (calibrated gain ~1): the population sway costs it
     # 41.7 -> 45.2 mm and lag +7.1 -> +11.0 ms (knee centres without the THI wands: 46.9 -> 45.2 mm; the lateral

@@ -26,6 +26,10 @@ PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
 STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
+# stance-frame mass: at least this many frames, whose per-frame masses' interquartile range is at most this part
+# of their median (a plate set aside, or a foot half on a plate, scatters them)
+STANCE_MIN_FRAMES = 10
+STANCE_MAX_SPREAD = 0.15
 UP = np.array([0.0, 0.0, 1.0])
 
 
@@ -180,6 +184,23 @@ def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: 
         n += int((rows & complete).sum())
         used += 1
     return (total / n / G if n else None), used
+
+
+def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray) -> tuple[float | None, float | None]:
+    """Body mass (kg) from frames where every foot that may bear weight is on a plate (``feet_on`` (F,)): there
+    the plates carry the whole body, F_z = m (g + a_z), with ``acc_z`` (F,) m/s² the CoM's vertical acceleration
+    from the kinematics (which does not depend on the mass). The median of F_z / (g + a_z) over those frames;
+    None unless there are ``STANCE_MIN_FRAMES`` and their interquartile range is within ``STANCE_MAX_SPREAD``
+    of the median. Returns (mass or None, spread: IQR / median, or None without frames)."""
+    rows = feet_on & (G + acc_z > 0.5 * G)  # a hop or a fall gives a quotient of nothing
+    if rows.sum() < STANCE_MIN_FRAMES:
+        return None, None
+    per = fz[rows] / (G + acc_z[rows])
+    q25, med, q75 = np.percentile(per, [25, 50, 75])
+    if med <= 0:
+        return None, None
+    spread = float((q75 - q25) / med)
+    return (float(med) if spread <= STANCE_MAX_SPREAD else None), spread
 
 
 def standing_span(times: np.ndarray, complete: np.ndarray, min_s: float = STANDING_S) -> list[tuple[float, float]]:

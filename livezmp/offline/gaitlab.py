@@ -4,8 +4,11 @@ the plates at the marker frames, the frames they saw whole, and the comparison.
 Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
 they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
 else the plates' mean vertical force ÷ g over a standing take (complete frames, 95 % of them, over at
-least ``STANDING_S``); else 70 kg. The ZMP does not depend on the total mass (every segment scales with
-it); the flight threshold and the plate-side CoM acceleration do.
+least ``STANDING_S``); else the plates' over the frames where every loaded foot is on one, F_z / (g + a_z)
+with the kinematics' vertical CoM acceleration (:func:`livezmp.balance.plates.stance_mass`: a trial with a
+step or two on the plates and no mass in the file); else 70 kg. The ZMP does not depend on the total mass
+(every segment scales with it); the flight threshold, the complete frames and the plate-side CoM acceleration
+(so the measured plate delay) do.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from livezmp.balance.plates import (
     plate_frames,
     plate_mass,
     plates_floor,
+    stance_mass,
     standing_span,
 )
 from livezmp.balance.support import SUPPORT_LABELS
@@ -154,8 +158,9 @@ def com_accelerations(take: MarkerTake, result: BatchResult) -> np.ndarray:
 
 def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult, times: np.ndarray,
                          cfg: PipelineConfig, floor: float, cutoff: float, shift: float, com_acc: np.ndarray,
-                         mass: float) -> tuple[PlateFrames, np.ndarray, str | None]:
-    """The plates per frame, the complete frames and, when there is none, why (one line)."""
+                         mass: float) -> tuple[PlateFrames, np.ndarray, np.ndarray, str | None]:
+    """The plates per frame, the complete frames, the frames with every foot that may bear weight on a plate
+    (whatever the plates carry) and, when there is no complete frame, why (one line)."""
     frames = np.rint(times * trial.rate).astype(int)
     plates = plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input,
                           cutoff, shift_s=shift)
@@ -177,19 +182,24 @@ def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult,
                f"m = {mass:.1f} kg (complete: {100 * FORCE_SEEN:.0f} %): "
                + ("a lighter subject? (--mass)" if carried > 0.5 else
                   "the plates do not read the feet on them (plate corners or channels wrong?)"))
-    return plates, complete, why
+    return plates, complete, feet_on, why
 
 
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
-                 m_standing: float | None = None) -> dict:
+                 m_standing: float | None = None, stance: tuple[float | None, float | None] = (None, None)) -> dict:
+    m_stance, spread = stance
     info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
-            "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles}
+            "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles,
+            "stance_kg": None if m_stance is None else round(m_stance, 2),
+            "stance_spread": None if spread is None else round(spread, 3)}
     if opts.mass:
         used, source = opts.mass, "--mass"
     elif m_plates is not None:
         used, source = m_plates, "plates"
     elif not trial.mass_kg and m_standing is not None:
         used, source = m_standing, "plates (standing)"
+    elif not trial.mass_kg and m_stance is not None:
+        used, source = m_stance, "plates (stance)"
     else:
         used, source = first, "file" if trial.mass_kg else "default"
     info.update(used_kg=round(used, 2), source=source)
@@ -225,14 +235,18 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
-    plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc, first)
+    plates, complete, feet_on, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
+                                                          com_acc, first)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
     m_standing, _ = plate_mass(plates.force[:, 2], times, complete, standing_span(times, complete))
-    mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing)
+    mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing,
+                             stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on))
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
         take, times, cfg, result = _run(trial, opts, used, floor)
         com_acc = com_accelerations(take, result)
+        plates, complete, _, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
+                                                        com_acc, used)
     # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
     # applied even when its halves disagree: tried, applying only determined delays was worse (docs/validation.md)
     measured, determined, halves = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete,
@@ -240,8 +254,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
     if applied:
         shift = measured
-        plates, complete, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift, com_acc,
-                                                     used)
+        plates, complete, _, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
+                                                        com_acc, used)
     summary = {
         "input": _input(trial, take),
         "markers": take.notes,
