@@ -84,6 +84,16 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
                    help="estimator smoothing cutoff, Hz (default 4 x (rate / 120 Hz)^0.2: 3.0 at 30 Hz, 4 at 120)")
 
 
+def add_marker_options(p: argparse.ArgumentParser) -> None:
+    """How a C3D trial's markers make a body: the marker map and the body-segment table."""
+    p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
+                                     "joint-centre rules; docs/validation.md)")
+    p.add_argument("--bsp", choices=("auto", "adult", "child"), default="auto",
+                   help="C3D body-segment table: de Leva's adult, or for a child scaled by Jensen's proportions at "
+                        "its age (default auto: child when the file's Age is under 18 or its Height under 1.40 m)")
+    p.add_argument("--age", type=float, metavar="YEARS", help="the C3D subject's age, replacing the file's")
+
+
 def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, C3D, or CSV + URDF)")
     p.add_argument("motion", nargs="?", help="motion file (.bvh, .c3d, or .csv with --robot); default: built-in demo")
@@ -93,8 +103,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
-    p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
-                                     "joint-centre rules; docs/validation.md)")
+    add_marker_options(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
 
@@ -102,7 +111,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("trials", nargs="+", help="C3D trials of one subject with force plates")
     p.add_argument("-o", "--output", default="subject.toml", help="subject file to write (default subject.toml)")
     p.add_argument("--mass", type=float, help="body mass, kg (default: the plates', else the file's)")
-    p.add_argument("--markers", help="C3D marker map (TOML), as for analyze")
+    add_marker_options(p)
     p.set_defaults(handler="livezmp.commands.calibrate:cmd_calibrate")
 
     p = sub.add_parser("correct", help="root and hip corrections that keep the ZMP inside the support polygon")
@@ -110,6 +119,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="corrected motion (same format as the input)")
     p.add_argument("--report", help="report JSON")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
+    add_marker_options(p)
     add_body_options(p)
     add_correction_limits(p)
     p.set_defaults(handler="livezmp.commands.correct:cmd_correct")
@@ -166,6 +176,7 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
                    help="run the monitor, its capture client and dashboard under SCHED_FIFO at this priority, 1-99 "
                         "(default 0: normal scheduling); if refused it runs at normal priority and says so")
     _sink_options(p)
+    add_marker_options(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.monitor:cmd_monitor")
 
@@ -350,6 +361,7 @@ def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D takes: HAT mass and centre of mass)")
     p.add_argument("--plot", action="store_true", help="also write each take's figure (zmp.png, as analyze --plot)")
+    add_marker_options(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.batch:cmd_analyze")
 

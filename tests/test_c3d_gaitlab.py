@@ -114,21 +114,23 @@ def _medial(side: str) -> np.ndarray:
 
 
 def _trial(t: np.ndarray, rate: float, full_body: bool = False, cluster: bool = False,
-           trunk: bool | str = False) -> C3dTrial:
+           trunk: bool | str = False, height: float = 1.75) -> C3dTrial:
     m = _markers(t, full_body, cluster, trunk)
     return C3dTrial("synthetic", list(m), np.stack(list(m.values()), axis=1), rate, rate, 0.0, [], MASS,
-                    "PROCESSING:Bodymass", 1.75)
+                    "PROCESSING:Bodymass", height)
 
 
 @functools.lru_cache(maxsize=4)  # variants of one lab share it (the arrays are not modified)
 def _true_wrench(body: MarkerBodyOptions, full_body: bool = False, cluster: bool = False,
-                 trunk: bool | str = False, analog: float = ANALOG,
-                 seconds: float = SECONDS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 trunk: bool | str = False, analog: float = ANALOG, seconds: float = SECONDS,
+                 height: float = 1.75) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force (S, 3) N, moment about the world origin (S, 3) N·m and CoP (S, 2) m at the analog rate, from the
-    marker body's own rigid-body dynamics driven by the motion sampled at >= 10 kHz (central differences)."""
+    marker body's own rigid-body dynamics driven by the motion sampled at >= 10 kHz (central differences), for
+    a subject of ``height`` m (the file's Height: it sizes the placed segments and chooses the segment table)."""
     fine = int(np.ceil(10_000 / analog))
     t = np.arange(int(seconds * analog) * fine + 2 * fine) / (analog * fine) - 1.0 / analog
-    take = body_from_markers(_trial(t, analog * fine, full_body, cluster, trunk), replace(body, total_mass=MASS))
+    take = body_from_markers(_trial(t, analog * fine, full_body, cluster, trunk, height),
+                             replace(body, total_mass=MASS))
     q = take.frames
     h = 1.0 / (analog * fine)
     model, data = take.body.model, take.body.model.createData()
@@ -188,6 +190,7 @@ class Lab:
     integer: float | None = None
     prefix: str = "Sub01:"
     mass: bool = True
+    height_m: float = 1.75  # PROCESSING:Height, written with the mass
 
 
 def _plate_axes(lab: Lab) -> np.ndarray:
@@ -264,7 +267,8 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     second half; ``pelvis_wobble_m``: the pelvis markers (not the body, nor its plates) shake sideways this far
     at WOBBLE_HZ (skin on the pelvis)."""
     lab = lab or Lab()
-    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk, lab.analog, lab.seconds)
+    force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk, lab.analog, lab.seconds,
+                                      lab.height_m)
     if delay_samples:
         force, moment = (np.vstack([np.repeat(x[:1], delay_samples, 0), x[:-delay_samples]]) for x in (force, moment))
     t = np.arange(int(lab.seconds * lab.rate)) / lab.rate
@@ -297,7 +301,7 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     _write_plates(c3d, lab, plates, [(f1, m1), (f2, m2), (spare[:, :3] @ axes.T, spare[:, 3:] @ axes.T)])
     if lab.mass:
         c3d.add_parameter("PROCESSING", "Bodymass", [MASS])
-        c3d.add_parameter("PROCESSING", "Height", [1750.0])
+        c3d.add_parameter("PROCESSING", "Height", [1000.0 * lab.height_m])
     c3d.write(str(path))
     if lab.integer or lab.scale[1]:  # ezc3d writes floats and zeroes ANALOG:OFFSET: rewrite its data section
         _store(path, pts, c3d["data"]["analogs"][0].T, lab)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from livezmp.checks import check_number
+from livezmp.commands.common import MAX_AGE_YEARS
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
@@ -14,7 +16,9 @@ from livezmp.offline.gaitlab import LabOptions
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     trials = [read_c3d(p) for p in args.trials]
-    markers = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None)
+    check_number(args.age, "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
+    markers = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
+                                age_years=args.age)
     subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))
     write_subject(subject, args.output, report)
     print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "

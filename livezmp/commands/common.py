@@ -23,6 +23,7 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 MAX_BODY_MASS = 1000.0  # kg
 MAX_GROUND_M = 1000.0  # m from the input's origin
 MAX_SOLE_WIDTH_M = 1.0
+MAX_AGE_YEARS = 130.0
 
 
 def check_body_options(args: argparse.Namespace) -> None:
@@ -30,6 +31,7 @@ def check_body_options(args: argparse.Namespace) -> None:
     check_number(args.mass, "--mass (kg)", 0.0, MAX_BODY_MASS, lo_open=True)
     check_number(args.ground, "--ground (m)", -MAX_GROUND_M, MAX_GROUND_M)
     check_number(args.sole_width, "--sole-width (m)", 0.0, MAX_SOLE_WIDTH_M, lo_open=True)
+    check_number(getattr(args, "age", None), "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
 
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
@@ -49,7 +51,7 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
                        subject=getattr(args, "subject", None), markers=getattr(args, "markers", None),
-                       cutoff_hz=args.cutoff_hz)
+                       cutoff_hz=args.cutoff_hz, bsp=getattr(args, "bsp", "auto"), age=getattr(args, "age", None))
 
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:

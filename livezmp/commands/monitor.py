@@ -20,6 +20,7 @@ from livezmp.live.realtime import realtime_priority
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.segments import load_mapping
@@ -52,8 +53,20 @@ def _source(args: argparse.Namespace) -> Source:
                          hat_fraction=subject and subject.hat_fraction)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
                          speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration,
-                         markers=subject.marker_options() if subject else MarkerBodyOptions())
+                         markers=_marker_options(args, subject))
     return open_source(args.motion, opts)
+
+
+def _marker_options(args: argparse.Namespace, subject: Subject | None) -> MarkerBodyOptions:
+    """A marker body's options (a C3D replayed, or a capture stream): the marker map, the segment table and the
+    subject file's parameters; refused for any other source."""
+    opts = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
+                             age_years=args.age)
+    markers = Path(args.motion).suffix.lower() == ".c3d" or str(args.motion).split("://")[0] in MOCAP_SCHEMES
+    if not markers and (args.markers or args.bsp != "auto" or args.age is not None):
+        raise InputError(f"{args.markers or '--bsp / --age'}: a marker map and the segment table are for a C3D "
+                         f"file or a capture stream's markers (got {args.motion})")
+    return subject.marker_options(opts) if subject else opts
 
 
 def _subject(args: argparse.Namespace) -> Subject | None:

@@ -13,7 +13,7 @@ feet; the first frame gives the up axis), written at full precision.
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ from livezmp.model.body import BodyModel, world_from_up_axis
 from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
+from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
 from livezmp.model.segments import SegmentTag
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -103,13 +104,15 @@ def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple
     from (every frame, at full precision; NaN where unseen) and the subject's parameters."""
     opts = opts or MarkerBodyOptions()
     take = body_from_markers(trial, opts)
-    labels = [lab for lab in marker_labels(trial) if lab in trial.labels]
+    labels = [lab for lab in marker_labels(trial, opts.marker_map) if lab in trial.labels]
     pts = np.stack([trial.marker(lab) for lab in labels], axis=1).reshape(len(trial.points), -1)
     text = ",".join(f"{lab}_{c}" for lab in labels for c in "xyz") + "\n" + "\n".join(
         ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
     options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
                "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
-               "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain, "source": trial.source}
+               "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain, "source": trial.source,
+               "marker_map": None if opts.marker_map is None else asdict(opts.marker_map), "bsp": opts.bsp,
+               "age_years": trial.age_years if opts.age_years is None else opts.age_years}
     return take, BodySpec("markers", {MARKERS_FILE: text}, options)
 
 
@@ -118,6 +121,14 @@ def stream_marker_body(take: MarkerTake, spec: BodySpec, up: str) -> tuple[BodyM
     ("+y"): its outputs go back into the stream's axes; the spec says so, so the body is rebuilt the same."""
     body = replace(take.body, world_from_input=world_from_up_axis(up), up_axis=up.lstrip("+"))
     return body, replace(spec, options={**spec.options, "input_up": up})
+
+
+def _marker_map(d: dict | None) -> MarkerMap | None:
+    """A marker map from its spec form (:func:`dataclasses.asdict`: tuples turned lists)."""
+    if d is None:
+        return None
+    tup = lambda v: tuple(tup(x) for x in v) if isinstance(v, list) else v  # noqa: E731
+    return MarkerMap(d["source"], tup(d["labels"]), tup(d["segments"]), tup(d["joints"]), d.get("stature_m"))
 
 
 def _markers_from_spec(spec: BodySpec) -> BodyModel:
@@ -130,7 +141,8 @@ def _markers_from_spec(spec: BodySpec) -> BodyModel:
     hat, gain = o.get("hat_offset"), o.get("hat_sway_gain")
     opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
                              hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"),
-                             hat_sway_gain=None if gain is None else tuple(gain))
+                             hat_sway_gain=None if gain is None else tuple(gain), bsp=o.get("bsp", "auto"),
+                             age_years=o.get("age_years"), marker_map=_marker_map(o.get("marker_map")))
     body = body_from_markers(trial, opts).body
     if o.get("input_up"):  # a live stream's body: outputs in the stream's axes
         body = replace(body, world_from_input=world_from_up_axis(o["input_up"]), up_axis=o["input_up"].lstrip("+"))

@@ -57,7 +57,7 @@ class C3dTrial:
     non-finite or all-zero coordinates); ``rate`` Hz of the
     points; ``analog_rate`` Hz of the plates; ``start_time`` s, the time of frame 0 in the
     capture (events are given on the same clock); ``parameters`` the subject's
-    (``Bodymass`` kg, ``Height`` m, ``LKneeWidth`` ... m) when the file has them."""
+    (``Bodymass`` kg, ``Height`` m, ``Age`` years, ``LKneeWidth`` ... m) when the file has them."""
 
     source: str
     labels: list[str]
@@ -72,6 +72,7 @@ class C3dTrial:
     widths_m: dict[str, float] = field(default_factory=dict)
     events: list[tuple[str, str, float]] = field(default_factory=list)  # (context, label, time s)
     units: str = "m"
+    age_years: float | None = None
 
     def marker(self, label: str) -> np.ndarray | None:
         """(F, 3) trajectory of ``label`` (m), or None when the file has no such marker."""
@@ -98,6 +99,15 @@ def _first_number(value) -> float | None:
         return None
     a = np.asarray(value, dtype=float).ravel()
     return float(a[0]) if a.size and np.isfinite(a[0]) and a[0] > 0 else None
+
+
+def _age(groups: dict) -> float | None:
+    """The subject's age (years) when the file states one (PROCESSING:Age, SUBJECT:AGE or SUBJECTS:AGE)."""
+    for g, n in (("PROCESSING", "Age"), ("SUBJECT", "AGE"), ("SUBJECTS", "AGE")):
+        age = _first_number(_param(groups, g, n))
+        if age is not None and age < 130:
+            return age
+    return None
 
 
 def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, float]]:
@@ -297,5 +307,5 @@ def read_c3d(path: str | Path) -> C3dTrial:
         source=str(p), labels=labels, points=pts.transpose(2, 1, 0), rate=rate,
         analog_rate=_first_number(_param(groups, "ANALOG", "RATE")) or rate,
         start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p), unit), mass_kg=mass, mass_field=where,
-        height_m=height, widths_m=widths, events=_events(groups, str(p)), units=unit,
+        height_m=height, age_years=_age(groups), widths_m=widths, events=_events(groups, str(p)), units=unit,
     )

@@ -20,7 +20,9 @@ cluster sets: :mod:`livezmp.model.marker_map`.
 - Segments: pelvis (lower trunk), thighs, shanks, feet, each a rigid body with six
   degrees of freedom (three prismatic, then yaw, pitch, roll) placed on its own markers every frame
   (no joint constraints: soft-tissue motion cannot break a chain). Masses, centres of mass and
-  radii of gyration from de Leva (1996); the foot's centre of mass at the middle of ankle centre
+  radii of gyration from de Leva (1996), or for a child that table with Jensen's mass proportions at the
+  child's age (:mod:`livezmp.model.anthropometry`, chosen from the file's age or height, or ``bsp``); the
+  foot's centre of mass at the middle of ankle centre
   to toe marker (Winter 2009, table 4.1).
 - Head, arms and trunk (HAT) of a lower-body set are placed from the pelvis: de Leva's head,
   trunk and arm segments stacked upright above the mid-hip (arms hanging from the cervicale),
@@ -43,7 +45,7 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from livezmp.errors import InputError
-from livezmp.model.anthropometry import DE_LEVA_MALE
+from livezmp.model.anthropometry import ADULT, DE_LEVA_MALE, BspTable, SegmentParams, choose_table
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy, world_from_up_axis
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
@@ -101,6 +103,8 @@ class MarkerBodyOptions:
     hat_follows_pelvis: bool = False
     hat_sway_gain: tuple[float, float] | None = TRUNK_SWAY_GAIN
     marker_map: MarkerMap | None = None  # labels renamed, or a cluster set (livezmp.model.marker_map)
+    bsp: str = "auto"  # segment table: "auto" (from the file's age / height), "adult" or "child" (anthropometry)
+    age_years: float | None = None  # the subject's age, replacing the file's
 
 
 @dataclass
@@ -252,9 +256,14 @@ def marker_roles(trial: C3dTrial) -> dict[str, str | None]:
     return _as_written(roles, match)
 
 
-def marker_labels(trial: C3dTrial) -> list[str]:
-    """The labels of ``trial``'s markers that its marker body is built from (as the file writes them)."""
-    return [label for label in marker_roles(trial).values() if label is not None]
+def marker_labels(trial: C3dTrial, mmap: MarkerMap | None = None) -> list[str]:
+    """The labels of ``trial``'s markers that its marker body (through the marker map ``mmap``, if any) is built
+    from, as the file writes them."""
+    if mmap is not None and mmap.segments:
+        return map_labels(mmap)
+    _, roles, match = _standard(trial, mmap)
+    original = dict(mmap.labels) if mmap is not None else {}  # a role the map names -> the file's label
+    return [original.get(label, label) for label in _as_written(roles, match).values() if label is not None]
 
 
 def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
@@ -326,13 +335,15 @@ def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     return np.unwrap(angles, axis=0) if unwrap else angles
 
 
-def hat_table(stature: float, head_and_arms: bool = False) -> tuple[float, float, np.ndarray]:
-    """Head-arms-trunk above the lower trunk, from de Leva (1996): mass fraction, height (m) of its
+def hat_table(stature: float, head_and_arms: bool = False,
+              table: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, float, np.ndarray]:
+    """Head-arms-trunk above the lower trunk, from de Leva (1996) (masses from ``table``, a segment table of
+    :mod:`livezmp.model.anthropometry`): mass fraction, height (m) of its
     centre of mass above the mid-hip, and its inertia (3, 3) per kg of HAT about that point
     (x forward, y left, z up). Segments stacked upright: lower, middle, upper trunk, head; each arm
     hangs from the cervicale (the top of the upper trunk) along the body's side. ``head_and_arms``:
     the same without the middle and upper trunk, its height then measured from the cervicale."""
-    t = DE_LEVA_MALE
+    t = table
     h = stature / 1741.0  # de Leva lengths are mm for a 1741 mm man
     parts = []  # (mass fraction, CoM height m, segment, length m)
     base = 145.7 * h  # omphalion above the mid-hip: the lower trunk's length
@@ -409,7 +420,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths)
+    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths, _table(opts, trial, notes))
     open_gaps = [{**g, "marker": match.roles.get(g["marker"], g["marker"])} for g in open_gaps]
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
@@ -633,7 +644,7 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths)
+    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths, _table(opts, trial, notes))
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
 
@@ -731,21 +742,30 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     return out
 
 
-def trunk_com_below_cervicale(stature: float) -> float:
+def trunk_com_below_cervicale(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> float:
     """Depth (m) of the middle + upper trunk's combined centre of mass below the cervicale (de Leva:
-    the upper trunk from the cervicale down to the xiphion, the middle trunk on to the omphalion)."""
-    t = DE_LEVA_MALE
+    the upper trunk from the cervicale down to the xiphion, the middle trunk on to the omphalion; masses from
+    the segment table ``t``)."""
     h = stature / 1741.0
     upt, mpt = 170.7 * h, 215.5 * h
     mu, mm = t["upper_trunk"].mass_fraction, t["middle_trunk"].mass_fraction
     return (mu * t["upper_trunk"].com_fraction * upt + mm * (upt + t["middle_trunk"].com_fraction * mpt)) / (mu + mm)
 
 
+def _table(opts: MarkerBodyOptions, trial: C3dTrial, notes: dict) -> BspTable:
+    """The segment table ``opts.bsp`` asks for, given the subject's age (``opts``' or the file's) and height; said in
+    ``notes["bsp"]``."""
+    age = opts.age_years if opts.age_years is not None else trial.age_years
+    table = choose_table(opts.bsp, age, trial.height_m, notes["stature_m"])
+    notes["bsp"] = table.summary()
+    return table
+
+
 def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarray,
-           notes: dict, lengths: dict[str, float]) -> tuple[BodyModel, np.ndarray]:
-    t = DE_LEVA_MALE
+           notes: dict, lengths: dict[str, float], table: BspTable = ADULT) -> tuple[BodyModel, np.ndarray]:
+    t = table.segments
     stature = notes["stature_m"]
-    hat_mass, hat_height, hat_inertia = hat_table(stature)
+    hat_mass, hat_height, hat_inertia = hat_table(stature, table=t)
     full = "hat" not in seg
     hat_fraction = hat_mass if full or opts.hat_fraction is None else opts.hat_fraction
     lower = t["lower_trunk"]
@@ -780,13 +800,13 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             body_frame["pelvis_joint"] = parent
             continue
         if kind == "headarms":  # placed on the tracked thorax, whose origin is at the cervicale
-            frac, height, inertia = hat_table(stature, head_and_arms=True)
+            frac, height, inertia = hat_table(stature, head_and_arms=True, table=t)
             mass = opts.total_mass * frac
             model.appendBodyToJoint(parent, pin.Inertia(mass, np.array([0.0, 0.0, height]), mass * inertia),
                                     pin.SE3.Identity())
             continue
         if kind in ("thorax", "head", "hand"):
-            mass, com, inertia = _upper_inertia(kind, name, seg, m, stature)
+            mass, com, inertia = _upper_inertia(kind, name, seg, m, stature, t)
             model.appendBodyToJoint(parent, pin.Inertia(opts.total_mass * mass, com, opts.total_mass * inertia),
                                     pin.SE3.Identity())
             continue
@@ -813,7 +833,8 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
     notes["hat"] = ("head, arms and trunk tracked by their own markers" if "head" in seg else
-                    f"trunk tracked by {_trunk_labels(m)}; head and arms (de Leva) placed on it, arms hanging"
+                    f"trunk tracked by {_trunk_labels(m)}; head and arms "
+                    f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on it, arms hanging"
                     if full else
                     f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
                     f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
@@ -834,15 +855,15 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     return body, segment_channels(seg)
 
 
-def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float) -> tuple[float, np.ndarray, np.ndarray]:
+def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
+                   t: dict[str, SegmentParams]) -> tuple[float, np.ndarray, np.ndarray]:
     """Mass fraction, centre of mass (segment frame, m) and inertia per kg of body mass (3, 3) of the
-    thorax (middle + upper trunk), head or hand, from de Leva (1996)."""
-    t = DE_LEVA_MALE
+    thorax (middle + upper trunk), head or hand, from the segment table ``t`` (de Leva 1996's layout)."""
     h = stature / 1741.0
     if kind == "thorax":
         frac = t["middle_trunk"].mass_fraction + t["upper_trunk"].mass_fraction
         length = (170.7 + 215.5) * h
-        com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature)])
+        com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)])
         gyr = t["middle_trunk"].gyration
     elif kind == "head":
         frac, length, com, gyr = t["head"].mass_fraction, 242.9 * h, np.zeros(3), t["head"].gyration

@@ -29,6 +29,7 @@ from scipy.optimize import least_squares
 
 from livezmp.balance.plates import G
 from livezmp.errors import InputError
+from livezmp.model.anthropometry import ADULT, BspTable, child_segments
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, body_from_markers, hat_table, sway_basis
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing
@@ -55,20 +56,27 @@ BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.
 @dataclass(frozen=True)
 class Subject:
     """HAT mass fraction of the body, its centre of mass (forward, left, up) m from the mid-hip, and how far
-    it sways (fore-aft, lateral) relative to the mid-hip (:func:`livezmp.model.markers.hat_sway`)."""
+    it sways (fore-aft, lateral) relative to the mid-hip (:func:`livezmp.model.markers.hat_sway`); the rest of the
+    body's segment table ``bsp`` ("adult", "child"; None: chosen from each file) and the subject's age, years."""
 
     hat_fraction: float
     hat_offset: tuple[float, float, float]
     hat_sway_gain: tuple[float, float] = TRUNK_SWAY_GAIN
+    bsp: str | None = None
+    age_years: float | None = None
 
     def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
-        return replace(base or MarkerBodyOptions(), hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
-                       hat_sway_gain=self.hat_sway_gain)
+        """``base`` with this subject's HAT; its table and age unless ``base`` asks for its own."""
+        base = base or MarkerBodyOptions()
+        return replace(base, hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
+                       hat_sway_gain=self.hat_sway_gain, bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
+                       age_years=base.age_years if base.age_years is not None else self.age_years)
 
 
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
-    optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_SWAY_GAIN`)."""
+    optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_SWAY_GAIN`; ``bsp = "adult"`` or
+    ``"child"`` and ``age_years``, else the table is chosen from each file)."""
     p = Path(path)
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
@@ -83,7 +91,13 @@ def load_subject(path: str | Path) -> Subject:
     if not (isinstance(gain, list) and len(gain) == 2
             and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
         raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
-    return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain))
+    bsp, age = s.get("bsp"), s.get("age_years")
+    if bsp is not None and bsp not in ("adult", "child"):
+        raise InputError(f"{p}: subject.bsp must be \"adult\" or \"child\", got {bsp!r}")
+    if age is not None and not (isinstance(age, int | float) and 0 < age < 130):
+        raise InputError(f"{p}: subject.age_years must be a number of years, got {age!r}")
+    return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain), bsp,
+                   None if age is None else float(age))
 
 
 def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
@@ -91,6 +105,8 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
              f"hat_fraction = {subject.hat_fraction:.5f}",
              "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
              "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
+             *([f'bsp = "{subject.bsp}"  # the segment table the HAT was fitted with'] if subject.bsp else []),
+             *([f"age_years = {subject.age_years:.1f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
     for k, v in report.items():
         lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
@@ -260,8 +276,9 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
             raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need {MIN_FRAMES}")
         _check_agreement(trial, lab, rows)
         whole.append(_terms(trial, lab, rows, opts.markers))
-        stature = lab.summary["markers"]["stature_m"]
-    fraction, height, _ = hat_table(stature)
+        stature, bsp = lab.summary["markers"]["stature_m"], lab.summary["markers"]["bsp"]
+    table = ADULT if bsp["table"] == "adult" else BspTable(child_segments(bsp["age_years"]), "child", bsp["age_years"])
+    fraction, height, _ = hat_table(stature, table=table.segments)
     prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_SWAY_GAIN])
     halves = _halves(whole)
     weight, scores = _cross_validated(halves, prior, free)
@@ -280,4 +297,5 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
               "prior_weight": None if not np.isfinite(weight) else weight,
               "prior_weight_scores_mm": [round(v, 2) for v in scores],
               "held_out_prior_weights": [None if not np.isfinite(w) else w for w in weights]}
-    return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6])), report
+    return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6]),
+                   table.name, table.age_years), report

@@ -61,11 +61,22 @@ class TakeOptions:
     subject: str | None = None  # subject file (livezmp calibrate): a BVH's HAT mass fraction, a C3D's HAT
     markers: str | None = None
     cutoff_hz: float | None = None
+    bsp: str = "auto"  # a C3D body's segment table (livezmp.model.anthropometry.choose_table)
+    age: float | None = None  # years: the subject's age, replacing a C3D file's
 
     def load(self, path: str | Path) -> LoadedMotion:
         subject = load_subject(self.subject) if self.subject else None
+        if Path(path).suffix.lower() != ".c3d":
+            check_not_c3d_options(self, path)
         return load_motion(path, self.robot, self.bvh_options(subject), UrdfBodyOptions(config=self.robot_config),
-                           c3d_mass=self.mass, markers=subject.marker_options() if subject else None)
+                           c3d_mass=self.mass, markers=self.marker_options())
+
+    def marker_options(self) -> MarkerBodyOptions:
+        """How a C3D's marker body is made: the marker map, the segment table, and the subject file's
+        parameters (its table, when it names one, unless ``bsp`` asks for one)."""
+        markers = MarkerBodyOptions(marker_map=load_marker_map(self.markers) if self.markers else None, bsp=self.bsp,
+                                    age_years=self.age)
+        return load_subject(self.subject).marker_options(markers) if self.subject else markers
 
     def bvh_options(self, subject: Subject | None = None) -> BvhBodyOptions:
         """How a BVH's body is made (``subject``: the loaded subject file, if any)."""
@@ -193,9 +204,7 @@ def _lab_columns(lab: LabAnalysis) -> dict[str, np.ndarray] | None:
 def lab_options(options: TakeOptions, cutoff_hz: float | None) -> LabOptions:
     """How a C3D take is read: the marker map and the subject file's parameters, if given, and the
     estimator's ``cutoff_hz`` (Hz; None: the lab's own, :data:`livezmp.offline.gaitlab.LAB_ESTIMATOR`)."""
-    markers = MarkerBodyOptions(marker_map=load_marker_map(options.markers) if options.markers else None)
-    markers = load_subject(options.subject).marker_options(markers) if options.subject else markers
-    return LabOptions(mass=options.mass, mode=options.mode, markers=markers,
+    return LabOptions(mass=options.mass, mode=options.mode, markers=options.marker_options(),
                       estimator=None if cutoff_hz is None else {"cutoff_hz": cutoff_hz})
 
 
@@ -220,9 +229,12 @@ def analyse_path(path: str | Path, options: TakeOptions) -> TakeAnalysis:
 
 
 def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None:
-    """A marker map only applies to C3D trials: say so for any other input."""
+    """A marker map and a segment table's choice only apply to C3D trials: say so for any other input."""
     if options.markers:
         raise InputError(f"{options.markers}: --markers is for C3D trials (got {path or 'the built-in demo'})")
+    if options.bsp != "auto" or options.age is not None:
+        raise InputError("--bsp and --age choose a C3D marker body's segment table (got "
+                         f"{path or 'the built-in demo'}; a BVH's body is de Leva's adult table)")
 
 
 def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, plot: bool = False) -> dict:

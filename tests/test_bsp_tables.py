@@ -1,0 +1,68 @@
+"""Body-segment tables: de Leva's adult table and the child table (Jensen's proportions), chosen from the
+file's age or height, tested on a synthetic child walking in the synthetic gait lab."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from livezmp.cli import main
+from livezmp.model.anthropometry import (
+    DE_LEVA_MALE,
+    JENSEN_MASS_PERCENT,
+    age_for_stature,
+    child_segments,
+    choose_table,
+)
+from livezmp.model.markers import MarkerBodyOptions
+from tests.test_c3d_gaitlab import PLATES, Lab, write_lab_c3d
+
+
+def _total(table) -> float:
+    return sum(p.mass_fraction * (1 if k == "head" or k.endswith("trunk") else 2) for k, p in table.items())
+
+
+def test_child_table_is_de_leva_at_adult_age_and_follows_jensens_changes():
+    adult = child_segments(18.0)
+    assert {k: p.mass_fraction for k, p in adult.items()} == pytest.approx(
+        {k: p.mass_fraction for k, p in DE_LEVA_MALE.items()}, abs=1e-12)
+    for age in (4.0, 6.0, 9.0, 12.0, 15.0):
+        assert _total(child_segments(age)) == pytest.approx(1.0, abs=1e-12)
+    six, j6, j18 = child_segments(6.0), JENSEN_MASS_PERCENT[6.0], JENSEN_MASS_PERCENT[18.0]
+    # head over thigh changes as Jensen's does between 6 and 18 (the renormalisation cancels in a ratio)
+    ratio = (six["head"].mass_fraction / six["thigh"].mass_fraction) / (
+        DE_LEVA_MALE["head"].mass_fraction / DE_LEVA_MALE["thigh"].mass_fraction)
+    assert ratio == pytest.approx((j6["head"] / j6["thigh"]) / (j18["head"] / j18["thigh"]), rel=1e-12)
+    assert six["head"].mass_fraction > 2.5 * DE_LEVA_MALE["head"].mass_fraction  # 18 % of a 6-year-old
+    assert six["shank"].com_fraction == DE_LEVA_MALE["shank"].com_fraction
+
+
+def test_table_is_chosen_from_what_the_file_says():
+    assert choose_table("auto", 9.0, 1.75, 1.7).name == "child"  # the age wins over a height
+    assert choose_table("auto", 30.0, 1.30, 1.3).name == "adult"
+    child = choose_table("auto", None, 1.16, 1.0)
+    assert child.name == "child" and child.age_years == pytest.approx(6.0) and "height 1.16 m" in child.reason
+    assert choose_table("auto", None, 1.50, 1.5).name == "adult"  # a short adult stays adult
+    none = choose_table("auto", None, None, 1.2)
+    assert none.name == "adult" and "no age or height" in none.reason
+    assert choose_table("child", None, None, 1.50).age_years == pytest.approx(age_for_stature(1.50)) == 12.0
+    assert choose_table("adult", 7.0, 1.2, 1.2).name == "adult"
+
+
+def _bias(path, tmp_path, *extra) -> dict:
+    out = tmp_path / "s.json"
+    assert main(["analyze", str(path), "--summary-json", str(out), "--out", str(tmp_path / "z.csv"), *extra]) == 0
+    return json.loads(out.read_text())
+
+
+def test_a_synthetic_child_needs_the_child_table(tmp_path):
+    path = tmp_path / "child.c3d"
+    # a 1.20 m child (about 6.7 years) whose plates carry the child table's dynamics exactly
+    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(bsp="child"), trunk="top", lab=Lab(height_m=1.20, seconds=3.0))
+    auto = _bias(path, tmp_path)
+    assert auto["markers"]["bsp"]["table"] == "child" and "height 1.20 m" in auto["markers"]["bsp"]["reason"]
+    assert auto["cop_vs_zmp"]["max_mm"] < 1.0
+    adult = _bias(path, tmp_path, "--bsp", "adult")
+    assert adult["markers"]["bsp"]["reason"] == "asked for (--bsp adult)"
+    assert adult["cop_vs_zmp"]["rms_mm"] > 5.0  # the adult table on a child: a measurable error
