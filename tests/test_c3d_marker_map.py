@@ -14,6 +14,7 @@ import pytest
 
 from livezmp.cli import main
 from livezmp.errors import InputError
+from livezmp.gait.take import load_take
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import cluster_frames, functional_centre, load_marker_map
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
@@ -189,3 +190,37 @@ def test_sample01_cluster_set_through_a_map(tmp_path):
         bad = _map_file(SAMPLE01_MAP.replace('"pv4"', '"PV9"'), tmp_path, "bad.toml")
         body_from_markers(read_c3d(C3D / "sample01_gait_forceplates.c3d"),
                           MarkerBodyOptions(marker_map=load_marker_map(bad)))
+
+
+def test_monitor_and_gait_read_a_set_only_its_map_reads(tmp_path, capsys):
+    """`monitor` takes the marker map too: a cluster set is refused in one line without it, replayed with it, and
+    the recording carries the map (its replay rebuilds the same body); a [labels] map likewise. `gait` too."""
+    map_path = _map_file(CLUSTER_MAP, tmp_path)
+    path = tmp_path / "cluster.c3d"
+    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(marker_map=load_marker_map(map_path)), cluster=True)
+    assert main(["monitor", str(path), "--speed", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "missing LASI" in err
+    frames = int(SECONDS * RATE) - 30  # RFT1's long gap cuts the start
+    std = tmp_path / "std.c3d"
+    write_lab_c3d(std, PLATES)
+    c3d = ezc3d.c3d(str(std))
+    rename = {"Sub01:LTOE": "L.ToeTip", "Sub01:RTOE": "R.ToeTip"}
+    labels = c3d["parameters"]["POINT"]["LABELS"]["value"]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = [rename.get(v, v) for v in labels]
+    renamed_path = tmp_path / "renamed.c3d"
+    c3d.write(str(renamed_path))
+    labels_map = _map_file('[labels]\nLTOE = "L.ToeTip"\nRTOE = "R.ToeTip"\n', tmp_path, "labels.toml")
+    for trial, mmap in ((path, map_path), (renamed_path, labels_map)):
+        rec = tmp_path / f"{trial.stem}.mcap"
+        assert main(["monitor", str(trial), "--speed", "0", "--markers", str(mmap), "--record", str(rec)]) == 0
+        assert f"{frames} frames in, {frames} analysed" in capsys.readouterr().out
+        assert main(["replay", str(rec)]) == 0
+        out = capsys.readouterr().out
+        assert f"{frames} results compared" in out and "same analysis" in out
+    assert main(["monitor", "--speed", "0", "--markers", str(map_path)]) == 2  # the demo robot has no markers
+    assert "C3D" in capsys.readouterr().err
+    with pytest.raises(InputError, match="missing LASI"):  # `gait` reads C3D walks through a map too
+        load_take(path)
+    walk = load_take(path, markers=map_path)
+    assert len(walk.t) == frames and walk.t[0] == pytest.approx(30 / RATE)

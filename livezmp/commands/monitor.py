@@ -44,6 +44,7 @@ from livezmp.sources.mocap_factory import MOCAP_SCHEMES
 def _source(args: argparse.Namespace) -> Source:
     urdf = UrdfBodyOptions(config=args.robot_config)
     subject = _subject(args)
+    markers = _marker_options(args, subject)
     if args.motion is None:  # the built-in demo, as for `livezmp analyze`
         body, spec = robot_body(demo_robot_path(), urdf)
         traj = demo_trajectory(body.joint_names)
@@ -53,7 +54,7 @@ def _source(args: argparse.Namespace) -> Source:
                          hat_fraction=subject and subject.hat_fraction)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
                          speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration,
-                         markers=_marker_options(args, subject))
+                         markers=markers)
     return open_source(args.motion, opts)
 
 
@@ -62,10 +63,11 @@ def _marker_options(args: argparse.Namespace, subject: Subject | None) -> Marker
     subject file's parameters; refused for any other source."""
     opts = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
                              age_years=args.age)
-    markers = Path(args.motion).suffix.lower() == ".c3d" or str(args.motion).split("://")[0] in MOCAP_SCHEMES
+    source = str(args.motion or "")
+    markers = Path(source).suffix.lower() == ".c3d" or source.split("://")[0] in MOCAP_SCHEMES
     if not markers and (args.markers or args.bsp != "auto" or args.age is not None):
         raise InputError(f"{args.markers or '--bsp / --age'}: a marker map and the segment table are for a C3D "
-                         f"file or a capture stream's markers (got {args.motion})")
+                         f"file or a capture stream's markers (got {args.motion or 'the built-in demo'})")
     return subject.marker_options(opts) if subject else opts
 
 

@@ -33,7 +33,8 @@ from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
-from livezmp.model.markers import body_from_markers
+from livezmp.model.marker_map import MarkerMap, load_marker_map
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
 
@@ -166,23 +167,27 @@ def take_from_trajectory(traj: JointTrajectory, body: BodyModel) -> GaitTake:
     return _make(traj.source, traj.t, q, body, traj)
 
 
-def take_from_c3d(trial: C3dTrial) -> GaitTake:
-    """A gait-lab walk: the marker body of ``trial`` as a chain (joint angles), over the frames where
-    every needed marker is seen; times from the trial's first frame (s)."""
-    take = body_from_markers(trial)
+def take_from_c3d(trial: C3dTrial, mmap: MarkerMap | None = None) -> GaitTake:
+    """A gait-lab walk: the marker body of ``trial`` (through the marker map ``mmap``, if any) as a chain (joint
+    angles), over the frames where every needed marker is seen; times from the trial's first frame (s)."""
+    take = body_from_markers(trial, MarkerBodyOptions(marker_map=mmap))
     names = segment_names(take.body)
     t = (take.first_frame + np.arange(len(take.frames))) / trial.rate
     walk = _make(trial.source, t, chain_frames(names, take.frames), chain_body(take.body), trial)
     return replace(walk, min_cycles=1)
 
 
-def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: str | Path | None = None) -> GaitTake:
-    """Read a walk from a ``.bvh`` or ``.c3d`` file, or a ``.csv`` joint trajectory (needs ``urdf``)."""
+def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: str | Path | None = None,
+              markers: str | Path | None = None) -> GaitTake:
+    """Read a walk from a ``.bvh`` or ``.c3d`` file (through the marker map file ``markers``, if given), or a
+    ``.csv`` joint trajectory (needs ``urdf``)."""
     p = Path(path)
+    if markers and p.suffix.lower() != ".c3d":
+        raise InputError(f"{markers}: --markers is for C3D walks (got {p})")
     if p.suffix.lower() == ".bvh":
         return take_from_bvh(read_bvh(p), up, units)
     if p.suffix.lower() == ".c3d":
-        return take_from_c3d(read_c3d(check_input_file(p, "walk")))
+        return take_from_c3d(read_c3d(check_input_file(p, "walk")), load_marker_map(markers) if markers else None)
     if p.suffix.lower() == ".csv":
         if urdf is None:
             raise InputError(f"{p}: a joint-trajectory CSV needs the robot's URDF (--urdf)")

@@ -143,6 +143,7 @@ class GaitJob(Job):
     up: str = "y"
     units: str | None = None
     urdf: str | None = None
+    markers: str | None = None  # a marker map file, for C3D walks
 
     name: ClassVar[str] = "gait"
     columns: ClassVar = (("cycles", "int64"), ("frequency_hz", "float64"), ("stride_length_m", "float64"),
@@ -155,7 +156,7 @@ class GaitJob(Job):
         return (FEATURES_JSON,)
 
     def run(self, path: Path, out_dir: Path) -> dict:
-        take = load_take(path, self.up, self.units, self.urdf)
+        take = load_take(path, self.up, self.units, self.urdf, self.markers)
         feats = walk_features(take)
         write_json(feats.to_json(), out_dir / FEATURES_JSON)
         t = take.t
