@@ -3,17 +3,19 @@ it gives the same ZMP as its Plug-in Gait labels; two labels claiming one marker
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import ezc3d
 import numpy as np
 import pytest
 
 from livezmp.cli import main
 from livezmp.model.c3d import read_c3d
-from livezmp.model.marker_labels import role_of
+from livezmp.model.marker_labels import match_labels, role_of
 from livezmp.model.marker_map import load_marker_map
-from livezmp.model.markers import MarkerBodyOptions
+from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
-from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
+from tests.test_c3d_gaitlab import PLATES, RATE, _trial, write_lab_c3d
 
 SIDE_NAMES = {"ASI": "ASIS", "PSI": "PSIS", "KNE": "Knee", "ANK": "Ankle", "HEE": "Heel", "TOE": "Toe"}
 CAST = {"ASI": "IAS", "PSI": "IPS", "KNE": "FLE", "ANK": "FAL", "HEE": "FCC", "TOE": "FM2"}
@@ -86,6 +88,7 @@ def test_two_labels_claiming_one_marker_are_refused_naming_both(std, tmp_path, c
     assert main(["analyze", str(other), "--out", str(tmp_path / "z.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "labels 'LLFC' and 'L.Knee' both name the LKNE marker" in err
+    assert 'chooses: LKNE = "LLFC" or LKNE = "L.Knee"' in err
     assert not (tmp_path / "z.csv").exists()
     # a marker map says which one: then read, with the Plug-in Gait ZMP
     map_path = tmp_path / "map.toml"
@@ -106,3 +109,32 @@ def test_a_map_naming_a_role_sets_the_files_own_marker_of_that_name_apart(std, t
     map_path.write_text('[labels]\nLANK = "LLMA"\n')
     a = analyse_lab_take(read_c3d(other), LabOptions(markers=MarkerBodyOptions(marker_map=load_marker_map(map_path))))
     assert np.abs(a.result.zmp - ref.result.zmp).max() < 1e-4
+
+
+def _ankles_named_by_the_lab(apart_m: float):
+    """The synthetic lab's markers as TYPE-3 names its ankles: the lateral malleolus ``LLMA`` (Plug-in Gait's
+    LANK), and ``LANK`` on the medial malleolus ``apart_m`` medially of it (each side); and the true ankle centres."""
+    trial = _trial(np.arange(200) / RATE, RATE)
+    labels, points, centres = list(trial.labels), [trial.points], {}
+    for side, medial in (("L", np.array([0.0, -1.0, 0.0])), ("R", np.array([0.0, 1.0, 0.0]))):
+        lateral = trial.marker(side + "ANK")
+        labels[labels.index(side + "ANK")] = side + "LMA"
+        labels.append(side + "ANK")
+        points.append((lateral + apart_m * medial)[:, None])
+        centres[side] = lateral + apart_m / 2 * medial
+    return replace(trial, labels=labels, points=np.concatenate(points, axis=1)), centres
+
+
+def test_two_ankle_labels_a_joints_width_apart_are_told_lateral_and_medial_by_position():
+    trial, centres = _ankles_named_by_the_lab(0.09)
+    match = match_labels(trial)
+    assert not match.ambiguous
+    assert match.roles["LANK"] == "LLMA" and match.roles["LMED"] == "LANK" and match.roles["RMED"] == "RANK"
+    assert match.by_position["LANK"] == "LLMA: 90 mm lateral of LANK"
+    take = body_from_markers(trial)
+    assert take.notes["labels"]["by_position"]["RMED"] == "RANK: 90 mm medial of RLMA"
+    for side, name in (("L", "left"), ("R", "right")):  # the ankle centre between the two malleoli
+        assert np.abs(take.centres["ankle"][name] @ np.linalg.inv(take.body.world_from_input).T
+                      - centres[side]).max() < 1e-9
+    # two markers 2 cm apart are not one ankle's two sides: which one the lab meant stays unsaid
+    assert set(match_labels(_ankles_named_by_the_lab(0.02)[0]).ambiguous) == {"LANK", "RANK"}

@@ -24,14 +24,20 @@ Where each name comes from:
   knee (TYPE-3), ``SACRUM`` (Walking_Hybrid, Capture0002); medial ``MKNE KNEM MFC MEPI ANKM MANK MMAL``
   (read before these conventions).
 
-Two labels of a file claiming one role (``LANK`` and ``LLMA``) are refused in one line naming both: which one
-the lab meant cannot be told from the names. A label never seen in the take claims nothing.
+Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
+chooses): which one the lab meant cannot be told from the names. One case is told by position: two labels
+claiming one side's lateral knee or ankle marker (``KNE``, ``ANK``) while nothing claims its medial one, which lie
+across the body at least :data:`MIN_JOINT_WIDTH_M` apart, more across the body than along it, at most
+:data:`MAX_JOINT_WIDTH_M` apart in all, on the same sides of each other in nearly every frame, are the joint's
+two markers: the one further from the pelvis' midline is the lateral (a lateral malleolus or
+epicondyle lies outside its medial one), the other the medial (c3d.org's TYPE-3: ``LANK`` 90 mm medial of
+``LLMA``). The summary's ``markers.labels.by_position`` says so. A label never seen in the take claims nothing.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,6 +71,14 @@ UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "CLAV": (("CLAV", PIG), ("IJ", CAST)),
     "STRN": (("STRN", PIG), ("PX", CAST)),
 }
+BY_POSITION = "lateral / medial told by position"
+_MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
+# two markers of one knee or ankle lie a joint's width (plus a marker's 14 mm) apart across the body: the knee and
+# ankle widths the shared trials' files give are 63-109 mm; 30 mm leaves room for the pelvis' lateral axis turned
+# against the joint's (a foot toeing out), and is more than two markers meant for one point are apart
+MIN_JOINT_WIDTH_M = 0.03
+MAX_JOINT_WIDTH_M = 0.16  # the widest knee, 109 mm, plus the markers and room: further apart, not one joint's pair
+SAME_SIDE_SHARE = 0.95  # of the frames seeing both, those where the lateral one is the outer
 _SIDE_WORDS = (("LEFT", "L"), ("RIGHT", "R"), ("L", "L"), ("R", "R"))
 _SEPARATORS = re.compile(r"[._\-\s]+")
 _LOOKUP = {name: (role, conv) for role, names in SIDED.items() for name, conv in names}
@@ -80,16 +94,19 @@ class LabelMatch:
     aliases: dict[str, str]
     conventions: tuple[str, ...]
     ambiguous: dict[str, tuple[str, ...]]
+    by_position: dict[str, str] = field(default_factory=dict)  # role -> why its label was chosen by position
 
     def summary(self) -> dict:
-        return {"conventions": list(self.conventions), "aliases": dict(sorted(self.aliases.items()))}
+        return {"conventions": list(self.conventions), "aliases": dict(sorted(self.aliases.items())),
+                **({"by_position": dict(sorted(self.by_position.items()))} if self.by_position else {})}
 
     def check(self, source: str, roles=None) -> None:
         """InputError naming the first of ``roles`` (default: any) that two labels claim."""
         for role, labels in self.ambiguous.items():
             if roles is None or role in roles:
+                choices = " or ".join(f'{role} = "{lab}"' for lab in dict.fromkeys(labels))
                 raise InputError(f"{source}: {_claimed(labels)} the {role} marker: which one the lab meant "
-                                 f"cannot be told from the names (a marker map's [labels] can say: {role} = \"...\")")
+                                 f"cannot be told from the names (a marker map's [labels] chooses: {choices})")
 
 
 def _claimed(labels: tuple[str, ...]) -> str:
@@ -147,11 +164,55 @@ def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> Label
         if found and (found[0] not in pinned or lab == found[0]):
             claims.setdefault(found[0], []).append(lab)
             convention[lab] = found[1]
+    by_position = _lateral_and_medial(trial, claims, pinned)
+    convention.update({claims[role][0]: BY_POSITION for role in by_position})
     ambiguous = {role: tuple(labs) for role, labs in claims.items() if len(labs) > 1}
     roles = {role: labs[0] for role, labs in claims.items() if len(labs) == 1}
     aliases = {role: lab for role, lab in roles.items() if lab != role}
     return LabelMatch(roles, aliases, tuple(dict.fromkeys(convention[lab] for _, lab in sorted(aliases.items()))),
-                      ambiguous)
+                      ambiguous, by_position)
+
+
+def _across(trial: C3dTrial, claims: dict[str, list[str]], side: str) -> np.ndarray | None:
+    """(F, 3) unit vectors from the pelvis' midline out towards ``side`` ("L", "R"): along RASI -> LASI; None
+    without both ASIS markers."""
+    if len(claims.get("LASI", ())) != 1 or len(claims.get("RASI", ())) != 1:
+        return None
+    left = trial.marker(claims["LASI"][0]) - trial.marker(claims["RASI"][0])
+    left = left / np.linalg.norm(left, axis=1, keepdims=True)
+    return left if side == "L" else -left
+
+
+def _lateral_and_medial(trial: C3dTrial, claims: dict[str, list[str]], pinned: frozenset[str]) -> dict[str, str]:
+    """Split, in place in ``claims``, a side's lateral knee or ankle role that two labels claim while nothing
+    claims its medial role, by position (module docstring); returns role -> why, for each role so filled."""
+    out = {}
+    for side in "LR":
+        for lateral, medial in _MEDIAL_ROLE.items():
+            lat, med = side + lateral, side + medial
+            labs = claims.get(lat, [])
+            if len(labs) != 2 or labs[0] == labs[1] or med in claims or {lat, med} & pinned:
+                continue
+            out_dir = _across(trial, claims, side)
+            if out_dir is None:
+                continue
+            d = trial.marker(labs[0]) - trial.marker(labs[1])
+            seen = np.isfinite(d).all(axis=1) & np.isfinite(out_dir).all(axis=1)
+            if not seen.any():
+                continue
+            gap = np.sum(d[seen] * out_dir[seen], axis=1)  # across the body, + where the first is the outer
+            along = np.linalg.norm(d[seen] - gap[:, None] * out_dir[seen], axis=1)
+            width = abs(float(np.median(gap)))
+            if not (MIN_JOINT_WIDTH_M <= width and float(np.median(np.linalg.norm(d[seen], axis=1))) <=
+                    MAX_JOINT_WIDTH_M and width >= float(np.median(along))
+                    and np.mean(np.sign(gap) == np.sign(np.median(gap))) >= SAME_SIDE_SHARE):
+                continue
+            outer, inner = labs if np.median(gap) > 0 else labs[::-1]
+            claims[lat], claims[med] = [outer], [inner]
+            mm = 1000 * width
+            out[lat] = f"{outer}: {mm:.0f} mm lateral of {inner}"
+            out[med] = f"{inner}: {mm:.0f} mm medial of {outer}"
+    return out
 
 
 def standard_trial(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> tuple[C3dTrial, LabelMatch]:
