@@ -16,7 +16,7 @@ from livezmp.model.anthropometry import (
     choose_table,
 )
 from livezmp.model.markers import MarkerBodyOptions
-from tests.test_c3d_gaitlab import PLATES, Lab, write_lab_c3d
+from tests.test_c3d_gaitlab import C3D, PLATES, Lab, write_lab_c3d
 
 
 def _total(table) -> float:
@@ -66,3 +66,12 @@ def test_a_synthetic_child_needs_the_child_table(tmp_path):
     adult = _bias(path, tmp_path, "--bsp", "adult")
     assert adult["markers"]["bsp"]["reason"] == "asked for (--bsp adult)"
     assert adult["cop_vs_zmp"]["rms_mm"] > 5.0  # the adult table on a child: a measurable error
+
+
+def test_the_table_options_are_for_c3d_bodies(capsys):
+    for argv in (["analyze", "--bsp", "child"], ["analyze", "--age", "8"],
+                 ["monitor", "--speed", "0", "--bsp", "adult"],
+                 ["analyze", str(C3D / "cgm24_walking01_forceplate.c3d"), "--age", "-3"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and ("--bsp" in err or "--age" in err)

@@ -220,6 +220,9 @@ def test_monitor_and_gait_read_a_set_only_its_map_reads(tmp_path, capsys):
         assert f"{frames} results compared" in out and "same analysis" in out
     assert main(["monitor", "--speed", "0", "--markers", str(map_path)]) == 2  # the demo robot has no markers
     assert "C3D" in capsys.readouterr().err
+    assert main(["monitor", "lsl://walk", "--markers", str(map_path)]) == 2  # refused before connecting
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "capture stream" in err
     with pytest.raises(InputError, match="missing LASI"):  # `gait` reads C3D walks through a map too
         load_take(path)
     walk = load_take(path, markers=map_path)

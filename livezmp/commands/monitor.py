@@ -59,15 +59,19 @@ def _source(args: argparse.Namespace) -> Source:
 
 
 def _marker_options(args: argparse.Namespace, subject: Subject | None) -> MarkerBodyOptions:
-    """A marker body's options (a C3D replayed, or a capture stream): the marker map, the segment table and the
-    subject file's parameters; refused for any other source."""
+    """A marker body's options (a C3D replayed, or a capture stream): the marker map (a C3D file's only: a live
+    stream's frames are matched by the standard roles' labels), the segment table and the subject file's
+    parameters; refused for any other source."""
     opts = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
                              age_years=args.age)
     source = str(args.motion or "")
-    markers = Path(source).suffix.lower() == ".c3d" or source.split("://")[0] in MOCAP_SCHEMES
-    if not markers and (args.markers or args.bsp != "auto" or args.age is not None):
-        raise InputError(f"{args.markers or '--bsp / --age'}: a marker map and the segment table are for a C3D "
-                         f"file or a capture stream's markers (got {args.motion or 'the built-in demo'})")
+    c3d = Path(source).suffix.lower() == ".c3d"
+    if args.markers and not c3d:
+        raise InputError(f"{args.markers}: --markers is for a C3D file replayed (got {source or 'the built-in demo'}; "
+                         "a capture stream's labels must be ones the built-in conventions read)")
+    if not (c3d or source.split("://")[0] in MOCAP_SCHEMES) and (args.bsp != "auto" or args.age is not None):
+        raise InputError("--bsp / --age: the segment table is for a C3D file's or a capture stream's markers (got "
+                         f"{args.motion or 'the built-in demo'})")
     return subject.marker_options(opts) if subject else opts
 
 
