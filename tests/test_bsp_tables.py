@@ -8,6 +8,7 @@ import json
 import pytest
 
 from livezmp.cli import main
+from livezmp.errors import InputError
 from livezmp.model.anthropometry import (
     DE_LEVA_MALE,
     JENSEN_MASS_PERCENT,
@@ -16,6 +17,7 @@ from livezmp.model.anthropometry import (
     choose_table,
 )
 from livezmp.model.markers import MarkerBodyOptions
+from livezmp.offline.calibrate import load_subject
 from tests.test_c3d_gaitlab import C3D, PLATES, Lab, write_lab_c3d
 
 
@@ -75,3 +77,16 @@ def test_the_table_options_are_for_c3d_bodies(capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and ("--bsp" in err or "--age" in err)
+
+
+def test_a_subject_file_names_its_table_unless_the_command_line_does(tmp_path):
+    path = tmp_path / "subject.toml"
+    path.write_text('[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\nbsp = "child"\nage_years = 8\n')
+    subject = load_subject(path)
+    opts = subject.marker_options()
+    assert (opts.bsp, opts.age_years, opts.hat_fraction) == ("child", 8.0, 0.5)
+    assert subject.marker_options(MarkerBodyOptions(bsp="adult", age_years=30.0)).bsp == "adult"
+    for line, field in (('bsp = "toddler"', "subject.bsp"), ("age_years = -1", "subject.age_years")):
+        path.write_text(f'[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\n{line}\n')
+        with pytest.raises(InputError, match=field):
+            load_subject(path)

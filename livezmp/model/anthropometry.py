@@ -72,7 +72,7 @@ class BspTable:
     reason: str = "de Leva (1996)"
 
     def summary(self) -> dict:
-        return {"table": self.name, "age_years": None if self.age_years is None else round(self.age_years, 1),
+        return {"table": self.name, "age_years": None if self.age_years is None else round(self.age_years, 3),
                 "source": "de Leva (1996)" if self.name == "adult" else
                 "de Leva (1996) scaled by Jensen (1986, 1989) child / adult mass proportions", "reason": self.reason}
 

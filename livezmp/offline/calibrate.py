@@ -106,7 +106,7 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
              "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
              "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
              *([f'bsp = "{subject.bsp}"  # the segment table the HAT was fitted with'] if subject.bsp else []),
-             *([f"age_years = {subject.age_years:.1f}"] if subject.age_years is not None else []),
+             *([f"age_years = {subject.age_years:.3f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
     for k, v in report.items():
         lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
