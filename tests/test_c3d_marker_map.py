@@ -5,6 +5,7 @@ body's exact dynamics), and on the shared cluster-set trial sample01."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import ezc3d
@@ -13,11 +14,13 @@ import pinocchio as pin
 import pytest
 
 from livezmp.cli import main
+from livezmp.correct.marker_take import attach
 from livezmp.errors import InputError
 from livezmp.gait.take import load_take
 from livezmp.model.c3d import read_c3d
+from livezmp.model.c3d_write import write_moved_points
 from livezmp.model.marker_map import cluster_frames, functional_centre, load_marker_map
-from livezmp.model.markers import MarkerBodyOptions, body_from_markers
+from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, body_from_markers
 from tests.test_c3d_gaitlab import C3D, PLATES, RATE, SECONDS, _trial, write_lab_c3d
 
 CLUSTER_MAP = """
@@ -227,3 +230,44 @@ def test_monitor_and_gait_read_a_set_only_its_map_reads(tmp_path, capsys):
         load_take(path)
     walk = load_take(path, markers=map_path)
     assert len(walk.t) == frames and walk.t[0] == pytest.approx(30 / RATE)
+
+
+def test_a_cluster_sets_hat_points_orient_its_hat(tmp_path):
+    """A corrected cluster-set take carries the leaned HAT as HAT points: read back through the map, the HAT is
+    where they say (before, a cluster set's HAT was always upright: its correction was lost on reading)."""
+    trial = _trial(np.arange(100) / RATE, RATE, cluster=True)
+    lean, origin = pin.utils.rotate("y", 0.2), np.array([0.0, 0.0, 1.2])
+    points = np.array([origin, *(origin + 0.1 * lean[:, k] for k in range(3))])  # HATO, HATA, HATL, HATP
+    trial = replace(trial, labels=trial.labels + list(HAT_POINTS),
+                    points=np.concatenate([trial.points, np.repeat(points[None], 100, 0)], axis=1))
+    take = body_from_markers(trial, MarkerBodyOptions(marker_map=load_marker_map(_map_file(CLUSTER_MAP, tmp_path))))
+    hat = take.body.channel_names.index("hat.x")
+    assert np.abs(take.frames[:, hat:hat + 6] - [0.0, 0.0, 1.2, 0.0, 0.2, 0.0]).max() < 1e-9
+    assert "oriented by the file's HAT points" in take.notes["hat"]
+
+
+def test_correct_moves_a_mapped_sets_markers_and_writes_a_file_with_more_labels_than_points(tmp_path):
+    """`correct --markers` attaches each marker to its segment through the map: a cluster set's by its segments, a
+    [labels] set's by their roles. sample01 writes 48 labels for its 26 points and 32 for its 16 analog channels:
+    its corrected C3D (HAT points added) is written with one label a point and one a channel."""
+    s01 = read_c3d(C3D / "sample01_gait_forceplates.c3d")
+    mmap = load_marker_map(_map_file(SAMPLE01_MAP, tmp_path))
+    segments = ["pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r", "hat"]
+    named = {s01.labels[i]: seg for i, seg in attach(s01, set(), segments, mmap).items()}
+    assert {lab: named[lab] for _, labels in mmap.segments for lab in labels} == {
+        lab: seg for seg, labels in mmap.segments for lab in labels}
+    with pytest.raises(InputError, match="missing LASI"):
+        attach(s01, set(), segments)
+    std = _trial(np.arange(10) / RATE, RATE)
+    renamed_trial = replace(std, labels=["L.ToeTip" if lab == "LTOE" else lab for lab in std.labels])
+    toes = load_marker_map(_map_file('[labels]\nLTOE = "L.ToeTip"\n', tmp_path, "toes.toml"))
+    named = {renamed_trial.labels[i]: seg for i, seg in attach(renamed_trial, set(), segments, toes).items()}
+    assert named["L.ToeTip"] == "foot_l" and named["LKNE"] == "thigh_l"
+    moved = {0: s01.points[:, 0] + 0.01}
+    added = {p: s01.points[:, 1] + 0.1 * k for k, p in enumerate(HAT_POINTS)}
+    write_moved_points(C3D / "sample01_gait_forceplates.c3d", tmp_path / "w.c3d", moved, added, 0)
+    back = read_c3d(tmp_path / "w.c3d")
+    assert back.labels == s01.labels + list(HAT_POINTS)
+    assert np.allclose(back.marker(s01.labels[0]), moved[0], atol=1e-6, equal_nan=True)
+    assert np.allclose(back.marker("HATP"), added["HATP"], atol=1e-6, equal_nan=True)
+    assert all(np.array_equal(a.force, b.force) for a, b in zip(back.plates, s01.plates, strict=True))

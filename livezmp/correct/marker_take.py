@@ -23,6 +23,7 @@ from livezmp.correct.solver import CorrectionResult, correct_motion
 from livezmp.model.body import BodyModel
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, segment_names, world_poses
+from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import HAT_POINTS, marker_roles
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take
 
@@ -63,18 +64,21 @@ def role_segment(role: str) -> str | None:
     return seg + _SIDE[base[0]] if base[0] in _SIDE else None
 
 
-def attach(trial: C3dTrial, skip: set[str], segments: list[str]) -> dict[int, str]:
-    """Point index -> segment (of ``segments``): the marker set's markers by role; other position points
-    (not in ``skip``, seen at least once, or markers whose role has no segment here) with the marker
-    nearest to them (median distance over the frames)."""
+def attach(trial: C3dTrial, skip: set[str], segments: list[str], mmap: MarkerMap | None = None) -> dict[int, str]:
+    """Point index -> segment (of ``segments``): the marker set's markers by role (through the marker map
+    ``mmap``: a cluster set's by its segments); other position points (not in ``skip``, seen at least once, or
+    markers whose role has no segment here) with the marker nearest to them (median distance over the frames)."""
     seen = np.isfinite(trial.points).all(axis=2).sum(axis=0)
     index = {}
     for i, label in enumerate(trial.labels):  # a label written twice: the copy with data (as the body reads it)
         if label not in index or seen[i] > seen[index[label]]:
             index[label] = i
-    roles = {label: role for role, label in marker_roles(trial).items() if label is not None}
-    out = {index[lab]: role_segment(role) for lab, role in roles.items()
-           if role not in HAT_POINTS and role_segment(role) in segments}
+    if mmap is not None and mmap.segments:
+        by_label = {lab: seg for seg, labels in mmap.segments for lab in labels}
+    else:
+        by_label = {lab: role_segment(role) for role, lab in marker_roles(trial, mmap).items()
+                    if lab is not None and role not in HAT_POINTS}
+    out = {index[lab]: seg for lab, seg in by_label.items() if lab in index and seg in segments}
     known = list(out)
     for i, label in enumerate(trial.labels):
         if i in out or label in skip or label in HAT_POINTS or not np.isfinite(trial.points[:, i]).any():
@@ -97,7 +101,7 @@ def correct_marker_take(trial: C3dTrial, lab_options: LabOptions, limits: Correc
     before, after = world_poses(names, free.frames), chain_poses(names, result.frames)
     r_in = free.body.world_from_input
     span = slice(free.first_frame, free.first_frame + len(free.frames))
-    attached = attach(trial, skip, names)
+    attached = attach(trial, skip, names, lab_options.markers.marker_map)
     moved = {}
     for i, seg in attached.items():
         (o0, r0), (o1, r1) = before[seg], after[seg]

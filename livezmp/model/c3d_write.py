@@ -37,13 +37,15 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
     residuals = np.array(c3d["data"]["meta_points"]["residuals"], dtype=float)
     masks = c3d["data"]["meta_points"].get("camera_masks")
     labels = list(point["LABELS"]["value"])
-    stripped = [strip_prefix(s) for s in labels]
+    # labels beyond the points (sample01 writes 48 for 26) name none; with points added ezc3d wants one a point
+    used = pts.shape[1]
+    stripped = [strip_prefix(s) for s in labels[:used]]
     new = [lab for lab in added if lab not in stripped]
     if new:
         pts = np.concatenate([pts, np.zeros((4, len(new), pts.shape[2]))], axis=1)
         pts[3, -len(new):] = 1.0
         residuals = np.concatenate([residuals, -np.ones((1, len(new), pts.shape[2]))], axis=1)
-        labels += new
+        labels = labels[:used] + new
         stripped += new
         if masks is not None:
             masks = np.concatenate([np.asarray(masks), np.zeros((masks.shape[0], len(new), pts.shape[2]), bool)], 1)
@@ -55,17 +57,29 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
         if stripped[i] in added:
             residuals[0, i, span] = np.where(ok, 0.0, -1.0)
     _latin1_text(c3d["parameters"])
+    _trim_channels(c3d["parameters"]["ANALOG"], c3d["data"]["analogs"].shape[1])
     c3d["data"]["points"] = pts
     c3d["data"]["meta_points"]["residuals"] = residuals
     if masks is not None:
         c3d["data"]["meta_points"]["camera_masks"] = masks
     point["LABELS"]["value"] = labels
     if new and "DESCRIPTIONS" in point:
-        point["DESCRIPTIONS"]["value"] = list(point["DESCRIPTIONS"]["value"]) + ["livezmp HAT axis"] * len(new)
+        descriptions = list(point["DESCRIPTIONS"]["value"])[:used]
+        descriptions += [""] * (used - len(descriptions)) + ["livezmp HAT axis"] * len(new)
+        point["DESCRIPTIONS"]["value"] = descriptions
     try:
         c3d.write(str(dest))
     except (ValueError, RuntimeError, NotImplementedError) as e:  # ezc3d's messages are one line
         raise InputError(f"{source}: its parameters cannot be written back by ezc3d ({e})") from None
+
+
+def _trim_channels(analog: dict, channels: int) -> None:
+    """ANALOG's per-channel parameters cut to the ``channels`` the data hold, in place: some files write more
+    (sample01: 32 labels, scales and offsets for 16 channels) and ezc3d writes only as many as there are."""
+    for name in ("LABELS", "DESCRIPTIONS", "UNITS", "SCALE", "OFFSET"):
+        if name in analog and len(analog[name]["value"]) > channels:
+            value = analog[name]["value"]
+            analog[name]["value"] = list(value)[:channels] if isinstance(value, list) else np.asarray(value)[:channels]
 
 
 def _latin1_text(parameters: dict) -> None:

@@ -250,20 +250,20 @@ def _as_written(roles: dict[str, str | None], match: LabelMatch) -> dict[str, st
     return {r: None if lab is None else match.roles.get(lab, lab) for r, lab in roles.items()}
 
 
-def marker_roles(trial: C3dTrial) -> dict[str, str | None]:
-    """Role -> the label (as the file writes it) of each marker ``trial``'s marker body reads; None: absent."""
-    _, roles, match = _standard(trial, None)
-    return _as_written(roles, match)
+def marker_roles(trial: C3dTrial, mmap: MarkerMap | None = None) -> dict[str, str | None]:
+    """Role -> the label (as the file writes it) of each marker ``trial``'s marker body reads, through the marker
+    map ``mmap``'s [labels] if given; None: absent."""
+    _, roles, match = _standard(trial, mmap)
+    original = dict(mmap.labels) if mmap is not None else {}  # a role the map names -> the file's label
+    return {r: None if lab is None else original.get(lab, lab) for r, lab in _as_written(roles, match).items()}
 
 
 def marker_labels(trial: C3dTrial, mmap: MarkerMap | None = None) -> list[str]:
     """The labels of ``trial``'s markers that its marker body (through the marker map ``mmap``, if any) is built
     from, as the file writes them."""
     if mmap is not None and mmap.segments:
-        return map_labels(mmap)
-    _, roles, match = _standard(trial, mmap)
-    original = dict(mmap.labels) if mmap is not None else {}  # a role the map names -> the file's label
-    return [original.get(label, label) for label in _as_written(roles, match).values() if label is not None]
+        return _cluster_labels(trial, mmap)
+    return [label for label in marker_roles(trial, mmap).values() if label is not None]
 
 
 def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
@@ -277,8 +277,9 @@ def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str,
 
 
 def _cluster_markers(trial: C3dTrial, mmap: MarkerMap) -> dict[str, np.ndarray]:
-    """The cluster map's markers (F, 3) m; InputError naming those the file does not have (or never sees)."""
-    labels = map_labels(mmap)
+    """The cluster map's markers (F, 3) m, and the HAT points when the file has them all (a corrected take);
+    InputError naming those the file does not have (or never sees)."""
+    labels = _cluster_labels(trial, mmap)
     seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
     have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}
     missing = [label for label in labels if label not in have]
@@ -286,6 +287,11 @@ def _cluster_markers(trial: C3dTrial, mmap: MarkerMap) -> dict[str, np.ndarray]:
         raise InputError(f"{trial.source}: markers of the map {mmap.source} not in the file (or never seen): "
                          f"{', '.join(missing)}")
     return {label: trial.marker(label) for label in labels}
+
+
+def _cluster_labels(trial: C3dTrial, mmap: MarkerMap) -> list[str]:
+    """The labels a cluster set's body reads: the map's, and the HAT points when the file has them all."""
+    return map_labels(mmap) + (list(HAT_POINTS) if set(HAT_POINTS) <= set(trial.labels) else [])
 
 
 def _cluster_up_vector(m: dict[str, np.ndarray], mmap: MarkerMap) -> np.ndarray:
@@ -535,7 +541,6 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 centres[joint][side] = lateral - sign * delta * y
                 rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
-    upright = _upright(x)
     seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
     full = "LFHD" in m
     if full:
@@ -544,8 +549,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     elif "C7" in m:
         seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin)
     else:
-        seg["hat"] = (pelvis_origin, upright) if "HATO" not in m else \
-            (m["HATO"], np.stack([_unit(m[p] - m["HATO"]) for p in HAT_POINTS[1:]], axis=-1))
+        seg["hat"] = _hat_frame(m, pelvis_origin, x)
     for side, (s, sign, t) in _SIDES.items():
         hip, knee, ankle = centres["hip"][side], centres["knee"][side], centres["ankle"][side]
         thigh = _frame(hip - knee, sign * (m[s + "KNE"] - knee))
@@ -621,6 +625,14 @@ def _swayed(seg: dict, opts: MarkerBodyOptions, m: dict) -> dict:
     return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain, facing), rot)}
 
 
+def _hat_frame(m: dict[str, np.ndarray], mid_hip: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A placed HAT's origin and frame: where the file's HAT points say (a corrected take), else at the mid-hip
+    ``mid_hip``, upright and turned to the pelvis' forward axes ``x`` (F, 3)."""
+    if "HATO" not in m:
+        return mid_hip, _upright(x)
+    return m["HATO"], np.stack([_unit(m[p] - m["HATO"]) for p in HAT_POINTS[1:]], axis=-1)
+
+
 def _upright(x: np.ndarray) -> np.ndarray:
     """(F, 3, 3) upright frames turned to the heading of the forward axes ``x`` (F, 3)."""
     heading = np.arctan2(x[:, 1], x[:, 0])
@@ -677,7 +689,7 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
     y = _unit(hip_l - hip_r)
     x = _unit(np.cross(y, _carried(r_pelvis, np.tile([0.0, 0.0, 1.0], (len(y), 1)))))
     pelvis_origin = (hip_l + hip_r) / 2
-    seg = {"pelvis": (pelvis_origin, np.stack([x, y, np.cross(x, y)], axis=-1)), "hat": (pelvis_origin, _upright(x))}
+    seg = {"pelvis": (pelvis_origin, np.stack([x, y, np.cross(x, y)], axis=-1)), "hat": _hat_frame(m, pelvis_origin, x)}
     stature = mmap.stature_m or trial.height_m or float(
         np.median(np.linalg.norm(hip_l - centres["ankle"]["left"], axis=1)) / LEG_FRACTION_OF_STATURE)
     for side, (s, _, t) in _SIDES.items():
