@@ -56,7 +56,7 @@ ADULT_AGE = 18.0  # years: by then Jensen's proportions are the adult's (the 18-
 MEDIAN_STATURE_M = ((6.0, 1.16), (12.0, 1.50), (18.0, 1.70))
 # Height below which a subject is taken for a child: the median stature at about 10 years; an adult this short
 # is rare (about 3 standard deviations below the mean adult woman's 1.62 m), while at 10 years Jensen's head
-# holds 12 % of the body mass against de Leva's adult 6.9 %
+# holds about 13 % of the body mass against de Leva's adult 6.9 %
 CHILD_STATURE_M = 1.40
 BSP_CHOICES = ("auto", "adult", "child")
 
