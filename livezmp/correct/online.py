@@ -60,17 +60,21 @@ TRUNK_SIZE_M = 0.3  # CoM height up to which the trunk acceleration limit holds 
 
 
 def size_scaled_accel(body: BodyModel, accel_deg_s2: float) -> float:
-    """The root rotation's angular acceleration limit (deg/s^2) for ``body``: the ZMP swing a trunk acceleration
-    α causes is about I α / (m g), and I / m grows as the square of the robot's size, so a robot whose CoM
-    stands higher than `TRUNK_SIZE_M` above its soles (zero posture) gets ``accel_deg_s2`` × (TRUNK_SIZE_M /
-    h)^2 (measured: a 1 m humanoid of 2 kg fell corrected in its arm swing at 100 deg/s^2, stood at 25)."""
+    """The root rotation's angular acceleration limit (deg/s^2) for ``body``: ``accel_deg_s2`` for a robot whose
+    CoM stands at most `TRUNK_SIZE_M` above its soles (zero posture), × `TRUNK_SIZE_M` / h for a taller one.
+    Dynamically similar robots (Froude scaling: lengths × L, times × sqrt(L / g), the robot's own time constant
+    sqrt(h / g)) turn their trunks alike at angular accelerations × 1 / L; the ZMP swing a trunk acceleration
+    α causes, I α / (m g), then grows as L, the same share of the feet. (Scaled by (0.3 m / h)^2 instead,
+    which kept that swing the same in mm, a 1.8 m, 60 kg humanoid turned its trunk at 9 deg/s^2: 1.8° in its
+    last 0.6 s while its lean brought the ZMP at 35 mm/s to its toes, and it fell corrected in ``lean`` and
+    ``push``; at 30 deg/s^2 it stands, benchmarks/bench_any_humanoid.py.)"""
     model, data = body.model, body.model.createData()
     q = np.zeros(model.nq)
     pin.centerOfMass(model, data, q)
     pin.framesForwardKinematics(model, data, q)
     ground = min(float(sole[:, 2].min()) for sole in foot_soles(body, data).values())
     height = float(data.com[0][2]) - ground
-    return accel_deg_s2 * min(1.0, (TRUNK_SIZE_M / height) ** 2) if height > 0 else accel_deg_s2
+    return accel_deg_s2 * min(1.0, TRUNK_SIZE_M / height) if height > 0 else accel_deg_s2
 
 
 class OnlineCorrector:

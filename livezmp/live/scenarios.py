@@ -375,13 +375,18 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     ``beyond`` (m) past its toes at the peak (`swing_frequency`: from its masses and
     inertias), so robots of any size are asked the same of their balance. The lean stays back from the toes
     by more than the arms' weight alone moves the CoM at the swing's ends (`ARMS_CLEAR` more): a big
-    robot's arms held forward would otherwise put it past its toes at any pace."""
+    robot's arms held forward would otherwise put it past its toes at any pace. A robot whose arms are light
+    for its feet needs a fast swing to reach ``beyond``, which keeps its ZMP past its toes too briefly to
+    topple it: the lean then comes closer to the toes (down to that bound), so that each swing holds the ZMP
+    past them for `SWING_PAST_S` (`swing_toe_margin`; a 0.3 m, 0.5 kg humanoid: 3.3 mm, 1.5 Hz)."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
     if toe_margin is not None:
         reach = max(front_margin(body, q0) - front_margin(body, q0 + sign * amplitude * dq) for sign in (1, -1))
         toe_margin = max(toe_margin, reach + ARMS_CLEAR)
+        if frequency is None:
+            toe_margin = swing_toe_margin(body, q0, dq, amplitude, beyond, reach + ARMS_CLEAR, toe_margin, flexion)
         q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
     if frequency is None:
         frequency = swing_frequency(body, q0, dq, amplitude, beyond)
@@ -400,20 +405,54 @@ def swing_zmp_beyond_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, ampli
                           frequency: float) -> float:
     """How far (m) past the toes the ZMP goes at the peak of the swing ``q0 + amplitude sin(wt) dq``,
     feet flat, from the whole-body dynamics (base still: only the arms move)."""
+    return float(swing_zmp_past_toes(body, q0, dq, amplitude, frequency).max())
+
+
+def swing_zmp_past_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float, frequency: float,
+                        samples: int = 64) -> np.ndarray:
+    """(samples,) m: how far past the toes the ZMP is (negative: inside) at evenly spaced phases of one cycle of
+    the swing ``q0 + amplitude sin(wt) dq``, feet flat, from the whole-body dynamics (base still)."""
     model, data = body.model, body.model.createData()
     base = BasePlacer(body).update(q0)
     toe = float(standing_support(body, q0)[1][:, X].max())
     w = 2 * np.pi * frequency
     still = np.zeros(len(base))
-    peak = -math.inf
-    for phase in np.linspace(0.0, 2 * np.pi, 64, endpoint=False):
+    past = np.full(samples, -math.inf)
+    for k, phase in enumerate(np.linspace(0.0, 2 * np.pi, samples, endpoint=False)):
         q = np.concatenate([base, q0 + amplitude * np.sin(phase) * dq])
         v = np.concatenate([still, amplitude * w * np.cos(phase) * dq])
         a = np.concatenate([still, -amplitude * w * w * np.sin(phase) * dq])
         zmp = compute_zmp(model, data, q, v, a).zmp
         if zmp is not None:
-            peak = max(peak, float(zmp[X]) - toe)
-    return peak
+            past[k] = float(zmp[X]) - toe
+    return past
+
+
+# s: each swing holds the ZMP past the toes this long: longer than the 0.2 s a robot's ZMP may stay outside its
+# feet before the simulator counts it fallen (a real robot topples in a few sqrt(h / g), 0.13-0.3 s from 0.3 to
+# 1.8 m: a fixed time asks a small robot for more, never less)
+SWING_PAST_S = 0.25
+
+
+def swing_toe_margin(body: BodyModel, stood: np.ndarray, dq: np.ndarray, amplitude: float, beyond: float,
+                     closest: float, farthest: float, flexion: float) -> float:
+    """The lean's distance (m) inside the toes, from ``stood`` (standing posture), for the arm swing that takes
+    the ZMP ``beyond`` past them: ``farthest`` when that swing holds the ZMP past the toes for `SWING_PAST_S`
+    each cycle, else the largest distance down to ``closest`` that does (a closer lean needs a gentler, slower
+    swing to reach ``beyond``, whose ZMP stays past the toes longer); ``closest`` if none does."""
+    poser = Poser(body)
+
+    def short(margin: float) -> float:  # s: how much less than SWING_PAST_S each swing holds the ZMP out
+        q0 = stood + poser.ankles_lean(lean_angle(body, -margin, flexion))
+        frequency = swing_frequency(body, q0, dq, amplitude, beyond)
+        past = swing_zmp_past_toes(body, q0, dq, amplitude, frequency, samples=256)
+        return SWING_PAST_S - float(np.mean(past > 0)) / frequency
+
+    if short(farthest) <= 0:
+        return farthest
+    if farthest <= closest or short(closest) > 0:
+        return closest
+    return float(brentq(short, closest, farthest, xtol=1e-5))
 
 
 def swing_frequency(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: float, beyond: float) -> float:
