@@ -161,3 +161,38 @@ def test_a_taller_robot_leans_slower_so_the_lean_itself_does_not_shove_it(mini, 
     # the half-cosine's peak acceleration D pi^2 / (2 T^2) times h / g is the lean's ZMP lead: LEAN_LEAD
     lead = (c1[0] - c0[0]) * np.pi ** 2 / (2 * ramp ** 2) * c0[2] / 9.81
     assert ramp > 4.0 and lead == pytest.approx(LEAN_LEAD, rel=0.01)
+
+
+ADULT = HumanoidSpec(height=1.8, mass=60.0, waist="yp", seed=24)  # the sweep's adult_1.8m_60kg
+
+
+@pytest.mark.parametrize(("name", "until"), [("lean", 9.0), ("push", None)])
+def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_to_stand(tmp_path, name, until):
+    # before: its trunk acceleration limit, 100 deg/s^2 x (0.3 m / 0.99 m)^2 = 9 deg/s^2, turned it 1.8 deg in the
+    # 0.6 s its lean took to bring the ZMP from 15 mm inside its toes to them: it fell corrected at 6.67 s in the
+    # lean, at 1.81 s in the push. Scaled as 0.3 m / h (dynamic similarity), 30 deg/s^2, it stands
+    body = load_robot(str(build_humanoid(tmp_path / "a.urdf", ADULT)), None).body
+    assert size_scaled_accel(body, 100.0) == pytest.approx(30.3, abs=0.1)
+    scenario = make_scenario(name, body, hold_s=1.0) if name == "lean" else make_scenario(name, body)
+    if until is not None:  # the lean's 6.7 s ramp and 1 s hold; not the lean back
+        scenario = replace(scenario, duration=until)
+    off, _ = balance(body, scenario, correct=False, foot_sensors=name == "push")
+    on, _ = balance(body, scenario, correct=True, foot_sensors=name == "push")
+    print(f"{name}: uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}")
+    assert off.fallen is not None and on.fallen is None
+
+
+def test_a_small_light_robot_is_toppled_by_its_arm_swing(tmp_path):
+    # before: light arms for its feet needed a 2.1 Hz swing to take its ZMP 4 mm past its toes from 8 mm inside
+    # them; past them 0.15 s a swing (and slower still, its shoulders at their speed limit), it never fell. It
+    # now leans to 3.3 mm inside its toes and swings at 1.5 Hz, past them 0.25 s a swing
+    body = load_robot(str(build_humanoid(tmp_path / "s.urdf", HumanoidSpec(height=0.3, mass=0.5, seed=22))),
+                      None).body
+    scenario = make_scenario("arm_swing", body, duration=3.0)
+    _, poly = standing_support(body, scenario.goals(0.0))
+    com, _ = standing_support(body, scenario.goals(0.0))
+    assert poly[:, 0].max() - com[0] < 0.004  # it leans closer to its toes than the 8 mm asked
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    print(f"uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}")
+    assert off.fallen is not None and on.fallen is None

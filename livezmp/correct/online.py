@@ -98,6 +98,7 @@ class OnlineCorrector:
         self.leg_roots = [body.model.frames[corr.hips[s]].parentJoint for s in ("left", "right")]
         actuated = set(corr.root_channels) if body.kind == "bvh" else set()
         actuated |= {c for cols in corr.legs.values() for c in cols}
+        actuated -= {len(body.base_channels) + m.joint for m in body.mimics}  # they follow their parents' goals
         self.channels = np.array(sorted(actuated))
         self.reset()
 

@@ -76,6 +76,7 @@ from livezmp.live.safety import FrameGuard, GoalLimiter, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.demo_robot import smooth_ramp
+from livezmp.model.mimic import follow
 
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
@@ -149,7 +150,7 @@ class LiveLoop:
         self.cop_vs_zmp = CopVsZmp()
         self.limits = joint_limits(body)
         self.guard = FrameGuard(self.limits, cfg.safety)
-        self.limiter = GoalLimiter(self.limits, cfg.safety, self.dt)
+        self.limiter = GoalLimiter(self.limits, cfg.safety, self.dt, body.mimics)
         est = EstimatorConfig(rate_hz=1.0 / self.dt, window_s=cfg.estimator_window_s, lag_s=cfg.estimator_lag_s,
                               cutoff_hz=cfg.estimator_cutoff_hz)
         self.pipeline_config = replace(default_config(body, 1.0 / self.dt), estimator=est)
@@ -426,7 +427,7 @@ class LiveLoop:
             self._feed(t, self._nan, valid=False)
 
     def _estimate(self, t: float, frame: LinkFrame) -> None:
-        q = frame.positions
+        q = follow(frame.positions, self.body.mimics)  # the kinematics: a mimic joint where its parent puts it
         self._reading = (self._contacts(t, frame.feet), frame.feet)
         base = self.placer.update(q)
         if self.config.imu_tilt and frame.imu is not None:

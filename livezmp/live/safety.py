@@ -36,6 +36,7 @@ import numpy as np
 from livezmp.links.base import LinkFrame
 from livezmp.live.config import SafetyConfig
 from livezmp.model.body import BodyModel
+from livezmp.model.mimic import Mimic, follow
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,8 @@ class GoalLimiter:
     """command + correction offsets → goals inside the correction and joint limits;
     ``dt``: seconds between calls (the loop period)."""
 
-    def __init__(self, limits: JointLimits, config: SafetyConfig, dt: float):
+    def __init__(self, limits: JointLimits, config: SafetyConfig, dt: float, mimics: tuple[Mimic, ...] = ()):
+        self.mimics = mimics  # a mimic joint's goal is its parent's goal times the multiplier plus the offset
         self.lower = limits.lower + config.limit_margin_rad
         self.upper = limits.upper - config.limit_margin_rad
         self.max_offset = config.max_correction_rad
@@ -162,6 +164,7 @@ class GoalLimiter:
         want = np.where(np.isfinite(offsets), offsets, 0.0)
         sent = np.clip(np.clip(want, -self.max_offset, self.max_offset),
                        self.offsets - self.max_step, self.offsets + self.max_step)
-        goals = np.clip(command + sent, self.lower, self.upper)
-        limited = bool(np.any(sent != want) or np.any(goals != command + sent))
+        wanted = follow(command + sent, self.mimics)
+        goals = np.clip(wanted, self.lower, self.upper)
+        limited = bool(np.any(sent != want) or np.any(goals != wanted))
         return goals, limited, sent

@@ -38,6 +38,7 @@ from livezmp.balance.zmp import compute_zmp
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
+from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import leg_joints
 
@@ -623,4 +624,8 @@ def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
     InputError naming the choices."""
     if name not in SCENARIOS:
         raise InputError(f"unknown scenario '{name}' (choose from {', '.join(SCENARIOS)})")
-    return SCENARIOS[name](body, **options)
+    scenario = SCENARIOS[name](body, **options)
+    if not body.mimics:
+        return scenario
+    # a mimic joint is not moved on its own: its goal is its parent's times the multiplier plus the offset
+    return replace(scenario, goals=lambda t: follow(scenario.goals(t), body.mimics))

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from livezmp.model.mimic import Mimic
+
 
 @dataclass
 class Foot:
@@ -74,6 +76,7 @@ class BodyModel:
     base_channels: list[int] = field(default_factory=list)  # q indices of a robot's floating base
     has_base_input: bool = True
     joint_names: list[str] = field(default_factory=list)  # a robot's actuated joints (URDF names)
+    mimics: tuple[Mimic, ...] = ()  # joints that follow another (indices into joint_names)
 
     @property
     def nq(self) -> int:

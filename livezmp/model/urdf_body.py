@@ -7,8 +7,9 @@ legs, and each sole a level box under the link's centre of mass: ``sole_length``
 ``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × / 0.28 × / 0.12 × the
 hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
 chain does not share (a waist above the legs is the trunk's). Continuous joints, and
-revolute ones without a ``<limit>``, are revolute joints without bounds; mimic joints
-are independent joints; a link named as a joint is renamed ``<name>_link``.
+revolute ones without a ``<limit>``, are revolute joints without bounds; a mimic joint
+keeps its own angle in the model and follows its parent's (``BodyModel.mimics``,
+:mod:`livezmp.model.mimic`); a link named as a joint is renamed ``<name>_link``.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import pinocchio as pin
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
 MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
@@ -189,7 +191,8 @@ def _quiet_stderr():
         os.close(saved)
 
 
-def _load_fixed(path: Path) -> pin.Model:
+def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]]]:
+    """The URDF's model without a base, and its mimics (`read_mimics`)."""
     text = read_input_text(path, "URDF")
     try:
         root = ET.fromstring(text)
@@ -205,6 +208,7 @@ def _load_fixed(path: Path) -> pin.Model:
     for link in links:
         _check_inertial(link, path)
     unbounded = _check_joints(root, path)
+    mimics = read_mimics(root, path)
     try:
         with _quiet_stderr():
             model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
@@ -214,7 +218,7 @@ def _load_fixed(path: Path) -> pin.Model:
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
-    return model
+    return model, mimics
 
 
 def _with_base(fixed: pin.Model) -> pin.Model:
@@ -297,7 +301,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     """Build the body model of a URDF robot (see module docstring)."""
     opts = opts or UrdfBodyOptions()
     path = Path(path)
-    fixed = _load_fixed(path)
+    fixed, mimics = _load_fixed(path)
     model = _with_base(fixed)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
     data = model.createData()
@@ -358,4 +362,5 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
                                     {s: [f] for s, f in feet_frames.items()}, full_foot_pose=True),
         named_points=named, base_channels=list(range(6)),
         joint_names=names[6:],
+        mimics=tuple(Mimic(names.index(n) - 6, names.index(p) - 6, m, o) for n, (p, m, o) in mimics.items()),
     )

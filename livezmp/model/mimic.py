@@ -1,0 +1,77 @@
+"""Mimic joints: a URDF ``<mimic joint="P" multiplier="m" offset="o"/>`` joint follows joint P, q = m q_P + o
+(a gripper's second finger, a knee's linkage). Its angle is kept in the model as a joint of its own (it has a
+servo that reads and is commanded like any other, and the model's coordinates stay one per joint: Pinocchio 4's
+mimic-aware build, ``buildModel(..., mimic=True)``, drops the follower's coordinate, so its reading would have no
+place and every joint-to-coordinate map would need the case); the live loop imposes the relation on what it
+reads before the kinematics and on every goal it sends, and the scenarios and the corrector never move it on
+their own."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from livezmp.errors import InputError
+
+
+@dataclass(frozen=True)
+class Mimic:
+    """Joint ``joint`` follows joint ``parent`` (indices into a robot's actuated joints, ``BodyModel.joint_names``):
+    q = ``multiplier`` q_parent + ``offset`` (rad, or m for a prismatic joint)."""
+
+    joint: int
+    parent: int
+    multiplier: float
+    offset: float
+
+
+def follow(values: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
+    """``values`` (n,) per actuated joint (angles or goals) with each mimic joint's value set from its parent's;
+    ``values`` itself when there are no mimics (parents are never mimics: chains are resolved when read)."""
+    if not mimics:
+        return values
+    out = values.copy()
+    for m in mimics:
+        out[m.joint] = m.multiplier * values[m.parent] + m.offset
+    return out
+
+
+def read_mimics(root: ET.Element, path: Path) -> dict[str, tuple[str, float, float]]:
+    """joint name → (parent joint name, multiplier, offset) of every ``<mimic>`` in the URDF ``root``; a mimic of a
+    mimic is resolved to the first joint of the chain (m = m1 m2, o = m1 o2 + o1). InputError (file, joint, what)
+    for a missing or unknown parent, a parent that is the joint itself, a fixed joint, a loop of mimics or
+    numbers that are not finite."""
+    kinds = {j.get("name"): j.get("type") for j in root.findall("joint")}
+    raw = {}
+    for j in root.findall("joint"):
+        tag = j.find("mimic")
+        if tag is None:
+            continue
+        where = f"{path}: joint {j.get('name')!r} <mimic>"
+        parent = tag.get("joint")
+        if parent not in kinds or parent == j.get("name"):
+            raise InputError(f"{where}: joint={parent!r} is not another joint of this URDF")
+        if "fixed" in (kinds[parent], j.get("type")):
+            raise InputError(f"{where}: a fixed joint cannot mimic or be mimicked")
+        try:
+            numbers = float(tag.get("multiplier", "1")), float(tag.get("offset", "0"))
+        except ValueError:
+            raise InputError(f"{where}: multiplier and offset must be numbers") from None
+        if not all(math.isfinite(v) for v in numbers):
+            raise InputError(f"{where}: multiplier and offset must be finite")
+        raw[j.get("name")] = (parent, *numbers)
+    resolved = {}
+    for name, (parent, m, o) in raw.items():
+        seen = {name}
+        while parent in raw:
+            if parent in seen:
+                raise InputError(f"{path}: joint {name!r} <mimic>: the mimics loop back to it ({parent!r})")
+            seen.add(parent)
+            up, m2, o2 = raw[parent]
+            parent, m, o = up, m * m2, m * o2 + o
+        resolved[name] = (parent, m, o)
+    return resolved
