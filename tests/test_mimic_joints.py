@@ -55,9 +55,17 @@ def test_the_urdf_mimics_are_read_with_their_multiplier_and_offset(gripper):
 
 
 class Recording(BusTime):
-    def __init__(self, link, time):
+    """Keeps the goals written; reads the joint ``misread`` 0.3 rad off (a follower's servo need not agree)."""
+
+    def __init__(self, link, time, misread):
         super().__init__(link, time)
-        self.goals = []
+        self.goals, self.misread = [], misread
+
+    def read(self):
+        frame = super().read()
+        if frame is not None:
+            frame.positions[self.misread] += 0.3
+        return frame
 
     def write_goals(self, goals):
         self.goals.append(np.array(goals))
@@ -80,7 +88,7 @@ def test_every_goal_sent_for_a_mimic_joint_follows_its_parents_goal(gripper):
     humanoid = SimHumanoid(body, scenario.goals(0.0))
     mock = MockLink(humanoid, body.joint_names, clock=time.now)
     mock.open()
-    link = Recording(mock, time)
+    link = Recording(mock, time, misread=lf)
     loop = LiveLoop(link, body, LoopConfig(correct=True), command=command,
                     clock=LoopClock(500.0, now=time.now, sleep=time.advance), fell=lambda: humanoid.fallen is not None)
     summary = loop.run(1.0)
@@ -89,6 +97,9 @@ def test_every_goal_sent_for_a_mimic_joint_follows_its_parents_goal(gripper):
     assert np.ptp(goals[:, lp]) > 0.5  # the parents did move
     for f, p in ((lf, lp), (rf, rp)):
         np.testing.assert_allclose(goals[:, f], M * goals[:, p] + O, atol=1e-12)
+    # the kinematics put the follower where its parent's reading puts it, not where its own servo says
+    q = loop.result.q[len(body.base_channels):]
+    assert q[lf] == pytest.approx(M * q[lp] + O, abs=1e-9) and abs(q[lp]) > 0.05
     # the servos followed, so the simulated fingers keep the relation up to the servos' lag
     q = humanoid.servo.position
     assert q[lf] == pytest.approx(M * q[lp] + O, abs=0.02)

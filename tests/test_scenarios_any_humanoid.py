@@ -4,6 +4,7 @@ push's ZMP shift, and the simulated humanoid's exact whole-body dynamics (simula
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from humanoid_gen import generate_humanoid, joint_name
 from test_live_loop_closed import balance
@@ -112,3 +113,16 @@ def test_a_push_grows_and_eases_off_as_half_cosines():
     assert sc.Push((2.0, 0.0), 0.2, 1.0, 0.1).share(1.05) == 1.0  # no rise: a step
     with pytest.raises(InputError, match="rise_s within"):
         sc.Push((2.0, 0.0), 0.2, 1.0, 1.0, rise_s=0.6)
+
+
+def test_the_arm_swing_starts_no_harder_than_it_swings(mini, generated):
+    # before: it grew over a fixed 0.5 s; for a slow (big robot's) swing the growth itself accelerated the arms
+    # several times harder than the swing does, and took the ZMP past the toes in its first 0.3 s
+    for body in (mini, generated[BIG]):
+        scenario = make_scenario("arm_swing", body)
+        joint = body.joint_names.index(joint_roles(body)["l_sho_pitch"])
+        dt = 1e-3
+        q = np.array([scenario.goals(t)[joint] for t in np.arange(0.0, scenario.duration, dt)])
+        accel = np.abs(np.diff(q, 2)) / dt ** 2
+        steady = accel[len(q) // 2:].max()  # A w^2, once grown
+        assert accel.max() <= 1.05 * steady, (body.model.name, accel.max(), steady)

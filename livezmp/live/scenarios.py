@@ -370,7 +370,7 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     """Lean forward at the ankles until the static CoM is ``toe_margin`` (m) inside the
     toes (None: stay upright), then swing both arms forward and back together at the
     shoulders, ``amplitude`` rad at ``frequency`` Hz (the defaults peak at 4.7 rad/s,
-    near the XM430's 4.8), the swing growing over its first half second. The static
+    near the XM430's 4.8), the swing growing over its first half second or period (`SWING_GROW_S`). The static
     CoM stays inside the feet; the ZMP swings with the arms' acceleration, past the toes
     on every swing. ``frequency=None``: the frequency whose swing puts this robot's ZMP
     ``beyond`` (m) past its toes at the peak (`swing_frequency`: from its masses and
@@ -392,11 +392,19 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     if frequency is None:
         frequency = swing_frequency(body, q0, dq, amplitude, beyond)
     w = 2 * np.pi * frequency
+    grow_s = max(SWING_GROW_S, 1.0 / frequency)
 
     def goals(t: float) -> np.ndarray:
-        return q0 + amplitude * smooth_step(t / 0.5) * np.sin(w * max(t, 0.0)) * dq
+        return q0 + amplitude * smooth_step(t / grow_s) * np.sin(w * max(t, 0.0)) * dq
 
     return Scenario("arm_swing", goals, duration)
+
+
+# s: the arm swing grows over this long, or over one period of the swing if that is longer: the arms' acceleration
+# A (s'' sin wt + 2 s' w cos wt - s w^2 sin wt), s growing as half a cosine, then peaks within 5 % of the swing's own
+# A w^2 (over half a period: 1.37 A w^2). Over a fixed 0.5 s, a 1.8 m robot's 0.24 Hz swing started 4x harder than
+# it swings: its ZMP went 10 mm past its toes in the first 0.3 s, uncorrected or not.
+SWING_GROW_S = 0.5
 
 
 ARMS_CLEAR = 0.0004  # m: the static CoM at the swing's ends stays this far inside the toes (livezmp_mini: 0.8 mm)
