@@ -184,7 +184,7 @@ def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_to_stand(tmp_path, name,
 
 def test_a_small_light_robot_is_toppled_by_its_arm_swing(tmp_path):
     # before: light arms for its feet needed a 2.1 Hz swing to take its ZMP 4 mm past its toes from 8 mm inside
-    # them; past them 0.15 s a swing (and slower still, its shoulders at their speed limit), it never fell. It
+    # them; past them 0.15 s a swing (less with its shoulders clipped at the servos' speed), it never fell. It
     # now leans to 3.3 mm inside its toes and swings at 1.5 Hz, past them 0.25 s a swing
     body = load_robot(str(build_humanoid(tmp_path / "s.urdf", HumanoidSpec(height=0.3, mass=0.5, seed=22))),
                       None).body

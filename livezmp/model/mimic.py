@@ -4,7 +4,7 @@ servo that reads and is commanded like any other, and the model's coordinates st
 mimic-aware build, ``buildModel(..., mimic=True)``, drops the follower's coordinate, so its reading would have no
 place and every joint-to-coordinate map would need the case); the live loop imposes the relation on what it
 reads before the kinematics and on every goal it sends, and the scenarios and the corrector never move it on
-their own."""
+their own (on a leg's chain, though, their postures and leg IK still solve as if it were free)."""
 
 from __future__ import annotations
 
