@@ -139,3 +139,28 @@ def test_a_bad_mimic_is_refused_in_one_line(tmp_path, capsys, edit, says):
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and "<mimic>" in err[0] and says in err[0], err
+
+
+def test_a_joint_csv_and_the_monitors_link_source_put_the_follower_where_its_parent_says(gripper, tmp_path):
+    from livezmp.links.base import LinkFrame, LinkStats
+    from livezmp.model.motion_file import trajectory_frames
+    from livezmp.model.trajectory_csv import JointTrajectory
+    from livezmp.sources.link_source import LinkSource
+
+    (lf, lp), (rf, rp) = fingers(gripper)[0]
+    nb = len(gripper.base_channels)
+    q = np.zeros((3, len(gripper.joint_names)))
+    q[:, lp] = (0.1, 0.2, 0.3)
+    q[:, lf] = 0.7  # what the file (or a servo) says of the follower: not where its parent puts it
+    frames = trajectory_frames(gripper, JointTrajectory(t=np.arange(3) * 0.01, q=q, joint_names=gripper.joint_names))
+    np.testing.assert_allclose(frames[:, nb + lf], M * q[:, lp] + O)
+
+    class OneFrame:  # a link whose follower servo reads 0.7
+        joint_names, stats = gripper.joint_names, LinkStats()
+
+        def read(self):
+            return LinkFrame(t=1.0, positions=q[0].copy())
+
+    source = LinkSource("fake", gripper, None, None, link=OneFrame())
+    frame = source.read(timeout=0.1)
+    assert frame.channels[nb + lf] == pytest.approx(M * 0.1 + O)

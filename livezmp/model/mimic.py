@@ -3,7 +3,8 @@
 servo that reads and is commanded like any other, and the model's coordinates stay one per joint: Pinocchio 4's
 mimic-aware build, ``buildModel(..., mimic=True)``, drops the follower's coordinate, so its reading would have no
 place and every joint-to-coordinate map would need the case); the live loop imposes the relation on what it
-reads before the kinematics and on every goal it sends, and the scenarios and the corrector never move it on
+reads before the kinematics and on every goal it sends (the monitor's link source and joint CSVs on what they
+read), and the scenarios and the corrector never move it on
 their own (on a leg's chain, though, their postures and leg IK still solve as if it were free)."""
 
 from __future__ import annotations
@@ -30,13 +31,14 @@ class Mimic:
 
 
 def follow(values: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
-    """``values`` (n,) per actuated joint (angles or goals) with each mimic joint's value set from its parent's;
-    ``values`` itself when there are no mimics (parents are never mimics: chains are resolved when read)."""
+    """``values`` (..., n) per actuated joint (angles or goals; a frame or frames) with each mimic joint's value
+    set from its parent's; ``values`` itself when there are no mimics (parents are never mimics: chains are
+    resolved when read)."""
     if not mimics:
         return values
-    out = values.copy()
+    out = np.array(values, dtype=float)
     for m in mimics:
-        out[m.joint] = m.multiplier * values[m.parent] + m.offset
+        out[..., m.joint] = m.multiplier * out[..., m.parent] + m.offset
     return out
 
 

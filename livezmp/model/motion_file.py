@@ -16,6 +16,7 @@ from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
+from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv, write_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
@@ -72,12 +73,13 @@ def trajectory_frames(body: BodyModel, traj: JointTrajectory, placer: BasePlacer
 
     Without base columns the base is placed so the stance foot stays flat on the ground (by
     ``placer`` when given: a take read in pieces carries it from one piece to the next)."""
+    q = follow(traj.q, body.mimics)  # a mimic joint where its parent puts it, whatever its column says
     if traj.base is None:
-        base = place_base(body, traj.q, placer)
+        base = place_base(body, q, placer)
     else:
         x, y, z, roll, pitch, yaw = traj.base.T
         base = np.column_stack([x, y, z, yaw, pitch, roll])
-    return np.hstack([base, traj.q])
+    return np.hstack([base, q])
 
 
 def write_motion(loaded: LoadedMotion, frames: np.ndarray, path: str | Path) -> None:

@@ -23,6 +23,7 @@ from livezmp.links.base import Link, LinkError, LinkReadError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.body_spec import BodySpec
+from livezmp.model.mimic import follow
 from livezmp.model.robot_config import RobotConfig
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
@@ -72,7 +73,7 @@ class LinkSource:
             self.stats.malformed += 1
             return None
         self._t_last = frame.t
-        joints = np.asarray(frame.positions, dtype=float)
+        joints = follow(np.asarray(frame.positions, dtype=float), self.body.mimics)  # mimic joints: their parents'
         contacts = sensor_contacts(frame.feet, self._min_force)
         self.stats.delivered += 1
         return SourceFrame(frame.t, np.concatenate([self._placer.update(joints), joints]), contacts,
