@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import make_smoothing_spline
 
+from livezmp.estimate import spline_diff
 from livezmp.estimate.spline_diff import SlidingSplineDifferentiator, smoothing_lambda, uniform_weights, window_weights
 
 DT = 1.0 / 120.0
@@ -171,3 +172,34 @@ def test_memory_is_fixed_while_streaming():
         diff.push(i * DT, y)
     after = {name: (v.shape, v.nbytes) for name, v in vars(diff).items() if isinstance(v, np.ndarray)}
     assert after == before
+
+
+def test_windows_with_skipped_grid_samples_are_fitted_once_per_pattern(monkeypatch):
+    """A loop that skips a deadline leaves a gap of whole periods in the window: each window is the exact fit
+    on its times, but a pattern of gaps seen before (the next gap alike, as the window slides past it)
+    reuses its weights instead of fitting again; the weights kept stay within their byte budget."""
+    window, lag = 16, 3
+    fits = []
+    fit = spline_diff.window_weights
+    monkeypatch.setattr(spline_diff, "window_weights", lambda *a: fits.append(1) or fit(*a))
+    rng = np.random.default_rng(5)
+    for budget, refits in ((spline_diff.GRID_WEIGHTS_BYTES, 0), (5 * 3 * window * 8, window - 1)):
+        diff = SlidingSplineDifferentiator(2, window, lag, DT, LAM, jitter_tol=1e-3, grid_weights_bytes=budget)
+        times, samples = [], []
+        per_gap = []
+        index = 0
+        for gap in range(3):  # three gaps of one missing sample, each followed by a full window
+            index += 2
+            for _ in range(window + 2):
+                t, y = 100.0 + index * DT, rng.normal(size=2)
+                index += 1
+                diff.push(t, y)
+                times, samples = (times + [t])[-window:], (samples + [y])[-window:]
+                if gap:
+                    fits.clear()
+                    np.testing.assert_allclose(diff.estimate(), fit(np.array(times), LAM, window - 1 - lag) @ samples,
+                                               atol=1e-9)
+                    per_gap.append(len(fits))
+            assert len(diff._grid) <= diff._grid_kept
+        # the second and third gaps: no fit with room for the patterns; without it one a window holding the gap
+        assert sum(per_gap[window + 2:]) == refits

@@ -31,9 +31,10 @@ A cycle whose read fails, or whose frame the guard rejects, writes nothing; the
 estimator is told the sample is missing (so its time grid stays uniform and short gaps
 are bridged by its Kalman prediction). Deadlines the clock skipped are not filled in:
 the estimator fits the uneven times instead, a bounded ~0.1 ms more a frame for one
-window, where analysing a missing sample per skipped deadline would add work exactly
-when the loop is already late. With no valid frame for the watchdog time the loop
-stops commanding (hold, or drop torque); while the link reports its port gone
+window (a lone gap seen before costs nothing: its windows' weights are kept), where
+analysing a missing sample per skipped deadline would add work exactly when the loop is
+already late. With no valid frame for the watchdog time the loop stops commanding (hold,
+or drop torque); while the link reports its port gone
 (:class:`~livezmp.links.base.LinkError`) it stops reading and tries ``reconnect`` every
 ``reconnect_every_s`` instead; a link that says it is unusable
 (:class:`~livezmp.links.base.LinkUnusable`: e.g. it loses too many replies) stops the
