@@ -342,3 +342,52 @@ def test_fast_status_has_running_crcs():
     reply = encode_fast_status([(0, 3, bytes(4)), (0, 7, bytes(4))])
     assert crc16(reply[:-2]) == reply[-2] | reply[-1] << 8
     assert crc16(reply[:14]) == reply[14] | reply[15] << 8
+
+
+class GoalLog(FixedPlant):
+    """Records every goal the chain gives the plant, in order."""
+
+    def __init__(self, ticks: list[int]) -> None:
+        super().__init__(ticks)
+        self.goals: list[tuple[int, float]] = []
+
+    def set_goal(self, idx: int, position: float) -> None:
+        self.goals.append((idx, position))
+
+
+def test_a_sync_write_of_goals_does_what_a_write_to_each_servo_does():
+    """The goals' sync write (the loop's packet every cycle, handled for all servos at once) against the
+    same goals sent as one Write instruction each (the general write path), servo for servo: goals in
+    range and limits taken, the one beyond its mode-3 limits, the one whose bus watchdog tripped, the one
+    beyond the register's range and the one on another baud rate refused, an unknown id ignored."""
+    ids = [1, 2, 3, 4, 5, 6]
+    goals = {1: 100, 2: 4000, 3: 5000, 4: 200, 5: 2_000_000, 6: 300, 9: 400}
+    outcomes = []
+    for sync in (True, False):
+        plant = GoalLog([2048] * len(ids))
+        with DynamixelChain(ids, plant, emulate_wire_time=False, adapter="none") as chain, \
+                serial.Serial(chain.path, 1_000_000) as ser:
+            chain.set_register(2, "max_position_limit", 3000)  # mode 3: 4000 is beyond it
+            chain.set_register(3, "operating_mode", 4)  # extended position: no limits
+            chain.set_register(4, "bus_watchdog", -1)  # tripped: goals refused
+            chain.set_register(6, "baud_rate", 1)  # 57600: does not hear the host
+            for i in ids:
+                chain.set_register(i, "torque_enable", 1)
+            plant.goals.clear()
+            unheard = chain.stats.unheard
+            if sync:
+                params = (116).to_bytes(2, "little") + (4).to_bytes(2, "little") + b"".join(
+                    bytes((i,)) + v.to_bytes(4, "little", signed=True) for i, v in goals.items())
+                assert exchange(ser, encode_packet(0xFE, 0x83, params), 0) == b""
+            else:
+                for i, v in goals.items():  # servos 6 (not hearing) and 9 (none) do not answer
+                    value = (116).to_bytes(2, "little") + v.to_bytes(4, "little", signed=True)
+                    status = 11 if i <= 5 else 0
+                    assert len(exchange(ser, encode_packet(i, 0x03, value), status)) == status
+            outcomes.append(([chain.register(i, "goal_position") for i in ids], plant.goals,
+                             chain.stats.unheard - unheard))
+    assert outcomes[0] == outcomes[1]
+    table, steered, unheard = outcomes[0]
+    assert table[:3] == [100, 2048, 5000] and table[4] == 2048  # 2 and 5 refused, 4 held where it was
+    assert [i for i, _ in steered] == [0, 2] and unheard == 1
+    assert steered[1][1] == pytest.approx((5000 - 2048) * 2 * math.pi / 4096)

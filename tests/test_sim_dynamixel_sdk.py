@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
 
 import numpy as np
 import pytest
+import serial
 from dynamixel_sdk import (
     BROADCAST_ID,
     COMM_RX_TIMEOUT,
@@ -26,6 +29,7 @@ from sim_support import sdk_latency_timer, short_gil_switch, wait_until  # noqa:
 from livezmp.links.bus_timing import sync_read_bytes, wire_time
 from livezmp.links.dynamixel import WaitingPortHandler
 from sim_devices.dynamixel_chain import DynamixelChain
+from sim_devices.dynamixel_packet import encode_packet
 from sim_devices.servo_plant import ServoPlant
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch", "sdk_latency_timer")
@@ -286,3 +290,33 @@ def test_changing_the_id_register_readdresses_the_servo(rig):
 def test_construction_errors_name_the_problem(kwargs, error, message):
     with pytest.raises(error, match=message):
         DynamixelChain(**kwargs)
+
+
+def spun_exchanges(chain, n: int = 40) -> np.ndarray:
+    """Seconds from writing a Fast Sync Read of the 20 positions (4 Mbps) until all its reply was read, for
+    ``n`` reads; the client polls without sleeping, so it has the bytes the moment the pty does."""
+    instruction = encode_packet(BROADCAST_ID, 0x8A, (PRESENT_POSITION).to_bytes(2, "little") + (4).to_bytes(2, "little")
+                                + bytes(IDS))
+    size = sync_read_bytes(len(IDS), 4, fast=True)[1]
+    took = []
+    with serial.Serial(chain.path, 4_000_000) as client:
+        for _ in range(n):
+            got = 0
+            start = time.monotonic()
+            os.write(client.fd, instruction)
+            while got < size and time.monotonic() - start < 0.1:
+                with contextlib.suppress(BlockingIOError):
+                    got += len(os.read(client.fd, size - got))
+            took.append(time.monotonic() - start)
+            assert got == size
+    return np.array(took)
+
+
+def test_a_reply_never_reaches_even_a_polling_client_before_the_bus_model_says():
+    """At 4 Mbps the host's own hand-offs are a good part of an exchange: however quickly the client takes the
+    reply in, it never has it before the wire time and the adapter's latency have passed."""
+    instruction, reply = sync_read_bytes(len(IDS), 4, fast=True)
+    model = wire_time(instruction + reply, 4_000_000) + 62.5e-6 + 125e-6  # high-speed adapter
+    with DynamixelChain(IDS, baud_rate=4_000_000, adapter="hs", settings={"return_delay_time": 0}) as chain:
+        assert spun_exchanges(chain).min() >= model
+
