@@ -97,7 +97,9 @@ class HumanoidSpec:
     ``frames``: "aligned" link frames, "pitch_z" (leg links rotated so the pitch axis is local z) or "random";
     ``names``: a `CONVENTIONS` key or "numbered" (joint_1...); ``limits``: "wide", "tight" (what standing needs and
     a little) or "absent" (no <limit> on any joint); ``continuous``: head and upper-arm yaw continuous;
-    ``grippers``: a two-finger gripper on each hand, one finger mimicking the other; ``extras``: camera, IMU and
+    ``grippers``: a two-finger gripper on each hand, one finger mimicking the other (multiplier -1);
+    ``double_knee``: each knee split in two pitch joints 0.04 heights apart (a kid-size linkage), the lower
+    (``knee2``) mimicking the upper with multiplier 1; ``extras``: camera, IMU and
     sole frames as fixed massless links, and a massless root link; ``root``: the root link's name, its frame at its
     centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
     humanoid_SEED); ``foot``: "box", "mesh" or "none" collision;
@@ -116,6 +118,7 @@ class HumanoidSpec:
     limits: str = "wide"
     continuous: bool = False
     grippers: bool = False
+    double_knee: bool = False
     extras: bool = False
     foot: str = "box"
     root: str = "base_link"
@@ -210,7 +213,12 @@ def _build(spec: HumanoidSpec) -> _Builder:
             b.joint(f"hip_{ROLE_OF[axis]}", s, parent, child, (0.0, w, 0.54), ROLE_OF[axis])
             parent = child
         shank = b.link(f"{s}_shank", 0.05, (0.0, w, 0.18), (0.05, 0.05, 0.24), b.frame(True))
-        b.joint("knee", s, parent, shank, (0.0, w, 0.30), "pitch")
+        if spec.double_knee:
+            link = b.link(f"{s}_kneecap", 0.01, (0.0, w, 0.30), (0.03, 0.03, 0.04), b.frame(True))
+            b.joint("knee", s, parent, link, (0.0, w, 0.32), "pitch")
+            b.joint("knee2", s, link, shank, (0.0, w, 0.28), "pitch", mimic=b.joints[-1]["name"], multiplier=1.0)
+        else:
+            b.joint("knee", s, parent, shank, (0.0, w, 0.30), "pitch")
         parent = shank
         for k, axis in enumerate(spec.ankle):
             last = k == len(spec.ankle) - 1
@@ -235,7 +243,7 @@ def _build(spec: HumanoidSpec) -> _Builder:
             for k, finger in enumerate((0.01, -0.01)):
                 tip = b.link(f"{s}_finger{k}", 0.002, (0.0, 0.12 * y + finger, 0.54), (0.01, 0.01, 0.03))
                 b.joint(f"finger{k}", s, parent, tip, (0.0, 0.12 * y + finger, 0.56), "roll",
-                        mimic=b.joints[-1]["name"] if k else None)
+                        mimic=b.joints[-1]["name"] if k else None, multiplier=-1.0)
     if spec.extras:
         for role, parent, at in (("camera", head, (0.05, 0.0, 0.95)), ("imu", trunk, (0.0, 0.0, 0.7))):
             b.link(role, 0.0, at, (0.0, 0.0, 0.0))
@@ -294,7 +302,7 @@ def _write(b: _Builder, path: Path) -> Path:
                 ET.SubElement(joint, "limit", lower=f"{bounds[0]:g}", upper=f"{bounds[1]:g}", effort="10",
                               velocity="6")
         if j.get("mimic"):
-            ET.SubElement(joint, "mimic", joint=j["mimic"], multiplier="-1", offset="0")
+            ET.SubElement(joint, "mimic", joint=j["mimic"], multiplier=f"{j['multiplier']:g}", offset="0")
         elements.append(joint)
     random.Random(spec.seed).shuffle(elements)
     robot.extend(elements)

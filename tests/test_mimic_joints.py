@@ -1,6 +1,8 @@
 """Mimic joints (URDF ``<mimic joint="P" multiplier="m" offset="o"/>``): the follower's angle is m q_P + o in the
-kinematics and in every goal the live loop sends, and neither the scenarios nor the corrector move it on its own.
-Truth: the relation the URDF states, and the simulated humanoid's exact whole-body dynamics (simulated time)."""
+kinematics and in every goal the live loop sends, and neither the scenarios nor the corrector move it on its own;
+on a leg (a double knee) their leg postures and IK put the feet where they asked with the relation imposed.
+Truth: the relation the URDF states, the feet a knee of one joint puts where the standing posture says (soles
+parallel to the trunk), and the simulated humanoid's exact whole-body dynamics (simulated time)."""
 
 from __future__ import annotations
 
@@ -8,16 +10,19 @@ import xml.etree.ElementTree as ET
 from dataclasses import replace
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from humanoid_gen import HumanoidSpec, build_humanoid
 from test_live_loop import SimTime
 from test_live_loop_closed import BusTime, balance
 
 from livezmp.cli import main
+from livezmp.correct.root_motion import RootMover
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
-from livezmp.live.scenarios import make_scenario
+from livezmp.live.scenarios import Poser, Y, joint_roles, make_scenario
+from livezmp.model.mimic import follow
 from livezmp.model.robot import load_robot
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.mock_link import MockLink
@@ -164,3 +169,77 @@ def test_a_joint_csv_and_the_monitors_link_source_put_the_follower_where_its_par
     source = LinkSource("fake", gripper, None, None, link=OneFrame())
     frame = source.read(timeout=0.1)
     assert frame.channels[nb + lf] == pytest.approx(M * 0.1 + O)
+
+
+# -- a mimic joint on a leg: a double knee, its lower joint following the upper (multiplier 1) ----------------
+
+@pytest.fixture(scope="module")
+def double_knee(tmp_path_factory):
+    spec = HumanoidSpec(double_knee=True, names="poppy", seed=5)
+    return load_robot(str(build_humanoid(tmp_path_factory.mktemp("knee") / "k.urdf", spec)), None).body
+
+
+def soles(body, q):
+    """Both soles' corners (8, 3), m, in the base's frame (``q``: the joints, base at the origin) or the world's
+    (``q``: the whole configuration)."""
+    data = body.model.createData()
+    q = np.concatenate([np.zeros(len(body.base_channels)), q]) if len(q) < body.model.nq else q
+    pin.framesForwardKinematics(body.model, data, q)
+    return np.concatenate([f.sole_local @ data.oMf[f.frame_id].rotation.T + data.oMf[f.frame_id].translation
+                           for f in body.feet.values()])
+
+
+def test_a_double_knees_postures_put_the_feet_where_the_scenario_asks(double_knee):
+    # before: the scenario bent the upper knee by 2 theta, then its follower was made to bend as much: 4 theta of
+    # knee, each sole turned 2 theta (0.6 rad) from the trunk's level and 72-82 mm from where it was asked
+    body = double_knee
+    names = body.joint_names
+    assert sorted((names[m.joint], names[m.parent], m.multiplier) for m in body.mimics) == [
+        ("l_knee2", "l_knee_y", 1.0), ("r_knee2", "r_knee_y", 1.0)]
+    assert joint_roles(body)["l_knee"] == "l_knee_y"  # the follower plays no role
+    poser = Poser(body)
+
+    def one_knee(theta):  # the standing posture as the scenario states it, the upper knee taking all the bend
+        return poser.arms_down(0.1) + sum(theta * (-poser.unit(f"{s}_hip_pitch", Y) + 2 * poser.unit(f"{s}_knee", Y)
+                                                   - poser.unit(f"{s}_ank_pitch", Y)) for s in "lr")
+
+    stood = soles(body, poser.standing())
+    assert np.ptp(stood[:, 2]) < 1e-9  # level, parallel to the trunk, as the standing posture says
+    scenario = make_scenario("lean", body, hold_s=1.0)
+    for t in (0.0, 1.5, 3.0):  # standing, mid-lean, leaning past the toes
+        goals = scenario.goals(t)
+        for m in body.mimics:
+            assert goals[m.joint] == pytest.approx(goals[m.parent], abs=1e-12)
+        asked = one_knee(0.3) + (goals - poser.standing())  # the lean: the ankles on top of it
+        held = np.abs(soles(body, goals) - soles(body, asked)).max()
+        unheld = np.abs(soles(body, follow(asked, body.mimics)) - soles(body, asked)).max()
+        print(f"t={t} s: sole error {1e3 * held:.2g} mm; without the relation in the posture {1e3 * unheld:.0f} mm")
+        assert held < 1e-3 < unheld
+
+
+def test_the_correctors_leg_ik_keeps_a_double_knees_feet(double_knee):
+    # before: the IK moved the follower on its own; the loop then sent it its parent's goal, and the soles went
+    # 1.3 mm (0.1 rad of trunk pitch) to 6.2 mm (0.26 rad, the corrector's limit) from where they stood
+    body = double_knee
+    q = np.concatenate([np.zeros(len(body.base_channels)), make_scenario("lean", body, hold_s=1.0).goals(3.0)])
+    ignoring = RootMover(replace(body, mimics=()))
+    base = len(body.base_channels)
+    for pitch in (0.1, 0.26):
+        errors = []
+        for mover in (RootMover(body), ignoring):
+            moved = mover.apply(q, np.array([0.0, pitch, 0.0]), 0.5)
+            sent = np.concatenate([moved[:base], follow(moved[base:], body.mimics)])  # what the loop makes of it
+            errors.append(np.abs(soles(body, sent) - soles(body, q)).max())
+        print(f"trunk pitch {pitch} rad: sole error {1e3 * errors[0]:.2g} mm, the IK ignoring the relation "
+              f"{1e3 * errors[1]:.1f} mm")
+        assert errors[0] < 1e-3 < errors[1]
+
+
+def test_a_double_knee_robot_falls_leaning_uncorrected_and_stands_corrected(double_knee):
+    lean = make_scenario("lean", double_knee, hold_s=1.0)
+    lean = replace(lean, duration=lean.duration - 2.0)  # through the hold (falls uncorrected), not the lean back
+    off, _ = balance(double_knee, lean, correct=False)
+    on, _ = balance(double_knee, lean, correct=True)
+    print(f"uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}, worst true "
+          f"margin {1e3 * on.counters.worst_margin:.1f} mm")
+    assert off.fallen is not None and on.fallen is None

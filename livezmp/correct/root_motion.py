@@ -9,6 +9,11 @@ pose, and each leg's correction channels are re-solved (damped Gauss-Newton) so 
 foot frames keep their world placement. For a robot with six-joint legs this is exact;
 for a skeleton whose legs may only turn at the thigh, the stance foot is exact and a
 swing foot keeps its place to the extent the thigh alone allows.
+
+A mimic joint on a leg (a double knee's second joint) is no coordinate of the IK: its
+column of the foot Jacobian is folded into its parent's (J_parent += m J_follower) and it is
+set to m q_parent + o after every step, so the foot placed is the one the robot reaches
+once the relation is imposed on its goals.
 """
 
 from __future__ import annotations
@@ -88,6 +93,19 @@ class RootMover:
         self.ik_iterations = ik_iterations
         self.ik_tolerance = ik_tolerance
         self.last_foot_error = 0.0
+        base = len(body.base_channels)
+        # channel (follower, parent, multiplier, offset) of every mimic joint
+        self.mimics = [(base + m.joint, base + m.parent, m.multiplier, m.offset) for m in body.mimics]
+        followers = {f for f, *_ in self.mimics}
+        self.free = {s: [c for c in cols if c not in followers] for s, cols in body.correction.legs.items()}
+        # per leg: (column in free, follower channel, multiplier) of the followers of the leg's own coordinates
+        self.folds = {s: [(free.index(p), f, m) for f, p, m, _ in self.mimics if p in free]
+                      for s, free in self.free.items()}
+
+    def _follow(self, q: np.ndarray) -> None:
+        """Each mimic joint's channel of ``q`` (..., nq; in place) set from its parent's."""
+        for f, p, m, o in self.mimics:
+            q[..., f] = m * q[..., p] + o
 
     def _fk(self, q: np.ndarray) -> None:
         pin.framesForwardKinematics(self.model, self.data, q)
@@ -144,12 +162,30 @@ class RootMover:
         self.last_foot_error = float(self._solve_legs(q_new, targets).max(initial=0.0))
         return q_new
 
+    def place_feet(self, asked: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """``start`` (nq) with its legs re-solved so that each foot has the placement it has in ``asked`` (nq),
+        the base where ``start`` has it and every mimic joint following its parent: the configuration the
+        robot reaches when asked for ``asked``'s feet (to the IK's tolerance; ``last_foot_error``: m)."""
+        self._fk(np.asarray(asked, dtype=float))
+        q = np.array(start, dtype=float)[None]
+        self.last_foot_error = float(self._solve_legs(q, [self.foot_targets()])[0])
+        return q[0]
+
     def _residual(self, frames: list[int], targets: list[pin.SE3]) -> np.ndarray:
         if self.body.correction.full_foot_pose:
             return np.concatenate([pin.log6(self.data.oMf[f].actInv(t)).vector for f, t in zip(frames, targets,
                                                                                                   strict=True)])
         return np.concatenate([t.translation - self.data.oMf[f].translation for f, t in zip(frames, targets,
                                                                                            strict=True)])
+
+    def _jacobian(self, side: str, frame: int, ref: pin.ReferenceFrame, rows: int) -> np.ndarray:
+        """(rows, free coordinates of the leg): ``frame``'s Jacobian over the leg's own coordinates, each
+        follower's column folded into its parent's; ``data`` must hold the joint Jacobians."""
+        full = pin.getFrameJacobian(self.model, self.data, frame, ref)[:rows]
+        jac = full[:, self.free[side]]
+        for k, f, m in self.folds[side]:
+            jac[:, k] += m * full[:, f]
+        return jac
 
     def _solve_legs(self, q: np.ndarray, targets: list[dict[str, list[pin.SE3]]]) -> np.ndarray:
         """Damped Gauss-Newton on each leg's channels of the N configurations ``q`` (N, nq, in
@@ -161,6 +197,7 @@ class RootMover:
         ref = pin.LOCAL if full else pin.LOCAL_WORLD_ALIGNED
         rows = 6 if full else 3
         sides = list(corr.legs)
+        self._follow(q)
         pending = np.ones((len(q), len(sides)), dtype=bool)
         for _ in range(self.ik_iterations):
             work: dict[str, tuple[list[int], list[np.ndarray], list[np.ndarray]]] = {s: ([], [], []) for s in sides}
@@ -170,20 +207,19 @@ class RootMover:
                 for i, side in enumerate(sides):
                     if not pending[n, i]:
                         continue
-                    cols, frames = corr.legs[side], corr.foot_frames[side]
+                    frames = corr.foot_frames[side]
                     e = self._residual(frames, targets[n][side])
                     if np.abs(e).max() < self.ik_tolerance:
                         pending[n, i] = False
                         continue
                     ns, jacs, errs = work[side]
                     ns.append(n)
-                    jacs.append(np.concatenate([pin.getFrameJacobian(self.model, self.data, f, ref)[:rows, cols]
-                                                for f in frames]))
+                    jacs.append(np.concatenate([self._jacobian(side, f, ref, rows) for f in frames]))
                     errs.append(e)
             for side, (ns, jacs, errs) in work.items():
                 if not ns:
                     continue
-                cols = corr.legs[side]
+                cols = self.free[side]
                 jac, e = np.array(jacs), np.array(errs)
                 jt = np.swapaxes(jac, 1, 2)
                 # damped, and every step bounded, so a leg that cannot reach exactly (a thigh alone
@@ -193,6 +229,7 @@ class RootMover:
                 damping = (1e-6 if full else 1e-3) * np.trace(jtj, axis1=1, axis2=2) / len(cols) + 1e-12
                 step = np.linalg.solve(jtj + damping[:, None, None] * np.eye(len(cols)), (jt @ e[:, :, None]))[..., 0]
                 q[np.ix_(ns, cols)] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
+                self._follow(q)
             if not pending.any():
                 break
         e = []

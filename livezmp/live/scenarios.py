@@ -35,6 +35,7 @@ from scipy.optimize import brentq
 
 from livezmp.balance.support import clamp_to_polygon, support_polygon
 from livezmp.balance.zmp import compute_zmp
+from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
@@ -139,8 +140,8 @@ def joint_roles(body: BodyModel) -> dict[str, str]:
 
 
 def _about(axis: dict[str, np.ndarray], joint: str, k: int) -> bool:
-    """Whether ``joint`` turns about world axis ``k`` (zero posture)."""
-    return abs(float(axis[joint][k])) >= ALIGNED
+    """Whether ``joint`` turns about world axis ``k`` (zero posture); False for a joint not in ``axis``."""
+    return joint in axis and abs(float(axis[joint][k])) >= ALIGNED
 
 
 def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
@@ -148,7 +149,9 @@ def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
     axis, origin = joint_axes(body)
     roles: dict[str, str] = {}
     chains = leg_chains(body)
-    for side, chain in chains.items():
+    followers = {body.joint_names[m.joint] for m in body.mimics}  # never moved on their own: no role
+    for side, full in chains.items():
+        chain = [n for n in full if n not in followers]
         pitch = [n for n in chain if _about(axis, n, Y)]
         if len(pitch) >= 3:
             hip, ankle = pitch[0], pitch[-1]
@@ -158,7 +161,8 @@ def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
         roll = [n for n in chain if _about(axis, n, X)]
         if len(roll) >= 2:
             roles.update({f"{side[0]}_hip_roll": roll[0], f"{side[0]}_ank_roll": roll[-1]})
-    found = _arms(body, set().union(*chains.values()), axis, origin)
+    found = _arms(body, set().union(*chains.values()), {n: a for n, a in axis.items() if n not in followers},
+                  origin)
     for s, arm in found.items():
         roles.update({f"{s}_{role}": joint for role, joint in
                       (("sho_pitch", arm.pitch), ("sho_roll", arm.roll), ("el", arm.elbow)) if joint})
@@ -182,7 +186,7 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
     """Side ("l", "r") -> its `Arm`: the chain from the trunk to a leaf link on that side that no leg and no
     other side shares, with a joint about the lateral (pitch) or forward (roll) axis; its elbow the first joint
     after the shoulder's whose origin lies a fifth of the way or more from the shoulder to the hand. ``axis``,
-    ``origin``: `joint_axes`."""
+    ``origin``: `joint_axes` (a joint left out of ``axis``, a mimic joint, plays no role)."""
     model, names = body.model, set(body.joint_names)
     children = np.zeros(model.njoints, dtype=int)
     for j in range(1, model.njoints):
@@ -215,7 +219,7 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
         start = origin[shoulder[-1] if roll is None else roll]
         reach = float(np.linalg.norm(hand - start))
         after = own[max(own.index(n) for n in shoulder) + 1:]
-        elbow = next((n for n in after if np.linalg.norm(origin[n] - start) >= 0.2 * reach), None)
+        elbow = next((n for n in after if n in axis and np.linalg.norm(origin[n] - start) >= 0.2 * reach), None)
         found[side] = Arm(pitch, roll, elbow, origin[elbow] if elbow else hand)
     return found
 
@@ -228,6 +232,12 @@ class Poser:
         self.names = list(body.joint_names)
         self.axis, self.origin = joint_axes(body)
         self.roles, self.arms = _roles_and_arms(body)
+        legs = {c for cols in body.correction.legs.values() for c in cols}
+        base = len(body.base_channels)
+        # a mimic joint on a leg: the legs' postures are re-solved so the feet go where they were asked
+        self.mover = (RootMover(body, ik_iterations=100, ik_tolerance=1e-10)
+                      if any({base + m.joint, base + m.parent} & legs for m in body.mimics) else None)
+        self.leg_index = np.array(sorted(legs), dtype=int) - base
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
@@ -253,11 +263,25 @@ class Poser:
 
     def legs_flexed(self, angle: float, sides: tuple[str, ...] = SIDES) -> np.ndarray:
         """Legs ("l", "r") bent by ``angle``: hip −θ, knee +2θ, ankle −θ about y (each sole
-        stays parallel to the pelvis)."""
+        stays parallel to the pelvis), the feet then kept where that puts them (`on_feet`)."""
         out = np.zeros(len(self.names))
         for s in sides:
             out += angle * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
                             - self.unit(f"{s}_ank_pitch", Y))
+        return self.on_feet(out)
+
+    def on_feet(self, joints: np.ndarray) -> np.ndarray:
+        """``joints`` (rad) with the legs' joints re-solved so that, with every mimic joint following its
+        parent, each foot is where ``joints`` put it relative to the trunk (its joints taken as they are);
+        ``joints`` itself for a robot without a mimic joint on a leg (`RootMover.place_feet`: the follower's
+        Jacobian column folded into its parent's)."""
+        if self.mover is None:
+            return joints
+        base = np.zeros(len(self.body.base_channels))
+        asked = np.concatenate([base, joints])
+        solved = self.mover.place_feet(asked, asked)[len(base):]
+        out = np.array(joints, dtype=float)
+        out[self.leg_index] = solved[self.leg_index]
         return out
 
     def ankles_lean(self, angle: float) -> np.ndarray:
