@@ -215,6 +215,10 @@ def test_a_double_knees_postures_put_the_feet_where_the_scenario_asks(double_kne
         unheld = np.abs(soles(body, follow(asked, body.mimics)) - soles(body, asked)).max()
         print(f"t={t} s: sole error {1e3 * held:.2g} mm; without the relation in the posture {1e3 * unheld:.0f} mm")
         assert held < 1e-3 < unheld
+    squat = make_scenario("squat", body)  # the legs bent anew each cycle (the IK warm-started from the last)
+    for t in np.arange(0.0, 2.0, 0.01):
+        flexion = 0.3 + 0.3 * 0.5 * (1.0 - np.cos(np.pi * t))  # its depth 0.3 over its period 2 s
+        assert np.abs(soles(body, squat.goals(t)) - soles(body, one_knee(flexion))).max() < 1e-3
 
 
 def test_the_correctors_leg_ik_keeps_a_double_knees_feet(double_knee):

@@ -238,6 +238,7 @@ class Poser:
         self.mover = (RootMover(body, ik_iterations=100, ik_tolerance=1e-10)
                       if any({base + m.joint, base + m.parent} & legs for m in body.mimics) else None)
         self.leg_index = np.array(sorted(legs), dtype=int) - base
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (asked, solved) configurations of on_feet
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
@@ -277,11 +278,14 @@ class Poser:
         Jacobian column folded into its parent's)."""
         if self.mover is None:
             return joints
-        base = np.zeros(len(self.body.base_channels))
-        asked = np.concatenate([base, joints])
-        solved = self.mover.place_feet(asked, asked)[len(base):]
+        asked = np.concatenate([np.zeros(len(self.body.base_channels)), joints])
+        start = asked
+        if self._last is not None:  # warm start: the last solution moved as the legs' ask moved (squat: each cycle)
+            start = self._last[1] + asked - self._last[0]
+        solved = self.mover.place_feet(asked, start)
+        self._last = asked, solved
         out = np.array(joints, dtype=float)
-        out[self.leg_index] = solved[self.leg_index]
+        out[self.leg_index] = solved[len(asked) - len(joints):][self.leg_index]
         return out
 
     def ankles_lean(self, angle: float) -> np.ndarray:

@@ -5,7 +5,10 @@ mimic-aware build, ``buildModel(..., mimic=True)``, drops the follower's coordin
 place and every joint-to-coordinate map would need the case); the live loop imposes the relation on what it
 reads before the kinematics and on every goal it sends (the monitor's link source and joint CSVs on what they
 read), and the scenarios and the corrector never move it on
-their own (on a leg's chain, though, their postures and leg IK still solve as if it were free)."""
+their own: it plays no role in a scenario, and where it is on a leg (a double knee's second joint) the scenarios'
+leg postures (``Poser.on_feet``) and the corrector's leg IK (``RootMover``) solve over the parents' coordinates
+only, its Jacobian column folded into its parent's (J_parent += m J_follower) and its angle set by `follow` after
+every step, so each foot goes where they place it once the relation is imposed."""
 
 from __future__ import annotations
 
