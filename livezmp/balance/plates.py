@@ -60,17 +60,29 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
 
 def unloaded_offset(plate: PlateRecord, analog_rate: float,
                     up: np.ndarray = UP) -> tuple[np.ndarray, np.ndarray] | None:
-    """The plate's reading at rest: mean force (3,) N and moment (3,) N·m over its quietest unloaded
-    stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| < ``UNLOADED_MAX_N``,
-    the smallest |mean| among those); None when there is none (loaded all along). ``up`` (3,): the vertical
-    in the file's axes (a y-up lab's is its y: its z force is a horizontal one, quiet under load)."""
+    """The plate's reading at rest: mean force (3,) N and moment (3,) N·m. Over the samples the file names
+    unloaded (FORCE_PLATFORM:ZERO, ``plate.zero``) when the vertical force is steady there (std < ``QUIET_STD_N``),
+    no ``QUIET_WINDOW_S`` stretch reads more than ``PULL_N`` below it (else the range held a load) and one reads
+    more than ``UNLOADED_MAX_N`` above it (the plate is stepped on); otherwise over
+    its quietest unloaded stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| <
+    ``UNLOADED_MAX_N``, the smallest |mean| among those); None when there is none (loaded all along). ``up`` (3,):
+    the vertical in the file's axes (a y-up lab's is its y: its z force is a horizontal one, quiet under load).
+
+    The ZERO range comes first because an amplifier's offset can exceed ``UNLOADED_MAX_N``: c3d.org's TYPE-3
+    sample reads -80, -212 and -181 N on three unloaded plates, which the quiet-stretch rule kept as "loaded" and
+    then set aside as pulling."""
     n = max(2, round(QUIET_WINDOW_S * analog_rate))
     fz = plate.force @ up
-    if len(fz) < n:
-        return None
-    starts = np.arange(0, len(fz) - n + 1, max(1, n // 4))
+    starts = np.arange(0, max(len(fz) - n + 1, 0), max(1, n // 4))
     windows = fz[starts[:, None] + np.arange(n)]
     mean, std = windows.mean(axis=1), windows.std(axis=1)
+    if plate.zero is not None and len(mean):
+        a, b = plate.zero
+        base = fz[a:b].mean()
+        # unloaded there: steady, nothing reads a pull below it, and someone stands on the plate later (a plate
+        # stood on all along, ZERO range included, would otherwise lose the subject's weight)
+        if fz[a:b].std() < QUIET_STD_N and mean.min() >= base - PULL_N and mean.max() > base + UNLOADED_MAX_N:
+            return plate.force[a:b].mean(axis=0), plate.moment[a:b].mean(axis=0)
     ok = (std < QUIET_STD_N) & (np.abs(mean) < UNLOADED_MAX_N)
     if not ok.any():
         return None

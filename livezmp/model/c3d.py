@@ -43,12 +43,14 @@ class PlateRecord:
     """One force platform at the analog rate, world frame of the file.
 
     ``force`` (S, 3) N on the subject; ``moment`` (S, 3) N·m about ``centre`` (3,) m, the centre of the
-    top surface; ``corners`` (4, 3) m."""
+    top surface; ``corners`` (4, 3) m; ``zero`` the analog samples [start, stop) the file names unloaded
+    (FORCE_PLATFORM:ZERO), or None."""
 
     force: np.ndarray
     moment: np.ndarray
     centre: np.ndarray
     corners: np.ndarray
+    zero: tuple[int, int] | None = None
 
 
 @dataclass
@@ -163,12 +165,28 @@ def _check_plate_offsets(groups: dict, source: str) -> None:
                          f"({offsets[bad[0] - 1]:.0f}): ezc3d reads signed data with its magnitude, not supported")
 
 
+def _zero_samples(groups: dict, samples: int, frames: int) -> tuple[int, int] | None:
+    """FORCE_PLATFORM:ZERO as analog samples [start, stop): the spec's (c3d.org user guide, FORCE_PLATFORM:ZERO)
+    range of 3D frames, first frame 1 (a 0 read as 1), over which the plates are unloaded, so that each channel's
+    mean there is its baseline; (0, 0) or no parameter: none. ``samples`` analog samples over ``frames`` frames."""
+    try:
+        z = [int(v) for v in np.asarray(_param(groups, "FORCE_PLATFORM", "ZERO"), dtype=float).ravel()[:2]]
+    except (TypeError, ValueError):
+        return None
+    if len(z) < 2 or z[1] <= 0 or frames <= 0:
+        return None
+    per = samples // frames
+    start, stop = (max(z[0], 1) - 1) * per, min(z[1] * per, samples)
+    return (start, stop) if stop - start >= 2 else None
+
+
 def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
     _check_plate_offsets(c3d["parameters"], source)
     out = []
     length = _LENGTH[unit]
+    frames = int(np.shape(c3d["data"]["points"])[2])
     for k, p in enumerate(c3d["data"].get("platform", [])):
         newtons = _NEWTONS.get(str(p["unit_force"]).strip().lower())
         if newtons is None:
@@ -178,7 +196,8 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
         corners = np.asarray(p["corners"], dtype=float).T * length
         force = np.asarray(p["force"], dtype=float).T * newtons
         mom = np.asarray(p["moment"], dtype=float).T * moment
-        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners))
+        zero = _zero_samples(c3d["parameters"], len(force), frames)
+        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero))
     return out
 
 
