@@ -173,7 +173,7 @@ class Lab:
     ``plate_turn`` deg the plates turned in the floor; ``scale`` (ANALOG:SCALE, OFFSET, GEN_SCALE) the channels
     are stored with; ``integer``: POINT:SCALE (> 0, POINT:UNITS per count) of an integer file, None: floating
     point (POINT:SCALE -1); ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and
-    height."""
+    height; ``zero`` FORCE_PLATFORM:ZERO (3D frames, 1-based; 0 in the second: no baseline range)."""
 
     rot: tuple = IDENTITY
     origin: tuple = (0.0, 0.0, 0.0)
@@ -191,6 +191,7 @@ class Lab:
     prefix: str = "Sub01:"
     mass: bool = True
     height_m: float = 1.75  # PROCESSING:Height, written with the mass
+    zero: tuple = (1, 0)
 
 
 def _plate_axes(lab: Lab) -> np.ndarray:
@@ -245,7 +246,7 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
     c3d["parameters"]["ANALOG"]["GEN_SCALE"]["value"] = [gen]
     _add_int(c3d, "FORCE_PLATFORM", "USED", [len(plates)])
     _add_int(c3d, "FORCE_PLATFORM", "TYPE", [lab.plate_type] * len(plates))
-    _add_int(c3d, "FORCE_PLATFORM", "ZERO", [1, 0])
+    _add_int(c3d, "FORCE_PLATFORM", "ZERO", list(lab.zero))
     quadrants = ((1, 1), (-1, 1), (-1, -1), (1, -1))
     corners = np.array([[rot @ (np.array([x, y, 0.0]) + axes[:, 0] * 0.25 * sx + axes[:, 1] * 0.15 * sy)
                          + lab.origin for sx, sy in quadrants] for x, y in plates.values()])
@@ -260,12 +261,15 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,
                   delay_samples: int = 0, body: MarkerBodyOptions | None = None, full_body: bool = False,
                   cluster: bool = False, spare_drift_n: float = 0.0, trunk: bool | str = False,
-                  lab: Lab | None = None, pelvis_wobble_m: float = 0.0) -> np.ndarray:
+                  lab: Lab | None = None, pelvis_wobble_m: float = 0.0, right_free_s: float = 0.0,
+                  right_bias_n: float = 0.0) -> np.ndarray:
     """The synthetic trial as a C3D at ``path``, written as ``lab`` does, its plates ``delay_samples`` analog samples
     late; returns the true CoP (S, 2) m at the analog rate (reference frame). ``cluster``: the cluster set (its
     body from ``body``'s map); ``spare_drift_n``: the unloaded plate's vertical force drifts by this much over the
     second half; ``pelvis_wobble_m``: the pelvis markers (not the body, nor its plates) shake sideways this far
-    at WOBBLE_HZ (skin on the pelvis)."""
+    at WOBBLE_HZ (skin on the pelvis); ``right_free_s``: the left foot carries the whole body this long at first,
+    then hands the right plate its share over 0.2 s; ``right_bias_n``: the right plate's channels carry a constant
+    vertical force (N, up; an amplifier's DC offset)."""
     lab = lab or Lab()
     force, moment, cop = _true_wrench(body or MarkerBodyOptions(), full_body, cluster, trunk, lab.analog, lab.seconds,
                                       lab.height_m)
@@ -287,17 +291,24 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     c3d["data"]["points"] = pts
     residual = np.where(np.isnan(pts[0]), -1.0, 1.0)[None]
     c3d["data"]["meta_points"] = {"residuals": residual}
-    share = 0.5 + 0.2 * np.sin(2 * np.pi * 0.25 * np.arange(len(force)) / lab.analog)[:, None]
+    ta = np.arange(len(force))[:, None] / lab.analog
+    share = 0.5 + 0.2 * np.sin(2 * np.pi * 0.25 * ta)
+    ramp = np.clip((ta - right_free_s) / 0.2, 0.0, 1.0) if right_free_s else np.ones_like(ta)
+    ramp = ramp * ramp * (3 - 2 * ramp)  # smoothstep: no ringing in the low-pass
+    share = 1.0 + (share - 1.0) * ramp
     centres = {k: np.array([x, y, 0.0]) for k, (x, y) in plates.items()}
-    foot = np.array([0.05, 0.11, 0.0])
+    cop3 = np.column_stack([cop, np.zeros(len(cop))])
+    # the left foot's force acts at its sole centre; alone, at the CoP (the right plate then carries nothing)
+    at = cop3 + ([0.05, 0.11, 0.0] - cop3) * ramp
     f1 = share * force
-    m1 = np.cross(foot - centres["left"], f1)  # the left foot's force acts at its sole centre
+    m1 = np.cross(at - centres["left"], f1)
     f2 = force - f1
     m2 = moment - (m1 + np.cross(centres["left"], f1)) - np.cross(centres["right"], f2)
     axes = _plate_axes(lab)
     spare = np.tile(OFFSET * with_offsets, (len(force), 1))  # in the plate's own axes
     drift = spare_drift_n * np.clip(np.linspace(-1.0, 1.0, len(force)), 0.0, None)
     spare[:, :3] += np.outer(drift, axes[2])  # along the vertical
+    f2 = f2 + [0.0, 0.0, right_bias_n]  # at the plate's centre: no moment about it
     _write_plates(c3d, lab, plates, [(f1, m1), (f2, m2), (spare[:, :3] @ axes.T, spare[:, 3:] @ axes.T)])
     if lab.mass:
         c3d.add_parameter("PROCESSING", "Bodymass", [MASS])

@@ -15,9 +15,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
 from livezmp.model import c3d as c3d_mod
-from livezmp.model.c3d import read_c3d
+from livezmp.model.c3d import PlateRecord, read_c3d
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.offline import calibrate as calibration
 from livezmp.offline.gaitlab import analyse_lab_take
@@ -153,3 +154,47 @@ def test_calibration_does_not_depend_on_the_labs_axes(tmp_path):
     keys = ("rms_table_mm", "rms_fitted_mm", "rms_held_out_table_mm", "rms_held_out_fitted_mm")
     assert reports[0]["rms_table_mm"] > 4
     assert [reports[1][k] for k in keys] == pytest.approx([reports[0][k] for k in keys], abs=0.02)
+
+
+def test_a_plates_dc_offset_is_taken_over_the_files_zero_frames(tmp_path):
+    """c3d.org's TYPE-3 sample has plates that read -80 to -212 N unloaded (an amplifier's DC offset) until walked
+    on, and names its unloaded frames in FORCE_PLATFORM:ZERO. Here the right plate (Kistler's eight channels) reads
+    -200 N while the left foot carries the whole body for 0.3 s, ZERO naming frames 1-20: that baseline is removed
+    and the plates give the true CoP. The left plate, loaded in those frames, keeps none (its reading falls below
+    that baseline later). Without the ZERO range nothing tells the offset from a load: the right plate reads a
+    pull, is set aside, and no frame is complete."""
+    def analysed(zero):
+        lab = Lab(plate_type=3, seconds=SECONDS, zero=zero, **SPEC)
+        cop = write_lab_c3d(tmp_path / "t.c3d", PLATES, lab=lab, right_free_s=0.3, right_bias_n=-200.0)
+        return analyse_lab_take(read_c3d(tmp_path / "t.c3d")), cop
+
+    a, true_cop = analysed((1, 20))
+    plates = a.summary["plates"]
+    assert plates["set_aside"] == []
+    assert plates["offsets_removed_n"][0] is None
+    assert plates["offsets_removed_n"][1] == pytest.approx([0.0, 0.0, -200.0], abs=1e-3)
+    rows = a.complete & (a.times > 0.5) & (a.times < SECONDS - 0.5)
+    assert rows.sum() > 150
+    k = np.rint(a.times[rows] * 1000).astype(int)
+    assert np.abs(a.take.body.to_input_frame(a.plates.cop[rows])[:, :2] - true_cop[k]).max() < 2e-4
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    without = analysed((1, 0))[0].summary
+    assert [p["plate"] for p in without["plates"]["set_aside"]] == [2] and without["cop_vs_zmp"]["frames"] == 0
+
+
+def test_a_zero_range_that_is_no_unloaded_reading_is_not_taken():
+    """FORCE_PLATFORM:ZERO names frames that are not an unloaded plate's reading: a blank first frame (all zeros,
+    as c3d.org's Innovative Sports Training sample stores before its plates read 21 N unloaded), or a plate stood on
+    all along. Neither is taken: the first plate's offset is its unloaded 21 N, the second keeps the weight."""
+    t = np.arange(3000) / 1000.0
+    step = np.clip(np.sin(np.pi * (t - 1.0)), 0.0, None) * (t < 2.0)  # stepped on from 1 to 2 s
+    fz = {"blank": 21.0 + 0.5 * np.sin(2 * np.pi * 7 * t) + 700.0 * step, "standing": 700.0 + 5 * np.sin(t)}
+    fz["blank"][:18] = 0.0
+
+    def offset(name):
+        force = np.column_stack([np.zeros((len(t), 2)), fz[name]])
+        return unloaded_offset(PlateRecord(force, np.zeros_like(force), np.zeros(3), np.zeros((4, 3)), (0, 18)),
+                               1000.0)
+
+    assert offset("blank")[0][2] == pytest.approx(21.0, abs=0.5)  # a 0.1 s stretch of its 0.5 N, 7 Hz noise
+    assert offset("standing") is None

@@ -61,10 +61,10 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
 def unloaded_offset(plate: PlateRecord, analog_rate: float,
                     up: np.ndarray = UP) -> tuple[np.ndarray, np.ndarray] | None:
     """The plate's reading at rest: mean force (3,) N and moment (3,) N·m. Over the samples the file names
-    unloaded (FORCE_PLATFORM:ZERO, ``plate.zero``) when the vertical force is steady there (std < ``QUIET_STD_N``),
-    no ``QUIET_WINDOW_S`` stretch reads more than ``PULL_N`` below it (else the range held a load) and one reads
-    more than ``UNLOADED_MAX_N`` above it (the plate is stepped on); otherwise over
-    its quietest unloaded stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| <
+    unloaded (FORCE_PLATFORM:ZERO, ``plate.zero``) when the vertical force is steady there (std < ``QUIET_STD_N``,
+    not all zeros), no ``QUIET_WINDOW_S`` stretch reads more than ``PULL_N`` below it (else the range held a load)
+    and one reads more than ``UNLOADED_MAX_N`` above it (the plate is stepped on); otherwise over its quietest
+    unloaded stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| <
     ``UNLOADED_MAX_N``, the smallest |mean| among those); None when there is none (loaded all along). ``up`` (3,):
     the vertical in the file's axes (a y-up lab's is its y: its z force is a horizontal one, quiet under load).
 
@@ -79,9 +79,11 @@ def unloaded_offset(plate: PlateRecord, analog_rate: float,
     if plate.zero is not None and len(mean):
         a, b = plate.zero
         base = fz[a:b].mean()
-        # unloaded there: steady, nothing reads a pull below it, and someone stands on the plate later (a plate
-        # stood on all along, ZERO range included, would otherwise lose the subject's weight)
-        if fz[a:b].std() < QUIET_STD_N and mean.min() >= base - PULL_N and mean.max() > base + UNLOADED_MAX_N:
+        # unloaded there: steady but not all zeros (a blank first frame is padding, not a reading: Innovative
+        # Sports Training's c3d.org sample reads 21 N unloaded after one), nothing reads a pull below it, and
+        # someone stands on the plate later (one stood on all along, ZERO range included, would lose the weight)
+        if fz[a:b].any() and fz[a:b].std() < QUIET_STD_N and base - PULL_N <= mean.min() \
+                and mean.max() > base + UNLOADED_MAX_N:
             return plate.force[a:b].mean(axis=0), plate.moment[a:b].mean(axis=0)
     ok = (std < QUIET_STD_N) & (np.abs(mean) < UNLOADED_MAX_N)
     if not ok.any():
