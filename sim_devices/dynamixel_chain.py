@@ -93,8 +93,12 @@ _LIVE = np.dtype([("tick", "<u2"), ("moving", "u1"), ("moving_status", "u1"), ("
                   ("position_trajectory", "<i4")])
 _LIVE_START = 120
 _LIVE_END = _LIVE_START + _LIVE.itemsize
+_LIVE_SPANS = [(name, _LIVE_START + offset, _LIVE_START + offset + dtype.itemsize)
+               for name, (dtype, offset) in _LIVE.fields.items()]  # (field, first address, end address)
+_MOTION = frozenset({"velocity", "velocity_trajectory", "moving", "moving_status"})  # refreshed together
 _PING = struct.Struct("<HB")
 _ADDRESS_LENGTH = struct.Struct("<HH")
+_POSITION_LIMITS = struct.Struct("<ii")  # Max and Min Position Limit, adjacent (addresses 48 and 52)
 _GOAL_ROW = np.dtype([("id", "u1"), ("value", "<i4")])  # one servo's part of a sync write of goal positions
 _RESET_KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}  # factory reset option -> kept
 _BAUD_CODES = {rate: code for code, rate in ct.BAUD_RATES.items()}
@@ -181,6 +185,7 @@ class DynamixelChain(PtyDevice):
         self._plant_time = now
         self._last_packet = now
         self._refreshed_at = -math.inf
+        self._fresh: set[str] = set()  # the live registers refreshed at _refreshed_at
         # One bytearray holds every servo's table (a memoryview row each) so that a numpy view can
         # refresh the plant-driven registers of all servos in one assignment.
         memory = bytearray(len(ids) * ct.TABLE_SIZE)
@@ -410,8 +415,9 @@ class DynamixelChain(PtyDevice):
             return []
         if len(packet.params) != 4:
             return self._status(servo, ErrorCode.DATA_LENGTH, level=1)
-        self._sync_plant(now)
-        code, data = self._read(servo, *_ADDRESS_LENGTH.unpack(packet.params))
+        address, length = _ADDRESS_LENGTH.unpack(packet.params)
+        self._sync_plant(now, address, address + length)
+        code, data = self._read(servo, address, length)
         return self._status(servo, code, data, level=1)
 
     def _write_instruction(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -497,8 +503,8 @@ class DynamixelChain(PtyDevice):
             return [] if servo is None else self._status(servo, ErrorCode.INSTRUCTION, level=1)
         if len(packet.params) < 5:
             return []
-        self._sync_plant(now)
         address, length = _ADDRESS_LENGTH.unpack_from(packet.params)
+        self._sync_plant(now, address, address + length)
         requests = [(dxl_id, address, length) for dxl_id in packet.params[4:]]
         return self._answer_reads(requests, packet.instruction == Instruction.FAST_SYNC_READ, line)
 
@@ -509,8 +515,8 @@ class DynamixelChain(PtyDevice):
             return [] if servo is None else self._status(servo, ErrorCode.INSTRUCTION, level=1)
         if not params or len(params) % 5:
             return []
-        self._sync_plant(now)
         requests = [(params[i], *_ADDRESS_LENGTH.unpack_from(params, i + 1)) for i in range(0, len(params), 5)]
+        self._sync_plant(now, min(a for _, a, _ in requests), max(a + n for _, a, n in requests))
         return self._answer_reads(requests, packet.instruction == Instruction.FAST_BULK_READ, line)
 
     def _answer_reads(self, requests: list[tuple[int, int, int]], fast: bool,
@@ -653,9 +659,10 @@ class DynamixelChain(PtyDevice):
             if servo.table[98] == 0xFF:  # bus watchdog error: goals are read-only
                 return ErrorCode.DATA_RANGE
             if name == "goal_position":
-                if servo.table[11] == 3 and not (
-                        servo.get("min_position_limit") <= value <= servo.get("max_position_limit")):
-                    return ErrorCode.DATA_LIMIT
+                if servo.table[11] == 3:
+                    highest, lowest = _POSITION_LIMITS.unpack_from(servo.table, _F["max_position_limit"].address)
+                    if not lowest <= value <= highest:
+                        return ErrorCode.DATA_LIMIT
             elif abs(value) > servo.get({"goal_pwm": "pwm_limit", "goal_current": "current_limit",
                                          "goal_velocity": "velocity_limit"}[name]):
                 return ErrorCode.DATA_LIMIT
@@ -715,7 +722,8 @@ class DynamixelChain(PtyDevice):
 
     def _ticks_to_rad(self, servo: _Servo, ticks: int) -> float:
         i = servo.index
-        return self._sign[i] * (ticks - self._offset[i] - self._zero) / TICKS_PER_RAD
+        # item(): Python floats, whose arithmetic costs less than numpy scalars' (once per servo per goal write)
+        return self._sign.item(i) * (ticks - self._offset.item(i) - self._zero) / TICKS_PER_RAD
 
     def _present_ticks(self, servo: _Servo) -> int:
         i = servo.index
@@ -737,30 +745,42 @@ class DynamixelChain(PtyDevice):
             self.plant.step(dt)
             self._plant_time = now
 
-    def _sync_plant(self, now: float) -> None:
-        """Step the plant to ``now`` and write its state into every servo's live registers."""
+    def _sync_plant(self, now: float, start: int = _LIVE_START, end: int = _LIVE_END) -> None:
+        """Step the plant to ``now`` and write its state into every servo's live registers among addresses
+        ``start`` to ``end`` (the registers a read covers: a loop reading positions each cycle does not pay
+        for the current, PWM and status registers)."""
         self._advance(now)
-        if self._refreshed_at == now:
+        if self._refreshed_at != now:
+            self._refreshed_at = now
+            self._fresh = set()
+        wanted = {name for name, lo, hi in _LIVE_SPANS if lo < end and start < hi} - self._fresh
+        if not wanted:
             return
-        self._refreshed_at = now
+        if wanted & _MOTION:  # Moving Status compares the position with the goal
+            wanted |= _MOTION | {"position"}
+        self._fresh |= wanted
         plant = self.plant
         n = len(self._servos)
         sign = self._sign
         live = self._live
-        position = np.rint(self._zero + sign * plant.position[:n] * TICKS_PER_RAD + self._offset)
-        velocity = np.rint(sign * plant.velocity[:n] / ct.VELOCITY_UNIT)
-        current = sign * plant.current[:n]
-        moving = np.abs(velocity) > self._threshold
-        live["tick"] = ((now - self._boot) * 1000.0).astype(np.int64) % 32768
-        live["moving"] = moving
-        live["moving_status"] = (np.abs(self._goal - position) <= IN_POSITION_TICKS) & ~moving
-        live["pwm"] = np.clip(np.rint(current * (ct.PWM_FULL_SCALE / STALL_CURRENT)), -ct.PWM_FULL_SCALE,
-                              ct.PWM_FULL_SCALE)
-        live["current"] = np.clip(np.rint(current / ct.CURRENT_UNIT), -32768, 32767)
-        live["velocity"] = velocity
-        live["position"] = position
-        live["velocity_trajectory"] = velocity
-        live["position_trajectory"] = self._goal
+        if "position" in wanted:
+            position = np.rint(self._zero + sign * plant.position[:n] * TICKS_PER_RAD + self._offset)
+            live["position"] = position
+        if wanted & _MOTION:
+            velocity = np.rint(sign * plant.velocity[:n] / ct.VELOCITY_UNIT)
+            live["velocity"] = live["velocity_trajectory"] = velocity
+            moving = np.abs(velocity) > self._threshold
+            live["moving"] = moving
+            live["moving_status"] = (np.abs(self._goal - position) <= IN_POSITION_TICKS) & ~moving
+        if wanted & {"pwm", "current"}:
+            current = sign * plant.current[:n]
+            live["pwm"] = np.clip(np.rint(current * (ct.PWM_FULL_SCALE / STALL_CURRENT)), -ct.PWM_FULL_SCALE,
+                                  ct.PWM_FULL_SCALE)
+            live["current"] = np.clip(np.rint(current / ct.CURRENT_UNIT), -32768, 32767)
+        if "tick" in wanted:
+            live["tick"] = ((now - self._boot) * 1000.0).astype(np.int64) % 32768
+        if "position_trajectory" in wanted:
+            live["position_trajectory"] = self._goal
 
     def _restart(self, servo: _Servo, now: float) -> None:
         """State after power-up with the table already reset: torque off, errors and registrations cleared."""

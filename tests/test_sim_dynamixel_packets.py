@@ -391,3 +391,41 @@ def test_a_sync_write_of_goals_does_what_a_write_to_each_servo_does():
     assert table[:3] == [100, 2048, 5000] and table[4] == 2048  # 2 and 5 refused, 4 held where it was
     assert [i for i, _ in steered] == [0, 2] and unheard == 1
     assert steered[1][1] == pytest.approx((5000 - 2048) * 2 * math.pi / 4096)
+
+
+def test_a_read_refreshes_every_live_register_it_covers_after_a_narrower_read_at_the_same_instant():
+    """The chain refreshes only the plant-driven registers a read covers (a loop reading positions pays for
+    nothing else): a read of all of them right after a read of the positions, at the same instant and
+    later, still gives each register from the plant in the e-manual's units."""
+    plant = FixedPlant([2048, 3000])
+    plant.velocity[:] = [0.0, 1.0]  # rad/s
+    plant.current[:] = [0.0, 0.5]  # A
+    rpm_unit, ma_unit = 0.229 * 2 * math.pi / 60, 2.69e-3  # velocity and current units (e-manual)
+    with DynamixelChain([1, 2], plant, emulate_wire_time=False, adapter="none") as chain, \
+            serial.Serial(chain.path, 1_000_000):
+        for i in (1, 2):
+            chain.set_register(i, "torque_enable", 1)  # goals: the present positions 2048, 3000
+        positions = encode_packet(0xFE, 0x8A, h("84 00 04 00 01 02"))
+        everything = encode_packet(0xFE, 0x82, h("78 00 18 00 01 02"))  # addresses 120-143
+        live = np.dtype([("tick", "<u2"), ("moving", "u1"), ("status", "u1"), ("pwm", "<i2"), ("current", "<i2"),
+                         ("velocity", "<i4"), ("position", "<i4"), ("velocity_trajectory", "<i4"),
+                         ("position_trajectory", "<i4")])
+
+        def read_all(now):
+            assert len(chain.on_bytes(positions, now)) == 1
+            replies = chain.on_bytes(everything, now)
+            return np.frombuffer(b"".join(payload[9:-2] for _, payload in replies), dtype=live)
+
+        now = time.monotonic()
+        r = read_all(now)
+        assert r["position"].tolist() == [2048, 3000] and r["position_trajectory"].tolist() == [2048, 3000]
+        assert r["velocity"].tolist() == r["velocity_trajectory"].tolist() == [0, round(1.0 / rpm_unit)]
+        assert r["current"].tolist() == [0, round(0.5 / ma_unit)]
+        assert r["pwm"].tolist() == [0, round(0.5 / STALL_CURRENT * 885)]
+        assert r["moving"].tolist() == [0, 1] and (r["status"] & 1).tolist() == [1, 0]
+        plant.velocity[:] = [-1.0, 0.0]
+        plant.position[1] = (3100 - 2048) * 2 * math.pi / 4096
+        r = read_all(now + 0.01)
+        assert r["position"].tolist() == [2048, 3100] and r["velocity"].tolist() == [-round(1.0 / rpm_unit), 0]
+        assert r["moving"].tolist() == [1, 0] and (r["status"] & 1).tolist() == [0, 0]  # 3100 is 100 off its goal
+        assert (r["tick"] - r["tick"][0]).tolist() == [0, 0]
