@@ -18,7 +18,7 @@ import pytest
 from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
 from livezmp.model import c3d as c3d_mod
-from livezmp.model.c3d import PlateRecord, read_c3d
+from livezmp.model.c3d import PlateRecord, _zero_samples, read_c3d
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.offline import calibrate as calibration
 from livezmp.offline.gaitlab import analyse_lab_take
@@ -180,6 +180,15 @@ def test_a_plates_dc_offset_is_taken_over_the_files_zero_frames(tmp_path):
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
     without = analysed((1, 0))[0].summary
     assert [p["plate"] for p in without["plates"]["set_aside"]] == [2] and without["cop_vs_zmp"]["frames"] == 0
+
+
+@pytest.mark.parametrize(("zero", "samples"), [([1, 20], (0, 200)), ([0, 20], (0, 200)), ([0, 0], None),
+                                               ([1.0, float("inf")], None), ([float("nan"), 5.0], None),
+                                               (["a", "b"], None), ([5, 500], (40, 1000))])
+def test_force_platform_zero_frames_as_analog_samples(zero, samples):
+    """FORCE_PLATFORM:ZERO (first frame 1, 0 read as 1) in analog samples at 10 a frame over 100 frames; a range
+    that is none, or not numbers (NaN, an infinite float, text), names nothing instead of raising."""
+    assert _zero_samples({"FORCE_PLATFORM": {"ZERO": {"value": zero}}}, 1000, 100) == samples
 
 
 def test_a_zero_range_that_is_no_unloaded_reading_is_not_taken():

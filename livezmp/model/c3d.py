@@ -171,7 +171,7 @@ def _zero_samples(groups: dict, samples: int, frames: int) -> tuple[int, int] | 
     mean there is its baseline; (0, 0) or no parameter: none. ``samples`` analog samples over ``frames`` frames."""
     try:
         z = [int(v) for v in np.asarray(_param(groups, "FORCE_PLATFORM", "ZERO"), dtype=float).ravel()[:2]]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # text, NaN or an infinite float: no range named
         return None
     if len(z) < 2 or z[1] <= 0 or frames <= 0:
         return None
