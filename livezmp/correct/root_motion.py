@@ -26,6 +26,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from livezmp.model.body import BodyModel
+from livezmp.model.mimic import follow
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 MAX_IK_STEP = 0.1  # rad per Gauss-Newton iteration and joint
@@ -104,8 +105,9 @@ class RootMover:
 
     def _follow(self, q: np.ndarray) -> None:
         """Each mimic joint's channel of ``q`` (..., nq; in place) set from its parent's."""
-        for f, p, m, o in self.mimics:
-            q[..., f] = m * q[..., p] + o
+        if self.mimics:
+            base = len(self.body.base_channels)
+            q[..., base:] = follow(q[..., base:], self.body.mimics)
 
     def _fk(self, q: np.ndarray) -> None:
         pin.framesForwardKinematics(self.model, self.data, q)
