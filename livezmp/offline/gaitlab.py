@@ -156,14 +156,17 @@ def com_accelerations(take: MarkerTake, result: BatchResult) -> np.ndarray:
     return out
 
 
-def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult, times: np.ndarray,
-                         cfg: PipelineConfig, floor: float, cutoff: float, shift: float, com_acc: np.ndarray,
-                         mass: float) -> tuple[PlateFrames, np.ndarray, np.ndarray, str | None]:
-    """The plates per frame, the complete frames, the frames with every foot that may bear weight on a plate
-    (whatever the plates carry) and, when there is no complete frame, why (one line)."""
+def _plates(trial: C3dTrial, take: MarkerTake, times: np.ndarray, cutoff: float, shift: float) -> PlateFrames:
+    """The plates at the marker frames ``times`` (s), low-passed at ``cutoff`` Hz, ``shift`` s later."""
     frames = np.rint(times * trial.rate).astype(int)
-    plates = plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input,
-                          cutoff, shift_s=shift)
+    return plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input, cutoff,
+                        shift_s=shift)
+
+
+def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: PipelineConfig, floor: float,
+              plates: PlateFrames, com_acc: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """The complete frames, the frames with every foot that may bear weight on a plate (whatever the plates
+    carry) and, when there is no complete frame, why (one line)."""
     contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
     # half a spline window from either end of the take the estimate is one-sided (and the plates' filter too);
     # at least the lab window's, so that estimator settings are compared on the same frames
@@ -182,7 +185,7 @@ def _plates_and_complete(trial: C3dTrial, take: MarkerTake, result: BatchResult,
                f"m = {mass:.1f} kg (complete: {100 * FORCE_SEEN:.0f} %): "
                + ("a lighter subject? (--mass)" if carried > 0.5 else
                   "the plates do not read the feet on them (plate corners or channels wrong?)"))
-    return plates, complete, feet_on, why
+    return complete, feet_on, why
 
 
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
@@ -235,8 +238,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
-    plates, complete, feet_on, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
-                                                          com_acc, first)
+    plates = _plates(trial, take, times, cutoff, shift)
+    complete, feet_on, why = _complete(trial, result, times, cfg, floor, plates, com_acc, first)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
     m_standing, _ = plate_mass(plates.force[:, 2], times, complete, standing_span(times, complete))
     mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing,
@@ -245,8 +248,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     if abs(used - first) > 0.005:
         take, times, cfg, result = _run(trial, opts, used, floor)
         com_acc = com_accelerations(take, result)
-        plates, complete, _, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
-                                                        com_acc, used)
+        complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)  # the same plates
     # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
     # applied even when its halves disagree: tried, applying only determined delays was worse (docs/validation.md)
     measured, determined, halves = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete,
@@ -254,8 +256,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
     if applied:
         shift = measured
-        plates, complete, _, why = _plates_and_complete(trial, take, result, times, cfg, floor, cutoff, shift,
-                                                        com_acc, used)
+        plates = _plates(trial, take, times, cutoff, shift)
+        complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)
     summary = {
         "input": _input(trial, take),
         "markers": take.notes,
