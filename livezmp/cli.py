@@ -28,6 +28,7 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 # livezmp.live.scenarios.SCENARIOS, sim_devices.launch.KINDS and the dashboard's default.
 SCENARIO_NAMES = ("stand", "lean", "arm_swing", "squat", "slope", "edge", "push", "demo")
 SIM_LINKS = ("dynamixel", "can", "fw")
+BSP_NAMES = ("auto", "adult", "child")  # livezmp.model.anthropometry.BSP_CHOICES
 DEFAULT_DASHBOARD = "127.0.0.1:8765"
 
 
@@ -88,7 +89,7 @@ def add_marker_options(p: argparse.ArgumentParser) -> None:
     """How a C3D trial's markers make a body: the marker map and the body-segment table."""
     p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
                                      "joint-centre rules; docs/validation.md)")
-    p.add_argument("--bsp", choices=("auto", "adult", "child"), default="auto",
+    p.add_argument("--bsp", choices=BSP_NAMES, default="auto",
                    help="C3D body-segment table: de Leva's adult, or for a child scaled by Jensen's proportions at "
                         "its age (default auto: child when the file's Age is under 18 or its Height under 1.40 m)")
     p.add_argument("--age", type=float, metavar="YEARS", help="the C3D subject's age, replacing the file's")

@@ -6,8 +6,9 @@ import json
 import subprocess
 import sys
 
-from livezmp.cli import DEFAULT_DASHBOARD, SCENARIO_NAMES, SIM_LINKS, build_parser
+from livezmp.cli import BSP_NAMES, DEFAULT_DASHBOARD, SCENARIO_NAMES, SIM_LINKS, build_parser
 from livezmp.live.scenarios import SCENARIOS
+from livezmp.model.anthropometry import BSP_CHOICES
 from livezmp.monitor.dashboard import parse_address
 from sim_devices.launch import KINDS
 
@@ -17,6 +18,7 @@ HEAVY = ("scipy", "pinocchio", "matplotlib", "mcap", "websockets", "serial", "ca
 def test_grammar_names_match_the_commands():
     assert SCENARIO_NAMES == tuple(SCENARIOS)
     assert SIM_LINKS == tuple(KINDS)
+    assert BSP_NAMES == BSP_CHOICES
     assert parse_address(DEFAULT_DASHBOARD) == ("127.0.0.1", 8765)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from livezmp.checks import check_number
-from livezmp.commands.common import MAX_AGE_YEARS
+from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions

@@ -14,6 +14,7 @@ from livezmp.checks import check_number
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import default_cutoff
+from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -23,7 +24,6 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 MAX_BODY_MASS = 1000.0  # kg
 MAX_GROUND_M = 1000.0  # m from the input's origin
 MAX_SOLE_WIDTH_M = 1.0
-MAX_AGE_YEARS = 130.0
 
 
 def check_body_options(args: argparse.Namespace) -> None:

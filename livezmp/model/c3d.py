@@ -33,6 +33,7 @@ import numpy as np
 
 from livezmp.checks import check_input_file
 from livezmp.errors import InputError
+from livezmp.model.anthropometry import MAX_AGE_YEARS
 
 _LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 _NEWTONS = {"n": 1.0, "newton": 1.0, "newtons": 1.0}  # FORCE_PLATFORM:UNITS
@@ -107,7 +108,7 @@ def _age(groups: dict) -> float | None:
     """The subject's age (years) when the file states one (PROCESSING:Age, SUBJECT:AGE or SUBJECTS:AGE)."""
     for g, n in (("PROCESSING", "Age"), ("SUBJECT", "AGE"), ("SUBJECTS", "AGE")):
         age = _first_number(_param(groups, g, n))
-        if age is not None and age < 130:
+        if age is not None and age < MAX_AGE_YEARS:
             return age
     return None
 

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 
 from livezmp.balance.plates import G
 from livezmp.errors import InputError
-from livezmp.model.anthropometry import ADULT, BspTable, child_segments
+from livezmp.model.anthropometry import ADULT, MAX_AGE_YEARS, BspTable, child_segments
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, body_from_markers, hat_table, sway_basis
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing
@@ -94,7 +94,7 @@ def load_subject(path: str | Path) -> Subject:
     bsp, age = s.get("bsp"), s.get("age_years")
     if bsp is not None and bsp not in ("adult", "child"):
         raise InputError(f"{p}: subject.bsp must be \"adult\" or \"child\", got {bsp!r}")
-    if age is not None and not (isinstance(age, int | float) and 0 < age < 130):
+    if age is not None and not (isinstance(age, int | float) and 0 < age < MAX_AGE_YEARS):
         raise InputError(f"{p}: subject.age_years must be a number of years, got {age!r}")
     return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain), bsp,
                    None if age is None else float(age))
