@@ -52,6 +52,14 @@ def test_table_is_chosen_from_what_the_file_says():
     assert choose_table("adult", 7.0, 1.2, 1.2).name == "adult"
 
 
+def test_reason_says_whose_age_and_when_the_table_is_held_at_its_youngest():
+    toddler = choose_table("child", 2.0, None, 0.88, "the given")
+    assert "the given age 2 years" in toddler.reason and "held at Jensen's youngest, 6 years" in toddler.reason
+    assert toddler.segments == child_segments(6.0)  # what "held" means
+    assert "held" not in choose_table("auto", 9.0, None, 1.3).reason
+    assert "the file's age 9 years" in choose_table("auto", 9.0, None, 1.3).reason
+
+
 def _bias(path, tmp_path, *extra) -> dict:
     out = tmp_path / "s.json"
     assert main(["analyze", str(path), "--summary-json", str(out), "--out", str(tmp_path / "z.csv"), *extra]) == 0

@@ -109,28 +109,33 @@ def age_for_stature(stature_m: float) -> float:
     return float(np.interp(stature_m, [s for _, s in MEDIAN_STATURE_M], [a for a, _ in MEDIAN_STATURE_M]))
 
 
-def choose_table(request: str, age_years: float | None, height_m: float | None, stature_m: float) -> BspTable:
+def choose_table(request: str, age_years: float | None, height_m: float | None, stature_m: float,
+                 age_from: str = "the file's") -> BspTable:
     """The segment table for ``request`` ("auto", "adult" or "child"): "auto" takes the child table when the file
     says the subject is a child (its age under :data:`ADULT_AGE`, else its height under :data:`CHILD_STATURE_M`)
-    and de Leva's adult table otherwise, saying why. A child's age: the file's, else the one its height (else
-    ``stature_m``, m, estimated from the markers) has as a median (:func:`age_for_stature`)."""
+    and de Leva's adult table otherwise, saying why. A child's age: ``age_years`` (``age_from`` says whose, for the
+    reason), else the one the file's height (else ``stature_m``, m, estimated from the markers) has as a median
+    (:func:`age_for_stature`). Below Jensen's youngest age the table is his 6-year one, and the reason says so."""
     if request not in BSP_CHOICES:
         raise ValueError(f"unknown body-segment table {request!r}")
     if age_years is not None:
-        age, said = age_years, f"the file's age {age_years:g} years"
+        age, said = age_years, f"{age_from} age {age_years:g} years"
     elif height_m is not None:
         age, said = age_for_stature(height_m), f"the file's height {height_m:.2f} m"
     else:
         age, said = age_for_stature(stature_m), None
     if request == "adult":
         return replace(ADULT, reason="asked for (--bsp adult)")
+    youngest = min(JENSEN_MASS_PERCENT)
+    held = f" (proportions held at Jensen's youngest, {youngest:g} years)" if age < youngest else ""
     if request == "child":
         return BspTable(child_segments(age), "child", age, f"asked for (--bsp child); age {age:.1f} years from "
-                        + (said or f"the stature {stature_m:.2f} m measured from the markers"))
+                        + (said or f"the stature {stature_m:.2f} m measured from the markers") + held)
     if said is None:
         return replace(ADULT, reason="the file gives no age or height: adult (--bsp child for a child)")
     child = age_years < ADULT_AGE if age_years is not None else height_m < CHILD_STATURE_M
     if not child:
         return replace(ADULT, reason=f"{said}: adult")
     return BspTable(child_segments(age), "child", age, f"{said}: a child" +
-                    ("" if age_years is not None else f" (under {CHILD_STATURE_M:.2f} m), about {age:.1f} years"))
+                    ("" if age_years is not None else f" (under {CHILD_STATURE_M:.2f} m), about {age:.1f} years")
+                    + held)

@@ -767,8 +767,9 @@ def trunk_com_below_cervicale(stature: float, t: dict[str, SegmentParams] = DE_L
 def _table(opts: MarkerBodyOptions, trial: C3dTrial, notes: dict) -> BspTable:
     """The segment table ``opts.bsp`` asks for, given the subject's age (``opts``' or the file's) and height; said in
     ``notes["bsp"]``."""
-    age = opts.age_years if opts.age_years is not None else trial.age_years
-    table = choose_table(opts.bsp, age, trial.height_m, notes["stature_m"])
+    given = opts.age_years is not None  # --age or the subject file's, over the C3D's
+    age = opts.age_years if given else trial.age_years
+    table = choose_table(opts.bsp, age, trial.height_m, notes["stature_m"], "the given" if given else "the file's")
     notes["bsp"] = table.summary()
     return table
 
