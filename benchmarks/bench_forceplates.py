@@ -33,6 +33,7 @@ import argparse
 import time
 from pathlib import Path
 
+import ezc3d
 import numpy as np
 import pinocchio as pin
 from machine_load import load_averages
@@ -42,7 +43,7 @@ from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, input_rotation, sway_basis
-from livezmp.offline.calibrate import PARAMETERS, calibrate
+from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
 from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
@@ -440,8 +441,8 @@ SUBSETS = {"offset fa+lat": ("forward", "left"), "offset fa": ("forward",), "swa
 def calibration_subsets(done: dict[str, tuple]) -> None:
     """`livezmp calibrate` fitting only some of the HAT's parameters (the others at the table), held out as in
     the calibration table, on the trials it accepts; and each fit without the prior on its own frames."""
-    print("\ncalibrated with fewer parameters: held out (fit on one half, scored on the other) / unconstrained on "
-          "its own frames, mm")
+    print("\ncalibrated with fewer parameters: held out (fit on every other 0.2 s block, scored on the others) / "
+          "unconstrained on its own frames, mm")
     print(f"{'trial':34s} {'table':>6s} {'all six':>13s} " + " ".join(f"{k:>15s}" for k in SUBSETS))
     for name, (trial, _) in done.items():
         cells = []
@@ -489,29 +490,66 @@ def calibration_floor(done: dict[str, tuple]) -> None:
 
 
 def calibration_table(done: dict[str, tuple]) -> None:
-    """`livezmp calibrate` on each trial alone, cross-validated on the halves of its complete frames."""
-    print("\ncalibrated subject, each trial alone; held out = fitted on one half of the complete frames (prior "
-          "weight chosen within that half), scored on the other (mm)")
-    print(f"{'trial':34s} {'frames':>6s} {'table':>7s} {'fitted':>7s} {'held-out table':>15s} {'fitted':>7s}  "
-          "weight (all / held-out folds), HAT fraction, CoM fwd/left/up mm, sway gain fore-aft/lateral")
-    held, every = [], []
+    """`livezmp calibrate` on each trial alone, cross-validated on every other BLOCK_S block of its complete
+    frames, and (the former folds, beside) on their first and second halves."""
+    print(f"\ncalibrated subject, each trial alone; held out = fitted on one fold (prior weight chosen within it), "
+          f"scored on the other; folds: every other {BLOCK_S:g} s block (blocks), or the first and second halves of "
+          "the complete frames (halves, as before) (mm)")
+    print(f"{'trial':34s} {'frames':>6s} {'table':>7s} {'fitted':>7s} {'held-out table':>15s} {'halves':>7s} "
+          f"{'blocks':>7s}  weight (all / held-out folds); HAT fraction, CoM fwd/left/up mm, sway gain "
+          "fore-aft/lateral (± jackknife SD)")
+    table, halves, blocks, every = [], [], [], []
     for name, (trial, a) in done.items():
         try:
+            _, old = calibrate([trial], block_s=None)
             subject, rep = calibrate([trial])
         except InputError as e:
             print(f"{name[:34]:34s} not calibrated: {str(e).split(': ', 1)[-1][:110]}")
             every.append(a.summary["cop_vs_zmp"]["rms_mm"])
             continue
-        held.append(rep["rms_held_out_fitted_mm"])
+        table.append(rep["rms_held_out_table_mm"])
+        halves.append(old["rms_held_out_fitted_mm"])
+        blocks.append(rep["rms_held_out_fitted_mm"])
         every.append(rep["rms_held_out_fitted_mm"])
-        off = ", ".join(f"{1000 * v:+.0f}" for v in subject.hat_offset)
         w = ", ".join("table" if v is None else f"{v:g}" for v in [rep["prior_weight"], *rep["held_out_prior_weights"]])
+        theta = [subject.hat_fraction, *subject.hat_offset, *subject.hat_sway_gain]
+        scale = [1, 1000, 1000, 1000, 1, 1]
+        fit = ", ".join(f"{v * k:.3g}±{e * k:.2g}" for v, e, k in zip(theta, rep["parameter_sd"], scale, strict=True))
         print(f"{name[:34]:34s} {rep['frames']:6d} {rep['rms_table_mm']:7.1f} {rep['rms_fitted_mm']:7.1f} "
-              f"{rep['rms_held_out_table_mm']:15.1f} {rep['rms_held_out_fitted_mm']:7.1f}  {w}; "
-              f"{subject.hat_fraction:.3f}, {off}, {subject.hat_sway_gain[0]:.2f}/{subject.hat_sway_gain[1]:.2f}")
-    if held:
-        print(f"median held-out RMS, calibrated: {np.median(held):.1f} mm over {len(held)} trials; over all "
+              f"{rep['rms_held_out_table_mm']:15.1f} {old['rms_held_out_fitted_mm']:7.1f} "
+              f"{rep['rms_held_out_fitted_mm']:7.1f}  {w}; {'table kept' if rep['table_kept'] else fit}")
+    if blocks:
+        print(f"median held-out RMS over the {len(blocks)} calibrated trials: table {np.median(table):.1f} mm, "
+              f"calibrated with halves {np.median(halves):.1f} mm, with blocks {np.median(blocks):.1f} mm; over all "
               f"{len(every)} (the others at their default): {np.median(every):.1f} mm")
+
+
+def _subject_names(path: str) -> tuple[str, ...]:
+    """The file's SUBJECTS:NAMES (empty when it names none)."""
+    groups = ezc3d.c3d(str(path), extract_forceplat_data=False)["parameters"]
+    return tuple(n.strip() for n in groups.get("SUBJECTS", {}).get("NAMES", {}).get("value", []) if n.strip())
+
+
+def calibration_across_trials(done: dict[str, tuple]) -> None:
+    """Trials naming the same subject (SUBJECTS:NAMES): calibrated on one (when calibrate accepts it), scored with
+    `analyze --subject` on each other, the table (analyze's default) beside."""
+    print("\ncalibrated on one trial, scored on another trial of the same subject (SUBJECTS:NAMES), ZMP - CoP RMS mm")
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name, (trial, _) in done.items():
+        if names := _subject_names(trial.source):
+            groups.setdefault(names, []).append(name)
+    for names, members in groups.items():
+        for src in members if len(members) > 1 else []:
+            try:
+                subject, _ = calibrate([done[src][0]])
+            except InputError as e:
+                print(f"{src[:34]:34s} not calibrated: {str(e).split(': ', 1)[-1][:90]}")
+                continue
+            for dst in (m for m in members if m != src):
+                trial, a = done[dst]
+                cal = analyse_lab_take(trial, LabOptions(markers=subject.marker_options()))
+                print(f"{src[:34]:34s} -> {dst[:34]:34s} table {a.summary['cop_vs_zmp']['rms_mm']:6.1f}  calibrated "
+                      f"{cal.summary['cop_vs_zmp']['rms_mm']:6.1f}  (subject {'/'.join(names)})")
 
 
 def main() -> None:
@@ -537,6 +575,7 @@ def main() -> None:
     foot_frame(done)
     lag_conditioning(done, args.figures)
     calibration_table(done)
+    calibration_across_trials(done)
     calibration_subsets(done)
     calibration_floor(done)
     print("\nestimator acceleration of a sinusoid, cutoff 6 Hz: gain / delay (ms)")

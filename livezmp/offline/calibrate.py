@@ -9,13 +9,19 @@ once: the rest of the body's wrench is computed once, and the HAT adds a point m
 the HAT frame (x, y, z, heading channels), exactly as in the body model.
 
 The table is the prior (the HAT sway gains' is :data:`TRUNK_SWAY_GAIN`, measured on trunk-marker trials), and
-how strongly the fit is held to it is chosen by cross-validation on the frames being fitted: each trial's
-complete frames are split into their first and second halves, every prior weight of ``PRIOR_WEIGHTS`` is fitted
-on one half and scored on the other, and the weight with the lower mean held-out error among those that beat
-the table both ways round is used (else, or when a half has fewer than ``MIN_FRAMES`` frames, the table itself,
-an infinite weight). A trial whose plates' horizontal
-force runs against the markers' motion is refused. Reported held-out error: fitted on one half (its weight
-chosen the same way within that half's own halves) and scored on the other, never seen by the fit or the choice.
+how strongly the fit is held to it is chosen by cross-validation on the frames being fitted. The folds respect
+the gait: each trial's complete frames are cut into blocks of ``BLOCK_S`` and every other block goes to one
+fold, so both folds hold both feet and every part of each stance. (The former folds, each trial's first and
+second halves, put one foot's stance in one half and the other's in the other on most short trials, so a fit
+on one half was scored on the other foot: ``block_s=None`` still gives them.) Every prior weight of
+``PRIOR_WEIGHTS`` is fitted on one fold and scored on the other, and the weight with the lower pooled held-out
+error among those that beat the table both ways round is used (else, or when a fold has fewer than
+``MIN_FOLD_FRAMES`` frames, the table itself, an infinite weight, and the report says so). A trial whose plates'
+horizontal force runs against the markers' motion is refused. Reported held-out error: fitted on one fold (its
+weight chosen the same way within that fold's own blocks) and scored on the other, never seen by the fit or the
+choice. Each parameter's uncertainty: the delete-one-block jackknife of the fit at the chosen weight (the
+blocks, not the frames, are the independent samples). Given several trials of one subject, each is also scored
+with the parameters calibrated on the others.
 """
 
 from __future__ import annotations
@@ -44,7 +50,12 @@ PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05, 0.5, 0.5])
 PRIOR_MM = 10.0
 # multiples of that prior's weight tried by the cross-validation (inf: the table, nothing fitted)
 PRIOR_WEIGHTS = (0.3, 1.0, 3.0, 10.0, 30.0, np.inf)
-MIN_FRAMES = 20  # complete frames a fit (and each part of its cross-validation) needs
+MIN_FRAMES = 20  # complete frames a fit needs
+# the cross-validation's blocks, s: longer than the table's ZMP - CoP error stays correlated (its autocorrelation
+# falls below 1/e within 50-100 ms on 8 of the 10 calibratable plate trials; 200-230 ms on two), shorter than a
+# stance (0.5-0.7 s), so every stance spans blocks of both folds
+BLOCK_S = 0.2
+MIN_FOLD_FRAMES = 10  # frames each fold needs for a score (half of MIN_FRAMES: a fold is scored, not fitted alone)
 # the prior's weight for the unconstrained fit (bounds only): on the very frames it is fitted on, the least error
 # any HAT parameters reach on these trials, reported as their floor
 FREE_WEIGHT = 1e-3
@@ -118,7 +129,8 @@ class _Terms:
     """Per complete frame: the rest of the body's wrench for the whole mass (F (n, 3) N, moment about
     the origin (n, 3) N·m), the HAT frame's origin o, acceleration a_o, heading A and its second
     derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3); the
-    origin's straight-line trend and the walk's axes (for the sway gains: o -> trend + K (o - trend))."""
+    origin's straight-line trend and the walk's axes (for the sway gains: o -> trend + K (o - trend)); the
+    frames' times (n,) s."""
 
     f_rest: np.ndarray
     m_rest: np.ndarray
@@ -133,6 +145,7 @@ class _Terms:
     trend: np.ndarray
     fwd: np.ndarray
     left: np.ndarray
+    times: np.ndarray
 
     def part(self, sel: np.ndarray) -> _Terms:
         """The same terms on the frames ``sel`` (boolean over this one's frames)."""
@@ -161,7 +174,7 @@ def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerB
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
     trend, fwd, left = sway_basis(r.q[:, HAT][:, :3], facing(lab.take))
     return _Terms(f_rest, m_rest, q[:, :3], a[:, :3], A, B, lab.plates.cop[idx, :2], plate_acc, mass,
-                  lab.plates.surface_z, trend[idx], fwd, left)
+                  lab.plates.surface_z, trend[idx], fwd, left, lab.times[idx])
 
 
 def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -193,9 +206,15 @@ def _residuals(theta: np.ndarray, terms: list[_Terms], prior: np.ndarray, weight
     return np.concatenate(out)
 
 
-def _rms_mm(theta: np.ndarray, terms: list[_Terms]) -> float:
+def _sq_mm(theta: np.ndarray, terms: list[_Terms]) -> tuple[float, int]:
+    """Sum of squared ZMP − CoP distances (mm²) and the frame count, so that folds pool."""
     d = np.vstack([_model(t, theta)[0] - t.cop for t in terms])
-    return float(1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))))
+    return float(1e6 * np.sum(d * d)), len(d)
+
+
+def _rms_mm(theta: np.ndarray, terms: list[_Terms]) -> float:
+    sq, n = _sq_mm(theta, terms)
+    return float(np.sqrt(sq / n))
 
 
 def _fit(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray) -> np.ndarray:
@@ -214,26 +233,67 @@ def _fit(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray
     return theta(x)
 
 
-def _halves(terms: list[_Terms]) -> tuple[list[_Terms], list[_Terms]]:
-    """Every trial's frames split into their first and second halves."""
-    cut = [np.arange(len(t.cop)) < len(t.cop) // 2 for t in terms]
-    return [t.part(c) for t, c in zip(terms, cut, strict=True)], [t.part(~c) for t, c in zip(terms, cut, strict=True)]
+def _blocks(t: _Terms, block_s: float | None) -> np.ndarray:
+    """Each frame's block (0, 1, ... over the blocks present): ``block_s`` long from the first frame, or for
+    None the first and second halves of the frames."""
+    if block_s is None:
+        return (np.arange(len(t.cop)) >= len(t.cop) // 2).astype(int)
+    return np.unique(np.floor((t.times - t.times[0]) / block_s).astype(int), return_inverse=True)[1]
 
 
-def _cross_validated(halves: tuple[list[_Terms], list[_Terms]], prior: np.ndarray,
-                     free: np.ndarray) -> tuple[float, list[float]]:
-    """The prior weight whose fits on one half score best on the other (mean RMS over both ways round) among
+Folds = list[tuple[list[_Terms], list[_Terms]]]
+
+
+def _folds(terms: list[_Terms], block_s: float | None) -> Folds:
+    """Two (fitted, held-out) splits of every trial's frames: every other block in one fold."""
+    odd = [_blocks(t, block_s) % 2 == 1 for t in terms]
+    return [([t.part(o != k) for t, o in zip(terms, odd, strict=True)],
+             [t.part(o == k) for t, o in zip(terms, odd, strict=True)]) for k in (False, True)]
+
+
+def _cross_validated(terms: list[_Terms], prior: np.ndarray, free: np.ndarray,
+                     block_s: float | None) -> tuple[float, list[float]]:
+    """The prior weight whose fits on one fold score best on the other (pooled RMS over both ways round) among
     those that beat the table both ways round (else the table: a fit that helps one way and not the other
-    is a fit to that half's noise), and each weight's mean score (mm)."""
-    if min(sum(len(t.cop) for t in half) for half in halves) < MIN_FRAMES:
+    is a fit to that fold's noise), and each weight's pooled score (mm)."""
+    folds = _folds(terms, block_s)
+    if min(sum(len(t.cop) for t in part) for fold in folds for part in fold) < MIN_FOLD_FRAMES:
         return PRIOR_WEIGHTS[-1], []
-    table = [_rms_mm(prior, halves[1 - k]) for k in (0, 1)]
-    folds = np.array([[_rms_mm(_fit(halves[k], prior, w, free), halves[1 - k]) for k in (0, 1)]
-                      for w in PRIOR_WEIGHTS])
-    score = folds.mean(axis=1)
-    ok = (folds < np.array(table)).all(axis=1)
-    best = int(np.flatnonzero(ok)[np.argmin(score[ok])]) if ok.any() else len(PRIOR_WEIGHTS) - 1
-    return PRIOR_WEIGHTS[best], [float(v) for v in score]
+    table = np.array([_sq_mm(prior, held) for _, held in folds])
+    scores = np.array([[_sq_mm(_fit(fitted, prior, w, free), held) for fitted, held in folds]
+                       for w in PRIOR_WEIGHTS])  # (weights, folds, (sum of squares, frames))
+    pooled = np.sqrt(scores[..., 0].sum(axis=1) / scores[..., 1].sum(axis=1))
+    ok = (scores[..., 0] < table[:, 0]).all(axis=1)
+    best = int(np.flatnonzero(ok)[np.argmin(pooled[ok])]) if ok.any() else len(PRIOR_WEIGHTS) - 1
+    return PRIOR_WEIGHTS[best], [float(v) for v in pooled]
+
+
+def _held_out(terms: list[_Terms], prior: np.ndarray, free: np.ndarray,
+              block_s: float | None) -> tuple[float, float, list[float]]:
+    """Pooled held-out RMS (mm) of the table and of the calibration (fitted on one fold with the weight its own
+    cross-validation chose, scored on the other), and those weights."""
+    table = calibrated = frames = 0.0
+    weights = []
+    for fitted, held in _folds(terms, block_s):
+        w, _ = _cross_validated(fitted, prior, free, block_s)
+        sq, n = _sq_mm(_fit(fitted, prior, w, free), held)
+        table, calibrated, frames = table + _sq_mm(prior, held)[0], calibrated + sq, frames + n
+        weights.append(w)
+    return float(np.sqrt(table / frames)), float(np.sqrt(calibrated / frames)), weights
+
+
+def _jackknife_sd(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray,
+                  block_s: float) -> np.ndarray | None:
+    """Each parameter's standard error by the delete-one-block jackknife (None with fewer than 3 blocks)."""
+    labels = [_blocks(t, block_s) for t in terms]
+    fits = []
+    for k, lab in enumerate(labels):
+        for b in range(int(lab.max()) + 1):
+            fits.append(_fit([t.part(lab != b) if j == k else t for j, t in enumerate(terms)], prior, weight, free))
+    if len(fits) < 3:
+        return None
+    fits = np.array(fits)
+    return np.sqrt((len(fits) - 1) / len(fits) * np.sum((fits - fits.mean(axis=0)) ** 2, axis=0))
 
 
 def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> None:
@@ -250,12 +310,26 @@ def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> Non
                              "to calibrate on")
 
 
+def _other_trials(terms: list[_Terms], prior: np.ndarray, free: np.ndarray, block_s: float | None) -> dict:
+    """Each trial scored with the parameters calibrated on the others (pooled RMS, mm, table beside)."""
+    table = fitted = frames = 0.0
+    for i, t in enumerate(terms):
+        rest = terms[:i] + terms[i + 1:]
+        w, _ = _cross_validated(rest, prior, free, block_s)
+        sq, n = _sq_mm(_fit(rest, prior, w, free), [t])
+        table, fitted, frames = table + _sq_mm(prior, [t])[0], fitted + sq, frames + n
+    return {"rms_other_trials_table_mm": round(float(np.sqrt(table / frames)), 2),
+            "rms_other_trials_fitted_mm": round(float(np.sqrt(fitted / frames)), 2)}
+
+
 def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
-              fit: tuple[str, ...] = PARAMETERS) -> tuple[Subject, dict]:
+              fit: tuple[str, ...] = PARAMETERS, block_s: float | None = BLOCK_S) -> tuple[Subject, dict]:
     """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
     (RMS ZMP − CoP with the table, fitted, fitted without the prior on the same frames (the floor of what
-    these parameters can do there), and held out, mm; the prior weight chosen). ``fit``: which of
-    ``PARAMETERS`` are fitted (the others keep the table's value)."""
+    these parameters can do there), and held out, mm; whether the table was kept, the prior weight chosen;
+    each parameter's standard error; with several trials, each scored with the others' calibration).
+    ``fit``: which of ``PARAMETERS`` are fitted (the others keep the table's value); ``block_s``: the
+    cross-validation's block length, s (None: the halves of each trial's frames, as before)."""
     unknown = set(fit) - set(PARAMETERS)
     if unknown or not fit:
         raise ValueError(f"calibrate: fit takes some of {PARAMETERS}, got {fit}")
@@ -280,22 +354,27 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     table = ADULT if bsp["table"] == "adult" else BspTable(child_segments(bsp["age_years"]), "child", bsp["age_years"])
     fraction, height, _ = hat_table(stature, table=table.segments)
     prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_SWAY_GAIN])
-    halves = _halves(whole)
-    weight, scores = _cross_validated(halves, prior, free)
+    weight, scores = _cross_validated(whole, prior, free, block_s)
     fitted = _fit(whole, prior, weight, free)
     unconstrained = _fit(whole, prior, FREE_WEIGHT, free)
-    held_out, weights = [], []
-    for k in (0, 1):  # the held-out half sees neither the fit nor the choice of its weight
-        w, _ = _cross_validated(_halves(halves[k]), prior, free)
-        held_out.append(_rms_mm(_fit(halves[k], prior, w, free), halves[1 - k]))
-        weights.append(w)
+    held_table, held_fitted, weights = _held_out(whole, prior, free, block_s)
+    kept = not np.isfinite(weight)
+    sd = None if kept else _jackknife_sd(whole, prior, weight, free, BLOCK_S)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
+              "folds": "halves" if block_s is None else f"every other {block_s:g} s block",
               "rms_table_mm": round(_rms_mm(prior, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
               "rms_fitted_unconstrained_mm": round(_rms_mm(unconstrained, whole), 2),
-              "rms_held_out_table_mm": round(float(np.mean([_rms_mm(prior, halves[1 - k]) for k in (0, 1)])), 2),
-              "rms_held_out_fitted_mm": round(float(np.mean(held_out)), 2),
-              "prior_weight": None if not np.isfinite(weight) else weight,
+              "rms_held_out_table_mm": round(held_table, 2), "rms_held_out_fitted_mm": round(held_fitted, 2),
+              "table_kept": bool(kept),
+              "prior_weight": None if kept else weight,
               "prior_weight_scores_mm": [round(v, 2) for v in scores],
-              "held_out_prior_weights": [None if not np.isfinite(w) else w for w in weights]}
+              "held_out_prior_weights": [None if not np.isfinite(w) else w for w in weights],
+              "parameters": list(PARAMETERS),
+              # the table kept: nothing was measured, its spread is the prior's between-subject one
+              "parameter_sd": [round(float(v), 5) for v in (PRIOR_SD if sd is None else sd)],
+              "parameter_sd_from": "the table's assumed spread (nothing fitted)" if sd is None
+              else "jackknife over the blocks"}
+    if len(whole) > 1:
+        report.update(_other_trials(whole, prior, free, block_s))
     return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6]),
                    table.name, table.age_years), report
