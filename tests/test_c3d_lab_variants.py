@@ -156,6 +156,19 @@ def test_calibration_does_not_depend_on_the_labs_axes(tmp_path):
     assert [reports[1][k] for k in keys] == pytest.approx([reports[0][k] for k in keys], abs=0.02)
 
 
+def test_each_trial_is_scored_with_the_other_trials_calibration(tmp_path):
+    """Two takes of one subject (its HAT 40 mm forward, 45 % of the mass), from the reference lab and from a y-up lab
+    it faces diagonally in: calibrated on either, the other's ZMP agrees with its plates to a few millimetres, where
+    the table is off by over 15 mm."""
+    body = MarkerBodyOptions(hat_offset=(0.04, 0.0, 0.33), hat_fraction=0.45, hat_sway_gain=None)
+    trials = []
+    for k, lab in enumerate((Lab(seconds=SECONDS), VARIANTS["y-up, diagonal, far, cm"])):
+        write_lab_c3d(tmp_path / f"{k}.c3d", PLATES, body=body, lab=replace(lab, seconds=SECONDS))
+        trials.append(read_c3d(tmp_path / f"{k}.c3d"))
+    report = calibration.calibrate(trials)[1]
+    assert report["rms_other_trials_table_mm"] > 15 and report["rms_other_trials_fitted_mm"] < 4
+
+
 def test_a_plates_dc_offset_is_taken_over_the_files_zero_frames(tmp_path):
     """c3d.org's TYPE-3 sample has plates that read -80 to -212 N unloaded (an amplifier's DC offset) until walked
     on, and names its unloaded frames in FORCE_PLATFORM:ZERO. Here the right plate (Kistler's eight channels) reads

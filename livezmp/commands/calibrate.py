@@ -26,13 +26,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
           f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip, swaying {subject.hat_sway_gain[0]:.2f} (fore-aft) "
           f"and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip")
     print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
-          f"{report['rms_fitted_mm']:.1f} mm; on held-out halves: table {report['rms_held_out_table_mm']:.1f} mm, "
-          f"fitted {report['rms_held_out_fitted_mm']:.1f} mm")
+          f"{report['rms_fitted_mm']:.1f} mm; held out ({report['folds']}): table "
+          f"{report['rms_held_out_table_mm']:.1f} mm, calibrated {report['rms_held_out_fitted_mm']:.1f} mm")
+    if "rms_other_trials_fitted_mm" in report:
+        print(f"  each trial with the others' calibration: table {report['rms_other_trials_table_mm']:.1f} mm, "
+              f"calibrated {report['rms_other_trials_fitted_mm']:.1f} mm")
     print("  unconstrained (prior off, scored on the frames it is fitted on): "
           f"{report['rms_fitted_unconstrained_mm']:.1f} mm, the least any HAT parameters reach on these trials")
-    w = report["prior_weight"]
-    print("  the cross-validation kept the table's values (no fit beat it on held-out frames)" if w is None else
-          f"  prior weight {w:g} (chosen by cross-validation on the halves of the frames)")
-    if w is not None and report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
+    if report["table_kept"]:
+        print("  the table's values are kept: no prior weight's fit beat the table on held-out frames both ways round")
+        return 0
+    sd = dict(zip(report["parameters"], report["parameter_sd"], strict=True))
+    print(f"  prior weight {report['prior_weight']:g} (chosen by cross-validation); standard errors (jackknife over "
+          f"the blocks): fraction {100 * sd['hat_fraction']:.1f} %, forward/left/up "
+          f"{1000 * sd['forward']:.0f}/{1000 * sd['left']:.0f}/{1000 * sd['up']:.0f} mm, sway "
+          f"{sd['sway_fore_aft']:.2f}/{sd['sway_lateral']:.2f}")
+    if report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
         print("  the fit does not beat the table on held-out frames: more plate trials are needed")
     return 0

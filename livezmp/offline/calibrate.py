@@ -120,7 +120,8 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
              *([f"age_years = {subject.age_years:.3f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
     for k, v in report.items():
-        lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
+        lines.append(f'{k} = "{v}"' if isinstance(v, str) else f"{k} = {str(v).lower()}" if isinstance(v, bool)
+                     else f"{k} = {v!r}")
     Path(path).write_text("\n".join(lines).replace("None", '"n/a"') + "\n", encoding="utf-8")
 
 
