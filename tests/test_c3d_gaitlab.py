@@ -742,7 +742,7 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
 
 def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, monkeypatch):
     """The synthetic subject's trunk sways half as far fore-aft and 0.7 times as far sideways as its mid-hip:
-    the table (gains TRUNK_SWAY_GAIN) is off by 6 mm; calibrated (prior on) the held-out halves improve; with the prior
+    the table (gains TRUNK_SWAY_GAIN) is off by 6 mm; calibrated (prior on) the held-out folds improve; with the prior
     off they and `analyze --subject` agree with the plates to 3-4 mm (the fit's model sways the smoothed
     positions, the body the raw ones). (A rigid sway about the
     ankles cannot tell a lighter, higher HAT from a heavier, lower, less swaying one, so the parameters
