@@ -461,10 +461,12 @@ def calibration_floor(done: dict[str, tuple]) -> None:
     """What simple per-subject constants could do, at best: the ZMP mapped onto the plate CoP (both relative to
     the CoM's ground point, along and across the walk) by a constant offset (the bias), by a gain per axis on
     the dynamic term ZMP - CoM, and by both (4 numbers), fitted on the very frames they are scored on (an
-    oracle), and the same fitted on one half of the complete frames and scored on the other."""
+    oracle), the same fitted on one half of the complete frames and scored on the other, and fitted on every
+    other BLOCK_S block and scored on the others (calibrate's folds)."""
     print("\nfloor of per-subject constants: ZMP - CoP RMS mm after the best map of (ZMP - CoM) onto (CoP - CoM), "
-          "in-sample (oracle) / held out (fit on one half, score the other)")
-    print(f"{'trial':34s} {'default':>7s} {'offset':>15s} {'gain per axis':>15s} {'gain+offset':>15s}")
+          f"in-sample (oracle) / held out: fit on one half, score the other / fit on every other {BLOCK_S:g} s block, "
+          "score the others")
+    print(f"{'trial':34s} {'default':>7s} {'offset':>23s} {'gain per axis':>23s} {'gain+offset':>23s}")
     cols = {k: [] for k in ("default", "offset", "gain", "both")}
     for name, (_, a) in done.items():
         r, p = a.result, a.plates
@@ -472,20 +474,23 @@ def calibration_floor(done: dict[str, tuple]) -> None:
         fwd, left = walking_axes(r.com)
         axes = np.array([fwd[:2], left[:2]]).T
         z, c = (r.zmp[rows, :2] - r.com[rows, :2]) @ axes, (p.cop[rows, :2] - r.com[rows, :2]) @ axes
-        h = len(z) // 2
-        parts = ((slice(0, h), slice(h, None)), (slice(h, None), slice(0, h)))
+        half = np.arange(len(z)) >= len(z) // 2
+        t = a.times[rows]
+        odd = np.floor((t - t[0]) / BLOCK_S).astype(int) % 2 == 1
         cells = [f"{a.summary['cop_vs_zmp']['rms_mm']:7.1f}"]
         cols["default"].append(a.summary["cop_vs_zmp"]["rms_mm"])
         for key, offset, gain in (("offset", True, False), ("gain", False, True), ("both", True, True)):
             oracle = _mapped_rms(z, c, _axis_map(z, c, offset, gain))
-            sq = [_mapped_rms(z[b], c[b], _axis_map(z[f], c[f], offset, gain)) ** 2 * len(z[b]) for f, b in parts]
-            held = float(np.sqrt(sum(sq) / len(z)))
-            cols[key].append((oracle, held))
-            cells.append(f"{oracle:7.1f} {held:7.1f}")
+            held = []
+            for fold in (half, odd):
+                sq = [_mapped_rms(z[b], c[b], _axis_map(z[f], c[f], offset, gain)) ** 2 * b.sum()
+                      for f, b in ((fold, ~fold), (~fold, fold)) if f.any() and b.any()]
+                held.append(float(np.sqrt(sum(sq) / len(z))))
+            cols[key].append((oracle, *held))
+            cells.append(f"{oracle:7.1f} {held[0]:7.1f} {held[1]:7.1f}")
         print(f"{name[:34]:34s} " + " ".join(cells))
     med = [f"{np.median(cols['default']):7.1f}"] + [
-        f"{np.median([v[0] for v in cols[k]]):7.1f} {np.median([v[1] for v in cols[k]]):7.1f}"
-        for k in ("offset", "gain", "both")]
+        " ".join(f"{np.median([v[i] for v in cols[k]]):7.1f}" for i in range(3)) for k in ("offset", "gain", "both")]
     print(f"{'median':34s} " + " ".join(med))
 
 
