@@ -156,10 +156,10 @@ def test_calibration_does_not_depend_on_the_labs_axes(tmp_path):
     assert [reports[1][k] for k in keys] == pytest.approx([reports[0][k] for k in keys], abs=0.02)
 
 
-def test_each_trial_is_scored_with_the_other_trials_calibration(tmp_path):
+def test_each_trial_is_scored_with_the_other_trials_calibration(tmp_path, capsys):
     """Two takes of one subject (its HAT 40 mm forward, 45 % of the mass), from the reference lab and from a y-up lab
     it faces diagonally in: calibrated on either, the other's ZMP agrees with its plates to a few millimetres, where
-    the table is off by over 15 mm."""
+    the table is off by over 15 mm. Pooled with another subject's take, the command says they do not transfer."""
     body = MarkerBodyOptions(hat_offset=(0.04, 0.0, 0.33), hat_fraction=0.45, hat_sway_gain=None)
     trials = []
     for k, lab in enumerate((Lab(seconds=SECONDS), VARIANTS["y-up, diagonal, far, cm"])):
@@ -167,6 +167,12 @@ def test_each_trial_is_scored_with_the_other_trials_calibration(tmp_path):
         trials.append(read_c3d(tmp_path / f"{k}.c3d"))
     report = calibration.calibrate(trials)[1]
     assert report["rms_other_trials_table_mm"] > 15 and report["rms_other_trials_fitted_mm"] < 4
+    # a take of another subject (its HAT 40 mm back) pooled with the first: each scored with the other's
+    # calibration is worse than with the table, and the command asks whether they are one subject
+    other = replace(body, hat_offset=(-0.04, 0.0, 0.33), hat_fraction=0.52)
+    write_lab_c3d(tmp_path / "other.c3d", PLATES, body=other, lab=Lab(seconds=SECONDS))
+    assert main(["calibrate", str(tmp_path / "0.c3d"), str(tmp_path / "other.c3d"), "-o", str(tmp_path / "s.t")]) == 0
+    assert "are these takes of one subject?" in capsys.readouterr().out
 
 
 def test_a_plates_dc_offset_is_taken_over_the_files_zero_frames(tmp_path):

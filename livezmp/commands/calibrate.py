@@ -31,6 +31,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if "rms_other_trials_fitted_mm" in report:
         print(f"  each trial with the others' calibration: table {report['rms_other_trials_table_mm']:.1f} mm, "
               f"calibrated {report['rms_other_trials_fitted_mm']:.1f} mm")
+        if report["rms_other_trials_fitted_mm"] > report["rms_other_trials_table_mm"]:
+            print("  the others' calibration is worse than the table on the trials it did not see: "
+                  "are these takes of one subject?")
     print("  unconstrained (prior off, scored on the frames it is fitted on): "
           f"{report['rms_fitted_unconstrained_mm']:.1f} mm, the least any HAT parameters reach on these trials")
     if report["table_kept"]:
