@@ -1,9 +1,11 @@
 """Dynamixel Protocol 2.0 CRC-16 (CRC-16/BUYPASS: poly 0x8005, init 0, no reflection; ROBOTIS e-manual).
 
-Shared by the link (checking the Fast Sync Read reply it takes every cycle) and the
-simulated servos (which sign their replies). Long packets are summed with numpy: the CRC
-is linear, so a packet's CRC is the XOR of each byte's contribution at its distance from
-the end, from one table made once.
+Shared by the link (checking the Fast Sync Read reply it takes every cycle, signing its goals)
+and the simulated servos (which check every instruction and sign their replies). With crcmod's
+C extension a packet's CRC is one C call (0.7 us for an 86-byte reply, where the numpy sum below
+takes 6.7 and the table loop 13; four a cycle on each side of a bus). Without it, long packets
+are summed with numpy: the CRC is linear, so a packet's CRC is the XOR of each byte's
+contribution at its distance from the end, from one table made once.
 """
 
 from __future__ import annotations
@@ -11,6 +13,12 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+
+try:
+    import crcmod
+    import crcmod._crcfunext  # noqa: F401  (crcmod without its C extension is a Python table loop)
+except ImportError:
+    crcmod = None
 
 MAX_PACKET = 1024  # bytes on the wire, as dynamixel-sdk's RXPACKET_MAX_LEN
 _POLY = 0x8005
@@ -47,8 +55,8 @@ def _shift_table() -> np.ndarray:
 _DESCENDING = np.arange(MAX_PACKET - 1, -1, -1)
 
 
-def crc16(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
-    """CRC-16 of ``data`` continuing from register value ``crc`` (0 to start a packet)."""
+def _crc16_python(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
+    """CRC-16 of ``data`` continuing from register value ``crc`` (0 to start a packet), without crcmod."""
     n = len(data)
     if n < _VECTOR_MIN or n > MAX_PACKET:
         table = _TABLE
@@ -62,6 +70,10 @@ def crc16(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
     if crc:
         value ^= int(shift[n - 1, crc >> 8]) ^ int(shift[n - 2, crc & 0xFF])
     return value
+
+
+# crc16(data, crc=0): the CRC-16 of ``data`` continuing from register value ``crc`` (0 to start a packet)
+crc16 = _crc16_python if crcmod is None else crcmod.mkCrcFun(0x10000 | _POLY, initCrc=0, rev=False, xorOut=0)
 
 
 def crc16_after_itself(crc: int) -> int:
