@@ -72,6 +72,7 @@ from sim_devices.dynamixel_packet import (
     ALERT,
     BROADCAST_ID,
     ErrorCode,
+    FastStatus,
     Instruction,
     Packet,
     PacketReader,
@@ -197,6 +198,8 @@ class DynamixelChain(PtyDevice):
         self._by_id: dict[int, _Servo] = {}
         self._hearing_line: int | None = -1
         self._hearing_map: dict[int, _Servo] = {}
+        # (servo ids read, data length, line speed) -> (their rows, the reply's layout), see `_fast_answer`
+        self._fast_layouts: dict[tuple[bytes, int, int | None], tuple[np.ndarray, FastStatus] | None] = {}
         self._readdress()
         self._boot = np.full(len(ids), now)
         self._sign = np.ones(len(ids))
@@ -323,6 +326,7 @@ class DynamixelChain(PtyDevice):
         """Rebuild the id lookups after an id or baud-rate change."""
         self._by_id = {servo.id: servo for servo in self._servos}
         self._hearing_line = -1
+        self._fast_layouts.clear()
 
     def _hearing(self, line: int | None) -> dict[int, _Servo]:
         """Servos by id that can hear a host at line speed ``line`` (None: unknown, all)."""
@@ -505,8 +509,37 @@ class DynamixelChain(PtyDevice):
             return []
         address, length = _ADDRESS_LENGTH.unpack_from(packet.params)
         self._sync_plant(now, address, address + length)
+        fast = packet.instruction == Instruction.FAST_SYNC_READ
+        if fast:
+            entries = self._fast_answer(packet.params[4:], address, length, line)
+            if entries is not None:
+                return entries
         requests = [(dxl_id, address, length) for dxl_id in packet.params[4:]]
-        return self._answer_reads(requests, packet.instruction == Instruction.FAST_SYNC_READ, line)
+        return self._answer_reads(requests, fast, line)
+
+    def _fast_answer(self, ids: bytes, address: int, length: int, line: int | None) -> list[tuple[float, bytes]] | None:
+        """The Fast Sync Read's reply when every one of ``ids`` is a servo that hears ``line`` and answers
+        reads: what `_answer_reads` builds, from the table rows at once (a control loop's read, every
+        cycle). None otherwise (a sub-controller, a silent or deaf servo, a bad range): `_answer_reads` then."""
+        if not length or address + length > ct.TABLE_SIZE:
+            return None
+        key = (ids, length, line)
+        if key not in self._fast_layouts:
+            if len(self._fast_layouts) >= 16:  # bounded: a loop asks the same ids every cycle
+                self._fast_layouts.clear()
+            servos = [self._hearing(line).get(dxl_id) for dxl_id in ids]
+            self._fast_layouts[key] = None if None in servos else (
+                np.array([servo.index for servo in servos]), FastStatus(ids, length))
+        layout = self._fast_layouts[key]
+        if layout is None:
+            return None
+        rows, status = layout
+        tables = self._tables[rows]
+        if (tables[:, 68] < 1).any():  # a Status Return Level of 0 keeps that servo silent
+            return None
+        errors = np.where(tables[:, 70] != 0, ALERT, ErrorCode.NONE)  # the alert bit: Hardware Error Status
+        delay = float(tables[:, 9].sum()) * ct.RETURN_DELAY_UNIT  # each servo's Return Delay Time, one after another
+        return [(delay, status.encode(errors, tables[:, address: address + length]))]
 
     def _bulk_read(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
         params = packet.params

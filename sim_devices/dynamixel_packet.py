@@ -18,6 +18,8 @@ import enum
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+import numpy as np
+
 from livezmp.links.dynamixel_crc import MAX_PACKET, crc16, crc16_after_itself
 
 HEADER = b"\xff\xff\xfd\x00"
@@ -100,6 +102,36 @@ def encode_fast_status(segments: Iterable[tuple[int, int, bytes]]) -> bytes:
         out += segment
         out += tail
     return bytes(out)
+
+
+class FastStatus:
+    """`encode_fast_status` of servos ``ids`` (in order) reading ``length`` bytes each, laid out once: a
+    chain's answer to the Fast Sync Read a control loop sends every cycle. The errors and data go into
+    a numpy record view over the packet, then one CRC call a segment signs it (where building each
+    segment took a dozen Python operations a servo)."""
+
+    def __init__(self, ids: bytes, length: int) -> None:
+        step = length + 4  # error, id, data, CRC
+        size = 1 + len(ids) * step
+        self._buffer = bytearray(HEADER + bytes((BROADCAST_ID, size & 0xFF, size >> 8, STATUS)) + bytes(size - 1))
+        self._records = np.frombuffer(self._buffer, dtype=[("error", "u1"), ("id", "u1"), ("data", "u1", (length,)),
+                                                           ("crc", "<u2")], offset=8)
+        self._records["id"] = np.frombuffer(ids, dtype=np.uint8)
+        self._view = memoryview(self._buffer)
+        self._crc_at = [8 + k * step + 2 + length for k in range(len(ids))]  # where each segment's CRC goes
+
+    def encode(self, errors: np.ndarray, data: np.ndarray) -> bytes:
+        """The reply: each servo's error byte ``errors`` (n,) and ``data`` (n, length) uint8."""
+        self._records["error"] = errors
+        self._records["data"] = data
+        buffer, view = self._buffer, self._view
+        crc, start = 0, 0
+        for at in self._crc_at:  # the running CRC of every byte before it, the segments' CRCs included
+            crc = crc16(view[start:at], crc)
+            buffer[at] = crc & 0xFF
+            buffer[at + 1] = crc >> 8
+            start = at
+        return bytes(buffer)
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,6 +21,7 @@ from sim_support import short_gil_switch  # noqa: F401 - a fixture
 
 from livezmp.links.dynamixel_crc import _crc16_python, crc16_after_itself
 from sim_devices.dynamixel_chain import STALL_CURRENT, DynamixelChain
+from sim_devices.dynamixel_control_table import OVERLOAD_ERROR
 from sim_devices.dynamixel_packet import PacketReader, crc16, encode_fast_status, encode_packet, stuff, unstuff
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
@@ -339,6 +340,31 @@ def test_reader_resynchronises_after_garbage_and_drops_stale_partials():
     assert [p.id for p in reader.feed(ping, 1.1)] == [1]  # 100 ms of silence dropped the partial
     assert reader.feed(bytes(5000), 2.0) == []  # garbage is not kept
     assert len(reader._buffer) <= 3
+
+
+def test_fast_sync_read_reply_has_each_servo_s_segment_after_their_delays(bus):
+    """The chain answers a Fast Sync Read from its table rows at once: the same segments (the alert bit
+    of a servo with a hardware error included) and the same delays as servo by servo; a servo whose
+    Status Return Level is 0 is left out."""
+    ids, ticks = [3, 7, 4], [166, 2079, 1023]
+    chain, _ = bus(ids, ticks)
+    chain.set_register(7, "return_delay_time", 10)
+    chain.set_register(4, "return_delay_time", 3)
+    chain.trip(4, OVERLOAD_ERROR)
+    packet = encode_packet(0xFE, 0x8A, bytes((132, 0, 4, 0)) + bytes(ids))
+    segments = [(0, 3, (166).to_bytes(4, "little")), (0, 7, (2079).to_bytes(4, "little")),
+                (0x80, 4, (1023).to_bytes(4, "little"))]
+    byte = 10 / 1_000_000
+    adapter = chain.adapter.out_s + chain.adapter.in_s
+    for silent in (None, 7):
+        if silent is not None:
+            chain.set_register(silent, "status_return_level", 0)
+        [(due, reply)] = chain.on_bytes(packet, 100.0)
+        expected = encode_fast_status([s for s in segments if s[1] != silent])
+        assert reply == expected
+        delays = sum(2e-6 * chain.register(i, "return_delay_time") for i in ids if i != silent)
+        assert due == pytest.approx(100.0 + adapter + (len(packet) + len(expected)) * byte + delays, abs=1e-9)
+        chain._bus_free = -math.inf  # the next exchange starts on an idle bus
 
 
 def test_fast_status_has_running_crcs():
