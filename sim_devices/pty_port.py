@@ -255,6 +255,11 @@ class PtyPort:
                 self._queue(device.poll(now))
             return self._pending[0][0] if self._pending else math.inf
 
+    def _next_due(self) -> float:
+        """When the next queued reply is due (inf: none, or no pty to write it to)."""
+        with self._lock:
+            return self._pending[0][0] if self._pending and self._master >= 0 else math.inf
+
     def _flush_due(self) -> None:
         with self._lock:
             if self._master >= 0:
@@ -358,10 +363,20 @@ class PortServer:
                                            [fd for w in waits.values() for fd in w[1]], [], timeout)
             now = time.monotonic()
             replies = [self._step(port, port._serve_selected, readable, now) for port in waits]
-            _spin_to(min((r for r in replies if r is not None), default=math.inf), now,
-                     max(port._spin_s for port in waits))
-            for port in waits:
-                self._step(port, port._flush_due)
+            spin_s = max(port._spin_s for port in waits)
+            due = min((r for r in replies if r is not None), default=math.inf)
+            # each reply due within the spin time leaves when due, in this pass: a second bus's reply due just
+            # after the first's does not cost another round of select and device calls
+            while True:
+                _spin_to(due, now, spin_s)
+                for port in waits:
+                    self._step(port, port._flush_due)
+                if not spin_s:
+                    break
+                now = time.monotonic()
+                due = min((port._next_due() for port in waits if port.error is None), default=math.inf)
+                if due > now + spin_s:
+                    break
 
     def _step(self, port: PtyPort, step, *args):
         """``step(*args)`` of ``port``; a device's exception is kept in the port's ``error`` (re-raised by its

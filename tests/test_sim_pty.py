@@ -156,3 +156,43 @@ def test_ports_served_by_one_thread_work_as_ports_of_their_own():
             again.write(b"back")
             assert again.read(4) == b"BACK"
     assert wait_until(lambda: server.thread is None)  # no port left: the thread ended
+
+
+class DueAt(Echo):
+    """Answers at the absolute time ``due`` (monotonic s), whenever asked."""
+
+    def __init__(self, due: float) -> None:
+        super().__init__()
+        self.due = due
+
+    def on_bytes(self, data: bytes, now: float):
+        return [(self.due, data.upper())]
+
+
+class LoggedPort(PtyPort):
+    """A PtyPort that notes (when, due) for every reply it writes."""
+
+    written: list[tuple[float, float]]
+
+    def _flush(self, master: int, now: float) -> None:
+        t = time.monotonic()
+        self.written = getattr(self, "written", []) + [(t, due) for due, _, _ in self._pending if due <= now]
+        super()._flush(master, now)
+
+
+def test_replies_due_close_together_on_one_server_each_leave_at_their_time():
+    """Two spinning ports of one server with replies due 50 us apart (two buses' replies): each is written
+    once due, never before (the server spins from one to the next in one pass)."""
+    server = PortServer()
+    first, second = DueAt(math.inf), DueAt(math.inf)
+    with LoggedPort(first, name="ttyA", spin=True, server=server) as a, \
+            LoggedPort(second, name="ttyB", spin=True, server=server) as b, \
+            serial.Serial(a.path, 115200, timeout=1.0) as ca, serial.Serial(b.path, 115200, timeout=1.0) as cb:
+        first.due = time.monotonic() + 0.02
+        second.due = first.due + 5e-5
+        ca.write(b"a")
+        cb.write(b"b")
+        assert ca.read(1) == b"A" and cb.read(1) == b"B"
+        for port, device in ((a, first), (b, second)):
+            [(when, flushed)] = port.written
+            assert flushed == device.due and when >= device.due
