@@ -218,7 +218,17 @@ def test_histogram_quantiles_match_numpy_within_a_bin():
     for q in (0.01, 0.5, 0.9, 0.99):
         assert abs(h.quantile(q) - np.quantile(x, q)) <= h.bin_s
     assert h.mean == pytest.approx(x.mean())
-    assert h.max == x.max() and h.quantile(1.0) == x.max()
+    assert h.max == x.max() and h.quantile(1.0) == x.max() and h.min == x.min()
+
+
+def test_histogram_keeps_values_beyond_its_span_in_its_end_bins():
+    h = TimingHistogram(bin_s=1e-3, span_s=0.01)
+    for v in (-0.5, 0.0042, 7.0, 7.0):  # a negative duration counts as 0; longer than the span, in the last bin
+        h.add(v)
+    assert (h.min, h.max, h.count) == (-0.5, 7.0, 4) and h.mean == pytest.approx(13.5042 / 4)
+    assert h.counts[0] == 1 and h.counts[4] == 1 and h.counts[-1] == 2 and sum(h.counts) == 4
+    assert h.quantile(0.25) == 1e-3 and h.quantile(0.5) == 5e-3
+    assert h.quantile(1.0) == pytest.approx(0.011)  # the last bin's upper edge: beyond the span only "longer"
 
 
 # -- safety rules ---------------------------------------------------------------------------------------
