@@ -583,6 +583,17 @@ def test_a_step_on_the_plates_without_a_file_mass_weighs_the_subject(tmp_path, m
     assert analyse_lab_take(trial).summary["mass"]["source"] == "default"  # the 70 kg default without it
 
 
+def test_a_standing_span_is_an_unbroken_run_of_complete_frames():
+    """Two 1 s steps on the plates with a step off between them span 3 s but are not standing; a 2 s unbroken run
+    is, and only that run counts (its mean vertical force is the weight)."""
+    t = np.arange(0, 6, 0.01)
+    steps = ((t >= 0.5) & (t < 1.5)) | ((t >= 2.5) & (t < 3.5))
+    assert plates_mod.standing_span(t, steps) == []
+    stand = steps | ((t >= 4.0) & (t < 6.0))
+    (a, b), = plates_mod.standing_span(t, stand)
+    assert a == pytest.approx(4.0) and b == pytest.approx(5.99)
+
+
 def test_analyze_c3d_writes_cop_columns_and_validation(lab, tmp_path):
     d, _ = lab
     rc, s = _analyze(d / "on.c3d", tmp_path, "--plot", str(tmp_path / "zmp.png"))

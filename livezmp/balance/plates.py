@@ -218,10 +218,11 @@ def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray) -> tuple
 
 
 def standing_span(times: np.ndarray, complete: np.ndarray, min_s: float = STANDING_S) -> list[tuple[float, float]]:
-    """[(start, end)] s: the span from the first to the last complete frame when it lasts ``min_s`` or more (longer
-    than any walking stance: someone standing or swaying on the plates, whose mean vertical force over it is the
-    weight as over a gait cycle); [] otherwise."""
+    """[(start, end)] s: every run of complete frames without a break that lasts ``min_s`` or more (longer than any
+    walking stance: someone standing or swaying on the plates, whose mean vertical force over it is the weight as
+    over a gait cycle); [] when there is none. A break (a frame not complete: a foot off the plates) ends a run: two
+    steps on the plates with a step off between them are not standing."""
     idx = np.flatnonzero(complete)
-    if not len(idx) or times[idx[-1]] - times[idx[0]] < min_s:
-        return []
-    return [(float(times[idx[0]]), float(np.nextafter(times[idx[-1]], np.inf)))]
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if len(idx) else []
+    return [(float(times[r[0]]), float(np.nextafter(times[r[-1]], np.inf))) for r in runs
+            if times[r[-1]] - times[r[0]] >= min_s]
