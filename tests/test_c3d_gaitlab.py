@@ -444,6 +444,24 @@ def test_a_plate_pulling_down_is_set_aside(lab, tmp_path, monkeypatch):
     assert analyse_lab_take(read_c3d(path)).summary["cop_vs_zmp"]["max_mm"] > 10.0
 
 
+def test_a_plate_read_turned_round_puts_its_cop_off_the_foot_and_is_reported(lab, tmp_path):
+    """The left plate's corners numbered from the opposite corner (its axes read turned by 180 degrees, a classic
+    set-up error): its CoP lands off the left foot standing on it, every frame, and the summary says so; read
+    right, it lies under the foot every frame. (The right plate carries the synthetic remainder, no foot's CoP.)"""
+    d, _ = lab
+    c3d = ezc3d.c3d(str(d / "on.c3d"))
+    corners = np.array(c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"])
+    corners[:, :, 0] = np.roll(corners[:, :, 0], 2, axis=1)
+    c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"] = corners
+    c3d.write(str(tmp_path / "turned.c3d"))
+    right = analyse_lab_take(read_c3d(d / "on.c3d")).summary["cop_under_foot"]
+    turned = analyse_lab_take(read_c3d(tmp_path / "turned.c3d")).summary["cop_under_foot"]
+    assert right["plates"][0]["plate"] == 1 and right["plates"][0]["frames"] > 300
+    assert right["plates"][0]["on_foot"] == 1.0 and not any(w.startswith("plate 1:") for w in right["warnings"])
+    assert turned["plates"][0]["on_foot"] == 0.0 and turned["plates"][0]["off_p95_mm"] > 40
+    assert any(w.startswith("plate 1: its CoP lies off the foot") for w in turned["warnings"])
+
+
 def test_trunk_markers_alone_track_the_thorax(tmp_path):
     """A lower-body set with the trunk's four markers (C7 T10 CLAV STRN) but no head or arm markers: the
     thorax is a segment of its own, head and arms ride on it (no placed HAT), and the ZMP matches the plates

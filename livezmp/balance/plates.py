@@ -47,6 +47,10 @@ class PlateFrames:
     offsets: list[tuple[np.ndarray, np.ndarray] | None]
     surface_z: float
     set_aside: list[dict] = field(default_factory=list)  # {plate (1-based), min_fz_n}: not used, see PULL_N
+    # each plate used (the order of ``outlines``): its number (1-based) and its own CoP (F, 3) m, NaN below min_fz
+    used: list[int] = field(default_factory=list)
+    plate_cop: list[np.ndarray] = field(default_factory=list)
+    plate_fz: list[np.ndarray] = field(default_factory=list)  # (F,) N, each plate used
 
 
 def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None:
@@ -113,7 +117,7 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
     r = world_from_input
     force = np.zeros((len(plates[0].force) if plates else 0, 3))
     moment = np.zeros_like(force)
-    offsets, outlines, aside = [], [], []
+    offsets, outlines, aside, used, own = [], [], [], [], []
     for k, p in enumerate(plates):
         off = unloaded_offset(p, analog_rate, r[2])
         offsets.append(off)
@@ -128,34 +132,53 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
         force += f
         moment += mom + np.cross(c, f)  # about the world origin
         outlines.append(p.corners @ r.T)
+        used.append(k + 1)
+        own.append(np.hstack([f, mom + np.cross(c, f)]))
     surface = float(np.mean([(p.corners @ r.T)[:, 2].mean() for p in plates])) if plates else 0.0
-    wrench = lowpass(np.hstack([force, moment]), analog_rate, cutoff_hz)
     t = (np.asarray(frames, dtype=float) / rate + shift_s) * analog_rate
-    idx = np.clip(t, 0, len(wrench) - 1)
-    lo = np.floor(idx).astype(int)
-    hi = np.minimum(lo + 1, len(wrench) - 1)
-    w = (idx - lo)[:, None]
-    at = wrench[lo] * (1 - w) + wrench[hi] * w
-    fr, mo = at[:, :3], at[:, 3:]
-    cop = np.full_like(fr, np.nan)
-    ok = fr[:, 2] > min_fz
-    cop[ok, 0] = (surface * fr[ok, 0] - mo[ok, 1]) / fr[ok, 2]
-    cop[ok, 1] = (mo[ok, 0] + surface * fr[ok, 1]) / fr[ok, 2]
+
+    def at_frames(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Wrench (S, 6) low-passed, at the marker frames: force (F, 3), moment (F, 3)."""
+        w = lowpass(w, analog_rate, cutoff_hz)
+        idx = np.clip(t, 0, len(w) - 1)
+        lo = np.floor(idx).astype(int)
+        hi = np.minimum(lo + 1, len(w) - 1)
+        frac = (idx - lo)[:, None]
+        at = w[lo] * (1 - frac) + w[hi] * frac
+        return at[:, :3], at[:, 3:]
+
+    fr, mo = at_frames(np.hstack([force, moment]))
+    each = [at_frames(w) for w in own]
+    return PlateFrames(fr, mo, _cop(fr, mo, surface, min_fz), outlines, offsets, surface, aside, used,
+                       [_cop(f, m, surface, min_fz) for f, m in each], [f[:, 2] for f, _ in each])
+
+
+def _cop(force: np.ndarray, moment: np.ndarray, surface: float, min_fz: float) -> np.ndarray:
+    """(F, 3) m: where ``force`` (F, 3) N with ``moment`` (F, 3) N·m about the world origin meets the plane at height
+    ``surface``; NaN where the vertical force is at most ``min_fz`` N."""
+    cop = np.full_like(force, np.nan)
+    ok = force[:, 2] > min_fz
+    cop[ok, 0] = (surface * force[ok, 0] - moment[ok, 1]) / force[ok, 2]
+    cop[ok, 1] = (moment[ok, 0] + surface * force[ok, 1]) / force[ok, 2]
     cop[ok, 2] = surface
-    return PlateFrames(fr, mo, cop, outlines, offsets, surface, aside)
+    return cop
+
+
+def _outside(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """(...,) m: how far horizontal ``points`` (..., 3) lie outside the convex ``outline`` (k, 3), or each outside
+    its own (..., k, 3): the largest signed distance to the outline's edge lines (negative inside; off a corner, a
+    lower bound of the distance)."""
+    a = outline[..., :2]
+    e = np.roll(a, -1, axis=-2) - a
+    n = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
+    inward = np.sum((a.mean(axis=-2, keepdims=True) - a) * n, axis=-1, keepdims=True) > 0
+    n = np.where(inward, -n, n)  # outward normals
+    return np.max(np.sum((points[..., None, :2] - a) * n, axis=-1), axis=-1)
 
 
 def _inside(points: np.ndarray, outline: np.ndarray, margin: float) -> np.ndarray:
     """(..., ) whether horizontal ``points`` (..., 3) lie in the convex ``outline`` (4, 3) grown by ``margin``."""
-    c = outline[:, :2].mean(axis=0)
-    ok = np.ones(points.shape[:-1], dtype=bool)
-    for a, b in zip(outline, np.roll(outline, -1, axis=0), strict=True):
-        e = b[:2] - a[:2]
-        n = np.array([e[1], -e[0]]) / np.hypot(*e)
-        if np.dot(c - a[:2], n) > 0:
-            n = -n  # outward normal
-        ok &= (points[..., :2] - a[:2]) @ n <= margin
-    return ok
+    return _outside(points, outline) <= margin
 
 
 def complete_frames(soles: dict[str, np.ndarray], in_contact: dict[str, np.ndarray], outlines: list[np.ndarray],
@@ -172,6 +195,32 @@ def complete_frames(soles: dict[str, np.ndarray], in_contact: dict[str, np.ndarr
         complete &= ~in_contact[side] | on.all(axis=1)
         any_contact |= in_contact[side]
     return complete & any_contact
+
+
+def cop_on_feet(plates: PlateFrames, soles: dict[str, np.ndarray], in_contact: dict[str, np.ndarray],
+                min_fz: float, margin: float = CONTACT_MARGIN_M) -> list[dict]:
+    """A check of each plate's reading that does not need the ZMP: a plate's own CoP lies under the foot standing on
+    it. Per plate used, over the frames where one foot in contact (``in_contact`` {side: (F,)}) has all its sole
+    corners (``soles`` {side: (F, k, 3)} m) on it, no other foot in contact touches it and it carries more than
+    ``min_fz`` N: ``{plate (1-based), frames, on_foot}``, the part of those frames whose plate CoP lies in that sole
+    grown by ``margin``, and ``off_p95_mm``, the 95th percentile of how far it lies outside the sole (0 inside). A
+    plate read with wrong corners, ORIGIN, axes or channels puts its CoP off the foot."""
+    out = []
+    for n, outline, cop, fz in zip(plates.used, plates.outlines, plates.plate_cop, plates.plate_fz, strict=True):
+        on = {s: _inside(sole, outline, margin).all(axis=1) & in_contact[s] for s, sole in soles.items()}
+        touch = {s: _inside(sole, outline, margin).any(axis=1) & in_contact[s] for s, sole in soles.items()}
+        off = np.zeros(len(fz))
+        rows = np.zeros(len(fz), dtype=bool)
+        for s in soles:
+            alone = on[s] & (fz > min_fz) & np.isfinite(cop).all(axis=1)
+            for other in soles:
+                alone &= (other == s) | ~touch[other]
+            rows |= alone
+            off[alone] = np.maximum(_outside(cop[alone], soles[s][alone]), 0.0)
+        if rows.any():
+            out.append({"plate": n, "frames": int(rows.sum()), "on_foot": round(float(np.mean(off[rows] <= margin)), 3),
+                        "off_p95_mm": round(1000 * float(np.percentile(off[rows], 95)), 1)})
+    return out
 
 
 def gait_cycles(strikes: dict[str, list[float]]) -> list[tuple[float, float]]:

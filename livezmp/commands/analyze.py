@@ -95,6 +95,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             print(f"  mass: {summary['mass']['note']}")
         if "no_complete_frame" in (summary.get("plates") or {}):
             print(f"  no ZMP vs plate CoP: {summary['plates']['no_complete_frame']}")
+        for w in (summary.get("cop_under_foot") or {}).get("warnings", []):
+            print(f"  {w}")
         for p in (summary.get("plates") or {}).get("set_aside", []):
             print(f"  plate {p['plate']} set aside: its vertical force reaches {p['min_fz_n']:.0f} N (a plate cannot "
                   "pull; drifting or faulty)")

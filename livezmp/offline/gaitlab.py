@@ -20,9 +20,11 @@ import pinocchio as pin
 
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.balance.plates import (
+    STANCE_MIN_FRAMES,
     G,
     PlateFrames,
     complete_frames,
+    cop_on_feet,
     gait_cycles,
     lowpass,
     plate_frames,
@@ -53,6 +55,11 @@ LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4, "cutoff_hz": 6.0}
 # this part of the estimator's cutoff (whole takes; docs/validation.md, "The lateral band").
 LATERAL_CUTOFF_FRACTION = 0.5
 FORCE_SEEN = 0.75  # complete frames: the plates carry at least this part of m (g + CoM vertical acceleration)
+# The CoP-under-the-foot check: a plate's CoP is its moment over its force, so a moment error of 1 N·m (offsets,
+# cross-talk) moves it 6 mm at a quarter of a 70 kg subject's weight, and further below; frames where a plate carries
+# less are left out. A plate whose CoP lies off the foot on it in more than half of its frames is reported.
+COP_CHECK_WEIGHT = 0.25
+COP_OFF_FOOT = 0.5
 
 
 @dataclass
@@ -188,6 +195,19 @@ def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: Pipe
     return complete, feet_on, why
 
 
+def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, floor: float, mass: float) -> dict:
+    """Each plate's CoP against the foot standing on it (:func:`livezmp.balance.plates.cop_on_feet`, over frames
+    where the plate carries ``COP_CHECK_WEIGHT`` of the weight or more) and a warning per plate whose CoP lies off
+    the foot in more than ``COP_OFF_FOOT`` of them (``STANCE_MIN_FRAMES`` or more)."""
+    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
+    per_plate = cop_on_feet(plates, result.soles, contact, COP_CHECK_WEIGHT * mass * G)
+    warnings = [f"plate {p['plate']}: its CoP lies off the foot standing on it in {100 * (1 - p['on_foot']):.0f} % "
+                f"of {p['frames']} frames ({p['off_p95_mm']:.0f} mm off at the 95th percentile): its corners, ORIGIN, "
+                "axes or channels may be wrong" for p in per_plate
+                if 1 - p["on_foot"] > COP_OFF_FOOT and p["frames"] >= STANCE_MIN_FRAMES]
+    return {"plates": per_plate, "warnings": warnings}
+
+
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
                  m_standing: float | None = None, stance: tuple[float | None, float | None] = (None, None)) -> dict:
     m_stance, spread = stance
@@ -275,6 +295,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
                                  facing(take)),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
+        "cop_under_foot": _cop_under_foot(trial, result, plates, floor, used),
         "lateral_band_hz": lateral_band_hz(opts, take, cfg),
     }
     return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)
