@@ -44,7 +44,7 @@ from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, input_rotation, sway_basis
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
-from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, may_bear_weight
+from livezmp.offline.gaitlab import COP_CHECK_WEIGHT, LabOptions, analyse_lab_take, facing, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
 from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
 
@@ -346,6 +346,44 @@ def foot_frame(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " | ".join(cells))
 
 
+def plate_check(done: dict[str, tuple]) -> None:
+    """Each plate read on its own, independent of the ZMP: `livezmp analyze`'s check that its CoP lies under the foot
+    standing on it (summary cop_under_foot), and how far that CoP travels along the walk while the plate carries a
+    quarter of the weight or more (a stance rolls it 15-25 cm from heel to toe; a plate whose moments are not read
+    keeps it near its centre)."""
+    print("\nplates read alone: CoP under the foot on it (frames, % on the foot, p95 mm off); CoP travel along the "
+          "walk p5..p95 mm")
+    for name, (_, a) in done.items():
+        p = a.plates
+        fwd, _ = walking_axes(a.result.com, facing(a.take))
+        checks = {c["plate"]: c for c in a.summary["cop_under_foot"]["plates"]}
+        cells = []
+        for n, cop, fz in zip(p.used, p.plate_cop, p.plate_fz, strict=True):
+            rows = (fz > COP_CHECK_WEIGHT * a.summary["mass"]["used_kg"] * G) & np.isfinite(cop).all(axis=1)
+            if not rows.any():
+                continue
+            along = 1000 * cop[rows, :2] @ fwd[:2]
+            c = checks.get(n)
+            check = f"{c['frames']:3d} fr {100 * c['on_foot']:3.0f} % {c['off_p95_mm']:3.0f}" if c else f"{'-':>17s}"
+            cells.append(f"p{n} {check}, travel {np.percentile(along, 95) - np.percentile(along, 5):3.0f}")
+        print(f"{name[:34]:34s} " + " | ".join(cells))
+
+
+def cutoff_sweep(done: dict[str, tuple]) -> None:
+    """`livezmp analyze` defaults on every trial but the estimator's cutoff (the plates low-passed with it)."""
+    cutoffs = (4.0, 5.0, 6.0, 8.0)
+    print("\nZMP vs CoP RMS (mm) by the estimator's cutoff, every trial (6 Hz: the default)")
+    print(f"{'trial':34s} {'rate':>5s} " + " ".join(f"{c:5.0f} Hz" for c in cutoffs))
+    table = []
+    for name, (trial, a) in done.items():
+        cvs = [a.summary["cop_vs_zmp"] if c == a.config.estimator.cutoff_hz else
+               analyse_lab_take(trial, LabOptions(estimator={"cutoff_hz": c})).summary["cop_vs_zmp"] for c in cutoffs]
+        rms = [np.nan if cv["rms_mm"] is None else cv["rms_mm"] for cv in cvs]  # None: no complete frame
+        table.append(rms)
+        print(f"{name[:34]:34s} {trial.rate:5.0f} " + " ".join(f"{x:8.1f}" for x in rms))
+    print(f"{'median':40s} " + " ".join(f"{x:8.1f}" for x in np.nanmedian(table, axis=0)))
+
+
 def _rms_by_shift(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """RMS (mm) of a(t + shift frames) - b(t) over ``rows``, per shift."""
     idx = np.flatnonzero(rows)
@@ -578,6 +616,9 @@ def main() -> None:
     error_sources(done)
     lateral_sources(done)
     foot_frame(done)
+    plate_check(done)
+    if args.more:
+        cutoff_sweep(done)
     lag_conditioning(done, args.figures)
     calibration_table(done)
     calibration_across_trials(done)

@@ -601,15 +601,27 @@ def test_a_step_on_the_plates_without_a_file_mass_weighs_the_subject(tmp_path, m
     assert analyse_lab_take(trial).summary["mass"]["source"] == "default"  # the 70 kg default without it
 
 
+def test_a_standing_take_without_a_file_mass_is_weighed_over_its_standing_span(tmp_path):
+    """The synthetic subject stands 4 s on the plates, no mass in the file, no foot strike: the plates' mean vertical
+    force over the unbroken complete frames is the weight (75 kg true)."""
+    path = tmp_path / "stand.c3d"
+    write_lab_c3d(path, PLATES, lab=Lab(mass=False))
+    m = analyse_lab_take(read_c3d(path)).summary["mass"]
+    assert m["source"] == "plates (standing)" and m["used_kg"] == pytest.approx(MASS, rel=0.005)
+
+
 def test_a_standing_span_is_an_unbroken_run_of_complete_frames():
     """Two 1 s steps on the plates with a step off between them span 3 s but are not standing; a 2 s unbroken run
-    is, and only that run counts (its mean vertical force is the weight)."""
+    is, and only that run counts (its mean vertical force is the weight), unless a foot strikes inside it."""
     t = np.arange(0, 6, 0.01)
     steps = ((t >= 0.5) & (t < 1.5)) | ((t >= 2.5) & (t < 3.5))
     assert plates_mod.standing_span(t, steps) == []
     stand = steps | ((t >= 4.0) & (t < 6.0))
     (a, b), = plates_mod.standing_span(t, stand)
     assert a == pytest.approx(4.0) and b == pytest.approx(5.99)
+    # a walk over adjoining plates: unbroken, but a foot strikes inside it
+    assert plates_mod.standing_span(t, stand, [0.5, 2.5, 4.0, 4.8]) == []
+    assert plates_mod.standing_span(t, stand, [0.5, 2.5, 4.0]) == [(a, b)]  # stepping on, then standing
 
 
 def test_analyze_c3d_writes_cop_columns_and_validation(lab, tmp_path):

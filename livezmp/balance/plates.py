@@ -266,12 +266,15 @@ def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray) -> tuple
     return (float(med) if spread <= STANCE_MAX_SPREAD else None), spread
 
 
-def standing_span(times: np.ndarray, complete: np.ndarray, min_s: float = STANDING_S) -> list[tuple[float, float]]:
+def standing_span(times: np.ndarray, complete: np.ndarray, strikes: list[float] = (),
+                  min_s: float = STANDING_S) -> list[tuple[float, float]]:
     """[(start, end)] s: every run of complete frames without a break that lasts ``min_s`` or more (longer than any
     walking stance: someone standing or swaying on the plates, whose mean vertical force over it is the weight as
-    over a gait cycle); [] when there is none. A break (a frame not complete: a foot off the plates) ends a run: two
-    steps on the plates with a step off between them are not standing."""
+    over a gait cycle) and has no foot strike (``strikes``, s) inside it; [] when there is none. A break (a frame not
+    complete: a foot off the plates) ends a run: two steps on the plates with a step off between them are not
+    standing; nor is a walk over adjoining plates, which strikes them (its mean force is not the weight)."""
     idx = np.flatnonzero(complete)
     runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if len(idx) else []
-    return [(float(times[r[0]]), float(np.nextafter(times[r[-1]], np.inf))) for r in runs
-            if times[r[-1]] - times[r[0]] >= min_s]
+    spans = [(float(times[r[0]]), float(np.nextafter(times[r[-1]], np.inf))) for r in runs
+             if times[r[-1]] - times[r[0]] >= min_s]
+    return [(a, b) for a, b in spans if not any(a < t < b for t in strikes)]

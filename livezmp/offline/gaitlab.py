@@ -3,10 +3,10 @@ the plates at the marker frames, the frames they saw whole, and the comparison.
 
 Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
 they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
-else the plates' mean vertical force ÷ g over a standing take (complete frames, 95 % of them, over at
-least ``STANDING_S``); else the plates' over the frames where every loaded foot is on one, F_z / (g + a_z)
-with the kinematics' vertical CoM acceleration (:func:`livezmp.balance.plates.stance_mass`: a trial with a
-step or two on the plates and no mass in the file); else 70 kg. The ZMP does not depend on the total mass
+else the plates' mean vertical force ÷ g over a standing take (complete frames without a break or a foot
+strike, over at least ``STANDING_S``); else the plates' over the frames where every loaded foot is on one,
+F_z / (g + a_z) with the kinematics' vertical CoM acceleration (:func:`livezmp.balance.plates.stance_mass`: a
+trial with a step or two on the plates and no mass in the file); else 70 kg. The ZMP does not depend on the total mass
 (every segment scales with it); the flight threshold, the complete frames and the plate-side CoM acceleration
 (so the measured plate delay) do.
 """
@@ -260,8 +260,10 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     shift = opts.plate_delay_s or 0.0
     plates = _plates(trial, take, times, cutoff, shift)
     complete, feet_on, why = _complete(trial, result, times, cfg, floor, plates, com_acc, first)
-    m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(_strikes(trial, result)))
-    m_standing, _ = plate_mass(plates.force[:, 2], times, complete, standing_span(times, complete))
+    strikes = _strikes(trial, result)
+    m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(strikes))
+    m_standing, _ = plate_mass(plates.force[:, 2], times, complete,
+                               standing_span(times, complete, [t for s in strikes.values() for t in s]))
     mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing,
                              stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on))
     used = mass_info["used_kg"]
