@@ -40,7 +40,8 @@ from machine_load import load_averages
 
 from livezmp.balance.plates import G, lowpass
 from livezmp.errors import InputError
-from livezmp.estimate.estimator import EstimatorConfig, estimate_offline
+from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.estimate.response import acceleration_response
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, input_rotation, sway_basis
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
@@ -124,15 +125,9 @@ def trial_table(path: Path) -> list[dict]:
 
 def estimator_response(rate: float, freq: float, window: float, lag: float, cutoff: float) -> tuple[float, float]:
     """Gain and delay (ms) of the estimator's acceleration of a unit sinusoid at ``freq`` Hz."""
-    t = np.arange(int(8 * rate)) / rate
-    x = np.sin(2 * np.pi * freq * t)[:, None]
-    _, _, qdd = estimate_offline(t, x, None, EstimatorConfig(rate_hz=rate, cutoff_hz=cutoff, window_s=window,
-                                                             lag_s=lag))
-    true = -((2 * np.pi * freq) ** 2) * x[:, 0]
-    sel = (t > 2) & (t < 6)
-    c = np.exp(-2j * np.pi * freq * t[sel])
-    ratio = (qdd[sel, 0] @ c) / (true[sel] @ c)
-    return abs(ratio), -np.angle(ratio) / (2 * np.pi * freq) * 1000
+    gain, delay = acceleration_response(EstimatorConfig(rate_hz=rate, cutoff_hz=cutoff, window_s=window, lag_s=lag),
+                                        freq)
+    return gain, 1000 * delay
 
 
 def extra_paths(args: list[str]) -> list[Path]:

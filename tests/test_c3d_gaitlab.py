@@ -21,6 +21,8 @@ from livezmp.balance import plates as plates_mod
 from livezmp.balance.plates import unloaded_offset
 from livezmp.cli import main
 from livezmp.errors import InputError
+from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.estimate.response import acceleration_response
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_table
@@ -599,6 +601,24 @@ def test_a_step_on_the_plates_without_a_file_mass_weighs_the_subject(tmp_path, m
     assert m["stance_spread"] < 0.05
     monkeypatch.setattr(gaitlab, "stance_mass", lambda *a: (None, None))
     assert analyse_lab_take(trial).summary["mass"]["source"] == "default"  # the 70 kg default without it
+
+
+def test_the_plates_get_the_estimators_band():
+    """Both sides of ZMP vs CoP must keep the same part of each frequency: the plates' low-pass at
+    ``plates_band_hz`` keeps what the lab estimator keeps of an acceleration (measured on sinusoids through it) within
+    0.01 from 1 to 4 Hz, at 60 and 120 Hz; the low-pass at the estimator's own cutoff (before) kept 0.84 of 4 Hz
+    where the estimator keeps 0.70."""
+    for rate in (60.0, 120.0):
+        est = EstimatorConfig(rate_hz=rate, **gaitlab.LAB_ESTIMATOR)
+        band = gaitlab.plates_band_hz(est)
+        t = np.arange(int(8 * rate)) / rate
+        for f in (1.0, 2.0, 3.0, 4.0):
+            x = np.sin(2 * np.pi * f * t)
+            mid = slice(len(t) // 4, 3 * len(t) // 4)  # clear of the filter's ends
+            kept = np.std(plates_mod.lowpass(x, rate, band)[mid]) / np.std(x[mid])
+            assert kept == pytest.approx(acceleration_response(est, f)[0], abs=0.01)
+        old = np.std(plates_mod.lowpass(x, rate, est.cutoff_hz)[mid]) / np.std(x[mid])
+        assert old - acceleration_response(est, 4.0)[0] > 0.1
 
 
 def test_a_standing_take_without_a_file_mass_is_weighed_over_its_standing_span(tmp_path):

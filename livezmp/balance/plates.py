@@ -104,6 +104,12 @@ def lowpass(x: np.ndarray, rate: float, cutoff_hz: float | None) -> np.ndarray:
     return sosfiltfilt(sos, x, axis=0)
 
 
+def cutoff_for_gain(freq_hz: float, gain: float) -> float:
+    """The cutoff (Hz) at which :func:`lowpass` (|H(f)| = 1 / (1 + (f / cutoff)^4)) keeps ``gain`` (0-1) of a
+    sinusoid of ``freq_hz`` Hz."""
+    return freq_hz / (1.0 / gain - 1.0) ** 0.25
+
+
 def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, frames: np.ndarray,
                  world_from_input: np.ndarray, cutoff_hz: float | None, min_fz: float = 20.0,
                  shift_s: float = 0.0) -> PlateFrames:

@@ -25,6 +25,7 @@ from livezmp.balance.plates import (
     PlateFrames,
     complete_frames,
     cop_on_feet,
+    cutoff_for_gain,
     gait_cycles,
     lowpass,
     plate_frames,
@@ -34,6 +35,8 @@ from livezmp.balance.plates import (
     standing_span,
 )
 from livezmp.balance.support import SUPPORT_LABELS
+from livezmp.estimate.estimator import EstimatorConfig
+from livezmp.estimate.response import acceleration_response
 from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers, sway_basis
@@ -54,6 +57,9 @@ LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4, "cutoff_hz": 6.0}
 # harmonics of the lateral motion lie below half the frequency. The segments' lateral positions are low-passed at
 # this part of the estimator's cutoff (whole takes; docs/validation.md, "The lateral band").
 LATERAL_CUTOFF_FRACTION = 0.5
+# The plates are matched to the estimator's acceleration gain at this part of its cutoff: the estimator's response
+# falls off faster than the plates' 4th-order low-pass, so they can agree over the band below it, not everywhere
+PLATE_BAND_MATCH = 2 / 3
 FORCE_SEEN = 0.75  # complete frames: the plates carry at least this part of m (g + CoM vertical acceleration)
 # The CoP-under-the-foot check: a plate's CoP is its moment over its force, so a moment error of 1 N·m (offsets,
 # cross-talk) moves it 6 mm at a quarter of a 70 kg subject's weight, and further below; frames where a plate carries
@@ -79,7 +85,7 @@ class LabAnalysis:
 @dataclass(frozen=True)
 class LabOptions:
     """``mass`` kg (None: decide, see module docstring); ``mode`` ZMP mode; ``plate_cutoff_hz``: the
-    plates' zero-phase low-pass (None: the estimator's cutoff, so both sides see the same band);
+    plates' zero-phase low-pass (None: :func:`plates_band_hz`, so both sides see the same band);
     ``plate_delay_s``: the plates' delay behind the markers (s; they are sampled that much later), None =
     measured from the CoM acceleration and applied when at least half a frame; ``markers``: body options
     (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults);
@@ -120,6 +126,16 @@ def _run(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
     frames = take.frames if band is None else lateral_band(take.frames, trial.rate, band, facing(take))
     result = run_batch(Pipeline(take.body, cfg, nominal_dt=1.0 / trial.rate), times, frames, keep_states=True)
     return take, times, cfg, result
+
+
+def plates_band_hz(estimator: EstimatorConfig) -> float:
+    """The plates' low-pass cutoff (Hz) that gives them the estimator's band: :func:`livezmp.balance.plates.lowpass`
+    keeps there what the estimator keeps of an acceleration at ``PLATE_BAND_MATCH`` of its cutoff. The lab estimator
+    at 6 Hz: 4.93 Hz, whose gain is the estimator's within 0.01 from 1 to 4 Hz, where a walk's CoM acceleration lies
+    (at the estimator's own cutoff the plates kept 0.84 of a 4 Hz acceleration, the markers 0.70; docs/validation.md).
+    """
+    f = PLATE_BAND_MATCH * estimator.cutoff_hz
+    return cutoff_for_gain(f, acceleration_response(estimator, f)[0])
 
 
 def lateral_band_hz(opts: LabOptions, take: MarkerTake, cfg: PipelineConfig) -> float | None:
@@ -255,7 +271,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
                            {"input": _input(trial, take), "markers": take.notes, "mass": mass_info, "plates": None,
                             "lateral_band_hz": lateral_band_hz(opts, take, cfg)})
-    cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else cfg.estimator.cutoff_hz
+    cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else plates_band_hz(cfg.estimator)
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
     plates = _plates(trial, take, times, cutoff, shift)
