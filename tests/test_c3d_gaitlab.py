@@ -668,8 +668,9 @@ def test_real_plugin_gait_walk(tmp_path):
     assert 20 < s["time_alignment"]["plate_delay_measured_ms"] < 30
     cv = s["cop_vs_zmp"]
     # the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip (measured on other trials): 50.8 -> 38.9 mm; knee
-    # centres without the THI wands: 36.7 mm, lag -8.5 -> -3.3 ms; the lateral band (3 Hz): 33.4 mm
-    assert cv["frames"] >= 130 and cv["rms_mm"] < 35 and cv["p95_mm"] < P95_WALK_MM
+    # centres without the THI wands: 36.7 mm, lag -8.5 -> -3.3 ms; the lateral band (3 Hz): 33.4 mm; the plates at the
+    # estimator's band: 32.0 mm (33.4 with the plates at the estimator's cutoff)
+    assert cv["frames"] >= 130 and cv["rms_mm"] < 33 and cv["p95_mm"] < P95_WALK_MM
     assert abs(cv["lag_ms"]) < 6 and abs(cv["bias_mm"][0]) < 5
     assert s["lateral_band_hz"] == 3.0
     acc = s["com_acc_vs_plates"]
@@ -678,7 +679,8 @@ def test_real_plugin_gait_walk(tmp_path):
     unswayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None)))
     assert unswayed.summary["cop_vs_zmp"]["rms_mm"] > 42  # the HAT moving with the mid-hip, as before (45.1)
     unbanded = analyse_lab_take(trial, LabOptions(lateral_cutoff_fraction=None))
-    assert unbanded.summary["cop_vs_zmp"]["rms_mm"] > 36  # lateral positions at the estimator's 6 Hz (36.7)
+    # lateral positions at the estimator's 6 Hz: 35.6 mm against the band's 32.0 (36.7 / 33.4, plates at 6 Hz)
+    assert unbanded.summary["cop_vs_zmp"]["rms_mm"] > cv["rms_mm"] + 2
 
 
 def test_real_cgm24_walk(tmp_path):
@@ -822,8 +824,8 @@ def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, mon
 
 def test_real_walk_calibrated_and_held_out():
     """The Plug-in Gait walk, cross-validated on every other 0.2 s block of its complete frames: the whole trial's fit
-    (prior weight 10) takes the ZMP error from 33.0 (the table) to 30.0 mm in-sample, but within either fold no
-    weight beats the table both ways round, so held out the calibration is the table: 33.0 mm, never worse. Its
+    (prior weight 10) takes the ZMP error from 31.6 (the table) to 28.1 mm in-sample, but within either fold no
+    weight beats the table both ways round, so held out the calibration is the table: 31.6 mm, never worse. Its
     parameters' jackknife standard errors are a small part of the table's assumed between-subject spread; its
     trunk sways less than its mid-hip."""
     subject, report = calibration.calibrate([read_c3d(C3D / "walk_plugingait_forceplates.c3d")])
@@ -831,8 +833,8 @@ def test_real_walk_calibrated_and_held_out():
     assert report["rms_held_out_fitted_mm"] == pytest.approx(report["rms_held_out_table_mm"], abs=0.01)
     assert report["held_out_prior_weights"] == [None, None] and not report["table_kept"]
     assert report["rms_fitted_mm"] < report["rms_table_mm"] - 2.5
-    # even unconstrained and scored on the frames it is fitted on, no HAT reaches the 25 mm target here (26.5 mm)
-    assert 25 < report["rms_fitted_unconstrained_mm"] < report["rms_fitted_mm"]
+    # unconstrained and scored on the frames it is fitted on, 24.5 mm (26.5 with the plates at the estimator's cutoff)
+    assert report["rms_fitted_unconstrained_mm"] < report["rms_fitted_mm"]
     assert np.all(np.array(report["parameter_sd"]) < calibration.PRIOR_SD / 4)
     assert subject.hat_sway_gain[0] < 0.8 and subject.hat_sway_gain[1] < 0.9
 
@@ -841,8 +843,8 @@ def test_calibration_rejects_a_fit_that_chases_one_folds_noise(monkeypatch):
     """cgm24 has one stance on its plate. Fitted on one fold of its 0.2 s blocks (prior weight 10), the HAT scores
     51.2 mm on the other against the table's 51.3; fitted on that other fold, it scores 37 mm on the first against
     the table's 20: it chased the second fold's noise. A weight must beat the table both ways round, none does, so
-    calibrate keeps the table and says so; held out it is the table's 39.6 mm. With the prior weight fixed instead
-    (no cross-validation), held out it is 51 mm, 12 mm worse than the table."""
+    calibrate keeps the table and says so; held out it is the table's 39.4 mm. With the prior weight fixed instead
+    (no cross-validation), held out it is 49.4 mm, 10 mm worse than the table."""
     trial = read_c3d(C3D / "cgm24_walking01_forceplate.c3d")
     subject, report = calibration.calibrate([trial])
     assert report["table_kept"] and report["prior_weight"] is None
@@ -862,7 +864,7 @@ def test_calibration_rejects_a_fit_that_chases_one_folds_noise(monkeypatch):
     assert ab < calibration._rms_mm(prior, held_a) and ba > calibration._rms_mm(prior, held_b) + 10
     monkeypatch.setattr(calibration, "_cross_validated", lambda terms, prior, free, block_s: (1.0, []))
     _, fixed = calibration.calibrate([trial])
-    assert fixed["rms_held_out_fitted_mm"] > fixed["rms_held_out_table_mm"] + 10.0
+    assert fixed["rms_held_out_fitted_mm"] > fixed["rms_held_out_table_mm"] + 8.0
 
 
 def test_calibration_refuses_plates_against_the_motion(lab):
