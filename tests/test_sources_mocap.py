@@ -338,6 +338,8 @@ def test_qtm_skeleton_segments_nested_untracked_and_unknown():
     ("qtm://", "need a host"),
     ("qtm://127.0.0.1:1?rate=3", "unknown parameter 'rate'"),
     ("lsl://x?timeout=soon", "timeout: need seconds"),
+    ("lsl://x?align=-1", "align: need frame periods"),
+    ("lsl://x?align=soon", "align: need frame periods"),
     ("lsl://no-such-stream-livezmp?timeout=0.2", "no LSL stream with name"),
     ("natnet://127.0.0.1?data_port=abc", "data_port: need a port number"),
     ("natnet://127.0.0.1?up=w", "up axis 'w'"),

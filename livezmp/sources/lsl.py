@@ -1,4 +1,4 @@
-"""Lab Streaming Layer live: ``lsl://[NAME][?type=&source_id=&plates=&up=&timeout=]`` through pylsl.
+"""Lab Streaming Layer live: ``lsl://[NAME][?type=&source_id=&plates=&up=&timeout=&align=]`` through pylsl.
 
 The markers stream is resolved by name (``NAME``), else ``source_id``, else ``type``
 (``MoCap`` by default). Its channels are read from the LSL mocap meta-data convention
@@ -16,13 +16,15 @@ the capture's stamp to the sample's arrival here. Frame numbers are the stamps i
 periods from the first, so drops (numbers skipped), late samples (stamped before one
 already delivered) and duplicates are counted exactly for a stream stamped at its
 nominal rate. Plates are paired with the marker frame of the same number; a marker
-frame waits at most ``align`` frame periods for its plates, then goes without
-(``plates_missing``). LSL re-connects by itself when a stream with the same source id
-comes back: data resuming after more than 0.5 s of silence counts as a reconnect.
+frame waits at most ``align`` frame periods for its plates (``?align=``, default 3), then goes
+without (``plates_missing``): a longer wait delays every frame whose plate sample is late by as
+much. LSL re-connects by itself when a stream with the same source id comes back: data resuming
+after more than 0.5 s of silence counts as a reconnect.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from urllib.parse import urlsplit
@@ -38,7 +40,7 @@ LENGTH = {"millimeters": 1e-3, "mm": 1e-3, "centimeters": 1e-2, "cm": 1e-2, "met
 MOMENT = {"newton meters": 1.0, "nm": 1.0, "n.m": 1.0, "newton millimeters": 1e-3, "nmm": 1e-3, "n.mm": 1e-3}
 FORCE = {"newtons": 1.0, "n": 1.0}
 PLATE_KINDS = {"force": ("force", FORCE), "moment": ("moment", MOMENT), "cop": ("cop", LENGTH)}
-QUERY_KEYS = {"type", "source_id", "plates", "up", "timeout"}
+QUERY_KEYS = {"type", "source_id", "plates", "up", "timeout", "align"}
 SILENCE = 0.5
 WAIT_S = 0.1  # s: longest single wait inside liblsl for a marker sample
 
@@ -137,6 +139,12 @@ class LslSource:
             timeout = float(query.get("timeout", 5.0))
         except ValueError:
             raise InputError(f"{url}: timeout: need seconds, got {query['timeout']!r}") from None
+        try:
+            align = float(query.get("align", align))
+        except ValueError:
+            align = math.nan
+        if not (math.isfinite(align) and align >= 0):
+            raise InputError(f"{url}: align: need frame periods (a number >= 0), got {query['align']!r}")
         prop, value = (("name", u.netloc + u.path.rstrip("/")) if u.netloc else
                        ("source_id", query["source_id"]) if "source_id" in query else
                        ("type", query.get("type", "MoCap")))
