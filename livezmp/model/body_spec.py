@@ -110,7 +110,8 @@ def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple
         ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
     options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
                "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
-               "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain, "source": trial.source,
+               "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain,
+               "hat_follow_hz": opts.hat_follow_hz, "source": trial.source,
                "marker_map": None if opts.marker_map is None else asdict(opts.marker_map), "bsp": opts.bsp,
                "age_years": trial.age_years if opts.age_years is None else opts.age_years}
     return take, BodySpec("markers", {MARKERS_FILE: text}, options)
@@ -141,7 +142,8 @@ def _markers_from_spec(spec: BodySpec) -> BodyModel:
     hat, gain = o.get("hat_offset"), o.get("hat_sway_gain")
     opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
                              hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"),
-                             hat_sway_gain=None if gain is None else tuple(gain), bsp=o.get("bsp", "auto"),
+                             hat_sway_gain=None if gain is None else tuple(gain),
+                             hat_follow_hz=o.get("hat_follow_hz"), bsp=o.get("bsp", "auto"),
                              age_years=o.get("age_years"), marker_map=_marker_map(o.get("marker_map")))
     body = body_from_markers(trial, opts).body
     if o.get("input_up"):  # a live stream's body: outputs in the stream's axes

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
+from scipy.signal import butter, sosfiltfilt
 
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import ADULT, DE_LEVA_MALE, BspTable, SegmentParams, choose_table
@@ -84,6 +85,19 @@ _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 # the lower-body trials it is used for (docs/validation.md, `python benchmarks/bench_forceplates.py DIR`); the
 # median over the four trials whose trunk is tracked (with 04 sub_labels and 09 PlugInC3D) is 0.74 / 0.83
 TRUNK_SWAY_GAIN = (0.73, 0.83)
+# The trunk is no rigid follower of the pelvis: it travels with it (the walk's slow changes of speed, below the
+# step frequency) and damps its step-by-step sway, the more the higher the harmonic (the trunk attenuates the
+# pelvis' accelerations: Menz, Lord & Fitzpatrick 2003, Gait Posture 18:35; Kavanagh et al. 2004, Gait Posture
+# 20:291). On the four tracked trunks the sway gain per band (fore-aft) is 0.9-1.6 below 1.2 Hz, 0.53-0.75 at the
+# step frequency, 0.40-0.67 at 2.5-4 Hz, 0.17-0.42 at 4-6 Hz; the constant gain above, fitted to positions (the
+# fundamental), overstates the HAT's acceleration, which is what the ZMP uses, 1.5 times. A placed HAT in a whole
+# take therefore follows the mid-hip's sway below TRUNK_FOLLOW_HZ and sways TRUNK_STEP_GAIN times it above: that
+# gain is the four tracked trunks' median least-squares gain of the acceleration (6 Hz band; fore-aft 0.50, 0.58,
+# 0.46, 0.46; lateral 0.61, 0.49, -0.59, 0.52), and this predicts their trunks' acceleration better than the constant
+# in 7 of 8 axes (docs/validation.md, "Why the ZMP swung too far"). TRUNK_SWAY_GAIN remains the constant-gain
+# model that `calibrate` fits.
+TRUNK_STEP_GAIN = (0.48, 0.50)
+TRUNK_FOLLOW_HZ = 1.0  # below the step frequency of any walk (1.2-2.7 Hz on the plate trials), above its speed changes
 
 
 @dataclass(frozen=True)
@@ -93,7 +107,8 @@ class MarkerBodyOptions:
     total mass replacing de Leva's; ``floor_z`` m (internal frame) where the soles are, None =
     from the lowest foot markers; ``max_gap_s`` s, the longest gap filled; ``hat_sway_gain`` (fore-aft,
     lateral) how far a placed HAT sways relative to the mid-hip over a whole take (:func:`hat_sway`; None:
-    it moves with the mid-hip)."""
+    it moves with the mid-hip), above ``hat_follow_hz`` Hz, below which it follows the mid-hip (None: at every
+    frequency)."""
 
     total_mass: float = DEFAULT_MASS
     hat_offset: tuple[float, float, float] | None = None
@@ -101,7 +116,8 @@ class MarkerBodyOptions:
     floor_z: float | None = None
     max_gap_s: float = 0.1
     hat_follows_pelvis: bool = False
-    hat_sway_gain: tuple[float, float] | None = TRUNK_SWAY_GAIN
+    hat_sway_gain: tuple[float, float] | None = TRUNK_STEP_GAIN
+    hat_follow_hz: float | None = TRUNK_FOLLOW_HZ
     marker_map: MarkerMap | None = None  # labels renamed, or a cluster set (livezmp.model.marker_map)
     bsp: str = "auto"  # segment table: "auto" (from the file's age / height), "adult" or "child" (anthropometry)
     age_years: float | None = None  # the subject's age, replacing the file's
@@ -426,7 +442,8 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths, _table(opts, trial, notes))
+    body, frames = _build(_swayed(seg, opts, m, trial.rate), m, opts, up, r_in, notes, lengths,
+                          _table(opts, trial, notes))
     open_gaps = [{**g, "marker": match.roles.get(g["marker"], g["marker"])} for g in open_gaps]
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
@@ -605,24 +622,34 @@ def travel_axes(travel: np.ndarray, facing: np.ndarray | None = None) -> tuple[n
     return np.array([fwd[0], fwd[1], 0.0]), np.array([-fwd[1], fwd[0], 0.0])
 
 
-def hat_sway(origin: np.ndarray, gain: tuple[float, float], facing: np.ndarray | None = None) -> np.ndarray:
+def hat_sway(origin: np.ndarray, gain: tuple[float, float], facing: np.ndarray | None = None,
+             rate: float | None = None, follow_hz: float | None = None) -> np.ndarray:
     """The HAT's base (F, 3) m when the trunk sways ``gain`` (fore-aft, lateral) times as far as the
     mid-hip ``origin`` (F, 3) about the walk's straight-line trend (:func:`sway_basis`); height
-    unchanged. Its acceleration is the gain times the mid-hip's along each axis (the trend has none).
+    unchanged. With ``follow_hz`` (Hz; frames at ``rate`` Hz) only the sway above it is scaled, the slower
+    part followed as it is (zero-phase low-pass, 4th order); without, the HAT's acceleration is the gain
+    times the mid-hip's along each axis (the trend has none).
     Whole takes only: a live stream has no trend, and :func:`marker_channels` does not sway."""
     trend, fwd, left = sway_basis(origin, facing)
-    k = gain[0] * np.outer(fwd, fwd) + gain[1] * np.outer(left, left) + np.diag([0.0, 0.0, 1.0])
-    return trend + (origin - trend) @ k.T
+    sway = origin - trend
+    out = origin.copy()
+    for axis, k in zip((fwd, left), gain, strict=True):
+        along = sway @ axis
+        slow = 0.0
+        if follow_hz is not None and rate is not None and follow_hz < rate / 2:
+            slow = sosfiltfilt(butter(2, follow_hz, fs=rate, output="sos"), along, padlen=min(9, len(along) - 1))
+        out += np.outer((k - 1.0) * (along - slow), axis)
+    return out
 
 
-def _swayed(seg: dict, opts: MarkerBodyOptions, m: dict) -> dict:
+def _swayed(seg: dict, opts: MarkerBodyOptions, m: dict, rate: float) -> dict:
     """``seg`` with its placed HAT swayed by ``opts.hat_sway_gain``; a HAT given by the file's HAT points
     (a corrected take) is where they say."""
     if opts.hat_sway_gain is None or "hat" not in seg or HAT_POINTS[0] in m:
         return seg
     origin, rot = seg["hat"]
     facing = np.nanmean(rot[:, :, 0], axis=0)  # the upright HAT's forward axis: the way the subject faces
-    return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain, facing), rot)}
+    return {**seg, "hat": (hat_sway(origin, opts.hat_sway_gain, facing, rate, opts.hat_follow_hz), rot)}
 
 
 def _hat_frame(m: dict[str, np.ndarray], mid_hip: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -656,7 +683,8 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
-    body, frames = _build(_swayed(seg, opts, m), m, opts, up, r_in, notes, lengths, _table(opts, trial, notes))
+    body, frames = _build(_swayed(seg, opts, m, trial.rate), m, opts, up, r_in, notes, lengths,
+                          _table(opts, trial, notes))
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     return MarkerTake(body, frames, keep.start, notes, centres)
 
@@ -856,8 +884,10 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
                        "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
                        f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
                     + ("" if opts.hat_sway_gain is None or full or "HATO" in m else
-                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip{}".format(
-                           *opts.hat_sway_gain, " (trunk-marker trials)" if opts.hat_sway_gain == TRUNK_SWAY_GAIN
+                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip{}{}".format(
+                           *opts.hat_sway_gain, "" if opts.hat_follow_hz is None else
+                           f" above {opts.hat_follow_hz:g} Hz, following it below",
+                           " (trunk-marker trials)" if opts.hat_sway_gain in (TRUNK_SWAY_GAIN, TRUNK_STEP_GAIN)
                            else "")))
     names = [f"{s}.{c}" for s in seg for c in _CHANNELS]
     body = BodyModel(

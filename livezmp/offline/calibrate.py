@@ -80,7 +80,8 @@ class Subject:
         """``base`` with this subject's HAT; its table and age unless ``base`` asks for its own."""
         base = base or MarkerBodyOptions()
         return replace(base, hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
-                       hat_sway_gain=self.hat_sway_gain, bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
+                       hat_sway_gain=self.hat_sway_gain, hat_follow_hz=None,  # the constant-gain model fitted
+                       bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
                        age_years=base.age_years if base.age_years is not None else self.age_years)
 
 
