@@ -24,7 +24,7 @@ from livezmp.model.c3d import read_c3d
 from livezmp.model.c3d_write import write_moved_points
 from livezmp.model.marker_bvh import chain_to_bvh
 from livezmp.model.marker_chain import chain_body, chain_frames, chain_poses, free_frames, segment_names
-from livezmp.model.markers import HAT_POINTS, body_from_markers
+from livezmp.model.markers import HAT_POINTS, body_from_markers, hat_table
 from livezmp.offline.calibrate import Subject
 from livezmp.offline.jobs import CorrectJob, GaitJob
 from livezmp.offline.library import find_takes, run_library
@@ -325,8 +325,13 @@ def test_monitor_replays_a_c3d_with_the_subjects_hat(corrected, tmp_path):
     45 % of the mass and 30 mm forward of the table's, moves it forward."""
     d, _ = corrected
     (tmp_path / "s.toml").write_text(SUBJECT)
+    # the table's HAT as a subject file: a subject's HAT sways at one gain at every frequency (the model calibrate
+    # fits), the table's by default only above TRUNK_FOLLOW_HZ; compared like with like
+    fraction, height, _ = hat_table(body_from_markers(read_c3d(d / "cut.c3d")).notes["stature_m"])
+    (tmp_path / "t.toml").write_text(f"[subject]\nhat_fraction = {fraction}\nhat_offset_m = [0.0, 0.0, {height}]\n")
     runs = {}
-    for name, extra in (("subject", ["--subject", str(tmp_path / "s.toml")]), ("table", [])):
+    for name, extra in (("subject", ["--subject", str(tmp_path / "s.toml")]),
+                        ("table", ["--subject", str(tmp_path / "t.toml")])):
         assert main(["monitor", str(d / "cut.c3d"), "--speed", "0", "--record", str(tmp_path / f"{name}.mcap"),
                      *extra]) == 0
         runs[name] = _recorded_zmp(tmp_path / f"{name}.mcap")

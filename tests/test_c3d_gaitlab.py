@@ -664,14 +664,15 @@ def test_real_plugin_gait_walk(tmp_path):
     assert "73.4 kg" in s["mass"]["note"]
     # Newton frame by frame over the complete frames agrees with the mean force over its gait cycle (82.2 / 82.5 kg)
     assert s["mass"]["stance_kg"] == pytest.approx(s["mass"]["plates_kg"], rel=0.01)
-    # its plates run ~24 ms behind its markers (measured, undone); then lag and fore-aft bias are small
-    assert 20 < s["time_alignment"]["plate_delay_measured_ms"] < 30
+    # its plates run ~20-24 ms behind its markers (measured, undone); then lag and fore-aft bias are small
+    assert 18 < s["time_alignment"]["plate_delay_measured_ms"] < 30
     cv = s["cop_vs_zmp"]
     # the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip (measured on other trials): 50.8 -> 38.9 mm; knee
     # centres without the THI wands: 36.7 mm, lag -8.5 -> -3.3 ms; the lateral band (3 Hz): 33.4 mm; the plates at the
-    # estimator's band: 32.0 mm (33.4 with the plates at the estimator's cutoff)
-    assert cv["frames"] >= 130 and cv["rms_mm"] < 33 and cv["p95_mm"] < P95_WALK_MM
-    assert abs(cv["lag_ms"]) < 6 and abs(cv["bias_mm"][0]) < 5
+    # estimator's band: 32.0 mm (33.4 with the plates at the estimator's cutoff); the HAT following the mid-hip below
+    # 1 Hz and swaying TRUNK_STEP_GAIN above (the tracked trunks' acceleration): WALK_RMS mm
+    assert cv["frames"] >= 130 and cv["rms_mm"] < 31.5 and cv["p95_mm"] < P95_WALK_MM
+    assert abs(cv["lag_ms"]) < 10 and abs(cv["bias_mm"][0]) < 5  # lag -3.9 ms, WALK_LAG with the step-gain sway
     assert s["lateral_band_hz"] == 3.0
     acc = s["com_acc_vs_plates"]
     assert acc["r"][0] > 0.85  # lateral CoM acceleration follows the plates
@@ -691,8 +692,8 @@ def test_real_cgm24_walk(tmp_path):
     cv = s["cop_vs_zmp"]
     # this subject's trunk follows its mid-hip fore-aft (calibrated gain ~1): the population sway costs it
     # 41.7 -> 45.2 mm and lag +7.1 -> +11.0 ms (knee centres without the THI wands: 46.9 -> 45.2 mm; the lateral
-    # band: 39.6 mm)
-    assert cv["frames"] >= 40 and cv["rms_mm"] < 41.5 and abs(cv["bias_mm"][0]) < 10
+    # band: 39.6 mm); the population's smaller step-frequency sway (TRUNK_STEP_GAIN, above 1 Hz) more: 53.2 mm
+    assert cv["frames"] >= 40 and cv["rms_mm"] < 55 and abs(cv["bias_mm"][0]) < 10
     # one stance: its halves' lags (+36 / -33 ms) disagree, so the lag is reported as not determined
     assert cv["lag_ms"] is None and abs(cv["lag_halves_ms"][0] - cv["lag_halves_ms"][1]) > 40
     assert s["time_alignment"]["plate_delay_determined"]  # its plate delay (-2 ms) is: both halves -3 / -1 ms
@@ -763,7 +764,7 @@ def test_calibration_model_reproduces_the_pipelines_zmp_exactly():
     # with sway gains: the model against the pipeline run on a body built with them (the estimator smooths
     # the swayed positions, the model sways the smoothed ones: equal up to the smoothing of a straight line)
     gains = (0.6, 0.4)
-    swayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=gains)))
+    swayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=gains, hat_follow_hz=None)))
     zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, *gains]))
     assert np.abs(zmp - swayed.result.zmp[rows, :2]).max() < 1e-3
     assert np.abs(swayed.result.zmp[rows, :2] - lab.result.zmp[rows, :2]).max() > 0.01  # the gains matter

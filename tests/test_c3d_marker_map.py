@@ -185,9 +185,10 @@ def test_sample01_cluster_set_through_a_map(tmp_path):
     cv = s["cop_vs_zmp"]
     # 37 frames of one foot's single support at 50 Hz: 49.7 mm RMS, 73.8 mm p95, bias +2 / +32 mm (HAT swaying
     # TRUNK_SWAY_GAIN times the mid-hip; moving with it: 49.9, 85.8, -15 / +28). The lag is not asserted: over
-    # this one stance it went from +27 to -80 ms with the sway while the RMS moved by 0.1 mm
-    assert cv["frames"] >= 30 and cv["rms_mm"] < 52 and cv["p95_mm"] < 78
-    assert abs(cv["bias_mm"][0]) < 5 and abs(cv["bias_mm"][1]) < 35
+    # this one stance it went from +27 to -80 ms with the sway while the RMS moved by 0.1 mm. Following the mid-hip
+    # below 1 Hz and swaying TRUNK_STEP_GAIN above: 43.9 mm RMS, 66.8 mm p95, bias -12 / +26 mm
+    assert cv["frames"] >= 30 and cv["rms_mm"] < 46 and cv["p95_mm"] < 70
+    assert abs(cv["bias_mm"][0]) < 15 and abs(cv["bias_mm"][1]) < 35
     assert s["markers"]["joint_centres"]["right_knee"].startswith("functional")
     with pytest.raises(InputError, match="never seen|not in the file"):
         bad = _map_file(SAMPLE01_MAP.replace('"pv4"', '"PV9"'), tmp_path, "bad.toml")

@@ -637,7 +637,9 @@ def hat_sway(origin: np.ndarray, gain: tuple[float, float], facing: np.ndarray |
         along = sway @ axis
         slow = 0.0
         if follow_hz is not None and rate is not None and follow_hz < rate / 2:
-            slow = sosfiltfilt(butter(2, follow_hz, fs=rate, output="sos"), along, padlen=min(9, len(along) - 1))
+            # padded by one period of the corner (in time, so that any frame rate gives the same ends)
+            pad = min(round(rate / follow_hz), len(along) - 1)
+            slow = sosfiltfilt(butter(2, follow_hz, fs=rate, output="sos"), along, padlen=pad)
         out += np.outer((k - 1.0) * (along - slow), axis)
     return out
 
