@@ -9,11 +9,13 @@ Each row adds one change to the one above, so each error source shows its share:
   4  + symmetric estimator window for whole takes (0.8 s, 0.4 s ahead)
   5  + plates' delay behind the markers measured and undone
   6  + the placed HAT swaying TRUNK_SWAY_GAIN times the mid-hip
-  7  + the segments' positions across the walk low-passed at half the cutoff (the lateral band)
-                                                                   [livezmp analyze default: 4 + 5 + 6 + 7]
+  7  + instead following the mid-hip below TRUNK_FOLLOW_HZ and swaying TRUNK_STEP_GAIN times it above
+  8  + the segments' positions across the walk low-passed at half the cutoff (the lateral band)
+                                                                   [livezmp analyze default: 4 + 5 + 7 + 8]
 
 then the estimator's cutoff around the default (plates low-passed with it, and at a fixed 6 Hz), the trunk's
-sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN comes from)
+sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN and
+TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
 with the kinematic and the plates' acceleration, `livezmp calibrate` cross-validated per trial, and the
 estimator's own gain and delay on sinusoids (why row 4 matters). Figures: over each
@@ -43,7 +45,14 @@ from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
 from livezmp.model.c3d import read_c3d
-from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, input_rotation, sway_basis
+from livezmp.model.markers import (
+    TRUNK_FOLLOW_HZ,
+    TRUNK_STEP_GAIN,
+    TRUNK_SWAY_GAIN,
+    MarkerBodyOptions,
+    input_rotation,
+    sway_basis,
+)
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
 from livezmp.offline.gaitlab import COP_CHECK_WEIGHT, LabOptions, analyse_lab_take, facing, may_bear_weight
 from livezmp.offline.plausibility import com_accelerations
@@ -54,6 +63,7 @@ TRIALS = ("walk_plugingait_forceplates.c3d", "cgm24_walking01_forceplate.c3d")
 LIVE = {"window_s": 0.4, "lag_s": 0.1}
 RIGID = MarkerBodyOptions(hat_follows_pelvis=True, hat_sway_gain=None)
 NO_SWAY = MarkerBodyOptions(hat_sway_gain=None)
+CONSTANT_SWAY = MarkerBodyOptions(hat_sway_gain=TRUNK_SWAY_GAIN, hat_follow_hz=None)  # one gain at every frequency
 RAW_PLATES = 1e9  # Hz: no low-pass
 UNBANDED = {"lateral_cutoff_fraction": None}  # steps before the lateral band
 STEPS = [
@@ -65,8 +75,9 @@ STEPS = [
                                                        **UNBANDED)),
     ("4 + symmetric window (0.8 s / 0.4 s)", LabOptions(markers=NO_SWAY, plate_delay_s=0.0, **UNBANDED)),
     ("5 + plate delay undone", LabOptions(markers=NO_SWAY, **UNBANDED)),
-    ("6 + trunk sway {:.2f}/{:.2f}".format(*TRUNK_SWAY_GAIN), LabOptions(**UNBANDED)),
-    ("7 + lateral band (half the cutoff) [default]", LabOptions()),
+    ("6 + trunk sway {:.2f}/{:.2f}".format(*TRUNK_SWAY_GAIN), LabOptions(markers=CONSTANT_SWAY, **UNBANDED)),
+    ("7 + follows < {:g} Hz, sways {:.2f}/{:.2f}".format(TRUNK_FOLLOW_HZ, *TRUNK_STEP_GAIN), LabOptions(**UNBANDED)),
+    ("8 + lateral band (half the cutoff) [default]", LabOptions()),
 ]
 UPPER = ("thorax", "headarms", "head", "upperarm", "forearm", "hand")
 
@@ -174,7 +185,7 @@ def trunk_sway(done: dict[str, tuple]) -> None:
     print("\ntrunk sway measured where the trunk is tracked (every frame of the take)")
     print(f"{'trial':34s} {'gain fore-aft':>13s} {'r':>5s} {'gain lateral':>13s} {'r':>5s}  "
           "HAT CoM from mid-hip fwd/left/up mm")
-    gains = []
+    gains, acc_gains = [], []
     for name, (_, a) in done.items():
         model = a.take.body.model
         upper = [j for j in range(1, model.njoints)
@@ -194,19 +205,26 @@ def trunk_sway(done: dict[str, tuple]) -> None:
         fit = [(float((dh @ ax) @ (dc @ ax) / ((dh @ ax) @ (dh @ ax))), float(np.corrcoef(dh @ ax, dc @ ax)[0, 1]))
                for ax in (fwd, left)]
         gains.append([g for g, _ in fit])
+        # the same in acceleration (6 Hz band, 0.3 s clear of the ends), what the ZMP uses: TRUNK_STEP_GAIN
+        inner = slice(int(0.3 * a.rate), -int(0.3 * a.rate))
+        acc = [np.gradient(np.gradient(lowpass(x, a.rate, 6.0), 1 / a.rate), 1 / a.rate)[inner]
+               for x in (dh @ fwd, dc @ fwd, dh @ left, dc @ left)]
+        acc_gains.append([float(acc[k] @ acc[k + 1] / (acc[k] @ acc[k])) for k in (0, 2)])
         off = com - hip
         print(f"{name[:34]:34s} {fit[0][0]:13.2f} {fit[0][1]:5.2f} {fit[1][0]:13.2f} {fit[1][1]:5.2f}  "
-              f"{1000 * np.mean(off @ fwd):+.0f} / {1000 * np.mean(off @ left):+.0f} / {1000 * np.mean(off[:, 2]):.0f}")
+              f"{1000 * np.mean(off @ fwd):+.0f} / {1000 * np.mean(off @ left):+.0f} / {1000 * np.mean(off[:, 2]):.0f}"
+              f"   in acceleration {acc_gains[-1][0]:.2f} / {acc_gains[-1][1]:.2f}")
     if gains:
         mean, median = np.mean(gains, axis=0), np.median(gains, axis=0)
         print(f"gain fore-aft / lateral: median {median[0]:.2f} / {median[1]:.2f}, mean {mean[0]:.2f} / {mean[1]:.2f} "
-              f"(TRUNK_SWAY_GAIN = {TRUNK_SWAY_GAIN})")
+              f"(TRUNK_SWAY_GAIN = {TRUNK_SWAY_GAIN}); in acceleration median "
+              "{:.2f} / {:.2f} (TRUNK_STEP_GAIN = {})".format(*np.median(acc_gains, axis=0), TRUNK_STEP_GAIN))
 
 
 def sway_before_after(done: dict[str, tuple]) -> None:
-    """Every trial with the placed HAT moving with the mid-hip (before) and swaying TRUNK_SWAY_GAIN (after)."""
-    print("\nplaced HAT: moving with the mid-hip -> swaying {:.2f}/{:.2f} (RMS / bias fore-aft / lag)".format(
-        *TRUNK_SWAY_GAIN))
+    """Every trial with the placed HAT moving with the mid-hip (before) and swaying as by default (after)."""
+    print("\nplaced HAT: moving with the mid-hip -> following it below {:g} Hz, swaying {:.2f}/{:.2f} above "
+          "(RMS / bias fore-aft / lag)".format(TRUNK_FOLLOW_HZ, *TRUNK_STEP_GAIN))
     before, after = [], []
     for name, (trial, a) in done.items():
         cv0 = analyse_lab_take(trial, LabOptions(markers=NO_SWAY)).summary["cop_vs_zmp"]
