@@ -13,6 +13,7 @@ segments' poses alone, no markers) drives the body directly: analyze's ZMP to 2 
 
 from __future__ import annotations
 
+import _thread
 import threading
 import time
 import uuid
@@ -37,6 +38,7 @@ from sim_devices.natnet_server import NatNetServer
 from sim_devices.qtm_server import QtmServer
 
 TRIAL = C3D / "walk_plugingait_forceplates.c3d"
+MONITOR_LIMIT_S = 60.0  # s: one streamed trial takes 3-7 s
 SAME_ESTIMATOR = ["--cutoff-hz", "6", "--window-s", "0.8", "--lag-s", "0.4"]  # analyze's for a C3D take (gaitlab)
 # NatNet's y-up axes (x, z, -y) of the z-up file, turned into the internal frame as y-up input is: (-y, x, z)
 NATNET_TURN = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -101,10 +103,15 @@ def _monitor(kind: str, trial, tmp_path) -> tuple[dict, dict]:
     player = threading.Thread(target=start, daemon=True)
     player.start()
     rec, summary = tmp_path / f"{kind}.mcap", tmp_path / f"{kind}.json"
+    # the monitor stops after the trial's frames; should one never come (a datagram lost on a loaded host), it is
+    # stopped as by Ctrl-C rather than waiting for ever (and the frame count below fails)
+    guard = threading.Timer(MONITOR_LIMIT_S, _thread.interrupt_main)
+    guard.start()
     try:
         rc = main(["monitor", url, "--calibration", str(TRIAL), *SAME_ESTIMATOR, "--frames", str(trial.n_frames),
                    "--record", str(rec), "--summary-json", str(summary)])
     finally:
+        guard.cancel()
         player.join(10)
         server.close()
     assert rc == 0
