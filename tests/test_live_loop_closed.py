@@ -44,7 +44,8 @@ class BusTime:
         return self.link.reconnect()
 
 
-def balance(body, scenario, correct: bool, foot_sensors: bool = False) -> tuple[SimHumanoid, dict]:
+def balance(body, scenario, correct: bool, foot_sensors: bool = False,
+            margin_m: float | None = None) -> tuple[SimHumanoid, dict]:
     time = SimTime()
     humanoid = SimHumanoid(body, scenario.goals(0.0))
     mock = MockLink(humanoid, body.joint_names, clock=time.now,
@@ -52,7 +53,7 @@ def balance(body, scenario, correct: bool, foot_sensors: bool = False) -> tuple[
     mock.open()
     for push in scenario.pushes:  # scenario time is loop time, and the humanoid's (both start at the link's opening)
         humanoid.push(push)
-    loop = LiveLoop(BusTime(mock, time), body, LoopConfig(correct=correct), command=scenario.goals,
+    loop = LiveLoop(BusTime(mock, time), body, LoopConfig(correct=correct, margin_m=margin_m), command=scenario.goals,
                     clock=LoopClock(500.0, now=time.now, sleep=time.advance), fell=lambda: humanoid.fallen is not None)
     return humanoid, loop.run(scenario.duration)
 

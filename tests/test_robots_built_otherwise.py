@@ -17,7 +17,7 @@ from humanoid_gen import CONVENTIONS, HumanoidSpec, build_humanoid, com_height, 
 from test_live_loop_closed import balance
 
 from livezmp.cli import main
-from livezmp.correct.online import size_scaled_accel
+from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
 from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
 from livezmp.model.robot import load_robot
 
@@ -167,19 +167,36 @@ ADULT = HumanoidSpec(height=1.8, mass=60.0, waist="yp", seed=24)  # the sweep's 
 
 
 @pytest.mark.parametrize(("name", "until"), [("lean", 9.0), ("push", None)])
-def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_to_stand(tmp_path, name, until):
+def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_and_keeps_its_zmp_on_its_feet(tmp_path, name, until):
     # before: its trunk acceleration limit, 100 deg/s^2 x (0.3 m / 0.99 m)^2 = 9 deg/s^2, turned it 1.8 deg in the
     # 0.6 s its lean took to bring the ZMP from 15 mm inside its toes to them: it fell corrected at 6.67 s in the
-    # lean, at 1.81 s in the push. Scaled as 0.3 m / h (dynamic similarity), 30 deg/s^2, it stands
+    # lean, at 1.81 s in the push. Scaled as 0.3 m / h (dynamic similarity), 30 deg/s^2, it stands. Then, with the
+    # corrector aiming 15 mm inside whatever the robot's size, its true ZMP still left its feet for moments
+    # (-4.6 mm in the lean, -5.7 mm in the push); aimed 15 mm x h / 0.3 m = 49.5 mm inside, it stays on them
     body = load_robot(str(build_humanoid(tmp_path / "a.urdf", ADULT)), None).body
     assert size_scaled_accel(body, 100.0) == pytest.approx(30.3, abs=0.1)
+    assert size_scaled_margin(body) == pytest.approx(0.0495, abs=0.0003)  # its CoM: 0.99 m above its soles
     scenario = make_scenario(name, body, hold_s=1.0) if name == "lean" else make_scenario(name, body)
-    if until is not None:  # the lean's 6.7 s ramp and 1 s hold; not the lean back
+    if until is not None:  # the lean's 6.7 s ramp and 1 s hold, where its ZMP left its feet; not the lean back
         scenario = replace(scenario, duration=until)
-    off, _ = balance(body, scenario, correct=False, foot_sensors=name == "push")
-    on, _ = balance(body, scenario, correct=True, foot_sensors=name == "push")
-    print(f"{name}: uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}")
+    sensors = name == "push"
+    off, _ = balance(body, scenario, correct=False, foot_sensors=sensors)
+    on, _ = balance(body, scenario, correct=True, foot_sensors=sensors)
+    fixed, _ = balance(body, scenario, correct=True, foot_sensors=sensors, margin_m=MARGIN_M)
+    print(f"{name}: uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}, worst "
+          f"true margin {1e3 * on.counters.worst_margin:.1f} mm; with a 15 mm margin: fell {fixed.fallen}, "
+          f"{1e3 * fixed.counters.worst_margin:.1f} mm")
     assert off.fallen is not None and on.fallen is None
+    assert on.counters.worst_margin > 0 and on.counters.unsupported_steps == 0
+    assert fixed.counters.worst_margin < 0 and fixed.counters.unsupported_steps > 0
+
+
+def test_the_margin_is_15_mm_for_robots_up_to_0_3_m_and_grows_with_the_com_height(mini, tmp_path):
+    assert size_scaled_margin(mini) == MARGIN_M == 0.015  # the mini's CoM: 0.29 m above its soles
+    spec = HumanoidSpec(height=1.2, mass=20.0)
+    body = load_robot(str(build_humanoid(tmp_path / "k.urdf", spec)), None).body
+    ground = (0.06 - 0.12 * (0.54 - 0.06)) * spec.height  # default soles: 0.12 hip heights below the ankle
+    assert size_scaled_margin(body) == pytest.approx(MARGIN_M * (com_height(spec) - ground) / 0.3)
 
 
 def test_a_small_light_robot_is_toppled_by_its_arm_swing(tmp_path):

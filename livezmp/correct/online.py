@@ -1,7 +1,8 @@
 """Per-frame balance correction for the live loop: causal, constant cost per frame.
 
-Each frame, the ZMP's shortfall from ``margin_m`` inside the support polygon (15 mm by
-default: wider than offline, so the correction starts early and gently) is turned
+Each frame, the ZMP's shortfall from ``margin_m`` inside the support polygon (by default
+`MARGIN_M`, 15 mm, scaled with the robot's size: :func:`size_scaled_margin`; wider than
+offline, so the correction starts early and gently) is turned
 into a change of the root rotation δ through the quasi-static sensitivity of the ZMP
 to δ: rotating the upper body by δ about the pivot P moves the CoM by
 (m_upper / m) · δ × (c_upper − P). A damped least-squares step (yaw damped hardest:
@@ -57,7 +58,23 @@ class OnlineCorrection:
 # passes 95 of 96 (the 96th: an armless robot refused arm_swing). (Asked 4/s, the loop ran at ~1.6/s while S took
 # the legs' subtree CoMs in their joints' own frames, 2.5x too large.)
 GAIN_PER_S = 1.3
-TRUNK_SIZE_M = 0.3  # CoM height up to which the trunk acceleration limit holds as given (mini 0.28 m, OP3 0.26 m)
+TRUNK_SIZE_M = 0.3  # CoM height up to which the trunk acceleration limit and the margin hold as given (mini 0.28 m)
+# m: how far inside the support polygon the corrector aims the ZMP, for a robot up to TRUNK_SIZE_M (see
+# size_scaled_margin). The corrected ZMP overshoots its aim by up to 12-16 mm on the 0.3 m robots of
+# benchmarks/bench_any_humanoid.py (the estimator's lag and the trunk's limited acceleration), which 15 mm covers.
+MARGIN_M = 0.015
+
+
+def size_factor(body: BodyModel) -> float:
+    """max(1, h / `TRUNK_SIZE_M`), h (m) the height of ``body``'s CoM above its soles in the zero posture: how much
+    larger than the robots the corrector's limits were set on ``body`` is."""
+    model, data = body.model, body.model.createData()
+    q = np.zeros(model.nq)
+    pin.centerOfMass(model, data, q)
+    pin.framesForwardKinematics(model, data, q)
+    ground = min(float(sole[:, 2].min()) for sole in foot_soles(body, data).values())
+    height = float(data.com[0][2]) - ground
+    return max(1.0, height / TRUNK_SIZE_M) if height > 0 else 1.0
 
 
 def size_scaled_accel(body: BodyModel, accel_deg_s2: float) -> float:
@@ -69,22 +86,30 @@ def size_scaled_accel(body: BodyModel, accel_deg_s2: float) -> float:
     which kept that swing the same in mm, a 1.8 m, 60 kg humanoid turned its trunk at 9 deg/s^2: 1.8° in its
     last 0.6 s while its lean brought the ZMP at 35 mm/s to its toes, and it fell corrected in ``lean`` and
     ``push``; at 30 deg/s^2 it stands, benchmarks/bench_any_humanoid.py.)"""
-    model, data = body.model, body.model.createData()
-    q = np.zeros(model.nq)
-    pin.centerOfMass(model, data, q)
-    pin.framesForwardKinematics(model, data, q)
-    ground = min(float(sole[:, 2].min()) for sole in foot_soles(body, data).values())
-    height = float(data.com[0][2]) - ground
-    return accel_deg_s2 * min(1.0, TRUNK_SIZE_M / height) if height > 0 else accel_deg_s2
+    return accel_deg_s2 / size_factor(body)
+
+
+def size_scaled_margin(body: BodyModel, margin_m: float = MARGIN_M) -> float:
+    """The corrector's ZMP margin (m) for ``body``: ``margin_m`` for a robot whose CoM stands at most
+    `TRUNK_SIZE_M` above its soles, × h / `TRUNK_SIZE_M` for a taller one. The margin has to cover how far the
+    corrected ZMP overshoots its aim, and that overshoot is a length of the robot's own dynamics: the ZMP's
+    travel during the estimator's lag and the corrector's response, and the swing of the trunk's acceleration
+    (`size_scaled_accel`), all grow as L between dynamically similar robots; so do the soles, so the margin stays
+    the same share of the feet (15 mm of the 0.3 m robots' 120 mm soles; 50 mm of the 1.8 m robot's 430 mm).
+    With 15 mm whatever its size, the 1.8 m, 60 kg humanoid's true ZMP left its feet corrected (−4.6 mm in
+    ``lean``, −5.7 mm in ``push``; benchmarks/bench_any_humanoid.py)."""
+    return margin_m * size_factor(body)
 
 
 class OnlineCorrector:
-    """Causal corrector; call :meth:`step` once per analysed frame."""
+    """Causal corrector; call :meth:`step` once per analysed frame. ``margin_m`` (m): how far inside the support
+    polygon it aims the ZMP; None: `size_scaled_margin` of ``body``."""
 
     def __init__(self, body: BodyModel, dt: float, limits: CorrectionLimits | None = None,
                  gain_per_s: float = GAIN_PER_S, relax_s: float = 2.0, max_accel_deg_s2: float = 500.0,
-                 pivot_tau_s: float = 0.05, margin_m: float = 0.015):
+                 pivot_tau_s: float = 0.05, margin_m: float | None = None):
         self.body = body
+        margin_m = size_scaled_margin(body) if margin_m is None else margin_m
         self.limits = replace(limits or CorrectionLimits(), margin_m=margin_m)
         self.dt = dt
         self.gain = min(1.0, gain_per_s * dt)

@@ -50,6 +50,8 @@ class LoopConfig:
     rotation (its angular acceleration pushes the ZMP the other way first, so it is kept
     gentle; the acceleration limit is for a robot whose CoM stands at most 0.3 m high, scaled
     down for taller ones: :func:`livezmp.correct.online.size_scaled_accel`);
+    ``margin_m``: how far inside the support polygon the corrector aims the ZMP (m); None: 15 mm
+    scaled up with the robot's size (:func:`livezmp.correct.online.size_scaled_margin`);
     ``status_every_s``: period of the status callback.
     ``contacts``: where the feet's contacts come from: ``"sensors"`` (the link's foot
     sensors: a foot is down when its cells carry more than ``contact_fraction`` of the
@@ -70,6 +72,7 @@ class LoopConfig:
     estimator_cutoff_hz: float = 8.0
     trunk_accel_deg_s2: float = 100.0
     correction_limits: CorrectionLimits = field(default_factory=CorrectionLimits)
+    margin_m: float | None = None
     status_every_s: float = 1.0
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     contacts: str = "auto"

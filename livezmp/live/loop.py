@@ -185,8 +185,8 @@ class LiveLoop:
         cfg = self.config
         every = self.correct_every
         self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
-                                         max_accel_deg_s2=size_scaled_accel(self.body, cfg.trunk_accel_deg_s2)
-                                         ) if cfg.correct else None
+                                         max_accel_deg_s2=size_scaled_accel(self.body, cfg.trunk_accel_deg_s2),
+                                         margin_m=cfg.margin_m) if cfg.correct else None
         self.limiter.reset()
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
