@@ -99,9 +99,10 @@ class HumanoidSpec:
     a little) or "absent" (no <limit> on any joint); ``continuous``: head and upper-arm yaw continuous;
     ``grippers``: a two-finger gripper on each hand, one finger mimicking the other (multiplier -1);
     ``double_knee``: each knee split in two pitch joints 0.04 heights apart (a kid-size linkage), the lower
-    (``knee2``) mimicking the upper with multiplier 1; ``extras``: camera, IMU and
-    sole frames as fixed massless links, and a massless root link; ``root``: the root link's name, its frame at its
-    centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
+    (``knee2``) mimicking the upper with multiplier 1; ``double_shoulder``: each arm's first joint followed,
+    0.04 heights lower, by a second about the same axis (``sho2``) mimicking it with multiplier 1; ``extras``:
+    camera, IMU and sole frames as fixed massless links, and a massless root link; ``root``: the root link's name,
+    its frame at its centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
     humanoid_SEED); ``foot``: "box", "mesh" or "none" collision;
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
@@ -119,6 +120,7 @@ class HumanoidSpec:
     continuous: bool = False
     grippers: bool = False
     double_knee: bool = False
+    double_shoulder: bool = False
     extras: bool = False
     foot: str = "box"
     root: str = "base_link"
@@ -239,6 +241,11 @@ def _build(spec: HumanoidSpec) -> _Builder:
             child = b.link(f"{s}_arm{k}", 0.03 if last or a == "e" else 0.01, com, size, b.frame(False))
             b.joint(role, s, parent, child, at, axis, "continuous" if spec.continuous and a == "y" else "revolute")
             parent = child
+            if spec.double_shoulder and k == 0:
+                link = b.link(f"{s}_arm{k}b", 0.01, (0.0, 0.12 * y, 0.77), (0.03, 0.03, 0.03), b.frame(False))
+                b.joint("sho2", s, parent, link, (0.0, 0.12 * y, 0.78), axis, mimic=b.joints[-1]["name"],
+                        multiplier=1.0)
+                parent = link
         if spec.grippers and spec.arm:
             for k, finger in enumerate((0.01, -0.01)):
                 tip = b.link(f"{s}_finger{k}", 0.002, (0.0, 0.12 * y + finger, 0.54), (0.01, 0.01, 0.03))

@@ -16,12 +16,14 @@ from humanoid_gen import HumanoidSpec, build_humanoid
 from test_live_loop import SimTime
 from test_live_loop_closed import BusTime, balance
 
+from livezmp.balance.zmp import compute_zmp
 from livezmp.cli import main
 from livezmp.correct.root_motion import RootMover
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
-from livezmp.live.scenarios import Poser, Y, joint_roles, make_scenario
+from livezmp.live.scenarios import Poser, Y, joint_roles, make_scenario, standing_support
+from livezmp.model.base_placement import BasePlacer
 from livezmp.model.mimic import follow
 from livezmp.model.robot import load_robot
 from sim_devices.humanoid import SimHumanoid
@@ -246,4 +248,53 @@ def test_a_double_knee_robot_falls_leaning_uncorrected_and_stands_corrected(doub
     on, _ = balance(double_knee, lean, correct=True)
     print(f"uncorrected fell at {off.fallen and off.fallen.t:.2f} s; corrected: fell {on.fallen}, worst true "
           f"margin {1e3 * on.counters.worst_margin:.1f} mm")
+    assert off.fallen is not None and on.fallen is None
+
+
+def double_shoulder(tmp_path, arm):
+    """The generated humanoid whose arms' first joint (``arm[0]``) is followed by a second about the same axis."""
+    spec = HumanoidSpec(arm=arm, double_shoulder=True, seed=31)
+    return load_robot(str(build_humanoid(tmp_path / f"s_{arm}.urdf", spec)), None).body
+
+
+def test_arms_with_a_double_shoulder_roll_hang_where_the_posture_says(tmp_path):
+    # before: the roll was found for the arm as if it turned alone; with its follower turning as much, each upper
+    # arm hung 0.171 rad (9.8 deg) from vertical, not the 0.1 rad asked
+    body = double_shoulder(tmp_path, "rpe")
+    names = body.joint_names
+    assert sorted(names[m.parent] for m in body.mimics) == ["l_sho_roll", "r_sho_roll"]
+    poser = Poser(body)
+    sent = make_scenario("stand", body).goals(0.0)
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, np.concatenate([np.zeros(len(body.base_channels)), sent]))
+    for s, lateral in (("l", 1.0), ("r", -1.0)):
+        arm = poser.arms[s]
+        d = (data.oMi[body.model.getJointId(arm.elbow)].translation
+             - data.oMi[body.model.getJointId(arm.roll)].translation)
+        assert np.arctan2(lateral * d[1], -d[2]) == pytest.approx(0.1, abs=1e-9)  # out from vertical, as asked
+        assert abs(d[0]) < 1e-12
+
+
+def test_an_arm_swing_with_a_double_shoulder_pitch_takes_the_zmp_as_far_as_it_was_designed_to(tmp_path):
+    # before: the swing was designed with the follower standing still while the goals sent swung it with its
+    # parent: twice the swing, and the ZMP went 9.6 mm past the toes where 4 mm was asked
+    body = double_shoulder(tmp_path, "pre")
+    scenario = make_scenario("arm_swing", body)  # ARM_SWING: the ZMP 4 mm past the toes at each swing's peak
+    q0 = scenario.goals(0.0)
+    base = BasePlacer(body).update(q0)
+    toe = float(standing_support(body, q0)[1][:, 0].max())
+    data, h, still = body.model.createData(), 1e-4, np.zeros(len(base))
+    past = []
+    for t in np.arange(1.5, 3.0, 0.002):  # the swing at its full amplitude: the goals sent, differentiated
+        g = [scenario.goals(t + k * h) for k in (-1, 0, 1)]
+        assert g[1][[m.joint for m in body.mimics]] == pytest.approx(g[1][[m.parent for m in body.mimics]])
+        zmp = compute_zmp(body.model, data, np.concatenate([base, g[1]]),
+                          np.concatenate([still, (g[2] - g[0]) / (2 * h)]),
+                          np.concatenate([still, (g[2] - 2 * g[1] + g[0]) / h ** 2])).zmp
+        past.append(float(zmp[0]) - toe)
+    assert max(past) == pytest.approx(0.004, abs=1e-4)
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    print(f"peak ZMP {1e3 * max(past):.2f} mm past the toes; uncorrected fell at {off.fallen and off.fallen.t:.2f} s, "
+          f"corrected: fell {on.fallen}")
     assert off.fallen is not None and on.fallen is None

@@ -39,7 +39,7 @@ from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
-from livezmp.model.mimic import follow
+from livezmp.model.mimic import follow, follow_rate
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import leg_joints
 
@@ -173,12 +173,13 @@ def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
 class Arm:
     """An arm found in the tree: its shoulder pitch and roll joints and its elbow (None where it has none), and
     ``upper``: the world point (zero posture, m) the upper arm reaches from the shoulder (the elbow, else the
-    centre of mass of the arm's last link)."""
+    centre of mass of the arm's last link), ``upper_at``: that point as (Pinocchio joint id, m in its frame)."""
 
     pitch: str | None
     roll: str | None
     elbow: str | None
     upper: np.ndarray
+    upper_at: tuple[int, np.ndarray]
 
 
 def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
@@ -204,11 +205,12 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
         y = float(data.oMf[f].translation[Y])
         sign = 0 if abs(y) < 0.01 else int(np.sign(y))
         j = model.frames[f].parentJoint
-        chains.append((sign, chain, data.oMi[j].act(model.inertias[j].lever)))
+        chains.append((sign, chain, j))
         for n in chain:
             side_of.setdefault(n, set()).add(sign)
     found: dict[str, Arm] = {}
-    for sign, chain, hand in chains:
+    for sign, chain, j in chains:
+        hand = data.oMi[j].act(model.inertias[j].lever)
         side = {1: "l", -1: "r"}.get(sign)
         own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
         pitch = next((n for n in own if _about(axis, n, Y)), None)
@@ -220,7 +222,8 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
         reach = float(np.linalg.norm(hand - start))
         after = own[max(own.index(n) for n in shoulder) + 1:]
         elbow = next((n for n in after if n in axis and np.linalg.norm(origin[n] - start) >= 0.2 * reach), None)
-        found[side] = Arm(pitch, roll, elbow, origin[elbow] if elbow else hand)
+        at = (model.getJointId(elbow), np.zeros(3)) if elbow else (j, model.inertias[j].lever.copy())
+        found[side] = Arm(pitch, roll, elbow, origin[elbow] if elbow else hand, at)
     return found
 
 
@@ -232,6 +235,7 @@ class Poser:
         self.names = list(body.joint_names)
         self.axis, self.origin = joint_axes(body)
         self.roles, self.arms = _roles_and_arms(body)
+        self._data = body.model.createData()
         legs = {c for cols in body.correction.legs.values() for c in cols}
         base = len(body.base_channels)
         # a mimic joint on a leg: the legs' postures are re-solved so the feet go where they were asked
@@ -294,7 +298,9 @@ class Poser:
 
     def arms_down(self, out_angle: float) -> np.ndarray:
         """Shoulder rolls that make each upper arm hang down, ``out_angle`` rad away from the body
-        (arms without a shoulder roll, and a robot without arms, stay as they are)."""
+        (arms without a shoulder roll, and a robot without arms, stay as they are). A mimic joint that follows
+        the roll moves the upper arm with it: the roll is then solved (secant steps) so that the arm hangs
+        down with its followers where their parents put them."""
         out = np.zeros(len(self.names))
         for s, lateral in (("l", 1.0), ("r", -1.0)):
             arm = self.arms.get(s)
@@ -302,11 +308,36 @@ class Poser:
                 continue
             i = self.names.index(arm.roll)
             a = self.axis[arm.roll]
-            d = arm.upper - self.origin[arm.roll]  # upper arm in the zero posture
             target = np.array([0.0, lateral * np.sin(out_angle), -np.cos(out_angle)])
-            d, target = d - (d @ a) * a, target - (target @ a) * a
-            out[i] = np.arctan2(a @ np.cross(d, target), d @ target)
+            target -= (target @ a) * a
+
+            def miss(roll: float, arm: Arm = arm, i: int = i, a: np.ndarray = a, target: np.ndarray = target) -> float:
+                """rad about the roll's axis from the upper arm to the target, rolled by ``roll``."""
+                d = self._upper_arm(arm, i, roll)
+                d -= (d @ a) * a
+                return float(np.arctan2(a @ np.cross(d, target), d @ target))
+
+            # without a follower miss(θ) = miss(0) − θ: the first step is exact
+            x0, e0 = 0.0, miss(0.0)
+            x1 = e0
+            e1 = miss(x1)
+            for _ in range(30):
+                if abs(e1) < 1e-12 or e1 == e0:
+                    break
+                x0, e0, x1 = x1, e1, x1 - e1 * (x1 - x0) / (e1 - e0)
+                e1 = miss(x1)
+            out[i] = x1
         return out
+
+    def _upper_arm(self, arm: Arm, i: int, roll: float) -> np.ndarray:
+        """World vector (m) from the shoulder roll's origin to the upper arm's end, every joint at zero but the
+        roll (index ``i``) at ``roll`` rad and the mimic joints following their parents."""
+        joints = np.zeros(len(self.names))
+        joints[i] = roll
+        q = np.concatenate([np.zeros(self.body.model.nq - len(joints)), follow(joints, self.body.mimics)])
+        pin.forwardKinematics(self.body.model, self._data, q)
+        j, point = arm.upper_at
+        return self._data.oMi[j].act(point) - self._data.oMi[self.body.model.getJointId(arm.roll)].translation
 
     def standing(self, flexion: float = 0.3, arm_out: float = 0.1) -> np.ndarray:
         """The standing posture (see module docstring)."""
@@ -328,7 +359,9 @@ def stand(body: BodyModel, duration: float = 3.0, flexion: float = 0.3) -> Scena
 
 def standing_support(body: BodyModel, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(CoM (3,), support polygon of both soles (k, 2)), m, for the robot standing still on both
-    feet in ``joints`` (its base placed by the feet)."""
+    feet in ``joints`` (its base placed by the feet; its mimic joints where their parents put them, as the goals
+    sent put them)."""
+    joints = follow(joints, body.mimics)
     q = np.concatenate([BasePlacer(body).update(joints), joints])
     data = body.model.createData()
     pin.centerOfMass(body.model, data, q)
@@ -452,6 +485,7 @@ def swing_zmp_past_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitu
     """(samples,) m: how far past the toes the ZMP is (negative: inside) at evenly spaced phases of one cycle of
     the swing ``q0 + amplitude sin(wt) dq``, feet flat, from the whole-body dynamics (base still)."""
     model, data = body.model, body.model.createData()
+    q0, dq = follow(q0, body.mimics), follow_rate(dq, body.mimics)  # the goals sent: a follower swings with its parent
     base = BasePlacer(body).update(q0)
     toe = float(standing_support(body, q0)[1][:, X].max())
     w = 2 * np.pi * frequency
@@ -616,11 +650,11 @@ def front_margin(body: BodyModel, joints: np.ndarray) -> float:
 # (estimator lag 30 ms) holds it. (The scenario's own default, 2.5 Hz, is faster than the loop can follow.)
 ARM_SWING = {"amplitude": 0.6, "frequency": None, "beyond": 0.004, "toe_margin": 0.008}
 # A hand leaning on the robot from behind as it leans 20 mm inside its toes (outside the corrector's 15 mm margin, so
-# it does nothing before the push): the force grows over 1 s to what takes the ZMP 5 mm past the toes, holds 1 s and
-# eases off. The joints do not show it; the feet's CoP does (OnlineCorrector). Uncorrected, the ZMP is past the toes
-# for longer than the simulator's 0.2 s to fall. Faster pushes are not held (0.5 s rise: the trunk, limited to
-# 100 deg/s^2, first pushes the ZMP forward as it starts back), nor pushes past what 15 degrees of trunk rotation
-# offsets.
+# it does nothing before the push; a robot above 0.3 m has a wider margin, and its corrector starts earlier): the force
+# grows over 1 s to what takes the ZMP 5 mm past the toes, holds 1 s and eases off. The joints do not show it; the
+# feet's CoP does (OnlineCorrector). Uncorrected, the ZMP is past the toes for longer than the simulator's 0.2 s to
+# fall. Faster pushes are not held (0.5 s rise: the trunk, limited to 100 deg/s^2, first pushes the ZMP forward as it
+# starts back), nor pushes past what 15 degrees of trunk rotation offsets.
 PUSH = {"beyond": 0.005, "toe_margin": 0.02, "duration": 3.0, "rise_s": 1.0, "total": 4.5}
 BLEND_S = 1.5  # s, between the parts of a sequence of scenarios (the lean into the arm swing is slow)
 

@@ -45,6 +45,18 @@ def follow(values: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
     return out
 
 
+def follow_rate(rates: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
+    """``rates`` (..., n) per actuated joint (velocities, accelerations or changes of angle) with each mimic
+    joint's set to its parent's times the multiplier (the offset does not move); ``rates`` itself when there are
+    no mimics."""
+    if not mimics:
+        return rates
+    out = np.array(rates, dtype=float)
+    for m in mimics:
+        out[..., m.joint] = m.multiplier * out[..., m.parent]
+    return out
+
+
 def read_mimics(root: ET.Element, path: Path) -> dict[str, tuple[str, float, float]]:
     """joint name → (parent joint name, multiplier, offset) of every ``<mimic>`` in the URDF ``root``; a mimic of a
     mimic is resolved to the first joint of the chain (m = m1 m2, o = m1 o2 + o1). InputError (file, joint, what)
