@@ -52,13 +52,17 @@ class HostSession:
     """One host <-> board session over a SerialTransport or CanTransport (role "host").
 
     heartbeat_period (s): how often poll() sends HEARTBEAT. watchdog_timeout (s)
-    and watchdog_action: configured on the board at connect. ack_timeout (s) and
-    retries bound the wait for each acknowledged command.
+    and watchdog_action: configured on the board at connect. An acknowledged command
+    is sent again every ack_timeout (s) without an ACK, ``retries`` times, and further
+    until ack_deadline (s; None: (retries + 1) x ack_timeout) has passed since its first
+    try; an ACK to any of its tries counts (on a loaded host the first try's ACK often
+    arrives while the second waits).
     """
 
     def __init__(self, transport, *, heartbeat_period: float = 0.05, watchdog_timeout: float = 0.2,
                  watchdog_action: WatchdogAction = WatchdogAction.HOLD, ack_timeout: float = 0.1,
-                 retries: int = 2, inbox_limit: int = 1024, clock: Callable[[], float] = time.monotonic):
+                 retries: int = 2, ack_deadline: float | None = None, inbox_limit: int = 1024,
+                 clock: Callable[[], float] = time.monotonic):
         if transport.is_board:
             raise ProtocolError("HostSession needs a transport with role='host'")
         self.transport = transport
@@ -67,6 +71,7 @@ class HostSession:
         self.watchdog_action = watchdog_action
         self.ack_timeout = ack_timeout
         self.retries = retries
+        self.ack_deadline = (retries + 1) * ack_timeout if ack_deadline is None else ack_deadline
         self.clock = clock
         self.health = LinkHealth()
         self.board: HelloAck | None = None
@@ -152,16 +157,23 @@ class HostSession:
     def _request(self, msg: Message, require_connected: bool = True) -> None:
         if require_connected:
             self._require_connected()
-        for _ in range(self.retries + 1):
-            key = (msg.spec.msg_id, self.transport.send(msg))
-            self._wait(lambda _m, key=key: key in self._replies, self.ack_timeout)
-            reply = self._replies.pop(key, None)
-            if isinstance(reply, Nack):
-                raise CommandRefused(f"{self.transport.name}: board refused {msg.spec.name}: {reply.code.name}",
-                                     reply.code)
-            if isinstance(reply, Ack):
+        start = self.clock()
+        keys: list[tuple[int, int]] = []  # (message id, sequence number) of every try
+        while True:
+            keys.append((msg.spec.msg_id, self.transport.send(msg)))
+            left = start + self.ack_deadline - self.clock()
+            wait = self.ack_timeout if len(keys) <= self.retries else min(self.ack_timeout, max(left, 0.0))
+            self._wait(lambda _m: any(k in self._replies for k in keys), wait)
+            replies = [r for r in (self._replies.pop(k, None) for k in keys) if r is not None]
+            if any(isinstance(r, Nack) for r in replies):
+                code = next(r.code for r in replies if isinstance(r, Nack))
+                raise CommandRefused(f"{self.transport.name}: board refused {msg.spec.name}: {code.name}", code)
+            if replies:
                 return
-        raise LinkError(f"{self.transport.name}: no ACK for {msg.spec.name} after {self.retries + 1} tries")
+            if len(keys) > self.retries and self.clock() - start >= self.ack_deadline:
+                break
+        raise LinkError(f"{self.transport.name}: no ACK for {msg.spec.name} after {len(keys)} tries in "
+                        f"{self.clock() - start:.2g} s")
 
     def _wait(self, done: Callable[[Message], bool], timeout: float) -> Message | None:
         """Pump until a received message satisfies ``done`` (returned) or the deadline passes (None)."""

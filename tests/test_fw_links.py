@@ -452,3 +452,63 @@ def test_port_read_failure_is_a_link_error():
     port.close()
     with pytest.raises(fp.LinkError, match="read failed"):
         transport.receive()
+
+
+class SlowBoard:
+    """A host-side transport to a board that acknowledges every command ``latency`` s after it was sent (None:
+    never), on a simulated clock that a receive advances by its timeout."""
+
+    is_board = False
+    name = "slow board"
+
+    def __init__(self, latency: float | None) -> None:
+        self.latency, self.now, self.seq, self.sent = latency, 0.0, 0, 0
+        self.replies: list[tuple[float, fp.Ack]] = []
+        self.errors: dict[str, int] = {}
+
+    def clock(self) -> float:
+        return self.now
+
+    def send(self, msg) -> int:
+        self.seq += 1
+        self.sent += 1
+        if self.latency is not None:
+            self.replies.append((self.now + self.latency, fp.Ack(msg.spec.msg_id, self.seq)))
+        return self.seq
+
+    def receive(self, timeout: float = 0.0) -> list:
+        self.now += max(timeout, 1e-3)
+        due = [fp.Received(ack, 0) for t, ack in self.replies if t <= self.now]
+        self.replies = [(t, ack) for t, ack in self.replies if t > self.now]
+        return due
+
+
+def own_ack_only(session: fp.HostSession, msg) -> None:
+    """The policy before: three tries of ``ack_timeout``, each waiting for its own ACK only."""
+    for _ in range(3):
+        key = (msg.spec.msg_id, session.transport.send(msg))
+        session._wait(lambda _m, key=key: key in session._replies, session.ack_timeout)
+        if session._replies.pop(key, None) is not None:
+            return
+    raise fp.LinkError(f"{session.transport.name}: no ACK for {msg.spec.name} after 3 tries")
+
+
+@pytest.mark.parametrize("latency", [0.6, 1.5])
+def test_a_late_ack_to_any_try_counts_until_the_deadline(latency):
+    # a loaded host read the first try's ACK late, while its third try waited for its own ACK: "no ACK for TORQUE
+    # after 3 tries" (can: 0.25 s a try); any try's ACK now counts, and tries go on until the deadline
+    board = SlowBoard(latency)
+    fp.HostSession(board, ack_timeout=0.25, retries=2, ack_deadline=2.0, clock=board.clock).estop()
+    assert board.now == pytest.approx(latency, abs=0.01)  # answered when the first try's ACK came
+    before = SlowBoard(latency)
+    session = fp.HostSession(before, ack_timeout=0.25, retries=2, clock=before.clock)
+    with pytest.raises(fp.LinkError, match="no ACK for ESTOP after 3 tries"):
+        own_ack_only(session, fp.Estop(True))
+
+
+def test_a_board_that_never_acknowledges_is_one_line_after_the_deadline():
+    board = SlowBoard(None)
+    with pytest.raises(fp.LinkError) as err:
+        fp.HostSession(board, ack_timeout=0.25, retries=2, ack_deadline=2.0, clock=board.clock).estop()
+    assert str(err.value) == "slow board: no ACK for ESTOP after 8 tries in 2 s"
+    assert board.sent == 8 and board.now == pytest.approx(2.0, abs=0.01)

@@ -37,6 +37,13 @@ INBOX_LIMIT = 256  # messages kept per node between polls (older ones are droppe
 # s per try of an acknowledged command: an ACK queues behind every node's streams on one bus, and python-can's
 # slcan reader takes about 3 000 frames/s
 ACK_TIMEOUT = 0.25
+# s: the tries of an acknowledged command go on this long (an ACK to any of them counts; before, each try of 0.25 s
+# took only its own ACK, so a reader 0.25 s behind for 0.75 s failed the open). A node that never answers is told
+# after 2 s, in one line. Not enough on a host loaded beyond what the slcan reader needs: opening the 20-node mini
+# beside 1-3 busy loops (load 2.6-3.7), 23 of 24 opens succeeded before, 22 of 24 with this; the failures are the
+# reader seconds behind the nodes' streams (an ACK not read within 2 s; the first read then finds a state a second
+# old), which no deadline fixes: a lower rate, or socketcand, does.
+ACK_DEADLINE = 2.0
 
 
 class _NodeTransport(fp.CanTransport):
@@ -83,7 +90,7 @@ class CanBoards:
         self._garbled = 0
         self.inboxes = {node: deque(maxlen=INBOX_LIMIT) for node in nodes}
         self.sessions = [fp.HostSession(_NodeTransport(self, node, tids), watchdog_timeout=OPEN_WATCHDOG,
-                                        ack_timeout=ACK_TIMEOUT) for node in nodes]
+                                        ack_timeout=ACK_TIMEOUT, ack_deadline=ACK_DEADLINE) for node in nodes]
         try:
             self.pump(0.0)
         except fp.LinkError as err:
