@@ -1,8 +1,8 @@
 """Per-frame balance correction for the live loop: causal, constant cost per frame.
 
-Each frame, the ZMP's shortfall from ``margin_m`` inside the support polygon (by default
-`MARGIN_M`, 15 mm, scaled with the robot's size: :func:`size_scaled_margin`; wider than
-offline, so the correction starts early and gently) is turned
+Each frame, the ZMP's shortfall from ``margin_m`` inside the support polygon (`MARGIN_M`,
+15 mm, by default; the live loop scales it with the robot's size: :func:`size_scaled_margin`;
+wider than offline, so the correction starts early and gently) is turned
 into a change of the root rotation δ through the quasi-static sensitivity of the ZMP
 to δ: rotating the upper body by δ about the pivot P moves the CoM by
 (m_upper / m) · δ × (c_upper − P). A damped least-squares step (yaw damped hardest:
@@ -103,13 +103,12 @@ def size_scaled_margin(body: BodyModel, margin_m: float = MARGIN_M) -> float:
 
 class OnlineCorrector:
     """Causal corrector; call :meth:`step` once per analysed frame. ``margin_m`` (m): how far inside the support
-    polygon it aims the ZMP; None: `size_scaled_margin` of ``body``."""
+    polygon it aims the ZMP (the live loop gives a robot its `size_scaled_margin`)."""
 
     def __init__(self, body: BodyModel, dt: float, limits: CorrectionLimits | None = None,
                  gain_per_s: float = GAIN_PER_S, relax_s: float = 2.0, max_accel_deg_s2: float = 500.0,
-                 pivot_tau_s: float = 0.05, margin_m: float | None = None):
+                 pivot_tau_s: float = 0.05, margin_m: float = MARGIN_M):
         self.body = body
-        margin_m = size_scaled_margin(body) if margin_m is None else margin_m
         self.limits = replace(limits or CorrectionLimits(), margin_m=margin_m)
         self.dt = dt
         self.gain = min(1.0, gain_per_s * dt)

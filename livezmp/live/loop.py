@@ -63,7 +63,7 @@ import numpy as np
 
 from livezmp.balance.foot_sensors import CopLocator, CopVsZmp, contact_force, sensor_contacts
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
-from livezmp.correct.online import OnlineCorrector, size_scaled_accel
+from livezmp.correct.online import OnlineCorrector, size_scaled_accel, size_scaled_margin
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.ground_tilt import GroundTilt
@@ -186,7 +186,8 @@ class LiveLoop:
         every = self.correct_every
         self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
                                          max_accel_deg_s2=size_scaled_accel(self.body, cfg.trunk_accel_deg_s2),
-                                         margin_m=cfg.margin_m) if cfg.correct else None
+                                         margin_m=size_scaled_margin(self.body) if cfg.margin_m is None
+                                         else cfg.margin_m) if cfg.correct else None
         self.limiter.reset()
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
