@@ -8,7 +8,12 @@ over the complete frames. The kinematics do not depend on these parameters, so t
 once: the rest of the body's wrench is computed once, and the HAT adds a point mass moving with
 the HAT frame (x, y, z, heading channels), exactly as in the body model.
 
-The table is the prior (the HAT sway gains' is :data:`TRUNK_SWAY_GAIN`, measured on trunk-marker trials), and
+The HAT sways as in analyze's default (:func:`livezmp.model.markers.hat_sway`): it follows the mid-hip below
+:data:`TRUNK_FOLLOW_HZ` and sways a gain (fore-aft, lateral) times it above; the gains are fitted. The take is run
+at the table's gains (so its plate delay and complete frames are analyze's) and once with the HAT's sway above
+that frequency removed: base and estimator being linear in it, the two give the HAT at any gain.
+
+The table is the prior (the HAT sway gains' is :data:`TRUNK_STEP_GAIN`, measured on trunk-marker trials), and
 how strongly the fit is held to it is chosen by cross-validation on the frames being fitted. The folds respect
 the gait: each trial's complete frames are cut into blocks of ``BLOCK_S`` and every other block goes to one
 fold, so both folds hold both feet and every part of each stance. (The former folds, each trial's first and
@@ -33,24 +38,32 @@ import numpy as np
 import pinocchio as pin
 from scipy.optimize import least_squares
 
-from livezmp.balance.plates import G
+from livezmp.balance.plates import G, plates_floor
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import ADULT, MAX_AGE_YEARS, BspTable, child_segments
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import TRUNK_SWAY_GAIN, MarkerBodyOptions, body_from_markers, hat_table, sway_basis
-from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing
+from livezmp.model.markers import (
+    TRUNK_FOLLOW_HZ,
+    TRUNK_STEP_GAIN,
+    MarkerBodyOptions,
+    body_from_markers,
+    hat_table,
+    sway_basis,
+)
+from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing, run_take
 from livezmp.offline.validation import walking_axes
 from livezmp.tomlfile import read_toml
 
 HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
 ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP shift it causes (h / g)
 # fraction, m, m, m: what subjects plausibly differ by; sway gains: no table gives them, so a weak prior that
-# only holds them at 1 (the HAT moving with the mid-hip) where the data do not say otherwise
+# only holds them at the trunk-marker trials' where the data do not say otherwise
 PRIOR_SD = np.array([0.05, 0.03, 0.03, 0.05, 0.5, 0.5])
 PRIOR_MM = 10.0
 # multiples of that prior's weight tried by the cross-validation (inf: the table, nothing fitted)
 PRIOR_WEIGHTS = (0.3, 1.0, 3.0, 10.0, 30.0, np.inf)
 MIN_FRAMES = 20  # complete frames a fit needs
+MAX_FOLLOW_HZ = 5.0  # a subject file's hat_follow_hz: above it the sway of every step would be followed
 # the cross-validation's blocks, s: longer than the table's ZMP - CoP error stays correlated (its autocorrelation
 # falls below 1/e within 50-100 ms on 8 of the 10 calibratable plate trials; 200-230 ms on two), shorter than a
 # stance (0.5-0.7 s), so every stance spans blocks of both folds
@@ -67,28 +80,32 @@ BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.
 @dataclass(frozen=True)
 class Subject:
     """HAT mass fraction of the body, its centre of mass (forward, left, up) m from the mid-hip, and how far
-    it sways (fore-aft, lateral) relative to the mid-hip (:func:`livezmp.model.markers.hat_sway`); the rest of the
-    body's segment table ``bsp`` ("adult", "child"; None: chosen from each file) and the subject's age, years."""
+    it sways (fore-aft, lateral) relative to the mid-hip above ``hat_follow_hz`` Hz, following it below
+    (:func:`livezmp.model.markers.hat_sway`); the rest of the body's segment table ``bsp`` ("adult", "child";
+    None: chosen from each file) and the subject's age, years."""
 
     hat_fraction: float
     hat_offset: tuple[float, float, float]
-    hat_sway_gain: tuple[float, float] = TRUNK_SWAY_GAIN
+    hat_sway_gain: tuple[float, float] = TRUNK_STEP_GAIN
     bsp: str | None = None
     age_years: float | None = None
+    hat_follow_hz: float = TRUNK_FOLLOW_HZ
 
     def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
         """``base`` with this subject's HAT; its table and age unless ``base`` asks for its own."""
         base = base or MarkerBodyOptions()
         return replace(base, hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
-                       hat_sway_gain=self.hat_sway_gain, hat_follow_hz=None,  # the constant-gain model fitted
+                       hat_sway_gain=self.hat_sway_gain, hat_follow_hz=self.hat_follow_hz,
                        bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
                        age_years=base.age_years if base.age_years is not None else self.age_years)
 
 
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
-    optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_SWAY_GAIN`; ``bsp = "adult"`` or
-    ``"child"`` and ``age_years``, else the table is chosen from each file)."""
+    optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_STEP_GAIN`, the sway above
+    ``hat_follow_hz`` (Hz, else :data:`TRUNK_FOLLOW_HZ`: a file written before it was, whose gains were fitted
+    at every frequency, is read with it too); ``bsp = "adult"`` or ``"child"`` and ``age_years``, else the table
+    is chosen from each file)."""
     p = Path(path)
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
@@ -99,17 +116,21 @@ def load_subject(path: str | Path) -> Subject:
     if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
             and all(abs(v) < 1.5 for v in off)):
         raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
-    gain = s.get("hat_sway_gain", list(TRUNK_SWAY_GAIN))
+    gain = s.get("hat_sway_gain", list(TRUNK_STEP_GAIN))
     if not (isinstance(gain, list) and len(gain) == 2
             and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
         raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
+    follow = s.get("hat_follow_hz", TRUNK_FOLLOW_HZ)
+    if not (isinstance(follow, int | float) and not isinstance(follow, bool) and 0 < follow <= MAX_FOLLOW_HZ):
+        raise InputError(f"{p}: subject.hat_follow_hz must be a frequency in Hz, above 0 and at most "
+                         f"{MAX_FOLLOW_HZ:g}, got {follow!r}")
     bsp, age = s.get("bsp"), s.get("age_years")
     if bsp is not None and bsp not in ("adult", "child"):
         raise InputError(f"{p}: subject.bsp must be \"adult\" or \"child\", got {bsp!r}")
     if age is not None and not (isinstance(age, int | float) and 0 < age < MAX_AGE_YEARS):
         raise InputError(f"{p}: subject.age_years must be a number of years, got {age!r}")
     return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain), bsp,
-                   None if age is None else float(age))
+                   None if age is None else float(age), float(follow))
 
 
 def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
@@ -117,6 +138,7 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
              f"hat_fraction = {subject.hat_fraction:.5f}",
              "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
              "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
+             f"hat_follow_hz = {subject.hat_follow_hz:g}  # the HAT follows the mid-hip below, sways the gains above",
              *([f'bsp = "{subject.bsp}"  # the segment table the HAT was fitted with'] if subject.bsp else []),
              *([f"age_years = {subject.age_years:.3f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
@@ -130,9 +152,9 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
 class _Terms:
     """Per complete frame: the rest of the body's wrench for the whole mass (F (n, 3) N, moment about
     the origin (n, 3) N·m), the HAT frame's origin o, acceleration a_o, heading A and its second
-    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3); the
-    origin's straight-line trend and the walk's axes (for the sway gains: o -> trend + K (o - trend)); the
-    frames' times (n,) s."""
+    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3); the origin
+    without its sway above the follow frequency (base, a_base) and the walk's axes (for the sway gains:
+    o -> base + K (o - base)); the frames' times (n,) s."""
 
     f_rest: np.ndarray
     m_rest: np.ndarray
@@ -144,7 +166,8 @@ class _Terms:
     plate_acc: np.ndarray
     mass: float
     floor: float
-    trend: np.ndarray
+    base: np.ndarray
+    a_base: np.ndarray
     fwd: np.ndarray
     left: np.ndarray
     times: np.ndarray
@@ -155,8 +178,11 @@ class _Terms:
                          and f.name not in ("fwd", "left") else v for f in fields(self)})
 
 
-def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerBodyOptions) -> _Terms:
+def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, opts: LabOptions) -> _Terms:
+    """The terms on the frames ``rows`` of ``lab``, ``trial`` analysed with ``opts`` (its HAT swaying
+    ``opts.markers.hat_sway_gain`` above ``hat_follow_hz``)."""
     mass = lab.summary["mass"]["used_kg"]
+    markers = opts.markers
     rest = body_from_markers(trial, replace(markers, total_mass=mass, hat_fraction=0.0)).body.model
     data = rest.createData()
     r = lab.result
@@ -174,9 +200,17 @@ def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, markers: MarkerB
     d2 = np.stack([np.stack([-c, s, zero], -1), np.stack([-s, -c, zero], -1), np.stack([zero] * 3, -1)], 1)
     B = a[:, 3, None, None] * d1 + (v[:, 3] ** 2)[:, None, None] * d2
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
-    trend, fwd, left = sway_basis(r.q[:, HAT][:, :3], facing(lab.take))
-    return _Terms(f_rest, m_rest, q[:, :3], a[:, :3], A, B, lab.plates.cop[idx, :2], plate_acc, mass,
-                  lab.plates.surface_z, trend[idx], fwd, left, lab.times[idx])
+    # the HAT with no sway above the follow frequency, through the same pipeline: the swayed HAT minus it is the
+    # gains times the sway, as are their estimated accelerations (hat_sway and the estimator are linear in it)
+    still = run_take(trial, replace(opts, markers=replace(markers, hat_sway_gain=(0.0, 0.0))), mass,
+                     plates_floor(trial, markers.marker_map))[3]
+    base, a_base = still.q[idx, HAT][:, :3], still.a[idx, HAT][:, :3]
+    _, fwd, left = sway_basis(still.q[:, HAT][:, :3], facing(lab.take))
+    k_fa, k_lat = markers.hat_sway_gain
+    unscale = np.outer(fwd, fwd) / k_fa + np.outer(left, left) / k_lat + np.diag([0.0, 0.0, 1.0])
+    o, a_o = base + (q[:, :3] - base) @ unscale.T, a_base + (a[:, :3] - a_base) @ unscale.T  # gains 1
+    return _Terms(f_rest, m_rest, o, a_o, A, B, lab.plates.cop[idx, :2], plate_acc, mass,
+                  lab.plates.surface_z, base, a_base, fwd, left, lab.times[idx])
 
 
 def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -186,8 +220,8 @@ def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rest = 1.0 - f_h  # the rest's wrench was computed with no HAT, i.e. the rest carrying the whole mass
     m_h = f_h * t.mass
     k = k_fa * np.outer(t.fwd, t.fwd) + k_lat * np.outer(t.left, t.left) + np.diag([0.0, 0.0, 1.0])
-    p = t.trend + (t.o - t.trend) @ k.T + t.A @ r
-    acc = t.a_o @ k.T + t.B @ r - np.array([0.0, 0.0, -G])
+    p = t.base + (t.o - t.base) @ k.T + t.A @ r
+    acc = t.a_base + (t.a_o - t.a_base) @ k.T + t.B @ r - np.array([0.0, 0.0, -G])
     force = rest * t.f_rest + m_h * acc
     moment = rest * t.m_rest + m_h * np.cross(p, acc)
     z0 = t.floor
@@ -337,8 +371,9 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
         raise ValueError(f"calibrate: fit takes some of {PARAMETERS}, got {fit}")
     free = np.isin(PARAMETERS, fit)
     opts = opts or LabOptions()
-    # the HAT frame's origin at the mid-hip: the fit sways it (the table's sway is its prior)
-    opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=None))
+    # analysed as analyze's default (the table's HAT and sway, the prior), so the plate delay and complete frames
+    # are analyze's
+    opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=TRUNK_STEP_GAIN, hat_follow_hz=TRUNK_FOLLOW_HZ))
     whole = []
     for trial in trials:
         if not trial.plates:
@@ -351,11 +386,11 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
         if rows.sum() < MIN_FRAMES:
             raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need {MIN_FRAMES}")
         _check_agreement(trial, lab, rows)
-        whole.append(_terms(trial, lab, rows, opts.markers))
+        whole.append(_terms(trial, lab, rows, opts))
         stature, bsp = lab.summary["markers"]["stature_m"], lab.summary["markers"]["bsp"]
     table = ADULT if bsp["table"] == "adult" else BspTable(child_segments(bsp["age_years"]), "child", bsp["age_years"])
     fraction, height, _ = hat_table(stature, table=table.segments)
-    prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_SWAY_GAIN])
+    prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_STEP_GAIN])
     weight, scores = _cross_validated(whole, prior, free, block_s)
     fitted = _fit(whole, prior, weight, free)
     unconstrained = _fit(whole, prior, FREE_WEIGHT, free)
@@ -379,4 +414,4 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     if len(whole) > 1:
         report.update(_other_trials(whole, prior, free, block_s))
     return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6]),
-                   table.name, table.age_years), report
+                   table.name, table.age_years, TRUNK_FOLLOW_HZ), report

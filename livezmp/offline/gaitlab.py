@@ -117,7 +117,9 @@ def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
     return out
 
 
-def _run(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
+def run_take(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
+    """The marker body of ``trial`` (``mass`` kg, soles at ``floor``) through the lab pipeline: the take, its
+    frame times (s), the pipeline's settings and its result."""
     take = body_from_markers(trial, replace(opts.markers, total_mass=mass, floor_z=floor))
     times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
     cfg = default_config(take.body, trial.rate, opts.mode, floor)
@@ -265,7 +267,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     opts = opts or LabOptions()
     first = opts.mass or trial.mass_kg or DEFAULT_MASS
     floor = plates_floor(trial, opts.markers.marker_map)
-    take, times, cfg, result = _run(trial, opts, first, floor)
+    take, times, cfg, result = run_take(trial, opts, first, floor)
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)
         return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
@@ -284,7 +286,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                              stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on))
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
-        take, times, cfg, result = _run(trial, opts, used, floor)
+        take, times, cfg, result = run_take(trial, opts, used, floor)
         com_acc = com_accelerations(take, result)
         complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)  # the same plates
     # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
