@@ -16,7 +16,7 @@ from livezmp.model.anthropometry import (
     child_segments,
     choose_table,
 )
-from livezmp.model.markers import MarkerBodyOptions
+from livezmp.model.markers import TRUNK_FOLLOW_HZ, TRUNK_STEP_GAIN, MarkerBodyOptions
 from livezmp.offline.calibrate import load_subject
 from tests.test_c3d_gaitlab import C3D, PLATES, Lab, write_lab_c3d
 
@@ -94,7 +94,12 @@ def test_a_subject_file_names_its_table_unless_the_command_line_does(tmp_path):
     opts = subject.marker_options()
     assert (opts.bsp, opts.age_years, opts.hat_fraction) == ("child", 8.0, 0.5)
     assert subject.marker_options(MarkerBodyOptions(bsp="adult", age_years=30.0)).bsp == "adult"
-    for line, field in (('bsp = "toddler"', "subject.bsp"), ("age_years = -1", "subject.age_years")):
+    # written before calibrate fitted the follow frequency: read with the default's (its gains then sway above it)
+    assert (opts.hat_sway_gain, opts.hat_follow_hz) == (TRUNK_STEP_GAIN, TRUNK_FOLLOW_HZ)
+    path.write_text('[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\nhat_follow_hz = 0.5\n')
+    assert load_subject(path).marker_options().hat_follow_hz == 0.5
+    for line, field in (('bsp = "toddler"', "subject.bsp"), ("age_years = -1", "subject.age_years"),
+                        *((f"hat_follow_hz = {v}", "subject.hat_follow_hz") for v in ("0", "-1", "6", '"1"', "true"))):
         path.write_text(f'[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\n{line}\n')
         with pytest.raises(InputError, match=field):
             load_subject(path)

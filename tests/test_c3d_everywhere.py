@@ -325,8 +325,7 @@ def test_monitor_replays_a_c3d_with_the_subjects_hat(corrected, tmp_path):
     45 % of the mass and 30 mm forward of the table's, moves it forward."""
     d, _ = corrected
     (tmp_path / "s.toml").write_text(SUBJECT)
-    # the table's HAT as a subject file: a subject's HAT sways at one gain at every frequency (the model calibrate
-    # fits), the table's by default only above TRUNK_FOLLOW_HZ; compared like with like
+    # the table's HAT as a subject file (its sway the default's, as calibrate fits it)
     fraction, height, _ = hat_table(body_from_markers(read_c3d(d / "cut.c3d")).notes["stature_m"])
     (tmp_path / "t.toml").write_text(f"[subject]\nhat_fraction = {fraction}\nhat_offset_m = [0.0, 0.0, {height}]\n")
     runs = {}
@@ -347,6 +346,7 @@ def test_monitor_replays_a_c3d_with_the_subjects_hat(corrected, tmp_path):
 @pytest.mark.parametrize(("subject", "source", "message"), [
     ("[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.3]\n", "bvh", "hat_offset_m"),
     ("[person]\nhat_fraction = 0.5\n", "bvh", "[subject]"),
+    ("[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\nhat_follow_hz = 0\n", "bvh", "hat_follow_hz"),
     (SUBJECT, "mcap", "describes a person"),
 ])
 def test_bad_subject_for_monitor_is_one_line(subject, source, message, tmp_path, capsys):

@@ -784,20 +784,22 @@ def test_not_a_c3d_is_one_line(tmp_path, capsys):
 # ---- calibration ----
 
 def test_calibration_model_reproduces_the_pipelines_zmp_exactly():
+    """The fit's model at the table's parameters is analyze's default ZMP; at other sway gains (the HAT following
+    the mid-hip below TRUNK_FOLLOW_HZ, swaying the gains above) the ZMP of the pipeline run on a body built with
+    them."""
     trial = read_c3d(C3D / "walk_plugingait_forceplates.c3d")
-    lab = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None)))
+    lab = analyse_lab_take(trial)
     rows = lab.complete & lab.result.has_zmp
-    terms = calibration._terms(trial, lab, rows, MarkerBodyOptions(hat_sway_gain=None))
+    terms = calibration._terms(trial, lab, rows, LabOptions())
     fraction, height, _ = hat_table(lab.summary["markers"]["stature_m"])
-    zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, 1.0, 1.0]))
+    zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, *calibration.TRUNK_STEP_GAIN]))
     assert np.abs(zmp - lab.result.zmp[rows, :2]).max() < 1e-9
-    # with sway gains: the model against the pipeline run on a body built with them (the estimator smooths
-    # the swayed positions, the model sways the smoothed ones: equal up to the smoothing of a straight line)
-    gains = (0.6, 0.4)
-    swayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=gains, hat_follow_hz=None)))
-    zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, *gains]))
-    assert np.abs(zmp - swayed.result.zmp[rows, :2]).max() < 1e-3
-    assert np.abs(swayed.result.zmp[rows, :2] - lab.result.zmp[rows, :2]).max() > 0.01  # the gains matter
+    for gains in ((1.0, 1.0), (0.6, 0.4)):  # (1, 1): the HAT moving with the mid-hip
+        swayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=gains)))
+        zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, *gains]))
+        # equal but for the walk's axes, the model's from the estimated HAT path, the body's from the markers' (14 µm)
+        assert np.abs(zmp - swayed.result.zmp[rows, :2]).max() < 5e-5
+        assert np.abs(swayed.result.zmp[rows, :2] - lab.result.zmp[rows, :2]).max() > 0.01  # the gains matter
 
 
 def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypatch):
@@ -814,7 +816,7 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     # its offset alone: mass fraction and sway stay the table's (not the true 0.45), so the truth is out of reach
     part, partial = calibration.calibrate([trial], fit=("forward", "left"))
     assert part.hat_fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12) and part.hat_fraction > 0.47
-    assert part.hat_sway_gain == calibration.TRUNK_SWAY_GAIN
+    assert part.hat_sway_gain == calibration.TRUNK_STEP_GAIN
     assert partial["rms_fitted_unconstrained_mm"] > 5 * report["rms_fitted_unconstrained_mm"]
     with pytest.raises(ValueError, match="fit takes some of"):
         calibration.calibrate([trial], fit=("knee",))
@@ -835,22 +837,27 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
 
 
 def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, monkeypatch):
-    """The synthetic subject's trunk sways half as far fore-aft and 0.7 times as far sideways as its mid-hip:
-    the table (gains TRUNK_SWAY_GAIN) is off by 6 mm; calibrated (prior on) the held-out folds improve; with the prior
-    off they and `analyze --subject` agree with the plates to 3-4 mm (the fit's model sways the smoothed
-    positions, the body the raw ones). (A rigid sway about the
-    ankles cannot tell a lighter, higher HAT from a heavier, lower, less swaying one, so the parameters
-    themselves are not asserted here.)"""
+    """The synthetic subject's trunk follows its mid-hip below 0.1 Hz and sways half as far fore-aft and 0.7 times as
+    far sideways above (its sway is at 0.3-0.4 Hz, below TRUNK_FOLLOW_HZ, so the follow frequency is lowered to see
+    it): the table (gains TRUNK_STEP_GAIN) is off by 4.1 mm; calibrated (prior on) the held-out folds halve that (1.8);
+    with the prior off they and `analyze --subject` (the subject file carrying the follow frequency) agree with the
+    plates to 0.7 mm. (A rigid sway about the ankles cannot tell a lighter, higher HAT from a heavier, lower, less
+    swaying one, so the parameters themselves are not asserted here.)"""
     path = tmp_path / "sway.c3d"
-    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(hat_sway_gain=(0.5, 0.7), hat_follow_hz=None))
-    _, report = calibration.calibrate([read_c3d(path)])
-    assert report["rms_table_mm"] > 5 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 1.5
+    body = MarkerBodyOptions(hat_sway_gain=(0.5, 0.7), hat_follow_hz=0.1)
+    write_lab_c3d(path, PLATES, body=body)
+    opts = LabOptions(markers=MarkerBodyOptions(hat_follow_hz=0.1))
+    _, report = calibration.calibrate([read_c3d(path)], opts)
+    assert report["rms_table_mm"] > 3 and report["rms_held_out_fitted_mm"] < report["rms_held_out_table_mm"] / 2
     monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
-    _, report = calibration.calibrate([read_c3d(path)])
-    assert report["rms_held_out_fitted_mm"] < 4.0
-    assert main(["calibrate", str(path), "-o", str(tmp_path / "s.toml")]) == 0
+    subject, report = calibration.calibrate([read_c3d(path)], opts)
+    assert report["rms_held_out_fitted_mm"] < 1.0 and subject.hat_follow_hz == 0.1
+    calibration.write_subject(subject, tmp_path / "s.toml", report)
+    assert calibration.load_subject(tmp_path / "s.toml").hat_follow_hz == 0.1
     rc, s = _analyze(path, tmp_path, "--subject", str(tmp_path / "s.toml"))
-    assert rc == 0 and s["cop_vs_zmp"]["rms_mm"] < 3.0 and "swaying" in s["markers"]["hat"]
+    assert rc == 0 and s["cop_vs_zmp"]["rms_mm"] < 1.0 and "above 0.1 Hz" in s["markers"]["hat"]
+    with pytest.raises(ValueError, match="follow frequency"):
+        calibration.calibrate([read_c3d(path)], LabOptions(markers=MarkerBodyOptions(hat_follow_hz=None)))
 
 
 def test_real_walk_calibrated_and_held_out():

@@ -364,6 +364,7 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     (RMS ZMP − CoP with the table, fitted, fitted without the prior on the same frames (the floor of what
     these parameters can do there), and held out, mm; whether the table was kept, the prior weight chosen;
     each parameter's standard error; with several trials, each scored with the others' calibration).
+    The HAT follows the mid-hip below ``opts.markers.hat_follow_hz`` (default :data:`TRUNK_FOLLOW_HZ`).
     ``fit``: which of ``PARAMETERS`` are fitted (the others keep the table's value); ``block_s``: the
     cross-validation's block length, s (None: the halves of each trial's frames, as before)."""
     unknown = set(fit) - set(PARAMETERS)
@@ -371,9 +372,12 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
         raise ValueError(f"calibrate: fit takes some of {PARAMETERS}, got {fit}")
     free = np.isin(PARAMETERS, fit)
     opts = opts or LabOptions()
+    follow = opts.markers.hat_follow_hz
+    if follow is None:
+        raise ValueError("calibrate: the HAT's sway is fitted above a follow frequency; hat_follow_hz is None")
     # analysed as analyze's default (the table's HAT and sway, the prior), so the plate delay and complete frames
     # are analyze's
-    opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=TRUNK_STEP_GAIN, hat_follow_hz=TRUNK_FOLLOW_HZ))
+    opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=TRUNK_STEP_GAIN))
     whole = []
     for trial in trials:
         if not trial.plates:
@@ -414,4 +418,4 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     if len(whole) > 1:
         report.update(_other_trials(whole, prior, free, block_s))
     return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6]),
-                   table.name, table.age_years, TRUNK_FOLLOW_HZ), report
+                   table.name, table.age_years, follow), report
