@@ -25,7 +25,7 @@ from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
-from livezmp.model.markers import MarkerBodyOptions, body_from_markers, hat_sway, hat_table
+from livezmp.model.markers import TRUNK_FOLLOW_HZ, MarkerBodyOptions, body_from_markers, hat_sway, hat_table
 from livezmp.offline import calibrate as calibration
 from livezmp.offline import gaitlab
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, lateral_band
@@ -797,8 +797,9 @@ def test_calibration_model_reproduces_the_pipelines_zmp_exactly():
     for gains in ((1.0, 1.0), (0.6, 0.4)):  # (1, 1): the HAT moving with the mid-hip
         swayed = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=gains)))
         zmp, _ = calibration._model(terms, np.array([fraction, 0.0, 0.0, height, *gains]))
-        # equal but for the walk's axes, the model's from the estimated HAT path, the body's from the markers' (14 µm)
-        assert np.abs(zmp - swayed.result.zmp[rows, :2]).max() < 5e-5
+        # equal but for the walk's axes, the model's from the estimated HAT path, the body's from the markers'
+        # (14 and 77 µm)
+        assert np.abs(zmp - swayed.result.zmp[rows, :2]).max() < 1e-4
         assert np.abs(swayed.result.zmp[rows, :2] - lab.result.zmp[rows, :2]).max() > 0.01  # the gains matter
 
 
@@ -861,48 +862,48 @@ def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, mon
 
 
 def test_real_walk_calibrated_and_held_out():
-    """The Plug-in Gait walk, cross-validated on every other 0.2 s block of its complete frames: the whole trial's fit
-    (prior weight 10) takes the ZMP error from 31.6 (the table) to 28.1 mm in-sample, but within either fold no
-    weight beats the table both ways round, so held out the calibration is the table: 31.6 mm, never worse. Its
-    parameters' jackknife standard errors are a small part of the table's assumed between-subject spread; its
-    trunk sways less than its mid-hip."""
-    subject, report = calibration.calibrate([read_c3d(C3D / "walk_plugingait_forceplates.c3d")])
-    assert 31 < report["rms_held_out_table_mm"] < 35
+    """The Plug-in Gait walk, cross-validated on every other 0.2 s block of its complete frames: its table is
+    analyze's default (27.9 mm), and no prior weight's fit beats it held out both ways round (28.1-28.6 pooled), so
+    calibrate keeps the table and says so; unconstrained and scored on its own frames the HAT reaches 26.3 mm."""
+    trial = read_c3d(C3D / "walk_plugingait_forceplates.c3d")
+    subject, report = calibration.calibrate([trial])
+    default = analyse_lab_take(trial).summary["cop_vs_zmp"]
+    assert report["rms_table_mm"] == pytest.approx(default["rms_mm"], abs=0.01)
+    assert report["frames"] == default["frames"]
+    assert report["table_kept"] and report["held_out_prior_weights"] == [None, None]
     assert report["rms_held_out_fitted_mm"] == pytest.approx(report["rms_held_out_table_mm"], abs=0.01)
-    assert report["held_out_prior_weights"] == [None, None] and not report["table_kept"]
-    assert report["rms_fitted_mm"] < report["rms_table_mm"] - 2.5
-    # unconstrained and scored on the frames it is fitted on, 24.5 mm (26.5 with the plates at the estimator's cutoff)
-    assert report["rms_fitted_unconstrained_mm"] < report["rms_fitted_mm"]
-    assert np.all(np.array(report["parameter_sd"]) < calibration.PRIOR_SD / 4)
-    assert subject.hat_sway_gain[0] < 0.8 and subject.hat_sway_gain[1] < 0.9
+    assert report["rms_held_out_table_mm"] < 29.5
+    assert min(report["prior_weight_scores_mm"][:-1]) > report["rms_held_out_table_mm"]
+    assert report["rms_fitted_unconstrained_mm"] < report["rms_table_mm"] - 1
+    assert subject.hat_sway_gain == calibration.TRUNK_STEP_GAIN and subject.hat_follow_hz == TRUNK_FOLLOW_HZ
 
 
 def test_calibration_rejects_a_fit_that_chases_one_folds_noise(monkeypatch):
     """cgm24 has one stance on its plate. Fitted on one fold of its 0.2 s blocks (prior weight 10), the HAT scores
-    51.2 mm on the other against the table's 51.3; fitted on that other fold, it scores 37 mm on the first against
-    the table's 20: it chased the second fold's noise. A weight must beat the table both ways round, none does, so
-    calibrate keeps the table and says so; held out it is the table's 39.4 mm. With the prior weight fixed instead
-    (no cross-validation), held out it is 49.4 mm, 10 mm worse than the table."""
+    55.2 mm on the other against the table's 69.7; fitted on that other fold, it scores 32.0 mm on the first against
+    the table's 23.3: it chased the second fold's noise. A weight must beat the table both ways round; within either
+    fold none does, so held out the calibration is the table's 52.9 mm (the whole trial's fit, weight 30, is written).
+    The guard is conservative here: with the prior weight fixed at 10 instead (no cross-validation), held out it is
+    45.6 mm."""
     trial = read_c3d(C3D / "cgm24_walking01_forceplate.c3d")
-    subject, report = calibration.calibrate([trial])
-    assert report["table_kept"] and report["prior_weight"] is None
+    _, report = calibration.calibrate([trial])
+    assert report["held_out_prior_weights"] == [None, None]
     assert report["rms_held_out_fitted_mm"] == pytest.approx(report["rms_held_out_table_mm"], abs=0.01)
-    assert report["parameter_sd_from"].startswith("the table")
-    lab = analyse_lab_take(trial, LabOptions(markers=MarkerBodyOptions(hat_sway_gain=None)))
+    lab = analyse_lab_take(trial)
+    assert report["rms_table_mm"] == pytest.approx(lab.summary["cop_vs_zmp"]["rms_mm"], abs=0.01)
     fraction, height, _ = hat_table(lab.summary["markers"]["stature_m"])
-    assert subject.hat_fraction == pytest.approx(fraction) and subject.hat_offset == pytest.approx((0, 0, height))
-    # the folds themselves: one way round the fit helps (barely), the other way it is far worse than the table
+    # the folds themselves: one way round the fit helps, the other way it is far worse than the table
     rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
-    terms = calibration._terms(trial, lab, rows, MarkerBodyOptions(hat_sway_gain=None))
-    prior = np.array([fraction, 0.0, 0.0, height, *calibration.TRUNK_SWAY_GAIN])
+    terms = calibration._terms(trial, lab, rows, LabOptions())
+    prior = np.array([fraction, 0.0, 0.0, height, *calibration.TRUNK_STEP_GAIN])
     (fit_a, held_a), (fit_b, held_b) = calibration._folds([terms], calibration.BLOCK_S)
     free = np.ones(6, bool)
     ab = calibration._rms_mm(calibration._fit(fit_a, prior, 10.0, free), held_a)
     ba = calibration._rms_mm(calibration._fit(fit_b, prior, 10.0, free), held_b)
-    assert ab < calibration._rms_mm(prior, held_a) and ba > calibration._rms_mm(prior, held_b) + 10
-    monkeypatch.setattr(calibration, "_cross_validated", lambda terms, prior, free, block_s: (1.0, []))
+    assert ab < calibration._rms_mm(prior, held_a) - 10 and ba > calibration._rms_mm(prior, held_b) + 5
+    monkeypatch.setattr(calibration, "_cross_validated", lambda terms, prior, free, block_s: (10.0, []))
     _, fixed = calibration.calibrate([trial])
-    assert fixed["rms_held_out_fitted_mm"] > fixed["rms_held_out_table_mm"] + 8.0
+    assert fixed["rms_held_out_fitted_mm"] < fixed["rms_held_out_table_mm"] - 5
 
 
 def test_calibration_refuses_plates_against_the_motion(lab):
