@@ -24,7 +24,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "
           f"{1000 * subject.hat_offset[0]:+.0f} mm forward, {1000 * subject.hat_offset[1]:+.0f} mm left, "
           f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip, swaying {subject.hat_sway_gain[0]:.2f} (fore-aft) "
-          f"and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip")
+          f"and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip above {subject.hat_follow_hz:g} Hz")
     print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
           f"{report['rms_fitted_mm']:.1f} mm; held out ({report['folds']}): table "
           f"{report['rms_held_out_table_mm']:.1f} mm, calibrated {report['rms_held_out_fitted_mm']:.1f} mm")

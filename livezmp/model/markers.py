@@ -95,7 +95,7 @@ TRUNK_SWAY_GAIN = (0.73, 0.83)
 # gain is the four tracked trunks' median least-squares gain of the acceleration (6 Hz band; fore-aft 0.50, 0.58,
 # 0.46, 0.46; lateral 0.61, 0.49, -0.59, 0.52), and this predicts their trunks' acceleration better than the constant
 # in 7 of 8 axes (docs/validation.md, "Why the ZMP swung too far"). TRUNK_SWAY_GAIN remains the constant-gain
-# model that `calibrate` fits.
+# model's (hat_follow_hz None); `calibrate` fits the follow model.
 TRUNK_STEP_GAIN = (0.48, 0.50)
 TRUNK_FOLLOW_HZ = 1.0  # below the step frequency of any walk (1.2-2.7 Hz on the plate trials), above its speed changes
 
