@@ -304,13 +304,14 @@ def _cross_validated(terms: list[_Terms], prior: np.ndarray, free: np.ndarray,
     return PRIOR_WEIGHTS[best], [float(v) for v in pooled]
 
 
-def _held_out(terms: list[_Terms], prior: np.ndarray, free: np.ndarray,
-              block_s: float | None) -> tuple[float, float, list[float]]:
-    """Pooled held-out RMS (mm) of the table and of the calibration (fitted on one fold with the weight its own
-    cross-validation chose, scored on the other), and those weights."""
+def _pooled(splits: Folds, prior: np.ndarray, free: np.ndarray,
+            block_s: float | None) -> tuple[float, float, list[float]]:
+    """Pooled RMS (mm) over (fitted, held-out) ``splits`` of the table and of the calibration (fitted on each
+    split's first part with the prior weight its own cross-validation chose, scored on its second), and those
+    weights."""
     table = calibrated = frames = 0.0
     weights = []
-    for fitted, held in _folds(terms, block_s):
+    for fitted, held in splits:
         w, _ = _cross_validated(fitted, prior, free, block_s)
         sq, n = _sq_mm(_fit(fitted, prior, w, free), held)
         table, calibrated, frames = table + _sq_mm(prior, held)[0], calibrated + sq, frames + n
@@ -348,14 +349,9 @@ def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> Non
 
 def _other_trials(terms: list[_Terms], prior: np.ndarray, free: np.ndarray, block_s: float | None) -> dict:
     """Each trial scored with the parameters calibrated on the others (pooled RMS, mm, table beside)."""
-    table = fitted = frames = 0.0
-    for i, t in enumerate(terms):
-        rest = terms[:i] + terms[i + 1:]
-        w, _ = _cross_validated(rest, prior, free, block_s)
-        sq, n = _sq_mm(_fit(rest, prior, w, free), [t])
-        table, fitted, frames = table + _sq_mm(prior, [t])[0], fitted + sq, frames + n
-    return {"rms_other_trials_table_mm": round(float(np.sqrt(table / frames)), 2),
-            "rms_other_trials_fitted_mm": round(float(np.sqrt(fitted / frames)), 2)}
+    table, fitted, _ = _pooled([(terms[:i] + terms[i + 1:], [t]) for i, t in enumerate(terms)], prior, free,
+                               block_s)
+    return {"rms_other_trials_table_mm": round(table, 2), "rms_other_trials_fitted_mm": round(fitted, 2)}
 
 
 def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
@@ -398,7 +394,7 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     weight, scores = _cross_validated(whole, prior, free, block_s)
     fitted = _fit(whole, prior, weight, free)
     unconstrained = _fit(whole, prior, FREE_WEIGHT, free)
-    held_table, held_fitted, weights = _held_out(whole, prior, free, block_s)
+    held_table, held_fitted, weights = _pooled(_folds(whole, block_s), prior, free, block_s)
     kept = not np.isfinite(weight)
     sd = None if kept else _jackknife_sd(whole, prior, weight, free, BLOCK_S)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
