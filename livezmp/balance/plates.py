@@ -213,8 +213,9 @@ def cop_on_feet(plates: PlateFrames, soles: dict[str, np.ndarray], in_contact: d
     plate read with wrong corners, ORIGIN, axes or channels puts its CoP off the foot."""
     out = []
     for n, outline, cop, fz in zip(plates.used, plates.outlines, plates.plate_cop, plates.plate_fz, strict=True):
-        on = {s: _inside(sole, outline, margin).all(axis=1) & in_contact[s] for s, sole in soles.items()}
-        touch = {s: _inside(sole, outline, margin).any(axis=1) & in_contact[s] for s, sole in soles.items()}
+        corners_on = {s: _inside(sole, outline, margin) & in_contact[s][:, None] for s, sole in soles.items()}
+        on = {s: c.all(axis=1) for s, c in corners_on.items()}
+        touch = {s: c.any(axis=1) for s, c in corners_on.items()}
         off = np.zeros(len(fz))
         rows = np.zeros(len(fz), dtype=bool)
         for s in soles:

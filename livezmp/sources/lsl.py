@@ -144,7 +144,7 @@ class LslSource:
         except ValueError:
             align = math.nan
         if not (math.isfinite(align) and align >= 0):
-            raise InputError(f"{url}: align: need frame periods (a number >= 0), got {query['align']!r}")
+            raise InputError(f"{url}: align: need frame periods (a number >= 0), got {query.get('align', align)!r}")
         prop, value = (("name", u.netloc + u.path.rstrip("/")) if u.netloc else
                        ("source_id", query["source_id"]) if "source_id" in query else
                        ("type", query.get("type", "MoCap")))
