@@ -39,7 +39,7 @@ from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
-from livezmp.model.mimic import follow, follow_rate
+from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import leg_joints
 
@@ -485,7 +485,8 @@ def swing_zmp_past_toes(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitu
     """(samples,) m: how far past the toes the ZMP is (negative: inside) at evenly spaced phases of one cycle of
     the swing ``q0 + amplitude sin(wt) dq``, feet flat, from the whole-body dynamics (base still)."""
     model, data = body.model, body.model.createData()
-    q0, dq = follow(q0, body.mimics), follow_rate(dq, body.mimics)  # the goals sent: a follower swings with its parent
+    # the goals sent: a follower swings with its parent
+    q0, dq = follow(q0, body.mimics), follow(dq, body.mimics, offset=False)
     base = BasePlacer(body).update(q0)
     toe = float(standing_support(body, q0)[1][:, X].max())
     w = 2 * np.pi * frequency

@@ -33,27 +33,16 @@ class Mimic:
     offset: float
 
 
-def follow(values: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
+def follow(values: np.ndarray, mimics: tuple[Mimic, ...], offset: bool = True) -> np.ndarray:
     """``values`` (..., n) per actuated joint (angles or goals; a frame or frames) with each mimic joint's value
     set from its parent's; ``values`` itself when there are no mimics (parents are never mimics: chains are
-    resolved when read)."""
+    resolved when read). ``offset=False`` for rates (velocities, accelerations or changes of angle): the
+    multiplier alone, the offset does not move."""
     if not mimics:
         return values
     out = np.array(values, dtype=float)
     for m in mimics:
-        out[..., m.joint] = m.multiplier * out[..., m.parent] + m.offset
-    return out
-
-
-def follow_rate(rates: np.ndarray, mimics: tuple[Mimic, ...]) -> np.ndarray:
-    """``rates`` (..., n) per actuated joint (velocities, accelerations or changes of angle) with each mimic
-    joint's set to its parent's times the multiplier (the offset does not move); ``rates`` itself when there are
-    no mimics."""
-    if not mimics:
-        return rates
-    out = np.array(rates, dtype=float)
-    for m in mimics:
-        out[..., m.joint] = m.multiplier * out[..., m.parent]
+        out[..., m.joint] = m.multiplier * out[..., m.parent] + (m.offset if offset else 0.0)
     return out
 
 
