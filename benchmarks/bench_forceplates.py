@@ -327,6 +327,62 @@ def error_sources(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
 
 
+LEG_KINDS = ("thigh", "shank", "foot")
+MIN_STEPS = 1.4  # complete frames spanning fewer steps do not pin a step-frequency phasor down
+
+
+def _step_phasors(series: dict[str, np.ndarray], t: np.ndarray, rows: np.ndarray, f: float) -> dict[str, complex]:
+    """Each series' complex amplitude at ``f`` Hz over ``rows`` (least squares with an offset, a linear trend and
+    the second harmonic beside it): amplitude abs(), phase angle() (a lead is positive)."""
+    w = 2 * np.pi * f * t
+    basis = np.column_stack([np.ones_like(t), t - t[rows].mean(), np.cos(w), np.sin(w), np.cos(2 * w), np.sin(2 * w)])
+    return {k: complex(c[2], -c[3]) for k, v in series.items()
+            for c in [np.linalg.lstsq(basis[rows], v[rows], rcond=None)[0]]}
+
+
+def swing_at_step_frequency(done: dict[str, tuple]) -> None:
+    """The fore-aft swing at the step frequency, split where it comes from: the body's acceleration is the mid-hip's
+    (what the pelvis markers give) plus the placed or tracked upper body's and the legs' motion relative to it (each
+    a share of the whole mass), against the plates' F_x / m; and the CoP's swing about the CoM against the ZMP's
+    (amplitude ratio; the ZMP's lead in ms). Trials whose complete frames span at least MIN_STEPS steps."""
+    print(f"\nfore-aft at the step frequency (complete frames spanning >= {MIN_STEPS} steps): acceleration amplitude "
+          "m/s2 @ phase deg vs the plates'; CoP-CoM / ZMP-CoM amplitude, ZMP lead ms")
+    print(f"{'trial':34s} {'f Hz':>5s} {'steps':>5s} {'mid-hip':>11s} {'upper rel.':>11s} {'legs rel.':>11s} "
+          f"{'kinematic':>11s} {'plates':>6s}   CoP/ZMP  lead")
+    for name, (trial, a) in done.items():
+        r, p, dt = a.result, a.plates, 1.0 / trial.rate
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        fwd, _ = walking_axes(r.com, facing(a.take))
+        shares = {k: v @ fwd for k, v in _group_accelerations(a, dt).items()}
+        mid_hip = com_accelerations(r.q[:, :3], dt) @ fwd  # the pelvis' origin: its first three channels
+        model = a.take.body.model
+        masses: dict[str, float] = {}
+        for j in range(1, model.njoints):
+            kind = model.names[j].split(".")[0].split("_")[0]
+            masses[kind] = masses.get(kind, 0.0) + model.inertias[j].mass
+        total = sum(masses.values())
+        legs = sum(shares[k] - masses[k] / total * mid_hip for k in LEG_KINDS)
+        upper = sum(shares[k] - masses[k] / total * mid_hip for k in shares if k not in LEG_KINDS)
+        kin = sum(shares.values())
+        spectrum = np.abs(np.fft.rfft(kin - kin.mean(), 8 * len(kin)))
+        freq = np.fft.rfftfreq(8 * len(kin), dt)
+        band = (freq > 1.0) & (freq < 3.5)
+        f = float(freq[band][np.argmax(spectrum[band])])
+        steps = (a.times[rows][-1] - a.times[rows][0]) * f if rows.any() else 0.0
+        if steps < MIN_STEPS:
+            continue
+        swing = {"zmp": np.where(r.has_zmp, (r.zmp[:, :2] - r.com[:, :2]) @ fwd[:2], 0.0),
+                 "cop": np.where(rows, (p.cop[:, :2] - r.com[:, :2]) @ fwd[:2], 0.0)}
+        ph = _step_phasors({"mid-hip": mid_hip, "upper": upper, "legs": legs, "kin": kin,
+                            "plates": (p.force / a.summary["mass"]["used_kg"]) @ fwd, **swing}, a.times, rows, f)
+        ref = ph["plates"]
+        cells = " ".join(f"{abs(ph[k]):5.2f}@{np.degrees(np.angle(ph[k] / ref)):+4.0f}"
+                         for k in ("mid-hip", "upper", "legs", "kin"))
+        lead = 1000 * np.angle(ph["zmp"] / ph["cop"]) / (2 * np.pi * f)
+        print(f"{name[:34]:34s} {f:5.2f} {steps:5.1f} {cells} {abs(ref):6.2f}   {abs(ph['cop']) / abs(ph['zmp']):5.2f} "
+              f"{lead:+5.0f}")
+
+
 def foot_frame(done: dict[str, tuple]) -> None:
     """CoP and ZMP in the stance foot's frame over single-support complete frames: along the foot from the heel
     (0) to the toe (1) by the sole model's corners, and sideways from its heel-toe line (mm, + left). A plate
@@ -630,6 +686,7 @@ def main() -> None:
     sway_before_after(done)
     error_sources(done)
     lateral_sources(done)
+    swing_at_step_frequency(done)
     foot_frame(done)
     plate_check(done)
     if args.more:
