@@ -17,10 +17,11 @@ then the estimator's cutoff around the default (plates low-passed with it, and a
 sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN and
 TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
-with the kinematic and the plates' acceleration, `livezmp calibrate` cross-validated per trial, and the
-estimator's own gain and delay on sinusoids (why row 4 matters). Figures: over each
-trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after the CoP; bias: mean
-ZMP - CoP along the walk and to its left.
+with the kinematic and the plates' acceleration, the fore-aft swing at the step frequency split into the
+mid-hip's acceleration and the upper body's and legs' motion relative to it, `livezmp calibrate`
+cross-validated per trial, and the estimator's own gain and delay on sinusoids (why row 4 matters).
+Figures: over each trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after
+the CoP; bias: mean ZMP - CoP along the walk and to its left.
 
     python benchmarks/bench_forceplates.py [MORE.c3d | DIR ...]
 
