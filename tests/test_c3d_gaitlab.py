@@ -491,10 +491,10 @@ def test_trunk_markers_alone_track_the_thorax(tmp_path):
 
 
 def test_trunk_top_markers_track_a_leaning_thorax(tmp_path):
-    """A lower-body set with only the trunk's top (C7 and the clavicles' LCLA, RCLA), the trunk rolling over
-    the hips on its own: the thorax is tracked, its axis from the mid-hip, and the ZMP matches the plates
-    written from that body's dynamics to a millimetre. Without C7 the HAT is placed upright on the mid-hip
-    and misses the lean by centimetres."""
+    """A lower-body set with only the trunk's top (C7 and the clavicles' LCLA, RCLA, or their ISB name LSC, RSC),
+    the trunk rolling over the hips on its own: the thorax is tracked, its axis from the mid-hip, and the ZMP
+    matches the plates written from that body's dynamics to a millimetre. Without C7 the HAT is placed upright on
+    the mid-hip and misses the lean by centimetres."""
     path = tmp_path / "top.c3d"
     write_lab_c3d(path, PLATES, trunk="top")
     trial = read_c3d(path)
@@ -502,6 +502,9 @@ def test_trunk_top_markers_track_a_leaning_thorax(tmp_path):
     assert {"thorax", "headarms"} <= {n.split(".")[0] for n in a.take.body.channel_names}
     assert "thorax from C7 LCLA RCLA (its axis from the mid-hip)" in a.summary["markers"]["marker_set"]
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    # the clavicles' sternal ends under their ISB name (c3d.org's 2198928 writes LSC, RSC): the same body
+    isb = replace(trial, labels=[{"LCLA": "LSC", "RCLA": "RSC"}.get(v, v) for v in trial.labels])
+    assert analyse_lab_take(isb).summary["cop_vs_zmp"]["rms_mm"] == a.summary["cop_vs_zmp"]["rms_mm"]
     trial.labels[trial.labels.index("C7")] = "unused"
     placed = analyse_lab_take(trial)
     assert "hat" in {n.split(".")[0] for n in placed.take.body.channel_names}

@@ -34,7 +34,8 @@ CONVENTIONS = {
     ("LLKN", "LKNE"), ("LMKN", "LKNM"), ("RLFC", "RKNE"), ("RLMA", "RANK"), ("RCAL", "RHEE"),
     ("L_IAS", "LASI"), ("R_IPS", "RPSI"), ("R_FLE", "RKNE"), ("L_FME", "LKNM"), ("L_FAL", "LANK"),
     ("L_TAM", "LMED"), ("R_FM2", "RTOE"), ("LeftASIS", "LASI"), ("l.asis", "LASI"), ("ASIS_L", "LASI"),
-    ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"),
+    ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"), ("LSC", "LCLA"),
+    ("R_SC", "RCLA"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role

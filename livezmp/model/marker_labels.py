@@ -18,7 +18,8 @@ Where each name comes from:
   and OptiTrack's "Conventional Lower" set label it, with the ISB landmark names of Van Sint Jan (2007, Color
   Atlas of Skeletal Landmark Definitions): ``L_IAS L_IPS SACR L_FLE L_FME L_FAL L_TAM L_FCC L_FM2``.
   Trunk: ``CV7``, ``TV10``, incisura jugularis ``IJ`` (Plug-in Gait's CLAV), processus xiphoideus ``PX`` (its
-  STRN) (Wu et al. 2005, J Biomech 38:981).
+  STRN), sternoclavicular joint ``L_SC`` (the clavicle's sternal end: the Helen Hayes LCLA) (Wu et al. 2005,
+  J Biomech 38:981).
 - Landmark names seen in the c3d.org samples: ``RLFC`` lateral femoral condyle, ``RLMA`` lateral malleolus,
   ``RCAL`` calcaneus, medial ``RMFC``/``RMMA`` (Innovative Sports Training), ``RLKN``/``RMKN`` lateral / medial
   knee (TYPE-3), ``SACRUM`` (Walking_Hybrid, Capture0002); medial ``MKNE KNEM MFC MEPI ANKM MANK MMAL``
@@ -62,7 +63,7 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST)),
-    "CLA": (("CLA", PIG),),
+    "CLA": (("CLA", PIG), ("SC", CAST)),
 }
 UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "SACR": (("SACR", PIG), ("VSAC", HH), ("VSACRAL", HH), ("SACRUM", LAB)),
