@@ -56,7 +56,7 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
     gives instead a cluster set (CLUSTER: 3-4 markers a segment, no standard label) plus medial knee
     and ankle markers; ``trunk`` the lower body and the trunk's four markers only (C7 T10 CLAV STRN), or
     ``"top"``: only C7 and the clavicles' LCLA and RCLA, the trunk also rolling sideways over the hips by up
-    to TOP_ROLL (as a trunk leaning over the stance leg does)."""
+    to TOP_ROLL (as a trunk leaning over the stance leg does), or ``"shoulders"``: so, with LSHO and RSHO."""
     if cluster:
         return _cluster_markers(_markers(t))
     if trunk is True:
@@ -70,10 +70,12 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
         for side, sign in (("L", 1.0), ("R", -1.0)):
             q = np.array([p[0], sign * p[1], p[2]])
             out[side + name] = np.repeat(q[None], len(t), 0) if name in FOOT else (rot @ (q - pivot)) + pivot
-    if trunk == "top":  # carried by the sway, then rolled about the hips' mid-point
+    if trunk in ("top", "shoulders"):  # carried by the sway, then rolled about the hips' mid-point
         hips = (out["LASI"] + out["RASI"] + out["LPSI"] + out["RPSI"]) / 4
         lean = np.array([pin.utils.rotate("x", a) for a in TOP_ROLL * np.sin(2 * np.pi * 0.5 * t)])
-        for name, p in (("C7", CENTRE["C7"]), ("LCLA", (0.05, 0.07, 1.41)), ("RCLA", (0.05, -0.07, 1.41))):
+        top = ((("C7", CENTRE["C7"]), ("LCLA", (0.05, 0.07, 1.41)), ("RCLA", (0.05, -0.07, 1.41))) if trunk == "top"
+               else (("LSHO", UPPER_LEFT["SHO"]), ("RSHO", (0.0, -0.18, 1.43))))
+        for name, p in top:
             out[name] = hips + np.einsum("fij,fj->fi", lean, (rot @ (np.array(p) - pivot)) + pivot - hips)
     if full_body:
         for name, p in CENTRE.items():
@@ -490,22 +492,23 @@ def test_trunk_markers_alone_track_the_thorax(tmp_path):
     assert ha_height == pytest.approx(sum(f * z for f, z in parts) / ha)  # ~0.14 m below: arms outweigh the head
 
 
-def test_trunk_top_markers_track_a_leaning_thorax(tmp_path):
-    """A lower-body set with only the trunk's top (C7 and the clavicles' LCLA, RCLA, or their ISB name LSC, RSC),
-    the trunk rolling over the hips on its own: the thorax is tracked, its axis from the mid-hip, and the ZMP
-    matches the plates written from that body's dynamics to a millimetre. Without C7 the HAT is placed upright on
-    the mid-hip and misses the lean by centimetres."""
+@pytest.mark.parametrize("trunk, labels", [("top", "C7 LCLA RCLA"), ("shoulders", "LSHO RSHO")])
+def test_trunk_top_markers_track_a_leaning_thorax(tmp_path, trunk, labels):
+    """A lower-body set with only the trunk's top (C7 and the clavicles' LCLA, RCLA, or their ISB name LSC, RSC;
+    or the shoulders' LSHO, RSHO), the trunk rolling over the hips on its own: the thorax is tracked, its axis
+    from the mid-hip, and the ZMP matches the plates written from that body's dynamics to a millimetre. Without
+    C7 (LSHO) the HAT is placed upright on the mid-hip and misses the lean by centimetres."""
     path = tmp_path / "top.c3d"
-    write_lab_c3d(path, PLATES, trunk="top")
+    write_lab_c3d(path, PLATES, trunk=trunk)
     trial = read_c3d(path)
     a = analyse_lab_take(trial)
     assert {"thorax", "headarms"} <= {n.split(".")[0] for n in a.take.body.channel_names}
-    assert "thorax from C7 LCLA RCLA (its axis from the mid-hip)" in a.summary["markers"]["marker_set"]
+    assert f"thorax from {labels} (its axis from the mid-hip)" in a.summary["markers"]["marker_set"]
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
-    # the clavicles' sternal ends under their ISB name (c3d.org's 2198928 writes LSC, RSC): the same body
-    isb = replace(trial, labels=[{"LCLA": "LSC", "RCLA": "RSC"}.get(v, v) for v in trial.labels])
-    assert analyse_lab_take(isb).summary["cop_vs_zmp"]["rms_mm"] == a.summary["cop_vs_zmp"]["rms_mm"]
-    trial.labels[trial.labels.index("C7")] = "unused"
+    if trunk == "top":  # the clavicles' sternal ends under their ISB name (c3d.org's 2198928: LSC, RSC)
+        isb = replace(trial, labels=[{"LCLA": "LSC", "RCLA": "RSC"}.get(v, v) for v in trial.labels])
+        assert analyse_lab_take(isb).summary["cop_vs_zmp"]["rms_mm"] == a.summary["cop_vs_zmp"]["rms_mm"]
+    trial.labels[trial.labels.index(labels.split()[0])] = "unused"
     placed = analyse_lab_take(trial)
     assert "hat" in {n.split(".")[0] for n in placed.take.body.channel_names}
     assert placed.summary["cop_vs_zmp"]["rms_mm"] > 10.0

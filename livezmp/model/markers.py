@@ -2,7 +2,8 @@
 
 Supported by their standard labels (prefixes already stripped): Vicon Plug-in Gait lower body
 and its full-body superset (or the trunk's four markers C7 T10 CLAV STRN alone, or only its top, C7 with
-CLAV or LCLA + RCLA: the thorax is tracked, head and arms placed on it), Helen Hayes / modified Helen
+CLAV or LCLA + RCLA, or the shoulders LSHO + RSHO: the thorax is tracked, head and arms placed on it), Helen
+Hayes / modified Helen
 Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
 Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional TIB wands (the ankle's chord
 rule; THI wands are read but do not place the knee), medial knee/ankle markers, HEE. Other labels and
@@ -64,8 +65,12 @@ _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
           "LWRB", "RWRB")
 _TRUNK = ("C7", "T10", "CLAV", "STRN")
-# the trunk's top alone: the cervicale and the sternal notch, or the two clavicles' markers (Helen Hayes sets)
-_TRUNK_TOPS = (("C7", "CLAV"), ("C7", "LCLA", "RCLA"))
+# the trunk's top alone: the cervicale and the sternal notch, or the two clavicles' markers (Helen Hayes sets), or
+# the two acromia (the upper-body Helen Hayes sets Motion Analysis writes: SHO, ELB, WRI; c3d.org's Walk1, newwalk)
+_TRUNK_TOPS = (("C7", "CLAV"), ("C7", "LCLA", "RCLA"), ("LSHO", "RSHO"))
+# the cervicale (1 - de Leva's vertex-cervicale head length 242.9 / 1741 = 0.860 of stature high) above the
+# acromia (0.818: Drillis & Contini 1966, as Winter 2009, Biomechanics and Motor Control, Fig. 4.1 gives them)
+CERVICALE_ABOVE_ACROMIA = 1.0 - DE_LEVA_MALE["head"].length_fraction - 0.818
 # the HAT's frame as virtual points (origin, anterior, left, proximal axis tips: Plug-in Gait's segment-axis
 # convention), written by `livezmp correct` when it leans the HAT; when present they orient the placed HAT
 HAT_POINTS = ("HATO", "HATA", "HATL", "HATP")
@@ -563,8 +568,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     if full:
         seg.update(_upper_segments(m, stature))
         rules["elbows"] = f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
-    elif "C7" in m:
-        seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin)
+    elif _trunk_tracked(m):
+        seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin, stature)
     else:
         seg["hat"] = _hat_frame(m, pelvis_origin, x)
     for side, (s, sign, t) in _SIDES.items():
@@ -576,7 +581,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
-             + (f"; thorax from {_trunk_labels(m)}" if "C7" in m else ""),
+             + (f"; thorax from {_trunk_labels(m)}" if _trunk_tracked(m) else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -739,21 +744,33 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
 
 def _upper_note(m: dict, trial: C3dTrial) -> str:
     have = [u for u in _UPPER if u in trial.labels]
-    if not have or "C7" in m:
+    if not have or _trunk_tracked(m):
         return ""
     return f"; upper-body markers incomplete (missing {', '.join(u for u in _UPPER if u not in have)}): not used"
 
 
+def _trunk_tracked(m: dict[str, np.ndarray]) -> bool:
+    """Whether the markers ``m`` track the thorax (C7 with the sternal notch or clavicles, or both shoulders)."""
+    return "C7" in m or "LSHO" in m
+
+
 def _trunk_labels(m: dict[str, np.ndarray]) -> str:
     """The trunk markers the thorax is tracked by, and where its axis starts without T10 and STRN."""
-    used = " ".join(u for u in (*_TRUNK, "LCLA", "RCLA") if u in m)
+    used = " ".join(u for u in (*_TRUNK, "LCLA", "RCLA", "LSHO", "RSHO") if u in m)
     return used if "T10" in m else used + " (its axis from the mid-hip)"
 
 
-def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray | None,
+            stature: float) -> tuple[np.ndarray, np.ndarray]:
     """The thorax' origin (between C7 and CLAV, or the clavicles' mid-point) and frame (z up the trunk,
     x forward). Its axis runs from the mid-point of T10 and STRN, or, with the trunk's top markers alone,
-    from the mid-hip ``mid_hip`` (F, 3): the trunk then leans as the line from the hips to its top."""
+    from the mid-hip ``mid_hip`` (F, 3; m): the trunk then leans as the line from the hips to its top. With the
+    shoulders alone, y points to the left one and the origin is raised from between them to the cervicale's
+    height, where head and arms are placed (:data:`CERVICALE_ABOVE_ACROMIA` of ``stature``, m)."""
+    if "C7" not in m:
+        up = _unit((m["LSHO"] + m["RSHO"]) / 2 - mid_hip)
+        top = (m["LSHO"] + m["RSHO"]) / 2 + CERVICALE_ABOVE_ACROMIA * stature * up
+        return top, _frame(up, m["LSHO"] - m["RSHO"])
     front = m["CLAV"] if "CLAV" in m else (m["LCLA"] + m["RCLA"]) / 2
     top = (m["C7"] + front) / 2
     if "T10" in m:
@@ -768,7 +785,7 @@ def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
     markers, x forward) and each arm: shoulder centre ``SHOULDER_DROP`` below SHO along the thorax,
     wrist centre between WRA and WRB, elbow centre by the chord rule, hand towards FIN (else along the
     forearm)."""
-    top, thorax = _thorax(m, None)
+    top, thorax = _thorax(m, None, stature)
     front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
     head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
     out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
