@@ -26,10 +26,10 @@ PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
 STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
-# stance-frame mass: at least this many frames, whose per-frame masses' interquartile range is at most this part
-# of their median (a plate set aside, or a foot half on a plate, scatters them)
+# stance-frame mass: at least this many frames carried whole, and at least this part of the frames with the feet on
+# the plates (fewer: the plates miss the load in most of them, e.g. a plate set aside)
 STANCE_MIN_FRAMES = 10
-STANCE_MAX_SPREAD = 0.15
+STANCE_MIN_KEPT = 0.5
 UP = np.array([0.0, 0.0, 1.0])
 
 
@@ -256,21 +256,33 @@ def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: 
     return (total / n / G if n else None), used
 
 
-def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray) -> tuple[float | None, float | None]:
+def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray,
+                seen: float) -> tuple[float | None, float | None]:
     """Body mass (kg) from frames where every foot that may bear weight is on a plate (``feet_on`` (F,)): there
     the plates carry the whole body, F_z = m (g + a_z), with ``acc_z`` (F,) m/s² the CoM's vertical acceleration
-    from the kinematics (which does not depend on the mass). The median of F_z / (g + a_z) over those frames;
-    None unless there are ``STANCE_MIN_FRAMES`` and their interquartile range is within ``STANCE_MAX_SPREAD``
-    of the median. Returns (mass or None, spread: IQR / median, or None without frames)."""
+    from the kinematics (which does not depend on the mass). A ratio of sums, m = Σ F_z / Σ (g + a_z): Σ a_z dt is
+    the CoM's vertical velocity change, which the kinematics give to a few cm/s against g × the time summed (several
+    m/s), while one frame's a_z (a smoothed second derivative) misses part of the step's, so F_z / (g + a_z) frame
+    by frame scatters by ±25 % (c3d.org sub_labels, sample14). Summed over the frames complete at that mass, where
+    the plates carry at least ``seen`` of m (g + a_z) (below it part of the load stands off the plates: the frames
+    the comparison leaves out too), found by iterating from all of them: each pass drops frames that carry too
+    little, so m only rises, until none is dropped. None unless ``STANCE_MIN_FRAMES`` frames remain and they are
+    at least ``STANCE_MIN_KEPT`` of the feet-on frames (a load missed by less than 1 - ``seen`` over most of them
+    looks like a lighter body and is not found). Returns (mass or None, part of the feet-on frames kept, or None
+    without frames)."""
     rows = feet_on & (G + acc_z > 0.5 * G)  # a hop or a fall gives a quotient of nothing
     if rows.sum() < STANCE_MIN_FRAMES:
         return None, None
-    per = fz[rows] / (G + acc_z[rows])
-    q25, med, q75 = np.percentile(per, [25, 50, 75])
-    if med <= 0:
-        return None, None
-    spread = float((q75 - q25) / med)
-    return (float(med) if spread <= STANCE_MAX_SPREAD else None), spread
+    keep = rows
+    while True:
+        mass = float(fz[keep].sum() / (G + acc_z[keep]).sum())
+        kept = rows & (fz > seen * mass * (G + acc_z))
+        if mass <= 0 or kept.sum() == keep.sum() or kept.sum() < STANCE_MIN_FRAMES:
+            break
+        keep = kept
+    part = float(keep.sum() / rows.sum())
+    ok = mass > 0 and kept.sum() == keep.sum() and part >= STANCE_MIN_KEPT
+    return (mass if ok else None), part
 
 
 def standing_span(times: np.ndarray, complete: np.ndarray, strikes: list[float] = (),

@@ -4,9 +4,10 @@ the plates at the marker frames, the frames they saw whole, and the comparison.
 Mass: ``--mass`` when given; else the plates' (mean vertical force over whole gait cycles ÷ g) when
 they cover a cycle, said when the file's differs by more than ``MASS_DISAGREE``; else the file's;
 else the plates' mean vertical force ÷ g over a standing take (complete frames without a break or a foot
-strike, over at least ``STANDING_S``); else the plates' over the frames where every loaded foot is on one,
-F_z / (g + a_z) with the kinematics' vertical CoM acceleration (:func:`livezmp.balance.plates.stance_mass`: a
-trial with a step or two on the plates and no mass in the file); else 70 kg. The ZMP does not depend on the total mass
+strike, over at least ``STANDING_S``); else the plates' over the frames where every loaded foot is on one and
+they carry the load, Σ F_z / Σ (g + a_z) with the kinematics' vertical CoM acceleration
+(:func:`livezmp.balance.plates.stance_mass`: a trial with a step or two on the plates and no mass in the file);
+else 70 kg. The ZMP does not depend on the total mass
 (every segment scales with it); the flight threshold, the complete frames and the plate-side CoM acceleration
 (so the measured plate delay) do.
 """
@@ -228,11 +229,11 @@ def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, f
 
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
                  m_standing: float | None = None, stance: tuple[float | None, float | None] = (None, None)) -> dict:
-    m_stance, spread = stance
+    m_stance, kept = stance
     info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
             "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles,
             "stance_kg": None if m_stance is None else round(m_stance, 2),
-            "stance_spread": None if spread is None else round(spread, 3)}
+            "stance_kept": None if kept is None else round(kept, 3)}
     if opts.mass:
         used, source = opts.mass, "--mass"
     elif m_plates is not None:
@@ -283,7 +284,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     m_standing, _ = plate_mass(plates.force[:, 2], times, complete,
                                standing_span(times, complete, [t for s in strikes.values() for t in s]))
     mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing,
-                             stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on))
+                             stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on, FORCE_SEEN))
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
         take, times, cfg, result = run_take(trial, opts, used, floor)
