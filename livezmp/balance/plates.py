@@ -257,7 +257,7 @@ def plate_mass(fz: np.ndarray, times: np.ndarray, complete: np.ndarray, cycles: 
 
 
 def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray,
-                seen: float) -> tuple[float | None, float | None]:
+                seen: float) -> tuple[float | None, int, int]:
     """Body mass (kg) from frames where every foot that may bear weight is on a plate (``feet_on`` (F,)): there
     the plates carry the whole body, F_z = m (g + a_z), with ``acc_z`` (F,) m/s² the CoM's vertical acceleration
     from the kinematics (which does not depend on the mass). A ratio of sums, m = Σ F_z / Σ (g + a_z): Σ a_z dt is
@@ -268,11 +268,10 @@ def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray,
     the comparison leaves out too), found by iterating from all of them: each pass drops frames that carry too
     little, so m only rises, until none is dropped. None unless ``STANCE_MIN_FRAMES`` frames remain and they are
     at least ``STANCE_MIN_KEPT`` of the feet-on frames (a load missed by less than 1 - ``seen`` over most of them
-    looks like a lighter body and is not found). Returns (mass or None, part of the feet-on frames kept, or None
-    without frames)."""
+    looks like a lighter body and is not found). Returns (mass or None, frames summed, feet-on frames)."""
     rows = feet_on & (G + acc_z > 0.5 * G)  # a hop or a fall gives a quotient of nothing
     if rows.sum() < STANCE_MIN_FRAMES:
-        return None, None
+        return None, 0, int(rows.sum())
     keep = rows
     while True:
         mass = float(fz[keep].sum() / (G + acc_z[keep]).sum())
@@ -280,9 +279,8 @@ def stance_mass(fz: np.ndarray, acc_z: np.ndarray, feet_on: np.ndarray,
         if mass <= 0 or kept.sum() == keep.sum() or kept.sum() < STANCE_MIN_FRAMES:
             break
         keep = kept
-    part = float(keep.sum() / rows.sum())
-    ok = mass > 0 and kept.sum() == keep.sum() and part >= STANCE_MIN_KEPT
-    return (mass if ok else None), part
+    ok = mass > 0 and kept.sum() == keep.sum() and kept.sum() >= STANCE_MIN_KEPT * rows.sum()
+    return (mass if ok else None), int(kept.sum()), int(rows.sum())
 
 
 def standing_span(times: np.ndarray, complete: np.ndarray, strikes: list[float] = (),

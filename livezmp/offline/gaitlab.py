@@ -22,6 +22,7 @@ import pinocchio as pin
 from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.balance.plates import (
     STANCE_MIN_FRAMES,
+    STANCE_MIN_KEPT,
     G,
     PlateFrames,
     complete_frames,
@@ -227,13 +228,26 @@ def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, f
     return {"plates": per_plate, "warnings": warnings}
 
 
+def _stance_rule(stance: tuple[float | None, int, int]) -> str:
+    """One line: how the plates weighed the subject over the frames with every loaded foot on them, or why not."""
+    m_stance, kept, feet_on = stance
+    seen = f"carry {100 * FORCE_SEEN:.0f} % of m (g + a_z)"
+    if m_stance is not None:
+        return (f"sum F_z / sum (g + a_z) over the {kept} of {feet_on} frames with every loaded foot on a plate "
+                f"that {seen} at that mass")
+    if feet_on < STANCE_MIN_FRAMES:
+        return f"not weighed: {feet_on} frames with every loaded foot on a plate (need {STANCE_MIN_FRAMES})"
+    return (f"not weighed: only {kept} of the {feet_on} frames with every loaded foot on a plate {seen} at the mass "
+            f"they give (need {STANCE_MIN_FRAMES} and {100 * STANCE_MIN_KEPT:.0f} %): the plates miss load")
+
+
 def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycles: int, first: float,
-                 m_standing: float | None = None, stance: tuple[float | None, float | None] = (None, None)) -> dict:
-    m_stance, kept = stance
+                 m_standing: float | None = None, stance: tuple[float | None, int, int] = (None, 0, 0)) -> dict:
+    m_stance, kept, feet_on = stance
     info = {"file_kg": trial.mass_kg, "file_field": trial.mass_field or None,
             "plates_kg": None if m_plates is None else round(m_plates, 2), "plate_cycles": cycles,
             "stance_kg": None if m_stance is None else round(m_stance, 2),
-            "stance_kept": None if kept is None else round(kept, 3)}
+            "stance_kept": round(kept / feet_on, 3) if feet_on else None, "stance_rule": _stance_rule(stance)}
     if opts.mass:
         used, source = opts.mass, "--mass"
     elif m_plates is not None:
