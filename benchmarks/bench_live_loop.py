@@ -10,9 +10,13 @@ standing in for the servos' own hardware). Each configuration is run side by sid
 
 * bus only (baseline): the same clock and link, read + write of the present posture each
   cycle, no estimation or correction: what the bus and simulator alone allow;
-* the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario;
-  where the target was not met under SCHED_FIFO, also under normal scheduling (loop and
-  simulator both), the ``sched`` column says which.
+* the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario, under
+  SCHED_FIFO with the CPUs kept awake while it runs (``FIFO50 awake``: a CPU latency request of
+  0 us, livezmp.live.realtime.awake_cpus, as `livezmp run` holds it); where the target was not
+  met, also without that request (``FIFO50``, the baseline: idle CPUs halt, and each wake-up of
+  the loop, of the kernel worker carrying a pty's bytes and of the simulator waits for its CPU
+  to leave that state) and under normal scheduling (loop and simulator both). ``--pairs N``
+  repeats those two SCHED_FIFO rows N times, alternated (the machine's load drifts).
 
 Each row asks for 85 % of its bus's ceiling (the physical maximum of one read + one write
 cycle: wire time of the packet sizes + return delays + the adapter's round trip; see
@@ -26,7 +30,7 @@ devices' process, whose port service spins through the last 0.1 ms before each r
 and its physics process), and of that the physics process's alone. The first rows are the loop's
 own work flat out on the mock link (no bus).
 
-Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...] [--physics thread]
+Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...] [--physics thread] [--pairs N]
 
 ``--physics thread`` steps the simulated humanoid in a thread of the devices' process (sharing its
 GIL with the port service), as the simulator did before its physics got a process of its own: the
@@ -52,7 +56,7 @@ from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
-from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
+from livezmp.live.realtime import LOOP_PRIORITY, cpu_wake_latency_us, realtime_priority
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import load_robot
 from sim_devices.mock_link import MockLink
@@ -120,18 +124,21 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 
 def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
         baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY,
-        physics: str = "process") -> dict:
+        physics: str = "process", awake: bool = True) -> dict:
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
-                    devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True):
+                    devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True,
+                                                                                awake=awake):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
+            kept_awake = cpu_wake_latency_us() == 0  # the kernel's aggregate of every request on the machine
             loop0, sim0 = time.process_time(), sim.cpu_seconds()
             x = bus_only(link, rate, seconds) if baseline else live(link, robot, sim, rate, seconds, correct_hz)
             loop1, sim1 = time.process_time(), sim.cpu_seconds()
         finally:
             link.close()
     cycles = max(x["cycles"], 1)
+    x["awake"] = kept_awake
     x["loop_cpu"] = 1e6 * (loop1 - loop0) / cycles
     if sim0 is None or sim1 is None:
         x["sim_cpu"] = x["physics_cpu"] = math.nan
@@ -179,6 +186,9 @@ def main() -> None:
     parser.add_argument("--only", action="append", metavar="TEXT",
                         help="run only the rows whose label contains TEXT (repeatable), e.g. 'x 2'")
     parser.add_argument("--no-mock", action="store_true", help="skip the loop-work-only lines (mock link)")
+    parser.add_argument("--pairs", type=int, default=1, metavar="N",
+                        help="the SCHED_FIFO live loop without and with the CPUs kept awake, N times alternated, on "
+                             "the rows that also run the baselines (default 1)")
     parser.add_argument("--physics", choices=("process", "thread"), default="process",
                         help="the simulated humanoid's physics in a process of its own (default) or in a thread "
                              "of the devices' process (the old way: the baseline)")
@@ -202,7 +212,7 @@ def main() -> None:
         print(f"loop work only (mock link, no bus), livezmp_mini, correct at {correct_hz:g} Hz: "
               f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
     header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
-              "sched  | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
+              "sched        | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
               "failed reads | loop CPU us | sim CPU us | physics us | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
@@ -214,15 +224,18 @@ def main() -> None:
         devices = {"baud": baud, "adapter": adapter, "buses": buses}
         bus = f"{baud / 1e6:g} Mbps" + (f" x {buses}" if buses > 1 else "")
         read = "fast sync" if fast else "sync"
-        runs = [(True, LOOP_PRIORITY)] + [(False, 0)] * both + [(False, LOOP_PRIORITY)]
-        for baseline, priority in runs:
+        # (bus only, priority, CPUs kept awake)
+        runs = [(True, LOOP_PRIORITY, True)] + [(False, 0, False)] * both
+        runs += [(False, LOOP_PRIORITY, False), (False, LOOP_PRIORITY, True)] * (args.pairs if both else 0)
+        runs += [] if both else [(False, LOOP_PRIORITY, True)]
+        for baseline, priority, awake in runs:
             x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults, priority=priority,
-                    physics=args.physics)
+                    physics=args.physics, awake=awake)
             fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
             loop = "bus only" if baseline else ("loop, 5+5%" if faults else "live loop")
-            sched = f"FIFO{priority}" if priority and refused is None else "normal"
+            sched = (f"FIFO{priority}" if priority and refused is None else "normal") + " awake" * x["awake"]
             print(f"| {name:<12} | {bus:<14} | {read:<9} | {adapter:<7} | {delay:8d} | {ceiling:10.0f} | {loop:<9} | "
-                  f"{sched:<6} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
+                  f"{sched:<12} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
                   f"{x['physics_cpu']:10.0f} | "

@@ -33,7 +33,14 @@ from livezmp.live import scenarios as sc
 from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import LiveLoop
-from livezmp.live.realtime import LOOP_PRIORITY, check_priority, memory_locked, parse_cpus, realtime_priority
+from livezmp.live.realtime import (
+    LOOP_PRIORITY,
+    check_priority,
+    cpu_wake_latency_us,
+    memory_locked,
+    parse_cpus,
+    realtime_priority,
+)
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
@@ -178,18 +185,19 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
                         on_status=status, recorder=recorder)
         priority, required = loop_priority(args)
         with (stop_on_signals(loop.request_stop),
-              realtime_priority(priority, cpus, lock_memory=required, required=required) as refused,
+              realtime_priority(priority, cpus, lock_memory=required, required=required, awake=True) as refused,
               switch_interval(RECORD_SWITCH_INTERVAL_S if recorder else None)):
             if refused not in (None, "off"):
                 status.event(f"real-time priority {refused}: the loop runs at normal priority")
-            locked = memory_locked()
+            locked, wake_latency = memory_locked(), cpu_wake_latency_us()
             summary = loop.run(duration)
     except BaseException as e:
         if recorder is not None:
             recorder.close({"stopped_by": f"error: {type(e).__name__}: {e}"})
         raise
     status.done()
-    summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked}
+    summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked,
+               "cpu_wake_latency_us": wake_latency}
     if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
         summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:

@@ -9,6 +9,15 @@ and the kernel keeps 5 % of each second for everything else (``sched_rt_runtime_
 so it cannot lock a machine up. This is what robot control frameworks do on Linux
 (ros2_control's controller manager asks for SCHED_FIFO 50 and locks its memory).
 
+A wake-up also waits for its CPU to leave its idle state: a deep C-state on bare metal, a
+halted virtual CPU that the host must run again in a VM. Each cycle on a serial bus has
+several: the loop's timer, and the kernel worker that carries the port's bytes to the
+reader (a normal-priority kworker running ``flush_to_ldisc``, on USB-serial adapters and
+ptys alike) and the reader it wakes. With ``awake`` the loop holds a CPU latency request
+of 0 us (:func:`awake_cpus`, the kernel's PM QoS ``/dev/cpu_dma_latency``, as cyclictest
+does) while it runs, so idle CPUs wait in a state they leave at once. Measured on a 2-CPU
+VM with a 1 kHz... see benchmarks/bench_live_loop.py.
+
 The policy and the CPU affinity are per thread: :func:`realtime_priority` sets them for the
 calling thread (threads it starts afterwards inherit them) and restores the previous ones
 on exit. Locked memory (``mlockall``: no page fault in the cycle waits for the disk) is the
@@ -25,6 +34,7 @@ import ctypes
 import ctypes.util
 import os
 import re
+import struct
 from collections.abc import Iterator
 
 from livezmp.errors import InputError
@@ -33,6 +43,7 @@ LOOP_PRIORITY = 50  # the loop; a simulator's devices run just below it (LOOP_PR
 _MCL_CURRENT, _MCL_FUTURE = 1, 2  # <sys/mman.h>
 _PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30  # <linux/prctl.h>
 FINE_TIMER_SLACK_NS = 1  # the least the kernel takes (0 would restore the thread's default)
+CPU_LATENCY_QOS = "/dev/cpu_dma_latency"  # the kernel's PM QoS CPU latency request (us, a native int32)
 
 
 def check_priority(priority: int) -> None:
@@ -66,13 +77,15 @@ def _libc_call(name: str, *args: int) -> str | None:
 
 @contextlib.contextmanager
 def realtime_priority(priority: int, cpus: frozenset[int] | None = None, lock_memory: bool = False,
-                      required: bool = False) -> Iterator[str | None]:
+                      required: bool = False, awake: bool = False) -> Iterator[str | None]:
     """Run the calling thread under SCHED_FIFO at ``priority`` (1–99) inside the block, on
-    ``cpus`` (None: where it was), with the process's memory locked if ``lock_memory`` (only
-    once SCHED_FIFO was granted). Yields None when granted, else one line saying why not (0
-    asks for nothing: "off"); with ``required``, a refusal raises InputError instead. A memory
-    lock refused is not a refusal (the loop still runs first; it is reported by
-    :func:`memory_locked`). The thread's previous policy, priority and CPUs are restored on exit."""
+    ``cpus`` (None: where it was), with the process's memory locked if ``lock_memory`` and idle
+    CPUs kept awake if ``awake`` (:func:`awake_cpus`; both only once SCHED_FIFO was granted).
+    Yields None when granted, else one line saying why not (0 asks for nothing: "off"); with
+    ``required``, a refusal raises InputError instead. A memory lock or CPU latency request
+    refused is not a refusal (the loop still runs first; they are reported by
+    :func:`memory_locked` and :func:`cpu_wake_latency_us`). The thread's previous policy,
+    priority and CPUs are restored on exit."""
     check_priority(priority)
     with _affinity(cpus), fine_timer_slack():
         if priority == 0:
@@ -94,11 +107,42 @@ def realtime_priority(priority: int, cpus: frozenset[int] | None = None, lock_me
             return
         locked = lock_memory and _libc_call("mlockall", _MCL_CURRENT | _MCL_FUTURE) is None
         try:
-            yield None
+            with awake_cpus() if awake else contextlib.nullcontext():
+                yield None
         finally:
             if locked:
                 _libc_call("munlockall")
             os.sched_setscheduler(0, before[0], before[1])
+
+
+@contextlib.contextmanager
+def awake_cpus() -> Iterator[str | None]:
+    """Inside the block, hold a CPU latency request of 0 us (PM QoS, ``/dev/cpu_dma_latency``): every
+    idle CPU of the machine waits in a state it leaves at once (a polling loop) instead of halting,
+    so a wake-up is not delayed by the idle state's exit. It costs the idle CPUs' power (in a VM, the
+    host's CPU time) while held; the kernel drops the request when the file is closed, on exit or if
+    the process dies. Yields None when held, else why not (one line: it needs root)."""
+    try:
+        fd = os.open(CPU_LATENCY_QOS, os.O_WRONLY)
+    except OSError as e:
+        yield f"refused ({e.strerror})"
+        return
+    try:
+        os.write(fd, struct.pack("=i", 0))
+        yield None
+    finally:
+        os.close(fd)
+
+
+def cpu_wake_latency_us() -> int | None:
+    """The CPU latency (us) the kernel keeps its idle CPUs within now, as PM QoS aggregates every
+    process's request (0: kept awake, see :func:`awake_cpus`; 2000000000: no request); None where
+    it cannot be read."""
+    try:
+        with open(CPU_LATENCY_QOS, "rb") as f:
+            return struct.unpack("=i", f.read(4))[0]
+    except (OSError, struct.error):
+        return None
 
 
 @contextlib.contextmanager
