@@ -9,7 +9,8 @@ import os
 import pytest
 
 from livezmp.errors import InputError
-from livezmp.live.realtime import check_priority, parse_cpus, realtime_priority
+from livezmp.live import realtime
+from livezmp.live.realtime import awake_cpus, check_priority, cpu_wake_latency_us, parse_cpus, realtime_priority
 
 
 def test_priority_zero_asks_for_nothing():
@@ -107,3 +108,31 @@ def test_cpu_lists(text, cpus):
 def test_bad_cpu_lists_are_user_errors(text):
     with pytest.raises(InputError, match=f"--cpu {text}: expected CPU numbers"):
         parse_cpus(text)
+
+
+def test_cpus_kept_awake_inside_and_let_sleep_after():
+    """awake_cpus holds a 0 us CPU latency request: the kernel's aggregate target reads 0 inside the block
+    and what it was before after it (root here; the default, or another process's request)."""
+    before = cpu_wake_latency_us()
+    assert before is not None and before >= 0
+    with awake_cpus() as refused:
+        assert refused is None
+        assert cpu_wake_latency_us() == 0
+    assert cpu_wake_latency_us() == before
+
+
+def test_awake_only_with_sched_fifo_granted():
+    """realtime_priority(..., awake=True) keeps the CPUs awake while SCHED_FIFO is held, not at priority 0."""
+    before = cpu_wake_latency_us()
+    with realtime_priority(0, awake=True):
+        assert cpu_wake_latency_us() == before
+    with realtime_priority(20, awake=True) as refused:
+        assert refused is None and cpu_wake_latency_us() == 0
+    assert cpu_wake_latency_us() == before
+
+
+def test_a_refused_cpu_latency_request_says_why(monkeypatch, tmp_path):
+    monkeypatch.setattr(realtime, "CPU_LATENCY_QOS", str(tmp_path / "no_such_device"))
+    with awake_cpus() as refused:
+        assert refused == "refused (No such file or directory)"
+    assert cpu_wake_latency_us() is None

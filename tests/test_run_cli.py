@@ -154,6 +154,7 @@ def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch
     s = json.loads(path.read_text())
     assert seen == [(os.SCHED_FIFO, 30, {cpu}, 2e-4)]  # on its own CPU it spins the last 0.2 ms to each deadline
     assert s["realtime_priority"] == 30 and s["memory_locked"] is True
+    assert s["cpu_wake_latency_us"] == 0  # the CPUs were kept awake while the loop ran (awake_cpus)
     assert (os.sched_getscheduler(0), os.sched_getaffinity(0)) == before
 
 
