@@ -20,7 +20,7 @@ from livezmp.histogram import TimingHistogram
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
-from livezmp.live.loop import LiveLoop
+from livezmp.live.loop import PTY_SEND_PAUSE_S, LiveLoop
 from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, Watchdog, joint_limits
 from livezmp.live.scenarios import smooth_step
 from livezmp.model.demo_robot import demo_robot_path, smooth_ramp
@@ -491,6 +491,36 @@ def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
     # all but the first write of each stretch of good frames went out as built ahead
     stretches = 1 + 3 + 1  # the start; after reads 250-251, 300 and 350 (failed or rejected); the watchdog's resume
     assert ahead_link.sent_prepared == ahead["commands_sent"] - stretches and plain_link.sent_prepared == 0
+
+
+@pytest.mark.parametrize("pty", [False, True])
+def test_a_pipelined_cycle_on_a_pty_pauses_after_sending_and_before_its_work(mini, pty):
+    """On a pseudo-terminal (the link says `via_pty`) each pipelined cycle sleeps PTY_SEND_PAUSE_S between
+    sending (goals + next read) and estimating, so the kernel worker that carries the bytes gets the CPU;
+    on another port (a USB-serial adapter) it goes straight on to its work."""
+    time = SimTime()
+    link = PipelinedLink(time, mini.joint_names, np.zeros(len(mini.joint_names)))
+    link.sent_prepared, link.prepare_goals, link.via_pty = 0, link.prepare, pty
+
+    def sleep(d: float) -> None:
+        link.calls.append(("sleep", d))
+        time.advance(d)
+
+    loop = LiveLoop(link, mini, LoopConfig(rate_hz=RATE), clock=LoopClock(RATE, now=time.now, sleep=sleep))
+    estimate = loop._estimate
+
+    def logged_estimate(t, frame):
+        link.calls.append(("estimate", t))
+        estimate(t, frame)
+
+    loop._estimate = logged_estimate
+    s = loop.run(duration=0.1)
+    calls = [name if name != "sleep" else ("pause" if t == PTY_SEND_PAUSE_S else "sleep") for name, t in link.calls]
+    cycles = [c for c in " ".join(calls).split("read") if "estimate" in c]
+    assert len(cycles) == s["good_frames"] == 0.1 * RATE
+    sent = [c.split("estimate")[0].split() for c in cycles]  # what each cycle did between its read and its work
+    assert all(c[-1] == ("pause" if pty else "request") and "write" in c for c in sent)
+    assert calls.count("pause") == (len(cycles) if pty else 0)
 
 
 def test_corrections_are_bounded_and_rate_limited(mini):

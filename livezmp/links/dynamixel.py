@@ -62,6 +62,7 @@ reply latency.
 from __future__ import annotations
 
 import math
+import os
 import select
 import termios
 import time
@@ -273,6 +274,13 @@ class DynamixelLink(PortLink):
         self._present: np.ndarray | None = None  # raw ticks of the last verified read
         self._lowest = np.full(len(ids), -2.0**31)  # goal limits in ticks, from the servos at open
         self._highest = np.full(len(ids), 2.0**31 - 1)
+
+    @property
+    def via_pty(self) -> bool:
+        """Whether the port is a pseudo-terminal (a simulated bus, or a bridge such as socat or ser2net): its
+        written bytes wait for a kernel worker of normal priority to reach the other end (a USB-serial
+        adapter's go out in the write itself)."""
+        return os.path.realpath(self.path).startswith("/dev/pts/")
 
     # -- Link -----------------------------------------------------------------------------------
 

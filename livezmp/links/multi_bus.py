@@ -71,6 +71,11 @@ class MultiBusLink:
         # the buses' frames end to end, taken in this order, are in the robot's joint order
         self._order = np.argsort(np.concatenate(self._joints))
 
+    @property
+    def via_pty(self) -> bool:
+        """Whether a bus's port is a pseudo-terminal (see `DynamixelLink.via_pty`)."""
+        return any(bus.via_pty for bus in self.buses)
+
     def request(self) -> None:
         """Every bus's next read instruction sent now (see `DynamixelLink.request`)."""
         for bus in self.buses:

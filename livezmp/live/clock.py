@@ -109,6 +109,10 @@ class LoopClock:
         """Due time (s) of cycle ``index``."""
         return self._start + index * self.period
 
+    def pause(self, seconds: float) -> None:
+        """Sleep ``seconds`` within a cycle, with the clock's ``sleep`` (simulated time in tests)."""
+        self._sleep(seconds)
+
     def wait(self) -> Tick:
         """End the current cycle: record its slack, sleep until the next due deadline
         (skipping those already past) and return the new cycle."""

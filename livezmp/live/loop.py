@@ -22,6 +22,11 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
 4. write: goals = command + offsets, through the
    :class:`~livezmp.live.safety.GoalLimiter`.
 
+On a link that sends its next read ahead (a Dynamixel bus) the cycle is pipelined: read, write
+the goals built the cycle before with the next read's instruction, then estimate and correct
+while that read travels; on a pseudo-terminal the loop first sleeps `PTY_SEND_PAUSE_S`, so the
+kernel worker that carries the bytes runs before the loop's work.
+
 The command comes from a scenario or motion (``command(t)``: joint goals, rad, at loop
 time t in s) or, without one, is the posture of the first frame (hold and balance). At
 the start, and when commanding resumes after a stop, the goals blend from the present
@@ -81,6 +86,13 @@ from livezmp.model.mimic import follow
 
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
+# After sending on a pseudo-terminal (a simulated bus) a pipelined cycle sleeps this long before its work. The
+# pty's bytes wait for a kernel worker of normal priority, which the scheduler puts on the loop's own CPU more often
+# than not (the loop's real-time load does not count in its placement); under SCHED_FIFO the loop's work then holds it
+# off for the whole estimate and correction. Measured (benchmarks/bench_tty_worker.py, livezmp_mini, 4 Mbps): that
+# worker waited over 0.2 ms after 6-37 % of the loop's writes, mostly on the loop's CPU; with this pause 1-8 %, the
+# loop's misses 17-28 % -> 3-5 %. 1 us was too short. A USB-serial adapter's bytes leave in the write itself: no pause.
+PTY_SEND_PAUSE_S = 2e-5
 EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
 @dataclass
 class LoopCounters:
@@ -315,6 +327,8 @@ class LiveLoop:
             if command is not None and not sent:
                 self._write(t, t0, command)
             self._request()  # when the write failed or was not sent
+            if getattr(self.link, "via_pty", False):
+                self.clock.pause(PTY_SEND_PAUSE_S)
             t2 = now()
             self._estimate(t, frame)
             t3 = now()
