@@ -11,12 +11,13 @@ standing in for the servos' own hardware). Each configuration is run side by sid
 * bus only (baseline): the same clock and link, read + write of the present posture each
   cycle, no estimation or correction: what the bus and simulator alone allow;
 * the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario, under
-  SCHED_FIFO with the CPUs kept awake while it runs (``FIFO50 awake``: a CPU latency request of
-  0 us, livezmp.live.realtime.awake_cpus, as `livezmp run` holds it); where the target was not
-  met, also without that request (``FIFO50``, the baseline: idle CPUs halt, and each wake-up of
-  the loop, of the kernel worker carrying a pty's bytes and of the simulator waits for its CPU
-  to leave that state) and under normal scheduling (loop and simulator both). ``--pairs N``
-  repeats those two SCHED_FIFO rows N times, alternated (the machine's load drifts).
+  SCHED_FIFO as `livezmp run` runs it: on the simulator's ptys each cycle sleeps 20 us after
+  sending before its work (livezmp.live.loop.PTY_SEND_PAUSE_S: the kernel worker that carries a
+  pty's bytes runs first) and the CPUs are kept awake while it runs (a 0 us CPU latency request,
+  livezmp.live.realtime.awake_cpus); the ``sched`` column says ``awake`` when the kernel's target was 0.
+  Where the target was not met, also as before those two (``FIFO50 before``: no pause, idle CPUs
+  halt), and under normal scheduling (loop and simulator both). ``--pairs N`` repeats the
+  before/after SCHED_FIFO rows N times, alternated (the machine's load drifts).
 
 Each row asks for 85 % of its bus's ceiling (the physical maximum of one read + one write
 cycle: wire time of the packet sizes + return delays + the adapter's round trip; see
@@ -43,6 +44,7 @@ baseline for the simulator's own timing.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import time
@@ -53,6 +55,7 @@ from machine_load import load_averages
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, BusCeiling, sync_read_bytes, sync_write_bytes
+from livezmp.live import loop as loop_module
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig
 from livezmp.live.loop import LiveLoop
@@ -64,6 +67,16 @@ from sim_devices.process import SimProcess
 from sim_devices.servo_plant import ServoPlant
 
 OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
+
+
+@contextlib.contextmanager
+def _pty_pause(seconds: float):
+    """The live loop's pause after sending on a pty set to ``seconds`` inside the block (0: as before it had one)."""
+    kept, loop_module.PTY_SEND_PAUSE_S = loop_module.PTY_SEND_PAUSE_S, seconds
+    try:
+        yield
+    finally:
+        loop_module.PTY_SEND_PAUSE_S = kept
 
 
 def bus_only(link, rate: float, seconds: float) -> dict:
@@ -124,10 +137,12 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 
 def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
         baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY,
-        physics: str = "process", awake: bool = True) -> dict:
+        physics: str = "process", before: bool = False) -> dict:
+    """One row; ``before``: the loop without its pty pause and the CPUs left to halt (the baseline)."""
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
                     devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True,
-                                                                                awake=awake):
+                                                                                awake=not before), \
+            _pty_pause(0.0 if before else loop_module.PTY_SEND_PAUSE_S):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -187,8 +202,8 @@ def main() -> None:
                         help="run only the rows whose label contains TEXT (repeatable), e.g. 'x 2'")
     parser.add_argument("--no-mock", action="store_true", help="skip the loop-work-only lines (mock link)")
     parser.add_argument("--pairs", type=int, default=1, metavar="N",
-                        help="the SCHED_FIFO live loop without and with the CPUs kept awake, N times alternated, on "
-                             "the rows that also run the baselines (default 1)")
+                        help="the SCHED_FIFO live loop as before (no pty pause, CPUs halt) and as now, N times "
+                             "alternated, on the rows that also run the baselines (default 1)")
     parser.add_argument("--physics", choices=("process", "thread"), default="process",
                         help="the simulated humanoid's physics in a process of its own (default) or in a thread "
                              "of the devices' process (the old way: the baseline)")
@@ -212,7 +227,7 @@ def main() -> None:
         print(f"loop work only (mock link, no bus), livezmp_mini, correct at {correct_hz:g} Hz: "
               f"{x['achieved_hz']:.0f} Hz flat out, read / estimate / correct / write {x['stages']} ms", flush=True)
     header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
-              "sched        | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
+              "sched         | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
               "failed reads | loop CPU us | sim CPU us | physics us | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
@@ -224,18 +239,19 @@ def main() -> None:
         devices = {"baud": baud, "adapter": adapter, "buses": buses}
         bus = f"{baud / 1e6:g} Mbps" + (f" x {buses}" if buses > 1 else "")
         read = "fast sync" if fast else "sync"
-        # (bus only, priority, CPUs kept awake)
-        runs = [(True, LOOP_PRIORITY, True)] + [(False, 0, False)] * both
-        runs += [(False, LOOP_PRIORITY, False), (False, LOOP_PRIORITY, True)] * (args.pairs if both else 0)
-        runs += [] if both else [(False, LOOP_PRIORITY, True)]
-        for baseline, priority, awake in runs:
+        # (bus only, priority, as before the pty pause and awake CPUs)
+        runs = [(True, LOOP_PRIORITY, False)] + [(False, 0, False)] * both
+        runs += [(False, LOOP_PRIORITY, True), (False, LOOP_PRIORITY, False)] * (args.pairs if both else 0)
+        runs += [] if both else [(False, LOOP_PRIORITY, False)]
+        for baseline, priority, before in runs:
             x = row(robot, urdf, options, rate, sec, devices, baseline, faults=faults, priority=priority,
-                    physics=args.physics, awake=awake)
+                    physics=args.physics, before=before)
             fell = "-" if x["fell"] is None else ("yes" if x["fell"] else "no")
             loop = "bus only" if baseline else ("loop, 5+5%" if faults else "live loop")
-            sched = (f"FIFO{priority}" if priority and refused is None else "normal") + " awake" * x["awake"]
+            sched = ((f"FIFO{priority}" if priority and refused is None else "normal") + " before" * before
+                     + " awake" * x["awake"])
             print(f"| {name:<12} | {bus:<14} | {read:<9} | {adapter:<7} | {delay:8d} | {ceiling:10.0f} | {loop:<9} | "
-                  f"{sched:<12} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
+                  f"{sched:<13} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
                   f"{x['physics_cpu']:10.0f} | "
