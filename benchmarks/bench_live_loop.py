@@ -70,7 +70,7 @@ OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 
 
 @contextlib.contextmanager
-def _pty_pause(seconds: float):
+def pty_pause(seconds: float):
     """The live loop's pause after sending on a pty set to ``seconds`` inside the block (0: as before it had one)."""
     kept, loop_module.PTY_SEND_PAUSE_S = loop_module.PTY_SEND_PAUSE_S, seconds
     try:
@@ -142,7 +142,7 @@ def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
                     devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True,
                                                                                 awake=not before), \
-            _pty_pause(0.0 if before else loop_module.PTY_SEND_PAUSE_S):
+            pty_pause(0.0 if before else loop_module.PTY_SEND_PAUSE_S):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)
         try:

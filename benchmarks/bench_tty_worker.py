@@ -13,8 +13,10 @@ over 100 us, who held the CPU it waited on: the loop (SCHED_FIFO), the simulator
 (SCHED_FIFO, just below), its physics process (normal priority), other programs, or nobody (an
 idle CPU waking up). Beside them: the share of the two CPUs each used, the real-time share
 against the kernel's limit (``sched_rt_runtime_us``), the loop's garbage collections and its
-missed deadlines. Each row runs with the CPUs kept awake (``awake``, a 0 us CPU latency request,
-as `livezmp run` holds it) and without, alternated ``--pairs`` times.
+missed deadlines. Each row runs three ways, alternated ``--pairs`` times: ``before`` (the loop
+going straight from its write to its work, idle CPUs halting), ``pause`` (the loop sleeping
+`PTY_SEND_PAUSE_S` after sending on a pty) and ``pause+awake`` (also a 0 us CPU latency request
+held: `livezmp run` as it is now).
 
 Run (as root): python benchmarks/bench_tty_worker.py [--seconds 4] [--only TEXT ...] [--pairs 2]
 """
@@ -31,10 +33,11 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
-from bench_live_loop import CONFIGS, OP3, label, live, predicted_ceiling
+from bench_live_loop import CONFIGS, OP3, label, live, predicted_ceiling, pty_pause
 from machine_load import load_averages
 
 from livezmp.links import open_link
+from livezmp.live.loop import PTY_SEND_PAUSE_S
 from livezmp.live.realtime import LOOP_PRIORITY, realtime_priority
 from livezmp.model.robot import load_robot
 from sim_devices.process import SimProcess
@@ -137,7 +140,10 @@ def analyse(text: str, who) -> Hops:
     return hops
 
 
-def traced_row(robot, urdf, config: tuple, seconds: float, awake: bool) -> tuple[dict, Hops, int]:
+VARIANTS = {"before": (0.0, False), "pause": (PTY_SEND_PAUSE_S, False), "pause+awake": (PTY_SEND_PAUSE_S, True)}
+
+
+def traced_row(robot, urdf, config: tuple, seconds: float, pause: float, awake: bool) -> tuple[dict, Hops, int]:
     """One live-loop row of bench_live_loop with the kernel traced: (its figures, the hops, GC collections)."""
     name, baud, buses, fast, delay, adapter, cap, faults, _ = config
     ceiling = predicted_ceiling(len(robot.body.joint_names), buses, fast, delay, baud, adapter)
@@ -150,7 +156,7 @@ def traced_row(robot, urdf, config: tuple, seconds: float, awake: bool) -> tuple
     with kernel_trace() as (start, stop), \
             SimProcess("dynamixel", ("demo", {}), faults, urdf=urdf, realtime_priority=LOOP_PRIORITY - 1,
                        devices={"baud": baud, "adapter": adapter, "buses": buses}) as sim, \
-            realtime_priority(LOOP_PRIORITY, lock_memory=True, awake=awake):
+            realtime_priority(LOOP_PRIORITY, lock_memory=True, awake=awake), pty_pause(pause):
         link = open_link(f"{sim.url}&fast={int(fast)}&return_delay={delay}", robot.body.joint_names, robot.config)
         devices = {int(t) for t in os.listdir(f"/proc/{sim._proc.pid}/task")}
         with open(f"/proc/{sim._proc.pid}/task/{sim._proc.pid}/children") as f:
@@ -192,7 +198,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=4.0, help="seconds per row (default 4)")
     parser.add_argument("--only", action="append", metavar="TEXT",
                         help=f"rows whose label contains TEXT (default: {'; '.join(DEFAULT_ROWS)})")
-    parser.add_argument("--pairs", type=int, default=2, help="rows without / with the CPUs kept awake (default 2)")
+    parser.add_argument("--pairs", type=int, default=2,
+                        help=f"rows {' / '.join(VARIANTS)}, alternated this many times (default 2)")
     args = parser.parse_args()
     if not os.path.isdir(f"{TRACEFS}/instances") or os.geteuid() != 0:
         parser.error(f"needs root and tracefs at {TRACEFS}")
@@ -206,19 +213,19 @@ def main() -> None:
           f"load average at the start: {load_averages()}")
     print("kworker wait: from flush_to_ldisc queued to it running, us (p50 / p90 / p99); own CPU: the worker was put "
           f"on the writer's CPU; held by: who ran on its CPU during the waits over {1e6 * LONG_WAIT_S:.0f} us\n")
-    header = ("| row                                     | CPUs   | missed % | out: kworker wait | own CPU | "
+    header = ("| row                                     | loop        | missed % | out: kworker wait | own CPU | "
               "out: held by                           | back: kworker wait | own CPU | back: held by"
               "                          | CPU share loop / devices / physics / other / idle | RT share | GC | load |")
     print(header)
     print("|" + "|".join("-" * len(c) for c in header.split("|")[1:-1]) + "|", flush=True)
     for config in configs:
         urdf, robot = robots[config[0]]
-        for awake in (False, True) * args.pairs:
-            x, hops, collections = traced_row(robot, urdf, config, args.seconds, awake)
+        for variant in list(VARIANTS) * args.pairs:
+            x, hops, collections = traced_row(robot, urdf, config, args.seconds, *VARIANTS[variant])
             span = max(hops.span, 1e-9)
             share = " / ".join(f"{hops.share[k] / span:.2f}" for k in ("loop", "devices", "physics", "other", "idle"))
             rt = (hops.share["loop"] + hops.share["devices"]) / span
-            print(f"| {label(config):<39} | {'awake' if awake else 'halt':<6} | "
+            print(f"| {label(config):<39} | {variant:<11} | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {quantiles_us(hops.waits[True]):>17} | "
                   f"{100 * np.mean(hops.same_cpu[True]):6.0f}% | {held(hops.holders[True]):<38} | "
                   f"{quantiles_us(hops.waits[False]):>18} | {100 * np.mean(hops.same_cpu[False]):6.0f}% | "
