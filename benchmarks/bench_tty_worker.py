@@ -95,12 +95,13 @@ class Hops:
 
 
 def analyse(text: str, who) -> Hops:
-    """The pty hops in a trace; ``who(pid, prio)`` names a task (loop, devices, physics, kworker, other, idle)."""
+    """The pty hops in a trace; ``who(pid)`` names a task (loop, devices, physics, other, idle)."""
     hops = Hops()
-    running: dict[int, tuple[float, int, int]] = {}  # cpu -> (since, pid, prio)
+    running: dict[int, tuple[float, int]] = {}  # cpu -> (since, pid)
     intervals: dict[int, list[tuple[float, float, str]]] = defaultdict(list)
-    queued: dict[str, list] = {}  # work struct -> [t, by loop, writer's cpu, worker's cpu]
-    waiting: list[tuple[float, float, int, bool]] = []  # (queued, started, cpu, by loop)
+    queued: dict[str, tuple[float, bool, int]] = {}  # work struct -> (t, by the loop, writer's cpu)
+    woken: dict[int, tuple[float, int]] = {}  # kworker pid -> (its last wake-up, the cpu it was put on)
+    waiting: list[tuple[float, float, int, bool]] = []  # (queued, started, cpu, by the loop)
     first = last = None
     for line in text.splitlines():
         m = _LINE.match(line)
@@ -109,24 +110,20 @@ def analyse(text: str, who) -> Hops:
         pid, cpu, t, event, rest = int(m[1]), int(m[2]), float(m[3]), m[4], m[5]
         first, last = first or t, t
         if event == "sched_switch":
-            nxt = re.search(r"next_pid=(\d+) next_prio=(\d+)", rest)
             if cpu in running:
-                since, p, prio = running[cpu]
-                intervals[cpu].append((since, t, who(p, prio)))
-            running[cpu] = (t, int(nxt[1]), int(nxt[2]))
-        elif event == "workqueue_queue_work" and "function=flush_to_ldisc" in rest:
-            by_loop = who(pid, 0) == "loop"
-            if by_loop or who(pid, 0) == "devices":
-                queued[re.search(r"work struct=(\w+)", rest)[1]] = [t, by_loop, cpu, None]
+                since, p = running[cpu]
+                intervals[cpu].append((since, t, who(p)))
+            running[cpu] = (t, int(re.search(r"next_pid=(\d+)", rest)[1]))
         elif event == "sched_wakeup" and "comm=kworker" in rest:
-            for q in queued.values():
-                if q[3] is None:
-                    q[3] = int(re.search(r"target_cpu=(\d+)", rest)[1])
+            woken[int(re.search(r" pid=(\d+)", rest)[1])] = (t, int(re.search(r"target_cpu=(\d+)", rest)[1]))
+        elif event == "workqueue_queue_work" and "function=flush_to_ldisc" in rest and who(pid) in ("loop", "devices"):
+            queued[re.search(r"work struct=(\w+)", rest)[1]] = (t, who(pid) == "loop", cpu)
         elif event == "workqueue_execute_start" and "flush_to_ldisc" in rest:
             q = queued.pop(re.search(r"work struct (\w+)", rest)[1], None)
             if q is not None:
+                t_woken, put_on = woken.get(pid, (-1.0, cpu))
                 hops.waits[q[1]].append(t - q[0])
-                hops.same_cpu[q[1]].append(q[3] == q[2] if q[3] is not None else cpu == q[2])
+                hops.same_cpu[q[1]].append((put_on if t_woken >= q[0] else cpu) == q[2])
                 waiting.append((q[0], t, cpu, q[1]))
     for a, b, cpu, by_loop in waiting:
         if b - a > LONG_WAIT_S:
@@ -172,7 +169,7 @@ def traced_row(robot, urdf, config: tuple, seconds: float, pause: float, awake: 
     x["rate"] = rate
     loop = os.getpid()
 
-    def who(pid: int, prio: int) -> str:
+    def who(pid: int) -> str:
         if pid == loop:
             return "loop"
         if pid in devices:
