@@ -87,11 +87,12 @@ from livezmp.model.mimic import follow
 STAGES = ("read", "estimate", "correct", "write")
 FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes its lock)
 # After sending on a pseudo-terminal (a simulated bus) a pipelined cycle sleeps this long before its work. The
-# pty's bytes wait for a kernel worker of normal priority, which the scheduler puts on the loop's own CPU more often
-# than not (the loop's real-time load does not count in its placement); under SCHED_FIFO the loop's work then holds it
-# off for the whole estimate and correction. Measured (benchmarks/bench_tty_worker.py, livezmp_mini, 4 Mbps): that
-# worker waited over 0.2 ms after 6-37 % of the loop's writes, mostly on the loop's CPU; with this pause 1-8 %, the
-# loop's misses 17-28 % -> 3-5 %. 1 us was too short. A USB-serial adapter's bytes leave in the write itself: no pause.
+# pty's bytes wait for a kernel worker of normal priority; when the other CPUs are busy the scheduler puts it on the
+# loop's own CPU (the loop's real-time load does not count in its placement), where under SCHED_FIFO the loop's
+# estimate and correction hold it off. Measured on 2 CPUs at load 2-3 (ftrace): it went on the loop's CPU after
+# 34-91 % of the loop's writes (OP3, 2 Mbps); livezmp_mini at 4 Mbps, 6 alternated pairs: it waited over 0.2 ms
+# after 6-37 % of the writes, with the pause 1-8 %, and missed deadlines went 4-28 % -> 1.6-5.4 %. A 1 us sleep was
+# too short. A USB-serial adapter's bytes leave in the write itself.
 PTY_SEND_PAUSE_S = 2e-5
 EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
 @dataclass
