@@ -14,9 +14,10 @@ standing in for the servos' own hardware). Each configuration is run side by sid
   SCHED_FIFO as `livezmp run` runs it: on the simulator's ptys each cycle sleeps 20 us after
   sending before its work (livezmp.live.loop.PTY_SEND_PAUSE_S: the kernel worker that carries a
   pty's bytes runs first) and the CPUs are kept awake while it runs (a 0 us CPU latency request,
-  livezmp.live.realtime.awake_cpus); the ``sched`` column says ``awake`` when the kernel's target was 0.
-  Where the target was not met, also as before those two (``FIFO50 before``: no pause, idle CPUs
-  halt), and under normal scheduling (loop and simulator both). ``--pairs N`` repeats the
+  livezmp.live.realtime.awake_cpus; the ``sched`` column says ``awake`` when the kernel's target was 0),
+  with the simulator's devices and physics on the last CPU (SimProcess's ``cpus``). Where the target
+  was not met, also as before those three (``FIFO50 before``: no pause, idle CPUs halt, the simulator
+  on any CPU), and under normal scheduling (loop and simulator both). ``--pairs N`` repeats the
   before/after SCHED_FIFO rows N times, alternated (the machine's load drifts).
 
 Each row asks for 85 % of its bus's ceiling (the physical maximum of one read + one write
@@ -67,6 +68,8 @@ from sim_devices.process import SimProcess
 from sim_devices.servo_plant import ServoPlant
 
 OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
+# the simulator (devices and physics) on the last CPU, the loop on the others (see SimProcess's cpus)
+SIM_CPUS = frozenset({max(os.sched_getaffinity(0))}) if len(os.sched_getaffinity(0)) > 1 else None
 
 
 @contextlib.contextmanager
@@ -138,10 +141,11 @@ def compute_only(robot, rate: float, seconds: float, correct_hz: float) -> dict:
 def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float, devices: dict,
         baseline: bool, correct_hz: float = 125.0, faults: str = "", priority: int = LOOP_PRIORITY,
         physics: str = "process", before: bool = False) -> dict:
-    """One row; ``before``: the loop without its pty pause and the CPUs left to halt (the baseline)."""
+    """One row; ``before``: the loop without its pty pause, the CPUs left to halt and the simulator on any CPU
+    (the baseline)."""
     with SimProcess("dynamixel", ("demo", {}), faults, urdf=robot_urdf, realtime_priority=max(priority - 1, 0),
-                    devices=devices, physics=physics) as sim, realtime_priority(priority, lock_memory=True,
-                                                                                awake=not before), \
+                    devices=devices, physics=physics, cpus=None if before else SIM_CPUS) as sim, \
+            realtime_priority(priority, lock_memory=True, awake=not before), \
             pty_pause(0.0 if before else loop_module.PTY_SEND_PAUSE_S):
         url = f"{sim.url}&{options}" if options else sim.url
         link = open_link(url, robot.body.joint_names, robot.config)

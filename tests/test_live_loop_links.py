@@ -7,6 +7,7 @@ devices, whose counters are the truth the loop's counters are compared with."""
 
 from __future__ import annotations
 
+import os
 import re
 import time
 
@@ -245,3 +246,25 @@ def test_a_bus_losing_a_fifth_of_its_replies_stops_the_run_with_the_measured_los
     print(message)
     assert re.search(r"lost or corrupted (\d+) % of the last \d+ replies \(more than 15 %\)", message)
     assert 15 < int(re.search(r"corrupted (\d+) %", message).group(1)) < 30
+
+
+def allowed_cpus(pid: int, tid: int) -> set[int]:
+    """The CPUs thread ``tid`` of process ``pid`` may run on, as the kernel reports them."""
+    with open(f"/proc/{pid}/task/{tid}/status") as f:
+        text = next(line for line in f if line.startswith("Cpus_allowed_list:")).split()[1]
+    return {c for part in text.split(",") for c in range(int(part.split("-")[0]), int(part.split("-")[-1]) + 1)}
+
+
+def test_a_simulator_placed_on_a_cpu_keeps_its_devices_and_physics_there():
+    """SimProcess(cpus=...): every thread of the devices' process and the physics process it forked may run
+    on those CPUs only; this process keeps all of its own."""
+    mine = os.sched_getaffinity(0)
+    last = max(mine)
+    with SimProcess("dynamixel", ("stand", {}), cpus=frozenset({last})) as sim:
+        pid = sim._proc.pid
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            physics = [int(p) for p in f.read().split()]
+        threads = [(pid, int(t)) for t in os.listdir(f"/proc/{pid}/task")] + [(p, p) for p in physics]
+        assert len(physics) == 1 and len(threads) >= 3  # main, port server, physics at least
+        assert all(allowed_cpus(p, t) == {last} for p, t in threads)
+    assert os.sched_getaffinity(0) == mine
