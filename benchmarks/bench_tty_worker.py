@@ -13,10 +13,11 @@ over 100 us, who held the CPU it waited on: the loop (SCHED_FIFO), the simulator
 (SCHED_FIFO, just below), its physics process (normal priority), other programs, or nobody (an
 idle CPU waking up). Beside them: the share of the two CPUs each used, the real-time share
 against the kernel's limit (``sched_rt_runtime_us``), the loop's garbage collections and its
-missed deadlines. Each row runs three ways, alternated ``--pairs`` times: ``before`` (the loop
-going straight from its write to its work, idle CPUs halting), ``pause`` (the loop sleeping
-`PTY_SEND_PAUSE_S` after sending on a pty) and ``pause+awake`` (also a 0 us CPU latency request
-held: `livezmp run` as it is now).
+missed deadlines. Each row runs four ways, alternated ``--pairs`` times: ``before`` (the loop
+going straight from its write to its work, idle CPUs halting, the simulator on any CPU), ``pause``
+(the loop sleeping `PTY_SEND_PAUSE_S` after sending on a pty), ``pause+awake`` (also a 0 us CPU
+latency request held, as `livezmp run` does) and ``now`` (also the simulator's devices and physics
+on the last CPU, as bench_live_loop runs it).
 
 Run (as root): python benchmarks/bench_tty_worker.py [--seconds 4] [--only TEXT ...] [--pairs 2]
 """
@@ -33,7 +34,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
-from bench_live_loop import CONFIGS, OP3, label, live, predicted_ceiling, pty_pause
+from bench_live_loop import CONFIGS, OP3, SIM_CPUS, label, live, predicted_ceiling, pty_pause
 from machine_load import load_averages
 
 from livezmp.links import open_link
@@ -137,10 +138,13 @@ def analyse(text: str, who) -> Hops:
     return hops
 
 
-VARIANTS = {"before": (0.0, False), "pause": (PTY_SEND_PAUSE_S, False), "pause+awake": (PTY_SEND_PAUSE_S, True)}
+# name: (the loop's pause after sending on a pty, CPUs kept awake, the simulator's CPUs)
+VARIANTS = {"before": (0.0, False, None), "pause": (PTY_SEND_PAUSE_S, False, None),
+            "pause+awake": (PTY_SEND_PAUSE_S, True, None), "now": (PTY_SEND_PAUSE_S, True, SIM_CPUS)}
 
 
-def traced_row(robot, urdf, config: tuple, seconds: float, pause: float, awake: bool) -> tuple[dict, Hops, int]:
+def traced_row(robot, urdf, config: tuple, seconds: float, pause: float, awake: bool,
+               cpus: frozenset[int] | None) -> tuple[dict, Hops, int]:
     """One live-loop row of bench_live_loop with the kernel traced: (its figures, the hops, GC collections)."""
     name, baud, buses, fast, delay, adapter, cap, faults, _ = config
     ceiling = predicted_ceiling(len(robot.body.joint_names), buses, fast, delay, baud, adapter)
@@ -152,7 +156,7 @@ def traced_row(robot, urdf, config: tuple, seconds: float, pause: float, awake: 
 
     with kernel_trace() as (start, stop), \
             SimProcess("dynamixel", ("demo", {}), faults, urdf=urdf, realtime_priority=LOOP_PRIORITY - 1,
-                       devices={"baud": baud, "adapter": adapter, "buses": buses}) as sim, \
+                       devices={"baud": baud, "adapter": adapter, "buses": buses}, cpus=cpus) as sim, \
             realtime_priority(LOOP_PRIORITY, lock_memory=True, awake=awake), pty_pause(pause):
         link = open_link(f"{sim.url}&fast={int(fast)}&return_delay={delay}", robot.body.joint_names, robot.config)
         devices = {int(t) for t in os.listdir(f"/proc/{sim._proc.pid}/task")}
