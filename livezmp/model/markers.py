@@ -2,9 +2,9 @@
 
 Supported by their standard labels (prefixes already stripped): Vicon Plug-in Gait lower body
 and its full-body superset (or the trunk's four markers C7 T10 CLAV STRN alone, or only its top, C7 with
-CLAV or LCLA + RCLA, or the shoulders LSHO + RSHO: the thorax is tracked, head and arms placed on it), Helen
-Hayes / modified Helen
-Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
+CLAV or LCLA + RCLA, or the shoulders LSHO + RSHO: the thorax is tracked, head and arms placed on it; with the
+Helen Hayes upper body's SHO, ELB and WRI on both sides the arms are tracked too, the head placed), Helen
+Hayes / modified Helen Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
 Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional TIB wands (the ankle's chord
 rule; THI wands are read but do not place the knee), medial knee/ankle markers, HEE. Other labels and
 cluster sets: :mod:`livezmp.model.marker_map`.
@@ -76,6 +76,10 @@ CERVICALE_ABOVE_ACROMIA = 1.0 - DE_LEVA_MALE["head"].length_fraction - 0.818
 HAT_POINTS = ("HATO", "HATA", "HATL", "HATP")
 SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
+WRIST_WIDTH_OF_STATURE = 0.032  # typical wrist width across the styloids (m / m; ~56 mm at 1.75 m, approximation)
+# the Helen Hayes upper body (Motion Analysis: c3d.org's Walk1, newwalk): one marker at the acromion, the lateral
+# epicondyle and the wrist per side; with both arms' three the arms are tracked, the head placed on the thorax
+_ARMS = ("LSHO", "LELB", "LWRI", "RSHO", "RELB", "RWRI")
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
@@ -217,10 +221,13 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
     if len(upper) == len(_UPPER):
         roles.update({u: u for u in _UPPER})
         roles.update({s + "FIN": s + "FIN" for s in "LR" if s + "FIN" in have})
-    elif set(_TRUNK) <= have:  # the thorax is seen; head and arms are placed on it
-        roles.update({u: u for u in _TRUNK})
-    elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
-        roles.update({u: u for u in top})
+    else:
+        if set(_TRUNK) <= have:  # the thorax is seen; head and arms are placed on it
+            roles.update({u: u for u in _TRUNK})
+        elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
+            roles.update({u: u for u in top})
+        if set(_ARMS) <= have:  # and the arms are tracked, the head alone placed on the thorax
+            roles.update({u: u for u in _ARMS})
     if missing:
         ambiguous = match.ambiguous
         if all(m in ambiguous for m in missing):
@@ -565,9 +572,14 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
     seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
     full = "LFHD" in m
-    if full:
-        seg.update(_upper_segments(m, stature))
-        rules["elbows"] = f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
+    if full or "LWRI" in m:
+        seg.update(_upper_segments(m, pelvis_origin, stature))
+        rules["elbows"] = (f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
+                           if full else f"ELB moved medially along the thorax axis "
+                           f"({1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm width)")
+        if not full:
+            rules["wrists"] = (f"WRI moved medially along the thorax axis "
+                               f"({1000 * WRIST_WIDTH_OF_STATURE * stature:.0f} mm width)")
     elif _trunk_tracked(m):
         seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin, stature)
     else:
@@ -581,7 +593,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         seg[f"thigh_{t}"], seg[f"shank_{t}"], seg[f"foot_{t}"] = (hip, thigh), (knee, shank), (ankle, foot)
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
-             + (f"; thorax from {_trunk_labels(m)}" if _trunk_tracked(m) else ""),
+             + (f"; thorax from {_trunk_labels(m)}" if _trunk_tracked(m) else "")
+             + ("; arms from " + " ".join(_ARMS) if "LWRI" in m else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -780,20 +793,30 @@ def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray | None,
     return top, _frame(top - bottom, _cross(top - bottom, fwd))
 
 
-def _upper_segments(m: dict[str, np.ndarray], stature: float) -> dict:
-    """Thorax (origin between C7 and CLAV, z up the trunk), head (origin at the centre of its four
-    markers, x forward) and each arm: shoulder centre ``SHOULDER_DROP`` below SHO along the thorax,
-    wrist centre between WRA and WRB, elbow centre by the chord rule, hand towards FIN (else along the
-    forearm)."""
-    top, thorax = _thorax(m, None, stature)
-    front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
-    head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
-    out = {"thorax": (top, thorax), "head": ((front + back) / 2, head)}
+def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float) -> dict:
+    """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head and each arm. The head: with
+    Plug-in Gait's four head markers its origin at their centre, x forward; without, placed on the thorax (its
+    frame; :func:`_upper_inertia` puts its mass above the cervicale). Each arm: shoulder centre ``SHOULDER_DROP``
+    below SHO along the thorax; with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
+    centre by the chord rule, hand towards FIN (else along the forearm); with the Helen Hayes single markers ELB
+    and WRI (lateral epicondyle, wrist) each centre half the elbow / wrist width (plus a marker radius) medial of
+    its marker along the thorax' lateral axis, as the knees are placed from KNE, the hand along the forearm.
+    ``mid_hip`` (F, 3; m) where the thorax' axis starts without T10 and STRN; ``stature`` m."""
+    top, thorax = _thorax(m, mid_hip, stature)
+    out = {"thorax": (top, thorax), "head": (top, thorax)}
+    if "LFHD" in m:
+        front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
+        head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
+        out["head"] = ((front + back) / 2, head)
     ty, tz = thorax[:, :, 1], thorax[:, :, 2]
     for s, sign, t in _SIDES.values():
         sjc = m[s + "SHO"] - SHOULDER_DROP * tz
-        wjc = (m[s + "WRA"] + m[s + "WRB"]) / 2
-        ejc = _chord(sjc, wjc, m[s + "ELB"], ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS, -sign * ty)
+        if s + "WRA" in m:
+            wjc = (m[s + "WRA"] + m[s + "WRB"]) / 2
+            ejc = _chord(sjc, wjc, m[s + "ELB"], ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS, -sign * ty)
+        else:
+            ejc = m[s + "ELB"] - sign * (ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS) * ty
+            wjc = m[s + "WRI"] - sign * (WRIST_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS) * ty
         hand_axis = wjc - m[s + "FIN"] if s + "FIN" in m else ejc - wjc
         out[f"upperarm_{t}"] = (sjc, _frame(sjc - ejc, ty))
         out[f"forearm_{t}"] = (ejc, _frame(ejc - wjc, ty))
@@ -892,7 +915,10 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         legs={s: [6 * list(seg).index(f"thigh_{s[0]}") + k for k in (3, 4, 5)] for s in ("left", "right")},
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
-    notes["hat"] = ("head, arms and trunk tracked by their own markers" if "head" in seg else
+    notes["hat"] = ("head, arms and trunk tracked by their own markers" if "LFHD" in m else
+                    f"trunk tracked by {_trunk_labels(m)}, arms by " + " ".join(_ARMS) + "; head "
+                    f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on the thorax"
+                    if "head" in seg else
                     f"trunk tracked by {_trunk_labels(m)}; head and arms "
                     f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on it, arms hanging"
                     if full else
@@ -927,8 +953,10 @@ def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
         length = (170.7 + 215.5) * h
         com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)])
         gyr = t["middle_trunk"].gyration
-    elif kind == "head":
-        frac, length, com, gyr = t["head"].mass_fraction, 242.9 * h, np.zeros(3), t["head"].gyration
+    elif kind == "head":  # tracked: at its markers' centre; placed on the thorax: above the cervicale (de Leva)
+        length = 242.9 * h
+        com = np.zeros(3) if "LFHD" in m else np.array([0.0, 0.0, (1 - t["head"].com_fraction) * length])
+        frac, gyr = t["head"].mass_fraction, t["head"].gyration
     else:
         s = name[-1].upper()
         origin, rot = seg[name]
