@@ -25,7 +25,16 @@ from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
-from livezmp.model.markers import TRUNK_FOLLOW_HZ, MarkerBodyOptions, body_from_markers, hat_sway, hat_table
+from livezmp.model.markers import (
+    ELBOW_WIDTH_OF_STATURE,
+    SHOULDER_DROP,
+    TRUNK_FOLLOW_HZ,
+    WRIST_WIDTH_OF_STATURE,
+    MarkerBodyOptions,
+    body_from_markers,
+    hat_sway,
+    hat_table,
+)
 from livezmp.offline import calibrate as calibration
 from livezmp.offline import gaitlab
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, lateral_band
@@ -528,8 +537,9 @@ def test_trunk_top_markers_track_a_leaning_thorax(tmp_path, trunk, labels):
 
 def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
     """The Helen Hayes upper body as Motion Analysis writes it (SHO, ELB, WRI a side; no head markers), the trunk
-    rolling over the hips and the arms swinging: each arm is tracked (upper arm, forearm, hand), the head placed on
-    the thorax, the masses add up to the body's, and the ZMP matches the plates written from that body's dynamics
+    rolling over the hips and the arms swinging: each arm is tracked (upper arm, forearm, hand), its elbow and wrist
+    centres medial of ELB and WRI (the segments' lengths from the standing markers), the head placed on the
+    thorax, the masses add up to the body's, and the ZMP matches the plates written from that body's dynamics
     to a millimetre. With the wrists unread the arms hang on the thorax: the ZMP then misses the plates by up to
     3 mm (2.2 RMS), over ten times the tracked arms' largest miss (the arms swing in opposition, so most of their
     momentum cancels; what is left is where their mass is)."""
@@ -543,6 +553,16 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
     assert "arms from LSHO LELB LWRI RSHO RELB RWRI" in a.summary["markers"]["marker_set"]
     assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    # the centres from the standing markers: shoulder SHOULDER_DROP below SHO, elbow and wrist half the table
+    # widths plus a marker radius medial of ELB, WRI; each segment's CoM de Leva's fraction down its length
+    sjc = np.array(UPPER_LEFT["SHO"]) - [0.0, 0.0, SHOULDER_DROP]
+    ejc = np.array(UPPER_LEFT["ELB"]) - [0.0, ELBOW_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
+    wjc = np.array([0.0, 0.22, 0.90]) - [0.0, WRIST_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
+    model = a.take.body.model
+    for side in "lr":
+        for seg, table, length in (("upperarm", "upper_arm", sjc - ejc), ("forearm", "forearm", ejc - wjc)):
+            com = model.inertias[model.frames[model.getFrameId(f"{seg}_{side}")].parentJoint].lever
+            assert -com[2] == pytest.approx(DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
     trial.labels[trial.labels.index("LWRI")] = "unused"
     placed = analyse_lab_take(trial)
     assert {"thorax", "headarms"} <= {n.split(".")[0] for n in placed.take.body.channel_names}
