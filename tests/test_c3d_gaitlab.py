@@ -50,6 +50,8 @@ FOOT = ("ANK", "HEE", "TOE")
 UPPER_LEFT = {"FHD": (0.07, 0.06, 1.65), "BHD": (-0.08, 0.06, 1.64), "SHO": (0.0, 0.18, 1.43),
               "ELB": (-0.01, 0.22, 1.15), "WRA": (0.03, 0.23, 0.90), "WRB": (-0.02, 0.21, 0.90),
               "FIN": (0.02, 0.22, 0.80)}
+HEAD3 = {"THEA": (0.0, 0.0, 1.757), "FHEA": (0.09, 0.0, 1.66), "RHEA": (-0.10, 0.0, 1.66)}  # top, front, rear
+NECK = np.array([0.0, 0.0, 1.50])
 TOP_ROLL = 0.15  # rad: the trunk-top set's trunk rolls this far over the hips
 CENTRE = {"C7": (-0.08, 0.0, 1.45), "T10": (-0.10, 0.0, 1.20), "CLAV": (0.05, 0.0, 1.42), "STRN": (0.09, 0.0, 1.25)}
 P95_WALK_MM = 86  # walk_plugingait's p95 with the default trunk sway (measured 83.2 mm; 101.7 without it)
@@ -67,7 +69,7 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
     ``"top"``: only C7 and the clavicles' LCLA and RCLA, the trunk also rolling sideways over the hips by up
     to TOP_ROLL (as a trunk leaning over the stance leg does), or ``"shoulders"``: so, with LSHO and RSHO, or
     ``"arms"``: so, with the Helen Hayes upper body's ELB and WRI too (lateral epicondyle, wrist), the arms
-    swinging."""
+    swinging, or ``"arms_head"``: so, with its head's three markers HEAD3 too, the head nodding."""
     if cluster:
         return _cluster_markers(_markers(t))
     if trunk is True:
@@ -81,14 +83,17 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
         for side, sign in (("L", 1.0), ("R", -1.0)):
             q = np.array([p[0], sign * p[1], p[2]])
             out[side + name] = np.repeat(q[None], len(t), 0) if name in FOOT else (rot @ (q - pivot)) + pivot
-    if trunk in ("top", "shoulders", "arms"):  # carried by the sway, then rolled about the hips' mid-point
+    if trunk in ("top", "shoulders", "arms", "arms_head"):  # carried by the sway, then rolled about the hips' middle
         hips = (out["LASI"] + out["RASI"] + out["LPSI"] + out["RPSI"]) / 4
         lean = np.array([pin.utils.rotate("x", a) for a in TOP_ROLL * np.sin(2 * np.pi * 0.5 * t)])
         top = ((("C7", CENTRE["C7"]), ("LCLA", (0.05, 0.07, 1.41)), ("RCLA", (0.05, -0.07, 1.41))) if trunk == "top"
                else (("LSHO", UPPER_LEFT["SHO"]), ("RSHO", (0.0, -0.18, 1.43))))
-        if trunk == "arms":
+        if trunk.startswith("arms"):
             top += tuple((side + name, _swung(t, UPPER_LEFT[name] if name == "ELB" else (0.0, 0.22, 0.90), sign))
                          for name in ("ELB", "WRI") for side, sign in (("L", 1.0), ("R", -1.0)))
+        if trunk == "arms_head":  # the head nodding about the neck
+            nod = np.array([pin.utils.rotate("y", a) for a in 0.15 * np.sin(2 * np.pi * 0.7 * t)])
+            top += tuple((name, nod @ (np.array(p) - NECK) + NECK) for name, p in HEAD3.items())
         for name, p in top:
             p = np.broadcast_to(np.array(p) - pivot, (len(t), 3))
             out[name] = hips + np.einsum("fij,fj->fi", lean, np.einsum("fij,fj->fi", rot, p) + pivot - hips)
@@ -535,22 +540,27 @@ def test_trunk_top_markers_track_a_leaning_thorax(tmp_path, trunk, labels):
     assert placed.summary["cop_vs_zmp"]["rms_mm"] > 10.0
 
 
-def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
-    """The Helen Hayes upper body as Motion Analysis writes it (SHO, ELB, WRI a side; no head markers), the trunk
-    rolling over the hips and the arms swinging: each arm is tracked (upper arm, forearm, hand), its elbow and wrist
-    centres medial of ELB and WRI (the segments' lengths from the standing markers), the head placed on the
-    thorax, the masses add up to the body's, and the ZMP matches the plates written from that body's dynamics
-    to a millimetre. With the wrists unread the arms hang on the thorax: the ZMP then misses the plates by up to
-    3 mm (2.2 RMS), over ten times the tracked arms' largest miss (the arms swing in opposition, so most of their
-    momentum cancels; what is left is where their mass is)."""
+@pytest.mark.parametrize("trunk", ["arms", "arms_head"])
+def test_helen_hayes_arm_markers_track_the_arms(tmp_path, trunk):
+    """The Helen Hayes upper body as Motion Analysis writes it (SHO, ELB, WRI a side; with or without the head's
+    THEA FHEA RHEA), the trunk rolling over the hips, the arms swinging and the head nodding: each arm is tracked
+    (upper arm, forearm, hand), its elbow and wrist centres medial of ELB and WRI (the segments' lengths from the
+    standing markers), the head on its markers or else placed on the thorax, de Leva's centre of mass from the
+    vertex or the cervicale; the masses add up to the body's, and the ZMP matches the plates written from that
+    body's dynamics to a millimetre. With the wrists unread the arms hang on the thorax: the ZMP then misses the
+    plates by up to 3 mm, over ten times the tracked arms' largest miss (the arms swing in opposition, so most of
+    their momentum cancels; what is left is where their mass is); with THEA unread the head is placed on the
+    thorax and its nod missed (5.5 mm)."""
     path = tmp_path / "arms.c3d"
-    write_lab_c3d(path, PLATES, trunk="arms")
+    write_lab_c3d(path, PLATES, trunk=trunk)
     trial = read_c3d(path)
     a = analyse_lab_take(trial)
     names = {n.split(".")[0] for n in a.take.body.channel_names}
     assert {"thorax", "head", "upperarm_l", "forearm_r", "hand_l", "hand_r"} <= names
     assert not {"hat", "headarms"} & names
-    assert "arms from LSHO LELB LWRI RSHO RELB RWRI" in a.summary["markers"]["marker_set"]
+    marker_set = a.summary["markers"]["marker_set"]
+    assert "arms from LSHO LELB LWRI RSHO RELB RWRI" in marker_set
+    assert ("head from THEA FHEA RHEA" in marker_set) == (trunk == "arms_head")
     assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
     # the centres from the standing markers: shoulder SHOULDER_DROP below SHO, elbow and wrist half the table
@@ -559,13 +569,25 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path):
     ejc = np.array(UPPER_LEFT["ELB"]) - [0.0, ELBOW_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
     wjc = np.array([0.0, 0.22, 0.90]) - [0.0, WRIST_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
     model = a.take.body.model
+
+    def com(seg: str) -> np.ndarray:
+        return model.inertias[model.frames[model.getFrameId(seg)].parentJoint].lever
+
     for side in "lr":
         for seg, table, length in (("upperarm", "upper_arm", sjc - ejc), ("forearm", "forearm", ejc - wjc)):
-            com = model.inertias[model.frames[model.getFrameId(f"{seg}_{side}")].parentJoint].lever
-            assert -com[2] == pytest.approx(DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
-    trial.labels[trial.labels.index("LWRI")] = "unused"
+            assert -com(f"{seg}_{side}")[2] == pytest.approx(
+                DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
+    head, head_len = DE_LEVA_MALE["head"], 242.9 * 1.75 / 1741
+    below_vertex = trunk == "arms_head"  # else above the cervicale, the thorax' origin
+    assert com("head")[2] == pytest.approx(-head.com_fraction * head_len if below_vertex else
+                                           (1 - head.com_fraction) * head_len)
+    frames = a.take.frames
+    head_pitch, thorax_pitch = (frames[:, a.take.body.channel_names.index(f"{s}.pitch")] for s in ("head", "thorax"))
+    assert (np.ptp(head_pitch - thorax_pitch) > 0.2) == below_vertex  # the nod is tracked (0.3 rad peak to peak)
+    trial.labels[trial.labels.index("THEA" if below_vertex else "LWRI")] = "unused"
     placed = analyse_lab_take(trial)
-    assert {"thorax", "headarms"} <= {n.split(".")[0] for n in placed.take.body.channel_names}
+    assert "head from" not in placed.summary["markers"]["marker_set"]
+    assert ("headarms" in {n.split(".")[0] for n in placed.take.body.channel_names}) != below_vertex
     assert placed.summary["cop_vs_zmp"]["max_mm"] > max(2.0, 10 * a.summary["cop_vs_zmp"]["max_mm"])
 
 

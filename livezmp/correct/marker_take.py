@@ -31,7 +31,8 @@ HAT_AXIS_M = 0.1  # m from the HAT origin to each axis point
 _SEGMENT_OF_ROLE = {"ASI": "pelvis", "PSI": "pelvis", "SACR": "pelvis", "THI": "thigh", "KNE": "thigh",
                     "TIB": "shank", "ANK": "shank", "TOE": "foot", "HEE": "foot", "C7": "thorax", "T10": "thorax",
                     "CLAV": "thorax", "CLA": "thorax", "STRN": "thorax", "SHO": "thorax", "FHD": "head", "BHD": "head",
-                    "ELB": "upperarm", "WRA": "forearm", "WRB": "forearm", "WRI": "forearm", "FIN": "hand"}
+                    "HEA": "head", "ELB": "upperarm", "WRA": "forearm", "WRB": "forearm", "WRI": "forearm",
+                    "FIN": "hand"}
 _SIDE = {"L": "_l", "R": "_r"}
 
 

@@ -80,6 +80,7 @@ WRIST_WIDTH_OF_STATURE = 0.032  # typical wrist width across the styloids (m / m
 # the Helen Hayes upper body (Motion Analysis: c3d.org's Walk1, newwalk): one marker at the acromion, the lateral
 # epicondyle and the wrist per side; with both arms' three the arms are tracked, the head placed on the thorax
 _ARMS = ("LSHO", "LELB", "LWRI", "RSHO", "RELB", "RWRI")
+_HEAD3 = ("THEA", "FHEA", "RHEA")  # its head (Walk1): top, front and rear of the head; tracked with the arms
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
@@ -226,8 +227,8 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
             roles.update({u: u for u in _TRUNK})
         elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
             roles.update({u: u for u in top})
-        if set(_ARMS) <= have:  # and the arms are tracked, the head alone placed on the thorax
-            roles.update({u: u for u in _ARMS})
+        if set(_ARMS) <= have:  # and the arms are tracked, the head placed on the thorax or on its three markers
+            roles.update({u: u for u in _ARMS + (_HEAD3 if set(_HEAD3) <= have else ())})
     if missing:
         ambiguous = match.ambiguous
         if all(m in ambiguous for m in missing):
@@ -594,7 +595,8 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     notes = {"marker_set": "Plug-in Gait full body (standard labels)" if full else
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
              + (f"; thorax from {_trunk_labels(m)}" if _trunk_tracked(m) else "")
-             + ("; arms from " + " ".join(_ARMS) if "LWRI" in m else ""),
+             + ("; arms from " + " ".join(_ARMS) if "LWRI" in m else "")
+             + ("; head from " + " ".join(_HEAD3) if "THEA" in m else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -795,8 +797,10 @@ def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray | None,
 
 def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float) -> dict:
     """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head and each arm. The head: with
-    Plug-in Gait's four head markers its origin at their centre, x forward; without, placed on the thorax (its
-    frame; :func:`_upper_inertia` puts its mass above the cervicale). Each arm: shoulder centre ``SHOULDER_DROP``
+    Plug-in Gait's four head markers its origin at their centre, x forward; with the Helen Hayes head's three
+    (top, front, rear) its origin at the vertex (a marker radius below THEA), z towards THEA from between the other
+    two, x forward; without, placed on the thorax (its frame; :func:`_upper_inertia` puts its mass above the
+    cervicale). Each arm: shoulder centre ``SHOULDER_DROP``
     below SHO along the thorax; with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
     centre by the chord rule, hand towards FIN (else along the forearm); with the Helen Hayes single markers ELB
     and WRI (lateral epicondyle, wrist) each centre half the elbow / wrist width (plus a marker radius) medial of
@@ -808,6 +812,10 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
         front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
         head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
         out["head"] = ((front + back) / 2, head)
+    elif "THEA" in m:
+        up = m["THEA"] - (m["FHEA"] + m["RHEA"]) / 2
+        head = _frame(up, _cross(up, m["FHEA"] - m["RHEA"]))
+        out["head"] = (m["THEA"] - MARKER_RADIUS * head[:, :, 2], head)
     ty, tz = thorax[:, :, 1], thorax[:, :, 2]
     for s, sign, t in _SIDES.values():
         sjc = m[s + "SHO"] - SHOULDER_DROP * tz
@@ -917,7 +925,8 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
     notes["hat"] = ("head, arms and trunk tracked by their own markers" if "LFHD" in m else
                     f"trunk tracked by {_trunk_labels(m)}, arms by " + " ".join(_ARMS) + "; head "
-                    f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on the thorax"
+                    + ("by " + " ".join(_HEAD3) if "THEA" in m else
+                       f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on the thorax")
                     if "head" in seg else
                     f"trunk tracked by {_trunk_labels(m)}; head and arms "
                     f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on it, arms hanging"
@@ -953,9 +962,10 @@ def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
         length = (170.7 + 215.5) * h
         com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)])
         gyr = t["middle_trunk"].gyration
-    elif kind == "head":  # tracked: at its markers' centre; placed on the thorax: above the cervicale (de Leva)
+    elif kind == "head":  # at its four markers' centre; from the vertex or above the cervicale by de Leva's fraction
         length = 242.9 * h
-        com = np.zeros(3) if "LFHD" in m else np.array([0.0, 0.0, (1 - t["head"].com_fraction) * length])
+        com = (np.zeros(3) if "LFHD" in m else np.array([0.0, 0.0, -t["head"].com_fraction * length]) if "THEA" in m
+               else np.array([0.0, 0.0, (1 - t["head"].com_fraction) * length]))
         frac, gyr = t["head"].mass_fraction, t["head"].gyration
     else:
         s = name[-1].upper()
