@@ -29,7 +29,7 @@ import os
 import random
 import time
 
-from machine_load import load_averages
+from machine_load import load_averages, run_timed
 
 from livezmp.links import open_link
 from livezmp.links.bus_timing import ADAPTERS
@@ -112,10 +112,7 @@ def main() -> None:
               f"{100 * x['hz'] / x['ceiling']:9.1f}% | "
               f"{100 * x['misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
               f"{x['cpu_ms']:12.2f} | {fell:>4} | {x['failed']:12d} |", flush=True)
-    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":
-    t0 = time.monotonic()
-    main()
-    print(f"took {time.monotonic() - t0:.0f} s")
+    run_timed(main)

@@ -51,7 +51,7 @@ import os
 import time
 from pathlib import Path
 
-from machine_load import load_averages
+from machine_load import load_averages, run_timed
 
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
@@ -260,10 +260,7 @@ def main() -> None:
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
                   f"{x['physics_cpu']:10.0f} | "
                   f"{os.getloadavg()[0]:4.1f} |", flush=True)
-    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":
-    t0 = time.monotonic()
-    main()
-    print(f"took {time.monotonic() - t0:.0f} s")
+    run_timed(main)

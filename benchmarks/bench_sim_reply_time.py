@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from machine_load import load_averages
+from machine_load import load_averages, run_timed
 
 from livezmp.links import LinkError, open_link
 from livezmp.links.bus_timing import ADAPTERS, sync_read_bytes, wire_time
@@ -98,6 +98,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    t0 = time.monotonic()
-    main()
-    print(f"took {time.monotonic() - t0:.0f} s")
+    run_timed(main, end_load=False)

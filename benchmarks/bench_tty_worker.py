@@ -29,13 +29,12 @@ import contextlib
 import gc
 import os
 import re
-import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
 from bench_live_loop import CONFIGS, OP3, SIM_CPUS, label, live, predicted_ceiling, pty_pause
-from machine_load import load_averages
+from machine_load import load_averages, run_timed
 
 from livezmp.links import open_link
 from livezmp.live.loop import PTY_SEND_PAUSE_S
@@ -232,10 +231,7 @@ def main() -> None:
                   f"{quantiles_us(hops.waits[False]):>18} | {100 * np.mean(hops.same_cpu[False]):6.0f}% | "
                   f"{held(hops.holders[False]):<38} | {share:<49} | {rt:8.2f} | {collections:2d} | "
                   f"{os.getloadavg()[0]:4.1f} |", flush=True)
-    print(f"\nload average at the end: {load_averages()}")
 
 
 if __name__ == "__main__":
-    t0 = time.monotonic()
-    main()
-    print(f"took {time.monotonic() - t0:.0f} s")
+    run_timed(main)
