@@ -274,13 +274,15 @@ class DynamixelLink(PortLink):
         self._present: np.ndarray | None = None  # raw ticks of the last verified read
         self._lowest = np.full(len(ids), -2.0**31)  # goal limits in ticks, from the servos at open
         self._highest = np.full(len(ids), 2.0**31 - 1)
+        self._opened_pty = False  # whether the port opened was a pseudo-terminal
 
     @property
     def via_pty(self) -> bool:
         """Whether the port is a pseudo-terminal (a simulated bus, or a bridge such as socat or ser2net): its
         written bytes wait for a kernel worker of normal priority to reach the other end (a USB-serial
-        adapter's go out in the write itself)."""
-        return os.path.realpath(self.path).startswith("/dev/pts/")
+        adapter's go out in the write itself). Of an open port, what it was when opened: the loop asks every
+        cycle, and following the path's links costs ~10 us."""
+        return self._opened_pty if self._port is not None else _names_a_pty(self.path)
 
     # -- Link -----------------------------------------------------------------------------------
 
@@ -441,6 +443,7 @@ class DynamixelLink(PortLink):
             port.closePort()
             raise LinkError(f"{self.path}: this dynamixel-sdk has no Fast Sync Read: use fast=0 or upgrade it")
         self._port = port
+        self._opened_pty = _names_a_pty(self.path)
         self._readers = {}
         self._instruction = self._goal_packet = None
 
@@ -838,6 +841,11 @@ class DynamixelLink(PortLink):
 
     def _who(self, i: int) -> str:
         return f"servo {self.ids[i]} ({self.joint_names[i]})"
+
+
+def _names_a_pty(path: str) -> bool:
+    """Whether ``path`` leads (through its links) to a pseudo-terminal."""
+    return os.path.realpath(path).startswith("/dev/pts/")
 
 
 def _fast_tx(reader: GroupSyncRead | GroupBulkRead) -> int:
