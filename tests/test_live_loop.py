@@ -468,11 +468,14 @@ def pipelined_loop(body, prepares: bool, fault, command, config):
 def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
     """The pipelined loop builds cycle k+1's goals at the end of cycle k. Sent or not (a read fails,
     a frame is rejected, the watchdog stops and the loop resumes), every goal written is the one
-    the cycle would have computed itself: the limiter keeps its state until they are sent."""
+    the cycle would have computed itself: the limiter keeps its state until they are sent. The command
+    a cycle's goals were built from is not asked for again when they are sent (once a cycle is its cost)."""
     cfg = LoopConfig(rate_hz=RATE, ramp_s=0.05, safety=SafetyConfig(max_correction_rate_rad_s=0.05))
     ankles = [mini.joint_names.index(n) for n in ("l_ank_pitch", "r_ank_pitch")]
+    asked: list[float] = []
 
     def command(t):
+        asked.append(t)
         q = np.zeros(len(mini.joint_names))
         q[ankles] = -0.3 * min(t / 0.5, 1.0)
         return q
@@ -480,9 +483,12 @@ def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
     # the corrector's offsets move at the limiter's rate from about read 190; then faults
     script = {250: "error", 251: "nan", 300: "error", 350: "jump", **{n: "error" for n in range(400, 460)}}
     runs = {}
+    repeats = {}
     for prepares in (False, True):
+        asked.clear()
         loop, link = pipelined_loop(mini, prepares, lambda n, t: script.get(n), command, cfg)
         runs[prepares] = (loop.run(duration=1.0), link)
+        repeats[prepares] = len(asked) - len(set(asked))
     (plain, plain_link), (ahead, ahead_link) = runs[False], runs[True]
     assert plain["commands_sent"] == ahead["commands_sent"]
     assert ahead["corrections_limited"] > 0 and ahead["resumes"] == 1  # the limiter and a restart are exercised
@@ -491,6 +497,7 @@ def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
     # all but the first write of each stretch of good frames went out as built ahead
     stretches = 1 + 3 + 1  # the start; after reads 250-251, 300 and 350 (failed or rejected); the watchdog's resume
     assert ahead_link.sent_prepared == ahead["commands_sent"] - stretches and plain_link.sent_prepared == 0
+    assert repeats == {False: 0, True: 0}  # each cycle's command asked for once, built ahead or not
 
 
 @pytest.mark.parametrize("pty", [False, True])

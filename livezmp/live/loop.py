@@ -216,7 +216,8 @@ class LiveLoop:
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
-        self._prepared: tuple[int, bool, np.ndarray] | None = None  # (cycle, limited, offsets) of built goals
+        # (cycle, limited, offsets, command) of the goals built ahead
+        self._prepared: tuple[int, bool, np.ndarray, np.ndarray] | None = None
 
     def request_stop(self, reason: str) -> None:
         """Ask the loop to end after the current cycle (safe from a signal handler)."""
@@ -323,9 +324,9 @@ class LiveLoop:
             # write first, with the offsets the previous cycle's work computed (built then, when this cycle's
             # goals are known ahead), then ask for the next read and do this cycle's work while its bytes are
             # on the wire
-            sent = self._send_prepared(tick.index, t, t0)
-            command = None if self.halted is not None else self._command(t, frame.positions)
-            if command is not None and not sent:
+            command = self._send_prepared(tick.index, t, t0)
+            if command is None and self.halted is None:
+                command = self._command(t, frame.positions)
                 self._write(t, t0, command)
             self._request()  # when the write failed or was not sent
             if getattr(self.link, "via_pty", False):
@@ -374,28 +375,31 @@ class LiveLoop:
                 self.link_down:
             return
         t = index * self.dt
-        goals, limited, offsets = self.limiter.propose(self._command(t, self._ramp_from), self.offsets)
+        command = self._command(t, self._ramp_from)
+        goals, limited, offsets = self.limiter.propose(command, self.offsets)
         try:
             self.link.prepare_goals(goals)
         except LinkError:
             return  # the cycle builds and sends them itself, and says what failed
-        self._prepared = (index, limited, offsets)
+        self._prepared = (index, limited, offsets, command)
 
-    def _send_prepared(self, index: int, t: float, t0: float) -> bool:
-        """Send the goals `_prepare` built for cycle ``index`` (True), if it did and nothing changed since."""
+    def _send_prepared(self, index: int, t: float, t0: float) -> np.ndarray | None:
+        """Send the goals `_prepare` built for cycle ``index``, if it did and nothing changed since, and
+        return that cycle's command they were built from (the same `_command` would give now: a restart
+        drops what was prepared); None when there was nothing to send."""
         prepared, self._prepared = self._prepared, None
         if prepared is None or prepared[0] != index or self.halted is not None or self.stopped:
-            return False
+            return None
         t3 = self.clock.now()
         try:
             self.link.send_prepared()
         except LinkError as e:
             self.counters.write_errors += 1
             self._event(t, f"write failed: {e}", kind="write")
-            return True
+            return prepared[3]
         self.limiter.offsets = prepared[2]
         self._written(t, t0, t3, prepared[1])
-        return True
+        return prepared[3]
 
     def _written(self, t: float, t0: float, t3: float, limited: bool) -> None:
         """Bookkeeping of goals sent at ``t3`` (s) in the cycle whose read started at ``t0``."""
