@@ -291,6 +291,26 @@ def test_goal_limiter_never_exceeds_its_limits(offset_seq, command):
         prev = sent
 
 
+def test_goal_limiter_is_the_two_clips_exactly_also_for_non_finite_input():
+    """The limiter's goals and kept offsets are, bit for bit, offsets clipped to the correction limit and
+    the rate limit, then command + offsets clipped to the joint limits (np.clip, the reference):
+    non-finite offsets count as zero, a NaN command stays NaN (the link refuses it)."""
+    cfg = SafetyConfig(max_correction_rad=0.4, max_correction_rate_rad_s=2.0, limit_margin_rad=0.01)
+    limiter = GoalLimiter(_limits(), cfg, T)
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        command, offsets = rng.normal(0.0, 0.8, 3), rng.normal(0.0, 0.5, 3)
+        offsets[rng.random(3) < 0.2] = rng.choice([np.nan, np.inf, -np.inf])
+        command[rng.random(3) < 0.05] = np.nan
+        kept = limiter.offsets.copy()
+        want = np.where(np.isfinite(offsets), offsets, 0.0)
+        sent = np.clip(np.clip(want, -0.4, 0.4), kept - 2.0 * T, kept + 2.0 * T)
+        goals = np.clip(command + sent, -0.99, 0.99)
+        got, limited = limiter.apply(command, offsets)
+        assert np.array_equal(got, goals, equal_nan=True) and np.array_equal(limiter.offsets, sent)
+        assert limited == bool(np.any(sent != want) or np.any(goals != command + sent))
+
+
 def test_safety_config_errors_name_the_field():
     with pytest.raises(InputError, match="watchdog_s = -1: must be a positive number"):
         SafetyConfig(watchdog_s=-1)
