@@ -14,8 +14,10 @@ process), with timestamps on both sides of the pty (one clock, ``time.monotonic`
 Printed per configuration: the medians and 99th percentiles of the stages (``pickup - write``: the
 pty's delivery to the simulator; ``sent - due``: the simulator's lateness against its model;
 ``have - sent``: the pty's delivery back and the client's wake-up), the read's excess over what the
-bus model allows from the client's write (``have - write - model``), missed deadlines, and the CPU
-per cycle of the client, of the devices' process and of the simulated chain's packet handling alone.
+bus model allows from the client's write (``have - write - model``), missed deadlines, failed reads
+(a lost reply is counted and the cycle goes on, as in the live loop; the pipelined cycle's goals are
+then built from a read asked again, up to READ_TRIES times), and the CPU per cycle of the client, of the
+devices' process and of the simulated chain's packet handling alone.
 
 Run: python benchmarks/bench_bus_timeline.py [--seconds 5] [--only TEXT ...]
 """
@@ -44,6 +46,7 @@ from sim_devices.process import SimProcess
 OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 
 MAX_EVENTS = 200_000  # per kind, bounded: a 5 s row at 1 kHz is 5 000 cycles
+READ_TRIES = 8  # a read that builds the pipelined cycle's goals, asked again after a lost reply
 
 
 def _traced_child(trace_path: str, *args) -> None:
@@ -84,8 +87,21 @@ def bus_cycles(link, rate: float, seconds: float, pipelined: bool) -> dict:
     clock = LoopClock(rate)
     n = int(seconds * rate)
     times = np.full((n, 2), np.nan)
+    failed = [0]
+
+    def prepare_from_a_read() -> None:
+        """Goals built from a fresh read; a lost reply is counted and the read asked again (as the live loop
+        goes on after one): the pipelined cycle's first read and the one after a failed cycle."""
+        for _ in range(READ_TRIES):
+            try:
+                link.prepare_goals(link.read().positions)
+                return
+            except LinkError:
+                failed[0] += 1
+        raise LinkError(f"no read in {READ_TRIES} tries")
+
     if pipelined:
-        link.prepare_goals(link.read().positions)
+        prepare_from_a_read()
     clock.start()
     cpu0 = time.process_time()
     for k in range(n):
@@ -95,8 +111,9 @@ def bus_cycles(link, rate: float, seconds: float, pipelined: bool) -> dict:
                 link.send_prepared()
             frame = link.read()
         except LinkError:
+            failed[0] += 1
             if pipelined:
-                link.prepare_goals(link.read().positions)
+                prepare_from_a_read()
             clock.wait()
             continue
         times[k, 1] = time.monotonic()
@@ -108,7 +125,7 @@ def bus_cycles(link, rate: float, seconds: float, pipelined: bool) -> dict:
     cpu = time.process_time() - cpu0
     st = clock.stats()
     return {"times": times, "cpu_us": 1e6 * cpu / n, "missed": 100 * st.deadline_misses / max(st.cycles, 1),
-            "achieved": st.achieved_hz}
+            "achieved": st.achieved_hz, "failed": failed[0]}
 
 
 def timeline(client: np.ndarray, picked: np.ndarray, sent: np.ndarray) -> dict:
@@ -190,8 +207,8 @@ def main() -> None:
     print("stages in us, median / p99: pickup = sim read - client write; model = due - pickup; "
           "late = reply written - due; back = client has - reply written; excess = have - write - model\n")
     header = ("| row                 | cycle     | Hz   | achieved | missed % | pickup      | model       | "
-              "late        | back        | excess      | client CPU us | devices CPU us | chain us/pickup | "
-              "physics us | load |")
+              "late        | back        | excess      | failed reads | client CPU us | devices CPU us | "
+              "chain us/pickup | physics us | load |")
     print(header)
     print("|" + "|".join("-" * len(c) for c in header.split("|")[1:-1]) + "|", flush=True)
     cycles = {"both": (False, True), "plain": (False,), "pipelined": (True,)}[args.cycle]
@@ -203,7 +220,8 @@ def main() -> None:
         print(f"| {name:<19} | {'pipelined' if pipelined else 'plain':<9} | {rate:4d} | {x['achieved']:8.1f} | "
               f"{x['missed']:8.2f} | {quantiles(x['pickup'])} | "
               f"{quantiles(x['model'])} | {quantiles(x['late'])} | {quantiles(x['back'])} | "
-              f"{quantiles(x['excess'])} | {x['cpu_us']:13.0f} | {x['devices_us']:14.0f} | {x['chain_us']:15.0f} | "
+              f"{quantiles(x['excess'])} | {x['failed']:12d} | {x['cpu_us']:13.0f} | {x['devices_us']:14.0f} | "
+              f"{x['chain_us']:15.0f} | "
               f"{x['physics_us']:10.0f} | {os.getloadavg()[0]:4.1f} |", flush=True)
 
 
