@@ -81,6 +81,10 @@ class FrameGuard:
     def __init__(self, limits: JointLimits, config: SafetyConfig):
         self.limits = limits
         self.config = config
+        # the bounds every frame is checked against, made once (the loop checks a frame every cycle)
+        tol = config.position_tolerance_rad
+        self._lowest, self._highest = limits.lower - tol, limits.upper + tol
+        self._max_speed = config.speed_factor * limits.velocity
         self.reset()
 
     def reset(self) -> None:
@@ -96,10 +100,11 @@ class FrameGuard:
         q = np.asarray(frame.positions, dtype=float)
         if q.shape != lim.lower.shape:
             return Verdict("corrupted", f"{q.size} positions for {lim.lower.size} joints")
-        if not np.all(np.isfinite(q)):
-            return Verdict("corrupted", f"joint {lim.names[int(np.argmin(np.isfinite(q)))]}: non-finite position")
+        finite = np.isfinite(q)
+        if not finite.all():
+            return Verdict("corrupted", f"joint {lim.names[int(np.argmin(finite))]}: non-finite position")
         tol = cfg.position_tolerance_rad
-        out = (q < lim.lower - tol) | (q > lim.upper + tol)
+        out = (q < self._lowest) | (q > self._highest)
         if out.any():
             j = int(np.argmax(out))
             return Verdict("corrupted", f"joint {lim.names[j]}: {q[j]:.3f} rad is beyond its limits "
@@ -111,7 +116,7 @@ class FrameGuard:
             return Verdict("stale", "frame is not newer than the previous one")
         if self._last_q is not None:
             step = np.abs(q - self._last_q)
-            allowed = cfg.speed_factor * lim.velocity * (frame.t - self._last_t) + tol
+            allowed = self._max_speed * (frame.t - self._last_t) + tol
             fast = step > allowed
             if fast.any():
                 j = int(np.argmax(fast))
