@@ -27,7 +27,7 @@ from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import (
     ELBOW_WIDTH_OF_STATURE,
-    SHOULDER_DROP,
+    SHOULDER_OFFSET,
     TRUNK_FOLLOW_HZ,
     WRIST_WIDTH_OF_STATURE,
     MarkerBodyOptions,
@@ -222,6 +222,7 @@ class Lab:
     prefix: str = "Sub01:"
     mass: bool = True
     height_m: float = 1.75  # PROCESSING:Height, written with the mass
+    subject: tuple = ()  # (name, mm) more PROCESSING measurements, written with the mass (LElbowWidth ...)
     zero: tuple = (1, 0)
 
 
@@ -344,6 +345,8 @@ def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bo
     if lab.mass:
         c3d.add_parameter("PROCESSING", "Bodymass", [MASS])
         c3d.add_parameter("PROCESSING", "Height", [1000.0 * lab.height_m])
+        for name, mm in lab.subject:
+            c3d.add_parameter("PROCESSING", name, [mm])
     c3d.write(str(path))
     if lab.integer or lab.scale[1]:  # ezc3d writes floats and zeroes ANALOG:OFFSET: rewrite its data section
         _store(path, pts, c3d["data"]["analogs"][0].T, lab)
@@ -563,20 +566,8 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path, trunk):
     assert ("head from THEA FHEA RHEA" in marker_set) == (trunk == "arms_head")
     assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
-    # the centres from the standing markers: shoulder SHOULDER_DROP below SHO, elbow and wrist half the table
-    # widths plus a marker radius medial of ELB, WRI; each segment's CoM de Leva's fraction down its length
-    sjc = np.array(UPPER_LEFT["SHO"]) - [0.0, 0.0, SHOULDER_DROP]
-    ejc = np.array(UPPER_LEFT["ELB"]) - [0.0, ELBOW_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
-    wjc = np.array([0.0, 0.22, 0.90]) - [0.0, WRIST_WIDTH_OF_STATURE * 1.75 / 2 + 0.007, 0.0]
-    model = a.take.body.model
-
-    def com(seg: str) -> np.ndarray:
-        return model.inertias[model.frames[model.getFrameId(seg)].parentJoint].lever
-
-    for side in "lr":
-        for seg, table, length in (("upperarm", "upper_arm", sjc - ejc), ("forearm", "forearm", ejc - wjc)):
-            assert -com(f"{seg}_{side}")[2] == pytest.approx(
-                DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
+    _assert_arm_centres(a, SHOULDER_OFFSET, ELBOW_WIDTH_OF_STATURE * 1.75, WRIST_WIDTH_OF_STATURE * 1.75)
+    com = functools.partial(_segment_com, a.take.body.model)
     head, head_len = DE_LEVA_MALE["head"], 242.9 * 1.75 / 1741
     below_vertex = trunk == "arms_head"  # else above the cervicale, the thorax' origin
     assert com("head")[2] == pytest.approx(-head.com_fraction * head_len if below_vertex else
@@ -589,6 +580,43 @@ def test_helen_hayes_arm_markers_track_the_arms(tmp_path, trunk):
     assert "head from" not in placed.summary["markers"]["marker_set"]
     assert ("headarms" in {n.split(".")[0] for n in placed.take.body.channel_names}) != below_vertex
     assert placed.summary["cop_vs_zmp"]["max_mm"] > max(2.0, 10 * a.summary["cop_vs_zmp"]["max_mm"])
+
+
+def _segment_com(model, seg: str) -> np.ndarray:
+    """(3,) m: segment ``seg``'s centre of mass in its joint's frame."""
+    return model.inertias[model.frames[model.getFrameId(seg)].parentJoint].lever
+
+
+def _assert_arm_centres(a, shoulder: float, elbow: float, wrist: float) -> None:
+    """The arms' centres from the standing markers: the shoulder ``shoulder`` plus a marker radius below SHO, elbow
+    and wrist half their widths ``elbow``, ``wrist`` plus a marker radius medial of ELB, WRI (m); each segment's
+    CoM de Leva's fraction down its length."""
+    sjc = np.array(UPPER_LEFT["SHO"]) - [0.0, 0.0, shoulder + 0.007]
+    ejc = np.array(UPPER_LEFT["ELB"]) - [0.0, elbow / 2 + 0.007, 0.0]
+    wjc = np.array([0.0, 0.22, 0.90]) - [0.0, wrist / 2 + 0.007, 0.0]
+    for side in "lr":
+        for seg, table, length in (("upperarm", "upper_arm", sjc - ejc), ("forearm", "forearm", ejc - wjc)):
+            assert -_segment_com(a.take.body.model, f"{seg}_{side}")[2] == pytest.approx(
+                DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
+
+
+def test_the_files_arm_measurements_place_the_arm_centres(tmp_path):
+    """Plug-in Gait's subject measurements in PROCESSING (LShoulderOffset, LElbowWidth, LWristWidth and the right
+    side's, mm; c3d.org's vicon_zerowire writes them) are read in m and place the shoulder, elbow and wrist centres
+    in place of the defaults; the summary says they are the file's. The defaults' lengths then do not fit."""
+    given = {"ShoulderOffset": 25.0, "ElbowWidth": 90.0, "WristWidth": 70.0}
+    path = tmp_path / "arms.c3d"
+    write_lab_c3d(path, PLATES, trunk="arms", lab=Lab(subject=tuple((s + k, v) for k, v in given.items()
+                                                                   for s in "LR")))
+    trial = read_c3d(path)
+    assert trial.widths_m == {s + k: pytest.approx(v / 1000) for k, v in given.items() for s in "LR"}
+    a = analyse_lab_take(trial)
+    _assert_arm_centres(a, *(v / 1000 for v in given.values()))
+    rules = a.summary["markers"]["joint_centres"]
+    assert rules["elbows"].endswith("(width 90 / 90 mm, the file's)")
+    assert "offset 25 / 25 mm, the file's" in rules["shoulders"]
+    with pytest.raises(AssertionError):
+        _assert_arm_centres(a, SHOULDER_OFFSET, ELBOW_WIDTH_OF_STATURE * 1.75, WRIST_WIDTH_OF_STATURE * 1.75)
 
 
 def test_late_plates_are_measured_and_realigned(lab):

@@ -59,8 +59,8 @@ class C3dTrial:
     """A C3D trial. ``points`` (F, P, 3) m with NaN where a marker was not seen (negative residual,
     non-finite or all-zero coordinates); ``rate`` Hz of the
     points; ``analog_rate`` Hz of the plates; ``start_time`` s, the time of frame 0 in the
-    capture (events are given on the same clock); ``parameters`` the subject's
-    (``Bodymass`` kg, ``Height`` m, ``Age`` years, ``LKneeWidth`` ... m) when the file has them."""
+    capture (events are given on the same clock); ``parameters`` the subject's (``Bodymass`` kg,
+    ``Height`` m, ``Age`` years, ``LKneeWidth``, ``LElbowWidth``, ``LShoulderOffset`` ... m) when the file has them."""
 
     source: str
     labels: list[str]
@@ -129,7 +129,9 @@ def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, f
             height = h / 1000.0 if h > 3.0 else h  # Vicon writes mm, others m
             break
     widths = {}
-    for n in ("LKneeWidth", "RKneeWidth", "LAnkleWidth", "RAnkleWidth"):
+    # Plug-in Gait's subject measurements (mm): its model places joint centres with them
+    for n in (f"{s}{what}" for s in "LR" for what in ("KneeWidth", "AnkleWidth", "ElbowWidth", "WristWidth",
+                                                       "ShoulderOffset")):
         w = _first_number(_param(groups, "PROCESSING", n))
         if w is not None:
             widths[n] = w / 1000.0

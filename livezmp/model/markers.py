@@ -74,7 +74,8 @@ CERVICALE_ABOVE_ACROMIA = 1.0 - DE_LEVA_MALE["head"].length_fraction - 0.818
 # the HAT's frame as virtual points (origin, anterior, left, proximal axis tips: Plug-in Gait's segment-axis
 # convention), written by `livezmp correct` when it leans the HAT; when present they orient the placed HAT
 HAT_POINTS = ("HATO", "HATA", "HATL", "HATP")
-SHOULDER_DROP = 0.04 + MARKER_RADIUS  # m: shoulder joint centre below the acromion marker (approximation)
+_ARM_DIMENSIONS = ("ShoulderOffset", "ElbowWidth", "WristWidth")  # Plug-in Gait's names, after the side letter
+SHOULDER_OFFSET = 0.04  # m: shoulder joint centre below the acromion marker's centre when the file gives none (approx.)
 ELBOW_WIDTH_OF_STATURE = 0.042  # typical elbow width (m / m)
 WRIST_WIDTH_OF_STATURE = 0.032  # typical wrist width across the styloids (m / m; ~56 mm at 1.75 m, approximation)
 # the Helen Hayes upper body (Motion Analysis: c3d.org's Walk1, newwalk): one marker at the acromion, the lateral
@@ -574,13 +575,14 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
     full = "LFHD" in m
     if full or "LWRI" in m:
-        seg.update(_upper_segments(m, pelvis_origin, stature))
-        rules["elbows"] = (f"chord rule (wrist centre, width {1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm)"
-                           if full else f"ELB moved medially along the thorax axis "
-                           f"({1000 * ELBOW_WIDTH_OF_STATURE * stature:.0f} mm width)")
+        arms = {s: arm_dimensions(trial.widths_m, s, stature) for s in "LR"}
+        seg.update(_upper_segments(m, pelvis_origin, stature, arms))
+        told = [_arm_told(trial.widths_m, arms, i) for i in range(3)]
+        rules["shoulders"] = f"SHO moved down the thorax axis (offset {told[0]}, plus a marker radius)"
+        rules["elbows"] = (f"chord rule (wrist centre, width {told[1]})" if full
+                           else f"ELB moved medially along the thorax axis (width {told[1]})")
         if not full:
-            rules["wrists"] = (f"WRI moved medially along the thorax axis "
-                               f"({1000 * WRIST_WIDTH_OF_STATURE * stature:.0f} mm width)")
+            rules["wrists"] = f"WRI moved medially along the thorax axis (width {told[2]})"
     elif _trunk_tracked(m):
         seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin, stature)
     else:
@@ -795,17 +797,33 @@ def _thorax(m: dict[str, np.ndarray], mid_hip: np.ndarray | None,
     return top, _frame(top - bottom, _cross(top - bottom, fwd))
 
 
-def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float) -> dict:
+def arm_dimensions(widths_m: dict[str, float], side: str, stature: float) -> tuple[float, float, float]:
+    """Side ``side``'s ("L", "R") shoulder offset, elbow width and wrist width (m): the file's Plug-in Gait
+    subject measurements (``LShoulderOffset``, ``LElbowWidth``, ``LWristWidth``) where given, else
+    :data:`SHOULDER_OFFSET` and the fractions of ``stature`` (m)."""
+    default = (SHOULDER_OFFSET, ELBOW_WIDTH_OF_STATURE * stature, WRIST_WIDTH_OF_STATURE * stature)
+    return tuple(widths_m.get(side + name) or d for name, d in zip(_ARM_DIMENSIONS, default, strict=True))
+
+
+def _arm_told(widths_m: dict[str, float], arms: dict[str, tuple[float, float, float]], i: int) -> str:
+    """The left / right value ``i`` of :func:`arm_dimensions` in mm, and whether the file gave it."""
+    given = all(f"{s}{_ARM_DIMENSIONS[i]}" in widths_m for s in "LR")
+    return " / ".join(f"{1000 * arms[s][i]:.0f}" for s in "LR") + (" mm, the file's" if given else " mm")
+
+
+def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float,
+                    arms: dict[str, tuple[float, float, float]]) -> dict:
     """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head and each arm. The head: with
     Plug-in Gait's four head markers its origin at their centre, x forward; with the Helen Hayes head's three
     (top, front, rear) its origin at the vertex (a marker radius below THEA), z towards THEA from between the other
     two, x forward; without, placed on the thorax (its frame; :func:`_upper_inertia` puts its mass above the
-    cervicale). Each arm: shoulder centre ``SHOULDER_DROP``
-    below SHO along the thorax; with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
+    cervicale). Each arm: shoulder centre its shoulder offset plus a marker radius below SHO along the thorax
+    (Plug-in Gait's rule); with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
     centre by the chord rule, hand towards FIN (else along the forearm); with the Helen Hayes single markers ELB
     and WRI (lateral epicondyle, wrist) each centre half the elbow / wrist width (plus a marker radius) medial of
     its marker along the thorax' lateral axis, as the knees are placed from KNE, the hand along the forearm.
-    ``mid_hip`` (F, 3; m) where the thorax' axis starts without T10 and STRN; ``stature`` m."""
+    ``mid_hip`` (F, 3; m) where the thorax' axis starts without T10 and STRN; ``stature`` m; ``arms`` side ->
+    :func:`arm_dimensions`."""
     top, thorax = _thorax(m, mid_hip, stature)
     out = {"thorax": (top, thorax), "head": (top, thorax)}
     if "LFHD" in m:
@@ -818,13 +836,14 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
         out["head"] = (m["THEA"] - MARKER_RADIUS * head[:, :, 2], head)
     ty, tz = thorax[:, :, 1], thorax[:, :, 2]
     for s, sign, t in _SIDES.values():
-        sjc = m[s + "SHO"] - SHOULDER_DROP * tz
+        shoulder, elbow, wrist = arms[s]
+        sjc = m[s + "SHO"] - (shoulder + MARKER_RADIUS) * tz
         if s + "WRA" in m:
             wjc = (m[s + "WRA"] + m[s + "WRB"]) / 2
-            ejc = _chord(sjc, wjc, m[s + "ELB"], ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS, -sign * ty)
+            ejc = _chord(sjc, wjc, m[s + "ELB"], elbow / 2 + MARKER_RADIUS, -sign * ty)
         else:
-            ejc = m[s + "ELB"] - sign * (ELBOW_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS) * ty
-            wjc = m[s + "WRI"] - sign * (WRIST_WIDTH_OF_STATURE * stature / 2 + MARKER_RADIUS) * ty
+            ejc = m[s + "ELB"] - sign * (elbow / 2 + MARKER_RADIUS) * ty
+            wjc = m[s + "WRI"] - sign * (wrist / 2 + MARKER_RADIUS) * ty
         hand_axis = wjc - m[s + "FIN"] if s + "FIN" in m else ejc - wjc
         out[f"upperarm_{t}"] = (sjc, _frame(sjc - ejc, ty))
         out[f"forearm_{t}"] = (ejc, _frame(ejc - wjc, ty))
