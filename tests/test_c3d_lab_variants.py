@@ -12,6 +12,7 @@ from __future__ import annotations
 import struct
 from dataclasses import replace
 
+import ezc3d
 import numpy as np
 import pytest
 
@@ -228,3 +229,29 @@ def test_a_zero_range_that_is_no_unloaded_reading_is_not_taken():
 
     assert offset("blank")[0][2] == pytest.approx(21.0, abs=0.5)  # a 0.1 s stretch of its 0.5 N, 7 Hz noise
     assert offset("standing") is None
+
+
+@pytest.mark.parametrize("layout", ["(2, n)", "flat pairs", "labels beyond USED"])
+def test_event_times_as_labs_write_them(layout, tmp_path):
+    """EVENT:TIMES is (2, USED) minutes and seconds; some writers store it flat, the pairs interleaved (as a
+    Plug-in Gait sample of BTK's test data does: 24 numbers for 12 events), and some list more labels than USED
+    counts. Each reads as the same events (the flat file was a traceback before)."""
+    path = tmp_path / "trial.c3d"
+    write_lab_c3d(path, PLATES, lab=Lab(seconds=SECONDS))
+    events = [("Left", "Foot Strike", 0.52), ("Right", "Foot Off", 61.25), ("Left", "Foot Off", 1.5)]
+    minutes_seconds = np.array([[t // 60, t % 60] for _, _, t in events])
+    c3d = ezc3d.c3d(str(path))
+    labels, contexts = [lab for _, lab, _ in events], [c for c, _, _ in events]
+    if layout == "(2, n)":
+        c3d.add_parameter("EVENT", "TIMES", minutes_seconds.T)
+    else:
+        c3d.add_parameter("EVENT", "TIMES", minutes_seconds.ravel())
+    if layout == "labels beyond USED":
+        labels, contexts = labels + ["Foot Strike"], contexts + ["Right"]
+    c3d.add_parameter("EVENT", "USED", [len(events)])
+    c3d.add_parameter("EVENT", "LABELS", labels)
+    c3d.add_parameter("EVENT", "CONTEXTS", contexts)
+    c3d.write(str(path))
+    got = read_c3d(path).events
+    assert [(c, lab) for c, lab, _ in got] == [(c, lab) for c, lab, _ in events]
+    assert [t for _, _, t in got] == pytest.approx([t for _, _, t in events], abs=1e-4)

@@ -139,15 +139,27 @@ def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, f
 
 
 def _events(groups: dict, source: str) -> list[tuple[str, str, float]]:
+    """The EVENT group's (context, label, time s): TIMES is (2, USED) minutes and seconds, which ezc3d gives as a
+    (2, n) array or flattened, pairs interleaved (Vicon Nexus files); USED, where given, counts the events, and a
+    group whose fields disagree in length keeps the events all of them describe."""
     times = _param(groups, "EVENT", "TIMES")
     labels = _param(groups, "EVENT", "LABELS")
-    contexts = _param(groups, "EVENT", "CONTEXTS")
     if times is None or labels is None:
         return []
+    contexts = _param(groups, "EVENT", "CONTEXTS") or [""] * len(labels)
+    used = _first_number(_param(groups, "EVENT", "USED"))
+    count = int(used) if used else len(labels)
+    n = min(len(labels), len(contexts), count)
     t = np.asarray(times, dtype=float)
-    t = t[0] * 60.0 + t[1] if t.ndim == 2 and t.shape[0] == 2 else t.ravel()  # (minutes, seconds)
-    contexts = contexts or [""] * len(labels)
-    return [(str(c).strip(), str(lab).strip(), float(s)) for c, lab, s in zip(contexts, labels, t, strict=True)]
+    if t.ndim == 2 and t.shape[0] == 2:
+        t = t[0] * 60.0 + t[1]
+    elif t.ndim == 1 and t.size == 2 * count:
+        t = t[0::2] * 60.0 + t[1::2]
+    else:
+        t = t.ravel()
+    n = min(n, len(t))
+    return [(str(c).strip(), str(lab).strip(), float(s))
+            for c, lab, s in zip(contexts[:n], labels[:n], t[:n], strict=True) if np.isfinite(s)]
 
 
 def _check_plate_offsets(groups: dict, source: str) -> None:
