@@ -463,6 +463,27 @@ def test_full_body_set_tracks_trunk_head_and_arms(tmp_path):
         calibration.calibrate([read_c3d(path)])
 
 
+def test_why_upper_body_labels_are_not_used_is_said():
+    """A full-body file whose upper-body markers are labelled but never seen (BTK's FunctionalWalk sample), or
+    whose C7, a shoulder and a wrist marker are never seen, places the HAT from the pelvis and says why: which
+    labels are missing or never seen (it listed none before)."""
+    t = np.arange(0.0, 1.0, 1 / RATE)
+    trial = _trial(t, RATE, full_body=True)
+    upper = [i for i, lab in enumerate(trial.labels) if lab in ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD",
+                                                                  "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB",
+                                                                  "LWRA", "RWRA", "LWRB", "RWRB")]
+    assert len(upper) == 16
+    points = trial.points.copy()
+    points[:, upper] = np.nan
+    notes = body_from_markers(replace(trial, points=points)).notes
+    assert notes["marker_set"].endswith("; upper-body markers labelled but never seen: not used")
+    points = trial.points.copy()
+    points[:, [trial.labels.index(lab) for lab in ("C7", "LSHO", "LWRB")]] = np.nan  # no trunk top is complete
+    notes = body_from_markers(replace(trial, points=points)).notes
+    assert notes["marker_set"].endswith("(missing C7 (never seen), LSHO (never seen), LWRB (never seen)): not used")
+    assert notes["hat"].startswith("head, arms and trunk")
+
+
 def test_a_plate_pulling_down_is_set_aside(lab, tmp_path, monkeypatch):
     """The unloaded plate drifts by -120 N: past its offset it reads a pull, which a plate cannot exert, so it
     is set aside and the ZMP still meets the true CoP; summed in, its drift would move the CoP by centimetres."""

@@ -760,10 +760,15 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
 
 
 def _upper_note(m: dict, trial: C3dTrial) -> str:
+    """Why the file's Plug-in Gait upper-body labels, if any, are not used: those missing or never seen."""
     have = [u for u in _UPPER if u in trial.labels]
     if not have or _trunk_tracked(m):
         return ""
-    return f"; upper-body markers incomplete (missing {', '.join(u for u in _UPPER if u not in have)}): not used"
+    unseen = [u for u in have if not np.isfinite(trial.marker(u)).all(axis=1).any()]
+    if len(unseen) == len(have):
+        return "; upper-body markers labelled but never seen: not used"
+    missing = [u for u in _UPPER if u not in have] + [f"{u} (never seen)" for u in unseen]
+    return f"; upper-body markers incomplete (missing {', '.join(missing)}): not used"
 
 
 def _trunk_tracked(m: dict[str, np.ndarray]) -> bool:
