@@ -35,7 +35,7 @@ CONVENTIONS = {
     ("L_IAS", "LASI"), ("R_IPS", "RPSI"), ("R_FLE", "RKNE"), ("L_FME", "LKNM"), ("L_FAL", "LANK"),
     ("L_TAM", "LMED"), ("R_FM2", "RTOE"), ("LeftASIS", "LASI"), ("l.asis", "LASI"), ("ASIS_L", "LASI"),
     ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"), ("LSC", "LCLA"),
-    ("R_SC", "RCLA"),
+    ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role
@@ -139,3 +139,55 @@ def test_two_ankle_labels_a_joints_width_apart_are_told_lateral_and_medial_by_po
                       - centres[side]).max() < 1e-9
     # two markers 2 cm apart are not one ankle's two sides: which one the lab meant stays unsaid
     assert set(match_labels(_ankles_named_by_the_lab(0.02)[0]).ambiguous) == {"LANK", "RANK"}
+
+
+
+def _with_medial_repeats(src, dst, describe: bool) -> None:
+    """``src`` with each knee's and ankle's medial marker (a joint's width medial of the lateral one) added as a
+    second ``LKNE`` / ``LANK`` ..., described ``L.Knee.Medial`` ... when ``describe`` (Motion Analysis' Helen
+    Hayes template)."""
+    c3d = ezc3d.c3d(str(src))
+    point = c3d["parameters"]["POINT"]
+    labels = list(point["LABELS"]["value"])
+    bare = [v.split(":")[-1] for v in labels]
+    pts = c3d["data"]["points"]
+    added, descriptions = [], []
+    for side, medial_y, word in (("L", -1.0, "L"), ("R", 1.0, "R")):
+        for mk, joint, width in (("KNE", "Knee", 0.10), ("ANK", "Ankle", 0.07)):
+            medial = pts[:, bare.index(side + mk)].copy()
+            medial[1] += 1000.0 * width * medial_y  # mm, the lab's unit; the walk faces +x, left is +y
+            added.append(medial)
+            labels.append(labels[bare.index(side + mk)])
+            descriptions.append(f"{word}.{joint}.Medial" if describe else "")
+    c3d["data"]["points"] = np.concatenate([pts, np.stack(added, axis=1)], axis=1)
+    shape = c3d["data"]["points"].shape[1:]
+    c3d["data"]["meta_points"]["residuals"] = np.zeros((1, *shape))
+    c3d["data"]["meta_points"]["camera_masks"] = np.zeros((7, *shape), dtype=bool)
+    point["LABELS"]["value"] = labels
+    c3d.add_parameter("POINT", "DESCRIPTIONS", [""] * (len(labels) - 4) + descriptions)
+    c3d.write(str(dst))
+
+
+@pytest.mark.parametrize("describe", [True, False])
+def test_medial_markers_written_as_repeated_labels_are_told_by_their_descriptions(std, tmp_path, capsys, describe):
+    """Motion Analysis' Helen Hayes template writes the medial knee and ankle markers as a second RKNE / RANK
+    described R.Knee.Medial / R.Ankle.Medial (BTK's Gait sample; c3d.org's Walk1 and newwalk, never seen there):
+    the descriptions name them, so each knee and ankle centre is the mid-point of its two markers. Without
+    descriptions the repeat is refused in one line, as before."""
+    path = tmp_path / "repeats.c3d"
+    _with_medial_repeats(std[0], path, describe)
+    if not describe:
+        assert main(["analyze", str(path), "--out", str(tmp_path / "z.csv")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "is written 2 times with data" in err and len(err.splitlines()) == 1
+        return
+    trial = read_c3d(path)
+    assert trial.labels[-4:] == ["L.Knee.Medial", "L.Ankle.Medial", "R.Knee.Medial", "R.Ankle.Medial"]
+    take = body_from_markers(trial)
+    assert take.notes["labels"]["aliases"]["RKNM"] == "R.Knee.Medial"
+    for side, name in (("L", "left"), ("R", "right")):
+        for joint, mk, word in (("knee", "KNE", "Knee"), ("ankle", "ANK", "Ankle")):
+            mid = (trial.marker(side + mk) + trial.marker(f"{side}.{word}.Medial")) / 2
+            got = take.centres[joint][name] @ np.linalg.inv(take.body.world_from_input).T
+            first, last = take.notes["frames_used"]
+            assert np.abs(got - mid[first:last + 1]).max() < 1e-9

@@ -315,6 +315,20 @@ def open_c3d(path: str | Path, plates: bool = False):
             from None
 
 
+def told_apart(labels: list[str], descriptions: list[str]) -> list[str]:
+    """``labels`` with each repeat of a label that POINT:DESCRIPTIONS describes otherwise than its first copy
+    renamed to its description: Motion Analysis' Helen Hayes template writes the medial knee and ankle markers as
+    a second ``RKNE`` / ``RANK`` described ``R.Knee.Medial`` / ``R.Ankle.Medial`` (c3d.org's Walk1 and newwalk,
+    BTK's Gait sample). A repeat with no other description stays (and is refused where it is used)."""
+    out, first = list(labels), {}
+    for i, (lab, desc) in enumerate(zip(labels, descriptions, strict=False)):
+        if lab not in first:
+            first[lab] = desc
+        elif desc and desc != first[lab] and desc not in labels:
+            out[i] = desc
+    return out
+
+
 def read_c3d(path: str | Path) -> C3dTrial:
     """Read ``path`` (see module docstring). Raises InputError for files ezc3d cannot read."""
     p = Path(path)
@@ -331,6 +345,7 @@ def read_c3d(path: str | Path) -> C3dTrial:
     pts = np.asarray(c3d["data"]["points"][:3], dtype=float)  # (3, P, F)
     labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
     labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]
+    labels = told_apart(labels, [str(d).strip() for d in _param(groups, "POINT", "DESCRIPTIONS") or []])
     residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=float)[0]  # (P, F); < 0: not seen
     # a gap: a negative residual, a non-finite coordinate, or the all-zero point some writers put in gaps
     unseen = (residual < 0) | ~np.isfinite(pts).all(axis=0) | (pts == 0).all(axis=0)

@@ -13,7 +13,9 @@ Where each name comes from:
 - Codamotion: ``L.ASIS L.PSIS L.Knee L.Ankle L.Heel L.Toe`` (Charnwood Dynamics, Coda cx1 User Guide 2004,
   "Gait Analysis II": the marker names its gait model needs; its wands ``L.Ant.Fem.`` ... are not Plug-in Gait's
   THI/TIB and are not read). Motion Analysis (EVaRT / Cortex Helen Hayes templates, as the c3d.org samples
-  Walk1, newwalk, Sample_Jump2 write them): sacrum ``VSAC`` (``V.Sacral``), toes ``L.TO``/``R.TO``.
+  Walk1, newwalk, Sample_Jump2 write them): sacrum ``VSAC`` (``V.Sacral``), toes ``L.TO``/``R.TO``, medial knee
+  and ankle ``R.Knee.Medial``/``R.Ankle.Medial`` (the descriptions of its repeated ``RKNE``/``RANK``, which
+  :func:`livezmp.model.c3d.told_apart` gives them as labels).
 - CAST (Cappozzo et al. 1995, Clin Biomech 10:171) as Qualisys' gait and running projects (QTM, with Visual3D)
   and OptiTrack's "Conventional Lower" set label it, with the ISB landmark names of Van Sint Jan (2007, Color
   Atlas of Skeletal Landmark Definitions): ``L_IAS L_IPS SACR L_FLE L_FME L_FAL L_TAM L_FCC L_FM2``.
@@ -55,12 +57,14 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
     "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB)),
-    "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB)),
+    "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
+            ("KNEEMEDIAL", HH)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
     "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB)),
-    "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST)),
+    "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
+            ("ANKLEMEDIAL", HH)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
