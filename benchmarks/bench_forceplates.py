@@ -80,7 +80,7 @@ STEPS = [
     ("7 + follows < {:g} Hz, sways {:.2f}/{:.2f}".format(TRUNK_FOLLOW_HZ, *TRUNK_STEP_GAIN), LabOptions(**UNBANDED)),
     ("8 + lateral band (half the cutoff) [default]", LabOptions()),
 ]
-UPPER = ("thorax", "headarms", "head", "upperarm", "forearm", "hand")
+UPPER = ("thorax", "headarms", "arms", "head", "upperarm", "forearm", "hand")
 
 
 def lag(cv: dict) -> str:
@@ -237,7 +237,8 @@ def sway_before_after(done: dict[str, tuple]) -> None:
     print(f"median RMS over {len(after)} trials: {np.median(before):.1f} -> {np.median(after):.1f} mm")
 
 
-GROUPS = ("pelvis", "hat", "thorax", "headarms", "head", "upperarm", "forearm", "hand", "thigh", "shank", "foot")
+GROUPS = ("pelvis", "hat", "thorax", "headarms", "arms", "head", "upperarm", "forearm", "hand", "thigh", "shank",
+          "foot")
 LATERAL_GAINS = (0.59, 0.40)  # the four tracked trunks' mean lateral sway gain, and lower
 
 

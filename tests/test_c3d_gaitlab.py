@@ -69,7 +69,8 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
     ``"top"``: only C7 and the clavicles' LCLA and RCLA, the trunk also rolling sideways over the hips by up
     to TOP_ROLL (as a trunk leaning over the stance leg does), or ``"shoulders"``: so, with LSHO and RSHO, or
     ``"arms"``: so, with the Helen Hayes upper body's ELB and WRI too (lateral epicondyle, wrist), the arms
-    swinging, or ``"arms_head"``: so, with its head's three markers HEAD3 too, the head nodding."""
+    swinging, or ``"arms_head"``: so, with its head's three markers HEAD3 too, the head nodding, or ``"head"``: the
+    trunk's four markers and Plug-in Gait's four head markers, the head nodding, no arm markers."""
     if cluster:
         return _cluster_markers(_markers(t))
     if trunk is True:
@@ -97,6 +98,15 @@ def _markers(t: np.ndarray, full_body: bool = False, cluster: bool = False,
         for name, p in top:
             p = np.broadcast_to(np.array(p) - pivot, (len(t), 3))
             out[name] = hips + np.einsum("fij,fj->fi", lean, np.einsum("fij,fj->fi", rot, p) + pivot - hips)
+    if trunk == "head":
+        nod = np.array([pin.utils.rotate("y", a) for a in 0.15 * np.sin(2 * np.pi * 0.7 * t)])
+        for name, p in CENTRE.items():
+            out[name] = (rot @ (np.array(p) - pivot)) + pivot
+        for name in ("FHD", "BHD"):
+            for side, sign in (("L", 1.0), ("R", -1.0)):
+                q = np.array([UPPER_LEFT[name][0], sign * UPPER_LEFT[name][1], UPPER_LEFT[name][2]])
+                nodded = np.einsum("fij,j->fi", nod, q - NECK) + NECK
+                out[side + name] = np.einsum("fij,fj->fi", rot, nodded - pivot) + pivot
     if full_body:
         for name, p in CENTRE.items():
             out[name] = (rot @ (np.array(p) - pivot)) + pivot
@@ -537,7 +547,7 @@ def test_trunk_markers_alone_track_the_thorax(tmp_path):
         length = t[name].length_fraction * stature
         parts.append((2 * t[name].mass_fraction, joint - t[name].com_fraction * length))
         joint -= length
-    ha, ha_height, _ = hat_table(stature, head_and_arms=True)
+    ha, ha_height, _ = hat_table(stature, "head_and_arms")
     assert ha == pytest.approx(sum(f for f, _ in parts))
     assert ha_height == pytest.approx(sum(f * z for f, z in parts) / ha)  # ~0.14 m below: arms outweigh the head
 
@@ -619,6 +629,28 @@ def _assert_arm_centres(a, shoulder: float, elbow: float, wrist: float) -> None:
         for seg, table, length in (("upperarm", "upper_arm", sjc - ejc), ("forearm", "forearm", ejc - wjc)):
             assert -_segment_com(a.take.body.model, f"{seg}_{side}")[2] == pytest.approx(
                 DE_LEVA_MALE[table].com_fraction * np.linalg.norm(length), abs=1e-3)
+
+
+def test_head_markers_track_the_head_without_arm_markers(tmp_path):
+    """The trunk's four markers and Plug-in Gait's four head markers, no arm markers, the head nodding: the head is
+    tracked on its markers and the arms (de Leva's, hanging) placed on the thorax; the masses add up and the ZMP
+    matches the plates written from that body's dynamics to a millimetre. With a head marker unread the head is
+    placed on the thorax (as before), its nod missed: 8 mm at most, over ten times the tracked head's largest miss."""
+    path = tmp_path / "head.c3d"
+    write_lab_c3d(path, PLATES, trunk="head")
+    trial = read_c3d(path)
+    a = analyse_lab_take(trial)
+    names = {n.split(".")[0] for n in a.take.body.channel_names}
+    assert {"thorax", "head", "arms"} <= names and not {"hat", "headarms", "upperarm_l"} & names
+    assert a.summary["markers"]["marker_set"].endswith("; head from LFHD RFHD LBHD RBHD")
+    assert a.summary["markers"]["hat"] == ("trunk tracked by C7 T10 CLAV STRN, head by LFHD RFHD LBHD RBHD; arms "
+                                           "(de Leva) placed on it, hanging")
+    assert a.take.body.total_mass == pytest.approx(sum(i.mass for i in a.take.body.model.inertias))
+    assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
+    trial.labels[trial.labels.index("LBHD")] = "unused"
+    placed = analyse_lab_take(trial)
+    assert {"thorax", "headarms"} <= {n.split(".")[0] for n in placed.take.body.channel_names}
+    assert placed.summary["cop_vs_zmp"]["max_mm"] > max(2.0, 10 * a.summary["cop_vs_zmp"]["max_mm"])
 
 
 def test_the_files_arm_measurements_place_the_arm_centres(tmp_path):

@@ -26,8 +26,8 @@ import pinocchio as pin
 from livezmp.model.body import BodyModel, point_mass_copy
 from livezmp.model.markers import _euler_zyx
 
-PARENT = {"hat": "pelvis", "thorax": "pelvis", "head": "thorax", "headarms": "thorax", "thigh": "pelvis",
-          "shank": "thigh", "foot": "shank",
+PARENT = {"hat": "pelvis", "thorax": "pelvis", "head": "thorax", "headarms": "thorax", "arms": "thorax",
+          "thigh": "pelvis", "shank": "thigh", "foot": "shank",
           "upperarm": "thorax", "forearm": "upperarm", "hand": "forearm"}
 _CHILD_CHANNELS = ("x", "y", "z", "flex", "abd", "rot")  # rotations about the y, x, z axes, in that order
 _CHILD_JOINTS = (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ, pin.JointModelRY, pin.JointModelRX,

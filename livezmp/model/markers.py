@@ -81,7 +81,8 @@ WRIST_WIDTH_OF_STATURE = 0.032  # typical wrist width across the styloids (m / m
 # the Helen Hayes upper body (Motion Analysis: c3d.org's Walk1, newwalk): one marker at the acromion, the lateral
 # epicondyle and the wrist per side; with both arms' three the arms are tracked, the head placed on the thorax
 _ARMS = ("LSHO", "LELB", "LWRI", "RSHO", "RELB", "RWRI")
-_HEAD3 = ("THEA", "FHEA", "RHEA")  # its head (Walk1): top, front and rear of the head; tracked with the arms
+_HEAD3 = ("THEA", "FHEA", "RHEA")  # its head (Walk1): top, front and rear of the head
+_HEAD4 = ("LFHD", "RFHD", "LBHD", "RBHD")  # Plug-in Gait's head; either set is tracked wherever the thorax is
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
@@ -228,8 +229,10 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
             roles.update({u: u for u in _TRUNK})
         elif top := next((t for t in _TRUNK_TOPS if set(t) <= have), None):  # its top seen: the thorax leans
             roles.update({u: u for u in top})
-        if set(_ARMS) <= have:  # and the arms are tracked, the head placed on the thorax or on its three markers
-            roles.update({u: u for u in _ARMS + (_HEAD3 if set(_HEAD3) <= have else ())})
+        if set(_ARMS) <= have:  # and the arms are tracked
+            roles.update({u: u for u in _ARMS})
+        if _trunk_tracked(roles):  # and the head, on its own markers; else placed on the thorax
+            roles.update({u: u for u in next((h for h in (_HEAD4, _HEAD3) if set(h) <= have), ())})
     if missing:
         ambiguous = match.ambiguous
         if all(m in ambiguous for m in missing):
@@ -371,14 +374,15 @@ def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     return np.unwrap(angles, axis=0) if unwrap else angles
 
 
-def hat_table(stature: float, head_and_arms: bool = False,
+def hat_table(stature: float, part: str = "hat",
               table: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, float, np.ndarray]:
     """Head-arms-trunk above the lower trunk, from de Leva (1996) (masses from ``table``, a segment table of
     :mod:`livezmp.model.anthropometry`): mass fraction, height (m) of its
     centre of mass above the mid-hip, and its inertia (3, 3) per kg of HAT about that point
     (x forward, y left, z up). Segments stacked upright: lower, middle, upper trunk, head; each arm
-    hangs from the cervicale (the top of the upper trunk) along the body's side. ``head_and_arms``:
-    the same without the middle and upper trunk, its height then measured from the cervicale."""
+    hangs from the cervicale (the top of the upper trunk) along the body's side. ``part``: ``"hat"`` all of it;
+    ``"head_and_arms"`` without the middle and upper trunk, ``"arms"`` the two arms alone, the height then
+    measured from the cervicale."""
     t = table
     h = stature / 1741.0  # de Leva lengths are mm for a 1741 mm man
     parts = []  # (mass fraction, CoM height m, segment, length m)
@@ -394,8 +398,9 @@ def hat_table(stature: float, head_and_arms: bool = False,
         length = t[name].length_fraction * stature
         parts += [(t[name].mass_fraction, joint - t[name].com_fraction * length, name, length)] * 2
         joint -= length
-    if head_and_arms:
-        parts = [(f, z - joint_top, n, length) for f, z, n, length in parts if not n.endswith("_trunk")]
+    if part != "hat":
+        left_out = ("middle_trunk", "upper_trunk") + (("head",) if part == "arms" else ())
+        parts = [(f, z - joint_top, n, length) for f, z, n, length in parts if n not in left_out]
     mass = sum(p[0] for p in parts)
     height = sum(p[0] * p[1] for p in parts) / mass
     inertia = np.zeros((3, 3))
@@ -573,7 +578,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
     seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
-    full = "LFHD" in m
+    full = "LWRA" in m
     if full or "LWRI" in m:
         arms = {s: arm_dimensions(trial.widths_m, s, stature) for s in "LR"}
         seg.update(_upper_segments(m, pelvis_origin, stature, arms))
@@ -583,6 +588,9 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                            else f"ELB moved medially along the thorax axis (width {told[1]})")
         if not full:
             rules["wrists"] = f"WRI moved medially along the thorax axis (width {told[2]})"
+    elif _trunk_tracked(m) and _head_labels(m):  # the head on its markers, the arms placed on the thorax
+        seg["thorax"] = seg["arms"] = _thorax(m, pelvis_origin, stature)
+        seg["head"] = _head(m, *seg["thorax"])
     elif _trunk_tracked(m):
         seg["thorax"] = seg["headarms"] = _thorax(m, pelvis_origin, stature)
     else:
@@ -598,7 +606,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
              "Plug-in Gait / Helen Hayes lower body (standard labels)" + _upper_note(m, trial)
              + (f"; thorax from {_trunk_labels(m)}" if _trunk_tracked(m) else "")
              + ("; arms from " + " ".join(_ARMS) if "LWRI" in m else "")
-             + ("; head from " + " ".join(_HEAD3) if "THEA" in m else ""),
+             + ("; head from " + _head_labels(m) if _head_labels(m) else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
              "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
@@ -771,6 +779,11 @@ def _upper_note(m: dict, trial: C3dTrial) -> str:
     return f"; upper-body markers incomplete (missing {', '.join(missing)}): not used"
 
 
+def _head_labels(m: dict) -> str:
+    """The head markers in ``m`` the head is tracked by ('' for none)."""
+    return " ".join(next((h for h in (_HEAD4, _HEAD3) if h[0] in m), ()))
+
+
 def _trunk_tracked(m: dict[str, np.ndarray]) -> bool:
     """Whether the markers ``m`` track the thorax (C7 with the sternal notch or clavicles, or both shoulders)."""
     return "C7" in m or "LSHO" in m
@@ -816,13 +829,25 @@ def _arm_told(widths_m: dict[str, float], arms: dict[str, tuple[float, float, fl
     return " / ".join(f"{1000 * arms[s][i]:.0f}" for s in "LR") + (" mm, the file's" if given else " mm")
 
 
+def _head(m: dict[str, np.ndarray], top: np.ndarray, thorax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The head's origin (F, 3; m) and frame (F, 3, 3): with Plug-in Gait's four head markers the origin at their
+    centre, x forward; with the Helen Hayes head's three (top, front, rear) the origin at the vertex (a marker
+    radius below THEA), z towards THEA from between the other two, x forward; without, the thorax' ``top`` and
+    ``thorax`` frame (:func:`_upper_inertia` then puts its mass above the cervicale)."""
+    if "LFHD" in m:
+        front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
+        return (front + back) / 2, _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
+    if "THEA" in m:
+        up = m["THEA"] - (m["FHEA"] + m["RHEA"]) / 2
+        head = _frame(up, _cross(up, m["FHEA"] - m["RHEA"]))
+        return m["THEA"] - MARKER_RADIUS * head[:, :, 2], head
+    return top, thorax
+
+
 def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float,
                     arms: dict[str, tuple[float, float, float]]) -> dict:
-    """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head and each arm. The head: with
-    Plug-in Gait's four head markers its origin at their centre, x forward; with the Helen Hayes head's three
-    (top, front, rear) its origin at the vertex (a marker radius below THEA), z towards THEA from between the other
-    two, x forward; without, placed on the thorax (its frame; :func:`_upper_inertia` puts its mass above the
-    cervicale). Each arm: shoulder centre its shoulder offset plus a marker radius below SHO along the thorax
+    """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head (:func:`_head`) and each
+    arm. Each arm: shoulder centre its shoulder offset plus a marker radius below SHO along the thorax
     (Plug-in Gait's rule); with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
     centre by the chord rule, hand towards FIN (else along the forearm); with the Helen Hayes single markers ELB
     and WRI (lateral epicondyle, wrist) each centre half the elbow / wrist width (plus a marker radius) medial of
@@ -830,15 +855,7 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
     ``mid_hip`` (F, 3; m) where the thorax' axis starts without T10 and STRN; ``stature`` m; ``arms`` side ->
     :func:`arm_dimensions`."""
     top, thorax = _thorax(m, mid_hip, stature)
-    out = {"thorax": (top, thorax), "head": (top, thorax)}
-    if "LFHD" in m:
-        front, back = (m["LFHD"] + m["RFHD"]) / 2, (m["LBHD"] + m["RBHD"]) / 2
-        head = _foot_frame(front - back, (m["LFHD"] + m["LBHD"]) / 2 - (m["RFHD"] + m["RBHD"]) / 2)
-        out["head"] = ((front + back) / 2, head)
-    elif "THEA" in m:
-        up = m["THEA"] - (m["FHEA"] + m["RHEA"]) / 2
-        head = _frame(up, _cross(up, m["FHEA"] - m["RHEA"]))
-        out["head"] = (m["THEA"] - MARKER_RADIUS * head[:, :, 2], head)
+    out = {"thorax": (top, thorax), "head": _head(m, top, thorax)}
     ty, tz = thorax[:, :, 1], thorax[:, :, 2]
     for s, sign, t in _SIDES.values():
         shoulder, elbow, wrist = arms[s]
@@ -914,8 +931,8 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * np.diag(np.square(r))), pin.SE3.Identity())
             body_frame["pelvis_joint"] = parent
             continue
-        if kind == "headarms":  # placed on the tracked thorax, whose origin is at the cervicale
-            frac, height, inertia = hat_table(stature, head_and_arms=True, table=t)
+        if kind in ("headarms", "arms"):  # placed on the tracked thorax, whose origin is at the cervicale
+            frac, height, inertia = hat_table(stature, "head_and_arms" if kind == "headarms" else "arms", table=t)
             mass = opts.total_mass * frac
             model.appendBodyToJoint(parent, pin.Inertia(mass, np.array([0.0, 0.0, height]), mass * inertia),
                                     pin.SE3.Identity())
@@ -947,26 +964,18 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         legs={s: [6 * list(seg).index(f"thigh_{s[0]}") + k for k in (3, 4, 5)] for s in ("left", "right")},
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
-    notes["hat"] = ("head, arms and trunk tracked by their own markers" if "LFHD" in m else
-                    f"trunk tracked by {_trunk_labels(m)}, arms by " + " ".join(_ARMS) + "; head "
-                    + ("by " + " ".join(_HEAD3) if "THEA" in m else
-                       f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on the thorax")
-                    if "head" in seg else
-                    f"trunk tracked by {_trunk_labels(m)}; head and arms "
-                    f"({'de Leva' if table.name == 'adult' else 'child table'}) placed on it, arms hanging"
-                    if full else
-                    f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
-                    f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
-                    + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
-                    + ("; oriented by the file's HAT points (" + ", ".join(HAT_POINTS) + ")" if "HATO" in m else
-                       "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
-                       f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
-                    + ("" if opts.hat_sway_gain is None or full or "HATO" in m else
-                       "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip{}{}".format(
-                           *opts.hat_sway_gain, "" if opts.hat_follow_hz is None else
-                           f" above {opts.hat_follow_hz:g} Hz, following it below",
-                           " (trunk-marker trials)" if opts.hat_sway_gain in (TRUNK_SWAY_GAIN, TRUNK_STEP_GAIN)
-                           else "")))
+    notes["hat"] = _tracked_note(seg, m, "de Leva" if table.name == "adult" else "child table") if full else (
+        f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
+        f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
+        + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
+        + ("; oriented by the file's HAT points (" + ", ".join(HAT_POINTS) + ")" if "HATO" in m else
+           "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
+           f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
+        + ("" if opts.hat_sway_gain is None or "HATO" in m else
+           "; swaying {:.2f} (fore-aft) and {:.2f} (lateral) times the mid-hip{}{}".format(
+               *opts.hat_sway_gain, "" if opts.hat_follow_hz is None else
+               f" above {opts.hat_follow_hz:g} Hz, following it below",
+               " (trunk-marker trials)" if opts.hat_sway_gain in (TRUNK_SWAY_GAIN, TRUNK_STEP_GAIN) else "")))
     names = [f"{s}.{c}" for s in seg for c in _CHANNELS]
     body = BodyModel(
         kind="markers", model=model, point_model=point_mass_copy(model), channel_names=names,
@@ -974,6 +983,20 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         feet=feet, world_from_input=r_in, up_axis=up, units="m", total_mass=opts.total_mass,
         correction=correction, named_points=named)
     return body, segment_channels(seg)
+
+
+def _tracked_note(seg: dict, m: dict, table: str) -> str:
+    """What tracks the head, arms and trunk of a body with a thorax (``seg`` its segments, ``m`` its markers),
+    and what segment table (``table``) places the rest on the thorax."""
+    if "LWRA" in m:
+        return "head, arms and trunk tracked by their own markers"
+    head = _head_labels(m)
+    if "LWRI" in m:
+        return (f"trunk tracked by {_trunk_labels(m)}, arms by " + " ".join(_ARMS) + "; head "
+                + (f"by {head}" if head else f"({table}) placed on the thorax"))
+    if "arms" in seg:
+        return f"trunk tracked by {_trunk_labels(m)}, head by {head}; arms ({table}) placed on it, hanging"
+    return f"trunk tracked by {_trunk_labels(m)}; head and arms ({table}) placed on it, arms hanging"
 
 
 def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
