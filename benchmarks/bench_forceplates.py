@@ -19,7 +19,8 @@ TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
 with the kinematic and the plates' acceleration, the fore-aft swing at the step frequency split into the
 mid-hip's acceleration and the upper body's and legs' motion relative to it, `livezmp calibrate`
-cross-validated per trial, and the estimator's own gain and delay on sinusoids (why row 4 matters).
+cross-validated per trial, the plates' CoP against their own force line, and the estimator's own gain and
+delay on sinusoids (why row 4 matters).
 Figures: over each trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after
 the CoP; bias: mean ZMP - CoP along the walk and to its left.
 
@@ -440,6 +441,28 @@ def plate_check(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " | ".join(cells))
 
 
+def force_line(done: dict[str, tuple]) -> None:
+    """The plates against their own force (`livezmp analyze`'s summary cop_vs_force_line): over complete frames,
+    how far the plates' CoP lies from the line of their own force through the markers' CoM (RMS; and over single
+    support half the difference between left and right stances, laterally + out towards the stance foot), beside
+    the ZMP's offset from its own (kinematic) force line, and the ZMP - CoP lateral RMS. Off its force line a CoP
+    says the body's angular momentum changes; the markers' segments say how much of that they carry."""
+    print("\nthe plates' CoP against their own force line (complete frames), mm: RMS fore-aft / lateral, stance gap "
+          "(single support) fore-aft / lateral | the ZMP's, from the markers | ZMP - CoP lateral RMS")
+    for name, (_, a) in done.items():
+        c = a.summary["cop_vs_force_line"]
+        r, p = a.result, a.plates
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        _, left = walking_axes(r.com, facing(a.take))
+        lat = 1000 * np.sqrt(np.mean(((r.zmp[rows, :2] - p.cop[rows, :2]) @ left[:2]) ** 2))
+
+        def cells(kind: str, c: dict = c) -> str:
+            rms, gap = c[f"{kind}_rms_mm"], c[f"{kind}_stance_gap_mm"]
+            return (" ".join(f"{v:5.1f}" if v is not None else f"{'-':>5s}" for v in rms) + "  "
+                    + (" ".join(f"{v:+6.1f}" for v in gap) if gap else f"{'-':>6s} {'-':>6s}"))
+        print(f"{name[:34]:34s} {c['frames']:4d} fr  plates {cells('plates')} | ZMP {cells('zmp')} | {lat:5.1f}")
+
+
 def cutoff_sweep(done: dict[str, tuple]) -> None:
     """`livezmp analyze` defaults on every trial but the estimator's cutoff (the plates low-passed with it)."""
     cutoffs = (4.0, 5.0, 6.0, 8.0)
@@ -691,6 +714,7 @@ def main() -> None:
     swing_at_step_frequency(done)
     foot_frame(done)
     plate_check(done)
+    force_line(done)
     if args.more:
         cutoff_sweep(done)
     lag_conditioning(done, args.figures)

@@ -38,7 +38,7 @@ from livezmp.model.markers import (
 from livezmp.offline import calibrate as calibration
 from livezmp.offline import gaitlab
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, lateral_band
-from livezmp.offline.validation import lag_with_halves
+from livezmp.offline.validation import lag_with_halves, stance_gap
 from tests.data_paths import DATA
 
 C3D = DATA / "c3d"
@@ -574,6 +574,41 @@ def test_trunk_top_markers_track_a_leaning_thorax(tmp_path, trunk, labels):
     assert placed.summary["cop_vs_zmp"]["rms_mm"] > 10.0
 
 
+def test_the_plates_cop_leaves_its_force_line_as_far_as_the_trunk_rolls(tmp_path):
+    """The trunk rolling over the hips (the trunk-top lab) moves the plates' CoP off the line of their force
+    through the CoM by the body's roll (Newton-Euler), 7 mm RMS across the walk: the body whose thorax is tracked
+    reproduces that to 0.2 mm (its ZMP off its own force line as far), the same lab with its HAT placed (C7 not
+    read) does not roll (0.5 mm) and its misplaced CoM leaves the plates' CoP 24 mm off; without the roll, the
+    plates' CoP and the ZMP both stay within 1.5 mm of their force lines."""
+    path = tmp_path / "top.c3d"
+    write_lab_c3d(path, PLATES, trunk="top")
+    trial = read_c3d(path)
+    tracked = analyse_lab_take(trial).summary["cop_vs_force_line"]
+    assert tracked["frames"] > 250 and tracked["single_support_frames"] == 0 and tracked["plates_stance_gap_mm"] is None
+    assert tracked["plates_rms_mm"][1] > 5.0
+    assert abs(tracked["zmp_rms_mm"][1] - tracked["plates_rms_mm"][1]) < 0.5
+    trial.labels[trial.labels.index("C7")] = "unused"
+    placed = analyse_lab_take(trial).summary["cop_vs_force_line"]
+    assert placed["zmp_rms_mm"][1] < 1.0 and placed["plates_rms_mm"][1] > 3 * tracked["plates_rms_mm"][1]
+    write_lab_c3d(path, PLATES)
+    still = analyse_lab_take(read_c3d(path)).summary["cop_vs_force_line"]
+    assert max(still["plates_rms_mm"] + still["zmp_rms_mm"]) < 2.0
+
+
+def test_a_stance_gap_is_half_the_left_minus_right_offset():
+    """An offset out towards the stance foot by 30 mm in every stance (left stance +y, right stance -y, walking
+    along +x) on top of a constant one: the stance gap is 30 mm laterally and 0 fore-aft, whichever constant; frames
+    in double support do not count; a side with too few frames gives none."""
+    axes = (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    stance = np.repeat([0, 2, 1, 2, 0, 1], 12)
+    offset = np.column_stack([np.full(len(stance), 0.02), np.where(stance == 0, 0.03, -0.03) + 0.011])
+    offset[stance == 2] = 5.0  # double support: left out
+    assert stance_gap(offset, stance, axes, 10) == pytest.approx([0.0, 0.03])
+    assert stance_gap(offset, stance, (np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0])), 10) == \
+        pytest.approx([0.03, 0.0])  # the same offsets with the walk along +y: their world-y gap is now along it
+    assert stance_gap(offset, stance, axes, 25) is None
+
+
 @pytest.mark.parametrize("trunk", ["arms", "arms_head"])
 def test_helen_hayes_arm_markers_track_the_arms(tmp_path, trunk):
     """The Helen Hayes upper body as Motion Analysis writes it (SHO, ELB, WRI a side; with or without the head's
@@ -894,6 +929,11 @@ def test_real_plugin_gait_walk(tmp_path):
     assert cv["frames"] >= 130 and cv["rms_mm"] < 29.5 and cv["p95_mm"] < P95_WALK_MM
     assert abs(cv["lag_ms"]) < 10 and abs(cv["bias_mm"][0]) < 5  # lag -3.9 ms, -8.4 with the step-gain sway
     assert s["lateral_band_hz"] == 3.0
+    # its plates' CoP lies off their force line outwards in both stances (+10.9 mm: its trunk, placed here, leans
+    # over the stance leg); the placed HAT's body shows less of it (+6.4 mm)
+    fl = s["cop_vs_force_line"]
+    assert fl["single_support_frames"] >= 100 and 5 < fl["plates_stance_gap_mm"][1] < 20
+    assert 0 < fl["zmp_stance_gap_mm"][1] < fl["plates_stance_gap_mm"][1]
     acc = s["com_acc_vs_plates"]
     assert acc["r"][0] > 0.85  # lateral CoM acceleration follows the plates
     trial = read_c3d(C3D / "walk_plugingait_forceplates.c3d")

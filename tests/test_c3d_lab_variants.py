@@ -127,6 +127,9 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     assert a.summary["mass"]["used_kg"] == pytest.approx(75.0, abs=0.2)
     assert a.summary["mass"]["source"].startswith("file" if lab.mass else "plates")
     assert a.summary["com_acc_vs_plates"]["r"] == pytest.approx(ref.summary["com_acc_vs_plates"]["r"], abs=0.02)
+    # the plates' CoP against their force line, along the walk and across it, whichever way the lab's axes point
+    fl, rf = a.summary["cop_vs_force_line"], ref.summary["cop_vs_force_line"]
+    assert fl["plates_rms_mm"] == pytest.approx(rf["plates_rms_mm"], abs=0.4)  # ~1.5 / 0.5 mm: a swap would show
 
 
 @pytest.mark.parametrize(("lab", "says"), [

@@ -43,7 +43,14 @@ from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers, sway_basis
 from livezmp.offline.batch import BatchResult, run_batch
-from livezmp.offline.validation import com_acc_vs_plates, cop_vs_zmp, ms, plate_delay
+from livezmp.offline.validation import (
+    com_acc_vs_plates,
+    cop_vs_force_line,
+    cop_vs_zmp,
+    ms,
+    plate_delay,
+    walking_axes,
+)
 
 MASS_DISAGREE = 0.03
 LOADED_HEIGHT_M = 0.04  # m: a sole corner this low ...
@@ -330,6 +337,9 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
                                  facing(take)),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
+        "cop_vs_force_line": cop_vs_force_line(
+            plates.cop, result.zmp, result.com, plates.force, used * (com_acc + [0.0, 0.0, G]), plates.surface_z,
+            result.support, complete & result.has_zmp, walking_axes(result.com, facing(take)), STANCE_MIN_FRAMES),
         "cop_under_foot": _cop_under_foot(trial, result, plates, floor, used),
         "lateral_band_hz": lateral_band_hz(opts, take, cfg),
     }

@@ -122,3 +122,55 @@ def com_acc_vs_plates(com_acc: np.ndarray, force: np.ndarray, mass: float, compl
     rms = np.sqrt(np.mean((kin - plates) ** 2, axis=0))
     return {"frames": int(rows.sum()), "r": [None if v is None else round(v, 4) for v in r],
             "rms_mps2": [round(float(v), 4) for v in rms]}
+
+
+def force_line_offset(point: np.ndarray, com: np.ndarray, force: np.ndarray, surface_z: float) -> np.ndarray:
+    """(N, 2) m: how far ``point`` (N, 3) lies, horizontally, from where the line of ``force`` (N, 3) N through
+    the centre of mass ``com`` (N, 3) meets the floor at height ``surface_z`` (m): point − (com − h F_h / F_z).
+    For the plates' CoP and ground reaction through the true CoM this is the whole body's rate of change of
+    angular momentum about its CoM over F_z (Newton–Euler: the CoP is off the force line only by that), through
+    a model's CoM that plus where the model misplaces the CoM; for the ZMP and m (a + g) from the kinematics it
+    is the model's own segments' rate. NaN where F_z ≤ 0."""
+    fz = np.where(force[:, 2] > 0, force[:, 2], np.nan)
+    h = com[:, 2] - surface_z
+    return point[:, :2] - (com[:, :2] - h[:, None] * force[:, :2] / fz[:, None])
+
+
+def stance_gap(offset: np.ndarray, stance: np.ndarray, axes: tuple[np.ndarray, np.ndarray],
+               min_frames: int) -> list[float] | None:
+    """Half the difference (m, [fore-aft, lateral] along ``axes``) between the mean ``offset`` (N, 2) m over
+    the frames standing on the left foot and over those on the right (``stance``: 0 left, 1 right, else
+    neither); laterally positive: out towards the stance foot. None with fewer than ``min_frames`` a side.
+    Laterally it is the part of the body's roll (angular momentum about the walk) that turns with the stance,
+    F_z times the offset: a trunk leaning over the stance leg and back puts the CoP outside the force line in
+    every stance."""
+    means = []
+    for side in (0, 1):
+        rows = (stance == side) & np.isfinite(offset).all(axis=1)
+        if rows.sum() < min_frames:
+            return None
+        means.append(offset[rows].mean(axis=0))
+    half = (means[0] - means[1]) / 2
+    return [float(half @ axes[0][:2]), float(half @ axes[1][:2])]
+
+
+def cop_vs_force_line(cop: np.ndarray, zmp: np.ndarray, com: np.ndarray, plate_force: np.ndarray,
+                      kin_force: np.ndarray, surface_z: float, stance: np.ndarray, rows: np.ndarray,
+                      axes: tuple[np.ndarray, np.ndarray], min_frames: int) -> dict:
+    """The plates' CoP against their own force line (:func:`force_line_offset`: the plates' CoP and ground
+    reaction ``plate_force`` (N, 3) N through the markers' CoM ``com`` (N, 3) m) beside the ZMP against the
+    kinematics' (``kin_force`` = m (a + g), N): RMS over ``rows`` (mm, [fore-aft, lateral] along ``axes``) and
+    :func:`stance_gap` over those of them in single support (``stance`` 0 left, 1 right; mm). Both measure the
+    body's rate of change of angular momentum, the plates the subject's (through the marker body's CoM) and the
+    ZMP the marker body's: a plates' lateral offset or stance gap the ZMP lacks is roll or lean the marker body
+    does not have (an upright, placed trunk cannot lean over the stance leg), and no CoM acceleration closes it."""
+    single = rows & np.isin(stance, (0, 1))
+    out = {"frames": int(rows.sum()), "single_support_frames": int(single.sum())}
+    for name, point, force in (("plates", cop, plate_force), ("zmp", zmp, kin_force)):
+        off = force_line_offset(point, com, force, surface_z)
+        ok = rows & np.isfinite(off).all(axis=1)
+        rms = [np.sqrt(np.mean((off[ok] @ ax[:2]) ** 2)) if ok.any() else None for ax in axes]
+        gap = stance_gap(off, np.where(ok & single, stance, -1), axes, min_frames)
+        out[f"{name}_rms_mm"] = [None if v is None else round(1000 * float(v), 1) for v in rms]
+        out[f"{name}_stance_gap_mm"] = None if gap is None else [round(1000 * v, 1) for v in gap]
+    return out
