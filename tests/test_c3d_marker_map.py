@@ -186,8 +186,10 @@ def test_sample01_cluster_set_through_a_map(tmp_path):
     # 37 frames of one foot's single support at 50 Hz: 49.7 mm RMS, 73.8 mm p95, bias +2 / +32 mm (HAT swaying
     # TRUNK_SWAY_GAIN times the mid-hip; moving with it: 49.9, 85.8, -15 / +28). The lag is not asserted: over
     # this one stance it went from +27 to -80 ms with the sway while the RMS moved by 0.1 mm. Following the mid-hip
-    # below 1 Hz and swaying TRUNK_STEP_GAIN above: 43.9 mm RMS, 66.8 mm p95, bias -12 / +26 mm
-    assert cv["frames"] >= 30 and cv["rms_mm"] < 46 and cv["p95_mm"] < 70
+    # below 1 Hz and swaying TRUNK_STEP_GAIN above: 43.9 mm RMS, 66.8 mm p95, bias -12 / +26 mm. Without the frames
+    # within the plates' low-pass reach (4 a side at 50 Hz) of its other foot's steps off the plates: 25 frames,
+    # 36.1 mm RMS, 48.5 mm p95, bias -12 / +24 mm
+    assert cv["frames"] >= 22 and cv["rms_mm"] < 38 and cv["p95_mm"] < 52
     assert abs(cv["bias_mm"][0]) < 15 and abs(cv["bias_mm"][1]) < 35
     assert s["markers"]["joint_centres"]["right_knee"].startswith("functional")
     with pytest.raises(InputError, match="never seen|not in the file"):

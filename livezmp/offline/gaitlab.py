@@ -30,6 +30,7 @@ from livezmp.balance.plates import (
     cutoff_for_gain,
     gait_cycles,
     lowpass,
+    lowpass_reach_s,
     plate_frames,
     plate_mass,
     plates_floor,
@@ -69,6 +70,11 @@ LATERAL_CUTOFF_FRACTION = 0.5
 # The plates are matched to the estimator's acceleration gain at this part of its cutoff: the estimator's response
 # falls off faster than the plates' 4th-order low-pass, so they can agree over the band below it, not everywhere
 PLATE_BAND_MATCH = 2 / 3
+# A complete frame's low-passed plate reading takes at most this part of its filter's weight from beyond the
+# complete frames on either side (lowpass_reach_s: 0.078 s at the lab's 4.93 Hz): a foot carrying W off the plates
+# there moves the CoP at most this part of W / body weight times its distance from the plates' CoP (15 mm for half
+# the weight 0.6 m away)
+PLATE_LEAK = 0.05
 FORCE_SEEN = 0.75  # complete frames: the plates carry at least this part of m (g + CoM vertical acceleration)
 # The CoP-under-the-foot check: a plate's CoP is its moment over its force, so a moment error of 1 N·m (offsets,
 # cross-talk) moves it 6 mm at a quarter of a 70 kg subject's weight, and further below; frames where a plate carries
@@ -198,18 +204,21 @@ def _plates(trial: C3dTrial, take: MarkerTake, times: np.ndarray, cutoff: float,
 
 
 def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: PipelineConfig, floor: float,
-              plates: PlateFrames, com_acc: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray, str | None]:
-    """The complete frames, the frames with every foot that may bear weight on a plate (whatever the plates
-    carry) and, when there is no complete frame, why (one line)."""
+              plates: PlateFrames, com_acc: np.ndarray, mass: float,
+              margin: int = 0) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """The complete frames (``margin`` frames or more from any frame that is not, but for the take's ends), the
+    frames with every foot that may bear weight on a plate (whatever the plates carry) and, when there is no
+    complete frame, why (one line)."""
     contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
     # half a spline window from either end of the take the estimate is one-sided (and the plates' filter too);
     # at least the lab window's, so that estimator settings are compared on the same frames
     edge = max(cfg.estimator.window_s, LAB_ESTIMATOR["window_s"]) / 2
     inner = (times >= times[0] + edge) & (times <= times[-1] - edge)
-    feet_on = complete_frames(result.soles, contact, plates.outlines, np.ones(len(times), dtype=bool)) & inner
+    feet = complete_frames(result.soles, contact, plates.outlines, np.ones(len(times), dtype=bool))
+    feet_on = feet & inner
     # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
     needed = mass * (G + com_acc[:, 2])
-    complete = feet_on & (plates.force[:, 2] > FORCE_SEEN * needed)
+    complete = clear_of(feet & (plates.force[:, 2] > FORCE_SEEN * needed), margin) & inner
     why = None
     if not feet_on.any():
         why = f"no frame ({edge:g} s or more from the take's ends) has every foot that may bear weight on a plate"
@@ -220,6 +229,13 @@ def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: Pipe
                + ("a lighter subject? (--mass)" if carried > 0.5 else
                   "the plates do not read the feet on them (plate corners or channels wrong?)"))
     return complete, feet_on, why
+
+
+def clear_of(mask: np.ndarray, k: int) -> np.ndarray:
+    """(N,) the frames of ``mask`` (N,) bool whose ``k`` neighbours on either side (within the take) are in it too."""
+    if k <= 0:
+        return mask
+    return mask & (np.convolve((~mask).astype(float), np.ones(2 * k + 1), "same") < 0.5)
 
 
 def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, floor: float, mass: float) -> dict:
@@ -319,7 +335,11 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     if applied:
         shift = measured
         plates = _plates(trial, take, times, cutoff, shift)
-        complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)
+    # the plates' low-pass mixes each frame with its neighbours: next to a frame with a loaded foot off the plates
+    # (or too little load on them) the low-passed plates miss part of a load that the kinematics' ZMP sees, so their
+    # CoP is no whole-body CoP there (docs/validation.md, "The plates' reach"). Mass and delay were fitted before.
+    margin = lowpass_reach_s(cutoff, PLATE_LEAK) if cutoff else 0.0
+    complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used, round(margin * trial.rate))
     summary = {
         "input": _input(trial, take),
         "markers": take.notes,
@@ -327,7 +347,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "plates": {"count": len(trial.plates), "surface_z_m": round(plates.surface_z, 4),
                    "offsets_removed_n": [None if o is None else [round(float(v), 2) for v in o[0]]
                                          for o in plates.offsets],
-                   "lowpass_hz": cutoff, "complete_frames": int(complete.sum()),
+                   "lowpass_hz": cutoff, "complete_frames": int(complete.sum()), "complete_margin_s": round(margin, 3),
                    "set_aside": plates.set_aside, **({"no_complete_frame": why} if why else {})},
         "time_alignment": {"plate_delay_measured_ms": ms(measured),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
