@@ -799,6 +799,13 @@ def test_frames_next_to_load_off_the_plates_are_not_complete(lab, monkeypatch):
     assert s_off["cop_vs_zmp"]["frames"] - s["cop_vs_zmp"]["frames"] == 2 * 8  # 8 frames at 100 Hz a side
 
 
+def test_a_margin_keeps_the_frames_whose_neighbours_are_all_in():
+    mask = np.array([0, 1, 1, 1, 0, 1, 1, 1, 1, 1, 1, 1, 0], dtype=bool)
+    assert gaitlab.clear_of(mask, 2).astype(int).tolist() == [0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0]
+    assert gaitlab.clear_of(mask, 0).tolist() == mask.tolist()
+    assert gaitlab.clear_of(np.ones(5, dtype=bool), 3).all()  # the take's own ends are no missing load
+
+
 def test_the_low_pass_reach_is_where_its_impulse_response_has_5_percent_left_a_side():
     """lowpass_reach_s against the impulse response of the plates' low-pass itself, at a rate of its own."""
     rate, cutoff = 1000.0, 4.93

@@ -218,10 +218,14 @@ def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: Pipe
     feet_on = feet & inner
     # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
     needed = mass * (G + com_acc[:, 2])
-    complete = clear_of(feet & (plates.force[:, 2] > FORCE_SEEN * needed), margin) & inner
+    carried = feet & (plates.force[:, 2] > FORCE_SEEN * needed)
+    complete = clear_of(carried, margin) & inner
     why = None
     if not feet_on.any():
         why = f"no frame ({edge:g} s or more from the take's ends) has every foot that may bear weight on a plate"
+    elif not complete.any() and (carried & inner).any():
+        why = (f"every frame with the load on the plates lies within their low-pass reach ({margin} frames) of one "
+               "without: the low-passed plates there mix in load they do not carry")
     elif not complete.any():
         carried = np.max(plates.force[feet_on, 2] / np.maximum(needed[feet_on], 1e-9))
         why = (f"where the feet are on the plates, these carry at most {100 * carried:.0f} % of m (g + a_z) with "
@@ -235,7 +239,9 @@ def clear_of(mask: np.ndarray, k: int) -> np.ndarray:
     """(N,) the frames of ``mask`` (N,) bool whose ``k`` neighbours on either side (within the take) are in it too."""
     if k <= 0:
         return mask
-    return mask & (np.convolve((~mask).astype(float), np.ones(2 * k + 1), "same") < 0.5)
+    c = np.concatenate([[0], np.cumsum(~mask)])
+    i = np.arange(len(mask))
+    return mask & (c[np.minimum(i + k + 1, len(mask))] == c[np.maximum(i - k, 0)])
 
 
 def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, floor: float, mass: float) -> dict:
