@@ -799,6 +799,20 @@ def test_frames_next_to_load_off_the_plates_are_not_complete(lab, monkeypatch):
     assert s_off["cop_vs_zmp"]["frames"] - s["cop_vs_zmp"]["frames"] == 2 * 8  # 8 frames at 100 Hz a side
 
 
+def test_no_frame_clear_of_load_off_the_plates_says_so(lab, monkeypatch):
+    """The right plate reading nothing from 1.6 to 2.2 s of the 4 s take, and a low-pass reaching 1.5 s: every frame
+    with the load on the plates lies within that reach of the gap, none is complete, and the summary says why."""
+    d, _ = lab
+    trial = read_c3d(d / "raw.c3d")
+    gap = slice(int(1.6 * ANALOG), int(2.2 * ANALOG))
+    trial.plates[1].force[gap] = 0.0
+    trial.plates[1].moment[gap] = 0.0
+    monkeypatch.setattr(gaitlab, "lowpass_reach_s", lambda cutoff, outside: 1.5)
+    a = analyse_lab_take(trial, LabOptions(mass=MASS))
+    assert not a.complete.any()
+    assert "within their low-pass reach (150 frames)" in a.summary["plates"]["no_complete_frame"]
+
+
 def test_a_margin_keeps_the_frames_whose_neighbours_are_all_in():
     mask = np.array([0, 1, 1, 1, 0, 1, 1, 1, 1, 1, 1, 1, 0], dtype=bool)
     assert gaitlab.clear_of(mask, 2).astype(int).tolist() == [0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0]

@@ -120,7 +120,8 @@ def lowpass_reach_s(cutoff_hz: float, outside: float = 0.05) -> float:
     impulse[n] = 1.0
     weight = np.abs(lowpass(impulse, rate, cutoff_hz))
     beyond = 1.0 - np.cumsum(weight[n:]) / weight.sum() - 0.5 * (1.0 - weight[n] / weight.sum())
-    return float(np.argmax(beyond < outside) / rate)
+    within = np.flatnonzero(beyond < outside)
+    return float((within[0] if len(within) else n) / rate)
 
 
 def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, frames: np.ndarray,
