@@ -218,12 +218,12 @@ def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: Pipe
     feet_on = feet & inner
     # the plates must also carry what the motion needs: a foot bearing weight off them is missed otherwise
     needed = mass * (G + com_acc[:, 2])
-    carried = feet & (plates.force[:, 2] > FORCE_SEEN * needed)
-    complete = clear_of(carried, margin) & inner
+    seen = feet & (plates.force[:, 2] > FORCE_SEEN * needed)
+    complete = clear_of(seen, margin) & inner
     why = None
     if not feet_on.any():
         why = f"no frame ({edge:g} s or more from the take's ends) has every foot that may bear weight on a plate"
-    elif not complete.any() and (carried & inner).any():
+    elif not complete.any() and (seen & inner).any():
         why = (f"every frame with the load on the plates lies within their low-pass reach ({margin} frames) of one "
                "without: the low-passed plates there mix in load they do not carry")
     elif not complete.any():
