@@ -64,12 +64,12 @@ from livezmp.live.realtime import LOOP_PRIORITY, cpu_wake_latency_us, realtime_p
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import load_robot
 from sim_devices.mock_link import MockLink
-from sim_devices.process import SimProcess
+from sim_devices.process import SimProcess, beside_loop
 from sim_devices.servo_plant import ServoPlant
 
 OP3 = Path("/work/shared/data/robots/robotis_op3.urdf")
 # the simulator (devices and physics) on the last CPU, the loop on the others (see SimProcess's cpus)
-SIM_CPUS = frozenset({max(os.sched_getaffinity(0))}) if len(os.sched_getaffinity(0)) > 1 else None
+SIM_CPUS = beside_loop()
 
 
 @contextlib.contextmanager

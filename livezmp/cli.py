@@ -260,6 +260,8 @@ def _loop_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link-options", default="", help="extra link URL options, e.g. fast=1&timeout=0.005")
     p.add_argument("--scenario", default="demo", help=f"{scenarios} (default demo: lean, then arm swing)")
     p.add_argument("--fault", default="", help="fault spec for the simulated devices")
+    p.add_argument("--sim-cpu", help="CPUs for the simulator's devices and physics, e.g. 1, or any (default: the "
+                                     "last CPU the loop is not pinned to by --cpu, given two or more)")
     add_device_options(p)
     add_loop_options(p)
     p.set_defaults(handler="livezmp.commands.demo:cmd_demo")

@@ -158,6 +158,15 @@ def device_options(args: argparse.Namespace) -> dict:
 FELL_FLAG_EVERY_S = 0.02  # how often a SimProcess's child looks for a fall to flag
 
 
+def beside_loop(loop_cpus: frozenset[int] | None = None) -> frozenset[int] | None:
+    """Where a simulator serving a live loop runs (`SimProcess`'s ``cpus``): the last CPU this process may use
+    that the loop is not pinned to (``loop_cpus``; None: not pinned), as ``bench_live_loop.py`` places it (see
+    `SimProcess`); None (anywhere) with a single CPU or none left over."""
+    allowed = os.sched_getaffinity(0)
+    free = sorted(allowed - (loop_cpus or frozenset()))
+    return frozenset(free[-1:]) if len(allowed) > 1 and free else None
+
+
 def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str, scenario: tuple[str, dict],
                faults: str, priority: int, devices: dict, physics: str, cpus: frozenset[int] | None = None) -> None:
     """A :class:`SimProcess`'s child: serve the devices, answer requests on ``conn``, set
@@ -258,6 +267,10 @@ class SimProcess:
 
     def servos(self) -> dict:
         return self._ask("servos")
+
+    def cpus(self) -> frozenset[int]:
+        """The CPUs the child process may run on (OSError if it is gone)."""
+        return frozenset(os.sched_getaffinity(self._proc.pid))
 
     def cpu_seconds(self) -> tuple[float, float] | None:
         """CPU time (user + system, s) used so far by the child process (all its threads: the devices) and

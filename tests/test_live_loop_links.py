@@ -21,7 +21,7 @@ from livezmp.live.loop import LiveLoop
 from livezmp.live.scenarios import make_scenario
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.launch import start_devices
-from sim_devices.process import SimProcess
+from sim_devices.process import SimProcess, beside_loop
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
@@ -268,3 +268,19 @@ def test_a_simulator_placed_on_a_cpu_keeps_its_devices_and_physics_there():
         assert len(physics) == 1 and len(threads) >= 3  # main, port server, physics at least
         assert all(allowed_cpus(p, t) == {last} for p, t in threads)
     assert os.sched_getaffinity(0) == mine
+
+
+def test_beside_the_loop_is_the_last_cpu_the_loop_is_not_pinned_to():
+    """`beside_loop` (where `livezmp demo` and bench_live_loop put the simulator): the last CPU this thread may
+    use, the one below it when the loop is pinned there, anywhere (None) on a single CPU or with none left."""
+    mine = os.sched_getaffinity(0)
+    cpus = sorted(mine)
+    if len(cpus) > 1:
+        assert beside_loop() == {cpus[-1]}
+        assert beside_loop(frozenset(cpus[-1:])) == {cpus[-2]}
+    assert beside_loop(frozenset(cpus)) is None
+    os.sched_setaffinity(0, {cpus[0]})  # this thread alone
+    try:
+        assert beside_loop() is None
+    finally:
+        os.sched_setaffinity(0, mine)

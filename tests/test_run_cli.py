@@ -104,6 +104,9 @@ def test_demo_runs_until_sigterm_then_stops_safely(tmp_path):
     assert s["stopped_by"] == "SIGTERM" and s["fell"] is False and s["scenario"] == "demo"
     assert s["link_url"].startswith("dynamixel:") and s["cycles"] > 0 and s["commands_sent"] > 0
     assert "cycles at" in out and "simulator: did not fall" in out
+    # the simulator's process was kept on the last CPU (the loop was not pinned), as bench_live_loop places it
+    cpus = sorted(os.sched_getaffinity(0))
+    assert s["simulator_cpus"] == (cpus[-1:] if len(cpus) > 1 else cpus)
 
 
 def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
@@ -190,6 +193,8 @@ def test_a_required_realtime_priority_refused_stops_before_the_link_opens(monkey
     (["demo", "--link", "fw", "--buses", "2"], "--buses: only the dynamixel link and MIT-mode CAN motors have"),
     (["demo", "--link", "fw", "--can-protocol", "mit"], "--can-protocol: only the can link has a protocol"),
     (["demo", "--baud", "0"], "--baud 0: must be a positive number of bit/s"),
+    (["demo", "--sim-cpu", "x"], "--sim-cpu x: expected CPU numbers such as 1 or 0,1 among"),
+    (["demo", "--link", "mock", "--sim-cpu", "0"], "--sim-cpu: the mock link's humanoid steps in the loop's own"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--adapter-latency-ms", "-1"],
      "--adapter-latency-ms -1.0: must be milliseconds >= 0"),
     # a device that is not there: exit 2 from run as from monitor, naming the link

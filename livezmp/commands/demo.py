@@ -7,7 +7,7 @@ humanoid in this process instead), a
 scenario (by default: lean past the toes and back, then swing the arms), a live status
 line and the summary, with the simulator's own verdict (``fell``,
 ``true_inside_fraction``: the share of its 1 ms steps whose true ZMP was inside the
-support polygon).
+support polygon). The simulator runs on the last CPU the loop is not pinned to (``--sim-cpu``).
 """
 
 from __future__ import annotations
@@ -15,14 +15,24 @@ from __future__ import annotations
 import argparse
 import sys
 
-from livezmp.commands.run import check_outputs, check_realtime, duration_of, finish, loop_priority, run_loop
+from livezmp.commands.run import (
+    check_outputs,
+    check_realtime,
+    duration_of,
+    finish,
+    loop_cpus,
+    loop_priority,
+    run_loop,
+)
+from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
 from livezmp.live import scenarios as sc
+from livezmp.live.realtime import parse_cpus
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
 from sim_devices.launch import humanoid_sensors
 from sim_devices.mock_link import MockLink
-from sim_devices.process import SimProcess, check_faults, device_options, start_sim
+from sim_devices.process import SimProcess, beside_loop, check_faults, device_options, start_sim
 
 
 def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
@@ -43,7 +53,9 @@ def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenari
 def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
     with SimProcess(args.link, (args.scenario, {}), args.fault, urdf=args.robot, config=args.robot_config,
-                    realtime_priority=max(loop_priority(args)[0] - 1, 0), devices=device_options(args)) as sim:
+                    realtime_priority=max(loop_priority(args)[0] - 1, 0), devices=device_options(args),
+                    cpus=simulator_cpus(args)) as sim:
+        placed = sorted(sim.cpus())
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
@@ -52,13 +64,24 @@ def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scena
                                fell=sim.fell, source=url)
         finally:
             link.close()
-        return {**summary, **sim.verdict(), "link_url": url}
+        return {**summary, **sim.verdict(), "link_url": url, "simulator_cpus": placed}
+
+
+def simulator_cpus(args: argparse.Namespace) -> frozenset[int] | None:
+    """--sim-cpu: the CPUs for the simulator's devices and physics (None: anywhere); by default the last CPU
+    outside --cpu (`beside_loop`). InputError on a bad one."""
+    if args.sim_cpu is not None and args.link == "mock":
+        raise InputError("--sim-cpu: the mock link's humanoid steps in the loop's own process")
+    if args.sim_cpu == "any":
+        return None
+    return beside_loop(loop_cpus(args)) if args.sim_cpu is None else parse_cpus(args.sim_cpu, "--sim-cpu")
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     check_realtime(args)
     check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
+    simulator_cpus(args)
     robot = load_robot(args.robot, args.robot_config)
     scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)

@@ -45,8 +45,9 @@ def check_priority(priority: int) -> None:
         raise InputError(f"--realtime-priority {priority}: must be 1-99 (SCHED_FIFO), or 0 for normal scheduling")
 
 
-def parse_cpus(text: str) -> frozenset[int]:
-    """--cpu: CPU numbers as ``2`` or ``2,3`` or ``0-1``, each one this machine has (InputError otherwise)."""
+def parse_cpus(text: str, option: str = "--cpu") -> frozenset[int]:
+    """--cpu (or ``option``): CPU numbers as ``2`` or ``2,3`` or ``0-1``, each one this machine has (InputError
+    otherwise)."""
     cpus: set[int] = set()
     for part in text.split(","):
         bounds = re.fullmatch(r"\s*(\d+)(?:-(\d+))?\s*", part)
@@ -56,7 +57,7 @@ def parse_cpus(text: str) -> frozenset[int]:
         cpus.update(range(int(bounds[1]), int(bounds[2] or bounds[1]) + 1))
     have = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else set()
     if not cpus or not cpus <= have:
-        raise InputError(f"--cpu {text}: expected CPU numbers such as 1 or 0,1 among {sorted(have)}")
+        raise InputError(f"{option} {text}: expected CPU numbers such as 1 or 0,1 among {sorted(have)}")
     return frozenset(cpus)
 
 
