@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from livezmp.correct.online import OnlineCorrector, size_scaled_accel, size_scaled_margin
 from livezmp.errors import InputError
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
@@ -569,6 +570,52 @@ def test_corrections_are_bounded_and_rate_limited(mini):
     offsets = goals - np.array([command(i * T) for i in range(len(goals))])
     assert np.abs(offsets).max() <= 0.1 + 1e-9
     assert np.abs(np.diff(offsets, axis=0)).max() <= 1.0 * T + 1e-9
+
+
+@pytest.mark.parametrize("correct_hz", [125.0, RATE])
+def test_a_corrector_step_is_split_over_two_cycles_when_it_steps_every_second_or_less(mini, monkeypatch, correct_hz):
+    """At 125 Hz in a 500 Hz loop the corrector steps every 4th cycle: the root rotation from the newest result in
+    one cycle, the legs' IK (its costly part) for the next cycle's command in the next, so no cycle carries both;
+    the offsets sent are what a whole step gives from that result and command (a twin corrector's). Stepping every
+    cycle (500 Hz), the step stays whole."""
+    cfg = LoopConfig(rate_hz=RATE, ramp_s=1e-9, correct_hz=correct_hz)
+    ankles = [mini.joint_names.index(n) for n in ("l_ank_pitch", "r_ank_pitch")]
+
+    def command(t):  # leans past the toes: the corrector acts
+        q = np.zeros(len(mini.joint_names))
+        q[ankles] = -0.3 * min(t / 0.5, 1.0)
+        return q
+
+    loop, _, _, _ = scripted_loop(mini, command=command, config=cfg)
+    twin = OnlineCorrector(mini, loop.correct_every * T, cfg.correction_limits,
+                           max_accel_deg_s2=size_scaled_accel(mini, cfg.trunk_accel_deg_s2),
+                           margin_m=size_scaled_margin(mini))
+    log, asked, same = [], [], []
+    update, offsets = OnlineCorrector.update, OnlineCorrector.offsets
+
+    def logged_update(self, result, cop=None):
+        if self is not twin:
+            log.append((loop.counters.cycles, "update"))
+            asked.append((result, cop))
+        return update(self, result, cop)
+
+    def logged_offsets(self, q_command):
+        out = offsets(self, q_command)
+        if self is not twin:
+            log.append((loop.counters.cycles, "offsets"))
+            result, cop = asked[-1]
+            same.append(np.array_equal(out, twin.step(result, q_command, cop).offsets))
+        return out
+
+    monkeypatch.setattr(OnlineCorrector, "update", logged_update)
+    monkeypatch.setattr(OnlineCorrector, "offsets", logged_offsets)
+    s = loop.run(duration=1.2)
+    steps = [c for c, kind in log if kind == "update"]
+    assert s["corrections_sent"] > 0 and len(steps) > correct_hz  # over 1 s of the 1.2 s run
+    after = 0 if correct_hz == RATE else 1  # the cycle the offsets come in, after the update's
+    whole = [(c + k, kind) for c in steps for k, kind in ((0, "update"), (after, "offsets"))]
+    assert log in (whole, whole[:-1])  # (the run may end between the two)
+    assert len(same) >= len(steps) - 1 and all(same)
 
 
 def test_ramps_at_one_time_match_their_closed_forms_and_the_array_evaluation():

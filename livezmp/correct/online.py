@@ -154,7 +154,14 @@ class OnlineCorrector:
     def step(self, result: FrameResult, q_command: np.ndarray, cop: np.ndarray | None = None) -> OnlineCorrection:
         """Update δ from an analysed frame and return offsets for ``q_command`` (SI, the
         posture about to be sent, before correction). ``cop``: the feet's measured centre of
-        pressure (m, the result's frame) of the same sample, where the link has foot sensors."""
+        pressure (m, the result's frame) of the same sample, where the link has foot sensors.
+        :meth:`update` then :meth:`offsets`, which a caller short of time may run apart."""
+        limited = self.update(result, cop)
+        return OnlineCorrection(self.delta.copy(), self.offsets(q_command), limited)
+
+    def update(self, result: FrameResult, cop: np.ndarray | None = None) -> bool:
+        """The first part of :meth:`step`: δ (``delta``) from an analysed frame (``cop`` as there); whether a
+        limit cut its step."""
         self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
         s = self.sensitivity(result.q)
@@ -179,12 +186,18 @@ class OnlineCorrector:
         limited = bool(np.any(np.abs(new - want) > 1e-12))
         self.prev_step = new - self.delta
         self.delta = new
+        return limited
+
+    def offsets(self, q_command: np.ndarray) -> np.ndarray:
+        """The second part of :meth:`step`, the costlier (the legs' IK): offsets (nq,) of the corrector's channels
+        for ``q_command`` (SI, the posture about to be sent, before correction) that turn the root by the present
+        δ about the present pivot, the feet kept in place."""
         offsets = np.zeros(self.body.nq)
         if np.any(self.delta):
             q_new = self.mover.apply(q_command, self.delta, self.w_left, self._last_offsets)
             offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
         self._last_offsets = offsets
-        return OnlineCorrection(self.delta.copy(), offsets, limited)
+        return offsets
 
 
 def with_measured_cop(result: FrameResult, cop: np.ndarray | None) -> FrameResult:

@@ -18,7 +18,11 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
    :class:`~livezmp.correct.online.OnlineCorrector` turns the newest result (with the
    measured CoP of its sample, where there are foot sensors: it sees pushes) into
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
-   more than one 500 Hz period allows on every cycle);
+   more than one 500 Hz period allows on every cycle). Where it steps every second cycle or
+   less often, its step is split over two cycles: the root rotation from the result in one,
+   the legs' IK (the costlier part) for the next cycle's command in the next, so no one cycle
+   carries both on top of its estimate (at 1 kHz on two buses a cycle with both ran past its
+   deadline one time in five);
 4. write: goals = command + offsets, through the
    :class:`~livezmp.live.safety.GoalLimiter`.
 
@@ -214,6 +218,7 @@ class LiveLoop:
         self._feet: list[FootSensors | None] = [None] * (self.pipe.lag + 1)  # ... and their foot sensors
         self._delta = np.zeros(3)  # the corrector's latest root rotation (rad)
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
+        self._offsets_due = False  # the corrector's root rotation is updated, its offsets not yet
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
         # (cycle, limited, offsets, command) of the goals built ahead
@@ -519,14 +524,28 @@ class LiveLoop:
         return target if s >= 1.0 else self._ramp_from + s * (target - self._ramp_from)
 
     def _correct(self, t: float, command: np.ndarray) -> None:
+        if self.corrector is None:
+            return
+        if self._offsets_due:  # the second part of a corrector step split over two cycles (module docstring)
+            self._correction_offsets(command)
+            return
         # by loop time, not by counting cycles: when the loop falls behind and skips
         # deadlines, the corrector still steps at the dt it was built for
-        if self.corrector is None or not self._fresh or t < self._next_correction - 0.5 * self.dt:
+        if not self._fresh or t < self._next_correction - 0.5 * self.dt:
             return
         self._next_correction = t + self.correct_every * self.dt
+        self.corrector.update(self.result, self._cop)
+        if self.correct_every > 1:
+            self._offsets_due = True
+        else:
+            self._correction_offsets(command)
+
+    def _correction_offsets(self, command: np.ndarray) -> None:
+        """The offsets of the corrector's present root rotation for ``command`` (joint goals, rad)."""
+        self._offsets_due = False
         q_command = np.concatenate([self.command_placer.update(command), command])
-        step = self.corrector.step(self.result, q_command, self._cop)
-        self.offsets, self._delta = step.offsets[self.nb:], step.delta
+        self.offsets = self.corrector.offsets(q_command)[self.nb:]
+        self._delta = self.corrector.delta.copy()
 
     # -- faults --------------------------------------------------------------------------------
 
