@@ -93,7 +93,8 @@ class RootMover:
         self.chain = _root_chain(body)
         self.ik_iterations = ik_iterations
         self.ik_tolerance = ik_tolerance
-        self.last_foot_error = 0.0
+        self._foot_error = 0.0
+        self._unchecked: tuple[np.ndarray, list[dict[str, list[pin.SE3]]]] | None = None  # see last_foot_error
         base = len(body.base_channels)
         # channel (follower, parent, multiplier, offset) of every mimic joint
         self.mimics = [(base + m.joint, base + m.parent, m.multiplier, m.offset) for m in body.mimics]
@@ -102,6 +103,16 @@ class RootMover:
         # per leg: (column in free, follower channel, multiplier) of the followers of the leg's own coordinates
         self.folds = {s: [(free.index(p), f, m) for f, p, m, _ in self.mimics if p in free]
                       for s, free in self.free.items()}
+
+    @property
+    def last_foot_error(self) -> float:
+        """The largest foot position error (m) the last :meth:`apply`, :meth:`apply_many` or :meth:`place_feet` left
+        (over its configurations). Found when asked (its forward kinematics cost a live correction ~10 %)."""
+        if self._unchecked is not None:
+            q, targets = self._unchecked
+            self._unchecked = None
+            self._foot_error = float(self._foot_errors(q, targets).max(initial=0.0))
+        return self._foot_error
 
     def _follow(self, q: np.ndarray) -> None:
         """Each mimic joint's channel of ``q`` (..., nq; in place) set from its parent's."""
@@ -161,7 +172,7 @@ class RootMover:
         if leg_start is not None:
             for cols in corr.legs.values():
                 q_new[:, cols] += leg_start[:, cols]
-        self.last_foot_error = float(self._solve_legs(q_new, targets).max(initial=0.0))
+        self._solve_legs(q_new, targets)
         return q_new
 
     def place_feet(self, asked: np.ndarray, start: np.ndarray) -> np.ndarray:
@@ -170,7 +181,7 @@ class RootMover:
         robot reaches when asked for ``asked``'s feet (to the IK's tolerance; ``last_foot_error``: m)."""
         self._fk(np.asarray(asked, dtype=float))
         q = np.array(start, dtype=float)[None]
-        self.last_foot_error = float(self._solve_legs(q, [self.foot_targets()])[0])
+        self._solve_legs(q, [self.foot_targets()])
         return q[0]
 
     def _residual(self, frames: list[int], targets: list[pin.SE3]) -> np.ndarray:
@@ -189,11 +200,12 @@ class RootMover:
             jac[:, k] += m * full[:, f]
         return jac
 
-    def _solve_legs(self, q: np.ndarray, targets: list[dict[str, list[pin.SE3]]]) -> np.ndarray:
+    def _solve_legs(self, q: np.ndarray, targets: list[dict[str, list[pin.SE3]]]) -> None:
         """Damped Gauss-Newton on each leg's channels of the N configurations ``q`` (N, nq, in
         place), the legs side by side (each leg moves only its own feet, so one Jacobian
-        evaluation per iteration serves both) and the N steps of a leg solved as one stacked
-        system; returns each configuration's largest remaining foot position error (m)."""
+        evaluation per iteration serves both) and the steps of every configuration's legs of one
+        size solved as one stacked system (each is its own system: the same values as one at a
+        time); `last_foot_error` then tells how close each came."""
         corr = self.body.correction
         full = corr.full_foot_pose
         ref = pin.LOCAL if full else pin.LOCAL_WORLD_ALIGNED
@@ -202,7 +214,8 @@ class RootMover:
         self._follow(q)
         pending = np.ones((len(q), len(sides)), dtype=bool)
         for _ in range(self.ik_iterations):
-            work: dict[str, tuple[list[int], list[np.ndarray], list[np.ndarray]]] = {s: ([], [], []) for s in sides}
+            # legs of one shape (rows, free coordinates) -> their (configuration, side), Jacobian and error
+            work: dict[tuple[int, int], tuple[list[tuple[int, str]], list[np.ndarray], list[np.ndarray]]] = {}
             for n in np.nonzero(pending.any(axis=1))[0]:
                 pin.computeJointJacobians(self.model, self.data, q[n])
                 pin.updateFramePlacements(self.model, self.data)
@@ -214,29 +227,33 @@ class RootMover:
                     if np.abs(e).max() < self.ik_tolerance:
                         pending[n, i] = False
                         continue
-                    ns, jacs, errs = work[side]
-                    ns.append(n)
-                    jacs.append(np.concatenate([self._jacobian(side, f, ref, rows) for f in frames]))
+                    jac = np.concatenate([self._jacobian(side, f, ref, rows) for f in frames])
+                    owners, jacs, errs = work.setdefault(jac.shape, ([], [], []))
+                    owners.append((n, side))
+                    jacs.append(jac)
                     errs.append(e)
-            for side, (ns, jacs, errs) in work.items():
-                if not ns:
-                    continue
-                cols = self.free[side]
+            for (_, k), (owners, jacs, errs) in work.items():
                 jac, e = np.array(jacs), np.array(errs)
                 jt = np.swapaxes(jac, 1, 2)
                 # damped, and every step bounded, so a leg that cannot reach exactly (a thigh alone
                 # moving ankle and toe) settles at the nearby least-squares pose instead of
                 # swinging to another branch; a robot's six-joint leg reaches exactly: damp lightly
                 jtj = jt @ jac
-                damping = (1e-6 if full else 1e-3) * np.trace(jtj, axis1=1, axis2=2) / len(cols) + 1e-12
-                step = np.linalg.solve(jtj + damping[:, None, None] * np.eye(len(cols)), (jt @ e[:, :, None]))[..., 0]
-                q[np.ix_(ns, cols)] += np.clip(step, -MAX_IK_STEP, MAX_IK_STEP)
-                self._follow(q)
+                damping = (1e-6 if full else 1e-3) * np.trace(jtj, axis1=1, axis2=2) / k + 1e-12
+                step = np.linalg.solve(jtj + damping[:, None, None] * np.eye(k), (jt @ e[:, :, None]))[..., 0]
+                for (n, side), s in zip(owners, np.clip(step, -MAX_IK_STEP, MAX_IK_STEP), strict=True):
+                    q[n, self.free[side]] += s
+            self._follow(q)
             if not pending.any():
                 break
+        self._unchecked = (q.copy(), targets)
+
+    def _foot_errors(self, q: np.ndarray, targets: list[dict[str, list[pin.SE3]]]) -> np.ndarray:
+        """(N,) each configuration's largest foot position error (m) against its ``targets``."""
+        rows = 6 if self.body.correction.full_foot_pose else 3
         e = []
         for n in range(len(q)):
             self._fk(q[n])
             e.append(np.concatenate([self._residual(frames, targets[n][side])
-                                     for side, frames in corr.foot_frames.items()]))
+                                     for side, frames in self.body.correction.foot_frames.items()]))
         return np.linalg.norm(np.reshape(e, (len(q), -1, rows))[:, :, :3], axis=2).max(axis=1, initial=0.0)
