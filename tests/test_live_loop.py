@@ -575,15 +575,18 @@ def test_corrections_are_bounded_and_rate_limited(mini):
 @pytest.mark.parametrize("correct_hz", [125.0, RATE])
 def test_a_corrector_step_is_split_over_two_cycles_when_it_steps_every_second_or_less(mini, monkeypatch, correct_hz):
     """At 125 Hz in a 500 Hz loop the corrector steps every 4th cycle: the root rotation from the newest result in
-    one cycle, the legs' IK (its costly part) for the next cycle's command in the next, so no cycle carries both;
-    the offsets sent are what a whole step gives from that result and command (a twin corrector's). Stepping every
-    cycle (500 Hz), the step stays whole."""
+    one cycle, the legs' IK (its costly part) for that cycle's command in the next, so no cycle carries both; the
+    offsets are what a whole step gives from that result and command (a twin corrector's). Stepping every cycle
+    (500 Hz), the step stays whole."""
     cfg = LoopConfig(rate_hz=RATE, ramp_s=1e-9, correct_hz=correct_hz)
     ankles = [mini.joint_names.index(n) for n in ("l_ank_pitch", "r_ank_pitch")]
+
+    commanded = []
 
     def command(t):  # leans past the toes: the corrector acts
         q = np.zeros(len(mini.joint_names))
         q[ankles] = -0.3 * min(t / 0.5, 1.0)
+        commanded.append(q)
         return q
 
     loop, _, _, _ = scripted_loop(mini, command=command, config=cfg)
@@ -596,15 +599,16 @@ def test_a_corrector_step_is_split_over_two_cycles_when_it_steps_every_second_or
     def logged_update(self, result, cop=None):
         if self is not twin:
             log.append((loop.counters.cycles, "update"))
-            asked.append((result, cop))
+            asked.append((result, cop, commanded[-1]))  # the command of this cycle, asked for before its correction
         return update(self, result, cop)
 
     def logged_offsets(self, q_command):
         out = offsets(self, q_command)
         if self is not twin:
             log.append((loop.counters.cycles, "offsets"))
-            result, cop = asked[-1]
-            same.append(np.array_equal(out, twin.step(result, q_command, cop).offsets))
+            result, cop, joints = asked[-1]
+            same.append(np.array_equal(q_command[loop.nb:], joints)
+                        and np.array_equal(out, twin.step(result, q_command, cop).offsets))
         return out
 
     monkeypatch.setattr(OnlineCorrector, "update", logged_update)

@@ -20,9 +20,9 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
    leg-joint offsets for the posture about to be sent (held in between: its IK costs
    more than one 500 Hz period allows on every cycle). Where it steps every second cycle or
    less often, its step is split over two cycles: the root rotation from the result in one,
-   the legs' IK (the costlier part) for the next cycle's command in the next, so no one cycle
-   carries both on top of its estimate (at 1 kHz on two buses a cycle with both ran past its
-   deadline one time in five);
+   the legs' IK (the costlier part) for that cycle's command in the next, whose offsets then
+   reach the goals a cycle later, so no one cycle carries both on top of its estimate (at
+   1 kHz on two buses a cycle with both ran past its deadline one time in five);
 4. write: goals = command + offsets, through the
    :class:`~livezmp.live.safety.GoalLimiter`.
 
@@ -218,7 +218,8 @@ class LiveLoop:
         self._feet: list[FootSensors | None] = [None] * (self.pipe.lag + 1)  # ... and their foot sensors
         self._delta = np.zeros(3)  # the corrector's latest root rotation (rad)
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
-        self._offsets_due = False  # the corrector's root rotation is updated, its offsets not yet
+        # the posture (base + joints) the corrector's updated root rotation awaits its offsets for
+        self._offsets_for: np.ndarray | None = None
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
         # (cycle, limited, offsets, command) of the goals built ahead
@@ -526,8 +527,8 @@ class LiveLoop:
     def _correct(self, t: float, command: np.ndarray) -> None:
         if self.corrector is None:
             return
-        if self._offsets_due:  # the second part of a corrector step split over two cycles (module docstring)
-            self._correction_offsets(command)
+        if self._offsets_for is not None:  # the second part of a corrector step split over two cycles
+            self._correction_offsets()
             return
         # by loop time, not by counting cycles: when the loop falls behind and skips
         # deadlines, the corrector still steps at the dt it was built for
@@ -535,15 +536,13 @@ class LiveLoop:
             return
         self._next_correction = t + self.correct_every * self.dt
         self.corrector.update(self.result, self._cop)
-        if self.correct_every > 1:
-            self._offsets_due = True
-        else:
-            self._correction_offsets(command)
+        self._offsets_for = np.concatenate([self.command_placer.update(command), command])
+        if self.correct_every == 1:
+            self._correction_offsets()
 
-    def _correction_offsets(self, command: np.ndarray) -> None:
-        """The offsets of the corrector's present root rotation for ``command`` (joint goals, rad)."""
-        self._offsets_due = False
-        q_command = np.concatenate([self.command_placer.update(command), command])
+    def _correction_offsets(self) -> None:
+        """The offsets of the corrector's root rotation for the command of the cycle that updated it."""
+        q_command, self._offsets_for = self._offsets_for, None
         self.offsets = self.corrector.offsets(q_command)[self.nb:]
         self._delta = self.corrector.delta.copy()
 
