@@ -56,6 +56,7 @@ the time a real servo takes to reboot.
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 import threading
@@ -105,6 +106,20 @@ _RESET_KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}  # factory r
 _BAUD_CODES = {rate: code for code, rate in ct.BAUD_RATES.items()}
 _F = ct.BY_NAME
 _GOAL = _F["goal_position"]
+
+
+@functools.cache
+def _live_fields(start: int, end: int) -> frozenset[str]:
+    """The plant-driven registers (fields of `_LIVE`) a read of addresses ``start`` to ``end`` covers."""
+    return frozenset(name for name, lo, hi in _LIVE_SPANS if lo < end and start < hi)
+
+
+def _rows(indices: list[int]) -> slice | np.ndarray:
+    """Table rows ``indices`` as a slice where they are consecutive (a loop reads its chain's servos in order:
+    the rows are then a view, not a copy), else an index array."""
+    if indices == list(range(indices[0], indices[0] + len(indices))):
+        return slice(indices[0], indices[0] + len(indices))
+    return np.array(indices)
 
 
 @dataclass
@@ -199,7 +214,7 @@ class DynamixelChain(PtyDevice):
         self._hearing_line: int | None = -1
         self._hearing_map: dict[int, _Servo] = {}
         # (servo ids read, data length, line speed) -> (their rows, the reply's layout), see `_fast_answer`
-        self._fast_layouts: dict[tuple[bytes, int, int | None], tuple[np.ndarray, FastStatus] | None] = {}
+        self._fast_layouts: dict[tuple[bytes, int, int | None], tuple[slice | np.ndarray, FastStatus] | None] = {}
         self._readdress()
         self._boot = np.full(len(ids), now)
         self._sign = np.ones(len(ids))
@@ -207,6 +222,7 @@ class DynamixelChain(PtyDevice):
         self._threshold = np.zeros(len(ids))
         self._goal = np.zeros(len(ids))
         self._armed: dict[_Servo, float] = {}
+        self._shortest_watchdog = math.inf  # the shortest armed period (s): the next expiry is this after a packet
         self._reader = PacketReader()
         self._handlers: dict[int, Callable[[Packet, float, int | None], list[tuple[float, bytes]]]] = {
             Instruction.PING: self._ping,
@@ -292,8 +308,7 @@ class DynamixelChain(PtyDevice):
 
     def next_deadline(self) -> float:
         with self._lock:
-            watchdog = self._last_packet + min(self._armed.values()) if self._armed else math.inf
-            return min(watchdog, self._faults.next_event_time())
+            return min(self._last_packet + self._shortest_watchdog, self._faults.next_event_time())
 
     # -- packet handling --------------------------------------------------------------------------
 
@@ -529,7 +544,7 @@ class DynamixelChain(PtyDevice):
                 self._fast_layouts.clear()
             servos = [self._hearing(line).get(dxl_id) for dxl_id in ids]
             self._fast_layouts[key] = None if None in servos else (
-                np.array([servo.index for servo in servos]), FastStatus(ids, length))
+                _rows([servo.index for servo in servos]), FastStatus(ids, length))
         layout = self._fast_layouts[key]
         if layout is None:
             return None
@@ -786,7 +801,7 @@ class DynamixelChain(PtyDevice):
         if self._refreshed_at != now:
             self._refreshed_at = now
             self._fresh = set()
-        wanted = {name for name, lo, hi in _LIVE_SPANS if lo < end and start < hi} - self._fresh
+        wanted = _live_fields(start, end) - self._fresh
         if not wanted:
             return
         if wanted & _MOTION:  # Moving Status compares the position with the goal
@@ -841,9 +856,10 @@ class DynamixelChain(PtyDevice):
             self._armed[servo] = period * ct.WATCHDOG_UNIT
         else:
             self._armed.pop(servo, None)
+        self._shortest_watchdog = min(self._armed.values(), default=math.inf)
 
     def _expire_watchdogs(self, now: float) -> None:
-        if not self._armed:
+        if self._last_packet + self._shortest_watchdog > now:  # none expired (every packet asks)
             return
         expired = sorted((self._last_packet + period, servo.index, servo)
                          for servo, period in self._armed.items() if self._last_packet + period <= now)
@@ -853,3 +869,4 @@ class DynamixelChain(PtyDevice):
             self.plant.set_goal(joint, float(self.plant.position[joint]))  # stop where it is
             servo.table[98] = 0xFF  # -1: Bus Watchdog Error
             del self._armed[servo]
+        self._shortest_watchdog = min(self._armed.values(), default=math.inf)
