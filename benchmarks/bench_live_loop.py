@@ -11,7 +11,7 @@ standing in for the servos' own hardware). Each configuration is run side by sid
 * bus only (baseline): the same clock and link, read + write of the present posture each
   cycle, no estimation or correction: what the bus and simulator alone allow;
 * the live loop (read → estimate → correct at 125 Hz → write), the `demo` scenario, under
-  SCHED_FIFO as `livezmp run` runs it: on the simulator's ptys each cycle sleeps 20 us after
+  SCHED_FIFO as `livezmp run` runs it: on the simulator's ptys each cycle sleeps 20 us a port after
   sending before its work (livezmp.live.loop.PTY_SEND_PAUSE_S: the kernel worker that carries a
   pty's bytes runs first) and the CPUs are kept awake while it runs (a 0 us CPU latency request,
   livezmp.live.realtime.awake_cpus; the ``sched`` column says ``awake`` when the kernel's target was 0),

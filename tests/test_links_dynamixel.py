@@ -345,17 +345,17 @@ def test_reply_loss_is_measured_over_a_sliding_window():
 
 
 def test_a_simulated_bus_is_seen_as_a_pty_and_a_usb_adapter_is_not(tmp_path):
-    """via_pty follows the port's path to what it names: the simulated chain's stable symlink leads to
+    """pty_ports follows the port's path to what it names: the simulated chain's stable symlink leads to
     /dev/pts/N (the loop then lets the kernel carry its bytes, see livezmp.live.loop); a USB adapter's
     path, or a link to one, does not."""
     config = servo_config(2)
     names = list(config.servos)
     with rig("dynamixel") as r:
-        assert r.link.via_pty
+        assert r.link.pty_ports == 1
         # found when the port opened: the loop asks every cycle, and following the links costs a cycle ~10 us
         with mock.patch("livezmp.links.dynamixel.os.path.realpath", side_effect=AssertionError("path followed")):
-            assert r.link.via_pty
+            assert r.link.pty_ports == 1
     usb = tmp_path / "robot-bus"
     usb.symlink_to("/dev/ttyUSB0")
     for path in ("/dev/ttyUSB0", str(usb)):
-        assert not DynamixelLink(path, names, list(config.servos.values())).via_pty
+        assert DynamixelLink(path, names, list(config.servos.values())).pty_ports == 0

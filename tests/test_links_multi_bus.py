@@ -24,7 +24,7 @@ pytestmark = pytest.mark.usefixtures("short_gil_switch")
 def test_two_buses_are_one_robot_read_and_driven_in_joint_order():
     with rig("dynamixel", devices={"buses": 2}, options="timeout=0.1") as r:
         assert isinstance(r.link, MultiBusLink) and len(r.devices.devices) == 2
-        assert r.link.via_pty  # simulated buses: the loop lets the kernel carry their bytes
+        assert r.link.pty_ports == 2  # simulated buses: the loop lets the kernel carry their bytes, each bus's
         assert [len(bus.ids) for bus in r.link.buses] == [10, 10]
         frame = r.link.read()
         assert np.abs(frame.positions - start_posture(20)).max() <= HALF_TICK

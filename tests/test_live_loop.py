@@ -521,14 +521,14 @@ def test_goals_built_ahead_are_the_goals_the_cycle_would_send(mini):
     assert repeats == {False: 0, True: 0}  # each cycle's command asked for once, built ahead or not
 
 
-@pytest.mark.parametrize("pty", [False, True])
-def test_a_pipelined_cycle_on_a_pty_pauses_after_sending_and_before_its_work(mini, pty):
-    """On a pseudo-terminal (the link says `via_pty`) each pipelined cycle sleeps PTY_SEND_PAUSE_S between
-    sending (goals + next read) and estimating, so the kernel worker that carries the bytes gets the CPU;
-    on another port (a USB-serial adapter) it goes straight on to its work."""
+@pytest.mark.parametrize("ptys", [0, 1, 2])
+def test_a_pipelined_cycle_on_a_pty_pauses_after_sending_and_before_its_work(mini, ptys):
+    """On pseudo-terminals (the link's `pty_ports`: two simulated buses, two) each pipelined cycle sleeps
+    PTY_SEND_PAUSE_S for each port between sending (goals + next read) and estimating, so the kernel worker that
+    carries the bytes gets the CPU; on other ports (USB-serial adapters) it goes straight on to its work."""
     time = SimTime()
     link = PipelinedLink(time, mini.joint_names, np.zeros(len(mini.joint_names)))
-    link.sent_prepared, link.prepare_goals, link.via_pty = 0, link.prepare, pty
+    link.sent_prepared, link.prepare_goals, link.pty_ports = 0, link.prepare, ptys
 
     def sleep(d: float) -> None:
         link.calls.append(("sleep", d))
@@ -543,12 +543,13 @@ def test_a_pipelined_cycle_on_a_pty_pauses_after_sending_and_before_its_work(min
 
     loop._estimate = logged_estimate
     s = loop.run(duration=0.1)
-    calls = [name if name != "sleep" else ("pause" if t == PTY_SEND_PAUSE_S else "sleep") for name, t in link.calls]
+    calls = [name if name != "sleep" else ("pause" if t == ptys * PTY_SEND_PAUSE_S else "sleep")
+             for name, t in link.calls]
     cycles = [c for c in " ".join(calls).split("read") if "estimate" in c]
     assert len(cycles) == s["good_frames"] == 0.1 * RATE
     sent = [c.split("estimate")[0].split() for c in cycles]  # what each cycle did between its read and its work
-    assert all(c[-1] == ("pause" if pty else "request") and "write" in c for c in sent)
-    assert calls.count("pause") == (len(cycles) if pty else 0)
+    assert all(c[-1] == ("pause" if ptys else "request") and "write" in c for c in sent)
+    assert calls.count("pause") == (len(cycles) if ptys else 0)
 
 
 def test_corrections_are_bounded_and_rate_limited(mini):

@@ -279,12 +279,12 @@ class DynamixelLink(PortLink):
         self._opened_pty = False  # whether the port opened was a pseudo-terminal
 
     @property
-    def via_pty(self) -> bool:
-        """Whether the port is a pseudo-terminal (a simulated bus, or a bridge such as socat or ser2net): its
+    def pty_ports(self) -> int:
+        """1 where the port is a pseudo-terminal (a simulated bus, or a bridge such as socat or ser2net): its
         written bytes wait for a kernel worker of normal priority to reach the other end (a USB-serial
-        adapter's go out in the write itself). Of an open port, what it was when opened: the loop asks every
-        cycle, and following the path's links costs ~10 us."""
-        return self._opened_pty if self._port is not None else _names_a_pty(self.path)
+        adapter's go out in the write itself); else 0. Of an open port, what it was when opened: the loop asks
+        every cycle, and following the path's links costs ~10 us."""
+        return int(self._opened_pty if self._port is not None else _names_a_pty(self.path))
 
     # -- Link -----------------------------------------------------------------------------------
 

@@ -72,9 +72,9 @@ class MultiBusLink:
         self._order = np.argsort(np.concatenate(self._joints))
 
     @property
-    def via_pty(self) -> bool:
-        """Whether a bus's port is a pseudo-terminal (see `DynamixelLink.via_pty`)."""
-        return any(bus.via_pty for bus in self.buses)
+    def pty_ports(self) -> int:
+        """How many of the buses' ports are pseudo-terminals (see `DynamixelLink.pty_ports`)."""
+        return sum(bus.pty_ports for bus in self.buses)
 
     def request(self) -> None:
         """Every bus's next read instruction sent now (see `DynamixelLink.request`)."""
