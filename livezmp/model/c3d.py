@@ -138,7 +138,7 @@ def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, f
     return mass, where, height, widths
 
 
-def _events(groups: dict, source: str) -> list[tuple[str, str, float]]:
+def _events(groups: dict) -> list[tuple[str, str, float]]:
     """The EVENT group's (context, label, time s): TIMES is (2, USED) minutes and seconds, which ezc3d gives as a
     (2, n) array or flattened, pairs interleaved (Vicon Nexus files); USED, where given, counts the events, and a
     group whose fields disagree in length keeps the events all of them describe."""
@@ -356,5 +356,5 @@ def read_c3d(path: str | Path) -> C3dTrial:
         source=str(p), labels=labels, points=pts.transpose(2, 1, 0), rate=rate,
         analog_rate=_first_number(_param(groups, "ANALOG", "RATE")) or rate,
         start_time=((first or 1.0) - 1.0) / rate, plates=_plates(c3d, str(p), unit), mass_kg=mass, mass_field=where,
-        height_m=height, age_years=_age(groups), widths_m=widths, events=_events(groups, str(p)), units=unit,
+        height_m=height, age_years=_age(groups), widths_m=widths, events=_events(groups), units=unit,
     )
