@@ -210,7 +210,8 @@ class Lab:
     ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels) or 4 (CAL_MATRIX);
     ``spec_plates``: the plates as the C3D spec has them (z axis down, corner 1 in the plate's +x +y quadrant, then
     -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
-    negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention);
+    negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention; TYPE 3:
+    only its z, az0, Kistler's sensor offsets a, b staying positive);
     ``plate_turn`` deg the plates turned in the floor; ``scale`` (ANALOG:SCALE, OFFSET, GEN_SCALE) the channels
     are stored with; ``integer``: POINT:SCALE (> 0, POINT:UNITS per count) of an integer file, None: floating
     point (POINT:SCALE -1); ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and
@@ -293,7 +294,8 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
     corners = np.array([[rot @ (np.array([x, y, 0.0]) + axes[:, 0] * 0.25 * sx + axes[:, 1] * 0.15 * sy)
                          + lab.origin for sx, sy in quadrants] for x, y in plates.values()])
     c3d.add_parameter("FORCE_PLATFORM", "CORNERS", per_m * corners.transpose(2, 1, 0))
-    origin = np.tile(lab.origin_sign * _plate_origin(lab) * per_m, (len(plates), 1))
+    sign = [1.0, 1.0, lab.origin_sign] if lab.plate_type == 3 else lab.origin_sign  # Kistler's a, b: distances
+    origin = np.tile(sign * _plate_origin(lab) * per_m, (len(plates), 1))
     c3d.add_parameter("FORCE_PLATFORM", "ORIGIN", origin.T)
     _add_int(c3d, "FORCE_PLATFORM", "CHANNEL", np.arange(1, n * len(plates) + 1).reshape(len(plates), n).T)
     if lab.plate_type == 4:

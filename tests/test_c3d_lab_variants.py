@@ -59,6 +59,8 @@ VARIANTS = {
     "integer cm, y-up, type 3": Lab(integer=0.006, units="cm", rot=Y_UP, plate_type=3, **SPEC),
     "type 3": Lab(plate_type=3, **SPEC),
     "type 3 y-up m": Lab(plate_type=3, rot=Y_UP, units="m", **SPEC),
+    # az0 written positive (AnyBody's GaitUniMiami, Vicon Workstation): ezc3d negated a and b with it
+    "type 3 az0 > 0": Lab(plate_type=3, origin_sign=-1.0, **SPEC),
     "plates turned 90": Lab(plate_turn=90.0, **SPEC),
     "plates turned 180": Lab(plate_turn=180.0, plate_type=3, **SPEC),
     "no prefix, no mass": Lab(prefix="", mass=False),
@@ -258,3 +260,4 @@ def test_event_times_as_labs_write_them(layout, tmp_path):
     got = read_c3d(path).events
     assert [(c, lab) for c, lab, _ in got] == [(c, lab) for c, lab, _ in events]
     assert [t for _, _, t in got] == pytest.approx([t for _, _, t in events], abs=1e-4)
+

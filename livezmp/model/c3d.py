@@ -195,6 +195,25 @@ def _zero_samples(groups: dict, samples: int, frames: int) -> tuple[int, int] | 
     return (start, stop) if stop - start >= 2 else None
 
 
+def _kistler_moment(p: dict) -> np.ndarray:
+    """(3, S) the moment of ezc3d's TYPE-3 platform ``p`` (file units, world axes, about the surface centre) with
+    Kistler's sensor offsets a, b (ORIGIN's x, y: distances, positive) as the file gives them. ezc3d negates the
+    whole ORIGIN when its z is positive (the AMTI sign, right for az0) and so a and b too, which negates the
+    sensors' part of the moment and mirrors the CoP through the plate's centre: AnyBody's GaitUniMiami sample
+    (Vicon Workstation, four Kistler plates, az0 written +54 mm) had every plate's CoP 90-160 mm off the foot on
+    it, walking backwards over the stance. ezc3d's moment is -S + F x (z0 ez), S the sensors' moment, z0 its
+    negated az0 and ez the plate's z axis from its corners as ezc3d takes them (corner 1 - 2, corner 1 - 4); the
+    moment meant is S + F x (z0 ez)."""
+    moment = np.asarray(p["moment"], dtype=float)
+    a, b, z0 = np.asarray(p["origin"], dtype=float).ravel()[:3]
+    if not (a < 0 and b < 0):
+        return moment
+    c = np.asarray(p["corners"], dtype=float)
+    ez = np.cross(c[:, 0] - c[:, 1], c[:, 0] - c[:, 3])
+    lever = z0 * ez / np.linalg.norm(ez)
+    return -moment + 2.0 * np.cross(np.asarray(p["force"], dtype=float).T, lever).T
+
+
 def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
@@ -202,6 +221,10 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     out = []
     length = _LENGTH[unit]
     frames = int(np.shape(c3d["data"]["points"])[2])
+    try:
+        types = np.asarray(_param(c3d["parameters"], "FORCE_PLATFORM", "TYPE"), dtype=float).ravel()
+    except (TypeError, ValueError):  # none, or text: ezc3d has read the plates as it could
+        types = np.zeros(0)
     for k, p in enumerate(c3d["data"].get("platform", [])):
         newtons = _NEWTONS.get(str(p["unit_force"]).strip().lower())
         if newtons is None:
@@ -210,7 +233,8 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
         moment = newtons * length
         corners = np.asarray(p["corners"], dtype=float).T * length
         force = np.asarray(p["force"], dtype=float).T * newtons
-        mom = np.asarray(p["moment"], dtype=float).T * moment
+        mom = (_kistler_moment(p) if k < len(types) and types[k] == 3 else np.asarray(p["moment"], dtype=float)).T
+        mom = mom * moment
         zero = _zero_samples(c3d["parameters"], len(force), frames)
         out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero))
     return out
