@@ -261,3 +261,25 @@ def test_event_times_as_labs_write_them(layout, tmp_path):
     assert [(c, lab) for c, lab, _ in got] == [(c, lab) for c, lab, _ in events]
     assert [t for _, _, t in got] == pytest.approx([t for _, _, t in events], abs=1e-4)
 
+
+@pytest.mark.parametrize(("plate", "refused"), [(1, True), (2, True), (3, False)], ids=["left", "right", "spare"])
+def test_plates_stepped_on_at_two_heights_are_refused_in_one_line(plate, refused, tmp_path, capsys):
+    """pyCGM's Movement_trial climbs a stair of four plates 0, 195, 389 and 584 mm up; read as one floor at their
+    mean height it gave a ZMP RMS of 22 mm against plates that are no one plane. A plate stepped on 0.2 m above
+    the other is refused in one line naming the plates' heights; the unloaded spare plate 0.2 m up is not in the
+    walk and changes nothing."""
+    path = tmp_path / "trial.c3d"
+    write_lab_c3d(path, PLATES, lab=Lab(seconds=SECONDS))
+    c3d = ezc3d.c3d(str(path))
+    corners = np.array(c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"], dtype=float)
+    corners[2, :, plate - 1] += 200.0  # mm
+    c3d.add_parameter("FORCE_PLATFORM", "CORNERS", corners)
+    c3d.write(str(path))
+    code = main(["analyze", str(path), "--out", str(tmp_path / "z.csv")])
+    err = capsys.readouterr().err.strip()
+    if refused:
+        heights = "0, 200" if plate == 2 else "200, 0"
+        assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err
+        assert f"not one level floor (plates 1, 2 at {heights} mm)" in err
+    else:
+        assert code == 0 and err == ""

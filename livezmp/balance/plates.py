@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from livezmp.errors import InputError
 from livezmp.model.c3d import C3dTrial, PlateRecord
 from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import input_rotation
@@ -25,6 +26,9 @@ UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not
 PULL_N = 10 * QUIET_STD_N
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
+# m: stepped-on plates' surfaces further apart in height than this are not one floor (a stair's step is 150-200 mm;
+# the plates of the trials read so far lie within 3 mm of each other)
+LEVEL_M = 0.05
 STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
 # stance-frame mass: at least this many frames carried whole, and at least this part of the frames with the feet on
 # the plates (fewer: the plates miss the load in most of them, e.g. a plate set aside)
@@ -55,11 +59,21 @@ class PlateFrames:
 
 def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None:
     """Height (m, internal frame) of the trial's plates' surface (the mean of their corners): the floor;
-    None without plates. ``mmap``: the trial's marker map, if it needs one."""
+    None without plates. ``mmap``: the trial's marker map, if it needs one. Raises InputError when the plates
+    stepped on (vertical force varying by more than ``UNLOADED_MAX_N``) lie more than ``LEVEL_M`` apart in height:
+    a stair's or a step's plates are no one floor for the ZMP (pyCGM's Movement_trial: plates 0-584 mm up)."""
     if not trial.plates:
         return None
     r_in = input_rotation(trial, mmap)[1]
-    return float(np.mean([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates]))
+    heights = np.array([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates])
+    stepped = np.array([len(p.force) > 0 and np.ptp(p.force @ r_in[2]) > UNLOADED_MAX_N for p in trial.plates])
+    on = np.flatnonzero(stepped) if stepped.any() else np.arange(len(heights))
+    if np.ptp(heights[on]) > LEVEL_M:
+        mm = ", ".join(f"{1000 * (heights[k] - heights[on].min()):.0f}" for k in on)
+        raise InputError(f"{trial.source}: the force plates stepped on are not one level floor (plates "
+                         f"{', '.join(str(k + 1) for k in on)} at {mm} mm): a stair or a step, and the ZMP needs "
+                         f"one floor")
+    return float(heights.mean())
 
 
 def unloaded_offset(plate: PlateRecord, analog_rate: float,
