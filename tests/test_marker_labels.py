@@ -26,6 +26,11 @@ CONVENTIONS = {
     "side words, lower case": lambda s, m: ("left" if s == "L" else "right") + SIDE_NAMES.get(m, m).lower(),
     "side behind, subject prefix and suffix on every label": lambda s, m: f"{SIDE_NAMES.get(m, m)}_{s}",
     "lab's anatomical names": lambda s, m: s + {"KNE": "LFC", "ANK": "LMA", "HEE": "CAL", "TOE": "TO"}.get(m, m),
+    # OpenSim's Stanford walking trials (opensim-core OpenSim/Tests/shared/walking2.c3d)
+    "OpenSim walking trials": lambda s, m: s + {"KNE": "LFC", "ANK": "LMAL", "HEE": "CAL", "TOE": "MT2"}.get(m, m),
+    # AnyBody's Qualisys gait examples (AMMR S3_Gait_Shod_1, SlowRun)
+    "AnyBody / Qualisys": lambda s, m: s + {"ASI": "Asis", "PSI": "Psis", "KNE": "KneeLateral", "ANK": "AnkleLateral",
+                                            "HEE": "Heel", "TOE": "Toe"}.get(m, m),
 }
 
 
@@ -35,7 +40,8 @@ CONVENTIONS = {
     ("L_IAS", "LASI"), ("R_IPS", "RPSI"), ("R_FLE", "RKNE"), ("L_FME", "LKNM"), ("L_FAL", "LANK"),
     ("L_TAM", "LMED"), ("R_FM2", "RTOE"), ("LeftASIS", "LASI"), ("l.asis", "LASI"), ("ASIS_L", "LASI"),
     ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"), ("LSC", "LCLA"),
-    ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"),
+    ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"), ("RKneeLateral", "RKNE"),
+    ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role

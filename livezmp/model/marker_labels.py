@@ -25,7 +25,11 @@ Where each name comes from:
 - Landmark names seen in the c3d.org samples: ``RLFC`` lateral femoral condyle, ``RLMA`` lateral malleolus,
   ``RCAL`` calcaneus, medial ``RMFC``/``RMMA`` (Innovative Sports Training), ``RLKN``/``RMKN`` lateral / medial
   knee (TYPE-3), ``SACRUM`` (Walking_Hybrid, Capture0002); medial ``MKNE KNEM MFC MEPI ANKM MANK MMAL``
-  (read before these conventions).
+  (read before these conventions). Lateral ``RLMAL`` malleolus and ``RMT2`` second metatarsal head (where Plug-in
+  Gait's TOE sits; CAST's FM2), as OpenSim's Stanford walking trials write them (opensim-core
+  ``OpenSim/Tests/shared/walking2.c3d``, with ``RLFC RMMAL RCAL``); ``RKneeLateral``/``RAnkleLateral`` with
+  ``RHeel RToe RAsis RPsis`` (AnyBody's Qualisys gait and running examples, AMMR ``S3_Gait_Shod_1``,
+  ``SlowRun``; their medial ``RKneeMedial`` is the Helen Hayes name above).
 
 Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
 chooses): which one the lab meant cannot be told from the names. One case is told by position: two labels
@@ -56,17 +60,17 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "ASI": (("ASI", PIG), ("ASIS", HH), ("IAS", CAST)),
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
-    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB)),
+    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
             ("KNEEMEDIAL", HH)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
-    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB)),
+    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB)),
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
             ("ANKLEMEDIAL", HH)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
-    "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST)),
+    "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST), ("MT2", LAB)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
 }
 UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
