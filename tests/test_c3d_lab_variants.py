@@ -236,6 +236,20 @@ def test_a_zero_range_that_is_no_unloaded_reading_is_not_taken():
     assert offset("standing") is None
 
 
+def test_blank_samples_before_the_zero_ranges_reading_are_left_out():
+    """AnyBody's GaitUniMiami sample (Vicon Workstation, Kistler plates) names frames 0-20 unloaded; one plate's
+    channels are blank (exact zeros) for their first 0.1 s, then read its amplifier's -103 N, beyond what a quiet
+    stretch may read. Its offset is the -103 N read after the blank samples: before, the blank and the reading
+    together were not steady, no quiet stretch was near zero, and the plate, reading -103 N, was set aside as
+    pulling."""
+    t = np.arange(3000) / 1000.0
+    fz = -103.0 + 1.2 * np.sin(2 * np.pi * 7 * t) + 800.0 * np.clip(np.sin(np.pi * (t - 1.0)), 0.0, None) * (t < 2.0)
+    fz[:150] = 0.0
+    force = np.column_stack([np.zeros((len(t), 2)), fz])
+    got = unloaded_offset(PlateRecord(force, np.zeros_like(force), np.zeros(3), np.zeros((4, 3)), (0, 300)), 1000.0)
+    assert got is not None and got[0][2] == pytest.approx(-103.0, abs=0.5)
+
+
 @pytest.mark.parametrize("layout", ["(2, n)", "flat pairs", "labels beyond USED"])
 def test_event_times_as_labs_write_them(layout, tmp_path):
     """EVENT:TIMES is (2, USED) minutes and seconds; some writers store it flat, the pairs interleaved (as a

@@ -96,11 +96,14 @@ def unloaded_offset(plate: PlateRecord, analog_rate: float,
     mean, std = windows.mean(axis=1), windows.std(axis=1)
     if plate.zero is not None and len(mean):
         a, b = plate.zero
-        base = fz[a:b].mean()
-        # unloaded there: steady but not all zeros (a blank first frame is padding, not a reading: Innovative
-        # Sports Training's c3d.org sample reads 21 N unloaded after one), nothing reads a pull below it, and
-        # someone stands on the plate later (one stood on all along, ZERO range included, would lose the weight)
-        if fz[a:b].any() and fz[a:b].std() < QUIET_STD_N and base - PULL_N <= mean.min() \
+        # blank samples (exact zeros) before the plate's first reading are padding, not a reading: Innovative Sports
+        # Training's c3d.org sample reads 21 N unloaded after a blank frame, AnyBody's GaitUniMiami -103 N after
+        # 0.1 s of them; the range is read from the first sample that is not blank
+        a += int(np.argmax(fz[a:b] != 0.0)) if fz[a:b].any() else b - a
+        base = fz[a:b].mean() if b > a else 0.0
+        # unloaded there: steady, nothing reads a pull below it, and someone stands on the plate later (one stood
+        # on all along, ZERO range included, would lose the weight)
+        if b > a and fz[a:b].std() < QUIET_STD_N and base - PULL_N <= mean.min() \
                 and mean.max() > base + UNLOADED_MAX_N:
             return plate.force[a:b].mean(axis=0), plate.moment[a:b].mean(axis=0)
     ok = (std < QUIET_STD_N) & (np.abs(mean) < UNLOADED_MAX_N)
