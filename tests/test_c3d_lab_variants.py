@@ -16,7 +16,7 @@ import ezc3d
 import numpy as np
 import pytest
 
-from livezmp.balance.plates import unloaded_offset
+from livezmp.balance.plates import PULL_N, lowpass, plate_frames, unloaded_offset
 from livezmp.cli import main
 from livezmp.model import c3d as c3d_mod
 from livezmp.model.c3d import PlateRecord, _zero_samples, read_c3d
@@ -297,3 +297,20 @@ def test_plates_stepped_on_at_two_heights_are_refused_in_one_line(plate, refused
         assert f"not one level floor (plates 1, 2 at {heights} mm)" in err
     else:
         assert code == 0 and err == ""
+
+
+def test_a_running_step_is_no_pull():
+    """A running step loads a plate hard and briefly (AnyBody's SlowRun: 1750 N over about 0.25 s); low-passed at
+    the estimator's 4.9 Hz it rings 40 N below zero after the step, and both of SlowRun's plates were set aside as
+    pulling. A plate is judged on its mean over 0.1 s: kept; one drifting to -60 N is still set aside."""
+    rate, t = 2000.0, np.arange(4000) / 2000.0
+    step = np.where((t > 0.8) & (t < 1.05), 1750.0 * np.sin(np.pi * (t - 0.8) / 0.25), 0.0)
+    assert lowpass(step, rate, 4.9).min() < -PULL_N  # what set it aside
+
+    def aside(fz):
+        force = np.column_stack([np.zeros((len(t), 2)), fz])
+        plate = PlateRecord(force, np.zeros_like(force), np.zeros(3), np.zeros((4, 3)), (0, 100))
+        return plate_frames([plate], rate, 100.0, np.arange(200), np.eye(3), 4.9).set_aside
+
+    assert aside(step) == []
+    assert [p["plate"] for p in aside(step - 60.0 * np.clip(t - 1.5, 0.0, None) * 2)] == [1]
