@@ -81,9 +81,10 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
 def unloaded_offset(plate: PlateRecord, analog_rate: float,
                     up: np.ndarray = UP) -> tuple[np.ndarray, np.ndarray] | None:
     """The plate's reading at rest: mean force (3,) N and moment (3,) N·m. Over the samples the file names
-    unloaded (FORCE_PLATFORM:ZERO, ``plate.zero``) when the vertical force is steady there (std < ``QUIET_STD_N``,
-    not all zeros), no ``QUIET_WINDOW_S`` stretch reads more than ``PULL_N`` below it (else the range held a load)
-    and one reads more than ``UNLOADED_MAX_N`` above it (the plate is stepped on); otherwise over its quietest
+    unloaded (FORCE_PLATFORM:ZERO, ``plate.zero``; from its first sample that is not blank, an exact zero) when the
+    vertical force is steady there (std < ``QUIET_STD_N``), no ``QUIET_WINDOW_S`` stretch reads more than
+    ``PULL_N`` below it (else the range held a load) and one reads more than ``UNLOADED_MAX_N`` above it (the plate
+    is stepped on); otherwise over its quietest
     unloaded stretch (``QUIET_WINDOW_S`` long, vertical force std < ``QUIET_STD_N``, |mean| <
     ``UNLOADED_MAX_N``, the smallest |mean| among those); None when there is none (loaded all along). ``up`` (3,):
     the vertical in the file's axes (a y-up lab's is its y: its z force is a horizontal one, quiet under load).
