@@ -17,7 +17,8 @@ then the estimator's cutoff around the default (plates low-passed with it, and a
 sway relative to the mid-hip on the trials whose trunk is tracked by markers (where TRUNK_SWAY_GAIN and
 TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
-with the kinematic and the plates' acceleration, the fore-aft swing at the step frequency split into the
+with the kinematic and the plates' acceleration, the lag of the ZMP and of those linear parts (and the ZMP
+with its angular-momentum part delayed), the fore-aft swing at the step frequency split into the
 mid-hip's acceleration and the upper body's and legs' motion relative to it, `livezmp calibrate`
 cross-validated per trial, the plates' CoP against their own force line, and the estimator's own gain and
 delay on sinusoids (why row 4 matters).
@@ -304,6 +305,20 @@ def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
     return f"{1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))):5.1f} ({fa:5.1f}/{lat:5.1f})"
 
 
+def _accelerations(trial, a) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) the CoM's acceleration from the kinematics and from the plates ((GRF - m g) / m), m/s2."""
+    return (com_accelerations(a.result.com, 1.0 / trial.rate),
+            a.plates.force / a.summary["mass"]["used_kg"] - [0.0, 0.0, G])
+
+
+def _linear_parts(trial, a) -> list[np.ndarray]:
+    """(F, 2) the ZMP's linear part, CoM - h a / (a_z + g), with the kinematic and with the plates' CoM
+    acceleration (:func:`_accelerations`), m."""
+    com, h = a.result.com, a.result.com[:, 2:] - a.plates.surface_z
+    with np.errstate(divide="ignore", invalid="ignore"):  # the plates' part off the plates (a_z = -g): inf, unused
+        return [com[:, :2] - h * x[:, :2] / (x[:, 2:] + G) for x in _accelerations(trial, a)]
+
+
 def error_sources(done: dict[str, tuple]) -> None:
     """Per trial: the error split by axis and support phase; the ZMP's linear part (CoM - h a / (a_z + g))
     with the kinematic CoM acceleration and with the plates' (GRF / m: what the plates say the same CoM
@@ -318,16 +333,39 @@ def error_sources(done: dict[str, tuple]) -> None:
         cop = p.cop[rows, :2]
         loaded = [may_bear_weight(sole, p.surface_z, 1.0 / trial.rate)[rows] for sole in r.soles.values()]
         double = loaded[0] & loaded[1]
-        acc = com_accelerations(r.com, 1.0 / trial.rate)[rows]
-        plate_acc = p.force[rows] / a.summary["mass"]["used_kg"] - [0.0, 0.0, G]
-        h = r.com[rows, 2:] - p.surface_z
-        lin = [r.com[rows, :2] - h * x[:, :2] / (x[:, 2:] + G) for x in (acc, plate_acc)]
+        acc, plate_acc = (x[rows] for x in _accelerations(trial, a))
+        lin = [x[rows] for x in _linear_parts(trial, a)]
         d = r.zmp[rows, :2] - cop
         parts = [_rms(d, axes), _rms(d[~double], axes) if (~double).any() else f"{'-':>19s}",
                  _rms(d[double], axes) if double.any() else f"{'-':>19s}", _rms(lin[0] - cop, axes),
                  _rms(lin[1] - cop, axes)]
         sd = [float(np.std(x @ axes[1])) for x in (acc, plate_acc)]
         print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
+
+
+def lag_split(done: dict[str, tuple]) -> None:
+    """Where the ZMP's lead on the CoP comes from: the lag (ms, + = after the CoP, as ``lag_ms``; ? = not
+    determined) of the ZMP, of its linear part with the kinematic CoM acceleration and with the plates' (the
+    rest of the ZMP is the segments' angular momentum term), and the ZMP's RMS with that rest delayed."""
+    delays = (0.0, 0.01, 0.02)
+    print("\nlag split over complete frames: ZMP, linear part (kinematic / plate acceleration) lag ms; ZMP RMS mm "
+          "with its angular-momentum part delayed " + " / ".join(f"{1000 * d:.0f}" for d in delays) + " ms")
+    for name, (trial, a) in done.items():
+        r, p, dt = a.result, a.plates, 1.0 / trial.rate
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        lin = _linear_parts(trial, a)
+        zmp = np.where(r.has_zmp[:, None], r.zmp[:, :2], np.nan)
+        lags = []
+        for x in (zmp, *lin):
+            lag, ok, _ = lag_with_halves(x, p.cop[:, :2], rows, dt)
+            lags.append("n/a" if lag is None else f"{1000 * lag:+.1f}{'' if ok else '?'}")
+        rest, t = np.nan_to_num(zmp - lin[0]), np.arange(len(zmp)) * dt
+        rms = []
+        for d in delays:
+            late = lin[0] + np.column_stack([np.interp(t - d, t, rest[:, k]) for k in range(2)])
+            e = (late - p.cop[:, :2])[rows]
+            rms.append(f"{1000 * np.sqrt(np.mean(np.sum(e * e, axis=1))):.1f}")
+        print(f"{name[:34]:34s} {lags[0]:>7s} {lags[1]:>7s} {lags[2]:>7s}   " + " / ".join(rms))
 
 
 LEG_KINDS = ("thigh", "shank", "foot")
@@ -710,6 +748,7 @@ def main() -> None:
     trunk_sway(done)
     sway_before_after(done)
     error_sources(done)
+    lag_split(done)
     lateral_sources(done)
     swing_at_step_frequency(done)
     foot_frame(done)
