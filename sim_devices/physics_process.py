@@ -25,6 +25,7 @@ import math
 import mmap
 import multiprocessing
 import os
+import select
 import signal
 import threading
 import time
@@ -206,8 +207,10 @@ def _take_inputs(humanoid: SimHumanoid, a: dict[str, np.ndarray]) -> None:
     """The goals and torque switches the devices wrote."""
     humanoid.set_goals(a["goal"].copy())
     on = a["torque"] > 0.5
-    for idx in np.flatnonzero(on != humanoid.servo.torque_on):
-        humanoid.set_torque(int(idx), bool(on[idx]))
+    switched = on != humanoid.servo.torque_on
+    if switched.any():  # seldom (at open and close): np.flatnonzero's wrapper is not paid every step
+        for idx in np.flatnonzero(switched):
+            humanoid.set_torque(int(idx), bool(on[idx]))
 
 
 def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensors: bool) -> None:
@@ -221,6 +224,10 @@ def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensor
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     conn.send("ready")
+    # a request, or the pipe's end, wakes the wait between steps: a poll object made once (Connection.poll makes a
+    # selector each call, about 20 us of the step's CPU), its timeout in whole ms rounded up as Connection.poll's
+    asked = select.poll()
+    asked.register(conn.fileno(), select.POLLIN)
     error: BaseException | None = None
     due = time.monotonic()
     try:
@@ -233,7 +240,7 @@ def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensor
                 except Exception as e:  # handed to close()
                     error = e
             due = max(due + humanoid.dt, time.monotonic() - humanoid.dt)  # no burst after a stall
-            if not conn.poll(max(0.0, due - time.monotonic())):
+            if not asked.poll(math.ceil(max(0.0, due - time.monotonic()) * 1e3)):
                 continue
             request, argument = conn.recv()
             if request == "stop":

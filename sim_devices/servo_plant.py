@@ -99,6 +99,7 @@ class ServoPlant:
         self.torque_on = np.zeros(n, dtype=bool)
         self.external_torque = np.zeros(n)  #: N m applied by the load, e.g. gravity
         self.steps = 0  #: `step` calls that advanced the plant (observers wait on it, not on the clock)
+        self._factors: tuple[float, tuple[Array, ...]] | None = None  # (substep s, its factors), see _factors_for
 
     def set_goal(self, idx: int, position: float) -> None:
         """Set joint ``idx``'s goal position (rad)."""
@@ -118,26 +119,35 @@ class ServoPlant:
         for _ in range(count):
             self._substep(h)
 
+    def _factors_for(self, h: float) -> tuple[Array, ...]:
+        """The per-joint factors of a substep of ``h`` s (first-order gain per second, velocity change limit, coast
+        decay, 1 - decay, inertia / h), made once per substep length from the parameters as constructed: a plant
+        stepped at a fixed rate (the humanoid's 1 kHz physics) pays their exponentials once, not every step."""
+        if self._factors is None or self._factors[0] != h:
+            decay = np.exp(-h / self.coast_time_constant)
+            self._factors = (h, (-np.expm1(-h / self.tau) / h, self.max_acceleration * h, decay, 1.0 - decay,
+                                 self.inertia / h))
+        return self._factors[1]
+
     def _substep(self, h: float) -> None:
         # ufuncs with out= rather than np.clip/np.where: this runs per packet, on small arrays.
         on = self.torque_on
         velocity = self.velocity
+        gain, dv, decay, coasted, inertia_rate = self._factors_for(h)
         # Torque on: the average velocity that makes this step exactly first-order, then limits.
         driven = self.goal - self.position
-        driven *= -np.expm1(-h / self.tau) / h
+        driven *= gain
         np.minimum(driven, self.max_velocity, out=driven)
         np.maximum(driven, -self.max_velocity, out=driven)
-        dv = self.max_acceleration * h
         np.minimum(driven, velocity + dv, out=driven)
         np.maximum(driven, velocity - dv, out=driven)
         # Torque off: exact integral of an exponentially decaying velocity.
-        decay = np.exp(-h / self.coast_time_constant)
         new_velocity = np.where(on, driven, velocity * decay)
-        shift = np.where(on, driven * h, velocity * self.coast_time_constant * (1.0 - decay))
+        shift = np.where(on, driven * h, velocity * self.coast_time_constant * coasted)
         position = self.position + shift
         clipped = np.minimum(np.maximum(position, self.lower), self.upper)
         new_velocity[clipped != position] = 0.0
-        torque = (new_velocity - velocity) * (self.inertia / h)
+        torque = (new_velocity - velocity) * inertia_rate
         torque += self.damping * new_velocity
         torque += self.external_torque
         torque /= self.torque_constant
