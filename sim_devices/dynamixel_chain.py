@@ -106,6 +106,8 @@ _RESET_KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}  # factory r
 _BAUD_CODES = {rate: code for code, rate in ct.BAUD_RATES.items()}
 _F = ct.BY_NAME
 _GOAL = _F["goal_position"]
+_GOAL_VALUE = struct.Struct("<i")
+_LIMITS_ADDRESS = _F["max_position_limit"].address
 
 
 @functools.cache
@@ -120,6 +122,19 @@ def _rows(indices: list[int]) -> slice | np.ndarray:
     if indices == list(range(indices[0], indices[0] + len(indices))):
         return slice(indices[0], indices[0] + len(indices))
     return np.array(indices)
+
+
+def _goal_position_error(table: memoryview, value: int) -> int:
+    """The error number of a Goal Position write of ``value`` (ticks) to a servo's control ``table`` (0: taken):
+    data range while its bus watchdog has tripped (goals are read-only then), data limit beyond its position
+    limits in position mode (3)."""
+    if table[98] == 0xFF:
+        return ErrorCode.DATA_RANGE
+    if table[11] == 3:
+        highest, lowest = _POSITION_LIMITS.unpack_from(table, _LIMITS_ADDRESS)
+        if not lowest <= value <= highest:
+            return ErrorCode.DATA_LIMIT
+    return ErrorCode.NONE
 
 
 @dataclass
@@ -626,18 +641,20 @@ class DynamixelChain(PtyDevice):
         general field handling, so that the simulator's time per cycle stays small beside the bus's."""
         rows = np.frombuffer(params, dtype=_GOAL_ROW, offset=4)
         self._advance(now)
+        goals, set_goal = self._goal, self.plant.set_goal  # looked up once, not once a servo
         for dxl_id, value in zip(rows["id"].tolist(), rows["value"].tolist(), strict=True):
             servo = hearing.get(dxl_id)
             if servo is None:
                 self.stats.unheard += dxl_id in self._by_id
                 continue
-            if not _GOAL.lo <= value <= _GOAL.hi or self._check_value(servo, "goal_position", value):
+            table = servo.table
+            if not _GOAL.lo <= value <= _GOAL.hi or _goal_position_error(table, value):
                 continue
-            struct.pack_into("<i", servo.table, _GOAL.address, value)
+            _GOAL_VALUE.pack_into(table, _GOAL.address, value)
             joint = servo.index
-            self._goal[joint] = value
-            if servo.table[11] in ct.POSITION_MODES:
-                self.plant.set_goal(joint, self._ticks_to_rad(servo, value))
+            goals[joint] = value
+            if table[11] in ct.POSITION_MODES:
+                set_goal(joint, self._ticks_to_rad(servo, value))
         self._refreshed_at = -math.inf
 
     def _bulk_write(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -703,16 +720,13 @@ class DynamixelChain(PtyDevice):
         return ErrorCode.NONE
 
     def _check_value(self, servo: _Servo, name: str, value: int) -> int:
+        if name == "goal_position":
+            return _goal_position_error(servo.table, value)
         if name in ct.GOAL_FIELDS:
             if servo.table[98] == 0xFF:  # bus watchdog error: goals are read-only
                 return ErrorCode.DATA_RANGE
-            if name == "goal_position":
-                if servo.table[11] == 3:
-                    highest, lowest = _POSITION_LIMITS.unpack_from(servo.table, _F["max_position_limit"].address)
-                    if not lowest <= value <= highest:
-                        return ErrorCode.DATA_LIMIT
-            elif abs(value) > servo.get({"goal_pwm": "pwm_limit", "goal_current": "current_limit",
-                                         "goal_velocity": "velocity_limit"}[name]):
+            if abs(value) > servo.get({"goal_pwm": "pwm_limit", "goal_current": "current_limit",
+                                       "goal_velocity": "velocity_limit"}[name]):
                 return ErrorCode.DATA_LIMIT
         elif name == "operating_mode" and value not in ct.OPERATING_MODES:
             return ErrorCode.DATA_RANGE

@@ -120,30 +120,36 @@ class ServoPlant:
             self._substep(h)
 
     def _factors_for(self, h: float) -> tuple[Array, ...]:
-        """The per-joint factors of a substep of ``h`` s (first-order gain per second, velocity change limit, coast
-        decay, 1 - decay, inertia / h), made once per substep length from the parameters as constructed: a plant
-        stepped at a fixed rate (the humanoid's 1 kHz physics) pays their exponentials once, not every step."""
+        """The per-joint factors of a substep of ``h`` s (first-order gain per second, lowest velocity, velocity
+        change limit, coast decay, 1 - decay, inertia / h), made once per substep length from the parameters as
+        constructed: a plant stepped at a fixed rate (the humanoid's 1 kHz physics) pays their exponentials once,
+        not every step."""
         if self._factors is None or self._factors[0] != h:
             decay = np.exp(-h / self.coast_time_constant)
-            self._factors = (h, (-np.expm1(-h / self.tau) / h, self.max_acceleration * h, decay, 1.0 - decay,
-                                 self.inertia / h))
+            self._factors = (h, (-np.expm1(-h / self.tau) / h, -self.max_velocity, self.max_acceleration * h, decay,
+                                 1.0 - decay, self.inertia / h))
         return self._factors[1]
 
     def _substep(self, h: float) -> None:
         # ufuncs with out= rather than np.clip/np.where: this runs per packet, on small arrays.
         on = self.torque_on
         velocity = self.velocity
-        gain, dv, decay, coasted, inertia_rate = self._factors_for(h)
+        gain, lowest, dv, decay, coasted, inertia_rate = self._factors_for(h)
         # Torque on: the average velocity that makes this step exactly first-order, then limits.
         driven = self.goal - self.position
         driven *= gain
         np.minimum(driven, self.max_velocity, out=driven)
-        np.maximum(driven, -self.max_velocity, out=driven)
+        np.maximum(driven, lowest, out=driven)
         np.minimum(driven, velocity + dv, out=driven)
         np.maximum(driven, velocity - dv, out=driven)
-        # Torque off: exact integral of an exponentially decaying velocity.
-        new_velocity = np.where(on, driven, velocity * decay)
-        shift = np.where(on, driven * h, velocity * self.coast_time_constant * coasted)
+        all_on = on.all()
+        if all_on:  # every joint driven (a standing humanoid, every step): no coasting terms to compute or mask
+            shift = driven * h
+            new_velocity = driven
+        else:
+            # Torque off: exact integral of an exponentially decaying velocity.
+            new_velocity = np.where(on, driven, velocity * decay)
+            shift = np.where(on, driven * h, velocity * self.coast_time_constant * coasted)
         position = self.position + shift
         clipped = np.minimum(np.maximum(position, self.lower), self.upper)
         new_velocity[clipped != position] = 0.0
@@ -151,7 +157,8 @@ class ServoPlant:
         torque += self.damping * new_velocity
         torque += self.external_torque
         torque /= self.torque_constant
-        torque[~on] = 0.0
+        if not all_on:
+            torque[~on] = 0.0
         # In place, so arrays handed out earlier stay live views of the state.
         self.current[:] = torque
         self.position[:] = clipped
