@@ -337,7 +337,7 @@ class SimHumanoid:
     def set_goals(self, positions: Array) -> None:
         """Set every joint's goal at once (rad, URDF order), atomically."""
         goals = np.asarray(positions, dtype=float)
-        if goals.shape != self.goal.shape or not np.all(np.isfinite(goals)):
+        if goals.shape != self.goal.shape or not np.isfinite(goals).all():
             bad = "shape " + str(goals.shape) if goals.shape != self.goal.shape else \
                 "joint " + self.body.joint_names[int(np.flatnonzero(~np.isfinite(goals))[0])] + " not finite"
             raise InputError(f"SimHumanoid.set_goals: need {len(self.goal)} finite angles (rad), got {bad}")

@@ -113,3 +113,40 @@ def test_bad_parameter_names_itself():
         ServoPlant(3, tau=[0.1, 0.2])
     with pytest.raises(ValueError, match="'max_velocity' must be > 0"):
         ServoPlant(2, max_velocity=0.0)
+
+
+def test_steps_of_changing_length_each_use_their_own_factors():
+    # the substep factors are made once per step length: a step of another length makes them again
+    plant = ServoPlant(2, position=[0.0, 1.0], tau=[0.02, 0.05], max_velocity=INF, max_acceleration=INF)
+    goals = np.array([1.0, -1.0])
+    for i, goal in enumerate(goals):
+        plant.set_goal(i, goal)
+        plant.set_torque(i, True)
+    t = 0.0
+    for dt in (1e-3, 5e-4, 1e-3, 2e-4, 5e-4):
+        plant.step(dt)
+        t += dt
+        expected = goals + (np.array([0.0, 1.0]) - goals) * np.exp(-t / plant.tau)
+        np.testing.assert_allclose(plant.position, expected, rtol=0, atol=1e-12)
+
+
+def test_all_joints_driven_move_as_when_another_joint_coasts():
+    # every joint on skips the coasting terms: the driven joints' state is the general path's, bit for bit
+    rng = np.random.default_rng(3)
+    start, goal = rng.uniform(-1, 1, 4), rng.uniform(-2, 2, 4)
+    driven = ServoPlant(4, position=start, lower=-1.2, upper=1.2, max_acceleration=80.0)
+    mixed = ServoPlant(5, position=np.append(start, 0.3), lower=-1.2, upper=1.2, max_acceleration=80.0)
+    mixed.velocity[4] = 2.0
+    for i in range(4):
+        for plant in (driven, mixed):
+            plant.set_goal(i, goal[i])
+            plant.set_torque(i, True)
+    for k in range(300):
+        load = rng.normal(0.0, 0.3, 4)
+        driven.external_torque[:], mixed.external_torque[:4] = load, load
+        dt = 1e-3 if k % 3 else 4e-4
+        driven.step(dt)
+        mixed.step(dt)
+        for name in ("position", "velocity", "current"):
+            assert np.array_equal(getattr(driven, name), getattr(mixed, name)[:4]), (k, name)
+    assert mixed.current[4] == 0.0 and mixed.velocity[4] != 0.0  # the fifth joint coasted throughout
