@@ -442,12 +442,13 @@ class SimHumanoid:
         v = (q2 - q0) / (2 * h)
         a = (q2 - 2 * q1 + q0) / (h * h)
         model, data = self.model, self._data
-        min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
         res = compute_zmp(model, data, q1, v, a, 0.0, FLIGHT_FRACTION, self.gravity)
         push, push_moment = self._push_wrench(t, res.com)
         force, zmp = res.force, res.zmp
         if push.any():
             force = res.force - push
+            # the flight threshold only when pushed: the model's gravity is a copy made each time it is read
+            min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
             zmp = zmp_from_wrench(res.com, force, data.dhg.angular - push_moment, 0.0, min_fz)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
