@@ -4,13 +4,15 @@ written in this process drive its joints there, its state and sensors come back,
 from __future__ import annotations
 
 import os
+import signal
+import threading
 import time
 
 import numpy as np
 import pytest
 
 from livezmp.errors import InputError
-from livezmp.live.scenarios import make_scenario
+from livezmp.live.scenarios import Push, make_scenario
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.physics_process import PhysicsProcess
 from tests.sim_support import wait_until
@@ -61,4 +63,31 @@ def test_an_error_in_the_physics_process_is_raised_by_close(mini):
     t = remote.t
     assert not wait_until(lambda: remote.t > t, timeout=0.2)  # it stopped stepping
     with pytest.raises(InputError, match="not finite"):
+        physics.close()
+
+
+def test_a_request_is_answered_between_steps_and_stepping_goes_on(mini):
+    # the wait between steps wakes for a request (its poll object watches the pipe), not only at the next step
+    humanoid = SimHumanoid(mini, make_scenario("stand", mini).goals(0.0), clock=time.monotonic, device_steps=False)
+    physics = PhysicsProcess(humanoid)
+    remote, took, answered = physics.humanoid, [], True
+
+    def push() -> None:
+        t0 = time.monotonic()
+        remote.push(Push(force=(1.0, 0.0), height=0.3, start=remote.t + 0.01, duration=0.02))
+        took.append(time.monotonic() - t0)
+
+    try:
+        for _ in range(20):
+            asking = threading.Thread(target=push, daemon=True)
+            asking.start()
+            asking.join(2.0)
+            answered = not asking.is_alive()
+            assert answered, "the physics process did not answer"
+        assert max(took) < 0.1  # a step's wait is at most a few ms
+        t = remote.t
+        assert wait_until(lambda: remote.t >= t + 0.02)  # and it steps on
+    finally:
+        if not answered:  # deaf to the stop as well: its end unblocks the waiting request, then close reaps it
+            os.kill(physics.pid, signal.SIGKILL)
         physics.close()
