@@ -203,3 +203,42 @@ def test_windows_with_skipped_grid_samples_are_fitted_once_per_pattern(monkeypat
             assert len(diff._grid) <= diff._grid_kept
         # the second and third gaps: no fit with room for the patterns; without it one a window holding the gap
         assert sum(per_gap[window + 2:]) == refits
+
+
+
+def dense_chain_weights(t, lam, index):
+    """(3, k) weights of the paper's chain, from the Reinsch equations written out as dense matrices."""
+    k = len(t)
+    h = np.diff(t)
+    q = np.zeros((k, k - 2))
+    r = np.zeros((k - 2, k - 2))
+    for j in range(k - 2):
+        q[j : j + 3, j] = 1 / h[j], -1 / h[j] - 1 / h[j + 1], 1 / h[j + 1]
+        r[j, j] = (h[j] + h[j + 1]) / 3
+        if j < k - 3:
+            r[j, j + 1] = r[j + 1, j] = h[j + 1] / 6
+    c = np.zeros((k, k))  # knot second derivatives per unit sample
+    c[1:-1] = np.linalg.solve(r + lam * q.T @ q, q.T)
+    g = np.eye(k) - lam * q @ c[1:-1]  # knot values per unit sample
+    v = np.zeros((k, k))  # knot slopes: an interval's at its left end, the last knot's at the right end of the last
+    for i in range(k):
+        a = min(i, k - 2)
+        near, far = (-2, -1) if i < k - 1 else (1, 2)
+        v[i] = (g[a + 1] - g[a]) / h[a] + (near * c[a] + far * c[a + 1]) * h[a] / 6
+    return np.array([g[index], v[index], v[index] @ v])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_exact_fit_of_a_window_with_skipped_deadlines_equals_the_dense_solution(seed):
+    """The banded fit (rows of weights through LAPACK, one row in 1-D) against dense linear algebra, on the
+    live loop's windows: grid times index * dt with several deadlines skipped, at every kind of index."""
+    rng = np.random.default_rng(seed)
+    dt, k = 1e-3, 60
+    lam = smoothing_lambda(dt, 8.0)
+    ticks = np.sort(rng.choice(np.arange(7000, 7000 + k + 12), size=k, replace=False))
+    t = ticks * dt
+    for index in (0, 1, k // 2, k - 31, k - 2, k - 1):
+        expected = dense_chain_weights(t, lam, index)
+        got = window_weights(t, lam, index)
+        scale = np.abs(expected).max(axis=1, keepdims=True)
+        np.testing.assert_allclose(got / scale, expected / scale, rtol=0, atol=1e-9)

@@ -57,26 +57,25 @@ def smoothing_lambda(dt: float, cutoff_hz: float) -> float:
 
 
 def _slopes_adjoint(u: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Transpose of the knot-slope map of a natural cubic spline, applied to ``u`` (k, r).
+    """Transpose of the knot-slope map of a natural cubic spline, applied to ``u``: a row (k,) or rows (r, k).
 
     The slopes at the knots are v = Dg g + Dc c for knot values g and second
-    derivatives c (both (k,)); this returns (Dg^T u, Dc^T u).
+    derivatives c (both (k,)); this returns (u Dg, u Dc), each shaped as ``u``.
     """
-    hc = h[:, None]
-    rate = u[:-1] / hc
+    rate = u[..., :-1] / h
     zg = np.zeros_like(u)
-    zg[:-1] -= rate
-    zg[1:] += rate
-    end_rate = u[-1] / hc[-1]  # the last slope uses the last interval from the left
-    zg[-2] -= end_rate
-    zg[-1] += end_rate
-    arm = u[:-1] * hc / 6.0
+    zg[..., :-1] -= rate
+    zg[..., 1:] += rate
+    end_rate = u[..., -1] / h[-1]  # the last slope uses the last interval from the left
+    zg[..., -2] -= end_rate
+    zg[..., -1] += end_rate
+    arm = u[..., :-1] * h / 6.0
     zc = np.zeros_like(u)
-    zc[:-1] -= 2.0 * arm
-    zc[1:] -= arm
-    end_arm = u[-1] * hc[-1] / 6.0
-    zc[-2] += end_arm
-    zc[-1] += 2.0 * end_arm
+    zc[..., :-1] -= 2.0 * arm
+    zc[..., 1:] -= arm
+    end_arm = u[..., -1] * h[-1] / 6.0
+    zc[..., -2] += end_arm
+    zc[..., -1] += 2.0 * end_arm
     return zg, zc
 
 
@@ -93,57 +92,59 @@ def window_weights(t: np.ndarray, lam: float, index: int) -> np.ndarray:
     A^-1 Q^T y, A = R + lam Q^T Q pentadiagonal.  Only one row of each linear
     map is wanted, so it is found through the transposed maps: two banded
     solves with one or two right-hand sides, O(k), whatever the channel count.
+    The maps act on rows (one weight vector a row, contiguous): numpy's
+    per-call cost, not the O(k) arithmetic, is most of a fit's time.
     """
     k = t.shape[0]
     if k == 1:
         return np.array([[1.0], [0.0], [0.0]])
-    h = np.diff(t)
+    h = t[1:] - t[:-1]  # np.diff's arithmetic without its call overhead
     if k == 2:
-        unit = np.zeros((k, 1))
-        unit[index] = 1.0
+        unit = np.zeros((1, k))
+        unit[0, index] = 1.0
         vel, _ = _slopes_adjoint(unit, h)
         acc, _ = _slopes_adjoint(vel, h)
-        return np.hstack([unit, vel, acc]).T
+        return np.vstack([unit, vel, acc])
     # Columns of the k x (k-2) second-difference matrix Q: entries at rows a, a+1, a+2.
-    lo = 1.0 / h[:-1]
-    hi = 1.0 / h[1:]
+    inv = 1.0 / h
+    lo = inv[:-1]
+    hi = inv[1:]
     mid = -lo - hi
     # Lower banded form of A = R + lam Q^T Q (symmetric positive definite); LAPACK's
     # unblocked band Cholesky costs half as much in lower as in upper storage.
-    ab = np.zeros((3, k - 2))
-    ab[0] = (h[:-1] + h[1:]) / 3.0 + lam * (lo**2 + mid**2 + hi**2)
+    ab = np.zeros((k - 2, 3)).T  # column-major, as LAPACK takes it: no copy
+    square = inv**2
+    ab[0] = (h[:-1] + h[1:]) / 3.0 + lam * (square[:-1] + mid**2 + square[1:])  # lo**2 + mid**2 + hi**2
     ab[1, :-1] = h[1:-1] / 6.0 + lam * (mid[:-1] * lo[1:] + hi[:-1] * mid[1:])
     ab[2, :-2] = lam * (hi[:-2] * lo[2:])
     # LAPACK directly: the scipy.linalg wrappers cost more than the O(k) work here.
     factor, info = dpbtrf(ab, lower=1)
     if info != 0:
         raise ValueError(f"smoothing system not positive definite (info {info}): times must increase")
-    lo, mid, hi = lo[:, None], mid[:, None], hi[:, None]
 
     def hat_t(base: np.ndarray, extra: np.ndarray) -> np.ndarray:
-        # base + Q A^-1 (extra[1:-1] - lam Q^T base): the transposed smoothing map.  With extra = 0 it
-        # is a row of the hat matrix; with (base, extra) = (Dg^T u, Dc^T u) it is V^T u for the
-        # knot-velocity map V = Dg H + Dc A^-1 Q^T.
-        rhs = extra[1:-1] - lam * (lo * base[:-2] + mid * base[1:-1] + hi * base[2:])
-        inner, _ = dpbtrs(factor, rhs, lower=1)
-        base[:-2] += lo * inner
-        base[1:-1] += mid * inner
-        base[2:] += hi * inner
+        # base + (Q A^-1 (extra[1:-1] - lam Q^T base))^T along the last axis, in place, for one row (k,) or
+        # rows (r, k): the transposed smoothing map.  With extra = 0 it is a row of the hat matrix; with
+        # (base, extra) = (u Dg, u Dc) it is u V for the knot-velocity map V = Dg H + Dc A^-1 Q^T.
+        rhs = extra[..., 1:-1] - lam * (lo * base[..., :-2] + mid * base[..., 1:-1] + hi * base[..., 2:])
+        # rows in, rows out: LAPACK's column-major right-hand sides are the rows transposed, no copy
+        inner = dpbtrs(factor, rhs.T, lower=1, overwrite_b=1)[0].T
+        base[..., :-2] += lo * inner
+        base[..., 1:-1] += mid * inner
+        base[..., 2:] += hi * inner
         return base
 
-    # Column 0: the unit vector at ``index``; column 1: (Dg^T, Dc^T) of it, which touch the two
-    # knots of the interval its slope is taken on (_slopes_adjoint, written out for one nonzero).
-    base, extra = np.zeros((k, 2)), np.zeros((k, 2))
-    base[index, 0] = 1.0
+    # Row 0 of ``out``: the unit vector at ``index``; row 1: (Dg, Dc) of it, which touch the two knots of
+    # the interval its slope is taken on (_slopes_adjoint, written out for one nonzero); row 2 from row 1.
+    out = np.zeros((3, k))
+    extra = np.zeros((2, k))
+    out[0, index] = 1.0
     a = min(index, k - 2)
     arm = h[a] / 6.0
-    base[a, 1], base[a + 1, 1] = -1.0 / h[a], 1.0 / h[a]
-    extra[a, 1], extra[a + 1, 1] = (-2.0 * arm, -arm) if index < k - 1 else (arm, 2.0 * arm)
-    pos_vel = hat_t(base, extra)
-    acc = hat_t(*_slopes_adjoint(pos_vel[:, 1:], h))
-    out = np.empty((3, k))
-    out[:2] = pos_vel.T
-    out[2] = acc[:, 0]
+    out[1, a], out[1, a + 1] = -1.0 / h[a], 1.0 / h[a]
+    extra[1, a], extra[1, a + 1] = (-2.0 * arm, -arm) if index < k - 1 else (arm, 2.0 * arm)
+    hat_t(out[:2], extra)  # in place: out's first two rows are views
+    out[2] = hat_t(*_slopes_adjoint(out[1], h))  # one row: numpy's 1-D calls cost less
     return out
 
 
