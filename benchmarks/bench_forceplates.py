@@ -18,8 +18,9 @@ sway relative to the mid-hip on the trials whose trunk is tracked by markers (wh
 TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
 with the kinematic and the plates' acceleration, the lag of the ZMP and of those linear parts (and the ZMP
-with its angular-momentum part delayed), the fore-aft swing at the step frequency split into the
-mid-hip's acceleration and the upper body's and legs' motion relative to it, `livezmp calibrate`
+with its angular-momentum part delayed), that part split per segment group and term (the ZMP's lag and RMS
+with each taken out), the fore-aft swing at the step frequency split into the mid-hip's acceleration and the
+upper body's and legs' motion relative to it, `livezmp calibrate`
 cross-validated per trial, the plates' CoP against their own force line, and the estimator's own gain and
 delay on sinusoids (why row 4 matters).
 Figures: over each trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after
@@ -366,6 +367,109 @@ def lag_split(done: dict[str, tuple]) -> None:
             e = (late - p.cop[:, :2])[rows]
             rms.append(f"{1000 * np.sqrt(np.mean(np.sum(e * e, axis=1))):.1f}")
         print(f"{name[:34]:34s} {lags[0]:>7s} {lags[1]:>7s} {lags[2]:>7s}   " + " / ".join(rms))
+
+
+AM_GROUPS = {"foot": "feet", "shank": "shanks", "thigh": "thighs", "pelvis": "pelvis"}  # any other kind: "upper"
+STANCE_TERMS = ("foot rot", "shank mass", "thigh mass")  # the stance leg's terms shown on their own
+# s: a mass wobbling on its bone at f_n Hz with damping ratio zeta lags it at step frequencies by 2 zeta / (2 pi f_n),
+# 10 ms at 16 Hz and zeta = 0.5 (soft tissue resonates at heel strike: Wakeling, Liphardt & Nigg 2003, J Biomech
+# 36:1761); the "stance late" column delays the whole stance leg's part by this much, more than its wobbling share
+WOBBLE_DELAY_S = 0.01
+
+
+def _am_parts(a) -> dict[str, np.ndarray]:
+    """The ZMP's angular-momentum part (the ZMP minus c - h F_xy / F_z with the model's own F) split per segment
+    and term, each (F, 2) m: "<segment> rot", the segment's own rotation R (I alpha + w x I w), and "<segment>
+    mass", its mass moving about the whole CoM, m_i (c_i - c) x a_i; their moments about the CoM (N m, world
+    frame) divided by F_z as ``balance.zmp`` does (x: -L'_y / F_z, y: L'_x / F_z), so they sum to that part."""
+    r, model = a.result, a.take.body.model
+    data = model.createData()
+    bodies = [j for j in range(1, model.njoints) if model.inertias[j].mass > 0]
+    rot, mass = (np.zeros((len(r.q), len(bodies), 3)) for _ in range(2))
+    fz = np.empty(len(r.q))
+    for f in range(len(r.q)):
+        pin.computeCentroidalMomentumTimeVariation(model, data, r.q[f], r.v[f], r.a[f])
+        c = data.com[0]
+        fz[f] = data.dhg.linear[2] - data.mass[0] * model.gravity.linear[2]
+        for k, j in enumerate(bodies):
+            inertia, v = model.inertias[j], data.v[j]
+            rate = data.oMi[j].act(inertia * data.a[j] + v.cross(inertia * v))  # momentum's rate, about the origin
+            mass[f, k] = np.cross(data.oMi[j].act(inertia.lever) - c, rate.linear)
+            rot[f, k] = rate.angular - np.cross(c, rate.linear) - mass[f, k]
+    return {f"{model.names[j].split('.')[0]} {term}": np.column_stack([-x[:, k, 1], x[:, k, 0]]) / fz[:, None]
+            for term, x in (("rot", rot), ("mass", mass)) for k, j in enumerate(bodies)}
+
+
+def _am_columns(a, loaded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """:func:`_am_parts` summed per segment group, per leg by its support that frame (a leg whose sole may bear
+    weight is a stance leg, else the swing leg), the stance leg's STANCE_TERMS, and per term over every segment
+    ("rot", "mass"), each (F, 2) m."""
+    cols: dict[str, np.ndarray] = {}
+
+    def add(col: str, x: np.ndarray) -> None:
+        cols[col] = cols.get(col, 0.0) + x
+
+    for key, x in _am_parts(a).items():
+        seg, term = key.split()
+        kind, _, side = seg.partition("_")
+        add(AM_GROUPS.get(kind, "upper"), x)
+        add(term, x)
+        if side:
+            on = loaded["left" if side == "l" else "right"][:, None]
+            add("stance leg", np.where(on, x, 0.0))
+            add("swing leg", np.where(on, 0.0, x))
+            if f"{kind} {term}" in STANCE_TERMS:
+                add(f"stance {kind} {term}", np.where(on, x, 0.0))
+    return cols
+
+
+def _double_halves(both: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each run of double-support frames ``both`` (F,) split at its middle: (after heel strike, before toe-off)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], both.astype(np.int8), [0]])))
+    early = np.zeros_like(both)
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        early[start:(start + stop) // 2] = True
+    return early, both & ~early
+
+
+def am_split(done: dict[str, tuple]) -> None:
+    """Which segments make the ZMP's lead: its lag (ms, as :func:`lag_split`; ? = not determined) and RMS against
+    the CoP (mm) with one column of :func:`_am_columns` taken out ("stance late": the stance leg's part delayed by
+    WOBBLE_DELAY_S instead), per trial; then the medians over the trials (the
+    lag's over those where it is determined) and the RMS medians in single support and in each double support's
+    first half (after heel strike) and second half (before toe-off)."""
+    order = ("ZMP", *dict.fromkeys(AM_GROUPS.values()), "upper", "swing leg", "stance leg",
+             *(f"stance {t}" for t in STANCE_TERMS), "stance late", "rot", "mass")
+    print("\nangular-momentum part by segment group: ZMP lag ms / RMS mm with that group's part taken out "
+          "(rot: every segment's own rotation, mass: every mass about the CoM)")
+    short = {"stance leg": "stance", "swing leg": "swing", "stance late": "st.+10ms",
+             **{f"stance {t}": "st." + t for t in STANCE_TERMS}}
+    print(f"{'trial':26s} " + " ".join(f"{k if k == 'ZMP' else '-' + short.get(k, k):>12s}" for k in order))
+    lags, rms = ({k: [] for k in order} for _ in range(2))
+    phases = {p: {k: [] for k in order} for p in ("single support", "after heel strike", "before toe-off")}
+    for name, (trial, a) in done.items():
+        r, p, dt = a.result, a.plates, 1.0 / trial.rate
+        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        loaded = {s: may_bear_weight(sole, p.surface_z, dt) for s, sole in r.soles.items()}
+        both = rows & loaded["left"] & loaded["right"]
+        zmp = np.where(r.has_zmp[:, None], r.zmp[:, :2], np.nan)
+        cols, t = _am_columns(a, loaded), a.times
+        stance = np.nan_to_num(cols["stance leg"])
+        cols["stance late"] = stance - np.column_stack([np.interp(t - WOBBLE_DELAY_S, t, x) for x in stance.T])
+        cells = []
+        for k in order:
+            x = zmp - cols[k] if k in cols else zmp
+            lag, ok, _ = lag_with_halves(x, p.cop[:, :2], rows, dt)
+            e = np.sum((x - p.cop[:, :2]) ** 2, axis=1)
+            rms[k].append(1000 * np.sqrt(np.mean(e[rows])))
+            for phase, m in zip(phases.values(), (rows & ~both, *_double_halves(both)), strict=True):
+                phase[k] += [1000 * np.sqrt(np.mean(e[m]))] if m.any() else []
+            lags[k] += [1000 * lag] if lag is not None and ok else []
+            cells.append(("n/a" if lag is None else f"{1000 * lag:+.1f}{'' if ok else '?'}") + f"/{rms[k][-1]:.1f}")
+        print(f"{name[:26]:26s} " + " ".join(f"{c:>12s}" for c in cells))
+    for label, lg, rm in (("median", lags, rms), *((p, None, v) for p, v in phases.items())):
+        print(f"{label:26s} " + " ".join(f"{(f'{np.median(lg[k]):+.1f}/' if lg and lg[k] else '')}"
+                                          f"{np.median(rm[k]) if rm[k] else np.nan:.1f}".rjust(12) for k in order))
 
 
 LEG_KINDS = ("thigh", "shank", "foot")
@@ -749,6 +853,7 @@ def main() -> None:
     sway_before_after(done)
     error_sources(done)
     lag_split(done)
+    am_split(done)
     lateral_sources(done)
     swing_at_step_frequency(done)
     foot_frame(done)
