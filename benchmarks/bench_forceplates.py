@@ -271,7 +271,7 @@ def lateral_sources(done: dict[str, tuple]) -> None:
           "(kin - plates); pelvis points: SD, r with the plates, gain onto the plates")
     for name, (trial, a) in done.items():
         r, p, dt = a.result, a.plates, 1.0 / trial.rate
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         _, left = walking_axes(r.com)
         plate = (p.force[rows] / a.summary["mass"]["used_kg"]) @ left
         res = com_accelerations(r.com, dt)[rows] @ left - plate
@@ -306,6 +306,21 @@ def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
     return f"{1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))):5.1f} ({fa:5.1f}/{lat:5.1f})"
 
 
+def _scored(a) -> np.ndarray:
+    """(F,) the frames the comparison scores: complete, with a ZMP and a plate CoP."""
+    return a.complete & a.result.has_zmp & np.isfinite(a.plates.cop).all(axis=1)
+
+
+def _lag_cell(lag: float | None, determined: bool) -> str:
+    """A lag (s) as a table cell in ms; ? = not determined, n/a = none."""
+    return "n/a" if lag is None else f"{1000 * lag:+.1f}{'' if determined else '?'}"
+
+
+def _delayed(x: np.ndarray, t: np.ndarray, delay: float) -> np.ndarray:
+    """(F, k) columns ``x`` at times ``t`` (s) delayed by ``delay`` s (linear interpolation, held at the ends)."""
+    return np.column_stack([np.interp(t - delay, t, col) for col in x.T])
+
+
 def _accelerations(trial, a) -> tuple[np.ndarray, np.ndarray]:
     """(F, 3) the CoM's acceleration from the kinematics and from the plates ((GRF - m g) / m), m/s2."""
     return (com_accelerations(a.result.com, 1.0 / trial.rate),
@@ -329,7 +344,7 @@ def error_sources(done: dict[str, tuple]) -> None:
           f"{'linear, plate acc':>19s}  lat. acc SD kin/plates m/s2")
     for name, (trial, a) in done.items():
         r, p = a.result, a.plates
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         axes = walking_axes(r.com)
         cop = p.cop[rows, :2]
         loaded = [may_bear_weight(sole, p.surface_z, 1.0 / trial.rate)[rows] for sole in r.soles.values()]
@@ -353,17 +368,17 @@ def lag_split(done: dict[str, tuple]) -> None:
           "with its angular-momentum part delayed " + " / ".join(f"{1000 * d:.0f}" for d in delays) + " ms")
     for name, (trial, a) in done.items():
         r, p, dt = a.result, a.plates, 1.0 / trial.rate
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         lin = _linear_parts(trial, a)
         zmp = np.where(r.has_zmp[:, None], r.zmp[:, :2], np.nan)
         lags = []
         for x in (zmp, *lin):
             lag, ok, _ = lag_with_halves(x, p.cop[:, :2], rows, dt)
-            lags.append("n/a" if lag is None else f"{1000 * lag:+.1f}{'' if ok else '?'}")
+            lags.append(_lag_cell(lag, ok))
         rest, t = np.nan_to_num(zmp - lin[0]), np.arange(len(zmp)) * dt
         rms = []
         for d in delays:
-            late = lin[0] + np.column_stack([np.interp(t - d, t, rest[:, k]) for k in range(2)])
+            late = lin[0] + _delayed(rest, t, d)
             e = (late - p.cop[:, :2])[rows]
             rms.append(f"{1000 * np.sqrt(np.mean(np.sum(e * e, axis=1))):.1f}")
         print(f"{name[:34]:34s} {lags[0]:>7s} {lags[1]:>7s} {lags[2]:>7s}   " + " / ".join(rms))
@@ -449,13 +464,13 @@ def am_split(done: dict[str, tuple]) -> None:
     phases = {p: {k: [] for k in order} for p in ("single support", "after heel strike", "before toe-off")}
     for name, (trial, a) in done.items():
         r, p, dt = a.result, a.plates, 1.0 / trial.rate
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         loaded = {s: may_bear_weight(sole, p.surface_z, dt) for s, sole in r.soles.items()}
         both = rows & loaded["left"] & loaded["right"]
         zmp = np.where(r.has_zmp[:, None], r.zmp[:, :2], np.nan)
         cols, t = _am_columns(a, loaded), a.times
         stance = np.nan_to_num(cols["stance leg"])
-        cols["stance late"] = stance - np.column_stack([np.interp(t - WOBBLE_DELAY_S, t, x) for x in stance.T])
+        cols["stance late"] = stance - _delayed(stance, t, WOBBLE_DELAY_S)
         cells = []
         for k in order:
             x = zmp - cols[k] if k in cols else zmp
@@ -465,7 +480,7 @@ def am_split(done: dict[str, tuple]) -> None:
             for phase, m in zip(phases.values(), (rows & ~both, *_double_halves(both)), strict=True):
                 phase[k] += [1000 * np.sqrt(np.mean(e[m]))] if m.any() else []
             lags[k] += [1000 * lag] if lag is not None and ok else []
-            cells.append(("n/a" if lag is None else f"{1000 * lag:+.1f}{'' if ok else '?'}") + f"/{rms[k][-1]:.1f}")
+            cells.append(f"{_lag_cell(lag, ok)}/{rms[k][-1]:.1f}")
         print(f"{name[:26]:26s} " + " ".join(f"{c:>12s}" for c in cells))
     for label, lg, rm in (("median", lags, rms), *((p, None, v) for p, v in phases.items())):
         print(f"{label:26s} " + " ".join(f"{(f'{np.median(lg[k]):+.1f}/' if lg and lg[k] else '')}"
@@ -496,7 +511,7 @@ def swing_at_step_frequency(done: dict[str, tuple]) -> None:
           f"{'kinematic':>11s} {'plates':>6s}   CoP/ZMP  lead")
     for name, (trial, a) in done.items():
         r, p, dt = a.result, a.plates, 1.0 / trial.rate
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         fwd, _ = walking_axes(r.com, facing(a.take))
         shares = {k: v @ fwd for k, v in _group_accelerations(a, dt).items()}
         mid_hip = com_accelerations(r.q[:, :3], dt) @ fwd  # the pelvis' origin: its first three channels
@@ -536,7 +551,7 @@ def foot_frame(done: dict[str, tuple]) -> None:
     print("\nCoP / ZMP in the stance foot (single support): along heel 0 -> toe 1, min..max (mean); sideways mean mm")
     for name, (trial, a) in done.items():
         r, p = a.result, a.plates
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         fwd, _ = walking_axes(r.com)
         load = {s: may_bear_weight(sole, p.surface_z, 1.0 / trial.rate) for s, sole in r.soles.items()}
         cells = []
@@ -594,7 +609,7 @@ def force_line(done: dict[str, tuple]) -> None:
     for name, (_, a) in done.items():
         c = a.summary["cop_vs_force_line"]
         r, p = a.result, a.plates
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         _, left = walking_axes(r.com, facing(a.take))
         lat = 1000 * np.sqrt(np.mean(((r.zmp[rows, :2] - p.cop[rows, :2]) @ left[:2]) ** 2))
 
@@ -644,7 +659,7 @@ def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
     for name, (trial, a) in done.items():
         cv, ta = a.summary["cop_vs_zmp"], a.summary["time_alignment"]
         r, p = a.result, a.plates
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         zmp = np.where(r.has_zmp[:, None], r.zmp, np.nan)[:, :2]
         whole, _, halves = lag_with_halves(zmp, p.cop[:, :2], rows, 1.0 / trial.rate)
         k = int(round(MAX_LAG_S * trial.rate))
@@ -744,7 +759,7 @@ def calibration_floor(done: dict[str, tuple]) -> None:
     cols = {k: [] for k in ("default", "offset", "gain", "both")}
     for name, (_, a) in done.items():
         r, p = a.result, a.plates
-        rows = a.complete & r.has_zmp & np.isfinite(p.cop).all(axis=1)
+        rows = _scored(a)
         fwd, left = walking_axes(r.com)
         axes = np.array([fwd[:2], left[:2]]).T
         z, c = (r.zmp[rows, :2] - r.com[rows, :2]) @ axes, (p.cop[rows, :2] - r.com[rows, :2]) @ axes
