@@ -75,5 +75,6 @@ def compute_zmp(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, 
 def zmp_on_plane(zmp0: np.ndarray, force: np.ndarray, ground_z: float) -> np.ndarray:
     """Move a ZMP computed on z = 0 to the plane z = ground_z along the line of action of
     the contact force: p(h) = p(0) + h · F_xy / F_z (m, internal frame)."""
-    fx, fy, fz = float(force[0]), float(force[1]), float(force[2])
-    return np.array((float(zmp0[0]) + ground_z * fx / fz, float(zmp0[1]) + ground_z * fy / fz, ground_z))
+    fx, fy, fz = force.tolist()  # plain floats in one call each, not one indexing per value
+    x0, y0, _ = zmp0.tolist()
+    return np.array((x0 + ground_z * fx / fz, y0 + ground_z * fy / fz, ground_z))

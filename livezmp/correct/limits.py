@@ -20,6 +20,13 @@ if TYPE_CHECKING:  # a type only: this module stays light for the command line's
 MAX_CORRECT_FRAMES = 80_000
 
 
+def clip(x: np.ndarray, lower, upper) -> np.ndarray:
+    """``np.clip(x, lower, upper)`` (NaN kept, the same values bit for bit) without its Python wrapper: the live
+    loop's goal limiter and online corrector run it every cycle or correction, and the wrapper was more than half
+    its cost (2.5 against 1.1 us on a 3-vector)."""
+    return np.minimum(np.maximum(x, lower), upper)
+
+
 @dataclass(frozen=True)
 class CorrectionLimits:
     """Limits and weights. Angles in degrees, rates in degrees per second, lengths in m."""

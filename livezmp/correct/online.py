@@ -35,7 +35,7 @@ import pinocchio as pin
 
 from livezmp.balance.pipeline import FrameResult
 from livezmp.balance.support import clamp_to_polygon
-from livezmp.correct.limits import CorrectionLimits, zmp_target
+from livezmp.correct.limits import CorrectionLimits, clip, zmp_target
 from livezmp.correct.root_motion import RootMover, hip_axes
 from livezmp.model.body import BodyModel, foot_soles
 
@@ -117,6 +117,7 @@ class OnlineCorrector:
         self.max_accel_step = np.radians(max_accel_deg_s2) * dt * dt
         self.max_rot = np.radians(np.asarray(self.limits.max_rotation_deg, dtype=float))
         self.pivot_alpha = min(1.0, dt / pivot_tau_s)
+        self._damp = np.diag([1e-6, 1e-6, 1e-4])  # the gain's damping (m², per δ axis), made once
         self.mover = RootMover(body)
         self.data = body.model.createData()
         corr = body.correction
@@ -165,12 +166,11 @@ class OnlineCorrector:
         self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
         s = self.sensitivity(result.q)
-        damp = np.diag([1e-6, 1e-6, 1e-4])
         result = with_measured_cop(result, cop)
         target = zmp_target(result, self.limits.margin_m)
         if target is not None:
             err = target - result.zmp[:2]
-            want = self.delta + self.gain * np.linalg.solve(s.T @ s + damp, s.T @ err)
+            want = self.delta + self.gain * np.linalg.solve(s.T @ s + self._damp, s.T @ err)
         else:
             want = self.delta * (1 - self.relax)
             if result.zmp is not None and result.margin is not None and len(result.polygon) > 2:
@@ -181,9 +181,9 @@ class OnlineCorrector:
                     want = self.delta.copy()
         step = want - self.delta
         lo, hi = self.prev_step - self.max_accel_step, self.prev_step + self.max_accel_step
-        clipped = np.clip(np.clip(step, lo, hi), -self.max_step, self.max_step)
-        new = np.clip(self.delta + clipped, -self.max_rot, self.max_rot)
-        limited = bool(np.any(np.abs(new - want) > 1e-12))
+        clipped = clip(clip(step, lo, hi), -self.max_step, self.max_step)
+        new = clip(self.delta + clipped, -self.max_rot, self.max_rot)
+        limited = bool((np.abs(new - want) > 1e-12).any())
         self.prev_step = new - self.delta
         self.delta = new
         return limited
@@ -193,7 +193,7 @@ class OnlineCorrector:
         for ``q_command`` (SI, the posture about to be sent, before correction) that turn the root by the present
         δ about the present pivot, the feet kept in place."""
         offsets = np.zeros(self.body.nq)
-        if np.any(self.delta):
+        if self.delta.any():  # the method, not np.any: its wrapper costs more than the test
             q_new = self.mover.apply(q_command, self.delta, self.w_left, self._last_offsets)
             offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
         self._last_offsets = offsets

@@ -26,8 +26,8 @@ def _rz(yaw: float) -> np.ndarray:
 
 def base_coordinates(m: pin.SE3) -> np.ndarray:
     """(x, y, z, yaw, pitch, roll) of a base pose, R = Rz(yaw)·Ry(pitch)·Rx(roll)."""
-    roll, pitch, yaw = pin.rpy.matrixToRpy(m.rotation)
-    return np.array([*m.translation, yaw, pitch, roll])
+    # one concatenation: unpacking the translation made three numpy scalars and a list to convert back
+    return np.concatenate((m.translation, pin.rpy.matrixToRpy(m.rotation)[::-1]))
 
 
 class BasePlacer:
