@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from livezmp.correct.limits import clip
 from livezmp.model.body import BodyModel
 from livezmp.model.mimic import follow
 
@@ -244,7 +245,7 @@ class RootMover:
                 jtj = jt @ jac
                 damping = (1e-6 if full else 1e-3) * np.trace(jtj, axis1=1, axis2=2) / k + 1e-12
                 step = np.linalg.solve(jtj + damping[:, None, None] * np.eye(k), (jt @ e[:, :, None]))[..., 0]
-                for (n, side), s in zip(owners, np.clip(step, -MAX_IK_STEP, MAX_IK_STEP), strict=True):
+                for (n, side), s in zip(owners, clip(step, -MAX_IK_STEP, MAX_IK_STEP), strict=True):
                     q[n, self.free[side]] += s
             self._follow(q)
             if not pending.any():
