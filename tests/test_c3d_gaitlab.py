@@ -1134,6 +1134,19 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     assert rc == 0 and s["cop_vs_zmp"]["rms_mm"] < 1.0
 
 
+def test_calibration_of_frames_within_one_block_keeps_the_table(tmp_path):
+    """Complete frames that all lie in one cross-validation block (a short trial: AMMR's S3_Gait_Shod_1 has 23 at
+    120 Hz, under 0.2 s) leave one fold with nothing to fit and the other with nothing to score: calibrate keeps
+    the table and says so (it raised an IndexError from an empty fold before)."""
+    path = tmp_path / "short.c3d"
+    write_lab_c3d(path, PLATES, body=MarkerBodyOptions(hat_offset=(0.04, 0.0, 0.33), hat_fraction=0.45,
+                                                       hat_sway_gain=None))
+    trial = read_c3d(path)
+    subject, report = calibration.calibrate([trial], block_s=1e3)  # every frame in the first block
+    assert report["table_kept"] and report["rms_held_out_fitted_mm"] == report["rms_held_out_table_mm"]
+    assert subject.hat_fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12)
+
+
 def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, monkeypatch):
     """The synthetic subject's trunk follows its mid-hip below 0.1 Hz and sways half as far fore-aft and 0.7 times as
     far sideways above (its sway is at 0.3-0.4 Hz, below TRUNK_FOLLOW_HZ, so the follow frequency is lowered to see

@@ -272,6 +272,8 @@ def _fit(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray
 def _blocks(t: _Terms, block_s: float | None) -> np.ndarray:
     """Each frame's block (0, 1, ... over the blocks present): ``block_s`` long from the first frame, or for
     None the first and second halves of the frames."""
+    if not len(t.times):  # a fold that took none of this trial's frames (all of them lie in one block)
+        return np.zeros(0, dtype=int)
     if block_s is None:
         return (np.arange(len(t.cop)) >= len(t.cop) // 2).astype(int)
     return np.unique(np.floor((t.times - t.times[0]) / block_s).astype(int), return_inverse=True)[1]
