@@ -443,7 +443,7 @@ def _am_columns(a, loaded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return cols
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) of each run of True in ``mask`` (F,)."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
     return list(zip(edges[::2], edges[1::2], strict=True))
@@ -452,7 +452,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 def _double_halves(both: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each run of double-support frames ``both`` (F,) split at its middle: (after heel strike, before toe-off)."""
     early = np.zeros_like(both)
-    for start, stop in _runs(both):
+    for start, stop in runs(both):
         early[start:(start + stop) // 2] = True
     return early, both & ~early
 
@@ -461,7 +461,7 @@ def _before_strikes(both: np.ndarray, n: int) -> np.ndarray:
     """(F,) the ``n`` frames before each run of double-support frames ``both`` (F,): single support's end, just
     before the heel strike."""
     late = np.zeros_like(both)
-    for start, _ in _runs(both):
+    for start, _ in runs(both):
         late[max(0, start - n):start] = True
     return late & ~both
 

@@ -20,6 +20,7 @@ import argparse
 import dataclasses
 
 import numpy as np
+from bench_forceplates import runs
 
 from livezmp.balance.plates import G
 from livezmp.model.c3d import read_c3d
@@ -32,12 +33,11 @@ TRUNK = ("C7", "T10", "CLAV", "STRN")
 
 def longest_run(mask: np.ndarray) -> slice:
     """The longest run of True in ``mask`` (N,) as a slice (empty when none)."""
-    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
-    starts, stops = edges[::2], edges[1::2]
-    if len(starts) == 0:
+    spans = runs(mask)
+    if not spans:
         return slice(0, 0)
-    k = int(np.argmax(stops - starts))
-    return slice(int(starts[k]), int(stops[k]))
+    start, stop = max(spans, key=lambda s: s[1] - s[0])  # the first of the longest, as argmax
+    return slice(int(start), int(stop))
 
 
 def rms_mm(x: np.ndarray) -> float:
