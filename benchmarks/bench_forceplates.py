@@ -59,7 +59,7 @@ from livezmp.model.markers import (
 )
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
 from livezmp.offline.gaitlab import COP_CHECK_WEIGHT, LabOptions, analyse_lab_take, facing, may_bear_weight
-from livezmp.offline.plausibility import com_accelerations
+from livezmp.offline.plausibility import WALK_COM_ACC_P99, com_accelerations, plausibility
 from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "c3d"
@@ -598,6 +598,28 @@ def foot_frame(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " | ".join(cells))
 
 
+def plausibility_check(done: dict[str, tuple]) -> None:
+    """The plausibility verdict's inputs per trial: the markers' CoM acceleration p99 over the whole take (what a
+    take is judged by), the plates' over the complete frames (both along the take's net travel, as the verdict),
+    and the verdict; then the largest of each over the trials (the references are the tuning trials' largest)."""
+    print(f"\nplausibility: CoM acceleration p99 m/s2 (fore-aft, lateral, vertical), references {WALK_COM_ACC_P99}")
+    print(f"{'trial':34s} {'markers, whole take':>22s} {'plates, complete':>22s}  verdict")
+    marks, plates = [], []
+    for name, (_, a) in done.items():
+        r = a.result
+        v = plausibility(r.com, r.zmp, r.has_zmp, 1.0 / a.rate)
+        fwd, left = walking_axes(r.com[[0, -1]])
+        acc = a.plates.force[a.complete] / a.summary["mass"]["used_kg"] - [0.0, 0.0, G]
+        p99 = [float(np.percentile(np.abs(acc @ ax), 99)) for ax in (fwd, left, np.array([0.0, 0.0, 1.0]))] \
+            if a.complete.sum() >= 20 else [np.nan] * 3
+        marks.append(v["com_acc_p99_mps2"])
+        plates.append(p99)
+        cells = ["/".join(f"{x:.2f}" for x in row) for row in (v["com_acc_p99_mps2"], p99)]
+        print(f"{name[:34]:34s} {cells[0]:>22s} {cells[1]:>22s}  {v['verdict'][:60]}")
+    most = ["/".join(f"{x:.2f}" for x in np.nanmax(np.array(v), axis=0)) for v in (marks, plates)]
+    print(f"{'largest':34s} {most[0]:>22s} {most[1]:>22s}")
+
+
 def plate_check(done: dict[str, tuple]) -> None:
     """Each plate read on its own, independent of the ZMP: `livezmp analyze`'s check that its CoP lies under the foot
     standing on it (summary cop_under_foot), and how far that CoP travels along the walk while the plate carries a
@@ -896,6 +918,7 @@ def main() -> None:
     swing_at_step_frequency(done)
     foot_frame(done)
     plate_check(done)
+    plausibility_check(done)
     force_line(done)
     if args.more:
         cutoff_sweep(done)
