@@ -41,14 +41,17 @@ CONVENTIONS = {
     ("L_TAM", "LMED"), ("R_FM2", "RTOE"), ("LeftASIS", "LASI"), ("l.asis", "LASI"), ("ASIS_L", "LASI"),
     ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"), ("LSC", "LCLA"),
     ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"), ("RKneeLateral", "RKNE"),
-    ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"),
+    ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"), ("LLKNE", "LKNE"),
+    ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role
 
 
+# RLEP: a lateral epicondyle, the femur's or the humerus' (ISB names them apart: FLE, HLE); LLA_TOE and LMT5 are
+# the toe's stand-ins only where no label claims the toe (test_the_metatarsal_heads_stand_in_for_a_missing_toe)
 @pytest.mark.parametrize("label", ["LKneeAngles", "R_THIGH_1", "VLKN", "LFEO", "L.Sac.Wand", "LTHI2", "LMT5",
-                                   "r knee 1", "PELO", "LHipPower"])
+                                   "r knee 1", "PELO", "LHipPower", "RLEP", "LLA_TOE", "RBackAsis"])
 def test_other_labels_name_no_role(label):
     assert role_of(label) is None
 
@@ -197,3 +200,53 @@ def test_medial_markers_written_as_repeated_labels_are_told_by_their_description
             got = take.centres[joint][name] @ np.linalg.inv(take.body.world_from_input).T
             first, last = take.notes["frames_used"]
             assert np.abs(got - mid[first:last + 1]).max() < 1e-9
+
+
+def _with_markers(trial, extra: dict, drop=()):
+    """``trial`` with the markers ``extra`` (label -> (F, 3) m) added and the labels ``drop`` removed."""
+    keep = [i for i, lab in enumerate(trial.labels) if lab not in drop]
+    return replace(trial, labels=[trial.labels[i] for i in keep] + list(extra),
+                   points=np.concatenate([trial.points[:, keep], np.stack(list(extra.values()), axis=1)], axis=1))
+
+
+def test_a_toe_claimant_away_from_the_foot_is_set_aside_by_position():
+    """osim_jogging's case: its femur cluster's middle marker RFM2 (CAST's FM2 name) and RTOE both claim the toe."""
+    trial = _trial(np.arange(200) / RATE, RATE)
+    thigh = {s + "FM2": trial.marker(s + "THI") + [0.05, 0.0, 0.0] for s in "LR"}
+    match = match_labels(_with_markers(trial, thigh))
+    assert not match.ambiguous and match.roles["LTOE"] == "LTOE" and match.roles["RTOE"] == "RTOE"
+    assert match.toe["LTOE"].startswith("LTOE: at the foot, 159 mm from LANK; LFM2 set aside: 626 mm")
+    take = body_from_markers(_with_markers(trial, thigh))
+    assert "not at the foot" in take.notes["labels"]["toe"]["RTOE"]
+    # two claimants both at the foot: which one the lab meant stays unsaid
+    near = {"LFM2": trial.marker("LTOE") + [0.02, 0.0, 0.0]}
+    assert set(match_labels(_with_markers(trial, near)).ambiguous) == {"LTOE"}
+
+
+def test_the_metatarsal_heads_stand_in_for_a_missing_toe():
+    """No TOE, FM2 or MT2: the mid-point of the first and fifth metatarsal heads, else the fifth alone."""
+    trial = _trial(np.arange(200) / RATE, RATE)
+    ref = body_from_markers(trial)
+    across = np.array([0.0, 0.03, 0.0])  # the synthetic lab's +y is the left side's lateral
+    heads = {"LMT1": trial.marker("LTOE") - across, "LMT5": trial.marker("LTOE") + across,
+             "R_FM1": trial.marker("RTOE") + across, "R_FM5": trial.marker("RTOE") - across}
+    take = body_from_markers(_with_markers(trial, heads, drop=("LTOE", "RTOE")))
+    assert take.notes["labels"]["aliases"]["LTOE"] == "LMT1+LMT5"
+    assert take.notes["labels"]["toe"]["RTOE"].startswith("mid-point of R_FM1 and R_FM5")
+    assert np.abs(take.frames - ref.frames).max() < 1e-9  # the heads' mid-point is where the toe marker was
+    # tsalemink's AUC set: a lateral toe marker alone, near the fifth metatarsal head
+    lateral = {s + "LA_TOE": trial.marker(s + "TOE") + (across if s == "L" else -across) for s in "LR"}
+    match = match_labels(_with_markers(trial, lateral, drop=("LTOE", "RTOE")))
+    assert match.roles["LTOE"] == "LLA_TOE" and "fifth metatarsal head alone" in match.toe["LTOE"]
+
+
+def test_a_set_read_but_for_one_role_is_refused_naming_only_that_role(std, tmp_path, capsys):
+    """pyorerun's running set: lateral knee and ankle names read, its back-of-pelvis markers not (no PSIS name)."""
+    path, _ = std
+    other = tmp_path / "run.c3d"
+    names = {"KNE": "KneeLat", "ANK": "AnkleLat", "HEE": "Heel", "ASI": "ASIS", "PSI": "BackAsis"}
+    _relabelled(path, other, lambda lab: lab[0] + names[lab[1:]] if lab[1:] in names else lab)
+    assert main(["analyze", str(other), "--out", str(tmp_path / "z.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "no Plug-in Gait / Helen Hayes marker set: missing LPSI+RPSI or SACR (markers in the file:" in err

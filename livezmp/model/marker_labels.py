@@ -29,7 +29,10 @@ Where each name comes from:
   Gait's TOE sits; CAST's FM2), as OpenSim's Stanford walking trials write them (opensim-core
   ``OpenSim/Tests/shared/walking2.c3d``, with ``RLFC RMMAL RCAL``); ``RKneeLateral``/``RAnkleLateral`` with
   ``RHeel RToe RAsis RPsis`` (AnyBody's Qualisys gait and running examples, AMMR ``S3_Gait_Shod_1``,
-  ``SlowRun``; their medial ``RKneeMedial`` is the Helen Hayes name above).
+  ``SlowRun``; their medial ``RKneeMedial`` is the Helen Hayes name above). Lateral knee ``LLKNE`` with
+  ``LLMA`` (AnyBody's ``SpecialFeatures`` example, AMMR); ``LKneeLat``/``LAnkleLat`` with ``LHeel LASIS`` (the
+  pyorerun running example, ``Running_0002.c3d``). Not read: ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral
+  or medial epicondyle of the femur or of the humerus alike (ISB names them apart, ``FLE``/``HLE``).
 
 Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
 chooses): which one the lab meant cannot be told from the names. One case is told by position: two labels
@@ -39,6 +42,21 @@ across the body at least :data:`MIN_JOINT_WIDTH_M` apart, more across the body t
 two markers: the one further from the pelvis' midline is the lateral (a lateral malleolus or
 epicondyle lies outside its medial one), the other the medial (c3d.org's TYPE-3: ``LANK`` 90 mm medial of
 ``LLMA``). The summary's ``markers.labels.by_position`` says so. A label never seen in the take claims nothing.
+
+The toe, by position too: of two or more labels claiming a side's ``TOE`` (its ankle marker claimed once), the
+one lying within :data:`MAX_TOE_FROM_ANKLE_M` of the ankle marker in nearly every frame is the toe, the others
+are set aside (``markers.labels.toe`` names them and their distance). A toe marker sits on the foot; a name is
+only a name: OpenSim's ``jogging.c3d`` labels its femur cluster's middle markers ``RFM1-3``, and ``RFM2`` reads
+as CAST's second metatarsal head ``R_FM2``, 660 mm from the ankle. Position rather than "Plug-in Gait's name
+wins": a lab may keep ``RTOE`` for something else while naming the true toe otherwise, and the position is
+measured, not assumed.
+
+A side with no label claiming the toe (no ``TOE``, ``FM2``, ``MT2``) takes the metatarsal heads' stand-in (each at
+the foot as above; ``markers.labels.toe`` says which): the mid-point of the first and fifth heads (``MT1``/``FM1``
+and ``MT5``/``FM5``) when the file has both, the second head's neighbourhood that Plug-in Gait's toe marks; else
+the fifth head (or a "lateral toe" ``LA_TOE``, tsalemink's AUC set) alone. The fifth alone turns the foot's long
+axis outward (the toe marker 20-30 mm lateral of the second head's line): measured by replacing AnyBody's
+``RTOE``/``LTOE`` with their ``RMT5``/``LMT5`` in its three gait trials, docs/validation.md ("Toe markers").
 """
 
 from __future__ import annotations
@@ -60,13 +78,15 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "ASI": (("ASI", PIG), ("ASIS", HH), ("IAS", CAST)),
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
-    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB)),
+    "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB),
+            ("LKNE", LAB), ("KNEELAT", LAB)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
             ("KNEEMEDIAL", HH)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
-    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB)),
+    "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB),
+            ("ANKLELAT", LAB)),
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
             ("ANKLEMEDIAL", HH)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
@@ -80,6 +100,12 @@ UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "CLAV": (("CLAV", PIG), ("IJ", CAST)),
     "STRN": (("STRN", PIG), ("PX", CAST)),
 }
+# the forefoot markers that stand in for the toe marker when no label claims it (module docstring)
+FOREFOOT_TOE = "toe from the metatarsal heads"
+FOREFOOT: dict[str, tuple[tuple[str, str], ...]] = {
+    "MT1": (("MT1", LAB), ("FM1", CAST)),
+    "MT5": (("MT5", LAB), ("FM5", CAST), ("LATOE", LAB)),  # LATOE: "lateral toe" (tsalemink's AUC set)
+}
 BY_POSITION = "lateral / medial told by position"
 _MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
 # two markers of one knee or ankle lie a joint's width (plus a marker's 14 mm) apart across the body: the knee and
@@ -88,10 +114,15 @@ _MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
 MIN_JOINT_WIDTH_M = 0.03
 MAX_JOINT_WIDTH_M = 0.16  # the widest knee, 109 mm, plus the markers and room: further apart, not one joint's pair
 SAME_SIDE_SHARE = 0.95  # of the frames seeing both, those where the lateral one is the outer
+# a toe or metatarsal marker lies within a foot's length of its ankle marker: de Leva's foot is 258 mm long at
+# 1.74 m, the ankle marker 50-80 mm forward of its back; the shared trials' are 103-186 mm apart, a thigh cluster's
+# 570 mm or more (osim_jogging's RFM2)
+MAX_TOE_FROM_ANKLE_M = 0.25
 _SIDE_WORDS = (("LEFT", "L"), ("RIGHT", "R"), ("L", "L"), ("R", "R"))
 _SEPARATORS = re.compile(r"[._\-\s]+")
 _LOOKUP = {name: (role, conv) for role, names in SIDED.items() for name, conv in names}
 _LOOKUP_UNSIDED = {name: (role, conv) for role, names in UNSIDED.items() for name, conv in names}
+_LOOKUP_FOREFOOT = {name: (role, conv) for role, names in FOREFOOT.items() for name, conv in names}
 
 
 @dataclass(frozen=True)
@@ -104,10 +135,13 @@ class LabelMatch:
     conventions: tuple[str, ...]
     ambiguous: dict[str, tuple[str, ...]]
     by_position: dict[str, str] = field(default_factory=dict)  # role -> why its label was chosen by position
+    toe: dict[str, str] = field(default_factory=dict)  # TOE role -> why its marker was chosen (at the foot, forefoot)
+    midpoints: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role -> the labels it is the mean of
 
     def summary(self) -> dict:
         return {"conventions": list(self.conventions), "aliases": dict(sorted(self.aliases.items())),
-                **({"by_position": dict(sorted(self.by_position.items()))} if self.by_position else {})}
+                **({"by_position": dict(sorted(self.by_position.items()))} if self.by_position else {}),
+                **({"toe": dict(sorted(self.toe.items()))} if self.toe else {})}
 
     def check(self, source: str, roles=None) -> None:
         """InputError naming the first of ``roles`` (default: any) that two labels claim."""
@@ -125,18 +159,23 @@ def _claimed(labels: tuple[str, ...]) -> str:
 
 def role_of(label: str) -> tuple[str, str] | None:
     """The Plug-in Gait role (e.g. ``LKNE``) a file label names, and its convention; None if none."""
+    return _named(label, _LOOKUP, _LOOKUP_UNSIDED)
+
+
+def _named(label: str, lookup: dict, unsided: dict) -> tuple[str, str] | None:
+    """The role (side letter + ``lookup``'s role, or ``unsided``'s) ``label`` names, and its convention."""
     tokens = [t for t in _SEPARATORS.split(label.strip().upper()) if t]
     if not tokens:
         return None
     joined = "".join(tokens)
-    if joined in _LOOKUP_UNSIDED:
-        return _LOOKUP_UNSIDED[joined]
+    if joined in unsided:
+        return unsided[joined]
     candidates = [(side, joined[len(word):]) for word, side in _SIDE_WORDS if joined.startswith(word)]
     if len(tokens) > 1:
         candidates += [(side, "".join(tokens[:-1])) for word, side in _SIDE_WORDS if tokens[-1] == word]
     for side, part in candidates:
-        if part in _LOOKUP:
-            role, conv = _LOOKUP[part]
+        if part in lookup:
+            role, conv = lookup[part]
             return side + role, conv
     return None
 
@@ -175,11 +214,71 @@ def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> Label
             convention[lab] = found[1]
     by_position = _lateral_and_medial(trial, claims, pinned)
     convention.update({claims[role][0]: BY_POSITION for role in by_position})
+    toe = _toe_at_foot(trial, claims, pinned)
+    midpoints = {}
+    for side in "LR":
+        if side + "TOE" not in claims and side + "TOE" not in pinned:
+            chosen = _forefoot_toe(trial, labels, bare, claims, side)
+            if chosen:
+                name, why, parts = chosen
+                claims[side + "TOE"], convention[name], toe[side + "TOE"] = [name], FOREFOOT_TOE, why
+                if len(parts) > 1:
+                    midpoints[side + "TOE"] = parts
     ambiguous = {role: tuple(labs) for role, labs in claims.items() if len(labs) > 1}
     roles = {role: labs[0] for role, labs in claims.items() if len(labs) == 1}
     aliases = {role: lab for role, lab in roles.items() if lab != role}
     return LabelMatch(roles, aliases, tuple(dict.fromkeys(convention[lab] for _, lab in sorted(aliases.items()))),
-                      ambiguous, by_position)
+                      ambiguous, by_position, toe, midpoints)
+
+
+def _from_ankle(trial: C3dTrial, label: str, ankle: str) -> tuple[bool, float]:
+    """Whether ``label`` lies within :data:`MAX_TOE_FROM_ANKLE_M` of the marker ``ankle`` in nearly every frame
+    seeing both (:data:`SAME_SIDE_SHARE`), and its median distance (m; NaN: never seen together)."""
+    d = np.linalg.norm(trial.marker(label) - trial.marker(ankle), axis=1)
+    d = d[np.isfinite(d)]
+    if not d.size:
+        return False, float("nan")
+    return bool(np.mean(d <= MAX_TOE_FROM_ANKLE_M) >= SAME_SIDE_SHARE), float(np.median(d))
+
+
+def _toe_at_foot(trial: C3dTrial, claims: dict[str, list[str]], pinned: frozenset[str]) -> dict[str, str]:
+    """Split, in place in ``claims``, a side's TOE role that two or more labels claim when exactly one of them lies
+    at the foot (near its ankle marker, :func:`_from_ankle`): the others are set aside. Returns role -> why."""
+    out = {}
+    for side in "LR":
+        role, ankle = side + "TOE", claims.get(side + "ANK", [])
+        labs = claims.get(role, [])
+        if len(labs) < 2 or len(set(labs)) < len(labs) or len(ankle) != 1 or role in pinned:
+            continue
+        where = {lab: _from_ankle(trial, lab, ankle[0]) for lab in labs}
+        near = [lab for lab in labs if where[lab][0]]
+        if len(near) != 1:
+            continue
+        claims[role] = near
+        apart = "; ".join(f"{lab} set aside: {1000 * where[lab][1]:.0f} mm from {ankle[0]}, not at the foot"
+                          for lab in labs if lab != near[0])
+        out[role] = f"{near[0]}: at the foot, {1000 * where[near[0]][1]:.0f} mm from {ankle[0]}; {apart}"
+    return out
+
+
+def _forefoot_toe(trial: C3dTrial, labels: list[str], bare: dict[str, str], claims: dict[str, list[str]],
+                  side: str) -> tuple[str, str, tuple[str, ...]] | None:
+    """The toe marker's stand-in on ``side`` (module docstring): the name it goes by, why, and the labels it is
+    the mean of; None without one."""
+    ankle = claims.get(side + "ANK", [])
+    heads: dict[str, list[str]] = {}
+    for lab in labels:
+        found = _named(bare[lab], _LOOKUP_FOREFOOT, {})
+        if found and found[0][0] == side and (len(ankle) != 1 or _from_ankle(trial, lab, ankle[0])[0]):
+            heads.setdefault(found[0][1:], []).append(lab)
+    mt1, mt5 = heads.get("MT1", []), heads.get("MT5", [])
+    if len(mt1) == 1 and len(mt5) == 1:
+        return (f"{mt1[0]}+{mt5[0]}", f"mid-point of {mt1[0]} and {mt5[0]} (no toe marker: the first and fifth "
+                f"metatarsal heads)", (mt1[0], mt5[0]))
+    if len(mt5) == 1:
+        return (mt5[0], f"{mt5[0]} (no toe marker: the fifth metatarsal head alone, the foot's long axis turned "
+                f"outward by it)", (mt5[0],))
+    return None
 
 
 def _across(trial: C3dTrial, claims: dict[str, list[str]], side: str) -> np.ndarray | None:
@@ -229,6 +328,10 @@ def standard_trial(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> tup
     labels claim too, keep theirs; a never-seen label named like a role another label fills becomes ``label?``).
     ``pinned`` as for :func:`match_labels`."""
     match = match_labels(trial, pinned)
+    if match.midpoints:  # the toe's stand-in as a marker of its own: the mean of the metatarsal heads
+        means = [np.mean([trial.marker(lab) for lab in labs], axis=0) for labs in match.midpoints.values()]
+        trial = replace(trial, labels=trial.labels + [match.roles[r] for r in match.midpoints],
+                        points=np.concatenate([trial.points, np.stack(means, axis=1)], axis=1))
     by_label = {lab: role for role, lab in match.roles.items()}
     seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
     out = []

@@ -467,8 +467,9 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
         notes["optional_markers_not_used"] = sorted(match.roles.get(d, d) for d in dropped)
-    if match.aliases:
+    if match.aliases or match.toe:
         notes["labels"] = match.summary()
+    if match.conventions:
         notes["marker_set"] = notes["marker_set"].replace(
             "(standard labels)", f"(labels read as {', '.join(match.conventions)})")
     # the roles' labels as the file (or a live stream of the same set) writes them
