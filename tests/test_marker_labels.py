@@ -42,7 +42,8 @@ CONVENTIONS = {
     ("L_ASI", "LASI"), ("LASIS", "LASI"), ("Knee.Right", "RKNE"), ("LKNE", "LKNE"), ("C7", "C7"), ("LSC", "LCLA"),
     ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"), ("RKneeLateral", "RKNE"),
     ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"), ("LLKNE", "LKNE"),
-    ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"),
+    ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
+    ("L_ANKLE_MED", "LMED"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role

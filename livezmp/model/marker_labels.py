@@ -31,7 +31,8 @@ Where each name comes from:
   ``RHeel RToe RAsis RPsis`` (AnyBody's Qualisys gait and running examples, AMMR ``S3_Gait_Shod_1``,
   ``SlowRun``; their medial ``RKneeMedial`` is the Helen Hayes name above). Lateral knee ``LLKNE`` with
   ``LLMA`` (AnyBody's ``SpecialFeatures`` example, AMMR); ``LKneeLat``/``LAnkleLat`` with ``LHeel LASIS`` (the
-  pyorerun running example, ``Running_0002.c3d``). Not read: ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral
+  pyorerun running example, ``Running_0002.c3d``); ``R_KNEE_LAT R_KNEE_MED R_ANKLE_LAT R_ANKLE_MED`` (c3d.org's
+  sample 26, ``Standing_Hybrid_1``). Not read: ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral
   or medial epicondyle of the femur or of the humerus alike (ISB names them apart, ``FLE``/``HLE``).
 
 Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
@@ -54,9 +55,10 @@ measured, not assumed.
 A side with no label claiming the toe (no ``TOE``, ``FM2``, ``MT2``) takes the metatarsal heads' stand-in (each at
 the foot as above; ``markers.labels.toe`` says which): the mid-point of the first and fifth heads (``MT1``/``FM1``
 and ``MT5``/``FM5``) when the file has both, the second head's neighbourhood that Plug-in Gait's toe marks; else
-the fifth head (or a "lateral toe" ``LA_TOE``, tsalemink's AUC set) alone. The fifth alone turns the foot's long
-axis outward (the toe marker 20-30 mm lateral of the second head's line): measured by replacing AnyBody's
-``RTOE``/``LTOE`` with their ``RMT5``/``LMT5`` in its three gait trials, docs/validation.md ("Toe markers").
+the fifth head (or a "lateral toe" ``LA_TOE``, tsalemink's AUC set) alone. The heads' mid-point lies 30-34 mm
+from CAST's FM2 in AnyBody's 2014001_C1_01, its heel-to-toe line turned under 1 degree; the fifth alone turns
+the foot's long axis outward, by 25-27 degrees (88 mm from the toe marker) in AnyBody's GaitNormal_1, and the
+ZMP falls outside the support polygon more often: docs/validation.md ("Toe markers").
 """
 
 from __future__ import annotations
@@ -81,14 +83,14 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB),
             ("LKNE", LAB), ("KNEELAT", LAB)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
-            ("KNEEMEDIAL", HH)),
+            ("KNEEMEDIAL", HH), ("KNEEMED", LAB)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
     "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB),
             ("ANKLELAT", LAB)),
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
-            ("ANKLEMEDIAL", HH)),
+            ("ANKLEMEDIAL", HH), ("ANKLEMED", LAB)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST), ("MT2", LAB)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
