@@ -169,3 +169,21 @@ def test_a_stream_labelled_in_another_convention_gives_the_same_frames(c3d):
     src = MarkerStreamSource(FakeStream(labels, c3d.points[:260]), None)
     assert src.take.roles["LKNE"] == "L.Knee"
     np.testing.assert_array_equal(read_all(src), pig)
+
+
+def test_a_stream_without_toe_markers_reads_the_metatarsal_heads_mid_point(c3d):
+    """A set with the first and fifth metatarsal heads and no toe marker: the body calibrated on the stream reads
+    the toe as their mid-point, as a C3D trial does, and looks both up in every frame (before, the stream reported
+    a missing marker 'LMT1+LMT5' and the feet had no toe)."""
+    across = np.array([0.0, 0.03, 0.0])
+    toes = [c3d.labels.index(s + "TOE") for s in "LR"]
+    heads = np.concatenate([c3d.points[:260, toes] - across, c3d.points[:260, toes] + across], axis=1)
+    keep = [i for i in range(len(c3d.labels)) if i not in toes]
+    labels = [c3d.labels[i] for i in keep] + ["LMT1", "RMT1", "LMT5", "RMT5"]
+    points = np.concatenate([c3d.points[:260, keep], heads], axis=1)
+    pig = read_all(MarkerStreamSource(FakeStream(c3d.labels, c3d.points[:260]), None))
+    src = MarkerStreamSource(FakeStream(labels, points), None)
+    assert src.take.roles["LTOE"] == "LMT1+LMT5" and src.take.mean_of["RMT1+RMT5"] == ("RMT1", "RMT5")
+    frames = read_all(src)
+    assert frames.shape == pig.shape and np.isfinite(frames).all() and not src.errors.drain()
+    np.testing.assert_allclose(frames, pig, atol=1e-9)

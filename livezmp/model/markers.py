@@ -146,6 +146,8 @@ class MarkerTake:
     centres: dict = field(default_factory=dict)  # joint -> side -> (F, 3) m, internal frame
     roles: dict = field(default_factory=dict)  # marker role -> label, as found in the trial
     subject: C3dTrial | None = None  # the trial the body was calibrated on (its widths, height, labels)
+    # a label of ``roles`` that is the mean of several of the file's (the toe's metatarsal stand-in) -> those labels
+    mean_of: dict = field(default_factory=dict)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -473,7 +475,8 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         notes["marker_set"] = notes["marker_set"].replace(
             "(standard labels)", f"(labels read as {', '.join(match.conventions)})")
     # the roles' labels as the file (or a live stream of the same set) writes them
-    return MarkerTake(body, frames, keep.start, notes, centres, _as_written(roles, match), trial)
+    return MarkerTake(body, frames, keep.start, notes, centres, _as_written(roles, match), trial,
+                      {match.roles[r]: labs for r, labs in match.midpoints.items()})
 
 
 def _check_coordinates(raw: dict[str, np.ndarray], roles: dict[str, str | None], trial: C3dTrial) -> None:

@@ -75,6 +75,7 @@ class MarkerStreamSource:
         self._role_labels = [take.roles[r] for r in self.roles]
         self._labels: tuple[str, ...] | None = None
         self._index = np.zeros(len(self.roles), int)
+        self._means: tuple[np.ndarray, np.ndarray] | None = None  # rows that average a second label, its index
         n = len(self.roles)
         self._last = np.full((n, 3), np.nan)
         self._prev = np.full((n, 3), np.nan)
@@ -142,10 +143,15 @@ class MarkerStreamSource:
         where = {}
         for i, x in enumerate(stripped):
             where.setdefault(x, i)
-        missing = [x for x in self._role_labels if x not in where]
+        # a role the body reads as the mean of two labels (the toe's metatarsal stand-in) looks up both
+        parts = [self.take.mean_of.get(x, (x,)) for x in self._role_labels]
+        missing = [x for labs in parts for x in labs if x not in where]
         if missing:
             self.errors.report("marker_gap", f"{self.name}: the stream has no marker {', '.join(missing)}")
-        self._index = np.array([where.get(x, len(labels)) for x in self._role_labels], int)
+        self._index = np.array([where.get(labs[0], len(labels)) for labs in parts], int)
+        rows = [i for i, labs in enumerate(parts) if len(labs) == 2]
+        self._means = (np.array(rows, int), np.array([where.get(parts[i][1], len(labels)) for i in rows], int)) \
+            if rows else None
         self._labels = labels
 
     def _markers(self, f: MocapFrame) -> np.ndarray:
@@ -153,7 +159,11 @@ class MarkerStreamSource:
         if f.labels != self._labels:
             self._map_labels(f.labels)
         padded = np.vstack([f.markers, np.full((1, 3), np.nan)])
-        p = padded[self._index] @ self.rotation.T
+        p = padded[self._index]
+        if self._means is not None:
+            rows, second = self._means
+            p[rows] = (p[rows] + padded[second]) / 2
+        p = p @ self.rotation.T
         seen = np.isfinite(p).all(axis=1)
         age = f.t - self._t_last
         carry = ~seen & (age <= self.max_gap_s + 1e-9) & np.isfinite(self._last[:, 0])
