@@ -123,12 +123,9 @@ def trial_table(path: Path) -> list[dict]:
         print(row(f"  default but cutoff {hz:g} Hz", a.summary["cop_vs_zmp"]))
         a = analyse_lab_take(trial, LabOptions(estimator={"cutoff_hz": hz}, plate_cutoff_hz=6.0))
         print(row("  the same, plates at 6 Hz", a.summary["cop_vs_zmp"]))
-    fwd, left = walking_axes(r.com)
     c = final.complete
-    plate = p.force[c] / final.summary["mass"]["used_kg"] - [0.0, 0.0, G]
-    kin = com_accelerations(r.com, 1.0 / trial.rate)
-    p99 = [[float(np.percentile(np.abs(x @ ax if ax is not None else x[:, 2]), 99)) for ax in (fwd, left, None)]
-           for x in (plate, kin[c])]
+    kin, plate = _accelerations(trial, final)
+    p99 = [_axis_p99(x[c], r.com) for x in (plate, kin)]
     dist = np.percentile(np.linalg.norm(p.cop[c, :2] - r.com[c, :2], axis=1), 99)
     print(f"plausibility references: CoM acceleration p99 (fore-aft, lateral, vertical) m/s2: plates "
           f"{np.round(p99[0], 2).tolist()}, markers {np.round(p99[1], 2).tolist()}; CoP-CoM p99 {dist:.3f} m")
@@ -325,6 +322,12 @@ def _accelerations(trial, a) -> tuple[np.ndarray, np.ndarray]:
     """(F, 3) the CoM's acceleration from the kinematics and from the plates ((GRF - m g) / m), m/s2."""
     return (com_accelerations(a.result.com, 1.0 / trial.rate),
             a.plates.force / a.summary["mass"]["used_kg"] - [0.0, 0.0, G])
+
+
+def _axis_p99(acc: np.ndarray, com: np.ndarray) -> list[float]:
+    """p99 of |acc| (N, 3) m/s2 along the walk of ``com`` (F, 3) (fore-aft, lateral; walking_axes) and vertical."""
+    fwd, left = walking_axes(com)
+    return [float(np.percentile(np.abs(acc @ ax), 99)) for ax in (fwd, left, np.array([0.0, 0.0, 1.0]))]
 
 
 def _linear_parts(trial, a) -> list[np.ndarray]:
@@ -605,13 +608,10 @@ def plausibility_check(done: dict[str, tuple]) -> None:
     print(f"\nplausibility: CoM acceleration p99 m/s2 (fore-aft, lateral, vertical), references {WALK_COM_ACC_P99}")
     print(f"{'trial':34s} {'markers, whole take':>22s} {'plates, complete':>22s}  verdict")
     marks, plates = [], []
-    for name, (_, a) in done.items():
+    for name, (trial, a) in done.items():
         r = a.result
         v = plausibility(r.com, r.zmp, r.has_zmp, 1.0 / a.rate)
-        fwd, left = walking_axes(r.com[[0, -1]])
-        acc = a.plates.force[a.complete] / a.summary["mass"]["used_kg"] - [0.0, 0.0, G]
-        p99 = [float(np.percentile(np.abs(acc @ ax), 99)) for ax in (fwd, left, np.array([0.0, 0.0, 1.0]))] \
-            if a.complete.sum() >= 20 else [np.nan] * 3
+        p99 = _axis_p99(_accelerations(trial, a)[1][a.complete], r.com) if a.complete.sum() >= 20 else [np.nan] * 3
         marks.append(v["com_acc_p99_mps2"])
         plates.append(p99)
         cells = ["/".join(f"{x:.2f}" for x in row) for row in (v["com_acc_p99_mps2"], p99)]
