@@ -63,6 +63,8 @@ def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title:
     clamped = body.to_input_frame(np.where(result.judged[:, None], result.clamped, np.nan))
     com = body.to_input_frame(result.com)
     plates = None if cop is None else body.to_input_frame(cop)
+    # a foot off the plates makes their CoP not the body's: those frames drawn apart, not as the truth
+    ok = np.ones(len(t), dtype=bool) if complete is None else np.asarray(complete, dtype=bool)
     labels = result.labels
     up = "xyz".index(body.up_axis)
     g = [k for k in range(3) if k != up]
@@ -75,7 +77,9 @@ def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title:
         ax.plot(t, clamped[:, k], lw=1, ls="--", label="ZMP clamped to support")
         ax.plot(t, com[:, k], lw=0.8, color="gray", label="CoM")
         if plates is not None:
-            ax.plot(t, plates[:, k], lw=1, color="black", label="plate CoP")
+            ax.plot(t, np.where(ok, plates[:, k], np.nan), lw=1, color="black", label="plate CoP (complete frames)")
+            ax.plot(t, np.where(ok, np.nan, plates[:, k]), lw=0.8, ls=":", color="gray",
+                    label="plate CoP, a loaded foot off the plates")
         out = result.judged & ~result.inside
         ax.scatter(t[out], zmp[out, k], s=4, color="red", label="outside support", zorder=3)
         ax.set_ylabel(f"{names[k]} (m)")
@@ -88,7 +92,6 @@ def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title:
     ax.axhline(0, color="black", lw=0.6)
     if plates is not None:
         err = 1000 * np.linalg.norm(zmp[:, g] - plates[:, g], axis=1)
-        ok = complete if complete is not None else np.ones(len(t), dtype=bool)
         ax.plot(t, np.where(ok, err, np.nan), lw=1, color="black", label="|ZMP - CoP| (complete frames)")
     ax.set_ylabel("mm")
     ax.set_xlabel("time (s)")
@@ -108,8 +111,9 @@ def plot_analysis(body: BodyModel, result: BatchResult, path: str | Path, title:
     top.plot(np.where(shown, com[:, g[0]], np.nan), np.where(shown, com[:, g[1]], np.nan), lw=0.8, color="gray",
              label="CoM projection")
     if plates is not None:
-        top.plot(np.where(shown, plates[:, g[0]], np.nan), np.where(shown, plates[:, g[1]], np.nan), lw=0.8,
-                 color="black", label="plate CoP")
+        on = shown & ok
+        top.plot(np.where(on, plates[:, g[0]], np.nan), np.where(on, plates[:, g[1]], np.nan), lw=0.8,
+                 color="black", label="plate CoP (complete frames)")
     top.set_aspect("equal", adjustable="datalim")
     top.set_xlabel(f"{names[g[0]]} (m)")
     top.set_ylabel(f"{names[g[1]]} (m)")
