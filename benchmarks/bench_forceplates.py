@@ -44,7 +44,8 @@ import numpy as np
 import pinocchio as pin
 from machine_load import load_averages
 
-from livezmp.balance.plates import G, lowpass
+from livezmp.balance.plates import G, lowpass, plate_frames
+from livezmp.balance.support import support_and_clamp
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
@@ -83,6 +84,7 @@ STEPS = [
     ("7 + follows < {:g} Hz, sways {:.2f}/{:.2f}".format(TRUNK_FOLLOW_HZ, *TRUNK_STEP_GAIN), LabOptions(**UNBANDED)),
     ("8 + lateral band (half the cutoff) [default]", LabOptions()),
 ]
+CONTACT_LOAD = 0.05  # of the weight: a foot carrying more stands on the floor
 UPPER = ("thorax", "headarms", "arms", "head", "upperarm", "forearm", "hand")
 
 
@@ -601,6 +603,59 @@ def foot_frame(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} " + " | ".join(cells))
 
 
+def _feet_loaded(trial, a) -> dict[str, np.ndarray]:
+    """{side: (F,) bool}: the feet the plates load, from their raw forces (no low-pass: it spreads a heel strike
+    over the frames before it) at the applied plate delay, each plate's load given to the foot whose sole centre
+    lies nearest its own CoP; a foot carrying more than CONTACT_LOAD of the weight is loaded."""
+    shift = a.summary["time_alignment"]["plate_delay_applied_ms"] / 1000
+    raw = plate_frames(trial.plates, trial.analog_rate, trial.rate, np.rint(a.times * trial.rate).astype(int),
+                       a.take.body.world_from_input, None, shift_s=shift)
+    centres = {s: sole[:, :, :2].mean(axis=1) for s, sole in a.result.soles.items()}
+    load = {s: np.zeros(len(a.times)) for s in centres}
+    for cop, fz in zip(raw.plate_cop, raw.plate_fz, strict=True):
+        seen = np.isfinite(cop).all(axis=1) & (fz > 0)
+        dist = {s: np.linalg.norm(c - np.nan_to_num(cop[:, :2]), axis=1) for s, c in centres.items()}
+        nearest_left = dist["left"] <= dist["right"]
+        load["left"] += np.where(seen & nearest_left, fz, 0.0)
+        load["right"] += np.where(seen & ~nearest_left, fz, 0.0)
+    weight = a.summary["mass"]["used_kg"] * G
+    return {s: x > CONTACT_LOAD * weight for s, x in load.items()}
+
+
+def support_check(done: dict[str, tuple]) -> None:
+    """livezmp's support against the plates over the complete frames: its feet in contact (from the markers) against
+    the feet the raw plates load (:func:`_feet_loaded`): frames agreeing, frames missing a loaded foot, frames with a
+    foot the plates do not load (a toe touching at push-off bounds the support too); and the plates' CoP inside
+    livezmp's own support polygon, beside the ZMP (inside_fraction's test) on the same frames."""
+    print(f"\nsupport against the plates (complete frames; a foot loaded above {100 * CONTACT_LOAD:g} % of the "
+          "weight): frames, feet agree %, missed, extra | plate CoP inside livezmp's support % | ZMP inside %")
+    totals = np.zeros(4)
+    inside = []
+    for name, (trial, a) in done.items():
+        r = a.result
+        rows = np.flatnonzero(a.complete & r.judged & np.isfinite(a.plates.cop).all(axis=1))
+        if not len(rows):
+            continue
+        loaded = _feet_loaded(trial, a)
+        labels = r.labels[rows]
+        ours = {"left": np.isin(labels, ("left", "double")), "right": np.isin(labels, ("right", "double"))}
+        missed = np.zeros(len(rows), dtype=bool)
+        extra = np.zeros(len(rows), dtype=bool)
+        for s in ours:
+            missed |= loaded[s][rows] & ~ours[s]
+            extra |= ours[s] & ~loaded[s][rows]
+        cop_in = np.mean([support_and_clamp(r.soles["left"][i][:, :2], r.soles["right"][i][:, :2], r.labels[i],
+                                            a.plates.cop[i, :2])[1].margin >= 0 for i in rows])
+        zmp_in = float(np.mean(r.inside[rows]))
+        totals += (len(rows), np.sum(~missed & ~extra), missed.sum(), extra.sum())
+        inside.append((cop_in, zmp_in))
+        print(f"{name[:34]:34s} {len(rows):5d} {100 * np.mean(~missed & ~extra):6.1f} {missed.sum():4d} "
+              f"{extra.sum():4d} | {100 * cop_in:6.1f} | {100 * zmp_in:6.1f}")
+    med = np.median(inside, axis=0)
+    print(f"{'all':34s} {int(totals[0]):5d} {100 * totals[1] / totals[0]:6.1f} {int(totals[2]):4d} {int(totals[3]):4d}"
+          f" | {100 * med[0]:6.1f} | {100 * med[1]:6.1f}  (inside: median over trials)")
+
+
 def plausibility_check(done: dict[str, tuple]) -> None:
     """The plausibility verdict's inputs per trial: the markers' CoM acceleration p99 over the whole take (what a
     take is judged by), the plates' over the complete frames (both along the take's net travel, as the verdict),
@@ -918,6 +973,7 @@ def main() -> None:
     swing_at_step_frequency(done)
     foot_frame(done)
     plate_check(done)
+    support_check(done)
     plausibility_check(done)
     force_line(done)
     if args.more:
