@@ -74,7 +74,7 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", help="URDF of the robot (for a joint-trajectory CSV)")
     p.add_argument("--robot-config", help="robot config TOML (default: beside the URDF, or built in)")
     p.add_argument("--mass", type=float, help="total body mass, kg (default: BVH 70; C3D the plates', else the file's)")
-    p.add_argument("--units", choices=["m", "cm", "mm", "in"], help="BVH length unit (default: detected)")
+    p.add_argument("--units", choices=["m", "cm", "mm", "in", "cmu"], help="BVH length unit (default: detected)")
     p.add_argument("--up", choices=["y", "z"], help="BVH up axis (default: detected)")
     p.add_argument("--mapping", help="TOML file mapping unknown joint names to segments")
     p.add_argument("--sole-width", type=float, help="sole width for a BVH skeleton, m (default 5.5%% of stature)")
@@ -285,7 +285,7 @@ def add_device_options(p: argparse.ArgumentParser) -> None:
 
 def _gait_input_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", choices=("y", "z"), default="y", help="BVH up axis (default y; ground = the other two)")
-    p.add_argument("--units", choices=("m", "cm", "mm", "in"), help="BVH length unit (default: detect)")
+    p.add_argument("--units", choices=("m", "cm", "mm", "in", "cmu"), help="BVH length unit (default: detect)")
     p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
     p.add_argument("--markers", help="C3D marker map (TOML), for C3D walks whose labels need one (as for analyze)")
 

@@ -94,7 +94,7 @@ def test_bvh_model_mass_channels_and_units(bandai_walk):
     assert np.allclose(body.channel_scale[~body.angle_mask], 0.01)
 
 
-@pytest.mark.parametrize("scale,unit", [(1.0, "cm"), (0.01, "m"), (1 / 2.54, "in"), (10.0, "mm")])
+@pytest.mark.parametrize("scale,unit", [(1.0, "cm"), (0.01, "m"), (1 / 2.54, "in"), (10.0, "mm"), (0.45 / 2.54, "cmu")])
 def test_units_detected_from_skeleton_height(scale, unit):
     motion = parse_bvh(make_bvh(scale), "synthetic.bvh")
     body = body_from_bvh(motion)

@@ -21,9 +21,10 @@ import numpy as np
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, world_from_up_axis
-from livezmp.model.bvh import BvhMotion, parse_bvh, parse_hierarchy
+from livezmp.model.bvh import BvhMotion, format_hierarchy, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
+from livezmp.model.euler_orders import clear_of_gimbal_lock
 from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
 from livezmp.model.segments import SegmentTag
@@ -67,6 +68,16 @@ def read_skeleton(path: str | Path) -> Skeleton:
         return Skeleton(parse_bvh(text, str(p)), hierarchy, True)
     rest = [j.offset["XYZ".index(c[0])] if c.endswith("position") else 0.0 for j in joints for c in j.channels]
     return Skeleton(BvhMotion(joints, 1.0 / 30.0, np.array([rest]), str(p)), hierarchy, False)
+
+
+def clear_skeleton(skeleton: Skeleton) -> Skeleton:
+    """``skeleton`` with its joints near gimbal lock re-expressed over its frames
+    (:func:`livezmp.model.euler_orders.clear_of_gimbal_lock`) and its hierarchy text written to match; itself when
+    none is. For a file replayed whole: a stream's frames come in the file's own orders."""
+    motion = clear_of_gimbal_lock(skeleton.motion)
+    if motion is skeleton.motion:
+        return skeleton
+    return Skeleton(motion, format_hierarchy(motion.joints) + "\n", skeleton.has_motion)
 
 
 def skeleton_body(skeleton: Skeleton, opts: BvhBodyOptions | None = None) -> tuple[BodyModel, BodySpec]:

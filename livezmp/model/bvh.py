@@ -352,7 +352,7 @@ def stream_bvh(path: str | Path, rows: int = MOTION_BLOCK_ROWS) -> tuple[BvhHead
 
 
 def _fmt(v: np.ndarray) -> str:
-    return " ".join(f"{x:.6f}" for x in v)
+    return " ".join(repr(float(x)) for x in v)  # exact: a rebuilt hierarchy is the file's to the last digit
 
 
 def format_hierarchy(joints: list[BvhJoint]) -> str:
@@ -384,16 +384,21 @@ def write_bvh(motion: BvhMotion, path: str | Path) -> None:
         np.savetxt(f, motion.frames, fmt="%.6f")
 
 
-UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+# "cmu": the CMU Graphics Lab motion capture database's unit, kept by its BVH conversions: its ASF files declare
+# `:units length 0.45`, lengths in 1/0.45 inch (0.0564 m; mocap.cs.cmu.edu, the Acclaim ASF/AMC format)
+UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 
 
 def detect_length_unit(stature: float, source: str = "") -> str:
-    """Guess the file's length unit ('m', 'cm', 'mm', 'in') from a human's estimated
-    stature in file units (0.8–2.5 m for people). Sizes in between default to centimetres,
-    the most common BVH unit; pass an explicit unit to override."""
+    """Guess the file's length unit ('m', 'cm', 'mm', 'in', 'cmu') from a human's estimated stature in file units:
+    the unit that makes it 1.1-2.5 m (0.4-3 m in metres). The ranges do not overlap: 20-45 CMU units are 1.13-2.54 m,
+    45-80 inches 1.14-2.03 m (a child under 1.14 m measured in inches reads as CMU units: give --units); pass an
+    explicit unit to override."""
     if 0.4 <= stature <= 3.0:
         return "m"
-    if 20.0 <= stature < 80.0:
+    if 20.0 <= stature < 45.0:
+        return "cmu"
+    if 45.0 <= stature < 80.0:
         return "in"
     if 80.0 <= stature <= 300.0:
         return "cm"

@@ -3,7 +3,7 @@ robot joint-trajectory CSV with its URDF."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +15,7 @@ from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.euler_orders import gimbal_orders, reexpressed, restore
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv, write_joint_csv
@@ -29,7 +30,8 @@ class LoadedMotion:
     times: np.ndarray
     frames: np.ndarray
     source: str
-    bvh: BvhMotion | None = None
+    bvh: BvhMotion | None = None  # as the file has it; ``frames`` re-express the joints of ``bvh_orders``
+    bvh_orders: dict[int, str] = field(default_factory=dict)  # joints near gimbal lock (livezmp.model.euler_orders)
     trajectory: JointTrajectory | None = None
     c3d: C3dTrial | None = None
 
@@ -50,9 +52,11 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         if robot is not None:
             raise InputError(f"{p}: --robot is for a joint-trajectory CSV; a BVH carries its own skeleton")
         motion = read_bvh(p)
-        body = body_from_bvh(motion, bvh_options)
+        orders = gimbal_orders(motion)
+        clear = reexpressed(motion, orders)
+        body = body_from_bvh(clear, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time
-        return LoadedMotion(body, times, motion.frames, str(p), bvh=motion)
+        return LoadedMotion(body, times, clear.frames, str(p), bvh=motion, bvh_orders=orders)
     if suffix == ".c3d":
         trial = read_c3d(p)
         take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),
@@ -86,7 +90,7 @@ def write_motion(loaded: LoadedMotion, frames: np.ndarray, path: str | Path) -> 
     """Write ``frames`` (F, nq, the body's raw channels) in the format ``loaded`` came from: a BVH with
     its skeleton, or a joint-trajectory CSV with its joint names (base as x, y, z, roll, pitch, yaw)."""
     if loaded.bvh is not None:
-        write_bvh(replace(loaded.bvh, frames=frames), path)
+        write_bvh(replace(loaded.bvh, frames=restore(loaded.bvh, loaded.bvh_orders, frames)), path)
         return
     traj = loaded.trajectory
     if traj is None:

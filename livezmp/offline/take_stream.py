@@ -30,6 +30,7 @@ from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, stream_bvh
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
+from livezmp.model.euler_orders import reexpress, reordered_joints, scan_orders
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.trajectory_csv import joint_csv_blocks, scan_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -64,8 +65,11 @@ class TakeStream:
 
 def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     """A BVH file as a :class:`TakeStream`: the header and the first seconds are read now (the body),
-    the frames when ``pieces`` is iterated. Bad rows raise :class:`InputError` when they are reached."""
-    header, blocks = stream_bvh(check_input_file(path, "motion file"))
+    the frames when ``pieces`` is iterated. Bad rows raise :class:`InputError` when they are reached. Joints near
+    gimbal lock are re-expressed as :func:`livezmp.model.euler_orders.clear_of_gimbal_lock` does (the file is
+    scanned for them first)."""
+    path = check_input_file(path, "motion file")
+    header, blocks = stream_bvh(path)
     calibration = max(1, round(CALIBRATION_S / header.frame_time))
     first, count = [], 0
     for block in blocks:
@@ -74,13 +78,19 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
         if count >= calibration:
             break
     blocks.close()
-    body = body_from_bvh(BvhMotion(header.joints, header.frame_time, np.concatenate(first), header.source), options)
+    orders = scan_orders(header.joints, lambda: stream_bvh(path)[1])
+    start = reexpress(header.joints, np.concatenate(first), orders)
+    body = body_from_bvh(BvhMotion(reordered_joints(header.joints, orders), header.frame_time, start, header.source),
+                         options)
     ends = np.array([0, header.n_frames - 1]) * header.frame_time  # as load_motion's times
     fps = float((header.n_frames - 1) / (ends[1] - ends[0])) if header.n_frames > 1 else 0.0
 
     def pieces(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        start = 0
+        start, previous = 0, None
         for block in stream_bvh(path, rows=chunk)[1]:
+            if orders:
+                block = reexpress(header.joints, block, orders, previous)
+                previous = block[-1]
             yield np.arange(start, start + len(block)) * header.frame_time, block
             start += len(block)
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
-from livezmp.model.body_spec import BodySpec, marker_body, read_skeleton, robot_body, skeleton_body
+from livezmp.model.body_spec import BodySpec, clear_skeleton, marker_body, read_skeleton, robot_body, skeleton_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
 from livezmp.model.markers import MarkerBodyOptions
@@ -72,6 +72,7 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         sk = read_skeleton(path)
         if not sk.has_motion:
             raise InputError(f"{path}: a hierarchy without frames; nothing to replay")
+        sk = clear_skeleton(sk)
         body, spec = skeleton_body(sk, o.bvh)
         times = np.arange(len(sk.motion.frames)) * sk.motion.frame_time
         return FileReplaySource(str(path), body, spec, times, sk.motion.frames, o.speed, o.loop)
