@@ -31,6 +31,8 @@ CONVENTIONS = {
     # AnyBody's Qualisys gait examples (AMMR S3_Gait_Shod_1, SlowRun)
     "AnyBody / Qualisys": lambda s, m: s + {"ASI": "Asis", "PSI": "Psis", "KNE": "KneeLateral", "ANK": "AnkleLateral",
                                             "HEE": "Heel", "TOE": "Toe"}.get(m, m),
+    # Griffith University's Vicon Nexus set (RealTimeBiomechanics/rtosim data/ViconNexus/walking_1.c3d)
+    "Griffith / rtosim": lambda s, m: s + {"KNE": "FCL", "ANK": "MALL", "HEE": "CAL"}.get(m, m),
 }
 
 
@@ -43,7 +45,7 @@ CONVENTIONS = {
     ("R_SC", "RCLA"), ("R.Knee.Medial", "RKNM"), ("L.Ankle.Medial", "LMED"), ("RKneeLateral", "RKNE"),
     ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"), ("LLKNE", "LKNE"),
     ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
-    ("L_ANKLE_MED", "LMED"),
+    ("L_ANKLE_MED", "LMED"), ("RFCL", "RKNE"), ("LFCM", "LKNM"), ("RMALL", "RANK"), ("LMALM", "LMED"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role

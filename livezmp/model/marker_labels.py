@@ -32,8 +32,12 @@ Where each name comes from:
   ``SlowRun``; their medial ``RKneeMedial`` is the Helen Hayes name above). Lateral knee ``LLKNE`` with
   ``LLMA`` (AnyBody's ``SpecialFeatures`` example, AMMR); ``LKneeLat``/``LAnkleLat`` with ``LHeel LASIS`` (the
   pyorerun running example, ``Running_0002.c3d``); ``R_KNEE_LAT R_KNEE_MED R_ANKLE_LAT R_ANKLE_MED`` (c3d.org's
-  sample 26, ``Standing_Hybrid_1``). Not read: ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral
-  or medial epicondyle of the femur or of the humerus alike (ISB names them apart, ``FLE``/``HLE``).
+  sample 26, ``Standing_Hybrid_1``). Femoral condyle and malleolus with the side behind the landmark,
+  ``RFCL``/``RFCM`` and ``RMALL``/``RMALM`` lateral / medial, with ``RCAL RMT1 RMT5 RPSI`` (Griffith University's
+  Vicon Nexus set, as RealTimeBiomechanics/rtosim's ``data/ViconNexus/walking_1.c3d`` and its subject file
+  ``S01.vsk`` write them: ``RFCL`` on its ``rknee`` segment, ``RMALL`` on ``rankle``). Not read:
+  ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral or medial epicondyle of the femur or of the humerus alike
+  (ISB names them apart, ``FLE``/``HLE``).
 
 Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
 chooses): which one the lab meant cannot be told from the names. One case is told by position: two labels
@@ -81,16 +85,16 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
     "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB),
-            ("LKNE", LAB), ("KNEELAT", LAB)),
+            ("LKNE", LAB), ("KNEELAT", LAB), ("FCL", LAB)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
-            ("KNEEMEDIAL", HH), ("KNEEMED", LAB)),
+            ("KNEEMEDIAL", HH), ("KNEEMED", LAB), ("FCM", LAB)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
     "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB),
-            ("ANKLELAT", LAB)),
+            ("ANKLELAT", LAB), ("MALL", LAB)),
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
-            ("ANKLEMEDIAL", HH), ("ANKLEMED", LAB)),
+            ("ANKLEMEDIAL", HH), ("ANKLEMED", LAB), ("MALM", LAB)),
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST), ("MT2", LAB)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
