@@ -215,7 +215,10 @@ class Lab:
     ``plate_turn`` deg the plates turned in the floor; ``scale`` (ANALOG:SCALE, OFFSET, GEN_SCALE) the channels
     are stored with; ``integer``: POINT:SCALE (> 0, POINT:UNITS per count) of an integer file, None: floating
     point (POINT:SCALE -1); ``prefix`` of the labels; ``mass``: whether the file gives the subject's mass and
-    height; ``zero`` FORCE_PLATFORM:ZERO (3D frames, 1-based; 0 in the second: no baseline range)."""
+    height; ``zero`` FORCE_PLATFORM:ZERO (3D frames, 1-based; 0 in the second: no baseline range);
+    ``corner_origin``: the transducer origin at the plate's -x -y corner of its top surface and ORIGIN's x, y
+    written from the centre to it, the spec's the other way round (an instrumented treadmill's belt as
+    RealTimeBiomechanics/rtosim's ``walking_1.c3d`` writes it)."""
 
     rot: tuple = IDENTITY
     origin: tuple = (0.0, 0.0, 0.0)
@@ -235,6 +238,7 @@ class Lab:
     height_m: float = 1.75  # PROCESSING:Height, written with the mass
     subject: tuple = ()  # (name, mm) more PROCESSING measurements, written with the mass (LElbowWidth ...)
     zero: tuple = (1, 0)
+    corner_origin: bool = False
 
 
 def _plate_axes(lab: Lab) -> np.ndarray:
@@ -248,6 +252,8 @@ def _plate_origin(lab: Lab) -> np.ndarray:
     """(3,) m: FORCE_PLATFORM:ORIGIN as meant (transducer origin to surface centre, plate axes)."""
     if lab.plate_type == 3:
         return np.array([*KISTLER_AB, -0.045])
+    if lab.corner_origin:
+        return np.array([0.25, 0.15, 0.0])
     return np.array([0.002, -0.001, -0.04]) if lab.spec_plates else np.zeros(3)
 
 
@@ -295,6 +301,7 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
                          + lab.origin for sx, sy in quadrants] for x, y in plates.values()])
     c3d.add_parameter("FORCE_PLATFORM", "CORNERS", per_m * corners.transpose(2, 1, 0))
     sign = [1.0, 1.0, lab.origin_sign] if lab.plate_type == 3 else lab.origin_sign  # Kistler's a, b: distances
+    sign = np.multiply(sign, [-1.0, -1.0, 1.0] if lab.corner_origin else 1.0)
     origin = np.tile(sign * _plate_origin(lab) * per_m, (len(plates), 1))
     c3d.add_parameter("FORCE_PLATFORM", "ORIGIN", origin.T)
     _add_int(c3d, "FORCE_PLATFORM", "CHANNEL", np.arange(1, n * len(plates) + 1).reshape(len(plates), n).T)

@@ -1,11 +1,11 @@
-"""The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up, an x-up and a
-z-down lab, walking along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates
-50-240 Hz with analog rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant
-order, ORIGIN below the surface) and with ORIGIN's z written positive, TYPE-4 (CAL_MATRIX), TYPE-3 (Kistler's eight
-channels); ANALOG SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in
-the floor; labels without a subject prefix and no mass in the file. Each must give the true CoP from its plates and
-the ZMP on it to a millimetre, the up axis and units it was written in, and the reference's summary figures. What
-cannot be read is refused in one line."""
+"""The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up, an x-up and a z-down
+lab, walking along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz
+with analog rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order,
+ORIGIN below the surface) and with ORIGIN's z written positive or its x, y from the centre to a corner, TYPE-4
+(CAL_MATRIX), TYPE-3 (Kistler's eight channels); ANALOG SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0);
+plates turned 90 and 180 degrees in the floor; labels without a subject prefix and no mass in the file. Each must
+give the true CoP from its plates and the ZMP on it to a millimetre, the up axis and units it was written in, and the
+reference's summary figures. What cannot be read is refused in one line."""
 
 from __future__ import annotations
 
@@ -54,6 +54,8 @@ VARIANTS = {
     "240 Hz x10": Lab(rate=240, analog=2400),
     "type 2 spec": Lab(**SPEC),
     "type 2 origin z>0": Lab(origin_sign=-1.0, **SPEC),
+    # a treadmill belt measuring about a corner, ORIGIN written from the centre to it (rtosim's walking_1.c3d)
+    "type 2 corner origin, written from the centre": Lab(corner_origin=True, **SPEC),
     "type 4, SCALE OFFSET GEN_SCALE": Lab(plate_type=4, scale=(0.25, 1500, 2.0), **SPEC),
     "integer mm": Lab(integer=0.06, scale=(1.0, 2048, 1.0)),
     "integer cm, y-up, type 3": Lab(integer=0.006, units="cm", rot=Y_UP, plate_type=3, **SPEC),
@@ -116,6 +118,8 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     cop_ref = (cop_lab - lab.origin) @ np.asarray(lab.rot)
     assert np.abs(cop_ref[:, :2] - true_cop[k]).max() < 2e-4
     assert np.abs(cop_ref[:, 2]).max() < 1e-6
+    # ORIGIN read against the spec only where the spec's reading puts the CoP off the plate (the corner origin)
+    assert sorted(a.summary["plates"].get("read", {})) == ([1, 2] if lab.corner_origin else [])
     cv, rv = a.summary["cop_vs_zmp"], ref.summary["cop_vs_zmp"]
     assert cv["max_mm"] < 1.0 and cv["rms_mm"] < 0.5
     assert cv["frames"] == pytest.approx(rv["frames"] * lab.rate / 100, rel=0.05)

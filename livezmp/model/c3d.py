@@ -46,13 +46,14 @@ class PlateRecord:
 
     ``force`` (S, 3) N on the subject; ``moment`` (S, 3) N·m about ``centre`` (3,) m, the centre of the
     top surface; ``corners`` (4, 3) m; ``zero`` the analog samples [start, stop) the file names unloaded
-    (FORCE_PLATFORM:ZERO), or None."""
+    (FORCE_PLATFORM:ZERO), or None; ``reading`` how its parameters were read where not as the spec says, else ''."""
 
     force: np.ndarray
     moment: np.ndarray
     centre: np.ndarray
     corners: np.ndarray
     zero: tuple[int, int] | None = None
+    reading: str = ""
 
 
 @dataclass
@@ -215,6 +216,57 @@ def _kistler_moment(p: dict) -> np.ndarray:
     return -moment + 2.0 * np.cross(np.asarray(p["force"], dtype=float).T, lever).T
 
 
+# the ORIGIN read the other way round must put the CoP on the plate in this share of its loaded samples, where the
+# spec's reading puts it there in under half of them; a loaded sample carries this much across the plate (N); "on"
+# spares a tenth of the plate's half-sizes (a foot at the edge, noise at light loads)
+ON_PLATE_SHARE = 0.95
+LOADED_N = 100.0
+ON_PLATE_SPARE = 1.1
+
+
+def _on_plate_share(p: dict, moment: np.ndarray) -> float:
+    """The share of ``p``'s loaded samples (file units) whose CoP, from ``moment`` (3, S) about the surface centre,
+    lies on the plate's top surface (its outline, :data:`ON_PLATE_SPARE` times its half-sizes)."""
+    c = np.asarray(p["corners"], dtype=float)
+    ex, ey = c[:, 0] - c[:, 1], c[:, 0] - c[:, 3]
+    n = np.cross(ex, ey) / np.linalg.norm(np.cross(ex, ey))
+    force = np.asarray(p["force"], dtype=float)
+    fn = n @ force
+    loaded = np.abs(fn) > LOADED_N * _NEWTONS.get(str(p["unit_force"]).strip().lower(), 1.0)
+    if not loaded.any():
+        return 1.0
+    r = np.cross(n, moment[:, loaded].T) / fn[loaded, None]  # the CoP from the centre: M = r x F + t n, r . n = 0
+    half = [np.linalg.norm(e) / 2 for e in (ex, ey)]
+    return float(np.mean(np.all([np.abs(r @ e) / np.linalg.norm(e) <= ON_PLATE_SPARE * h for e, h in zip((ex, ey), half,
+                                                                                              strict=True)], axis=0)))
+
+
+def _origin_moment(p: dict) -> tuple[np.ndarray, str]:
+    """(3, S) the moment of ezc3d's platform ``p`` about its surface centre, and how ORIGIN was read ('' as the
+    spec says). The spec's ORIGIN runs from the measurement origin to the surface centre, and ezc3d moves the
+    moment by F x ORIGIN. A plate measuring about a corner of its top (an instrumented treadmill's belt: Griffith
+    University's Vicon Nexus file in RealTimeBiomechanics/rtosim, ``data/ViconNexus/walking_1.c3d``, ORIGIN
+    (-241.3, -819, 0) mm on a 483 x 1638 mm belt) may write it from the centre to that corner instead: the CoP
+    then lies a whole plate off, outside the plate's own surface, where no CoP can be. ORIGIN's x, y are read
+    the other way round when the spec's reading puts the CoP on the plate in under half of its loaded samples and
+    the other reading in :data:`ON_PLATE_SHARE` of them; with a centred measurement origin (AMTI's few mm) both
+    readings put it there and the spec's stands."""
+    moment = np.asarray(p["moment"], dtype=float)
+    ox, oy = np.asarray(p["origin"], dtype=float).ravel()[:2]
+    c = np.asarray(p["corners"], dtype=float)
+    ex, ey = c[:, 0] - c[:, 1], c[:, 0] - c[:, 3]
+    lever = ox * ex / np.linalg.norm(ex) + oy * ey / np.linalg.norm(ey)
+    if not np.any(lever):
+        return moment, ""
+    other = moment - 2.0 * np.cross(np.asarray(p["force"], dtype=float).T, lever).T
+    spec, opposite = _on_plate_share(p, moment), _on_plate_share(p, other)
+    if spec >= 0.5 or opposite < ON_PLATE_SHARE:
+        return moment, ""
+    return other, (f"ORIGIN's x, y read from the surface centre to the measurement origin (the spec's reading put "
+                   f"the CoP on the plate in {100 * spec:.0f} % of its loaded samples, this one in "
+                   f"{100 * opposite:.0f} %)")
+
+
 def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
@@ -234,10 +286,11 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
         moment = newtons * length
         corners = np.asarray(p["corners"], dtype=float).T * length
         force = np.asarray(p["force"], dtype=float).T * newtons
-        mom = (_kistler_moment(p) if k < len(types) and types[k] == 3 else np.asarray(p["moment"], dtype=float)).T
-        mom = mom * moment
+        mom, reading = (_kistler_moment(p), "") if k < len(types) and types[k] == 3 else _origin_moment(p)
+        mom = mom.T * moment
         zero = _zero_samples(c3d["parameters"], len(force), frames)
-        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero))
+        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero,
+                               reading))
     return out
 
 

@@ -354,7 +354,9 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                    "offsets_removed_n": [None if o is None else [round(float(v), 2) for v in o[0]]
                                          for o in plates.offsets],
                    "lowpass_hz": cutoff, "complete_frames": int(complete.sum()), "complete_margin_s": round(margin, 3),
-                   "set_aside": plates.set_aside, **({"no_complete_frame": why} if why else {})},
+                   "set_aside": plates.set_aside, **({"no_complete_frame": why} if why else {}),
+                   **({"read": {k + 1: p.reading for k, p in enumerate(trial.plates) if p.reading}}
+                      if any(p.reading for p in trial.plates) else {})},
         "time_alignment": {"plate_delay_measured_ms": ms(measured),
                            "plate_delay_applied_ms": round(1000 * shift, 1),
                            "plate_delay_determined": determined,
