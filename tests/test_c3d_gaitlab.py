@@ -1078,6 +1078,25 @@ def test_a_segment_flipping_between_frames_is_refused():
         body_from_markers(trial)
 
 
+def test_a_tib_wand_medial_of_the_shank_is_not_read_as_plug_in_gaits_lateral_wand():
+    """Plug-in Gait's TIB sits on the shank's lateral side; one lying medial of the line from the ankle marker to the
+    knee centre (biomechZoo's HC036A, right side: 47 mm medial, 38 mm in front) puts the chord rule's plane off the
+    shank's frontal plane, and its two solutions swapped sides between frames (the right shank turned 180 deg in
+    10 ms: refused). Such a wand is left out, the ankle centre placed as without one, and the rule says why."""
+    t = np.arange(int(SECONDS * RATE)) / RATE
+    trial, bare = _trial(t, RATE), _trial(t, RATE)
+    tib, lasi, rasi = (trial.labels.index(k) for k in ("RTIB", "LASI", "RASI"))
+    left = trial.points[:, lasi] - trial.points[:, rasi]
+    trial.points[:, tib] += 0.12 * left / np.linalg.norm(left, axis=1, keepdims=True)  # across to the medial side
+    bare.points[:, tib] = np.nan  # no right wand at all
+    take, ref = body_from_markers(trial), body_from_markers(bare)
+    rules = take.notes["joint_centres"]
+    assert "RTIB not read as a lateral wand: lateral of the shank's line in 0 % of the frames" in rules["right_ankle"]
+    assert rules["left_ankle"].startswith("chord rule (LTIB wand")
+    np.testing.assert_array_equal(take.centres["ankle"]["right"], ref.centres["ankle"]["right"])
+    np.testing.assert_array_equal(take.frames, ref.frames)
+
+
 def test_not_a_c3d_is_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.c3d"
     bad.write_bytes(b"not a c3d file at all" * 10)

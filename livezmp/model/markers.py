@@ -83,6 +83,12 @@ WRIST_WIDTH_OF_STATURE = 0.032  # typical wrist width across the styloids (m / m
 _ARMS = ("LSHO", "LELB", "LWRI", "RSHO", "RELB", "RWRI")
 _HEAD3 = ("THEA", "FHEA", "RHEA")  # its head (Walk1): top, front and rear of the head
 _HEAD4 = ("LFHD", "RFHD", "LBHD", "RBHD")  # Plug-in Gait's head; either set is tracked wherever the thorax is
+# Plug-in Gait's TIB wand sits on the shank's lateral side (Vicon's Plug-in Gait reference: "lower lateral 1/3 surface
+# of the shank"), so the chord rule's plane is the shank's frontal plane and the ankle centre lies across the line from
+# the ankle marker to the knee centre from it. It is read so where it lies lateral of that line (along the pelvis'
+# lateral axis) in this share of the frames; biomechZoo's subject HC036A has its right TIB 47 mm medial and 38 mm in
+# front of the line, where the chord rule's two solutions swapped sides between frames (a 180 deg turn of the shank)
+TIB_LATERAL_SHARE = 0.95
 MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any segment in walking or running
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
@@ -335,6 +341,14 @@ def _cluster_up_vector(m: dict[str, np.ndarray], mmap: MarkerMap) -> np.ndarray:
     return centroid["pelvis"] - (centroid["foot_l"] + centroid["foot_r"]) / 2
 
 
+def _wand_side(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, medial: np.ndarray) -> np.ndarray:
+    """(F,) how far along ``medial`` (F, 3) the unit direction from the line ``marker``-``proximal`` to ``wand`` in
+    their plane points: negative where the wand lies lateral of the line, as Plug-in Gait places it."""
+    d = _unit(proximal - marker)
+    w = wand - marker
+    return np.add.reduce(_unit(w - np.add.reduce(w * d, axis=-1, keepdims=True) * d) * medial, axis=-1)
+
+
 def _chord(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray, delta: float,
            medial: np.ndarray) -> np.ndarray:
     """Plug-in Gait's chord rule: the point J at ``delta`` from ``marker``, in the plane of the three
@@ -560,6 +574,9 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
         np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
+    # the share of the take's frames each TIB wand lies lateral (LTIB_lateral_share ...): read as Plug-in Gait's
+    # lateral wand from TIB_LATERAL_SHARE on; new frames of the take keep the take's decision
+    wands: dict[str, float] = {}
     for side, (s, sign, _) in _SIDES.items():
         # the knee's chord rule takes no THI wand: without the static trial's thigh-rotation offset its plane
         # is not the knee's frontal plane (the Plug-in Gait walk's knees came out 36 mm forward and 16 mm
@@ -574,12 +591,19 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
                 continue
             width = trial.widths_m.get(f"{s}{joint.capitalize()}Width") or frac * stature
             delta = width / 2 + MARKER_RADIUS
+            share = f"{s}{wand}_lateral_share" if wand else ""
             if wand and s + wand in m:
+                wands[share] = (dims or {}).get(share, float(np.mean(
+                    _wand_side(centres[prox][side], m[s + wand], lateral, -sign * y) < 0)))
+            if wands.get(share, 0.0) >= TIB_LATERAL_SHARE:
                 centres[joint][side] = _chord(centres[prox][side], m[s + wand], lateral, delta, -sign * y)
                 rules[f"{side}_{joint}"] = f"chord rule ({s}{wand} wand, width {1000 * width:.0f} mm)"
             else:
+                why = (f"; {s}{wand} not read as a lateral wand: lateral of the shank's line in "
+                       f"{100 * wands[share]:.0f} % of the frames") if share in wands else ""
                 centres[joint][side] = lateral - sign * delta * y
-                rules[f"{side}_{joint}"] = f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm width)"
+                rules[f"{side}_{joint}"] = (f"{s}{mk} moved medially along the pelvis axis ({1000 * width:.0f} mm "
+                                            f"width){why}")
     pelvis_origin = (hjc["left"] + hjc["right"]) / 2
     seg = {"pelvis": (pelvis_origin, _columns(x, y, z))}
     full = "LWRA" in m
@@ -613,7 +637,7 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
              + ("; head from " + _head_labels(m) if _head_labels(m) else ""),
              "hip_joint_centre": "Harrington et al. 2007, pelvic-width regression",
              "joint_centres": rules, "stature_m": round(stature, 4),
-             "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature}}
+             "dimensions": {"pelvis_width_m": pw, "pelvis_depth_m": pd, "stature_m": stature, **wands}}
     return seg, centres, notes
 
 
