@@ -31,6 +31,7 @@ from livezmp.model.markers import (
     TRUNK_FOLLOW_HZ,
     WRIST_WIDTH_OF_STATURE,
     MarkerBodyOptions,
+    _euler_zyx,
     body_from_markers,
     hat_sway,
     hat_table,
@@ -1095,6 +1096,32 @@ def test_a_tib_wand_medial_of_the_shank_is_not_read_as_plug_in_gaits_lateral_wan
     assert rules["left_ankle"].startswith("chord rule (LTIB wand")
     np.testing.assert_array_equal(take.centres["ankle"]["right"], ref.centres["ankle"]["right"])
     np.testing.assert_array_equal(take.frames, ref.frames)
+
+
+def test_a_segment_swinging_over_its_angles_singularity_keeps_continuous_angles():
+    """A segment pitching over 90 degrees (its x axis through the vertical: a child's hand swung forward,
+    biomechZoo's HC036A23) stays on the yaw-pitch-roll branch it came by; before, arcsin folded the pitch back at 90
+    and yaw and roll each jumped by pi between two frames (170 deg in 10 ms; the ZMP ran 1.9 m off)."""
+    def rz(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def ry(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+    def rx(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+    pitch = np.radians(np.linspace(60.0, 110.0, 101))
+    yaw, roll = 0.3 + 0.2 * np.sin(pitch), -0.4 + 0.1 * pitch
+    rot = np.stack([rz(a) @ ry(b) @ rx(c) for a, b, c in zip(yaw, pitch, roll, strict=True)])
+    ang = _euler_zyx(rot)
+    assert np.abs(np.diff(ang, axis=0)).max() < 0.02
+    np.testing.assert_allclose(ang, np.column_stack([yaw, pitch, roll]), atol=1e-9)
+    short = rot[:40]  # short of the singularity: as before
+    np.testing.assert_array_equal(_euler_zyx(short), np.unwrap(_euler_zyx(short, unwrap=False), axis=0))
 
 
 def test_not_a_c3d_is_one_line(tmp_path, capsys):

@@ -382,12 +382,28 @@ def _local(rot: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     """(F, 3) yaw, pitch, roll (rad) with R = Rz(yaw) Ry(pitch) Rx(roll), unwrapped over frames (else
-    each within ±pi)."""
+    each within ±pi).
+
+    Unwrapped, a frame passing over the angles' singularity (its x axis vertical, pitch ±90°) stays on the branch it
+    came by: every rotation is also (yaw + pi, pi - pitch, roll + pi), and arcsin folds the pitch back at ±90°,
+    where yaw and roll then jumped by pi each between two frames (a child's hand swung forward, biomechZoo's
+    HC036A23: 170° in 10 ms, the ZMP 1.9 m off). Of the two, each frame takes the one nearer its predecessor's."""
     angles = np.empty((len(rot), 3))
     angles[:, 0] = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
     angles[:, 1] = np.arcsin(np.minimum(np.maximum(-rot[:, 2, 0], -1.0), 1.0))
     angles[:, 2] = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
-    return np.unwrap(angles, axis=0) if unwrap else angles
+    if not unwrap:
+        return angles
+    other = np.column_stack([angles[:, 0] + np.pi, np.pi - angles[:, 1], angles[:, 2] + np.pi])
+
+    def apart(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.sum((np.mod(a - b + np.pi, 2 * np.pi) - np.pi) ** 2, axis=1)
+
+    # the other branch is as far from the other branch before as this one from this one: a crossing is a frame whose
+    # other branch lies nearer the frame before than its own; the branch changes at each crossing
+    crossed = np.r_[False, apart(other[1:], angles[:-1]) < apart(angles[1:], angles[:-1])]
+    on_other = (np.cumsum(crossed) % 2).astype(bool)
+    return np.unwrap(np.where(on_other[:, None], other, angles), axis=0)
 
 
 def hat_table(stature: float, part: str = "hat",
