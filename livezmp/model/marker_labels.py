@@ -293,7 +293,8 @@ def _across(trial: C3dTrial, claims: dict[str, list[str]], side: str) -> np.ndar
     if len(claims.get("LASI", ())) != 1 or len(claims.get("RASI", ())) != 1:
         return None
     left = trial.marker(claims["LASI"][0]) - trial.marker(claims["RASI"][0])
-    left = left / np.linalg.norm(left, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore"):  # ASIS markers on top of each other (type1.C3D's unseen ones): NaN, unread
+        left = left / np.linalg.norm(left, axis=1, keepdims=True)
     return left if side == "L" else -left
 
 
