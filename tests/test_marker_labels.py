@@ -31,8 +31,8 @@ CONVENTIONS = {
     # AnyBody's Qualisys gait examples (AMMR S3_Gait_Shod_1, SlowRun)
     "AnyBody / Qualisys": lambda s, m: s + {"ASI": "Asis", "PSI": "Psis", "KNE": "KneeLateral", "ANK": "AnkleLateral",
                                             "HEE": "Heel", "TOE": "Toe"}.get(m, m),
-    # Griffith University's Vicon Nexus set (RealTimeBiomechanics/rtosim data/ViconNexus/walking_1.c3d)
-    "Griffith / rtosim": lambda s, m: s + {"KNE": "FCL", "ANK": "MALL", "HEE": "CAL"}.get(m, m),
+    # RealTimeBiomechanics/rtosim's Vicon Nexus set (data/ViconNexus/walking_1.c3d, S01.vsk)
+    "rtosim (Vicon Nexus)": lambda s, m: s + {"KNE": "FCL", "ANK": "MALL", "HEE": "CAL"}.get(m, m),
 }
 
 

@@ -244,8 +244,8 @@ def _on_plate_share(p: dict, moment: np.ndarray) -> float:
 def _origin_moment(p: dict) -> tuple[np.ndarray, str]:
     """(3, S) the moment of ezc3d's platform ``p`` about its surface centre, and how ORIGIN was read ('' as the
     spec says). The spec's ORIGIN runs from the measurement origin to the surface centre, and ezc3d moves the
-    moment by F x ORIGIN. A plate measuring about a corner of its top (an instrumented treadmill's belt: Griffith
-    University's Vicon Nexus file in RealTimeBiomechanics/rtosim, ``data/ViconNexus/walking_1.c3d``, ORIGIN
+    moment by F x ORIGIN. A plate measuring about a corner of its top (an instrumented treadmill's belt: the
+    Vicon Nexus file in RealTimeBiomechanics/rtosim, ``data/ViconNexus/walking_1.c3d``, ORIGIN
     (-241.3, -819, 0) mm on a 483 x 1638 mm belt) may write it from the centre to that corner instead: the CoP
     then lies a whole plate off, outside the plate's own surface, where no CoP can be. ORIGIN's x, y are read
     the other way round when the spec's reading puts the CoP on the plate in under half of its loaded samples and

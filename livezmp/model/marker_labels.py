@@ -33,8 +33,8 @@ Where each name comes from:
   ``LLMA`` (AnyBody's ``SpecialFeatures`` example, AMMR); ``LKneeLat``/``LAnkleLat`` with ``LHeel LASIS`` (the
   pyorerun running example, ``Running_0002.c3d``); ``R_KNEE_LAT R_KNEE_MED R_ANKLE_LAT R_ANKLE_MED`` (c3d.org's
   sample 26, ``Standing_Hybrid_1``). Femoral condyle and malleolus with the side behind the landmark,
-  ``RFCL``/``RFCM`` and ``RMALL``/``RMALM`` lateral / medial, with ``RCAL RMT1 RMT5 RPSI`` (Griffith University's
-  Vicon Nexus set, as RealTimeBiomechanics/rtosim's ``data/ViconNexus/walking_1.c3d`` and its subject file
+  ``RFCL``/``RFCM`` and ``RMALL``/``RMALM`` lateral / medial, with ``RCAL RMT1 RMT5 RPSI`` (the
+  Vicon Nexus set of RealTimeBiomechanics/rtosim's ``data/ViconNexus/walking_1.c3d`` and its subject file
   ``S01.vsk`` write them: ``RFCL`` on its ``rknee`` segment, ``RMALL`` on ``rankle``). Not read:
   ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral or medial epicondyle of the femur or of the humerus alike
   (ISB names them apart, ``FLE``/``HLE``).
