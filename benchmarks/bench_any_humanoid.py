@@ -13,6 +13,7 @@ Then malformed or non-humanoid URDFs go through ``livezmp demo --robot X.urdf`` 
 each must exit 2 with one line on stderr and no traceback.
 
     python benchmarks/bench_any_humanoid.py [--only NAME,...] [--scenarios lean,push] [--no-cli]
+    python benchmarks/bench_any_humanoid.py --urdf ROBOT.urdf ...   # these URDFs instead of the generated sweep
 """
 
 from __future__ import annotations
@@ -146,9 +147,12 @@ def main() -> None:
     ap.add_argument("--only", help="comma-separated variant names")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--no-cli", action="store_true", help="skip the CLI checks (malformed URDFs, demo exit)")
+    ap.add_argument("--urdf", nargs="+", default=[], metavar="PATH",
+                    help="sweep these URDFs (named by file stem) instead of the variants")
     args = ap.parse_args()
     warnings.simplefilter("ignore", RuntimeWarning)  # a robot's NaN shows in its row
-    names = args.only.split(",") if args.only else list(VARIANTS)
+    variants = {Path(p).stem: str(Path(p).resolve()) for p in args.urdf} or VARIANTS
+    names = args.only.split(",") if args.only else list(variants)
     scenarios = args.scenarios.split(",")
     print(f"load average at start: {os.getloadavg()}")
     rows, cli_rows = [], []
@@ -156,7 +160,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         for name in names:
-            urdf = urdf_of(name, VARIANTS[name], out)
+            urdf = urdf_of(name, variants[name], out)
             rows += sweep_robot(name, urdf, scenarios)
             print(*rows[-1], sep="  ", file=sys.stderr, flush=True)
             if not args.no_cli and urdf is not None and name != "robotis_op3":
@@ -171,7 +175,7 @@ def main() -> None:
         print(f"\n{passed} of {len(rows)} robot x scenario rows pass (uncorrected falls, corrected stands); "
               f"{refused} refused with exit 2; CPU {time.process_time() - t0:.0f} s")
         if not args.no_cli:
-            for path in malformed(out):
+            for path in [] if args.urdf else malformed(out):
                 cli_rows += check_refusal(path)
             print()
             table(("robot", "command", "exit", "stderr lines", "last stderr line", "ok"), cli_rows)
