@@ -104,6 +104,13 @@ class HumanoidSpec:
     camera, IMU and sole frames as fixed massless links, and a massless root link; ``root``: the root link's name,
     its frame at its centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
     humanoid_SEED); ``foot``: "box", "mesh" or "none" collision;
+    as published files write them (held-out real robots): ``placeholders``, how the extras' massless links are
+    written: "" without <inertial>, "zero_mass" mass 0 with a small inertia (Bolt's feet), "point_mass" 1e-4 kg
+    with a zero inertia (Talos', Wolfgang's sensor frames); ``fixed_axis_zero``: fixed joints with
+    <axis xyz="0 0 0"/> (Unitree H1's logo, NAO's effectors); ``odd_inertias``: the head a point mass with a
+    2.4e-35 product of inertia (iCub's), the torso's moments (a, a, 3a) breaking the triangle inequality
+    (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
+    kept (Talos' reduced model);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -126,6 +133,10 @@ class HumanoidSpec:
     root: str = "base_link"
     root_at_ground: bool = False
     robot_name: str = ""
+    placeholders: str = ""
+    fixed_axis_zero: bool = False
+    odd_inertias: bool = False
+    fixed_finger: bool = False
     seed: int = 0
 
 
@@ -250,6 +261,7 @@ def _build(spec: HumanoidSpec) -> _Builder:
             for k, finger in enumerate((0.01, -0.01)):
                 tip = b.link(f"{s}_finger{k}", 0.002, (0.0, 0.12 * y + finger, 0.54), (0.01, 0.01, 0.03))
                 b.joint(f"finger{k}", s, parent, tip, (0.0, 0.12 * y + finger, 0.56), "roll",
+                        "fixed" if k and spec.fixed_finger else "revolute",
                         mimic=b.joints[-1]["name"] if k else None, multiplier=-1.0)
     if spec.extras:
         for role, parent, at in (("camera", head, (0.05, 0.0, 0.95)), ("imu", trunk, (0.0, 0.0, 0.7))):
@@ -277,12 +289,18 @@ def _write(b: _Builder, path: Path) -> Path:
     for role, v in b.links.items():
         link = ET.Element("link", name=names[role])
         R, p = v["R"], origin_of[role]
-        if v["mass"] > 0:
+        if v["mass"] > 0 or spec.placeholders:
+            placeholder = {"zero_mass": 0.0, "point_mass": 1e-4}.get(spec.placeholders) if v["mass"] == 0 else None
             inertial = ET.SubElement(link, "inertial")
             ET.SubElement(inertial, "origin", xyz=_fmt(R.T @ (v["com"] - p)), rpy="0 0 0")
-            ET.SubElement(inertial, "mass", value=f"{v['mass']:.9g}")
+            ET.SubElement(inertial, "mass", value=f"{v['mass'] if placeholder is None else placeholder:.9g}")
             dx, dy, dz = v["size"]
             inertia = R.T @ np.diag([dy * dy + dz * dz, dx * dx + dz * dz, dx * dx + dy * dy]) @ R * v["mass"] / 12
+            if placeholder is not None:
+                inertia = np.diag([5.7e-7, 8.4e-7, 5.3e-7] if spec.placeholders == "zero_mass" else [0.0] * 3)
+            elif spec.odd_inertias and role in ("head", "torso"):
+                inertia = (np.array([[0.0, 0.0, 2.40741e-35], [0.0, 0.0, 0.0], [2.40741e-35, 0.0, 0.0]])
+                           if role == "head" else np.diag([1.0, 1.0, 3.0]) * inertia[0, 0])
             ET.SubElement(inertial, "inertia", **{k: f"{inertia[i, j]:.9g}" for k, (i, j) in zip(
                 ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                 strict=True)})
@@ -302,6 +320,8 @@ def _write(b: _Builder, path: Path) -> Path:
         ET.SubElement(joint, "parent", link=names[j["parent"]])
         ET.SubElement(joint, "child", link=names[j["child"]])
         ET.SubElement(joint, "origin", xyz=_fmt(Rp.T @ (j["at"] - pp)), rpy=_fmt(pin.rpy.matrixToRpy(Rp.T @ Rc)))
+        if j["axis"] is None and spec.fixed_axis_zero:
+            ET.SubElement(joint, "axis", xyz="0 0 0")
         if j["axis"] is not None:
             ET.SubElement(joint, "axis", xyz=_fmt(Rc.T @ j["axis"]))
             bounds = _limits(spec, j["role"], j["axis"])

@@ -110,6 +110,27 @@ def test_the_robot_built_otherwise_falls_uncorrected_and_stands_corrected(hard, 
     assert on.fallen is None and s_on["stopped_by"] == "duration"
 
 
+PLAIN = HumanoidSpec(extras=True, grippers=True, seed=40)
+
+
+@pytest.mark.parametrize("quirk", [{"placeholders": "zero_mass"}, {"placeholders": "point_mass"},
+                                   {"fixed_axis_zero": True}, {"odd_inertias": True}, {"fixed_finger": True}])
+def test_a_humanoid_written_as_published_files_are_loads_with_its_masses_and_legs(tmp_path, quirk):
+    # before, refused: a link of mass 0 (Bolt's feet) or a point mass with a zero inertia (Talos', Wolfgang's
+    # sensor frames), a fixed joint's <axis xyz="0 0 0"> (Unitree H1, NAO), a point-mass head with a 2.4e-35
+    # product of inertia (iCub) or a torso breaking the triangle inequality (Darwin-OP, Romeo), a fixed finger
+    # keeping its <mimic> (Talos' reduced model)
+    plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", PLAIN)), None).body
+    body = load_robot(str(build_humanoid(tmp_path / "odd.urdf", replace(PLAIN, **quirk))), None).body
+    extra = 5 * 1e-4 if quirk.get("placeholders") == "point_mass" else 0.0  # 2 soles, camera, IMU, dummy root
+    assert body.total_mass == pytest.approx(plain.total_mass + extra, rel=1e-9)
+    roles = joint_roles(body)
+    assert all(roles[f"{s}_{r}"] == plain_roles for s in "lr" for r in LEG_ROLES
+               for plain_roles in [joint_roles(plain)[f"{s}_{r}"]])
+    fingers = {"l_finger1", "r_finger1"}
+    assert set(body.joint_names) == set(plain.joint_names) - (fingers if quirk.get("fixed_finger") else set())
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

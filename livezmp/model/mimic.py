@@ -49,20 +49,23 @@ def follow(values: np.ndarray, mimics: tuple[Mimic, ...], offset: bool = True) -
 def read_mimics(root: ET.Element, path: Path) -> dict[str, tuple[str, float, float]]:
     """joint name → (parent joint name, multiplier, offset) of every ``<mimic>`` in the URDF ``root``; a mimic of a
     mimic is resolved to the first joint of the chain (m = m1 m2, o = m1 o2 + o1). InputError (file, joint, what)
-    for a missing or unknown parent, a parent that is the joint itself, a fixed joint, a loop of mimics or
-    numbers that are not finite."""
+    for a missing or unknown parent, a parent that is the joint itself, a fixed parent, a loop of mimics or
+    numbers that are not finite. A fixed joint's ``<mimic>`` is ignored: the file has fixed it (Talos' reduced
+    model keeps its fixed fingers' tags)."""
     kinds = {j.get("name"): j.get("type") for j in root.findall("joint")}
     raw = {}
     for j in root.findall("joint"):
         tag = j.find("mimic")
         if tag is None:
             continue
+        if j.get("type") == "fixed":  # a joint the file has fixed (a reduced model's fingers) follows nothing
+            continue
         where = f"{path}: joint {j.get('name')!r} <mimic>"
         parent = tag.get("joint")
         if parent not in kinds or parent == j.get("name"):
             raise InputError(f"{where}: joint={parent!r} is not another joint of this URDF")
-        if "fixed" in (kinds[parent], j.get("type")):
-            raise InputError(f"{where}: a fixed joint cannot mimic or be mimicked")
+        if kinds[parent] == "fixed":
+            raise InputError(f"{where}: a fixed joint cannot be mimicked")
         try:
             numbers = float(tag.get("multiplier", "1")), float(tag.get("offset", "0"))
         except ValueError:

@@ -47,6 +47,7 @@ class UrdfBodyOptions:
 
 MAX_LINK_MASS = 1e4  # kg: heavier than any humanoid's link
 MAX_LENGTH = 1e3  # m: joint origins and centres of mass
+ROUNDOFF = 1e-9  # a principal moment this far below zero (relative: `_check_inertial`) is a zero written in decimals
 
 
 def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.ndarray:
@@ -61,8 +62,15 @@ def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.
 
 
 def _check_inertial(link: ET.Element, path: Path) -> None:
-    """Mass finite and > 0, centre of mass finite, inertia finite, positive definite and
-    obeying the triangle inequality (each principal moment at most the sum of the other two)."""
+    """Mass finite and >= 0, centre of mass finite, inertia finite and positive semi-definite: what the
+    ZMP's dynamics need. Principal moments that break the triangle inequality (one larger than the sum of
+    the other two: no rigid body has them) are used as written: CAD exports give them to published robots
+    (Darwin-OP's neck, Romeo's shoulder, iCub's 1 mg base link) and a monitor that refused the robot for
+    one link's inertia would serve no one.
+    A mass of 0 makes the link massless (a frame, a sensor's placeholder, as real URDFs write
+    them): its ``<inertial>`` is removed, whatever inertia it gives (no massless body has one).
+    Zero principal moments are a point mass or a thin rod (a sensor link of 0.01 kg written
+    with a zero inertia): the limits of rigid bodies, accepted."""
     where = f"{path}: link {link.get('name')!r} <inertial>"
     inertial = link.find("inertial")
     if inertial is None:
@@ -71,8 +79,11 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
     if mass_el is None or inertia_el is None:
         raise InputError(f"{where}: needs <mass> and <inertia>")
     mass = _numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
+    if mass == 0:
+        link.remove(inertial)
+        return
     if not 0 < mass <= MAX_LINK_MASS:
-        raise InputError(f"{where} <mass> value: {mass:g} kg is outside (0, {MAX_LINK_MASS:g}]")
+        raise InputError(f"{where} <mass> value: {mass:g} kg is outside [0, {MAX_LINK_MASS:g}]")
     if origin is not None:
         for attr in ("xyz", "rpy"):
             v = _numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")
@@ -84,13 +95,9 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
     c = comps
     inertia = np.array([[c["ixx"], c["ixy"], c["ixz"]], [c["ixy"], c["iyy"], c["iyz"]], [c["ixz"], c["iyz"], c["izz"]]])
     moments = np.linalg.eigvalsh(inertia)
-    scale = max(float(np.abs(moments).max()), 1e-300)
-    if moments[0] <= 1e-12 * scale or moments[0] <= 0:
-        raise InputError(f"{where} <inertia>: not positive definite (principal moments "
+    if moments[0] < -ROUNDOFF * max(float(np.abs(moments).max()), mass * 1.0):  # kg m^2: the mass 1 m out
+        raise InputError(f"{where} <inertia>: not positive semi-definite (principal moments "
                          f"{', '.join(f'{m:.3g}' for m in moments)} kg m^2)")
-    if moments[2] > (moments[0] + moments[1]) * (1 + 1e-6):
-        raise InputError(f"{where} <inertia>: principal moments {', '.join(f'{m:.3g}' for m in moments)} "
-                         "kg m^2 break the triangle inequality (no rigid body has them)")
 
 
 def _check_tree(root: ET.Element, path: Path) -> None:
@@ -153,7 +160,7 @@ def _check_joints(root: ET.Element, path: Path) -> list[str]:
             for attr in ("xyz", "rpy"):
                 if np.abs(_numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")).max() > MAX_LENGTH:
                     raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
-        axis = j.find("axis")
+        axis = j.find("axis") if j.get("type") != "fixed" else None  # a fixed one means nothing: files give 0 0 0
         if axis is not None and not np.any(_numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
             raise InputError(f"{where} <axis>: zero vector")
         if j.get("type") == "continuous" or (j.get("type") == "revolute" and j.find("limit") is None):
@@ -203,10 +210,10 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     links = root.findall("link")
     if len(links) > MAX_LINKS:
         raise InputError(f"{path}: {len(links)} links, more than the {MAX_LINKS} this tool analyses")
-    if root.find("./link/inertial") is None:
-        raise InputError(f"{path}: URDF has no <inertial> on any link; masses are needed for the ZMP")
     for link in links:
         _check_inertial(link, path)
+    if root.find("./link/inertial") is None:
+        raise InputError(f"{path}: URDF has no <inertial> with a mass on any link; masses are needed for the ZMP")
     unbounded = _check_joints(root, path)
     mimics = read_mimics(root, path)
     try:
