@@ -110,7 +110,8 @@ class HumanoidSpec:
     <axis xyz="0 0 0"/> (Unitree H1's logo, NAO's effectors); ``odd_inertias``: the head a point mass with a
     2.4e-35 product of inertia (iCub's), the torso's moments (a, a, 3a) breaking the triangle inequality
     (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
-    kept (Talos' reduced model);
+    kept (Talos' reduced model); ``facing``: the way the robot faces in its file, "x" (REP 103), "-y" (Poppy's)
+    or "-x" (iCub's);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -137,10 +138,12 @@ class HumanoidSpec:
     fixed_axis_zero: bool = False
     odd_inertias: bool = False
     fixed_finger: bool = False
+    facing: str = "x"
     seed: int = 0
 
 
 ROLE_OF = {"y": "yaw", "r": "roll", "p": "pitch"}
+FACING = {"x": 0.0, "-y": -np.pi / 2, "-x": np.pi}  # the yaw (rad) that turns a robot facing +x to face so
 ARM_ROLE = {"p": ("sho_pitch", "pitch"), "r": ("sho_roll", "roll"), "y": ("arm_yaw", "yaw"), "e": ("el", "pitch")}
 
 
@@ -273,6 +276,13 @@ def _build(spec: HumanoidSpec) -> _Builder:
     total = sum(v["mass"] for v in b.links.values())
     for v in b.links.values():
         v["mass"] *= spec.mass / total
+    turn = _rot((0.0, 0.0, FACING[spec.facing]))  # the robot turned about z in its root's frame, boxes with it
+    for v in b.links.values():
+        v["com"], v["size"] = turn @ v["com"], np.abs(turn) @ v["size"]
+    for j in b.joints:
+        j["at"] = turn @ j["at"]
+        if j["axis"] is not None:  # limits as the robot's own axes give them (a knee flexes backward)
+            j["own_axis"], j["axis"] = j["axis"], turn @ j["axis"]
     return b
 
 
@@ -324,7 +334,7 @@ def _write(b: _Builder, path: Path) -> Path:
             ET.SubElement(joint, "axis", xyz="0 0 0")
         if j["axis"] is not None:
             ET.SubElement(joint, "axis", xyz=_fmt(Rc.T @ j["axis"]))
-            bounds = _limits(spec, j["role"], j["axis"])
+            bounds = _limits(spec, j["role"], j["own_axis"])
             if bounds is not None and j["kind"] == "revolute":
                 ET.SubElement(joint, "limit", lower=f"{bounds[0]:g}", upper=f"{bounds[1]:g}", effort="10",
                               velocity="6")

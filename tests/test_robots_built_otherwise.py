@@ -131,6 +131,23 @@ def test_a_humanoid_written_as_published_files_are_loads_with_its_masses_and_leg
     assert set(body.joint_names) == set(plain.joint_names) - (fingers if quirk.get("fixed_finger") else set())
 
 
+@pytest.mark.parametrize("facing", ["-y", "-x"])
+def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x_by_its_knees(tmp_path, facing):
+    # before: facing -y (Poppy), no leg joint turned about the lateral axis (refused: "found no l_hip_pitch");
+    # facing -x (iCub), its right foot taken as the left and its knees bent against their limits to stand
+    spec = HumanoidSpec(limits="tight", seed=41)
+    plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", spec)), None).body
+    body = load_robot(str(build_humanoid(tmp_path / "turned.urdf", replace(spec, facing=facing))), None).body
+    assert {s: body.model.frames[f.frame_id].name.removesuffix("_level") for s, f in body.feet.items()} == \
+        {"left": "l_foot", "right": "r_foot"}
+    assert joint_roles(body) == joint_roles(plain)
+    model = body.model
+    for name in ("lean", "arm_swing", "push"):
+        goals = make_scenario(name, body).goals(0.0)
+        assert np.all(goals >= model.lowerPositionLimit[6:]) and np.all(goals <= model.upperPositionLimit[6:])
+        assert np.allclose(goals, make_scenario(name, plain).goals(0.0), atol=1e-6)
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -41,7 +41,7 @@ from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import read_joint_csv
-from livezmp.model.urdf_body import leg_joints
+from livezmp.model.urdf_body import ALIGNED, leg_joints
 
 SIDES = ("l", "r")
 G = 9.81  # m/s^2
@@ -98,7 +98,6 @@ class Scenario:
     edge: tuple[str, float] | None = None
 
 
-ALIGNED = 0.99  # |cos| between a joint's axis and a world axis for the joint to turn about it
 
 
 def joint_axes(body: BodyModel) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:

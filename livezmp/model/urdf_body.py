@@ -228,13 +228,14 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     return model, mimics
 
 
-def _with_base(fixed: pin.Model) -> pin.Model:
+def _with_base(fixed: pin.Model, yaw: float = 0.0) -> pin.Model:
+    """The URDF's model on the six base joints, turned by ``yaw`` (rad, about z) on the base (`_heading`)."""
     base = pin.Model()
     j = 0
     for name, jm in BASE_JOINTS:
         j = base.addJoint(j, jm(), pin.SE3.Identity(), name)
     f = base.addFrame(pin.Frame("base_attach", j, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-    model = pin.appendModel(base, fixed, f, pin.SE3.Identity())
+    model = pin.appendModel(base, fixed, f, pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.zeros(3)))
     model.name = fixed.name
     return model
 
@@ -287,6 +288,62 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
     return {"left": a, "right": b}
 
 
+ALIGNED = 0.99  # |cos| between a joint's axis and a direction for the joint to turn about it
+KNEE_BIAS = 0.5  # a knee's limits say which way it flexes when |lower + upper| >= this share of upper - lower
+
+
+def _knees_flex_forward(model: pin.Model, data: pin.Data, feet: dict[str, int], lateral: np.ndarray,
+                        forward: np.ndarray) -> bool:
+    """Whether every leg whose knee's limits say which way it flexes (`KNEE_BIAS`: Poppy's −0.06..2.34 rad,
+    iCub's −2.18..0.40) has its foot move along ``forward`` as the knee flexes, i.e. the robot faces the other
+    way (a knee flexes so the foot goes back). A leg's knee: of its joints turning about ``lateral``, the one
+    nearest mid-height between the first and the last (the hip and ankle pitch). False where no knee says."""
+    pin.computeJointJacobians(model, data, np.zeros(model.nq))
+    votes = []
+    for side, chain in leg_joints(model, feet).items():
+        axis = {j: data.J[3:, model.joints[j].idx_v] for j in chain}
+        pitch = [j for j in chain if abs(float(axis[j] @ lateral)) >= ALIGNED]
+        if len(pitch) < 3:
+            continue
+        middle = 0.5 * (data.oMi[pitch[0]].translation[2] + data.oMi[pitch[-1]].translation[2])
+        knee = min(pitch[1:-1], key=lambda j: abs(data.oMi[j].translation[2] - middle))
+        k = model.joints[knee].idx_q
+        lower, upper = float(model.lowerPositionLimit[k]), float(model.upperPositionLimit[k])
+        if not (np.isfinite(lower) and np.isfinite(upper)) or abs(lower + upper) < KNEE_BIAS * (upper - lower):
+            continue
+        shin = data.oMf[feet[side]].translation - data.oMi[knee].translation
+        votes.append(float(np.sign(lower + upper) * np.cross(axis[knee], shin) @ forward) > 0)
+    return bool(votes) and all(votes)
+
+
+def _heading(model: pin.Model, data: pin.Data, feet: dict[str, int], sided: bool) -> float:
+    """The yaw (rad, a multiple of 90°) that turns the robot to face +x, where its URDF faces another way (Poppy
+    faces −y, iCub −x): its forward axis is the lateral one (right foot to left) turned 90° clockwise seen from
+    above; where the feet's sides are not ``sided`` (a config names them; else they are the lowest leaves, left
+    the one at larger y) and the knees flex so the feet would go forward, the robot faces the other way."""
+    lateral = data.oMf[feet["left"]].translation - data.oMf[feet["right"]].translation
+    lateral[2] = 0.0
+    if np.linalg.norm(lateral) < 1e-9:
+        return 0.0
+    lateral /= np.linalg.norm(lateral)
+    forward = np.cross(lateral, [0.0, 0.0, 1.0])
+    if not sided and _knees_flex_forward(model, data, feet, lateral, forward):
+        forward = -forward
+    return float(np.pi / 2 * round(-np.arctan2(forward[1], forward[0]) / (np.pi / 2)))
+
+
+def _feet(model: pin.Model, data: pin.Data, cfg: RobotConfig, path: Path) -> dict[str, int]:
+    """Side -> frame id of each foot: the config's, else `_default_feet`."""
+    feet_frames: dict[str, int] = {}
+    for side, f in cfg.feet.items():
+        if not model.existFrame(f["link"]):
+            raise InputError(f"{cfg.source}: [feet.{side}] link {f['link']!r} is not in {path}")
+        feet_frames[side] = model.getFrameId(f["link"])
+    if len(feet_frames) < 2:
+        feet_frames = {**_default_feet(model, data, path), **feet_frames}
+    return feet_frames
+
+
 def _level_frame(model: pin.Model, fid: int, rotation: np.ndarray) -> int:
     """A frame at the foot link's origin, on its joint, level in the zero pose (z up, x forward: the axes soles
     and the base placement use): the link's own frame when it already is, else a new ``<link>_level`` frame
@@ -314,13 +371,13 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     data = model.createData()
     q0 = np.zeros(model.nq)
     pin.framesForwardKinematics(model, data, q0)
-    feet_frames: dict[str, int] = {}
-    for side, f in cfg.feet.items():
-        if not model.existFrame(f["link"]):
-            raise InputError(f"{cfg.source}: [feet.{side}] link {f['link']!r} is not in {path}")
-        feet_frames[side] = model.getFrameId(f["link"])
-    if len(feet_frames) < 2:
-        feet_frames = {**_default_feet(model, data, path), **feet_frames}
+    feet_frames = _feet(model, data, cfg, path)
+    yaw = _heading(model, data, feet_frames, sided=len(cfg.feet) >= 2)
+    if yaw:  # the same model turned: frame ids are kept, the default feet's sides found again
+        model = _with_base(fixed, yaw)
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, q0)
+        feet_frames = _feet(model, data, cfg, path)
     leg_ids = leg_joints(model, feet_frames)
     for side, chain in leg_ids.items():
         if not chain:
