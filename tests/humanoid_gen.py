@@ -111,7 +111,8 @@ class HumanoidSpec:
     2.4e-35 product of inertia (iCub's), the torso's moments (a, a, 3a) breaking the triangle inequality
     (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
     kept (Talos' reduced model); ``facing``: the way the robot faces in its file, "x" (REP 103), "-y" (Poppy's)
-    or "-x" (iCub's);
+    or "-x" (iCub's); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
+    file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -139,6 +140,7 @@ class HumanoidSpec:
     odd_inertias: bool = False
     fixed_finger: bool = False
     facing: str = "x"
+    odd_limits: bool = False
     seed: int = 0
 
 
@@ -191,15 +193,17 @@ class _Builder:
         return None
 
 
-def _limits(spec: HumanoidSpec, role: str, axis: np.ndarray) -> tuple[float, float] | None:
+def _limits(spec: HumanoidSpec, role: str, side: str, axis: np.ndarray) -> tuple[float, float] | None:
     """(lower, upper) rad: wide ±2.8; tight: the standing posture's range (knee bent 0-1.4 rad forward of its
-    axis sign, hips and ankles ±0.7, rolls ±0.35, arms ±1.2)."""
+    axis sign, hips and ankles ±0.7, rolls ±0.35, arms ±1.2); ``odd_limits``: see `HumanoidSpec`."""
+    if spec.odd_limits and role == "el":
+        return (-1.54, -0.03)
     if spec.limits == "absent":
         return None
     if spec.limits == "wide":
         return (-2.8, 2.8)
     if role == "knee":
-        return (0.0, 1.4) if axis[1] > 0 else (-1.4, 0.0)
+        return (0.0, 1.4) if (axis[1] > 0) != (spec.odd_limits and side == "l") else (-1.4, 0.0)
     if role in ("hip_roll", "ank_roll", "hip_yaw"):
         return (-0.35, 0.35)
     return (-0.7, 0.7) if role in ("hip_pitch", "ank_pitch") else (-1.2, 1.2)
@@ -334,7 +338,7 @@ def _write(b: _Builder, path: Path) -> Path:
             ET.SubElement(joint, "axis", xyz="0 0 0")
         if j["axis"] is not None:
             ET.SubElement(joint, "axis", xyz=_fmt(Rc.T @ j["axis"]))
-            bounds = _limits(spec, j["role"], j["own_axis"])
+            bounds = _limits(spec, j["role"], j["side"], j["own_axis"])
             if bounds is not None and j["kind"] == "revolute":
                 ET.SubElement(joint, "limit", lower=f"{bounds[0]:g}", upper=f"{bounds[1]:g}", effort="10",
                               velocity="6")

@@ -148,6 +148,20 @@ def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x_by_its_knees
         assert np.allclose(goals, make_scenario(name, plain).goals(0.0), atol=1e-6)
 
 
+def test_a_stance_beyond_a_knees_limits_is_refused_and_an_arm_beyond_its_own_is_held_at_them(tmp_path, capsys):
+    # before: the sim's servos stopped the left knee and the elbows at their limits, the robot stood crooked and
+    # fell in 0.2 s corrected or not (Poppy); the elbows' goals left outside their limits (NAO)
+    spec = HumanoidSpec(limits="tight", odd_limits=True, seed=42)
+    urdf = build_humanoid(tmp_path / "odd.urdf", spec)
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "leg joint 'l_knee' at 0.60 rad, outside its limits [-1.40, 0.00]" in err[0]
+    body = load_robot(str(build_humanoid(tmp_path / "arms.urdf", replace(spec, limits="wide"))), None).body
+    goals = make_scenario("lean", body).goals(0.0)
+    elbows = [body.joint_names.index(f"{s}_el") for s in "lr"]
+    assert np.allclose(goals[elbows], -0.03)
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -339,8 +339,19 @@ class Poser:
         return self._data.oMi[j].act(point) - self._data.oMi[self.body.model.getJointId(arm.roll)].translation
 
     def standing(self, flexion: float = 0.3, arm_out: float = 0.1) -> np.ndarray:
-        """The standing posture (see module docstring)."""
-        return self.legs_flexed(flexion) + self.arms_down(arm_out)
+        """The standing posture (see module docstring), within the joints' limits: a leg joint it would put
+        beyond them is refused (InputError: the knees-bent stance is what every scenario stands on; Poppy's file
+        lets its left knee flex only forward), any other joint is held at its limit (NAO's elbow roll, whose
+        limits leave out its zero)."""
+        q = self.legs_flexed(flexion) + self.arms_down(arm_out)
+        model = self.body.model
+        lower, upper = model.lowerPositionLimit[-len(q):], model.upperPositionLimit[-len(q):]
+        for i in self.leg_index:
+            if not lower[i] - 1e-9 <= q[i] <= upper[i] + 1e-9:
+                raise InputError(f"{model.name}: standing with bent knees needs leg joint {self.names[i]!r} at "
+                                 f"{q[i]:.2f} rad, outside its limits [{lower[i]:.2f}, {upper[i]:.2f}] (a knee "
+                                 "whose limits let it flex only forward?)")
+        return np.clip(q, lower, upper)
 
 
 def smooth_step(x: np.ndarray | float) -> np.ndarray | float:
