@@ -112,7 +112,8 @@ class HumanoidSpec:
     (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
     kept (Talos' reduced model); ``facing``: the way the robot faces in its file, "x" (REP 103), "-y" (Poppy's)
     or "-x" (iCub's); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
-    file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad);
+    file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
+    torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -141,6 +142,7 @@ class HumanoidSpec:
     fixed_finger: bool = False
     facing: str = "x"
     odd_limits: bool = False
+    inertia_scale: float = 1.0
     seed: int = 0
 
 
@@ -315,6 +317,8 @@ def _write(b: _Builder, path: Path) -> Path:
             elif spec.odd_inertias and role in ("head", "torso"):
                 inertia = (np.array([[0.0, 0.0, 2.40741e-35], [0.0, 0.0, 0.0], [2.40741e-35, 0.0, 0.0]])
                            if role == "head" else np.diag([1.0, 1.0, 3.0]) * inertia[0, 0])
+            if role == "torso":
+                inertia = inertia * spec.inertia_scale
             ET.SubElement(inertial, "inertia", **{k: f"{inertia[i, j]:.9g}" for k, (i, j) in zip(
                 ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                 strict=True)})

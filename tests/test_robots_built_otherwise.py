@@ -162,6 +162,18 @@ def test_a_stance_beyond_a_knees_limits_is_refused_and_an_arm_beyond_its_own_is_
     assert np.allclose(goals[elbows], -0.03)
 
 
+def test_a_link_inertia_no_link_of_the_robot_can_have_is_refused_in_one_line(tmp_path, capsys):
+    # before: taken as written (Darwin-OP's file: a 1 kg body of 6.5 kg m^2), the true ZMP moved by metres; the
+    # torso is the root link, named base_link
+    for scale, refused in ((1e6, True), (100.0, False)):  # kg mm^2 written as kg m^2; a torso 10 times too wide
+        urdf = build_humanoid(tmp_path / f"i{scale:g}.urdf", HumanoidSpec(inertia_scale=scale, seed=43))
+        rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.05",
+                   "--quiet"])
+        err = capsys.readouterr().err.splitlines()
+        assert (rc, len(err)) == ((2, 1) if refused else (0, 0)), err
+        assert not refused or ("link 'base_link' <inertia>" in err[0] and "more than the whole robot" in err[0])
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -349,8 +349,8 @@ class Poser:
         for i in self.leg_index:
             if not lower[i] - 1e-9 <= q[i] <= upper[i] + 1e-9:
                 raise InputError(f"{model.name}: standing with bent knees needs leg joint {self.names[i]!r} at "
-                                 f"{q[i]:.2f} rad, outside its limits [{lower[i]:.2f}, {upper[i]:.2f}] (a knee "
-                                 "whose limits let it flex only forward?)")
+                                 f"{q[i]:.2f} rad, outside its limits [{lower[i]:.2f}, {upper[i]:.2f}] (the legs' "
+                                 "limits let neither leg, or only one, stand so facing either way)")
         return np.clip(q, lower, upper)
 
 

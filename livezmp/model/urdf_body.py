@@ -61,7 +61,7 @@ def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.
     return vals
 
 
-def _check_inertial(link: ET.Element, path: Path) -> None:
+def _check_inertial(link: ET.Element, path: Path) -> float:
     """Mass finite and >= 0, centre of mass finite, inertia finite and positive semi-definite: what the
     ZMP's dynamics need. Principal moments that break the triangle inequality (one larger than the sum of
     the other two: no rigid body has them) are used as written: CAD exports give them to published robots
@@ -70,18 +70,19 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
     A mass of 0 makes the link massless (a frame, a sensor's placeholder, as real URDFs write
     them): its ``<inertial>`` is removed, whatever inertia it gives (no massless body has one).
     Zero principal moments are a point mass or a thin rod (a sensor link of 0.01 kg written
-    with a zero inertia): the limits of rigid bodies, accepted."""
+    with a zero inertia): the limits of rigid bodies, accepted. Returns the largest principal moment (kg m^2; 0
+    for a massless link), for `_check_sizes`."""
     where = f"{path}: link {link.get('name')!r} <inertial>"
     inertial = link.find("inertial")
     if inertial is None:
-        return
+        return 0.0
     mass_el, inertia_el, origin = inertial.find("mass"), inertial.find("inertia"), inertial.find("origin")
     if mass_el is None or inertia_el is None:
         raise InputError(f"{where}: needs <mass> and <inertia>")
     mass = _numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
     if mass == 0:
         link.remove(inertial)
-        return
+        return 0.0
     if not 0 < mass <= MAX_LINK_MASS:
         raise InputError(f"{where} <mass> value: {mass:g} kg is outside [0, {MAX_LINK_MASS:g}]")
     if origin is not None:
@@ -98,6 +99,23 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
     if moments[0] < -ROUNDOFF * max(float(np.abs(moments).max()), mass * 1.0):  # kg m^2: the mass 1 m out
         raise InputError(f"{where} <inertia>: not positive semi-definite (principal moments "
                          f"{', '.join(f'{m:.3g}' for m in moments)} kg m^2)")
+    return float(moments[2])
+
+
+def _check_sizes(model: pin.Model, mass: float, moments: dict[str, float], path: Path) -> None:
+    """No link's largest principal moment (``moments``, kg m^2 by link name) above what the whole robot's mass
+    (``mass``, kg) could have at its size (all of it at the largest distance between two of its joints, zero
+    pose): no link of the robot can have it (Darwin-OP's file gives its 1 kg body 6.5 kg m^2, 9 times the whole
+    robot's most, and its ZMP then moved by metres; a unit error). InputError naming the link."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, np.zeros(model.nq))
+    points = np.array([data.oMi[j].translation for j in range(model.njoints)])
+    size = float(np.linalg.norm(points[:, None] - points[None], axis=2).max())
+    name, moment = max(moments.items(), key=lambda item: item[1])
+    if size > 0 and moment > mass * size**2:  # 0: a single link, no size to judge by
+        raise InputError(f"{path}: link {name!r} <inertia>: a principal moment of {moment:.3g} kg m^2, more than "
+                         f"the whole robot ({mass:.3g} kg, {size:.2f} m across its joints) could have "
+                         f"({mass * size**2:.2g}): not a link of it (units?)")
 
 
 def _check_tree(root: ET.Element, path: Path) -> None:
@@ -210,8 +228,7 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     links = root.findall("link")
     if len(links) > MAX_LINKS:
         raise InputError(f"{path}: {len(links)} links, more than the {MAX_LINKS} this tool analyses")
-    for link in links:
-        _check_inertial(link, path)
+    moments = {link.get("name"): _check_inertial(link, path) for link in links}
     if root.find("./link/inertial") is None:
         raise InputError(f"{path}: URDF has no <inertial> with a mass on any link; masses are needed for the ZMP")
     unbounded = _check_joints(root, path)
@@ -222,6 +239,7 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     except (RuntimeError, ValueError) as e:
         first = str(e).splitlines()[0] if str(e).strip() else type(e).__name__
         raise InputError(f"{path}: Pinocchio cannot load it: {first}") from None
+    _check_sizes(model, sum(float(m.get("value")) for m in root.findall("./link/inertial/mass")), moments, path)
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
@@ -289,45 +307,44 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
 
 
 ALIGNED = 0.99  # |cos| between a joint's axis and a direction for the joint to turn about it
-KNEE_BIAS = 0.5  # a knee's limits say which way it flexes when |lower + upper| >= this share of upper - lower
+STANCE_FLEXION = 0.3  # rad: the scenarios' standing posture bends hip, knee, ankle by -1, +2, -1 times this
 
 
-def _knees_flex_forward(model: pin.Model, data: pin.Data, feet: dict[str, int], lateral: np.ndarray,
-                        forward: np.ndarray) -> bool:
-    """Whether every leg whose knee's limits say which way it flexes (`KNEE_BIAS`: Poppy's −0.06..2.34 rad,
-    iCub's −2.18..0.40) has its foot move along ``forward`` as the knee flexes, i.e. the robot faces the other
-    way (a knee flexes so the foot goes back). A leg's knee: of its joints turning about ``lateral``, the one
-    nearest mid-height between the first and the last (the hip and ankle pitch). False where no knee says."""
+def _stance_fits(model: pin.Model, data: pin.Data, feet: dict[str, int], forward: np.ndarray) -> int:
+    """How many legs can take the scenarios' knees-bent stance within their joints' limits, the robot facing
+    ``forward``: hip, knee and ankle pitch (of a leg's joints turning about the lateral axis, the first, the
+    one nearest mid-height between the first and the last, and the last) turned by −1, +2 and −1 times
+    `STANCE_FLEXION` about the robot's left (a knee flexes so its foot goes back)."""
+    left = np.cross([0.0, 0.0, 1.0], forward)
     pin.computeJointJacobians(model, data, np.zeros(model.nq))
-    votes = []
-    for side, chain in leg_joints(model, feet).items():
-        axis = {j: data.J[3:, model.joints[j].idx_v] for j in chain}
-        pitch = [j for j in chain if abs(float(axis[j] @ lateral)) >= ALIGNED]
+    fits = 0
+    for chain in leg_joints(model, feet).values():
+        along = {j: float(data.J[3:, model.joints[j].idx_v] @ left) for j in chain}
+        pitch = [j for j in chain if abs(along[j]) >= ALIGNED]
         if len(pitch) < 3:
             continue
         middle = 0.5 * (data.oMi[pitch[0]].translation[2] + data.oMi[pitch[-1]].translation[2])
         knee = min(pitch[1:-1], key=lambda j: abs(data.oMi[j].translation[2] - middle))
-        k = model.joints[knee].idx_q
-        lower, upper = float(model.lowerPositionLimit[k]), float(model.upperPositionLimit[k])
-        if not (np.isfinite(lower) and np.isfinite(upper)) or abs(lower + upper) < KNEE_BIAS * (upper - lower):
-            continue
-        shin = data.oMf[feet[side]].translation - data.oMi[knee].translation
-        votes.append(float(np.sign(lower + upper) * np.cross(axis[knee], shin) @ forward) > 0)
-    return bool(votes) and all(votes)
+        turns = ((pitch[0], -1.0), (knee, 2.0), (pitch[-1], -1.0))
+        angles = [(model.joints[j].idx_q, k * STANCE_FLEXION / along[j]) for j, k in turns]
+        fits += all(model.lowerPositionLimit[i] <= q <= model.upperPositionLimit[i] for i, q in angles)
+    return fits
 
 
 def _heading(model: pin.Model, data: pin.Data, feet: dict[str, int], sided: bool) -> float:
     """The yaw (rad, a multiple of 90°) that turns the robot to face +x, where its URDF faces another way (Poppy
     faces −y, iCub −x): its forward axis is the lateral one (right foot to left) turned 90° clockwise seen from
     above; where the feet's sides are not ``sided`` (a config names them; else they are the lowest leaves, left
-    the one at larger y) and the knees flex so the feet would go forward, the robot faces the other way."""
+    the one at larger y) and more legs take the knees-bent stance within their limits facing the other way
+    (`_stance_fits`: iCub's knees flex only one way, the Gepetto simple humanoid's ankles too), it faces that
+    way."""
     lateral = data.oMf[feet["left"]].translation - data.oMf[feet["right"]].translation
     lateral[2] = 0.0
     if np.linalg.norm(lateral) < 1e-9:
         return 0.0
     lateral /= np.linalg.norm(lateral)
     forward = np.cross(lateral, [0.0, 0.0, 1.0])
-    if not sided and _knees_flex_forward(model, data, feet, lateral, forward):
+    if not sided and _stance_fits(model, data, feet, -forward) > _stance_fits(model, data, feet, forward):
         forward = -forward
     return float(np.pi / 2 * round(-np.arctan2(forward[1], forward[0]) / (np.pi / 2)))
 
