@@ -114,6 +114,7 @@ class HumanoidSpec:
     or "-x" (iCub's); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
     file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
+    ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -143,6 +144,7 @@ class HumanoidSpec:
     facing: str = "x"
     odd_limits: bool = False
     inertia_scale: float = 1.0
+    shoulder_tilt: float = 0.0
     seed: int = 0
 
 
@@ -185,7 +187,12 @@ class _Builder:
         sign = -1.0 if axis and self.rng.random() < self.spec.flip else 1.0
         self.joints.append({"name": name, "role": role, "side": side, "parent": parent, "child": child,
                             "at": np.asarray(at, float) * self.spec.height, "kind": kind,
-                            "axis": None if axis is None else sign * np.array(AXES[axis]), **extra})
+                            "axis": None if axis is None else sign * np.array(AXES[axis]) @ self.tilt(role).T,
+                            **extra})
+
+    def tilt(self, role: str) -> np.ndarray:
+        """The turn of a joint's axis from its world axis: the shoulder pitch's ``shoulder_tilt`` about x."""
+        return _rot((self.spec.shoulder_tilt if role == "sho_pitch" else 0.0, 0.0, 0.0))
 
     def frame(self, leg: bool) -> np.ndarray | None:
         if self.spec.frames == "pitch_z" and leg:

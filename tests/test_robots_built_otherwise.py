@@ -174,6 +174,19 @@ def test_a_link_inertia_no_link_of_the_robot_can_have_is_refused_in_one_line(tmp
         assert not refused or ("link 'base_link' <inertia>" in err[0] and "more than the whole robot" in err[0])
 
 
+def test_a_shoulder_pitch_mounted_off_the_lateral_axis_is_the_one_the_arms_swing_from(tmp_path):
+    # before: a shoulder pitch 25 deg off the lateral axis (Unitree H1's) was passed over for the elbow: the arms
+    # swung from their elbows (Unitree's H1, H1-2 and G1 then stood uncorrected and fell corrected)
+    body = load_robot(str(build_humanoid(tmp_path / "t.urdf", HumanoidSpec(shoulder_tilt=0.44, seed=44))), None).body
+    roles = joint_roles(body)
+    assert [roles[f"{s}_{r}"] for s in "lr" for r in ("sho_pitch", "el")] == ["l_sho_pitch", "l_el", "r_sho_pitch",
+                                                                              "r_el"]
+    scenario = make_scenario("arm_swing", body, duration=3.0)
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    assert off.fallen is not None and on.fallen is None
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -138,9 +138,13 @@ def joint_roles(body: BodyModel) -> dict[str, str]:
     return _roles_and_arms(body)[0]
 
 
-def _about(axis: dict[str, np.ndarray], joint: str, k: int) -> bool:
-    """Whether ``joint`` turns about world axis ``k`` (zero posture); False for a joint not in ``axis``."""
-    return joint in axis and abs(float(axis[joint][k])) >= ALIGNED
+SHOULDER_ALIGNED = 0.85  # |cos|: a shoulder's pitch or roll may be turned up to 32° off the world axis (H1: 25°)
+
+
+def _about(axis: dict[str, np.ndarray], joint: str, k: int, aligned: float = ALIGNED) -> bool:
+    """Whether ``joint`` turns about world axis ``k`` (zero posture) within ``aligned`` (|cos|); False for a
+    joint not in ``axis``."""
+    return joint in axis and abs(float(axis[joint][k])) >= aligned
 
 
 def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
@@ -184,7 +188,8 @@ class Arm:
 def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
           origin: dict[str, np.ndarray]) -> dict[str, Arm]:
     """Side ("l", "r") -> its `Arm`: the chain from the trunk to a leaf link on that side that no leg and no
-    other side shares, with a joint about the lateral (pitch) or forward (roll) axis; its elbow the first joint
+    other side shares, with a joint about the lateral (pitch) or forward (roll) axis (within `SHOULDER_ALIGNED`:
+    Unitree's H1 and G1 mount the shoulder pitch 25° and 16° off the lateral axis); its elbow the first joint
     after the shoulder's whose origin lies a fifth of the way or more from the shoulder to the hand. ``axis``,
     ``origin``: `joint_axes` (a joint left out of ``axis``, a mimic joint, plays no role)."""
     model, names = body.model, set(body.joint_names)
@@ -212,8 +217,8 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
         hand = data.oMi[j].act(model.inertias[j].lever)
         side = {1: "l", -1: "r"}.get(sign)
         own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
-        pitch = next((n for n in own if _about(axis, n, Y)), None)
-        roll = next((n for n in own if _about(axis, n, X)), None)
+        pitch = next((n for n in own if _about(axis, n, Y, SHOULDER_ALIGNED)), None)
+        roll = next((n for n in own if _about(axis, n, X, SHOULDER_ALIGNED)), None)
         if side is None or side in found or (pitch is None and roll is None):
             continue
         shoulder = [n for n in (pitch, roll) if n]
@@ -258,7 +263,7 @@ class Poser:
         i = self.index(role)
         name = self.roles[role]
         along = float(self.axis[name][world_axis])
-        if abs(along) < ALIGNED:
+        if abs(along) < (SHOULDER_ALIGNED if "_sho_" in role else ALIGNED):
             raise InputError(f"{self.body.model.name}: joint {name!r} turns about {np.round(self.axis[name], 3)}, "
                              f"not the world {'xyz'[world_axis]} axis this scenario needs")
         out = np.zeros(len(self.names))
