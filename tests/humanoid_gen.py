@@ -115,6 +115,7 @@ class HumanoidSpec:
     file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
+    ``ankle_range``: the ankle pitch limited to ± this (rad; 0: as ``limits`` says; Romeo's −0.52..0.79);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -145,6 +146,7 @@ class HumanoidSpec:
     odd_limits: bool = False
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
+    ankle_range: float = 0.0
     seed: int = 0
 
 
@@ -207,6 +209,8 @@ def _limits(spec: HumanoidSpec, role: str, side: str, axis: np.ndarray) -> tuple
     axis sign, hips and ankles ±0.7, rolls ±0.35, arms ±1.2); ``odd_limits``: see `HumanoidSpec`."""
     if spec.odd_limits and role == "el":
         return (-1.54, -0.03)
+    if spec.ankle_range and role == "ank_pitch":
+        return (-spec.ankle_range, spec.ankle_range)
     if spec.limits == "absent":
         return None
     if spec.limits == "wide":

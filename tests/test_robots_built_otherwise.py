@@ -187,6 +187,15 @@ def test_a_shoulder_pitch_mounted_off_the_lateral_axis_is_the_one_the_arms_swing
     assert off.fallen is not None and on.fallen is None
 
 
+def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
+    # before: the loop held the ankles at their limits and the robot stood, short of its toes, uncorrected
+    # (Romeo: 88 mm inside them; its default soles put the toes where 0.67 rad of ankle leans to them)
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(ankle_range=0.35, seed=45))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.35" in err[0], err
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -713,7 +713,32 @@ def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
     if name not in SCENARIOS:
         raise InputError(f"unknown scenario '{name}' (choose from {', '.join(SCENARIOS)})")
     scenario = SCENARIOS[name](body, **options)
-    if not body.mimics:
-        return scenario
-    # a mimic joint is not moved on its own: its goal is its parent's times the multiplier plus the offset
-    return replace(scenario, goals=lambda t: follow(scenario.goals(t), body.mimics))
+    if body.mimics:  # a mimic joint is not moved on its own: its goal is its parent's times the multiplier + offset
+        scenario = replace(scenario, goals=lambda t, goals=scenario.goals: follow(goals(t), body.mimics))
+    _check_limits(scenario, body)
+    return scenario
+
+
+LIMIT_CHECK_S = 0.01  # s between the goals a scenario's joint limits are checked at
+
+
+def _check_limits(scenario: Scenario, body: BodyModel) -> None:
+    """InputError (one line) where the scenario's goals take a leg joint beyond its limits: the loop holds its
+    goals within them, so the robot would not do what the scenario says (Romeo's default soles, half its hip
+    height long, put its toes where leaning to them needs 0.67 rad of ankle, 0.52 allowed: it stood, 88 mm
+    inside them). An arm's goals beyond its limits are left to the loop's clip: the swing is one-sided (iCub's
+    shoulder pitch stops at 0.09 rad), the robot still swings its arms."""
+    model = body.model
+    n = len(body.joint_names)
+    legs = np.zeros(n, dtype=bool)
+    legs[[c - (model.nq - n) for cols in body.correction.legs.values() for c in cols]] = True
+    lower, upper = model.lowerPositionLimit[-n:] - 1e-6, model.upperPositionLimit[-n:] + 1e-6
+    for t in np.arange(0.0, scenario.duration, LIMIT_CHECK_S):
+        goals = scenario.goals(float(t))
+        out = np.flatnonzero(legs & ((goals < lower) | (goals > upper)))
+        if out.size:
+            i = int(out[0])
+            raise InputError(f"{model.name}: {scenario.name} needs joint {body.joint_names[i]!r} at {goals[i]:.3f} "
+                             f"rad (t = {t:.2f} s), beyond its limits [{lower[i] + 1e-6:.3f}, "
+                             f"{upper[i] - 1e-6:.3f}]: the robot would not do it (soles nearer its real feet, in a "
+                             "robot config, may ask less)")
