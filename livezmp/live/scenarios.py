@@ -738,7 +738,7 @@ def _check_limits(scenario: Scenario, body: BodyModel) -> None:
         out = np.flatnonzero(legs & ((goals < lower) | (goals > upper)))
         if out.size:
             i = int(out[0])
-            raise InputError(f"{model.name}: {scenario.name} needs joint {body.joint_names[i]!r} at {goals[i]:.3f} "
-                             f"rad (t = {t:.2f} s), beyond its limits [{lower[i] + 1e-6:.3f}, "
-                             f"{upper[i] - 1e-6:.3f}]: the robot would not do it (soles nearer its real feet, in a "
+            raise InputError(f"{model.name}: {scenario.name} needs joint {body.joint_names[i]!r} at {goals[i]:.4f} "
+                             f"rad (t = {t:.2f} s), beyond its limits [{lower[i] + 1e-6:.4f}, "
+                             f"{upper[i] - 1e-6:.4f}]: the robot would not do it (soles nearer its real feet, in a "
                              "robot config, may ask less)")
