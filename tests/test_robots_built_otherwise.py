@@ -115,7 +115,7 @@ PLAIN = HumanoidSpec(extras=True, grippers=True, seed=40)
 
 @pytest.mark.parametrize("quirk", [{"placeholders": "zero_mass"}, {"placeholders": "point_mass"},
                                    {"fixed_axis_zero": True}, {"odd_inertias": True}, {"fixed_finger": True}])
-def test_a_humanoid_written_as_published_files_are_loads_with_its_masses_and_legs(tmp_path, quirk):
+def test_quirks_of_published_urdfs_load_with_the_masses_and_legs_of_the_plain_robot(tmp_path, quirk):
     # before, refused: a link of mass 0 (Bolt's feet) or a point mass with a zero inertia (Talos', Wolfgang's
     # sensor frames), a fixed joint's <axis xyz="0 0 0"> (Unitree H1, NAO), a point-mass head with a 2.4e-35
     # product of inertia (iCub) or a torso breaking the triangle inequality (Darwin-OP, Romeo), a fixed finger
