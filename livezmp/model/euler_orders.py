@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from livezmp.model.bvh import BvhJoint, BvhMotion
+from livezmp.model.euler import other_branch, wrapped
 
 GIMBAL_MARGIN_DEG = 20.0  # a middle angle within this of ±90° is near gimbal lock
 ORDERS = tuple("".join(p) for p in permutations("XYZ"))
@@ -139,10 +140,6 @@ def clear_of_gimbal_lock(motion: BvhMotion) -> BvhMotion:
     return reexpressed(motion, gimbal_orders(motion))
 
 
-def _wrap(d: np.ndarray) -> np.ndarray:
-    return (d + 180.0) % 360.0 - 180.0
-
-
 def restore(original: BvhMotion, orders: dict[int, str], frames: np.ndarray) -> np.ndarray:
     """``frames`` (F, C; as many rows as ``original``'s) of ``original``'s hierarchy re-expressed by ``orders``,
     written back in the file's own orders: of the two Euler triples of each rotation and their 360° turns, the one
@@ -154,9 +151,9 @@ def restore(original: BvhMotion, orders: dict[int, str], frames: np.ndarray) -> 
         slots = rotation_slots(joint)
         cols = [joint.first_channel + i for i in slots]
         one = _euler(_rotations(frames, new[k], slots), _order(joint, slots))
-        other = np.column_stack([one[:, 0] + 180.0, 180.0 - one[:, 1], one[:, 2] + 180.0])  # the same rotation
+        other = other_branch(one, 180.0)  # the same rotations
         ref = original.frames[:, cols]
-        d_one, d_other = _wrap(one - ref), _wrap(other - ref)
+        d_one, d_other = wrapped(one - ref, 180.0), wrapped(other - ref, 180.0)
         nearer = (d_one ** 2).sum(axis=1) <= (d_other ** 2).sum(axis=1)
         out[:, cols] = ref + np.where(nearer[:, None], d_one, d_other)
     return out

@@ -51,6 +51,7 @@ from livezmp.model.anthropometry import ADULT, DE_LEVA_MALE, BspTable, SegmentPa
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy, world_from_up_axis
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
+from livezmp.model.euler import other_branch, wrapped
 from livezmp.model.marker_labels import LabelMatch, standard_trial
 from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
 
@@ -394,10 +395,10 @@ def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
     angles[:, 2] = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
     if not unwrap:
         return angles
-    other = np.column_stack([angles[:, 0] + np.pi, np.pi - angles[:, 1], angles[:, 2] + np.pi])
+    other = other_branch(angles)
 
     def apart(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.sum((np.mod(a - b + np.pi, 2 * np.pi) - np.pi) ** 2, axis=1)
+        return np.sum(wrapped(a - b) ** 2, axis=1)
 
     # the other branch is as far from the other branch before as this one from this one: a crossing is a frame whose
     # other branch lies nearer the frame before than its own; the branch changes at each crossing
