@@ -32,6 +32,7 @@ from livezmp.model.markers import (
     WRIST_WIDTH_OF_STATURE,
     MarkerBodyOptions,
     _euler_zyx,
+    _segments,
     body_from_markers,
     hat_sway,
     hat_table,
@@ -1394,3 +1395,24 @@ def test_all_zero_points_are_gaps_and_are_filled(tmp_path):
     pelvis_x = take.frames[100:103, 0]  # the pelvis origin, from the filled LASI: near the true motion
     reference = body_from_markers(_trial(t, RATE)).frames[100:103, 0]
     assert np.abs(pelvis_x - reference).max() < 1e-3, (pelvis_x, reference)
+
+
+def test_a_finger_marker_giving_no_stable_hand_frame_leaves_that_hand_along_the_forearm():
+    """A FIN marker that jumps about the wrist (not where Plug-in Gait puts it: biomechZoo's HC040A14, 61-121 deg
+    off the forearm) turns its hand frame by half a turn between frames: that hand is placed along the forearm, as
+    without FIN, and said; the take is read (before: refused, "segment hand_l turns 170 deg"). The other hand keeps
+    its FIN, and a stream built from the take's dimensions keeps the decision."""
+    t = np.arange(int(SECONDS * RATE)) / RATE
+    trial = _trial(t, RATE, full_body=True)
+    fin = trial.labels.index("LFIN")
+    wrist = (trial.points[:, trial.labels.index("LWRA")] + trial.points[:, trial.labels.index("LWRB")]) / 2
+    flip = (np.arange(len(t)) // 50) % 2 == 1  # every half second the marker sits above the wrist instead of below
+    trial.points[flip, fin] = 2 * wrist[flip] - trial.points[flip, fin]
+    take = body_from_markers(trial)
+    rules = take.notes["joint_centres"]
+    assert rules["left_hand"].startswith("along the forearm: LFIN") and "right_hand" not in rules
+    assert take.notes["dimensions"]["LFIN_stable"] == 0.0 and take.notes["dimensions"]["RFIN_stable"] == 1.0
+    seg, _, _ = _segments({k: trial.points[:1, i] for i, k in enumerate(trial.labels)}, trial,
+                                       take.notes["dimensions"])
+    forearm, hand = seg["forearm_l"][1][0], seg["hand_l"][1][0]
+    np.testing.assert_allclose(hand, forearm, atol=1e-12)  # one frame, as a stream's: the take's decision

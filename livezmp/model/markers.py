@@ -626,7 +626,12 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     full = "LWRA" in m
     if full or "LWRI" in m:
         arms = {s: arm_dimensions(trial.widths_m, s, stature) for s in "LR"}
-        seg.update(_upper_segments(m, pelvis_origin, stature, arms))
+        upper, hands = _upper_segments(m, pelvis_origin, stature, arms, dims)
+        seg.update(upper)
+        wands.update(hands)
+        for k in (k for k, stable in hands.items() if not stable):
+            rules[f"{'left' if k[0] == 'L' else 'right'}_hand"] = (
+                f"along the forearm: {k[:4]} gives no stable hand frame (it turns over 90 deg between frames)")
         told = [_arm_told(trial.widths_m, arms, i) for i in range(3)]
         rules["shoulders"] = f"SHO moved down the thorax axis (offset {told[0]}, plus a marker radius)"
         rules["elbows"] = (f"chord rule (wrist centre, width {told[1]})" if full
@@ -658,6 +663,12 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     return seg, centres, notes
 
 
+def _turns(rot: np.ndarray) -> np.ndarray:
+    """(F - 1,) rad: how far a frame ``rot`` (F, 3, 3) turns from each frame to the next."""
+    cos = (np.einsum("fij,fij->f", rot[:-1], rot[1:]) - 1.0) / 2.0  # trace(R_k^T R_k+1) = sum R_k * R_k+1
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
 def _check_turns(seg: dict, first: int, source: str) -> None:
     """Refuse a segment without a frame somewhere (markers on top of each other or in line, or far out of
     range) or whose frame turns more than ``MAX_TURN_RAD`` between two frames: its axes flipped (markers
@@ -667,8 +678,7 @@ def _check_turns(seg: dict, first: int, source: str) -> None:
         if bad.any():
             raise InputError(f"{source}: segment {name} has no frame at frame {first + int(np.argmax(bad))}: "
                              "its markers coincide, lie in line or are out of range there")
-        cos = (np.einsum("fij,fij->f", rot[:-1], rot[1:]) - 1.0) / 2.0  # trace(R_k^T R_k+1) = sum R_k * R_k+1
-        turn = np.arccos(np.clip(cos, -1.0, 1.0))
+        turn = _turns(rot)
         if len(turn) and turn.max() > MAX_TURN_RAD:
             k = int(np.argmax(turn))
             raise InputError(f"{source}: segment {name} turns {np.degrees(turn[k]):.0f} deg between frames "
@@ -890,7 +900,7 @@ def _head(m: dict[str, np.ndarray], top: np.ndarray, thorax: np.ndarray) -> tupl
 
 
 def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: float,
-                    arms: dict[str, tuple[float, float, float]]) -> dict:
+                    arms: dict[str, tuple[float, float, float]], dims: dict | None = None) -> tuple[dict, dict]:
     """Thorax (:func:`_thorax`; origin at the cervicale's level, z up the trunk), head (:func:`_head`) and each
     arm. Each arm: shoulder centre its shoulder offset plus a marker radius below SHO along the thorax
     (Plug-in Gait's rule); with Plug-in Gait's wrist bar the wrist centre between WRA and WRB and the elbow
@@ -898,9 +908,13 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
     and WRI (lateral epicondyle, wrist) each centre half the elbow / wrist width (plus a marker radius) medial of
     its marker along the thorax' lateral axis, as the knees are placed from KNE, the hand along the forearm.
     ``mid_hip`` (F, 3; m) where the thorax' axis starts without T10 and STRN; ``stature`` m; ``arms`` side ->
-    :func:`arm_dimensions`."""
+    :func:`arm_dimensions`. A FIN marker whose hand frame turns more than ``MAX_TURN_RAD`` between two frames (a
+    finger marker not where Plug-in Gait puts it: biomechZoo's HC040A14, 61-121 deg off the forearm) gives no hand
+    frame: that hand lies along the forearm as without FIN; the decision per side (``LFIN_stable`` ...: 1.0 / 0.0)
+    is returned beside the segments, and taken from ``dims`` when given (a stream keeps its calibration's)."""
     top, thorax = _thorax(m, mid_hip, stature)
     out = {"thorax": (top, thorax), "head": _head(m, top, thorax)}
+    hands: dict[str, float] = {}
     ty, tz = thorax[:, :, 1], thorax[:, :, 2]
     for s, sign, t in _SIDES.values():
         shoulder, elbow, wrist = arms[s]
@@ -911,11 +925,17 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
         else:
             ejc = m[s + "ELB"] - sign * (elbow / 2 + MARKER_RADIUS) * ty
             wjc = m[s + "WRI"] - sign * (wrist / 2 + MARKER_RADIUS) * ty
-        hand_axis = wjc - m[s + "FIN"] if s + "FIN" in m else ejc - wjc
+        hand = _frame(ejc - wjc, ty)
+        if s + "FIN" in m:
+            with_fin = _frame(wjc - m[s + "FIN"], ty)
+            turn = _turns(with_fin)
+            hands[f"{s}FIN_stable"] = (dims or {}).get(f"{s}FIN_stable",
+                                                       float(not len(turn) or turn.max() <= MAX_TURN_RAD))
+            hand = with_fin if hands[f"{s}FIN_stable"] else hand
         out[f"upperarm_{t}"] = (sjc, _frame(sjc - ejc, ty))
         out[f"forearm_{t}"] = (ejc, _frame(ejc - wjc, ty))
-        out[f"hand_{t}"] = (wjc, _frame(hand_axis, ty))
-    return out
+        out[f"hand_{t}"] = (wjc, hand)
+    return out, hands
 
 
 def trunk_com_below_cervicale(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> float:
