@@ -142,6 +142,21 @@ def test_names_from_common_skeletons():
         assert (tag.kind, tag.side) == want, name
 
 
+def test_lower_case_cmu_skeleton_reads_its_sides():
+    """The lower-case CMU BVH skeleton (hip, lhip, lknee, lfoot, rhip, ...; e.g. AmmarkoV/RGBDAcquisition's
+    Motions/102_01cc.bvh) glues one side letter to the bone: its legs were refused as unsided."""
+    text = make_bvh()
+    for side in ("Left", "Right"):
+        s = side[0].lower()
+        for bone, cmu in (("UpLeg", "hip"), ("Leg", "knee"), ("Foot", "foot"), ("ToeBase", "toe")):
+            text = text.replace(f"JOINT {side}{bone}\n", f"JOINT {s}{cmu}\n")
+    text = text.replace("ROOT Hips", "ROOT hip").replace("JOINT Spine", "JOINT lowerback")
+    body = body_from_bvh(parse_bvh(text))
+    assert set(body.feet) == {"left", "right"}
+    assert [(classify(n).kind, classify(n).side) for n in ("lhip", "rknee", "lowerback", "root")] == [
+        ("thigh", "left"), ("shank", "right"), ("spine", "center"), ("root", "center")]
+
+
 def test_unknown_skeleton_needs_mapping(tmp_path):
     names = {"thigh": "Femur_", "shin": "Crus_", "foot": "Pes_", "toe": "Digit_"}
     text = make_bvh(names=names).replace("LeftFemur_", "FemurA").replace("RightFemur_", "FemurB")

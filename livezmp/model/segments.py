@@ -1,7 +1,7 @@
 """Which skeleton joint is which body segment: name patterns and explicit mapping files.
 
 Each BVH joint "owns" the segment from itself to its child. Patterns cover the common
-skeletons (Bandai, CMU, SFU, Mixamo-style); anything else needs a mapping file, a TOML
+skeletons (Bandai, CMU and its lower-case "lhip", SFU, Mixamo-style); anything else needs a mapping file, a TOML
 table ``[segments]`` of ``joint name = "kind"`` (kinds below, plus ``side = "left"`` etc.
 inferred from the name or given as ``"thigh:left"``).
 
@@ -43,8 +43,7 @@ _PATTERNS: list[tuple[str, str]] = [
     (r"(spine|chest|torso|back|abdomen|thorax|waist)", "spine"),
     (r"(root|reference)", "root"),
 ]
-_ASF_BONES = ("femur", "tibia", "foot", "toes", "humerus", "radius", "wrist", "hand", "clavicle", "hipjoint",
-              "thumb", "fingers")
+_CENTER_KINDS = ("pelvis", "spine", "neck", "head", "root")
 
 
 @dataclass(frozen=True)
@@ -71,10 +70,18 @@ def _side(name: str) -> str:
         return "left"
     if "r" in tokens:
         return "right"
-    for side, prefix in (("left", "l"), ("right", "r")):
-        if any(low.split(":")[-1] == prefix + b or low.split(":")[-1].startswith(prefix + b) for b in _ASF_BONES):
-            return side
+    # One lower-case letter glued to a limb word: ASF/CMU "lfemur", "lhipjoint", the lower-case CMU BVH skeleton's
+    # "lhip", "lknee", "rshoulder", "relbow" (its hip joint is the thigh, as in classify). The rest must name a
+    # sided segment, so "lowerback" ("owerback": a spine word) and "root" stay centre joints.
+    last = re.sub(r"[\s_.\-]", "", name.split(":")[-1])
+    if last[:1] in ("l", "r", "L", "R") and last[1:].islower() and _kind_of(last[1:]) not in (None, *_CENTER_KINDS[1:]):
+        return "left" if last[0] in "lL" else "right"
     return "center"
+
+
+def _kind_of(cleaned: str) -> str | None:
+    """The first pattern's kind matching a lower-cased, separator-free name, else None."""
+    return next((kind for pat, kind in _PATTERNS if re.search(pat, cleaned)), None)
 
 
 def classify(name: str) -> SegmentTag | None:
@@ -83,14 +90,14 @@ def classify(name: str) -> SegmentTag | None:
     s = re.sub(r"^(left|right)", "", s)
     s = re.sub(r"(left|right)$", "", s)
     side = _side(name)
-    for pat, kind in _PATTERNS:
-        if re.search(pat, s):
-            if kind == "pelvis" and side != "center":
-                kind = "thigh"  # "LeftHip" names the hip joint, i.e. the thigh segment
-            if kind in ("pelvis", "spine", "neck", "head", "root"):
-                side = "center"
-            return SegmentTag(kind, side)
-    return None
+    kind = _kind_of(s)
+    if kind is None:
+        return None
+    if kind == "pelvis" and side != "center":
+        kind = "thigh"  # "LeftHip" names the hip joint, i.e. the thigh segment
+    if kind in _CENTER_KINDS:
+        side = "center"
+    return SegmentTag(kind, side)
 
 
 def load_mapping(path: str | Path) -> dict[str, SegmentTag]:
