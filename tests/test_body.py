@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pinocchio as pin
 import pytest
 from data_paths import OP3_URDF
 
+from livezmp.cli import main
 from livezmp.errors import InputError
 from livezmp.model.body import foot_soles
 from livezmp.model.bvh import parse_bvh
@@ -155,6 +158,23 @@ def test_lower_case_cmu_skeleton_reads_its_sides():
     assert set(body.feet) == {"left", "right"}
     assert [(classify(n).kind, classify(n).side) for n in ("lhip", "rknee", "lowerback", "root")] == [
         ("thigh", "left"), ("shank", "right"), ("spine", "center"), ("root", "center")]
+
+
+def test_a_body_rising_off_the_tracked_ground_is_no_flight(tmp_path):
+    """A standing body carried up at 3 cm/s (a floor not level under a walk, as deep-motion-editing's
+    blender_rendering/example.bvh rises 6.5 cm over 3.7 m) outruns the ground's tracking: its frames read as flight
+    while its CoM does not fall, which the verdict must not call plausible."""
+    text = make_bvh(frames=1)
+    header, row = text[: text.index("Frames:")], text.strip().splitlines()[-1].split()
+    rows = [" ".join([row[0], f"{96 + 0.03 * i:g}", *row[2:]]) for i in range(300)]
+    path = tmp_path / "rising.bvh"
+    path.write_text(header + "Frames: 300\nFrame Time: 0.01\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "s.json"
+    assert main(["analyze", str(path), "--summary-json", str(out)]) == 0
+    s = json.loads(out.read_text())
+    assert s["flight_frames"] > 30
+    assert "does not fall" in s["plausibility"]["verdict"]
+    assert s["plausibility"]["flight_com_acc_mps2"] == pytest.approx(0.0, abs=0.5)
 
 
 def test_unknown_skeleton_needs_mapping(tmp_path):

@@ -141,7 +141,8 @@ class TakeStats:
         self.inside_tol += int(np.sum(result.judged & (result.margin >= -self.tolerance_mm / 1000)))
         self.judged += int(result.judged.sum())
         self.inside += int(result.inside[result.judged].sum())
-        self.flight += int(np.sum(~result.has_zmp | (result.support == SUPPORT_LABELS.index("none"))))
+        flight = ~result.has_zmp | (result.support == SUPPORT_LABELS.index("none"))
+        self.flight += int(np.sum(flight))
         out = result.judged & ~result.inside
         if out.any():
             worst = float(np.max(-result.margin[out]))
@@ -149,7 +150,7 @@ class TakeStats:
         self.support += np.bincount(result.support, minlength=len(SUPPORT_LABELS))
         self.first_t = float(result.t[0]) if self.first_t is None else self.first_t
         self.last_t, self.ground = float(result.t[-1]), float(result.ground_z[-1])
-        self.plausibility.add(result.com, result.zmp, result.has_zmp)
+        self.plausibility.add(result.com, result.zmp, result.has_zmp, flight)
 
     def summary(self, body: BodyModel, mode: str) -> dict:
         n, judged, inside, tolerance_mm = self.count, self.judged, self.inside, self.tolerance_mm
