@@ -160,6 +160,15 @@ def test_lower_case_cmu_skeleton_reads_its_sides():
         ("thigh", "left"), ("shank", "right"), ("spine", "center"), ("root", "center")]
 
 
+def test_a_forefoot_joint_is_the_toe_segment():
+    """pybvh's bvh_data/bvh_test3.bvh ends each leg LeftFoot → LeftForeFoot: read as a second foot joint, the sole
+    was laid round the forefoot alone (11 cm long) and the standing take's ZMP fell outside both feet."""
+    body = body_from_bvh(parse_bvh(make_bvh(names={"toe": "ForeFoot"})))
+    foot = body.feet["left"]
+    assert body.model.frames[foot.frame_id].name == "LeftFoot"
+    assert body.model.frames[foot.toe_frame_id].name == "LeftForeFoot"
+
+
 def test_a_body_rising_off_the_tracked_ground_is_no_flight(tmp_path):
     """A standing body carried up at 3 cm/s (a floor not level under a walk, as deep-motion-editing's
     blender_rendering/example.bvh rises 6.5 cm over 3.7 m) outruns the ground's tracking: its frames read as flight

@@ -28,7 +28,7 @@ KINDS = (
 # Order matters: first match wins. Names are lower-cased with separators removed.
 _PATTERNS: list[tuple[str, str]] = [
     (r"(thumb|index|middle|ring|pinky|finger|handend|handtip|hand_?site)", "fingers"),
-    (r"(toebase|toe|ball)", "toe"),
+    (r"(toebase|toe|ball|forefoot)", "toe"),  # the forefoot (metatarsals and toes) is the foot's distal part
     (r"hipjoint", "link"),
     (r"(forearm|lowerarm|elbow|radius|ulna)", "forearm"),
     (r"(upperarm|humerus|^(l|r|left|right)?arm$|arm(l|r|left|right)?$)", "upper_arm"),
