@@ -197,7 +197,8 @@ def _read_hierarchy(cur: _Cursor) -> list[BvhJoint]:
         raise cur.error(f"duplicate joint name(s): {', '.join(sorted(dup))}")
     n_ch = sum(len(j.channels) for j in joints)
     if n_ch > MAX_CHANNELS:
-        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses")
+        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses (face and finger joints "
+                        "carry no mass here: give the take without them)")
     return joints
 
 
