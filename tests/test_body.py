@@ -160,6 +160,16 @@ def test_lower_case_cmu_skeleton_reads_its_sides():
         ("thigh", "left"), ("shank", "right"), ("spine", "center"), ("root", "center")]
 
 
+def test_a_two_frame_take_is_too_short_to_judge(tmp_path):
+    """lo-th/olympe's res/bvh/root.bvh has 2 frames: its accelerations are zeros by construction, and it was called
+    "plausible for walking"."""
+    path = tmp_path / "two.bvh"
+    path.write_text(make_bvh(frames=2))
+    out = tmp_path / "s.json"
+    assert main(["analyze", str(path), "--summary-json", str(out)]) == 0
+    assert json.loads(out.read_text())["plausibility"]["verdict"].startswith("too short to judge")
+
+
 def test_too_many_channels_says_what_to_give():
     """The Daz-friendly CMU conversions with MakeHuman's face (MocapNET, RGBDAcquisition) carry 498 channels."""
     face = "".join(f"JOINT Face{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n"

@@ -121,14 +121,16 @@ class PlausibilityStats:
         fall = self.flight_acc / self.flight_count if self.flight_count else None
         share = self.flight_count / self.total if self.total else 0.0
         return _verdict([parts[0].value(), parts[1].value(), self.vertical.value()], self.distance.value() or 0.0,
-                        fall, share)
+                        fall, share, self.total)
 
 
-def _verdict(p99: list[float], d99: float, fall: float | None = None, share: float = 0.0) -> dict:
+def _verdict(p99: list[float], d99: float, fall: float | None = None, share: float = 0.0, frames: int = 3) -> dict:
     ratio = [p / r for p, r in zip(p99, WALK_COM_ACC_P99, strict=True)]
     names = ("fore-aft", "lateral", "vertical")
     worst = int(np.argmax(ratio))
-    if fall is not None and share >= FLIGHT_SHARE and fall > FLIGHT_FALL_MPS2:
+    if frames < 3:  # an acceleration needs three positions: com_accelerations gives zeros
+        verdict = f"too short to judge: {frames} frame(s), an acceleration needs 3"
+    elif fall is not None and share >= FLIGHT_SHARE and fall > FLIGHT_FALL_MPS2:
         verdict = (f"not physically plausible: {100 * share:.0f} % of the frames have no foot on the ground found "
                    f"while the CoM does not fall (mean vertical acceleration {fall:+.1f} m/s², a flight's is -9.8): "
                    "the floor is not level or the root is held in the air")
