@@ -116,6 +116,8 @@ class HumanoidSpec:
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
     ``ankle_range``: the ankle pitch limited to ± this (rad; 0: as ``limits`` says; Romeo's −0.52..0.79);
+    ``arms_forward``: the arms held straight forward in the zero posture (NAO's), the shoulder roll then about the
+    vertical axis and the upper-arm yaw a twist about the forward axis, at the elbow (NAO's elbow yaw);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -147,6 +149,7 @@ class HumanoidSpec:
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
     ankle_range: float = 0.0
+    arms_forward: bool = False
     seed: int = 0
 
 
@@ -263,12 +266,18 @@ def _build(spec: HumanoidSpec) -> _Builder:
             b.link(f"{s}_sole", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
             b.joint("sole", s, parent, f"{s}_sole", (0.02, w, 0.0), None, "fixed")
         parent, shoulder = trunk, (0.0, 0.12 * y, 0.82)
+        # arms forward: each point of the hanging arm turned 90° about y around the shoulder, boxes with it
+        point = (lambda p: (0.82 - p[2], p[1], 0.82)) if spec.arms_forward else tuple
+        box = (lambda d: (d[2], d[1], d[0])) if spec.arms_forward else tuple
         for k, a in enumerate(spec.arm):
             role, axis = ARM_ROLE[a]
-            at = (0.0, 0.12 * y, 0.68) if a == "e" else shoulder
+            if spec.arms_forward:
+                axis = {"roll": "yaw", "yaw": "roll"}.get(axis, axis) if a != "e" else axis
+            at = point((0.0, 0.12 * y, 0.68) if a == "e" or (a == "y" and spec.arms_forward) else shoulder)
             last = k == len(spec.arm) - 1
             com, size = ((0.0, 0.12 * y, 0.62), (0.04, 0.04, 0.13)) if last else \
                 ((0.0, 0.12 * y, 0.75), (0.04, 0.04, 0.14))
+            com, size = point(com), box(size)
             child = b.link(f"{s}_arm{k}", 0.03 if last or a == "e" else 0.01, com, size, b.frame(False))
             b.joint(role, s, parent, child, at, axis, "continuous" if spec.continuous and a == "y" else "revolute")
             parent = child

@@ -187,6 +187,22 @@ def test_a_shoulder_pitch_mounted_off_the_lateral_axis_is_the_one_the_arms_swing
     assert off.fallen is not None and on.fallen is None
 
 
+def test_arms_held_forward_in_the_zero_posture_are_brought_down_and_swung_from_the_shoulder(tmp_path):
+    # before: with the arms forward in the zero posture (NAO's), the upper-arm twist at the elbow (NAO's elbow
+    # yaw, about the forward axis) was taken for the shoulder roll: the arms stayed forward and NAO's arm swing
+    # stood uncorrected
+    body = load_robot(str(build_humanoid(tmp_path / "f.urdf", HumanoidSpec(arm="prye", arms_forward=True, seed=46))),
+                      None).body
+    roles = joint_roles(body)
+    assert [roles[f"l_{r}"] for r in ("sho_pitch", "sho_roll", "el")] == ["l_sho_pitch", "l_sho_roll", "l_el"]
+    poser = Poser(body)
+    assert poser.standing()[poser.index("l_sho_pitch")] == pytest.approx(np.pi / 2, abs=0.01)  # arms down
+    scenario = make_scenario("arm_swing", body, duration=3.0)
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    assert off.fallen is not None and on.fallen is None
+
+
 def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
     # before: the loop held the ankles at their limits and the robot stood, short of its toes, uncorrected
     # (Romeo: 88 mm inside them; its default soles put the toes where 0.67 rad of ankle leans to them)

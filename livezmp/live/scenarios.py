@@ -217,18 +217,39 @@ def _arms(body: BodyModel, legs: set[str], axis: dict[str, np.ndarray],
         hand = data.oMi[j].act(model.inertias[j].lever)
         side = {1: "l", -1: "r"}.get(sign)
         own = [n for n in chain if side_of[n] == {sign}]  # below the trunk, on one side only
+        if side is None or side in found or not own:
+            continue
         pitch = next((n for n in own if _about(axis, n, Y, SHOULDER_ALIGNED)), None)
-        roll = next((n for n in own if _about(axis, n, X, SHOULDER_ALIGNED)), None)
-        if side is None or side in found or (pitch is None and roll is None):
+        shoulder_at = origin[own[0]]
+        bend = next((origin[n] for n in own if np.linalg.norm(origin[n] - shoulder_at)
+                     >= 0.4 * np.linalg.norm(hand - shoulder_at)), hand)  # the upper arm's end: at the elbow
+        out = _abduction(bend - shoulder_at)
+        roll = next((n for n in own if n in axis and abs(float(axis[n] @ out)) >= SHOULDER_ALIGNED), None)
+        if pitch is None and roll is None:
             continue
         shoulder = [n for n in (pitch, roll) if n]
         start = origin[shoulder[-1] if roll is None else roll]
         reach = float(np.linalg.norm(hand - start))
         after = own[max(own.index(n) for n in shoulder) + 1:]
-        elbow = next((n for n in after if n in axis and np.linalg.norm(origin[n] - start) >= 0.2 * reach), None)
+        # the elbow bends the arm: a twist about the upper arm (NAO's elbow yaw, at its elbow) is not it
+        elbow = next((n for n in after if n in axis and np.linalg.norm(origin[n] - start) >= 0.2 * reach
+                      and abs(float(axis[n] @ (origin[n] - start))) < SHOULDER_ALIGNED * np.linalg.norm(
+                          origin[n] - start)), None)
         at = (model.getJointId(elbow), np.zeros(3)) if elbow else (j, model.inertias[j].lever.copy())
         found[side] = Arm(pitch, roll, elbow, origin[elbow] if elbow else hand, at)
     return found
+
+
+def _abduction(arm: np.ndarray) -> np.ndarray:
+    """World axis (unit, zero posture) about which a shoulder roll turns an arm pointing along ``arm`` (world
+    vector) out to the side: perpendicular to the lateral axis and to the arm's course in the sagittal plane
+    (forward, x, for an arm hanging down; vertical, z, for an arm held forward, NAO's zero posture, whose elbow
+    yaw turns about x as a twist of the forearm), forward for an arm held out sideways (OP3's zero posture)."""
+    sagittal = np.array([arm[X], 0.0, arm[Z]])
+    if np.linalg.norm(sagittal) < 0.3 * np.linalg.norm(arm):
+        return np.array([1.0, 0.0, 0.0])
+    out = np.cross([0.0, 1.0, 0.0], sagittal)
+    return out / np.linalg.norm(out)
 
 
 class Poser:
@@ -302,7 +323,9 @@ class Poser:
 
     def arms_down(self, out_angle: float) -> np.ndarray:
         """Shoulder rolls that make each upper arm hang down, ``out_angle`` rad away from the body
-        (arms without a shoulder roll, and a robot without arms, stay as they are). A mimic joint that follows
+        (arms without a shoulder roll, and a robot without arms, stay as they are), after the shoulder pitch
+        has brought down an upper arm held more than 45° off down in the sagittal plane (`_pitch_down`: NAO's
+        zero posture holds the arms forward). A mimic joint that follows
         the roll moves the upper arm with it: the roll is then solved (secant steps) so that the arm hangs
         down with its followers where their parents put them."""
         out = np.zeros(len(self.names))
@@ -310,14 +333,16 @@ class Poser:
             arm = self.arms.get(s)
             if arm is None or arm.roll is None:
                 continue
+            pitched = self._pitch_down(arm)
             i = self.names.index(arm.roll)
-            a = self.axis[arm.roll]
+            a = self._axis_at(arm.roll, pitched)
             target = np.array([0.0, lateral * np.sin(out_angle), -np.cos(out_angle)])
             target -= (target @ a) * a
 
-            def miss(roll: float, arm: Arm = arm, i: int = i, a: np.ndarray = a, target: np.ndarray = target) -> float:
+            def miss(roll: float, arm: Arm = arm, i: int = i, a: np.ndarray = a, target: np.ndarray = target,
+                     pitched: np.ndarray = pitched) -> float:
                 """rad about the roll's axis from the upper arm to the target, rolled by ``roll``."""
-                d = self._upper_arm(arm, i, roll)
+                d = self._upper_arm(arm, i, roll, pitched)
                 d -= (d @ a) * a
                 return float(np.arctan2(a @ np.cross(d, target), d @ target))
 
@@ -330,13 +355,37 @@ class Poser:
                     break
                 x0, e0, x1 = x1, e1, x1 - e1 * (x1 - x0) / (e1 - e0)
                 e1 = miss(x1)
+            out += pitched
             out[i] = x1
         return out
 
-    def _upper_arm(self, arm: Arm, i: int, roll: float) -> np.ndarray:
-        """World vector (m) from the shoulder roll's origin to the upper arm's end, every joint at zero but the
-        roll (index ``i``) at ``roll`` rad and the mimic joints following their parents."""
-        joints = np.zeros(len(self.names))
+    def _pitch_down(self, arm: Arm) -> np.ndarray:
+        """Joint vector (zeros but the shoulder pitch) that turns the upper arm, seen in the sagittal plane,
+        straight down; zeros if the arm has no pitch, already hangs within 45° of down, or lies mostly across
+        the body (an arm held out sideways, OP3's, is brought down by its roll alone)."""
+        out = np.zeros(len(self.names))
+        if arm.pitch is None:
+            return out
+        a = self.axis[arm.pitch]
+        d = arm.upper - self.origin[arm.pitch]
+        flat = d - (d @ a) * a
+        down = np.array([0.0, 0.0, -1.0]) - a[Z] * a
+        turn = float(np.arctan2(a @ np.cross(flat, down), flat @ down))
+        if np.linalg.norm(flat) >= 0.5 * np.linalg.norm(d) and abs(turn) > np.pi / 4:
+            out[self.names.index(arm.pitch)] = turn
+        return out
+
+    def _axis_at(self, name: str, joints: np.ndarray) -> np.ndarray:
+        """World axis of joint ``name`` in the posture ``joints`` (rad, base at the origin)."""
+        model = self.body.model
+        pin.computeJointJacobians(model, self._data, np.concatenate(
+            [np.zeros(model.nq - len(joints)), follow(joints, self.body.mimics)]))
+        return self._data.J[3:, model.joints[model.getJointId(name)].idx_v].copy()
+
+    def _upper_arm(self, arm: Arm, i: int, roll: float, joints: np.ndarray) -> np.ndarray:
+        """World vector (m) from the shoulder roll's origin to the upper arm's end, in the posture ``joints``
+        (rad) with the roll (index ``i``) at ``roll`` rad and the mimic joints following their parents."""
+        joints = joints.copy()
         joints[i] = roll
         q = np.concatenate([np.zeros(self.body.model.nq - len(joints)), follow(joints, self.body.mimics)])
         pin.forwardKinematics(self.body.model, self._data, q)
