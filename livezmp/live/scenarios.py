@@ -7,7 +7,8 @@ found from the kinematic tree (`joint_roles`: each leg is the chain from the tru
 foot, its hip, knee and ankle the first, middle and last joints turning about the
 lateral axis, its hip and ankle roll the first and last about the forward axis; each
 arm the chain to a hand that no other limb shares, its shoulder the first joints turning
-about the lateral and forward axes, its elbow the next), and
+about the lateral axis and about the axis that turns the upper arm out to the side
+(`_abduction`), its elbow the next that bends the arm), and
 postures are rotations about world axes in the zero posture, turned into joint angles
 through each joint's own axis as the model gives it. Role names follow OP3's
 ({l,r}_{hip_pitch, knee, ank_pitch, hip_roll, ank_roll, sho_pitch, sho_roll, el}).
