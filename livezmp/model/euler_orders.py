@@ -122,9 +122,8 @@ def reexpress(joints: list[BvhJoint], block: np.ndarray, orders: dict[int, str],
 
 
 def gimbal_orders(motion: BvhMotion) -> dict[int, str]:
-    """{joint index: new order} for ``motion``'s joints near gimbal lock (:func:`choose_orders`)."""
-    flagged = near_lock(motion.joints, motion.frames)
-    return choose_orders(motion.joints, middle_extents(motion.joints, motion.frames, flagged)) if flagged else {}
+    """{joint index: new order} for ``motion``'s joints near gimbal lock: :func:`scan_orders` over its one block."""
+    return scan_orders(motion.joints, lambda: (motion.frames,))
 
 
 def reexpressed(motion: BvhMotion, orders: dict[int, str]) -> BvhMotion:
