@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 from machine_load import load_averages
 
-from livezmp.balance.plates import G, lowpass, plate_frames
+from livezmp.balance.plates import G, lowpass
 from livezmp.balance.support import support_and_clamp
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
@@ -59,7 +59,14 @@ from livezmp.model.markers import (
     sway_basis,
 )
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
-from livezmp.offline.gaitlab import COP_CHECK_WEIGHT, LabOptions, analyse_lab_take, facing, may_bear_weight
+from livezmp.offline.gaitlab import (
+    COP_CHECK_WEIGHT,
+    LabOptions,
+    analyse_lab_take,
+    facing,
+    may_bear_weight,
+    plates_at,
+)
 from livezmp.offline.plausibility import WALK_COM_ACC_P99, com_accelerations, plausibility
 from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
 
@@ -608,8 +615,7 @@ def _feet_loaded(trial, a) -> dict[str, np.ndarray]:
     over the frames before it) at the applied plate delay, each plate's load given to the foot whose sole centre
     lies nearest its own CoP; a foot carrying more than CONTACT_LOAD of the weight is loaded."""
     shift = a.summary["time_alignment"]["plate_delay_applied_ms"] / 1000
-    raw = plate_frames(trial.plates, trial.analog_rate, trial.rate, np.rint(a.times * trial.rate).astype(int),
-                       a.take.body.world_from_input, None, shift_s=shift)
+    raw = plates_at(trial, a.take, a.times, None, shift)
     centres = {s: sole[:, :, :2].mean(axis=1) for s, sole in a.result.soles.items()}
     load = {s: np.zeros(len(a.times)) for s in centres}
     for cop, fz in zip(raw.plate_cop, raw.plate_fz, strict=True):

@@ -196,8 +196,8 @@ def com_accelerations(take: MarkerTake, result: BatchResult) -> np.ndarray:
     return out
 
 
-def _plates(trial: C3dTrial, take: MarkerTake, times: np.ndarray, cutoff: float, shift: float) -> PlateFrames:
-    """The plates at the marker frames ``times`` (s), low-passed at ``cutoff`` Hz, ``shift`` s later."""
+def plates_at(trial: C3dTrial, take: MarkerTake, times: np.ndarray, cutoff: float | None, shift: float) -> PlateFrames:
+    """The plates at the marker frames ``times`` (s), low-passed at ``cutoff`` Hz (None: raw), ``shift`` s later."""
     frames = np.rint(times * trial.rate).astype(int)
     return plate_frames(trial.plates, trial.analog_rate, trial.rate, frames, take.body.world_from_input, cutoff,
                         shift_s=shift)
@@ -320,7 +320,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else plates_band_hz(cfg.estimator)
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
-    plates = _plates(trial, take, times, cutoff, shift)
+    plates = plates_at(trial, take, times, cutoff, shift)
     complete, feet_on, why = _complete(trial, result, times, cfg, floor, plates, com_acc, first)
     strikes = _strikes(trial, result)
     m_plates, cycles = plate_mass(plates.force[:, 2], times, complete, gait_cycles(strikes))
@@ -340,7 +340,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
     if applied:
         shift = measured
-        plates = _plates(trial, take, times, cutoff, shift)
+        plates = plates_at(trial, take, times, cutoff, shift)
     # the plates' low-pass mixes each frame with its neighbours: next to a frame with a loaded foot off the plates
     # (or too little load on them) the low-passed plates miss part of a load that the kinematics' ZMP sees, so their
     # CoP is no whole-body CoP there (docs/validation.md, "The plates' reach"). Mass and delay were fitted before.
