@@ -155,6 +155,8 @@ class MarkerTake:
     subject: C3dTrial | None = None  # the trial the body was calibrated on (its widths, height, labels)
     # a label of ``roles`` that is the mean of several of the file's (the toe's metatarsal stand-in) -> those labels
     mean_of: dict = field(default_factory=dict)
+    # the segments whose mass rides on another segment's markers (:func:`placed_segments`)
+    placed: tuple[str, ...] = ()
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -507,7 +509,7 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
             "(standard labels)", f"(labels read as {', '.join(match.conventions)})")
     # the roles' labels as the file (or a live stream of the same set) writes them
     return MarkerTake(body, frames, keep.start, notes, centres, _as_written(roles, match), trial,
-                      {match.roles[r]: labs for r, labs in match.midpoints.items()})
+                      {match.roles[r]: labs for r, labs in match.midpoints.items()}, placed_segments(seg, m))
 
 
 def _check_coordinates(raw: dict[str, np.ndarray], roles: dict[str, str | None], trial: C3dTrial) -> None:
@@ -773,7 +775,7 @@ def _cluster_take(trial: C3dTrial, opts: MarkerBodyOptions, mmap: MarkerMap) -> 
     body, frames = _build(_swayed(seg, opts, m, trial.rate), m, opts, up, r_in, notes, lengths,
                           _table(opts, trial, notes))
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
-    return MarkerTake(body, frames, keep.start, notes, centres)
+    return MarkerTake(body, frames, keep.start, notes, centres, placed=placed_segments(seg, m))
 
 
 def _carried(rot: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -832,6 +834,13 @@ def _upper_note(m: dict, trial: C3dTrial) -> str:
         return "; upper-body markers labelled but never seen: not used"
     missing = [u for u in _UPPER if u not in have] + [f"{u} (never seen)" for u in unseen]
     return f"; upper-body markers incomplete (missing {', '.join(missing)}): not used"
+
+
+def placed_segments(seg: dict, m: dict) -> tuple[str, ...]:
+    """The segments of ``seg`` whose mass is placed from another segment's markers (``m`` the markers): the
+    head, arms and trunk on the pelvis (``hat``), head and arms or arms on the thorax, a head without head
+    markers on the thorax. Empty: every segment is tracked by its own markers."""
+    return tuple(s for s in seg if s in ("hat", "headarms", "arms") or (s == "head" and not _head_labels(m)))
 
 
 def _head_labels(m: dict) -> str:

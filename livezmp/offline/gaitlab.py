@@ -67,6 +67,11 @@ LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4, "cutoff_hz": 6.0}
 # harmonics of the lateral motion lie below half the frequency. The segments' lateral positions are low-passed at
 # this part of the estimator's cutoff (whole takes; docs/validation.md, "The lateral band").
 LATERAL_CUTOFF_FRACTION = 0.5
+# The walk's heading at each frame (:func:`walk_heading`): its velocity low-passed below the stride (a slow walk's
+# 0.7 Hz strides sway the heading by 1 deg through it), counted from half a slow walk's speed (0.4 m/s) up; slower,
+# swaying or standing, the whole take's travel or the way the subject faces
+HEADING_HZ = 0.5
+HEADING_SPEEDS_MPS = (0.2, 0.4)
 # The plates are matched to the estimator's acceleration gain at this part of its cutoff: the estimator's response
 # falls off faster than the plates' 4th-order low-pass, so they can agree over the band below it, not everywhere
 PLATE_BAND_MATCH = 2 / 3
@@ -156,25 +161,46 @@ def plates_band_hz(estimator: EstimatorConfig) -> float:
 
 
 def lateral_band_hz(opts: LabOptions, take: MarkerTake, cfg: PipelineConfig) -> float | None:
-    """The cutoff (Hz) of :func:`lateral_band` for ``take``, or None: not asked, or a corrected take
-    (livezmp's own output, its HAT given by HAT points), which is analysed as written."""
-    if opts.lateral_cutoff_fraction is None or HAT_POINTS[0] in take.roles:
+    """The cutoff (Hz) of :func:`lateral_band` for ``take``, or None: not asked; every segment tracked by its
+    own markers (no mass rides on another segment's markers to carry their shake into the ZMP, and the band
+    would only take real motion out: docs/validation.md, "The lateral band where every segment is tracked");
+    or a corrected take (livezmp's own output, its HAT given by HAT points), which is analysed as written."""
+    if opts.lateral_cutoff_fraction is None or not take.placed or HAT_POINTS[0] in take.roles:
         return None
     return opts.lateral_cutoff_fraction * cfg.estimator.cutoff_hz
 
 
 def lateral_band(frames: np.ndarray, rate: float, cutoff_hz: float, facing: np.ndarray | None = None) -> np.ndarray:
     """``frames`` (F, 6 per segment: x, y, z m, yaw, pitch, roll rad, internal frame) with every segment's
-    position across the walk (the lateral axis of the first segment's straight-line trend, or of ``facing``
-    when it barely travels: :func:`livezmp.model.markers.sway_basis`) low-passed at ``cutoff_hz`` (zero phase);
-    along the walk, height and angles unchanged. Whole takes only (zero phase needs the future)."""
-    _, _, left = sway_basis(frames[:, :3], facing)
+    position across the walk low-passed at ``cutoff_hz`` (zero phase); along the walk, height and angles
+    unchanged. Across the walk is square to :func:`walk_heading` at each frame, so that a turning walk's
+    fore-aft motion is not taken for lateral. Whole takes only (zero phase needs the future)."""
+    left = walk_heading(frames[:, :3], rate, facing) @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     out = frames.copy()
     for k in range(0, frames.shape[1], 6):
         pos = frames[:, k:k + 3]
-        across = pos @ left
-        out[:, k:k + 3] = pos + np.outer(lowpass(across, rate, cutoff_hz) - across, left)
+        # about the segment's own slow path, so that a turning heading does not sweep its distance from the origin in
+        across = np.einsum("ij,ij->i", pos - lowpass(pos, rate, HEADING_HZ), left)
+        out[:, k:k + 3] = pos + (lowpass(across, rate, cutoff_hz) - across)[:, None] * left
     return out
+
+
+def walk_heading(origin: np.ndarray, rate: float, facing: np.ndarray | None = None) -> np.ndarray:
+    """(F, 3) unit horizontal direction (internal frame) in which a walk whose point ``origin`` (F, 3) m at
+    ``rate`` Hz heads at each frame: its velocity low-passed at ``HEADING_HZ`` (below the stride, so that the
+    lateral sway does not swing it) where it moves faster than ``HEADING_SPEEDS_MPS``' upper end, the whole
+    take's travel (:func:`sway_basis`; standing: the way it faces) below the lower, blended between."""
+    _, fwd, _ = sway_basis(origin, facing)
+    vel = np.gradient(lowpass(origin, rate, HEADING_HZ), 1.0 / rate, axis=0)
+    vel[:, 2] = 0.0
+    speed = np.linalg.norm(vel, axis=1, keepdims=True)
+    lo, hi = HEADING_SPEEDS_MPS
+    w = np.clip((speed - lo) / (hi - lo), 0.0, 1.0)
+    w = w * w * (3 - 2 * w)  # smoothstep: no kink where the walk starts to count
+    # an axis, not a direction: a heading against the take's travel is the same axis
+    local = vel / np.maximum(speed, 1e-9) * np.sign(vel @ fwd + 1e-12)[:, None]
+    d = w * local + (1 - w) * fwd
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def may_bear_weight(sole: np.ndarray, floor: float, dt: float) -> np.ndarray:
