@@ -118,6 +118,9 @@ class HumanoidSpec:
     ``ankle_range``: the ankle pitch limited to ± this (rad; 0: as ``limits`` says; Romeo's −0.52..0.79);
     ``arms_forward``: the arms held straight forward in the zero posture (NAO's), the shoulder roll then about the
     vertical axis and the upper-arm yaw a twist about the forward axis, at the elbow (NAO's elbow yaw);
+    ``cleats``: each foot ends in four cleats, massless leaf links fixed at its sole's corners, on a plane turned
+    this angle (rad) toes up from level in the zero posture, the right foot's also rolled a tenth of it, its
+    outer edge up (Wolfgang-OP's: 15° and 1.3°);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -150,6 +153,7 @@ class HumanoidSpec:
     shoulder_tilt: float = 0.0
     ankle_range: float = 0.0
     arms_forward: bool = False
+    cleats: float = 0.0
     seed: int = 0
 
 
@@ -262,6 +266,12 @@ def _build(spec: HumanoidSpec) -> _Builder:
                      b.link(f"{s}_ankle{k}", 0.005, (0.0, w, 0.06), (0.02, 0.02, 0.02), b.frame(True)))
             b.joint(f"ank_{ROLE_OF[axis]}", s, parent, child, (0.0, w, 0.06), ROLE_OF[axis])
             parent = child
+        if spec.cleats:
+            roll = spec.cleats / 10 if s == "r" else 0.0
+            for x, dy in ((-0.055, -0.035), (-0.055, 0.035), (0.095, -0.035), (0.095, 0.035)):
+                at = (x, w + dy, (x + 0.055) * np.tan(spec.cleats) - dy * np.tan(roll))
+                cleat = b.link(f"{s}_cleat_{'bf'[x > 0]}{'rl'[dy > 0]}", 0.0, at, (0.0, 0.0, 0.0))
+                b.joint(f"cleat_{'bf'[x > 0]}{'rl'[dy > 0]}", s, parent, cleat, at, None, "fixed")
         if spec.extras:
             b.link(f"{s}_sole", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
             b.joint("sole", s, parent, f"{s}_sole", (0.02, w, 0.0), None, "fixed")

@@ -19,6 +19,8 @@ from test_live_loop_closed import balance
 from livezmp.cli import main
 from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
 from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
+from livezmp.model.base_placement import BasePlacer
+from livezmp.model.body import foot_soles
 from livezmp.model.robot import load_robot
 
 # the sweep's "combined" robot: every way of being built otherwise that a fix was needed for, at once
@@ -63,6 +65,27 @@ def test_turned_foot_frames_get_level_soles_under_the_feet(hard):
         com = data.oMi[model.frames[foot.frame_id].parentJoint]
         centre = com.act(model.inertias[model.frames[foot.frame_id].parentJoint].lever)
         assert corners[:, :2].mean(axis=0) == pytest.approx(centre[:2], abs=1e-9)
+
+
+def test_cleat_feet_stand_on_their_cleats_with_the_trunk_upright(tmp_path):
+    # before: the lowest cleat was taken as the foot, under a level box sole (0.5 x 0.28 hip heights, centred under
+    # the foot's centre of mass), and the standing posture kept the soles as the zero posture has them: the cleats,
+    # on a plane 15° toes up (the right foot's also rolled 1.5°), were not the sole, and only the back pair touched
+    body = load_robot(str(build_humanoid(tmp_path / "cleats.urdf", HumanoidSpec(cleats=np.radians(15), seed=40))),
+                      None).body
+    model, data = body.model, body.model.createData()
+    joints = Poser(body).standing()
+    base = BasePlacer(body).update(joints)
+    pin.framesForwardKinematics(model, data, np.concatenate([base, joints]))
+    soles = foot_soles(body, data)
+    for side in ("left", "right"):
+        cleats = np.array([data.oMf[f].translation for f in range(model.nframes)
+                           if model.frames[f].name.startswith(f"{side[0]}_cleat_")
+                           and model.frames[f].type == pin.FrameType.BODY])
+        assert len(cleats) == 4
+        np.testing.assert_allclose(cleats[:, 2], 0.0, atol=1e-9)  # all four on the floor
+        np.testing.assert_allclose(sorted(map(tuple, soles[side])), sorted(map(tuple, cleats)), atol=1e-9)
+    np.testing.assert_allclose(base[4:], 0.0, atol=1e-9)  # the trunk upright: no pitch, no roll
 
 
 def test_a_two_joint_arm_hangs_down_by_its_shoulder_roll(hard):

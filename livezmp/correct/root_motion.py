@@ -183,13 +183,18 @@ class RootMover:
         self._solve_legs(q_new, targets)
         return q_new
 
-    def place_feet(self, asked: np.ndarray, start: np.ndarray) -> np.ndarray:
-        """``start`` (nq) with its legs re-solved so that each foot has the placement it has in ``asked`` (nq),
-        the base where ``start`` has it and every mimic joint following its parent: the configuration the
-        robot reaches when asked for ``asked``'s feet (to the IK's tolerance; ``last_foot_error``: m)."""
-        self._fk(np.asarray(asked, dtype=float))
+    def feet_of(self, q: np.ndarray) -> dict[str, list[pin.SE3]]:
+        """The world placements of each foot's frames (``correction.foot_frames``) in the configuration ``q``."""
+        self._fk(np.asarray(q, dtype=float))
+        return self.foot_targets()
+
+    def place_feet(self, start: np.ndarray, targets: dict[str, list[pin.SE3]]) -> np.ndarray:
+        """``start`` (nq) with its legs re-solved so that each foot's frames have the placements ``targets``
+        (`feet_of`: the feet of a configuration asked for), the base where ``start`` has it and every mimic joint
+        following its parent: the configuration the robot reaches when asked for those feet (to the IK's
+        tolerance; ``last_foot_error``: m)."""
         q = np.array(start, dtype=float)[None]
-        self._solve_legs(q, [self.foot_targets()])
+        self._solve_legs(q, [targets])
         return q[0]
 
     def _residual(self, frames: list[int], targets: list[pin.SE3]) -> np.ndarray:

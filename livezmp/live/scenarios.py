@@ -253,6 +253,34 @@ def _abduction(arm: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out)
 
 
+FLAT = 1e-6  # rad, m: soles turned or at heights this far apart in the zero posture are not flat on one plane
+
+
+def soles_flat(body: BodyModel) -> bool:
+    """Whether, in the zero posture, every sole frame is level (z up, within `FLAT` rad) and every sole's lowest
+    corner is at the same height (within `FLAT` m): the knees-bent stance, which keeps each sole parallel to the
+    pelvis, then stands both flat on the floor with the trunk upright."""
+    model, data = body.model, body.model.createData()
+    pin.framesForwardKinematics(model, data, np.zeros(model.nq))
+    tilts = [math.acos(min(1.0, float(data.oMf[f.frame_id].rotation[Z, Z]))) for f in body.feet.values()]
+    heights = [float(sole[:, Z].min()) for sole in foot_soles(body, data).values()]
+    return max(tilts) <= FLAT and max(heights) - min(heights) <= FLAT
+
+
+def _levelled(body: BodyModel, targets: dict[str, list[pin.SE3]]) -> dict[str, list[pin.SE3]]:
+    """Foot frame placements ``targets`` (`RootMover.feet_of`) turned level about their origins, their headings
+    kept, and moved up or down so that every sole's bottom is at their mean height."""
+    out, bottoms = {}, {}
+    for side, (pose, *rest) in targets.items():
+        level = pin.rpy.rpyToMatrix(0.0, 0.0, math.atan2(pose.rotation[Y, X], pose.rotation[X, X]))
+        out[side] = [pin.SE3(level, pose.translation.copy()), *rest]
+        bottoms[side] = pose.translation[Z] + float(body.feet[side].sole_local[:, Z].min())
+    mean = float(np.mean(list(bottoms.values())))
+    for side, (pose, *_) in out.items():
+        pose.translation[Z] += mean - bottoms[side]
+    return out
+
+
 class Poser:
     """Joint-angle vectors from rotations about world axes, for one body (joints by `joint_roles`)."""
 
@@ -264,9 +292,11 @@ class Poser:
         self._data = body.model.createData()
         legs = {c for cols in body.correction.legs.values() for c in cols}
         base = len(body.base_channels)
-        # a mimic joint on a leg: the legs' postures are re-solved so the feet go where they were asked
+        # the legs' postures are re-solved where a mimic joint is on a leg (so the feet go where they were asked)
+        # or the soles do not lie flat on one plane in the zero posture (so they are put there: `on_feet`)
+        self.level = not soles_flat(body)
         self.mover = (RootMover(body, ik_iterations=100, ik_tolerance=1e-10)
-                      if any({base + m.joint, base + m.parent} & legs for m in body.mimics) else None)
+                      if self.level or any({base + m.joint, base + m.parent} & legs for m in body.mimics) else None)
         self.leg_index = np.array(sorted(legs), dtype=int) - base
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (asked, solved) configurations of on_feet
 
@@ -295,24 +325,42 @@ class Poser:
     def legs_flexed(self, angle: float, sides: tuple[str, ...] = SIDES) -> np.ndarray:
         """Legs ("l", "r") bent by ``angle``: hip −θ, knee +2θ, ankle −θ about y (each sole
         stays parallel to the pelvis), the feet then kept where that puts them (`on_feet`)."""
-        out = np.zeros(len(self.names))
+        out = self.soles_levelled() if self.level else np.zeros(len(self.names))
         for s in sides:
             out += angle * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
                             - self.unit(f"{s}_ank_pitch", Y))
         return self.on_feet(out)
 
+    def soles_levelled(self) -> np.ndarray:
+        """Ankle pitch and roll (rad) that turn each sole level, the trunk upright, from the zero posture: a sole
+        whose upward normal is n turns level by a = atan2(−n_x, √(n_y² + n_z²)) about y after b = atan2(n_y, n_z)
+        about x (Ry(a) Rx(b) n = z, the ankle pitch above the roll; `on_feet` solves what that leaves)."""
+        model, data = self.body.model, self._data
+        pin.framesForwardKinematics(model, data, np.zeros(model.nq))
+        out = np.zeros(len(self.names))
+        for side, foot in self.body.feet.items():
+            n = data.oMf[foot.frame_id].rotation[:, Z]
+            out += math.atan2(-n[X], math.hypot(n[Y], n[Z])) * self.unit(f"{side[0]}_ank_pitch", Y)
+            if f"{side[0]}_ank_roll" in self.roles:
+                out += math.atan2(n[Y], n[Z]) * self.unit(f"{side[0]}_ank_roll", X)
+        return out
+
     def on_feet(self, joints: np.ndarray) -> np.ndarray:
         """``joints`` (rad) with the legs' joints re-solved so that, with every mimic joint following its
-        parent, each foot is where ``joints`` put it relative to the trunk (its joints taken as they are);
-        ``joints`` itself for a robot without a mimic joint on a leg (`RootMover.place_feet`: the follower's
-        Jacobian column folded into its parent's)."""
+        parent, each foot is where ``joints`` put it relative to the trunk (its joints taken as they are), and,
+        where the soles do not lie flat on one plane in the zero posture (`soles_flat`: Wolfgang-OP's cleats
+        lie 15° from the pelvis' level, its right foot's 1.3° rolled and 0.9 mm lower), each sole then turned
+        level about its frame's origin (its heading kept) and both raised or lowered to their mean height, so
+        that with the trunk upright both stand flat on the floor; ``joints`` itself for a robot with neither
+        (`RootMover.place_feet`: a follower's Jacobian column folded into its parent's)."""
         if self.mover is None:
             return joints
         asked = np.concatenate([np.zeros(len(self.body.base_channels)), joints])
         start = asked
         if self._last is not None:  # warm start: the last solution moved as the legs' ask moved (squat: each cycle)
             start = self._last[1] + asked - self._last[0]
-        solved = self.mover.place_feet(asked, start)
+        targets = self.mover.feet_of(asked)
+        solved = self.mover.place_feet(start, _levelled(self.body, targets) if self.level else targets)
         self._last = asked, solved
         out = np.array(joints, dtype=float)
         out[self.leg_index] = solved[len(asked) - len(joints):][self.leg_index]

@@ -3,9 +3,11 @@
 Masses and inertias come from the URDF's ``<inertial>`` tags. Feet and soles come from
 the robot config (:mod:`livezmp.model.robot_config`); without one, the feet are the two
 lowest leaf links in the zero pose (left = +y), level and side by side at the ends of two
-legs, and each sole a level box under the link's centre of mass: ``sole_length`` ×
-``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × / 0.28 × / 0.12 × the
-hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
+legs; a foot whose leaf links include three or more on one plane near level (cleats, contact
+points, force sensors: :mod:`livezmp.model.foot_contacts`) has their hull for its sole and
+their plane for its level, else its sole is a level box under the link's centre of mass:
+``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × /
+0.28 × / 0.12 × the hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
 chain does not share (a waist above the legs is the trunk's). Continuous joints, and
 revolute ones without a ``<limit>``, are revolute joints without bounds; a mimic joint
 keeps its own angle in the model and follows its parent's (``BodyModel.mimics``,
@@ -27,6 +29,7 @@ import pinocchio as pin
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
+from livezmp.model.foot_contacts import contact_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
@@ -361,16 +364,16 @@ def _feet(model: pin.Model, data: pin.Data, cfg: RobotConfig, path: Path) -> dic
     return feet_frames
 
 
-def _level_frame(model: pin.Model, fid: int, rotation: np.ndarray) -> int:
-    """A frame at the foot link's origin, on its joint, level in the zero pose (z up, x forward: the axes soles
-    and the base placement use): the link's own frame when it already is, else a new ``<link>_level`` frame
-    (a URDF may turn a leg's link frames, e.g. so a pitch axis is local z). ``rotation``: the link frame's
-    world rotation in the zero pose."""
-    if np.allclose(rotation, np.eye(3), atol=1e-9):
+def _foot_frame(model: pin.Model, data: pin.Data, fid: int, world: pin.SE3, name: str) -> int:
+    """A frame on the foot's joint with the zero-posture world placement ``world`` (``data``: the zero posture's
+    placements): the foot link's own frame ``fid`` when it already has it, else a new frame ``name``. Soles and
+    the base placement take a foot frame's z as the sole's normal and its x as forward: a URDF may turn a leg's
+    link frames (e.g. so a pitch axis is local z), and a foot's contact frames may lie on a plane turned from
+    the world's level (`contact_sole`)."""
+    if data.oMf[fid].isApprox(world, 1e-9):
         return fid
-    frame = model.frames[fid]
-    level = frame.placement * pin.SE3(rotation.T, np.zeros(3))
-    return model.addFrame(pin.Frame(f"{frame.name}_level", frame.parentJoint, level, pin.FrameType.OP_FRAME))
+    joint = model.frames[fid].parentJoint
+    return model.addFrame(pin.Frame(name, joint, data.oMi[joint].actInv(world), pin.FrameType.OP_FRAME))
 
 
 def _box(length: float, width: float, center: np.ndarray) -> np.ndarray:
@@ -403,10 +406,17 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     hip_h = float(np.mean([data.oMi[leg_ids[s][0]].translation[2] - data.oMf[f].translation[2]
                            for s, f in feet_frames.items()]))
     turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
-    feet_frames = {side: _level_frame(model, fid, turns[side]) for side, fid in feet_frames.items()}
     feet = {}
-    for side, fid in feet_frames.items():
+    for side, link in feet_frames.items():
         spec = cfg.feet.get(side, {})
+        contact = None if {"sole", "box"} & set(spec) else contact_sole(model, data, model.frames[link].parentJoint)
+        if contact is not None:
+            fid = _foot_frame(model, data, link, contact.placement, f"{side}_contact_sole")
+            feet_frames[side] = fid
+            feet[side] = Foot(side, fid, sole_local=contact.corners)
+            continue
+        name = f"{model.frames[link].name}_level"
+        fid = feet_frames[side] = _foot_frame(model, data, link, pin.SE3(np.eye(3), data.oMf[link].translation), name)
         turn = turns[side]  # a config's sole and box centre are in the link's frame: into the level one
         if "sole" in spec:
             sole = np.asarray(spec["sole"], dtype=float) @ turn.T
