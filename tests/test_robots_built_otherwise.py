@@ -46,7 +46,7 @@ def test_the_waist_above_the_legs_is_the_trunks_and_the_legs_start_at_the_hips(h
     assert {r: roles[f"{s}_{r}"] for s in "lr" for r in LEG_ROLES} == {r: darwin(r, s) for s in "lr"
                                                                        for r in LEG_ROLES}
     hips = {s: body.model.frames[f].name for s, f in body.correction.hips.items()}
-    assert hips == {"left": darwin("hip_roll", "l"), "right": darwin("hip_roll", "r")}  # "rpy": roll first
+    assert hips == {"left": darwin("hip_pitch", "l"), "right": darwin("hip_pitch", "r")}  # the pivot: the pitch
     assert roles["l_sho_pitch"] == darwin("sho_pitch", "l") and "l_el" not in roles  # a 2-joint arm
 
 

@@ -101,6 +101,17 @@ def size_scaled_margin(body: BodyModel, margin_m: float = MARGIN_M) -> float:
     return margin_m * size_factor(body)
 
 
+def _leg_root(body: BodyModel, side: str) -> int:
+    """The top joint of a leg (Pinocchio id), whose subtree is the leg: from the hip's joint up the joints the
+    leg's correction channels turn (a robot's hip pitch may hang below its hip yaw and roll)."""
+    model = body.model
+    legs = set(body.correction.legs[side])
+    j = model.frames[body.correction.hips[side]].parentJoint
+    while model.parents[j] > 0 and model.joints[model.parents[j]].idx_q in legs:
+        j = model.parents[j]
+    return j
+
+
 class OnlineCorrector:
     """Causal corrector; call :meth:`step` once per analysed frame. ``margin_m`` (m): how far inside the support
     polygon it aims the ZMP (the live loop gives a robot its `size_scaled_margin`)."""
@@ -121,7 +132,7 @@ class OnlineCorrector:
         self.mover = RootMover(body)
         self.data = body.model.createData()
         corr = body.correction
-        self.leg_roots = [body.model.frames[corr.hips[s]].parentJoint for s in ("left", "right")]
+        self.leg_roots = [_leg_root(body, s) for s in ("left", "right")]
         actuated = set(corr.root_channels) if body.kind == "bvh" else set()
         actuated |= {c for cols in corr.legs.values() for c in cols}
         actuated -= {len(body.base_channels) + m.joint for m in body.mimics}  # they follow their parents' goals

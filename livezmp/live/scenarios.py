@@ -747,8 +747,9 @@ def hip_height(body: BodyModel, joints: np.ndarray) -> float:
     where a hand pushes the trunk, wherever the URDF puts its root link's frame."""
     q = np.concatenate([BasePlacer(body).update(joints), joints])
     data = body.model.createData()
-    pin.framesForwardKinematics(body.model, data, q)
-    return float(np.mean([data.oMf[f].translation[Z] for f in body.correction.hips.values()]))
+    pin.forwardKinematics(body.model, data, q)
+    tops = [body.model.getJointId(chain[0]) for chain in leg_chains(body).values()]
+    return float(np.mean([data.oMi[j].translation[Z] for j in tops]))
 
 
 def front_margin(body: BodyModel, joints: np.ndarray) -> float:

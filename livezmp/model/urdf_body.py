@@ -364,6 +364,16 @@ def _feet(model: pin.Model, data: pin.Data, cfg: RobotConfig, path: Path) -> dic
     return feet_frames
 
 
+def _hip_pitch(model: pin.Model, data: pin.Data, chain: list[int]) -> int:
+    """The joint of a leg (``chain``, top first) about which the trunk pitches on it: its first joint turning about
+    the lateral axis (world y, zero posture; `ALIGNED`), else its first. The corrector turns the root about the
+    hips' line: about the pitch joints' it moves no joint below them, while about a hip yaw's origin, 4 cm above
+    and 2 cm behind Wolfgang-OP's hip pitch, its trunk turned back 0.2 rad straightened the knees 0.24 rad, to
+    where the legs' IK lost the feet by 17 mm (its corrected lean fell, its true ZMP 1 m off its feet)."""
+    pin.computeJointJacobians(model, data, np.zeros(model.nq))
+    return next((j for j in chain if abs(float(data.J[4, model.joints[j].idx_v])) >= ALIGNED), chain[0])
+
+
 def _foot_frame(model: pin.Model, data: pin.Data, fid: int, world: pin.SE3, name: str) -> int:
     """A frame on the foot's joint with the zero-posture world placement ``world`` (``data``: the zero posture's
     placements): the foot link's own frame ``fid`` when it already has it, else a new frame ``name``. Soles and
@@ -441,7 +451,8 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
             if n not in jid:
                 raise InputError(f"{cfg.source}: correction leg joint {n!r} is not in {path}")
         legs[side] = [model.joints[jid[n]].idx_q for n in wanted]
-    hips = {s: model.getFrameId(model.names[leg_ids[s][0]], pin.FrameType.JOINT) for s in feet_frames}
+    hips = {s: model.getFrameId(model.names[_hip_pitch(model, data, leg_ids[s])], pin.FrameType.JOINT)
+            for s in feet_frames}
     named = {f"{s}_foot": f for s, f in feet_frames.items()}
     return BodyModel(
         kind="urdf", model=model, point_model=point_mass_copy(model), channel_names=names,
