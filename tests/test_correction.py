@@ -310,13 +310,14 @@ def test_root_mover_warm_start_gives_the_same_legs(op3_body):
     cold = mover.apply(q, np.radians([2.0, -3.0, 0.5]), 0.5)
     mover.ik_iterations = 2  # from the previous solution for a nearby δ, two iterations suffice
     nearby = mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5, leg_start=cold - q)
-    assert mover.last_foot_error < 1e-7
+    assert mover.last_foot_error < 1e-9
     mover.ik_iterations = 10
     reference = mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5)
     np.testing.assert_allclose(nearby, reference, atol=1e-6)
-    mover.ik_iterations = 2  # and without the warm start two iterations are not enough
+    # and without the warm start two iterations leave hundreds of times more: 7e-8 m (warm 2e-10; 3e-7 and 3e-10
+    mover.ik_iterations = 2  # when the root turned about the hip yaws, not the hip pitch joints)
     mover.apply(q, np.radians([2.1, -3.1, 0.5]), 0.5)
-    assert mover.last_foot_error > 1e-7
+    assert mover.last_foot_error > 1e-8
 
 
 def test_root_mover_batch_matches_one_at_a_time(op3_body):
