@@ -2,12 +2,13 @@
 
 Every robot variant (tests/humanoid_gen.py's `HumanoidSpec`: joint orders, 5/6-DOF legs, negated axes, rotated
 link frames, waist or none, 0-4 arm joints, fixed sensor links, mimic (gripper finger, double knee, double
-shoulder) and continuous joints, feet with box, mesh or no collision, 0.3-1.8 m and 0.5-60 kg, names in other
-conventions, scrambled file order, tight or absent limits), plus livezmp_mini and the OP3, plays ``lean``,
-``arm_swing`` and ``push`` in the closed loop on simulated time (tests/test_live_loop_closed.balance: the mock
-link on the simulated humanoid, whose true ZMP is its exact whole-body dynamics), uncorrected and corrected
-(push: with the feet's CoP). A row passes when the uncorrected run falls and the corrected one stands; a
-refusal (the `InputError` `livezmp demo` turns into exit 2) is shown with its message.
+shoulder) and continuous joints, feet with box, mesh or no collision or ending in four cleats on a tilted plane,
+0.3-1.8 m and 0.5-60 kg, names in other conventions, scrambled file order, tight or absent limits), plus
+livezmp_mini and the OP3, plays ``lean``, ``arm_swing`` and ``push`` in the closed loop on simulated time
+(tests/test_live_loop_closed.balance: the mock link on the simulated humanoid, whose true ZMP is its exact
+whole-body dynamics), uncorrected and corrected (push: with the feet's CoP). A row passes when the uncorrected
+run falls and the corrected one stands; a refusal (the `InputError` `livezmp demo` turns into exit 2) is shown
+with its message.
 
 Then malformed or non-humanoid URDFs go through ``livezmp demo --robot X.urdf`` and ``livezmp sim``:
 each must exit 2 with one line on stderr and no traceback.
@@ -74,6 +75,7 @@ VARIANTS: dict[str, HumanoidSpec | str | None] = {
     "continuous_mimic": replace(BASE, continuous=True, grippers=True, arm="prye", seed=28),
     "double_knee_mimic": replace(BASE, double_knee=True, names="poppy", seed=30),
     "double_shoulder_mimic": replace(BASE, double_shoulder=True, seed=31),
+    "cleat_feet": replace(BASE, cleats=0.26, seed=40),
     "combined": replace(BASE, waist="yp", torso_root=True, frames="pitch_z", arm="pr", extras=True, names="darwin",
                         hip="rpy", flip=0.5, limits="absent", root="j_tibia_l", robot_name="kid size #3", seed=29),
 }

@@ -15,7 +15,9 @@ through each joint's own axis as the model gives it. Role names follow OP3's
 
 Standing posture: knees bent, hip −θ, knee +2θ, ankle −θ about the lateral axis (y,
 left), which keeps each sole parallel to the pelvis (flat on the ground) and the legs
-away from their straight-knee singularity; arms hang down, turned out a little by the
+away from their straight-knee singularity (soles not level and on one plane in the zero
+posture, as Wolfgang-OP's cleats, are first turned level at the ankles and the legs
+re-solved to put both on the floor: `Poser.on_feet`); arms hang down, turned out a little by the
 shoulder roll (OP3's zero posture holds them out sideways).
 
 Angles in rad, times in s, world frame z up, x forward, y left. ``livezmp run --scenario``
