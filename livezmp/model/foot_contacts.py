@@ -4,7 +4,7 @@ heel frames) that lie on one plane.
 Wolfgang-OP's feet (bit-bots/wolfgang_robot) end in four cleats, the real sole's corners, on a plane turned 15°
 from the world's level in the zero posture (its front pair 48 mm higher); the lowest leaf alone, under a level box
 sole, is not the foot that stands. Where a foot has three or more such points that span an area, its sole is their
-convex hull and its level is their plane (`contact_sole`); else the caller keeps its default box.
+convex hull on their plane, which is its level (`contact_sole`); else the caller keeps its default box.
 
 World frame z up, the robot's zero posture, metres.
 """
@@ -20,9 +20,11 @@ import pinocchio as pin
 from livezmp.balance.support import clamp_to_polygon, convex_hull
 
 MAX_TILT = np.radians(45.0)  # a sole plane's normal lies within this of the world's up in the zero posture
-ON_PLANE = 0.002  # a point within this share of the points' span of a plane lies on it (roundoff in CAD exports)
+# a point within this share of the points' span of a plane lies on it: roundoff in CAD exports, not Romeo's sole
+# frame, 3.8 mm (2 %) under its force sensors' plane
+ON_PLANE = 0.002
 MIN_AREA = 0.05  # the points on the plane enclose at least this share of their span squared (not a line)
-MAX_POINTS = 16  # leaves tried per foot: planes through three of them, (16 choose 3) = 560, once at load
+MAX_POINTS = 16  # a foot's first leaves tried: planes through three of them, (16 choose 3) = 560, once at load
 
 
 @dataclass(frozen=True)
@@ -73,9 +75,9 @@ def _best_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
 
 def contact_sole(model: pin.Model, data: pin.Data, joint: int) -> ContactSole | None:
     """The sole of the foot on ``joint`` from its leaf links (module docstring), or None where fewer than three
-    of them lie on a plane near level (one leaf; a toe and a heel frame). The sole lies as low as the lowest leaf
-    above it: a sole frame a few millimetres below the cleats' or force sensors' own frames (Wolfgang-OP's
-    ``l_sole``, 4.6 mm; Romeo's, 3.8 mm below its FSRs) is where the designer put the ground.
+    of them lie on a plane near level (one leaf; a toe and a heel frame). The sole lies as low as the lowest of
+    the leaves over its area: a sole frame a few millimetres below the cleats' or force sensors' own frames
+    (Wolfgang-OP's ``l_sole``, 4.9 mm; Romeo's, 3.8 mm below its FSRs) is where the designer put the ground.
     ``data``: frame placements of the zero posture."""
     leaves = leaf_links(model, joint)[:MAX_POINTS]
     if len(leaves) < 3:
