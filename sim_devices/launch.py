@@ -64,29 +64,31 @@ CAN_POWER_UP_RATES = StreamRates(joint_state_hz=10, foot_sensors_hz=0, imu_hz=0,
 def humanoid_sensors(humanoid: SimHumanoid) -> tuple[FootProvider, ImuProvider]:
     """Foot-sensor and IMU providers reading ``humanoid`` in the devices' conventions.
 
-    Feet: its four force cells per sole reordered front-left, front-right, rear-left,
-    rear-right (x forward, y left in the foot link's frame), and their centre of pressure
-    (m) from the sole's centre in that frame, None without load. IMU: orientation as
-    (w, x, y, z), angular velocity (rad/s) and specific force (m/s^2) in the base link's axes.
-    InputError if a foot has no four-corner sole.
+    Feet: its force cells, one per sole corner, reordered front-left, front-right, rear-left,
+    rear-right (x forward, y left in the foot link's frame; a quadrant without a corner, as
+    under Romeo's triangular sole of three force sensors, is a cell that carries nothing), and
+    their centre of pressure (m) from the sole's centre in that frame, None without load. IMU:
+    orientation as (w, x, y, z), angular velocity (rad/s) and specific force (m/s^2) in the base
+    link's axes. InputError if a foot has no sole of three or four corners, one per quadrant.
     """
     orders, offsets = {}, {}
     for side, foot in humanoid.body.feet.items():
         corners = None if foot.sole_local is None else np.asarray(foot.sole_local)[:, :2]
-        if corners is None or len(corners) != 4:
-            raise InputError(f"foot '{side}': the simulated foot cells need a sole of four corners")
-        rel = corners - corners.mean(axis=0)
+        if corners is None or not 3 <= len(corners) <= 4:
+            raise InputError(f"foot '{side}': the simulated foot cells need a sole of three or four corners")
+        rel = np.vstack([corners - corners.mean(axis=0), np.zeros(2)])  # the last row: a quadrant's empty cell
         order = []
         for front, left in ((True, True), (True, False), (False, True), (False, False)):
-            hits = np.flatnonzero(((rel[:, 0] > 0) == front) & ((rel[:, 1] > 0) == left))
-            if len(hits) != 1:
-                raise InputError(f"foot '{side}': its sole corners are not one per quadrant around its centre")
-            order.append(int(hits[0]))
+            hits = np.flatnonzero(((rel[:-1, 0] > 0) == front) & ((rel[:-1, 1] > 0) == left))
+            if len(hits) > 1:
+                raise InputError(f"foot '{side}': its sole corners are not at most one per quadrant around its "
+                                 "centre")
+            order.append(int(hits[0]) if len(hits) else len(corners))
         orders[side], offsets[side] = order, rel[order]
 
     def foot_sensors() -> FootSensors:
         cells = humanoid.foot_forces()
-        forces = {side: np.asarray(getattr(cells, side))[order] for side, order in orders.items()}
+        forces = {side: np.append(getattr(cells, side), 0.0)[order] for side, order in orders.items()}
         cop = {side: (f @ offsets[side] / f.sum() if f.sum() > 0 else None) for side, f in forces.items()}
         return FootSensors(forces, cop)
 

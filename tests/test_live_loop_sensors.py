@@ -221,6 +221,21 @@ def test_a_standing_robot_cop_matches_the_zmp_and_lean_stays_close(mini):
     assert 0.05 < c["mean_mm"] < 3.0 and c["p95_mm"] < 8.0 and c["max_mm"] < 30.0
 
 
+def test_a_three_corner_sole_has_a_cell_under_each_corner_and_its_cop_is_the_zmp(tmp_path):
+    """A sole of three corners (Romeo's three force sensors: one at the heel, two at the front): its cells in the fw
+    board's four, the quadrant without a corner an empty cell; standing, the measured CoP is the computed ZMP to
+    rounding. (Before: refused, the simulated foot cells needed a sole of four corners.)"""
+    config = tmp_path / "triangle.toml"
+    config.write_text("".join(f'[feet.{side}]\nlink = "{side[0]}_foot"\nsole = [[-0.06, {y}, -0.035], '
+                              f'[0.06, {y - 0.033}, -0.035], [0.06, {y + 0.033}, -0.035]]\n'
+                              for side, y in (("left", 0.004), ("right", -0.004))))
+    body = load_robot(None, str(config)).body
+    assert [len(foot.sole_local) for foot in body.feet.values()] == [3, 3]
+    _, stand, _ = on_sim_time(body, make_scenario("stand", body), lambda h: humanoid_sensors(h)[0], duration=0.5)
+    c = stand["cop_vs_zmp"]
+    assert c["frames"] == c["readings"] == stand["analysed_frames"] > 200 and c["max_mm"] < 1e-6
+
+
 @pytest.mark.usefixtures("short_gil_switch")
 def test_cop_vs_zmp_on_the_fw_board_is_finite_and_small_standing(mini, mini_config):
     s = on_fw_board(mini, mini_config, LoopConfig(rate_hz=100.0), duration=1.5)
