@@ -1124,6 +1124,29 @@ def test_a_tib_wand_medial_of_the_shank_is_not_read_as_plug_in_gaits_lateral_wan
     np.testing.assert_array_equal(take.frames, ref.frames)
 
 
+def test_a_medial_marker_on_top_of_its_lateral_one_is_a_copy_and_not_read():
+    """pyCGM2 writes each marker's model-fitted copy beside it (``RKNE_m``, ``RANK_m``), which reads as ``RKNEM`` /
+    ``RANKM``, the medial knee and ankle: the mid-point of the two put the knee centre on the lateral marker and the
+    thigh's frame turned 127 deg between two frames (qualisys/cgm2-web-report-uploader's ForMeasurementSectionTest
+    walk, refused). A medial marker within a joint's width of its lateral one is left out and the rule says why."""
+    t = np.arange(int(SECONDS * RATE)) / RATE
+    bare = _trial(t, RATE)
+    copies = ["LKNE", "RKNE", "LANK", "RANK"]
+    noise = 0.002 * np.random.default_rng(0).standard_normal((len(t), len(copies), 3))
+    trial = replace(bare, labels=bare.labels + [k + "_m" for k in copies],
+                    points=np.concatenate([bare.points, bare.points[:, [bare.labels.index(k) for k in copies]] + noise],
+                                          axis=1))
+    take, ref = body_from_markers(trial), body_from_markers(bare)
+    rules = take.notes["joint_centres"]
+    assert rules["right_knee"].endswith("RKNE_m not read as the medial marker: 3 mm from RKNE (a medial marker lies "
+                                        "the joint's width across)")
+    assert "LANK_m not read as the medial marker" in rules["left_ankle"]
+    for joint in ("knee", "ankle"):
+        for side in ("left", "right"):
+            np.testing.assert_array_equal(take.centres[joint][side], ref.centres[joint][side])
+    np.testing.assert_array_equal(take.frames, ref.frames)
+
+
 def test_a_segment_swinging_over_its_angles_singularity_keeps_continuous_angles():
     """A segment pitching over 90 degrees (its x axis through the vertical: a child's hand swung forward,
     biomechZoo's HC036A23) stays on the yaw-pitch-roll branch it came by; before, arcsin folded the pitch back at 90

@@ -52,7 +52,7 @@ from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_cop
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.euler import other_branch, wrapped
-from livezmp.model.marker_labels import LabelMatch, standard_trial
+from livezmp.model.marker_labels import MIN_JOINT_WIDTH_M, LabelMatch, standard_trial
 from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
 
 MARKER_RADIUS = 0.007  # m: Plug-in Gait's default 14 mm markers
@@ -488,11 +488,15 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         else:
             dropped.append(roles[role])
             roles[role] = None  # so that live frames leave it out too
+    copies = _medial_copies(raw, roles, keep, match)
     if keep.stop - keep.start < 4:
         raise InputError(f"{trial.source}: only {keep.stop - keep.start} frames have every needed marker")
     up, r_in = _up_rotation(raw, trial.source)
     m = {k: v[keep] @ r_in.T for k, v in raw.items()}
     seg, centres, notes = _segments(m, trial)
+    for role, why in copies.items():
+        side, joint = ("left" if role[0] == "L" else "right"), ("knee" if role[1:4] == "KNE" else "ankle")
+        notes["joint_centres"][f"{side}_{joint}"] += f"; {why}"
     _check_stature(notes["stature_m"], trial)
     _check_turns(seg, keep.start, trial.source)
     lengths = _check_lengths(seg, m, trial)
@@ -510,6 +514,28 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     # the roles' labels as the file (or a live stream of the same set) writes them
     return MarkerTake(body, frames, keep.start, notes, centres, _as_written(roles, match), trial,
                       {match.roles[r]: labs for r, labs in match.midpoints.items()}, placed_segments(seg, m))
+
+
+def _medial_copies(raw: dict[str, np.ndarray], roles: dict[str, str | None], keep: slice,
+                   match: LabelMatch) -> dict[str, str]:
+    """Leave out (from ``raw`` and ``roles``) each medial knee or ankle marker lying on its lateral one: less than
+    :data:`MIN_JOINT_WIDTH_M` from it over the frames ``keep`` (median). A joint's medial marker lies the joint's
+    width across from its lateral one; one on top of it is a copy of the lateral marker, and the mid-point of the
+    two would put the joint centre on the skin (pyCGM2 writes each marker's model-fitted copy as ``RKNE_m``, which
+    reads as ``RKNEM``, the medial knee: the qualisys/cgm2-web-report-uploader test trials; the knee's frame then
+    turned 127 deg between two frames). Returns lateral role -> why (the file's labels: ``match``), for each one
+    left out."""
+    out = {}
+    for role in [r for r in raw if r.endswith("_med")]:
+        lateral = role.removesuffix("_med")
+        apart = float(np.nanmedian(np.linalg.norm(raw[role][keep] - raw[lateral][keep], axis=1)))
+        if apart < MIN_JOINT_WIDTH_M:
+            label, lateral_label = (match.roles.get(roles[r], roles[r]) for r in (role, lateral))
+            out[lateral] = (f"{label} not read as the medial marker: {1000 * apart:.0f} mm from {lateral_label} "
+                            "(a medial marker lies the joint's width across)")
+            del raw[role]
+            roles[role] = None  # so that live frames leave it out too
+    return out
 
 
 def _check_coordinates(raw: dict[str, np.ndarray], roles: dict[str, str | None], trial: C3dTrial) -> None:
