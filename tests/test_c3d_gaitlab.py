@@ -209,7 +209,8 @@ class Lab:
 
     ``rot`` (3, 3) and ``origin`` (3,) m place the reference in the lab (p_lab = rot @ p_ref + origin): a y-up lab,
     walking along -x, a far origin; ``units`` POINT:UNITS (``units_given`` False: left empty, the data in
-    ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels) or 4 (CAL_MATRIX);
+    ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels), 4 (CAL_MATRIX) or 5 (8
+    channels, 6 x 8 CAL_MATRIX);
     ``spec_plates``: the plates as the C3D spec has them (z axis down, corner 1 in the plate's +x +y quadrant, then
     -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
     negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention; TYPE 3:
@@ -260,13 +261,16 @@ def _plate_origin(lab: Lab) -> np.ndarray:
 
 
 CAL = np.eye(6) + 0.02 * np.sin(np.arange(36).reshape(6, 6))  # a TYPE-4 plate's calibration matrix (cross-talk)
+# a TYPE-5 plate's: Kistler's eight channels (fx12 fx34 fy14 fy23 fz1..fz4, volts) to TYPE 2's six, with cross-talk
+CAL5 = np.hstack([np.eye(6), np.zeros((6, 2))]) * 50.0 + np.cos(np.arange(48).reshape(6, 8))
 
 
 def _channels(force: np.ndarray, moment: np.ndarray, lab: Lab) -> np.ndarray:
     """(S, 6 or 8) a plate's channels for force (S, 3) N and moment (S, 3) N·m about its surface centre, both in
     plate axes: forces and moments (N·POINT:UNITS) about the transducer origin, through the inverse CAL_MATRIX for
-    TYPE 4; TYPE 3: Kistler's eight forces (fx12 fx34 fy14 fy23 fz1..fz4, sensors k at (±a, ±b) in the corners'
-    quadrant order), which give back the wrench through the C3D spec's TYPE-3 formulae."""
+    TYPE 4, the 6 x 8 one for TYPE 5 (eight channels); TYPE 3: Kistler's eight forces (fx12 fx34 fy14 fy23 fz1..fz4,
+    sensors k at (±a, ±b) in the corners' quadrant order), which give back the wrench through the C3D spec's TYPE-3
+    formulae."""
     o = _plate_origin(lab)
     if lab.plate_type == 3:
         (a, b), (fx, fy, fz) = KISTLER_AB, force.T
@@ -276,14 +280,14 @@ def _channels(force: np.ndarray, moment: np.ndarray, lab: Lab) -> np.ndarray:
                                 fz / 4 + mx / (4 * b) - my / (4 * a), fz / 4 + mx / (4 * b) + my / (4 * a),
                                 fz / 4 - mx / (4 * b) + my / (4 * a), fz / 4 - mx / (4 * b) - my / (4 * a)])
     w = np.hstack([force, PER_METRE[lab.units] * (moment - np.cross(force, o))])
-    return w @ np.linalg.inv(CAL).T if lab.plate_type == 4 else w
+    return w @ np.linalg.inv(CAL).T if lab.plate_type == 4 else w @ np.linalg.pinv(CAL5).T if lab.plate_type == 5 else w
 
 
 def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenches: list) -> None:
     """FORCE_PLATFORM and ANALOG for ``wrenches`` [(force (S, 3) N, moment (S, 3) N·m about the plate's surface
     centre)] in reference axes, one per plate of ``plates`` (centres, m, reference frame; 0.5 x 0.3 m)."""
     rot, axes, per_m = np.asarray(lab.rot), _plate_axes(lab), PER_METRE[lab.units]
-    n = 8 if lab.plate_type == 3 else 6
+    n = 8 if lab.plate_type in (3, 5) else 6
     channels = np.hstack([_channels(f @ axes, m @ axes, lab) for f, m in wrenches])
     scale, offset, gen = lab.scale
     names = ("Fx12", "Fx34", "Fy14", "Fy23", "Fz1", "Fz2", "Fz3", "Fz4") if n == 8 else \
@@ -309,6 +313,8 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
     _add_int(c3d, "FORCE_PLATFORM", "CHANNEL", np.arange(1, n * len(plates) + 1).reshape(len(plates), n).T)
     if lab.plate_type == 4:
         c3d.add_parameter("FORCE_PLATFORM", "CAL_MATRIX", np.repeat(CAL[:, :, None], len(plates), axis=2))
+    if lab.plate_type == 5:
+        c3d.add_parameter("FORCE_PLATFORM", "CAL_MATRIX", np.repeat(CAL5[:, :, None], len(plates), axis=2))
 
 
 def write_lab_c3d(path, plates: dict[str, tuple[float, float]], with_offsets: bool = True,

@@ -2,10 +2,11 @@
 lab, walking along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz
 with analog rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order,
 ORIGIN below the surface) and with ORIGIN's z written positive or its x, y from the centre to a corner, TYPE-4
-(CAL_MATRIX), TYPE-3 (Kistler's eight channels); ANALOG SCALE, OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0);
-plates turned 90 and 180 degrees in the floor; labels without a subject prefix and no mass in the file. Each must
-give the true CoP from its plates and the ZMP on it to a millimetre, the up axis and units it was written in, and the
-reference's summary figures. What cannot be read is refused in one line."""
+(CAL_MATRIX), TYPE-3 (Kistler's eight channels), TYPE-5 (eight channels through a 6 x 8 CAL_MATRIX); ANALOG SCALE,
+OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in the floor; labels without
+a subject prefix and no mass in the file. Each must give the true CoP from its plates and the ZMP on it to a
+millimetre, the up axis and units it was written in, and the reference's summary figures. What cannot be read is
+refused in one line."""
 
 from __future__ import annotations
 
@@ -57,6 +58,8 @@ VARIANTS = {
     # a treadmill belt measuring about a corner, ORIGIN written from the centre to it (rtosim's walking_1.c3d)
     "type 2 corner origin, written from the centre": Lab(corner_origin=True, **SPEC),
     "type 4, SCALE OFFSET GEN_SCALE": Lab(plate_type=4, scale=(0.25, 1500, 2.0), **SPEC),
+    # Qualisys' Kistler plates as QTM writes them (cgm2-web-report-uploader's WithNewPafFields walk): ezc3d refuses them
+    "type 5 (CAL_MATRIX 6 x 8)": Lab(plate_type=5, **SPEC),
     "integer mm": Lab(integer=0.06, scale=(1.0, 2048, 1.0)),
     "integer cm, y-up, type 3": Lab(integer=0.006, units="cm", rot=Y_UP, plate_type=3, **SPEC),
     "type 3": Lab(plate_type=3, **SPEC),
@@ -140,10 +143,10 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
 
 @pytest.mark.parametrize(("lab", "says"), [
     (Lab(rot=((1.0, 0.0, 0.0), (0.0, 0.7071, -0.7071), (0.0, 0.7071, 0.7071))), "cannot tell the up axis"),  # 45 deg
-    (Lab(plate_type=5, spec_plates=True), "Type 5 is not supported"),  # ezc3d reads plate TYPEs 1-4
+    (Lab(plate_type=6, spec_plates=True), "Type 6 is not supported"),  # ezc3d reads plate TYPEs 1-4, livezmp 5
     # ezc3d subtracts |OFFSET|: a negative one on signed data would shift the channel (0 complete frames here)
     (Lab(scale=(0.5, -500, 1.0)), "ANALOG:OFFSET of force-plate channel 1 is negative (-500)"),
-], ids=["tilted 45 deg", "type 5", "negative offset"])
+], ids=["tilted 45 deg", "type 6", "negative offset"])
 def test_a_lab_it_cannot_read_is_refused_in_one_line(lab, says, tmp_path, capsys):
     path = tmp_path / "trial.c3d"
     write_lab_c3d(path, PLATES, lab=replace(lab, seconds=SECONDS))

@@ -267,6 +267,66 @@ def _origin_moment(p: dict) -> tuple[np.ndarray, str]:
                    f"{100 * opposite:.0f} %)")
 
 
+def _plate_types(groups: dict) -> np.ndarray:
+    """FORCE_PLATFORM:TYPE per plate (float; none, or text: empty)."""
+    try:
+        return np.asarray(_param(groups, "FORCE_PLATFORM", "TYPE"), dtype=float).ravel()
+    except (TypeError, ValueError):  # none, or text
+        return np.zeros(0)
+
+
+_CHANNELS_OF_TYPE = {2: 6, 5: 8}  # the plate types read where ezc3d's filter refuses a TYPE-5 plate
+
+
+def _calibrated_platforms(c3d: dict, source: str) -> list[dict]:
+    """The plates of a file with TYPE-5 plates, which ezc3d's plate filter refuses ("not supported yet"), as that
+    filter gives a plate (force, moment about the surface centre, world axes; corners, ORIGIN). A TYPE-5 plate is a
+    TYPE-3 one (Kistler's eight channels fx12 fx34 fy14 fy23 fz1-4) with a 6 x 8 FORCE_PLATFORM:CAL_MATRIX (c3d.org's
+    user guide; BTK's ForcePlatformType5), which takes them to TYPE 2's six (Fx Fy Fz Mx My Mz about the measurement
+    origin, plate axes), as pyCGM2's ``correctForcePlateType5`` reads the Qualisys files that write them: the
+    qualisys/cgm2-web-report-uploader walk ``WithNewPafFields/Gait - CGM2 1`` so read gives the six channels its
+    processed copy (``processed/Gait - CGM2 3``, re-written as TYPE 2) holds to 1 % RMS. TYPE-2 plates beside them are
+    read too. From there as ezc3d's filter does (its ``ForcePlatforms.cpp``): axes from the corners (x = corner 1 - 2,
+    y = corner 1 - 4, made orthogonal), the moment moved to the surface centre by F x ORIGIN, ORIGIN negated where its
+    z is positive. Other types beside a TYPE-5 plate are refused in one line."""
+    groups = c3d["parameters"]
+    types = _plate_types(groups)
+    try:
+        channel = np.asarray(_param(groups, "FORCE_PLATFORM", "CHANNEL"), dtype=int).reshape(-1, len(types), order="F")
+        corners = np.asarray(_param(groups, "FORCE_PLATFORM", "CORNERS"), dtype=float).reshape(3, 4, len(types),
+                                                                                                order="F")
+        origin = np.asarray(_param(groups, "FORCE_PLATFORM", "ORIGIN"), dtype=float).reshape(3, len(types), order="F")
+        cal = np.asarray(_param(groups, "FORCE_PLATFORM", "CAL_MATRIX"), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: TYPE-5 force platforms without a CHANNEL, CORNERS or ORIGIN for each plate "
+                         "(FORCE_PLATFORM)") from None
+    analogs = np.asarray(c3d["data"]["analogs"], dtype=float)[0]  # (channels, samples), scaled
+    units = _param(groups, "FORCE_PLATFORM", "UNITS")
+    out = []
+    for k, kind in enumerate(types):
+        n = _CHANNELS_OF_TYPE.get(int(kind))
+        if n is None:
+            raise InputError(f"{source}: force platform {k + 1}: TYPE {kind:g} beside TYPE-5 plates is not read "
+                             "(TYPE 2 and 5 are)")
+        if kind == 5 and (cal.ndim != 3 or cal.shape[:2] != (6, 8) or cal.shape[2] <= k):
+            raise InputError(f"{source}: force platform {k + 1}: TYPE 5 needs a 6 x 8 FORCE_PLATFORM:CAL_MATRIX "
+                             f"(the file's is {' x '.join(map(str, cal.shape))})")
+        index = channel[:n, k] - 1
+        if len(index) < n or index.min() < 0 or index.max() >= len(analogs):
+            raise InputError(f"{source}: force platform {k + 1}: FORCE_PLATFORM:CHANNEL names channels the file "
+                             "does not have")
+        six = cal[:, :, k] @ analogs[index] if kind == 5 else analogs[index]
+        c = corners[:, :, k]
+        ex, ey = c[:, 0] - c[:, 1], c[:, 0] - c[:, 3]
+        ez = np.cross(ex, ey)
+        rot = np.column_stack([v / np.linalg.norm(v) for v in (ex, np.cross(ez, ex), ez)])
+        o = -origin[:, k] if origin[2, k] > 0 else origin[:, k]
+        moment = six[3:] + np.cross(six[:3].T, o).T
+        out.append({"unit_force": str(units[0]) if units is not None and len(units) else "N", "corners": c,
+                    "origin": o, "force": rot @ six[:3], "moment": rot @ moment})
+    return out
+
+
 def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
@@ -274,10 +334,7 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     out = []
     length = _LENGTH[unit]
     frames = int(np.shape(c3d["data"]["points"])[2])
-    try:
-        types = np.asarray(_param(c3d["parameters"], "FORCE_PLATFORM", "TYPE"), dtype=float).ravel()
-    except (TypeError, ValueError):  # none, or text: ezc3d has read the plates as it could
-        types = np.zeros(0)
+    types = _plate_types(c3d["parameters"])  # none, or text: ezc3d has read the plates as it could
     for k, p in enumerate(c3d["data"].get("platform", [])):
         newtons = _NEWTONS.get(str(p["unit_force"]).strip().lower())
         if newtons is None:
@@ -410,7 +467,13 @@ def told_apart(labels: list[str], descriptions: list[str]) -> list[str]:
 def read_c3d(path: str | Path) -> C3dTrial:
     """Read ``path`` (see module docstring). Raises InputError for files ezc3d cannot read."""
     p = Path(path)
-    c3d = open_c3d(p, plates=True)
+    try:
+        c3d = open_c3d(p, plates=True)
+    except InputError as refused:  # ezc3d's plate filter refuses TYPE-5 plates: read here
+        c3d = open_c3d(p)
+        if 5 not in _plate_types(c3d["parameters"]):
+            raise refused from None
+        c3d["data"]["platform"] = _calibrated_platforms(c3d, str(p))
     groups = c3d["parameters"]
     units = _param(groups, "POINT", "UNITS")
     # missing or empty: mm, the unit nearly every writer uses (a metre file is then refused by its stature)
