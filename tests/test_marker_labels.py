@@ -46,6 +46,7 @@ CONVENTIONS = {
     ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"), ("LLKNE", "LKNE"),
     ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
     ("L_ANKLE_MED", "LMED"), ("RFCL", "RKNE"), ("LFCM", "LKNM"), ("RMALL", "RANK"), ("LMALM", "LMED"),
+    ("LKNEL", "LKNE"), ("RKNEM", "RKNM"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role

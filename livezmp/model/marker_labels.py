@@ -35,7 +35,8 @@ Where each name comes from:
   sample 26, ``Standing_Hybrid_1``). Femoral condyle and malleolus with the side behind the landmark,
   ``RFCL``/``RFCM`` and ``RMALL``/``RMALM`` lateral / medial, with ``RCAL RMT1 RMT5 RPSI`` (the
   Vicon Nexus set of RealTimeBiomechanics/rtosim's ``data/ViconNexus/walking_1.c3d`` and its subject file
-  ``S01.vsk`` write them: ``RFCL`` on its ``rknee`` segment, ``RMALL`` on ``rankle``). Not read:
+  ``S01.vsk`` write them: ``RFCL`` on its ``rknee`` segment, ``RMALL`` on ``rankle``); the knee's as ``RKNEL``/``RKNEM``
+  beside them (keenon/nimblephysics' ``data/osim/Return11`` trial, with ``RHEE RTOE RM5``). Not read:
   ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral or medial epicondyle of the femur or of the humerus alike
   (ISB names them apart, ``FLE``/``HLE``).
 
@@ -85,7 +86,7 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
     "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB),
-            ("LKNE", LAB), ("KNEELAT", LAB), ("FCL", LAB)),
+            ("LKNE", LAB), ("KNEELAT", LAB), ("FCL", LAB), ("KNEL", LAB)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
             ("KNEEMEDIAL", HH), ("KNEEMED", LAB), ("FCM", LAB)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
