@@ -14,7 +14,8 @@ corners, x = corner 1 − corner 2 and y = corner 1 − corner 4 (the corners ar
 M + F × ORIGIN, ORIGIN being the vector from the plate's measurement origin to that centre in plate axes (its z
 negative; a positive z, the original AMTI convention, is negated, as Visual3D does); TYPE 3 from Kistler's
 eight channels with ORIGIN's x, y the sensor offsets (kept positive where ezc3d negates them with a positive z:
-:func:`_kistler_moment`); TYPE 4 through CAL_MATRIX stored by columns. The
+:func:`_kistler_moment`); TYPE 4 through CAL_MATRIX stored by columns; TYPE 5, which ezc3d refuses, here
+(:func:`_calibrated_platforms`). The
 synthetic labs of tests/test_c3d_lab_variants.py write every one of these and meet their true CoP. Its analog
 scaling subtracts |ANALOG:OFFSET| where the spec's offset is signed: a negative offset on a plate channel of
 signed data is refused.
