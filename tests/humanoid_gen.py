@@ -121,6 +121,8 @@ class HumanoidSpec:
     ``cleats``: each foot ends in four cleats, massless leaf links fixed at its sole's corners, on a plane turned
     this angle (rad) toes up from level in the zero posture, the right foot's also rolled a tenth of it, its
     outer edge up (Wolfgang-OP's: 15° and 1.3°);
+    ``foot_frames``: a force sensor's and an end effector's frame as fixed massless links at each sole's centre,
+    so each foot ends in several leaves at one height (JVRC-1's, XBot-L's);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -154,6 +156,7 @@ class HumanoidSpec:
     ankle_range: float = 0.0
     arms_forward: bool = False
     cleats: float = 0.0
+    foot_frames: bool = False
     seed: int = 0
 
 
@@ -275,6 +278,9 @@ def _build(spec: HumanoidSpec) -> _Builder:
         if spec.extras:
             b.link(f"{s}_sole", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
             b.joint("sole", s, parent, f"{s}_sole", (0.02, w, 0.0), None, "fixed")
+        for frame in ("ft_sensor", "end_effector") if spec.foot_frames else ():
+            b.link(f"{s}_{frame}", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
+            b.joint(f"{frame}_fixed", s, parent, f"{s}_{frame}", (0.02, w, 0.0), None, "fixed")
         parent, shoulder = trunk, (0.0, 0.12 * y, 0.82)
         # arms forward: each point of the hanging arm turned 90° about y around the shoulder, boxes with it
         point = (lambda p: (0.82 - p[2], p[1], 0.82)) if spec.arms_forward else tuple

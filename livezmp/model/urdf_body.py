@@ -283,9 +283,11 @@ FEET_LEVEL = 0.05  # a pair of feet differ in height by at most this share of th
 
 
 def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int]:
-    """The two lowest leaf links in the zero pose: left has the larger y. They must be level (`FEET_LEVEL`),
-    side by side and each at the end of its own leg: else this is not a two-legged robot standing in its
-    zero pose (a one-legged robot's lowest leaves are its foot and a hand)."""
+    """The lowest leaf link in the zero pose, and the lowest on another limb (a leaf whose chain parts from the
+    first's: a foot's sole, sensor and end-effector frames, JVRC-1's and XBot-L's, are one foot); left has the
+    larger y. They must be level (`FEET_LEVEL`), side by side and each at the end of its own leg: else this is
+    not a two-legged robot standing in its zero pose (a one-legged robot's lowest leaves are its foot and a
+    hand)."""
     children = {j: 0 for j in range(model.njoints)}
     for j in range(1, model.njoints):
         children[model.parents[j]] += 1
@@ -295,7 +297,8 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
     if len(leaves) < 2:
         raise InputError(f"{path}: cannot find two feet (leaf links); give a robot config with [feet]")
     leaves.sort(key=lambda f: data.oMf[f].translation[2])
-    a, b = leaves[0], leaves[1]
+    a = leaves[0]
+    b = next((f for f in leaves[1:] if all(leg_joints(model, {"a": a, "b": f}).values())), leaves[1])
     if data.oMf[a].translation[1] < data.oMf[b].translation[1]:
         a, b = b, a
     pa, pb = data.oMf[a].translation, data.oMf[b].translation
