@@ -122,7 +122,9 @@ class HumanoidSpec:
     this angle (rad) toes up from level in the zero posture, the right foot's also rolled a tenth of it, its
     outer edge up (Wolfgang-OP's: 15° and 1.3°);
     ``foot_frames``: a force sensor's and an end effector's frame as fixed massless links at each sole's centre,
-    so each foot ends in several leaves at one height (JVRC-1's, XBot-L's);
+    so each foot ends in several leaves at one height (JVRC-1's, XBot-L's); ``parallel_legs``: a massless copy
+    of each leg below its hip roll, thigh and shank pitch and ankle roll joints ending in a foot-plane link at
+    the sole (NimbRo-OP2X's parallel-linkage model, beside its serial legs);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -157,6 +159,7 @@ class HumanoidSpec:
     arms_forward: bool = False
     cleats: float = 0.0
     foot_frames: bool = False
+    parallel_legs: bool = False
     seed: int = 0
 
 
@@ -251,6 +254,7 @@ def _build(spec: HumanoidSpec) -> _Builder:
         hips = list(spec.hip)
         for k, axis in enumerate(hips):
             last = k == len(hips) - 1
+            above_thigh = parent
             child = (b.link(f"{s}_thigh", 0.09, (0.0, w, 0.42), (0.06, 0.06, 0.24), b.frame(True)) if last else
                      b.link(f"{s}_hip{k}", 0.01, (0.0, w, 0.54), (0.03, 0.03, 0.03), b.frame(True)))
             b.joint(f"hip_{ROLE_OF[axis]}", s, parent, child, (0.0, w, 0.54), ROLE_OF[axis])
@@ -278,6 +282,14 @@ def _build(spec: HumanoidSpec) -> _Builder:
         if spec.extras:
             b.link(f"{s}_sole", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
             b.joint("sole", s, parent, f"{s}_sole", (0.02, w, 0.0), None, "fixed")
+        if spec.parallel_legs:
+            ghost = above_thigh
+            for role, at, axis in (("thigh", 0.54, "pitch"), ("shank", 0.30, "pitch"), ("foot", 0.06, "roll")):
+                link = b.link(f"{s}_parallel_{role}", 0.0, (0.0, w, at), (0.0, 0.0, 0.0))
+                b.joint(f"parallel_{role}", s, ghost, link, (0.0, w, at), axis)
+                ghost = link
+            b.link(f"{s}_parallel_plane", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
+            b.joint("parallel_plane", s, ghost, f"{s}_parallel_plane", (0.02, w, 0.0), None, "fixed")
         for frame in ("ft_sensor", "end_effector") if spec.foot_frames else ():
             b.link(f"{s}_{frame}", 0.0, (0.02, w, 0.0), (0.0, 0.0, 0.0))
             b.joint(f"{frame}_fixed", s, parent, f"{s}_{frame}", (0.02, w, 0.0), None, "fixed")

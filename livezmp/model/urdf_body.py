@@ -283,9 +283,10 @@ FEET_LEVEL = 0.05  # a pair of feet differ in height by at most this share of th
 
 
 def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int]:
-    """The lowest leaf link in the zero pose, and the lowest on another limb (a leaf whose chain parts from the
-    first's: a foot's sole, sensor and end-effector frames, JVRC-1's and XBot-L's, are one foot); left has the
-    larger y. They must be level (`FEET_LEVEL`), side by side and each at the end of its own leg: else this is
+    """The lowest leaf link on a body with mass in the zero pose, and the lowest on another limb (a leaf whose
+    chain parts from the first's: a foot's sole, sensor and end-effector frames, JVRC-1's and XBot-L's, are one
+    foot; a foot bears weight: NimbRo-OP2X's massless copy of each leg, its parallel linkage, is none); left has
+    the larger y. They must be level (`FEET_LEVEL`), side by side and each at the end of its own leg: else this is
     not a two-legged robot standing in its zero pose (a one-legged robot's lowest leaves are its foot and a
     hand)."""
     children = {j: 0 for j in range(model.njoints)}
@@ -293,7 +294,8 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
         children[model.parents[j]] += 1
     leaves = [f for f in range(model.nframes)
               if model.frames[f].type == pin.FrameType.BODY and children[model.frames[f].parentJoint] == 0
-              and model.frames[f].parentJoint > len(BASE_JOINTS)]
+              and model.frames[f].parentJoint > len(BASE_JOINTS)
+              and model.inertias[model.frames[f].parentJoint].mass > 0]
     if len(leaves) < 2:
         raise InputError(f"{path}: cannot find two feet (leaf links); give a robot config with [feet]")
     leaves.sort(key=lambda f: data.oMf[f].translation[2])
