@@ -179,6 +179,19 @@ def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x_by_its_knees
         assert np.allclose(goals, make_scenario(name, plain).goals(0.0), atol=1e-6)
 
 
+@pytest.mark.parametrize("facing", ["-y", "-x"])
+def test_a_robot_whose_limits_allow_either_way_faces_the_way_its_toes_point(tmp_path, facing):
+    # before: with limits allowing the knees-bent stance both ways (Sigmaban's, ±π), the foot at +y in the file
+    # was the left: facing -x, the right foot was taken as the left and the knees bent backward
+    spec = HumanoidSpec(limits="wide", seed=42)
+    plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", spec)), None).body
+    body = load_robot(str(build_humanoid(tmp_path / "turned.urdf", replace(spec, facing=facing))), None).body
+    assert {s: body.model.frames[f.frame_id].name.removesuffix("_level") for s, f in body.feet.items()} == \
+        {"left": "l_foot", "right": "r_foot"}
+    assert joint_roles(body) == joint_roles(plain)
+    assert np.allclose(make_scenario("lean", body).goals(0.0), make_scenario("lean", plain).goals(0.0), atol=1e-6)
+
+
 def test_a_stance_beyond_a_knees_limits_is_refused_and_an_arm_beyond_its_own_is_held_at_them(tmp_path, capsys):
     # before: the sim's servos stopped the left knee and the elbows at their limits, the robot stood crooked and
     # fell in 0.2 s corrected or not (Poppy); the elbows' goals left outside their limits (NAO)

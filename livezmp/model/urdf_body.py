@@ -339,21 +339,41 @@ def _stance_fits(model: pin.Model, data: pin.Data, feet: dict[str, int], forward
     return fits
 
 
+TOES_AHEAD = 0.02  # share of the legs' height a foot's centre of mass lies ahead of its ankle to tell which way
+
+
+def _toes_ahead(model: pin.Model, data: pin.Data, feet: dict[str, int], forward: np.ndarray) -> float:
+    """How far the feet's centres of mass lie ahead (along ``forward``) of their legs' last joints, on average,
+    as a share of the legs' height (hip to foot) in the zero pose."""
+    ahead, height = [], []
+    for side, chain in leg_joints(model, feet).items():
+        if not chain:
+            return 0.0
+        j = model.frames[feet[side]].parentJoint
+        ahead.append(float((data.oMi[j].act(model.inertias[j].lever) - data.oMi[chain[-1]].translation) @ forward))
+        height.append(float(data.oMi[chain[0]].translation[2] - data.oMf[feet[side]].translation[2]))
+    return float(np.mean(ahead) / np.mean(height)) if np.mean(height) > 0 else 0.0
+
+
 def _heading(model: pin.Model, data: pin.Data, feet: dict[str, int], sided: bool) -> float:
     """The yaw (rad, a multiple of 90°) that turns the robot to face +x, where its URDF faces another way (Poppy
     faces −y, iCub −x): its forward axis is the lateral one (right foot to left) turned 90° clockwise seen from
     above; where the feet's sides are not ``sided`` (a config names them; else they are the lowest leaves, left
     the one at larger y) and more legs take the knees-bent stance within their limits facing the other way
     (`_stance_fits`: iCub's knees flex only one way, the Gepetto simple humanoid's ankles too), it faces that
-    way."""
+    way; where as many legs take it either way, it faces the way its feet's centres of mass lie ahead of their
+    ankles by `TOES_AHEAD` of the legs' height or more (toes are longer than heels: Sigmaban's file faces −x,
+    its knees' limits ±π; a tie kept its right foot as the left, and bent its knees backward)."""
     lateral = data.oMf[feet["left"]].translation - data.oMf[feet["right"]].translation
     lateral[2] = 0.0
     if np.linalg.norm(lateral) < 1e-9:
         return 0.0
     lateral /= np.linalg.norm(lateral)
     forward = np.cross(lateral, [0.0, 0.0, 1.0])
-    if not sided and _stance_fits(model, data, feet, -forward) > _stance_fits(model, data, feet, forward):
-        forward = -forward
+    if not sided:
+        ahead, behind = _stance_fits(model, data, feet, forward), _stance_fits(model, data, feet, -forward)
+        if behind > ahead or (behind == ahead and _toes_ahead(model, data, feet, forward) < -TOES_AHEAD):
+            forward = -forward
     return float(np.pi / 2 * round(-np.arctan2(forward[1], forward[0]) / (np.pi / 2)))
 
 
