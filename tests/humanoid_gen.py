@@ -115,6 +115,7 @@ class HumanoidSpec:
     file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
+    ``hip_tilt``: the hip pitch's likewise (Fourier GR2's 0.52);
     ``ankle_range``: the ankle pitch limited to ± this (rad; 0: as ``limits`` says; Romeo's −0.52..0.79);
     ``arms_forward``: the arms held straight forward in the zero posture (NAO's), the shoulder roll then about the
     vertical axis and the upper-arm yaw a twist about the forward axis, at the elbow (NAO's elbow yaw);
@@ -155,6 +156,7 @@ class HumanoidSpec:
     odd_limits: bool = False
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
+    hip_tilt: float = 0.0
     ankle_range: float = 0.0
     arms_forward: bool = False
     cleats: float = 0.0
@@ -206,8 +208,9 @@ class _Builder:
                             **extra})
 
     def tilt(self, role: str) -> np.ndarray:
-        """The turn of a joint's axis from its world axis: the shoulder pitch's ``shoulder_tilt`` about x."""
-        return _rot((self.spec.shoulder_tilt if role == "sho_pitch" else 0.0, 0.0, 0.0))
+        """The turn of a joint's axis from its world axis: the shoulder pitch's ``shoulder_tilt``, the hip
+        pitch's ``hip_tilt``, about x."""
+        return _rot(({"sho_pitch": self.spec.shoulder_tilt, "hip_pitch": self.spec.hip_tilt}.get(role, 0.0), 0.0, 0.0))
 
     def frame(self, leg: bool) -> np.ndarray | None:
         if self.spec.frames == "pitch_z" and leg:

@@ -256,6 +256,14 @@ def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
     assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.35" in err[0], err
 
 
+def test_a_hip_pitch_mounted_off_the_lateral_axis_is_refused_saying_how_far(tmp_path, capsys):
+    # before: "found no l_hip_pitch" and what a leg needs, not which joint came near (Fourier GR2: 30° off)
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(hip_tilt=np.radians(30), seed=46))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "found no l_hip_pitch" in err[0] and "l_hip_pitch 30°" in err[0], err
+
+
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",
         "floating": "type 'floating' not supported", "no_masses": "no <inertial>", "not_xml": "cannot read URDF",
         "missing_child": "no link 'ghost'"}

@@ -309,8 +309,20 @@ class Poser:
                     "axis" if "sho" in role or role.endswith("_el") else "two legs: hip, knee and ankle joints "
                     "about the lateral axis, and hip and ankle joints about the forward axis")
             raise InputError(f"{self.body.model.name}: found no {role} in its kinematic tree (this scenario needs "
-                             f"{need})")
+                             f"{need}){self._leg_offsets(role)}")
         return self.names.index(self.roles[role])
+
+    def _leg_offsets(self, role: str) -> str:
+        """For a leg's pitch or roll role not found: how far each of that leg's joints turns off the world axis
+        the role needs (GR2's hip pitch, 30° off the lateral axis), as ``; leg joints off the lateral axis:
+        NAME 30°, ...``; "" for other roles."""
+        side = {"l": "left", "r": "right"}.get(role[0])
+        k = {"hip_pitch": Y, "knee": Y, "ank_pitch": Y, "hip_roll": X, "ank_roll": X}.get(role[2:])
+        if side is None or k is None or side not in self.body.feet:
+            return ""
+        chain = [n for n in leg_chains(self.body)[side] if n in self.axis]
+        off = ", ".join(f"{n} {np.degrees(np.arccos(min(1.0, abs(float(self.axis[n][k]))))):.0f}°" for n in chain)
+        return f"; {side} leg joints off the {'lateral' if k == Y else 'forward'} axis: {off}"
 
     def unit(self, role: str, world_axis: int) -> np.ndarray:
         """Joint vector that turns the joint of ``role`` by +1 rad about the world axis (0 x, 1 y, 2 z)."""
