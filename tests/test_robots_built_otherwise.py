@@ -345,6 +345,19 @@ def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_and_keeps_its_zmp_on_its
     assert fixed.counters.worst_margin < 0 and fixed.counters.unsupported_steps > 0
 
 
+def test_a_slow_arm_swing_lasts_a_whole_period_at_full_swing(tmp_path):
+    # before: 4 s whatever the swing: JAXON's 0.16 Hz swing grows over 6.3 s, its arms swung a quarter of the way
+    # and it stood uncorrected; this robot's swing reached 87 % of its amplitude in 4 s
+    body = load_robot(str(build_humanoid(tmp_path / "adult.urdf", ADULT)), None).body
+    scenario, poser = make_scenario("arm_swing", body), Poser(body)
+    name = poser.roles["l_sho_pitch"]
+    i, along = poser.names.index(name), abs(float(poser.axis[name][1]))
+    start = scenario.goals(0.0)[i]
+    swing = [abs(scenario.goals(t)[i] - start) * along for t in np.arange(0.0, scenario.duration, 0.01)]
+    full = [t for t, a in zip(np.arange(0.0, scenario.duration, 0.01), swing, strict=True) if a > 0.6 * 0.999]
+    assert full and scenario.duration - full[0] >= 1.0  # full swing reached, and swung on at it
+
+
 def test_the_margin_is_15_mm_for_robots_up_to_0_3_m_and_grows_with_the_com_height(mini, tmp_path):
     assert size_scaled_margin(mini) == MARGIN_M == 0.015  # the mini's CoM: 0.29 m above its soles
     spec = HumanoidSpec(height=1.2, mass=20.0)

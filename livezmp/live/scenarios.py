@@ -569,7 +569,8 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     for its feet needs a fast swing to reach ``beyond``, which keeps its ZMP past its toes too briefly to
     topple it: the lean then comes closer to the toes (down to that bound), so that each swing holds the ZMP
     past them for `SWING_PAST_S` (`swing_toe_margin`; a 0.3 m, 0.5 kg humanoid: 3.3 mm, the bound, 1.5 Hz,
-    past its toes 0.249 s a swing, where from 8 mm it was 2.1 Hz and 0.15 s)."""
+    past its toes 0.249 s a swing, where from 8 mm it was 2.1 Hz and 0.15 s). It lasts ``duration`` (s), or
+    longer where that would end it before one whole period at full swing."""
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.unit("l_sho_pitch", Y) + poser.unit("r_sho_pitch", Y)
@@ -587,7 +588,9 @@ def arm_swing(body: BodyModel, amplitude: float = 0.3, frequency: float | None =
     def goals(t: float) -> np.ndarray:
         return q0 + amplitude * smooth_step(t / grow_s) * np.sin(w * max(t, 0.0)) * dq
 
-    return Scenario("arm_swing", goals, duration)
+    # at least one whole period at full swing: JAXON's 0.16 Hz swing grows over 6.3 s, and in 4 s its arms had
+    # swung a quarter of the way, its ZMP never past its toes
+    return Scenario("arm_swing", goals, max(duration, grow_s + 1.0 / frequency))
 
 
 # s: the arm swing grows over this long, or over one period of the swing if that is longer: the arms' acceleration
