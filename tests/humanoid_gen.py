@@ -115,7 +115,8 @@ class HumanoidSpec:
     file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
-    ``hip_tilt``: the hip pitch's likewise (Fourier GR2's 0.52);
+    ``hip_tilt``: the hip pitch's likewise (Fourier GR2's 0.52); ``torso_com``: the torso's centre of mass
+    height as a share of ``height`` (0.72; NimbRo-OP2X's upper body has its CoM 65 mm above its hips);
     ``ankle_range``: the ankle pitch limited to ± this (rad; 0: as ``limits`` says; Romeo's −0.52..0.79);
     ``arms_forward``: the arms held straight forward in the zero posture (NAO's), the shoulder roll then about the
     vertical axis and the upper-arm yaw a twist about the forward axis, at the elbow (NAO's elbow yaw);
@@ -157,6 +158,7 @@ class HumanoidSpec:
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
     hip_tilt: float = 0.0
+    torso_com: float = 0.72
     ankle_range: float = 0.0
     arms_forward: bool = False
     cleats: float = 0.0
@@ -240,7 +242,7 @@ def _limits(spec: HumanoidSpec, role: str, side: str, axis: np.ndarray) -> tuple
 
 def _build(spec: HumanoidSpec) -> _Builder:
     b = _Builder(spec)
-    trunk = b.link("torso", 0.30, (0.0, 0.0, 0.72), (0.12, 0.2, 0.24))
+    trunk = b.link("torso", 0.30, (0.0, 0.0, spec.torso_com), (0.12, 0.2, 0.24))
     pelvis = b.link("pelvis", 0.10, (0.0, 0.0, 0.58), (0.1, 0.16, 0.06)) if spec.waist else trunk
     if spec.waist:  # the chain from pelvis up to torso (or down, when the torso is the root)
         chain = [pelvis] + [b.link(f"waist_{k}", 0.01, (0.0, 0.0, 0.6), (0.04, 0.04, 0.02))

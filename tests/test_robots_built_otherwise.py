@@ -256,6 +256,17 @@ def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
     assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.35" in err[0], err
 
 
+def test_a_lean_the_corrector_cannot_take_back_is_refused_in_one_line(tmp_path, capsys):
+    # before: NimbRo-OP2X (joints unlimited, default soles 390 mm long, its upper body's CoM 65 mm above its hips)
+    # leaned 0.44 rad at the ankles and fell corrected, its trunk at the corrector's 15°; this robot, like it, fell
+    # corrected at 2.34 s (15° takes its CoM 2.6 mm back inside its toes; with its torso's CoM at 0.62 of its
+    # height, 5.7 mm, and it stands corrected)
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(limits="absent", torso_com=0.55, seed=47))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "only 2.6 mm inside its toes" in err[0], err
+
+
 def test_a_hip_pitch_mounted_off_the_lateral_axis_is_refused_saying_how_far(tmp_path, capsys):
     # before: "found no l_hip_pitch" and what a leg needs, not which joint came near (Fourier GR2: 30° off)
     urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(hip_tilt=np.radians(30), seed=46))

@@ -38,6 +38,7 @@ from scipy.optimize import brentq
 
 from livezmp.balance.support import clamp_to_polygon, support_polygon
 from livezmp.balance.zmp import compute_zmp
+from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
 from livezmp.model.base_placement import BasePlacer
@@ -519,6 +520,19 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
     return float(brentq(excess, 0.0, 1.0, xtol=1e-9))
 
 
+def trunk_takes_back(body: BodyModel, joints: np.ndarray) -> float:
+    """Signed distance (m, + inside) of the static CoM's ground point to the support polygon of both soles for
+    the robot standing in ``joints`` (rad) with its root turned back, as far as the corrector may
+    (`CorrectionLimits.max_rotation_deg` about the lateral axis, whichever way moves the CoM back), the feet
+    held where they are (`RootMover`)."""
+    joints = follow(joints, body.mimics)
+    q = np.concatenate([BasePlacer(body).update(joints), joints])
+    mover, turn = RootMover(body, ik_iterations=50), np.radians(CorrectionLimits().max_rotation_deg[Y])
+    base = len(body.base_channels)
+    return max(static_margin(body, mover.apply(q, np.array([0.0, sign * turn, 0.0]), 0.5)[base:])
+               for sign in (1.0, -1.0))
+
+
 LEAN_LEAD = 0.0025  # m: the most the lean's own acceleration may move the ZMP ahead of the CoM
 LEAN_RAMP_S = 2.0  # s: the shortest lean (livezmp_mini's and the OP3's: their leads are 2.3 and 2.5 mm)
 
@@ -542,6 +556,13 @@ def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: 
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.ankles_lean(lean_angle(body, beyond, flexion))
+    back, largest = trunk_takes_back(body, q0 + dq), CorrectionLimits().max_rotation_deg[Y]
+    if back < beyond:
+        length = float(np.ptp(body.feet["left"].sole_local[:, X]))
+        raise InputError(f"{body.model.name}: lean: its trunk turned back by the corrector's largest "
+                         f"{largest:g}° brings its CoM only {back * 1e3:.1f} mm inside its toes from "
+                         f"{beyond * 1e3:.1f} mm past them, so it could not stand corrected (its soles are "
+                         f"{length * 1e3:.0f} mm long; a robot config gives its real ones)")
     if ramp_s is None:
         ramp_s = lean_ramp(body, q0, dq)
     up_end = settle_s + ramp_s + hold_s
