@@ -162,11 +162,14 @@ def test_quirks_of_published_urdfs_load_with_the_masses_and_legs_of_the_plain_ro
     assert foot_joints(body) == foot_joints(plain)
 
 
+@pytest.mark.parametrize("limits", ["tight", "wide"])
 @pytest.mark.parametrize("facing", ["-y", "-x"])
-def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x_by_its_knees(tmp_path, facing):
+def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x(tmp_path, facing, limits):
     # before: facing -y (Poppy), no leg joint turned about the lateral axis (refused: "found no l_hip_pitch");
-    # facing -x (iCub), its right foot taken as the left and its knees bent against their limits to stand
-    spec = HumanoidSpec(limits="tight", seed=41)
+    # facing -x (iCub), its right foot taken as the left and its knees bent against their limits to stand; with
+    # limits that allow the stance both ways ("wide", Sigmaban's ±π) the way its toes point tells: before, the
+    # foot at +y in the file was the left, and facing -x its knees bent backward
+    spec = HumanoidSpec(limits=limits, seed=41)
     plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", spec)), None).body
     body = load_robot(str(build_humanoid(tmp_path / "turned.urdf", replace(spec, facing=facing))), None).body
     assert {s: body.model.frames[f.frame_id].name.removesuffix("_level") for s, f in body.feet.items()} == \
@@ -177,19 +180,6 @@ def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x_by_its_knees
         goals = make_scenario(name, body).goals(0.0)
         assert np.all(goals >= model.lowerPositionLimit[6:]) and np.all(goals <= model.upperPositionLimit[6:])
         assert np.allclose(goals, make_scenario(name, plain).goals(0.0), atol=1e-6)
-
-
-@pytest.mark.parametrize("facing", ["-y", "-x"])
-def test_a_robot_whose_limits_allow_either_way_faces_the_way_its_toes_point(tmp_path, facing):
-    # before: with limits allowing the knees-bent stance both ways (Sigmaban's, ±π), the foot at +y in the file
-    # was the left: facing -x, the right foot was taken as the left and the knees bent backward
-    spec = HumanoidSpec(limits="wide", seed=42)
-    plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", spec)), None).body
-    body = load_robot(str(build_humanoid(tmp_path / "turned.urdf", replace(spec, facing=facing))), None).body
-    assert {s: body.model.frames[f.frame_id].name.removesuffix("_level") for s, f in body.feet.items()} == \
-        {"left": "l_foot", "right": "r_foot"}
-    assert joint_roles(body) == joint_roles(plain)
-    assert np.allclose(make_scenario("lean", body).goals(0.0), make_scenario("lean", plain).goals(0.0), atol=1e-6)
 
 
 def test_a_stance_beyond_a_knees_limits_is_refused_and_an_arm_beyond_its_own_is_held_at_them(tmp_path, capsys):
