@@ -246,15 +246,16 @@ def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
     assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.35" in err[0], err
 
 
-def test_a_lean_the_corrector_cannot_take_back_is_refused_in_one_line(tmp_path, capsys):
+@pytest.mark.parametrize("name", ["lean", "push"])
+def test_a_lean_or_push_the_corrector_cannot_take_back_is_refused_in_one_line(tmp_path, capsys, name):
     # before: NimbRo-OP2X (joints unlimited, default soles 390 mm long, its upper body's CoM 65 mm above its hips)
-    # leaned 0.44 rad at the ankles and fell corrected, its trunk at the corrector's 15°; this robot, like it, fell
-    # corrected at 2.34 s (15° takes its CoM 2.6 mm back inside its toes; with its torso's CoM at 0.62 of its
-    # height, 5.7 mm, and it stands corrected)
-    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(limits="absent", torso_com=0.55, seed=47))
-    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    # leaned 0.44 rad at the ankles and fell corrected in lean and push, its trunk at the corrector's 15°; this
+    # robot, like it, fell corrected at 2.34 s (lean) and 2.20 s (push)
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(limits="absent", torso_com=0.5, seed=47))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", name, "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()
-    assert rc == 2 and len(err) == 1 and "only 2.6 mm inside its toes" in err[0], err
+    assert rc == 2 and len(err) == 1 and f"{name}: its trunk turned back" in err[0], err
+    assert "could not stand corrected" in err[0]
 
 
 def test_a_hip_pitch_mounted_off_the_lateral_axis_is_refused_saying_how_far(tmp_path, capsys):

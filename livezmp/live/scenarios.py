@@ -533,6 +533,20 @@ def trunk_takes_back(body: BodyModel, joints: np.ndarray) -> float:
                for sign in (1.0, -1.0))
 
 
+def _check_trunk_reach(body: BodyModel, name: str, joints: np.ndarray, need: float, why: str) -> None:
+    """InputError (one line) where the corrector's largest trunk turn (`trunk_takes_back`) moves the static CoM of
+    the posture ``joints`` (rad) back less than ``need`` (m; ``why`` says what for): the robot could not stand
+    the scenario ``name`` corrected (NimbRo-OP2X: its default soles, 390 mm, put its toes where leaning to them
+    takes 0.44 rad of ankle, and its upper body's CoM, 65 mm above its hips, moves 4 mm back at 15°)."""
+    back = trunk_takes_back(body, joints) - static_margin(body, joints)
+    if back < need:
+        length = float(np.ptp(body.feet["left"].sole_local[:, X]))
+        raise InputError(f"{body.model.name}: {name}: its trunk turned back by the corrector's largest "
+                         f"{CorrectionLimits().max_rotation_deg[Y]:g}° moves its CoM back only {back * 1e3:.1f} mm, "
+                         f"{need * 1e3:.1f} needed ({why}): it could not stand corrected (its soles are "
+                         f"{length * 1e3:.0f} mm long; a robot config gives its real ones)")
+
+
 LEAN_LEAD = 0.0025  # m: the most the lean's own acceleration may move the ZMP ahead of the CoM
 LEAN_RAMP_S = 2.0  # s: the shortest lean (livezmp_mini's and the OP3's: their leads are 2.3 and 2.5 mm)
 
@@ -556,13 +570,8 @@ def lean(body: BodyModel, beyond: float = 0.004, settle_s: float = 0.5, ramp_s: 
     poser = Poser(body)
     q0 = poser.standing(flexion)
     dq = poser.ankles_lean(lean_angle(body, beyond, flexion))
-    back, largest = trunk_takes_back(body, q0 + dq), CorrectionLimits().max_rotation_deg[Y]
-    if back < beyond:
-        length = float(np.ptp(body.feet["left"].sole_local[:, X]))
-        raise InputError(f"{body.model.name}: lean: its trunk turned back by the corrector's largest "
-                         f"{largest:g}° brings its CoM only {back * 1e3:.1f} mm inside its toes from "
-                         f"{beyond * 1e3:.1f} mm past them, so it could not stand corrected (its soles are "
-                         f"{length * 1e3:.0f} mm long; a robot config gives its real ones)")
+    _check_trunk_reach(body, "lean", q0 + dq, 2 * beyond, f"from {beyond * 1e3:.1f} mm past its toes to as far "
+                       "inside")
     if ramp_s is None:
         ramp_s = lean_ramp(body, q0, dq)
     up_end = settle_s + ramp_s + hold_s
@@ -736,6 +745,7 @@ def push(body: BodyModel, force: tuple[float, float] | None = None, at: float = 
     q0 = poser.standing(flexion)
     if toe_margin is not None:
         q0 = q0 + poser.ankles_lean(lean_angle(body, -toe_margin, flexion))
+    _check_trunk_reach(body, "push", q0, beyond, "as far as the push takes its ZMP past its toes")
     if height is None:
         height = hip_height(body, q0)
     if force is None:
