@@ -248,9 +248,9 @@ def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["lean", "push"])
 def test_a_lean_or_push_the_corrector_cannot_take_back_is_refused_in_one_line(tmp_path, capsys, name):
-    # before: NimbRo-OP2X (joints unlimited, default soles 390 mm long, its upper body's CoM 65 mm above its hips)
-    # leaned 0.44 rad at the ankles and fell corrected in lean and push, its trunk at the corrector's 15°; this
-    # robot, like it, fell corrected at 2.34 s (lean) and 2.20 s (push)
+    # before: this robot (its torso's CoM at half its height) fell corrected at 2.34 s (lean) and 2.20 s (push),
+    # its trunk at the corrector's 15°, which moves its CoM back 4.3 mm; so did NimbRo-OP2X (unlimited joints,
+    # 390 mm default soles, upper body's CoM 65 mm above its hips) when the trunk turned about its hip yaws
     urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(limits="absent", torso_com=0.5, seed=47))
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", name, "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()

@@ -536,8 +536,8 @@ def trunk_takes_back(body: BodyModel, joints: np.ndarray) -> float:
 def _check_trunk_reach(body: BodyModel, name: str, joints: np.ndarray, need: float, why: str) -> None:
     """InputError (one line) where the corrector's largest trunk turn (`trunk_takes_back`) moves the static CoM of
     the posture ``joints`` (rad) back less than ``need`` (m; ``why`` says what for): the robot could not stand
-    the scenario ``name`` corrected (NimbRo-OP2X: its default soles, 390 mm, put its toes where leaning to them
-    takes 0.44 rad of ankle, and its upper body's CoM, 65 mm above its hips, moves 4 mm back at 15°)."""
+    the scenario ``name`` corrected (a robot whose upper body's CoM lies just above its hips: turned about its
+    hip yaws, the corrector's former pivot, NimbRo-OP2X's moved 4 mm back at 15° and it fell corrected)."""
     back = trunk_takes_back(body, joints) - static_margin(body, joints)
     if back < need:
         length = float(np.ptp(body.feet["left"].sole_local[:, X]))
