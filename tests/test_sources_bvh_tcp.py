@@ -12,6 +12,7 @@ from sim_support import wait_until
 
 from livezmp.errors import InputError
 from livezmp.model.bvh import read_bvh
+from livezmp.model.euler_orders import clear_of_gimbal_lock
 from livezmp.sources.bvh_tcp import parse_frame_line
 from livezmp.sources.factory import SourceOptions, open_source
 from sim_devices.mocap_streamer import Impairments, TcpStreamer
@@ -49,7 +50,10 @@ def test_frames_arrive_as_streamed(motion, avatar):
     server.run_in_thread()
     frames = collect(src, 100)
     assert len(frames) == 100 and src.nominal_dt == pytest.approx(motion.frame_time)
-    np.testing.assert_allclose(np.array([f.channels for f in frames]), motion.frames[:100], atol=5e-7)
+    # in the orders the body analyses: Bandai's spine, near gimbal lock, is re-expressed line by line as the file is
+    clear = clear_of_gimbal_lock(motion)
+    assert clear is not motion
+    np.testing.assert_allclose(np.array([f.channels for f in frames]), clear.frames[:100], atol=1e-5)
     np.testing.assert_allclose([f.t for f in frames], np.arange(100) * motion.frame_time)
     src.close()
     server.close()
@@ -69,7 +73,7 @@ def test_bad_lines_are_dropped_and_a_lost_connection_is_reopened(motion):
         src.read(0.05)
     server.send_raw(good[2])
     (f,) = collect(src, 1)
-    np.testing.assert_allclose(f.channels, motion.frames[2], atol=5e-7)
+    np.testing.assert_allclose(f.channels, clear_of_gimbal_lock(motion).frames[2], atol=1e-5)
     assert f.t == pytest.approx(2 * motion.frame_time)  # frames keep counting across the reconnect
     st = src.stats
     assert (st.delivered, st.malformed, st.oversized, st.reconnects) == (3, 2, 1, 1)

@@ -18,6 +18,7 @@ from livezmp.balance.pipeline import default_config
 from livezmp.errors import InputError
 from livezmp.model.bvh import read_bvh
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
+from livezmp.model.euler_orders import clear_of_gimbal_lock
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.monitor.loop import Monitor
 from livezmp.recording.reader import iter_messages
@@ -144,8 +145,10 @@ def test_streamer_impairments_are_seen_exactly(fmt):
     seqs = np.round(np.array([f.t for f in got]) / motion.frame_time).astype(int)
     assert np.all(np.diff(seqs) > 0)
     assert st.lost == seqs[-1] + 1 - len(got)  # every frame number not delivered
-    tol = {"json": 0.0, "binary": 1e-4}[fmt]
-    np.testing.assert_allclose(np.array([f.channels for f in got]), motion.frames[seqs], rtol=tol, atol=tol)
+    tol = {"json": 1e-9, "binary": 1e-4}[fmt]
+    # in the orders the body analyses: Bandai's spine, near gimbal lock, is re-expressed frame by frame as the file is
+    clear = clear_of_gimbal_lock(motion).frames
+    np.testing.assert_allclose(np.array([f.channels for f in got]), clear[seqs], rtol=tol, atol=tol)
     src.close()
 
 

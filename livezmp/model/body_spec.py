@@ -24,7 +24,7 @@ from livezmp.model.body import BodyModel, world_from_up_axis
 from livezmp.model.bvh import BvhMotion, format_hierarchy, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.euler_orders import clear_of_gimbal_lock
+from livezmp.model.euler_orders import gimbal_orders, reexpressed
 from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
 from livezmp.model.segments import SegmentTag
@@ -50,11 +50,13 @@ class Skeleton:
     """A skeleton file read: ``motion`` (its frames, or for a hierarchy alone one stand-in
     frame at a nominal 30 Hz: the rest pose, rotations zero and position channels equal
     to the offsets they replace), ``hierarchy`` its HIERARCHY lines verbatim,
-    ``has_motion`` whether the file had frames (and so a real frame time)."""
+    ``has_motion`` whether the file had frames (and so a real frame time); ``orders`` {joint index: rotation order}
+    of the joints re-expressed clear of gimbal lock (:func:`clear_skeleton`), none as read."""
 
     motion: BvhMotion
     hierarchy: str
     has_motion: bool
+    orders: dict[int, str] = field(default_factory=dict)
 
 
 def read_skeleton(path: str | Path) -> Skeleton:
@@ -71,13 +73,15 @@ def read_skeleton(path: str | Path) -> Skeleton:
 
 
 def clear_skeleton(skeleton: Skeleton) -> Skeleton:
-    """``skeleton`` with its joints near gimbal lock re-expressed over its frames
-    (:func:`livezmp.model.euler_orders.clear_of_gimbal_lock`) and its hierarchy text written to match; itself when
-    none is. For a file replayed whole: a stream's frames come in the file's own orders."""
-    motion = clear_of_gimbal_lock(skeleton.motion)
-    if motion is skeleton.motion:
+    """``skeleton`` with its joints near gimbal lock over its frames re-expressed
+    (:mod:`livezmp.model.euler_orders`) and its hierarchy text written to match; itself when none is. A file
+    replayed whole is re-expressed here; a stream's frames, which come in the file's own orders, row by row by
+    :class:`~livezmp.model.euler_orders.StreamOrders` with the result's ``orders``."""
+    orders = gimbal_orders(skeleton.motion)
+    if not orders:
         return skeleton
-    return Skeleton(motion, format_hierarchy(motion.joints) + "\n", skeleton.has_motion)
+    motion = reexpressed(skeleton.motion, orders)
+    return Skeleton(motion, format_hierarchy(motion.joints) + "\n", skeleton.has_motion, orders)
 
 
 def skeleton_body(skeleton: Skeleton, opts: BvhBodyOptions | None = None) -> tuple[BodyModel, BodySpec]:

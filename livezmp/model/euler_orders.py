@@ -9,7 +9,9 @@ no longer cancel and the ZMP's dynamics explode (accelerations of 10⁶ g, frame
 middle angle comes within ``GIMBAL_MARGIN_DEG`` of ±90° somewhere in the take is therefore re-expressed, every frame,
 in the Tait-Bryan order whose middle angle stays farthest from ±90° over the take: the same rotations (the segments'
 poses unchanged to rounding), in other channels, unwrapped so that they run continuously. Angles in degrees, as
-BVH writes them; the order is one for the whole take, so a take read in pieces is scanned once first.
+BVH writes them; the order is one for the whole take, so a take read in pieces is scanned once first. A live stream
+cannot be scanned ahead: its orders are the ones its skeleton file's frames call for, fixed before the first frame
+(the body's joints follow them), and each streamed row is re-expressed as it comes (:class:`StreamOrders`).
 """
 
 from __future__ import annotations
@@ -170,3 +172,19 @@ def scan_orders(joints: list[BvhJoint], blocks: Callable[[], Iterable[np.ndarray
     for block in blocks():
         extents = merge_extents(extents, middle_extents(joints, block, flagged))
     return choose_orders(joints, extents)
+
+
+class StreamOrders:
+    """A live stream's rows (C,) (degrees, the skeleton file's orders) re-expressed by ``orders`` one at a time, each
+    unwrapped from the row before; :meth:`restart` where the stream's timeline starts over."""
+
+    def __init__(self, joints: list[BvhJoint], orders: dict[int, str]):
+        self.joints, self.orders = joints, orders
+        self._previous: np.ndarray | None = None
+
+    def __call__(self, row: np.ndarray) -> np.ndarray:
+        self._previous = reexpress(self.joints, row[None], self.orders, self._previous)[0]
+        return self._previous
+
+    def restart(self) -> None:
+        self._previous = None

@@ -7,7 +7,8 @@ a newline or by ``||``. A leading avatar index and name (``0 Avatar00 ...``, as 
 Neuron's string broadcast) is skipped. Lines with the wrong value count, non-numbers,
 non-finite values, or longer than the limit are counted and dropped. The lines carry no
 time: frame k is at ``k × frame period``. A dropped connection is reported and
-re-opened every ``retry`` seconds; frames keep counting on.
+re-opened every ``retry`` seconds; frames keep counting on. Joints the body analyses in
+other rotation orders (clear of gimbal lock) are re-expressed line by line (``orders``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from livezmp.checks import MAX_CHANNEL_VALUE, first_out_of_range
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.body_spec import BodySpec
+from livezmp.model.euler_orders import StreamOrders
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 DELIMITER = re.compile(rb"\r?\n|\|\|")
@@ -48,16 +50,18 @@ def parse_frame_line(line: bytes, n_channels: int) -> np.ndarray:
 
 class BvhTcpSource:
     """Client of a BVH broadcast at ``host``:``port`` (see the module docstring);
-    ``frame_time`` s per frame; lines longer than ``max_line`` bytes are dropped."""
+    ``frame_time`` s per frame; lines longer than ``max_line`` bytes are dropped; ``orders`` re-expresses each
+    line's values into the body's rotation orders (None: the body's are the file's)."""
 
     def __init__(self, host: str, port: int, body: BodyModel, body_spec: BodySpec, frame_time: float,
-                 max_line: int | None = None, retry: float = 0.5):
+                 max_line: int | None = None, retry: float = 0.5, orders: StreamOrders | None = None):
         self.name = f"tcp://{host}:{port}"
         self.host, self.port = host, port
         self.body, self.body_spec = body, body_spec
         self.nominal_dt = frame_time
         self.max_line = max_line or 1024 + 32 * body.nq
         self.retry = retry
+        self.orders = orders
         self.stats, self.errors = SourceStats(), ErrorLog()
         self._buf = bytearray()
         self._skipping = False  # inside an over-long line, up to its delimiter
@@ -132,7 +136,7 @@ class BvhTcpSource:
         t = self._k * self.nominal_dt
         self._k += 1
         self.stats.delivered += 1
-        return SourceFrame(t, values, None, time.monotonic())
+        return SourceFrame(t, values if self.orders is None else self.orders(values), None, time.monotonic())
 
     def read(self, timeout: float) -> SourceFrame | None:
         deadline = time.monotonic() + timeout

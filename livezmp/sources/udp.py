@@ -20,7 +20,9 @@ so the analysis starts over on the new clock. A single far-ahead packet thus cos
 nothing, a restarted sender is followed after ``RESYNC_FRAMES`` frames, and genuine
 frames arriving in between clear the candidate run, so stray packets cannot take over.
 
-The allowlist defaults to loopback senders; binding beyond loopback requires one.
+The allowlist defaults to loopback senders; binding beyond loopback requires one. Joints the
+body analyses in other rotation orders (clear of gimbal lock) are re-expressed frame by frame
+(``orders``).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import time
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.body_spec import BodySpec
+from livezmp.model.euler_orders import StreamOrders
 from livezmp.sources.frame_format import SEQ_MOD, FrameError, decode_frame, max_packet_bytes
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
@@ -124,12 +127,13 @@ class UdpSource:
 
     def __init__(self, host: str, port: int, body: BodyModel, body_spec: BodySpec,
                  allow: tuple[Network, ...] | None = None, max_bytes: int | None = None,
-                 nominal_dt: float | None = None):
+                 nominal_dt: float | None = None, orders: StreamOrders | None = None):
         self.name = f"udp://{host}:{port}"
         if allow is None and not is_loopback(host):
             raise InputError(f"{self.name}: listening beyond loopback needs an allowlist of senders "
                              "(?allow=ADDRESS[/BITS],...)")
         self.body, self.body_spec, self.nominal_dt = body, body_spec, nominal_dt
+        self.orders = orders
         self.allow = allow or LOOPBACK
         self.max_bytes = max_packet_bytes(body.nq) if max_bytes is None else max_bytes
         self.stats, self.errors = SourceStats(), ErrorLog()
@@ -193,7 +197,12 @@ class UdpSource:
             self._lost_before = self.stats.lost
         self.stats.delivered += 1
         self._last_t = f.t
-        return SourceFrame(f.t, f.channels, f.contacts, received, restart=restart)
+        channels = f.channels
+        if self.orders is not None:
+            if restart:
+                self.orders.restart()
+            channels = self.orders(channels)
+        return SourceFrame(f.t, channels, f.contacts, received, restart=restart)
 
     def read(self, timeout: float) -> SourceFrame | None:
         deadline = time.monotonic() + timeout
