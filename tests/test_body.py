@@ -14,7 +14,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import foot_soles
 from livezmp.model.bvh import parse_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
-from livezmp.model.segments import classify, load_mapping
+from livezmp.model.segments import classify, load_mapping, tag_joints
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 
@@ -158,6 +158,19 @@ def test_lower_case_cmu_skeleton_reads_its_sides():
     assert set(body.feet) == {"left", "right"}
     assert [(classify(n).kind, classify(n).side) for n in ("lhip", "rknee", "lowerback", "root")] == [
         ("thigh", "left"), ("shank", "right"), ("spine", "center"), ("root", "center")]
+
+
+def test_a_shoulder_beside_a_collar_is_the_upper_arm():
+    """The lower-case CMU and Daz-friendly skeletons' arm is lcollar → lshoulder → lelbow (RGBDAcquisition's
+    102_01cc.bvh, 02_03.bvh): "lshoulder" read as a second collar, its arm's mass given to the other arm segments.
+    Mixamo's LeftShoulder → LeftArm keeps its shoulder as the collar."""
+    legs = [f"{s}{b}" for s in "lr" for b in ("hip", "knee", "foot")]
+    cmu = tag_joints(["hip", *legs, "lcollar", "lshoulder", "lelbow", "lhand", "rcollar", "rshoulder", "relbow"])
+    assert [(t.kind, t.side) for t in cmu[7:]] == [
+        ("collar", "left"), ("upper_arm", "left"), ("forearm", "left"), ("hand", "left"),
+        ("collar", "right"), ("upper_arm", "right"), ("forearm", "right")]
+    mixamo = tag_joints(["Hips", *legs, "LeftShoulder", "LeftArm", "LeftForeArm"])
+    assert [(t.kind, t.side) for t in mixamo[7:]] == [("collar", "left"), ("upper_arm", "left"), ("forearm", "left")]
 
 
 def test_a_two_frame_take_is_too_short_to_judge(tmp_path):

@@ -100,6 +100,20 @@ def classify(name: str) -> SegmentTag | None:
     return SegmentTag(kind, side)
 
 
+def _shoulders_beside_collars(names: list[str], tags: list[SegmentTag], mapping: dict[str, SegmentTag]) -> None:
+    """A "shoulder" joint on a side that also has a collar or clavicle joint and no upper-arm joint is the upper
+    arm (in place in ``tags``): the lower-case CMU and Daz-friendly skeletons' lcollar → lshoulder → lelbow. Mixamo's
+    LeftShoulder → LeftArm has its arm, and stays the collar. Joints named in ``mapping`` keep their tag."""
+    for side in ("left", "right"):
+        if any((t.kind, t.side) == ("upper_arm", side) for t in tags):
+            continue
+        collars = [i for i, t in enumerate(tags) if (t.kind, t.side) == ("collar", side) and names[i] not in mapping]
+        shoulders = [i for i in collars if "shoulder" in names[i].lower()]
+        if shoulders and len(shoulders) < len(collars):
+            for i in shoulders:
+                tags[i] = SegmentTag("upper_arm", side)
+
+
 def load_mapping(path: str | Path) -> dict[str, SegmentTag]:
     """Read an explicit mapping file: TOML ``[segments]`` table of joint = "kind[:side]"."""
     p = Path(path)
@@ -133,6 +147,7 @@ def tag_joints(names: list[str], mapping: dict[str, SegmentTag] | None = None, s
             unknown.append(n)
             t = SegmentTag("fingers", "center")  # massless until mapped
         tags.append(t)
+    _shoulders_beside_collars(names, tags, mapping)
     need = [("pelvis", "center")] + [(k, s) for s in ("left", "right") for k in ("thigh", "shank", "foot")]
     have = {(t.kind, t.side) for t in tags}
     missing = [f"{k}:{s}" if s != "center" else k for k, s in need if (k, s) not in have]
