@@ -38,6 +38,10 @@ class CorrectionLimits:
     rotation_scale_deg: float = 20.0  # σ_δ: how much a degree of rotation costs
     accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
     iterations: int = 30
+    # the search stops after this many Gauss-Newton iterations without fewer frames outside than the best so far
+    # (the take is not being corrected: video2bvh_cxk spent all 30 at 270-310 of 900 frames outside, 465 s); the
+    # walks that are corrected went on after at most 4 such (walk_exhausted_004: 1, 4, 3, 2, 2, then 0 outside)
+    patience: int = 6
     foot_hold_m: float = 0.0006  # how far a weight-bearing foot may move (the promise is 1 mm)
 
 

@@ -352,6 +352,12 @@ def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs
     return delta, current, cost
 
 
+def _stalled(phase: list[int], patience: int) -> bool:
+    """Whether the last ``patience`` iterations of a phase (``phase``: frames outside after each) left none fewer
+    outside than the best before them: the steps still lower the cost, but they trade frames outside for others."""
+    return len(phase) > patience and min(phase[-patience:]) >= min(phase[:-patience])
+
+
 def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
                    limits: CorrectionLimits | None = None, nominal_dt: float | None = None,
                    progress: Callable[[str], None] | None = None) -> CorrectionResult:
@@ -391,10 +397,14 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     mu = 1.0
     # phase 1 with the original contacts held; phase 2 (a few iterations) re-detects them,
     # as `livezmp analyze` will, to settle the frames where a moved swing foot changes them
+    stalled = False
     for contacts, iterations in ((held, limits.iterations), (None, 5)):
+        if stalled:
+            break  # the take cannot be corrected within the limits: no more searching, only the final checks
         if contacts is None:
             current = analyse(apply_delta(mover, body, frames, delta, w))
             cost = _cost(current, delta, limits, reg_size, reg_acc)
+        phase: list[int] = []
         for _ in range(iterations):
             judged = [k for k, r in enumerate(current) if r.margin is not None]
             if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
@@ -415,13 +425,18 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
                     break
                 mu *= 10
             history.append(sum(1 for r in current if r.inside is False))
+            phase.append(history[-1])
             tell(f"iteration {len(history)}: {history[-1]} frames outside")
             if not accepted or history[-1] == 0:
                 break
-    tell("easing contact changes, final check")
-    delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
-                                               lambda d: (apply_delta(mover, body, frames, d, w), d),
-                                               (reg_size, reg_acc), max(1, round(0.3 / dt)))
+            if stalled := _stalled(phase, limits.patience):
+                tell(f"no fewer frames outside in {limits.patience} iterations: stopping the search")
+                break
+    tell("final check" if stalled else "easing contact changes, final check")
+    if not stalled:
+        delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
+                                                   lambda d: (apply_delta(mover, body, frames, d, w), d),
+                                                   (reg_size, reg_acc), max(1, round(0.3 / dt)))
     supports = [r.support for r in before]
     held_feet: set[int] = set()
     for _ in range(3):  # both only shrink rotations; the feet are checked last
