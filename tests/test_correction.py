@@ -11,14 +11,16 @@ from data_paths import BANDAI, OP3_URDF
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
+from test_body import make_bvh
 
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.cli import main
 from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, rate_limit
 from livezmp.correct.online import OnlineCorrector
 from livezmp.correct.root_motion import RootMover, euler_from_matrix, hip_axes
+from livezmp.correct.solver import correct_bvh
 from livezmp.model.base_placement import BasePlacer
-from livezmp.model.bvh import read_bvh
+from livezmp.model.bvh import parse_bvh, read_bvh
 from livezmp.model.demo_robot import smooth_ramp
 
 # rotations about world +y; the OP3's pitch axes are ±y per side (URDF), hence the signs
@@ -337,3 +339,17 @@ def test_root_mover_batch_matches_one_at_a_time(op3_body):
     np.testing.assert_allclose(batch[0], q[0], atol=1e-12)  # δ = 0: nothing moves (the root channels round-trip)
     mover.apply_many(q, delta, w)
     assert mover.last_foot_error == max(errors) < 1e-7
+
+
+def test_the_search_stops_on_a_take_it_cannot_correct():
+    """A trunk swinging ±50° about the hips carries the ZMP out of the feet at 56 of 60 frames, beyond what 2° of
+    root rotation can bring back: after ``patience`` iterations without fewer frames outside the search stops (it
+    went on to 13 iterations, the contact re-detection phase and the easing, at 59 outside all along)."""
+    motion = parse_bvh(make_bvh(frames=60), "swing.bvh")
+    motion.frame_time = 1 / 30
+    spine = next(j for j in motion.joints if j.name == "Spine")
+    motion.frames[:, spine.first_channel + 1] = 50.0 * np.sin(2 * np.pi * np.arange(60) / 30)
+    limits = CorrectionLimits(max_rotation_deg=(2.0, 2.0, 2.0))
+    _, result = correct_bvh(motion, limits=limits)
+    assert result.history == [59] * (limits.patience + 1)
+    assert result.report()["out_of_support_after"] == 59
