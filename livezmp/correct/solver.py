@@ -352,10 +352,11 @@ def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs
     return delta, current, cost
 
 
-def _stalled(phase: list[int], patience: int) -> bool:
-    """Whether the last ``patience`` iterations of a phase (``phase``: frames outside after each) left none fewer
-    outside than the best before them: the steps still lower the cost, but they trade frames outside for others."""
-    return len(phase) > patience and min(phase[-patience:]) >= min(phase[:-patience])
+def _stalled(phase: list[int], patience: int, progress: float) -> bool:
+    """Whether the last ``patience`` iterations of a phase (``phase``: frames outside after each) failed to leave
+    fewer outside than the best before them by the fraction ``progress``: the steps still lower the cost, but they
+    trade frames outside for others, or win back a frame or two of hundreds."""
+    return len(phase) > patience and min(phase[-patience:]) >= min(phase[:-patience]) * (1.0 - progress)
 
 
 def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
@@ -429,8 +430,9 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
             tell(f"iteration {len(history)}: {history[-1]} frames outside")
             if not accepted or history[-1] == 0:
                 break
-            if stalled := _stalled(phase, limits.patience):
-                tell(f"no fewer frames outside in {limits.patience} iterations: stopping the search")
+            if stalled := _stalled(phase, limits.patience, limits.progress):
+                tell(f"frames outside not {100 * limits.progress:g} % fewer in {limits.patience} iterations: "
+                     "stopping the search")
                 break
     tell("final check" if stalled else "easing contact changes, final check")
     if not stalled:
