@@ -39,10 +39,10 @@ class CorrectionLimits:
     accel_scale_deg_s2: float = 3000.0  # σ_a: how much rotational acceleration costs
     iterations: int = 30
     # the search stops after ``patience`` Gauss-Newton iterations without ``progress`` (a fraction) fewer frames
-    # outside than the best so far: the take is not being corrected (video2bvh_cxk spent all 30 at 267-310 of 900
-    # frames outside, 465 s). The walks that are corrected (Bandai's 24, two held-out) went on after at most 4 such,
-    # and every new best of theirs was at least 13 % fewer (walk_active_003: 37 → 32; walk_exhausted_004: 1, 4, 3,
-    # 2, 2, then 0 outside)
+    # outside than the best so far: the take is not being corrected (video2bvh_cxk: 14 iterations at 267-310 of
+    # 900 frames outside, then the easing, 491 s CPU; now 7 and no easing, 61 s). The walks that are corrected
+    # (Bandai's 24, two held-out) went on after at most 4 such, and every new best of theirs was at least 13 %
+    # fewer (walk_active_003: 37 → 32; walk_exhausted_004: 1, 4, 3, 2, 2, then 0 outside)
     patience: int = 6
     progress: float = 0.05
     foot_hold_m: float = 0.0006  # how far a weight-bearing foot may move (the promise is 1 mm)
