@@ -521,15 +521,17 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
 
 
 def trunk_takes_back(body: BodyModel, joints: np.ndarray) -> float:
-    """Signed distance (m, + inside) of the static CoM's ground point to the support polygon of both soles for
-    the robot standing in ``joints`` (rad) with its root turned back, as far as the corrector may
-    (`CorrectionLimits.max_rotation_deg` about the lateral axis, whichever way moves the CoM back), the feet
-    held where they are (`RootMover`)."""
+    """How far back (m, along -x: the robot faces +x) the static CoM's ground point moves when the robot standing
+    in ``joints`` (rad) has its root turned back as far as the corrector may (`CorrectionLimits.max_rotation_deg`
+    about the lateral axis, whichever way moves the CoM back), the feet held where they are (`RootMover`). A
+    distance, not a change of the support margin: from a centred stance a move back brings the CoM nearer the
+    heels' edge, and the margin falls."""
     joints = follow(joints, body.mimics)
     q = np.concatenate([BasePlacer(body).update(joints), joints])
     mover, turn = RootMover(body, ik_iterations=50), np.radians(CorrectionLimits().max_rotation_deg[Y])
     base = len(body.base_channels)
-    return max(static_margin(body, mover.apply(q, np.array([0.0, sign * turn, 0.0]), 0.5)[base:])
+    x0 = standing_support(body, joints)[0][X]
+    return max(x0 - standing_support(body, mover.apply(q, np.array([0.0, sign * turn, 0.0]), 0.5)[base:])[0][X]
                for sign in (1.0, -1.0))
 
 
@@ -538,7 +540,7 @@ def _check_trunk_reach(body: BodyModel, name: str, joints: np.ndarray, need: flo
     the posture ``joints`` (rad) back less than ``need`` (m; ``why`` says what for): the robot could not stand
     the scenario ``name`` corrected (a robot whose upper body's CoM lies just above its hips: turned about its
     hip yaws, the corrector's former pivot, NimbRo-OP2X's moved 4 mm back at 15° and it fell corrected)."""
-    back = trunk_takes_back(body, joints) - static_margin(body, joints)
+    back = trunk_takes_back(body, joints)
     if back < need:
         length = float(np.ptp(body.feet["left"].sole_local[:, X]))
         raise InputError(f"{body.model.name}: {name}: its trunk turned back by the corrector's largest "
