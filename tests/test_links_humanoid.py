@@ -28,7 +28,9 @@ def body():
     return body_from_urdf(MINI_URDF)
 
 
-@pytest.mark.parametrize(("kind", "options"), [("fw", "rate=100&timeout=0.3"), ("can", "rate=20&timeout=0.5")])
+# what is checked is what arrives; the staleness rule has its own tests (test_links_firmware.py). A loaded 2-CPU host's
+# slcan reader, one byte a system call, fell 977 ms behind 20 nodes' streams once in a whole-suite run
+@pytest.mark.parametrize(("kind", "options"), [("fw", "rate=100&timeout=0.3"), ("can", "rate=20&timeout=2")])
 def test_humanoid_posture_feet_and_imu_reach_the_host(body, kind, options):
     posture = Poser(body).standing().astype(np.float32).astype(float)
     humanoid = SimHumanoid(body, posture)
