@@ -249,8 +249,8 @@ def offline_stages(rate: float = 240.0) -> None:
 
     from livezmp.model.c3d import read_c3d
     from livezmp.model.markers import MarkerBodyOptions
+    from livezmp.model.plate_frame import plate_axes
     from livezmp.sources.marker_stream import MarkerStreamSource
-    from livezmp.sources.plate_frame import plate_axes
     from livezmp.sources.qtm import frame_of_packet, parse_parameters
     from sim_devices import qtm_server as qs
     from sim_devices.mocap_trial import TrialPlayer, load_c3d_trial, resampled

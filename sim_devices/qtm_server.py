@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livezmp.sources.plate_frame import plate_axes
+from livezmp.model.plate_frame import plate_axes
 from sim_devices.impairments import Impairments
 from sim_devices.mocap_trial import MocapTrial, PlayCounters, TrialFrame, TrialPlayer
 from sim_devices.tcp_accept import accept_until

@@ -17,8 +17,8 @@ from data_paths import C3D
 from sim_support import wait_until
 
 from livezmp.errors import InputError
+from livezmp.model.plate_frame import plate_axes
 from livezmp.sources.mocap_factory import open_mocap_source
-from livezmp.sources.plate_frame import plate_axes
 from sim_devices.impairments import Impairments
 from sim_devices.lsl_publisher import LslPublisher
 from sim_devices.mocap_trial import load_c3d_trial

@@ -36,6 +36,7 @@ import numpy as np
 from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import MAX_AGE_YEARS
+from livezmp.model.plate_frame import plate_axes
 
 _LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 _NEWTONS = {"n": 1.0, "newton": 1.0, "newtons": 1.0}  # FORCE_PLATFORM:UNITS
@@ -318,9 +319,7 @@ def _calibrated_platforms(c3d: dict, source: str) -> list[dict]:
                              "does not have")
         six = cal[:, :, k] @ analogs[index] if kind == 5 else analogs[index]
         c = corners[:, :, k]
-        ex, ey = c[:, 0] - c[:, 1], c[:, 0] - c[:, 3]
-        ez = np.cross(ex, ey)
-        rot = np.column_stack([v / np.linalg.norm(v) for v in (ex, np.cross(ez, ex), ez)])
+        rot, _ = plate_axes(c.T)
         o = -origin[:, k] if origin[2, k] > 0 else origin[:, k]
         moment = six[3:] + np.cross(six[:3].T, o).T
         out.append({"unit_force": str(units[0]) if units is not None and len(units) else "N", "corners": c,

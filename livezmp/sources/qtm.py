@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from livezmp.errors import InputError
+from livezmp.model.plate_frame import plate_axes
 from livezmp.sources.interface import ErrorLog, SourceStats
 from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
-from livezmp.sources.plate_frame import plate_axes
 
 DEFAULT_PORT = 22223  # QTM's little-endian RT port, the one qtm-rt speaks
 LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
