@@ -396,6 +396,41 @@ def lag_split(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} {lags[0]:>7s} {lags[1]:>7s} {lags[2]:>7s}   " + " / ".join(rms))
 
 
+def bias_and_lead(done: dict[str, tuple]) -> None:
+    """How much of the fore-aft bias is the ZMP's lead: the CoP travels forward through each stance, so a ZMP
+    that runs a time ``lag`` ahead of it sits ``-lag`` times the CoP's mean fore-aft speed in front. Per trial:
+    the fore-aft bias (mm, as ``bias_mm``), the lag (ms, ? = not determined), the CoP's mean fore-aft speed over
+    scored frames whose neighbours are scored (m/s), the bias the lead alone gives, and the bias left with the
+    ZMP moved back by its lag (interpolated between frames)."""
+    print("\nfore-aft bias and the lead: bias mm, lag ms, CoP fore-aft speed m/s, -lag x speed mm, bias with the "
+          "ZMP shifted by its lag mm")
+    cols = []
+    for name, (trial, a) in done.items():
+        r, p, dt = a.result, a.plates, 1.0 / trial.rate
+        rows = _scored(a)
+        zmp = np.where(r.has_zmp[:, None], r.zmp[:, :2], np.nan)
+        lag, ok, _ = lag_with_halves(zmp, p.cop[:, :2], rows, dt)
+        if lag is None:
+            continue
+        fwd = walking_axes(r.com)[0][:2]
+        t = np.arange(len(zmp)) * dt
+        bias = 1000 * float(np.mean(zmp[rows] - p.cop[rows, :2], axis=0) @ fwd)
+        moved = _delayed(np.nan_to_num(zmp), t, -lag)  # ZMP(t + lag): where it stood lag later
+        left = 1000 * float(np.mean(moved[rows] - p.cop[rows, :2], axis=0) @ fwd)
+        mid = np.flatnonzero(rows[1:-1] & rows[:-2] & rows[2:]) + 1
+        speed = float(np.mean((p.cop[mid + 1, :2] - p.cop[mid - 1, :2]) @ fwd) / (2 * dt)) if len(mid) else np.nan
+        cols.append((bias, -1000 * lag * speed, left, ok))
+        print(f"{name[:34]:34s} {bias:+7.1f} {_lag_cell(lag, ok):>7s} {speed:6.2f} {-1000 * lag * speed:+7.1f} "
+              f"{left:+7.1f}")
+    det = np.array([c[:3] for c in cols if c[3]])
+    if len(det) > 2:
+        print(f"over the {len(det)} trials with the lag determined: median bias {np.median(det[:, 0]):+.1f} mm, "
+              f"lead's part {np.median(det[:, 1]):+.1f}, left at the lag {np.median(det[:, 2]):+.1f}; "
+              f"|bias| <= 10 mm on {int((abs(det[:, 0]) <= 10).sum())}, at the lag on "
+              f"{int((abs(det[:, 2]) <= 10).sum())}; r(bias, lead's part) "
+              f"{np.corrcoef(det[:, 0], det[:, 1])[0, 1]:.2f}")
+
+
 AM_GROUPS = {"foot": "feet", "shank": "shanks", "thigh": "thighs", "pelvis": "pelvis"}  # any other kind: "upper"
 STANCE_TERMS = ("foot rot", "shank mass", "thigh mass")  # the stance leg's terms shown on their own
 # s: a mass wobbling on its bone at f_n Hz with damping ratio zeta lags it at step frequencies by 2 zeta / (2 pi f_n),
@@ -974,6 +1009,7 @@ def main() -> None:
     sway_before_after(done)
     error_sources(done)
     lag_split(done)
+    bias_and_lead(done)
     am_split(done)
     lateral_sources(done)
     swing_at_step_frequency(done)
