@@ -457,11 +457,11 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",
                 limits: CorrectionLimits | None = None) -> tuple[BvhMotion, CorrectionResult]:
-    """A balance-corrected copy of a BVH motion (same hierarchy, frame count and time), and
-    what the correction did."""
+    """A balance-corrected copy of a BVH motion (same hierarchy, frame count and time; the joints its model drops
+    as they were), and what the correction did."""
     body = body_from_bvh(motion, BvhBodyOptions(total_mass=total_mass))
     times = np.arange(len(motion.frames)) * motion.frame_time
-    result = correct_motion(body, times, motion.frames,
+    result = correct_motion(body, times, body.input_rows(motion.frames),
                             default_config(body, motion.fps, mode, cutoff_hz=CORRECTION_CUTOFF_HZ), limits,
                             nominal_dt=motion.frame_time)
-    return replace(motion, frames=result.frames), result
+    return replace(motion, frames=body.into_input(motion.frames, result.frames)), result

@@ -107,12 +107,14 @@ def synth_take(take: GaitTake, analysis: GaitAnalysis, label: str, amount: float
 
 
 def to_bvh(take: GaitTake, q: np.ndarray) -> BvhMotion:
-    """A changed BVH take's ``q`` back to a BvhMotion (degrees wrapped to (−180°, 180°])."""
+    """A changed BVH take's ``q`` back to a BvhMotion (degrees wrapped to (−180°, 180°]); the joints its body drops
+    (a face, fingers) held as in the take's first frame."""
     motion = take.origin
     frames = take.body.q_to_channels(turn_root(q, take, take.heading))
     a = take.angle_index
     frames[:, a] = 180.0 - (180.0 - frames[:, a]) % 360.0
-    return BvhMotion(motion.joints, motion.frame_time, frames, motion.source)
+    held = np.repeat(motion.frames[:1], len(frames), axis=0)
+    return BvhMotion(motion.joints, motion.frame_time, take.body.into_input(held, frames), motion.source)
 
 
 def to_trajectory(take: GaitTake, t: np.ndarray, q: np.ndarray) -> JointTrajectory:

@@ -152,7 +152,7 @@ def take_from_bvh(motion: BvhMotion, up: str = "y", units: str | None = None) ->
         raise InputError(f"{motion.source}: up axis must be 'y' or 'z', got {up!r}")
     body = body_from_bvh(motion, BvhBodyOptions(units=units, up_axis=up))
     t = np.arange(len(motion.frames)) * motion.frame_time
-    return _make(motion.source, t, body.channels_to_q(motion.frames), body, motion)
+    return _make(motion.source, t, body.channels_to_q(body.input_rows(motion.frames)), body, motion)
 
 
 def take_from_trajectory(traj: JointTrajectory, body: BodyModel) -> GaitTake:

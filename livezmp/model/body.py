@@ -77,6 +77,9 @@ class BodyModel:
     has_base_input: bool = True
     joint_names: list[str] = field(default_factory=list)  # a robot's actuated joints (URDF names)
     mimics: tuple[Mimic, ...] = ()  # joints that follow another (indices into joint_names)
+    # a skeleton's: the input row's column of each channel (the part of the skeleton the model is built on,
+    # livezmp.model.bvh_body.model_part); None: the input's rows are the channels
+    input_columns: np.ndarray | None = None
 
     @property
     def nq(self) -> int:
@@ -88,6 +91,20 @@ class BodyModel:
 
     def q_to_channels(self, q: np.ndarray) -> np.ndarray:
         return q / self.channel_scale
+
+    def input_rows(self, rows: np.ndarray) -> np.ndarray:
+        """The channels (..., nq) of input rows (..., C) as a file or stream carries them (every joint of a
+        skeleton)."""
+        return rows if self.input_columns is None else rows[..., self.input_columns]
+
+    def into_input(self, rows: np.ndarray, channels: np.ndarray) -> np.ndarray:
+        """Input rows (F, C) with the body's channels set to ``channels`` (F, nq); the columns the body does not
+        read (a skeleton's dropped joints) as ``rows`` has them."""
+        if self.input_columns is None:
+            return channels
+        out = np.array(rows, dtype=float)
+        out[:, self.input_columns] = channels
+        return out
 
     def to_input_frame(self, p: np.ndarray) -> np.ndarray:
         """Internal-frame points (..., 3) → the input's world frame (still metres)."""

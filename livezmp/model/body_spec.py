@@ -24,7 +24,7 @@ from livezmp.model.body import BodyModel, world_from_up_axis
 from livezmp.model.bvh import BvhMotion, format_hierarchy, parse_bvh, parse_hierarchy
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.euler_orders import gimbal_orders, reexpressed
+from livezmp.model.euler_orders import StreamOrders, gimbal_orders, reexpressed
 from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
 from livezmp.model.segments import SegmentTag
@@ -82,6 +82,25 @@ def clear_skeleton(skeleton: Skeleton) -> Skeleton:
         return skeleton
     motion = reexpressed(skeleton.motion, orders)
     return Skeleton(motion, format_hierarchy(motion.joints) + "\n", skeleton.has_motion, orders)
+
+
+class SkeletonStream:
+    """A live stream's rows (C,) of a skeleton, as its file writes them (every joint, the file's rotation orders),
+    made the channels of ``body`` (built on ``clear``, the skeleton clear of gimbal lock): re-expressed row by row
+    into the orders ``clear`` chose (:class:`~livezmp.model.euler_orders.StreamOrders`), then cut to the joints the
+    body is built on (:meth:`BodyModel.input_rows`). ``n_channels``: C, the values each row carries;
+    :meth:`restart` where the stream's timeline starts over."""
+
+    def __init__(self, skeleton: Skeleton, clear: Skeleton, body: BodyModel):
+        self.n_channels, self.body = skeleton.motion.n_channels, body
+        self.orders = StreamOrders(skeleton.motion.joints, clear.orders) if clear.orders else None
+
+    def __call__(self, row: np.ndarray) -> np.ndarray:
+        return self.body.input_rows(row if self.orders is None else self.orders(row))
+
+    def restart(self) -> None:
+        if self.orders is not None:
+            self.orders.restart()
 
 
 def skeleton_body(skeleton: Skeleton, opts: BvhBodyOptions | None = None) -> tuple[BodyModel, BodySpec]:

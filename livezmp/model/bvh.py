@@ -27,8 +27,8 @@ from livezmp.checks import (
 )
 from livezmp.errors import InputError
 
-MAX_JOINTS = 256  # joints of a skeleton; mocap skeletons have 20-100 (hands included)
-MAX_CHANNELS = 256  # Pinocchio's model data grows as the cube: ~1 GB at 256 channels, 4 GB at 400
+MAX_JOINTS = 256  # joints of a skeleton (so at most 1536 channels); mocap skeletons have 20-170 (hands, faces)
+MAX_CHANNELS = 256  # of a body model (its part of the skeleton): Pinocchio's data grows as the cube, ~1 GB at 256
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
 
@@ -71,6 +71,42 @@ class BvhMotion:
     def channel_labels(self) -> list[str]:
         """``Joint.Channel`` for every column of ``frames``."""
         return [f"{j.name}.{c}" for j in self.joints for c in j.channels]
+
+
+@dataclass(frozen=True)
+class BvhPart:
+    """The part of a skeleton a body model is built on: ``kept`` the file's indices of its joints (file order, so
+    each after its parent), ``joints`` copies of them renumbered within the part (parent, children, first channel;
+    offsets, channels and End Sites as the file has them), ``columns`` (C',) the file's channel index of each of the
+    part's channels in order: the map from a file's rows to the model's."""
+
+    kept: list[int]
+    joints: list[BvhJoint]
+    columns: np.ndarray
+
+    def joint(self, i: int) -> BvhJoint:
+        """The part's copy of the file's joint ``i`` (one the part keeps)."""
+        return self.joints[self.kept.index(i)]
+
+
+def skeleton_part(joints: list[BvhJoint], needed: set[int]) -> BvhPart:
+    """The part of ``joints`` made of the ``needed`` ones and those leading to them (their ancestors); the subtrees
+    with none of them are dropped."""
+    keep = set()
+    for i in needed:
+        while i >= 0 and i not in keep:
+            keep.add(i)
+            i = joints[i].parent
+    kept = sorted(keep)
+    at = {i: k for k, i in enumerate(kept)}
+    part, columns, first = [], [], 0
+    for i in kept:
+        j = joints[i]
+        part.append(BvhJoint(j.name, at.get(j.parent, -1), j.offset, j.channels, j.end_site,
+                             [at[c] for c in j.children if c in at], first))
+        columns.extend(range(j.first_channel, j.first_channel + len(j.channels)))
+        first += len(j.channels)
+    return BvhPart(kept, part, np.array(columns, dtype=int))
 
 
 class _Cursor:
@@ -195,10 +231,6 @@ def _read_hierarchy(cur: _Cursor) -> list[BvhJoint]:
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise cur.error(f"duplicate joint name(s): {', '.join(sorted(dup))}")
-    n_ch = sum(len(j.channels) for j in joints)
-    if n_ch > MAX_CHANNELS:
-        raise cur.error(f"{n_ch} channels, more than the {MAX_CHANNELS} this tool analyses (face and finger joints "
-                        "carry no mass here: give the take without them)")
     return joints
 
 

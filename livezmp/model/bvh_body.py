@@ -1,7 +1,10 @@
 """Body model of a BVH skeleton on Pinocchio.
 
 Each rotation channel becomes a revolute joint and each position channel a prismatic
-joint, in the file's channel order; a joint's position channels replace its offset.
+joint, in the file's channel order; a joint's position channels replace its offset. Only the
+joints that carry a segment's mass, each foot's toe (the sole's front) and the joints leading to
+them are built (:func:`model_part`): face, finger and toe-tip subtrees carry no mass in the table,
+and are dropped (their offsets still shape the segments they hang from, as in the whole file).
 Segment masses, centres of mass and radii of gyration come from de Leva (1996), see
 :mod:`livezmp.model.anthropometry`; stature is estimated from the leg bones (thigh + shank
 ≈ 49.2 % of stature in de Leva's table). The input's world frame is rotated into the
@@ -18,7 +21,7 @@ import pinocchio as pin
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.bvh import UNIT_SCALES, BvhMotion, detect_length_unit
+from livezmp.model.bvh import MAX_CHANNELS, UNIT_SCALES, BvhJoint, BvhMotion, BvhPart, detect_length_unit, skeleton_part
 from livezmp.model.segments import SegmentTag, tag_joints
 
 # input world → internal z-up: for y-up, internal (x, y, z) = input (z, x, y)
@@ -81,14 +84,14 @@ def _segment_vector(motion: BvhMotion, tags: list[SegmentTag], i: int, scale: fl
 _BELOW_HAT = ("lower_trunk", "thigh", "shank", "foot")
 
 
-def _mass_table(tags: list[SegmentTag], motion: BvhMotion,
+def _mass_table(tags: list[SegmentTag], joints: list[BvhJoint],
                 hat_fraction: float | None = None) -> dict[int, tuple[str, float, bool]]:
     """joint index → (de Leva kind, mass fraction, proximal-is-up) for every massive joint;
     fractions renormalised so that a skeleton missing segments (no arms, say) keeps its
     total mass. ``hat_fraction``: the head, arms and trunk above the lower trunk together weigh
     this part of the body (a subject file's), the other segments the rest, each group keeping its
     proportions."""
-    out = _raw_mass_table(tags, motion)
+    out = _raw_mass_table(tags, joints)
     total = sum(f for _, f, _ in out.values())
     out = {i: (k, f / total, up) for i, (k, f, up) in out.items()}
     hat = sum(f for k, f, _ in out.values() if k not in _BELOW_HAT)
@@ -98,7 +101,7 @@ def _mass_table(tags: list[SegmentTag], motion: BvhMotion,
     return {i: (k, f * scale[k in _BELOW_HAT], up) for i, (k, f, up) in out.items()}
 
 
-def _raw_mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tuple[str, float, bool]]:
+def _raw_mass_table(tags: list[SegmentTag], joints: list[BvhJoint]) -> dict[int, tuple[str, float, bool]]:
     out: dict[int, tuple[str, float, bool]] = {}
     limb = {"upper_arm", "forearm", "hand", "thigh", "shank", "foot"}
     for i, t in enumerate(tags):
@@ -112,7 +115,7 @@ def _raw_mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tupl
     spine: list[int] = []
     k = pelvis
     while True:  # walk up the trunk from the pelvis
-        nxt = [c for c in motion.joints[k].children if tags[c].kind == "spine"]
+        nxt = [c for c in joints[k].children if tags[c].kind == "spine"]
         if not nxt:
             break
         k = nxt[0]
@@ -131,6 +134,25 @@ def _raw_mass_table(tags: list[SegmentTag], motion: BvhMotion) -> dict[int, tupl
     return out
 
 
+def _toe(joints: list[BvhJoint], tags: list[SegmentTag], foot: int) -> int | None:
+    """The toe joint of the foot joint ``foot`` (its first toe child; the sole reaches to it), if any."""
+    return next((c for c in joints[foot].children if tags[c].kind == "toe"), None)
+
+
+def model_part(joints: list[BvhJoint], tags: list[SegmentTag], source: str = "") -> BvhPart:
+    """The part of a skeleton (tagged ``tags``) its body model is built on: the joints carrying a segment's mass,
+    each foot's toe and the joints leading to them; the subtrees below which no segment has mass (a face, fingers,
+    toe tips) are dropped. A skeleton of up to :data:`~livezmp.model.bvh.MAX_JOINTS` joints may carry more than
+    :data:`~livezmp.model.bvh.MAX_CHANNELS` channels; its part may not (the model's data grows as the cube)."""
+    feet = [i for i, t in enumerate(tags) if t.kind == "foot"]
+    toes = {toe for toe in (_toe(joints, tags, f) for f in feet) if toe is not None}
+    part = skeleton_part(joints, set(_raw_mass_table(tags, joints)) | toes)
+    if len(part.columns) > MAX_CHANNELS:
+        raise InputError(f"{source}: {len(part.columns)} channels carry or lead to a segment's mass, more than the "
+                         f"{MAX_CHANNELS} this tool analyses")
+    return part
+
+
 def _stature(motion: BvhMotion, tags: list[SegmentTag], scale: float) -> float:
     legs = []
     for side in ("left", "right"):
@@ -143,17 +165,19 @@ def _stature(motion: BvhMotion, tags: list[SegmentTag], scale: float) -> float:
     return leg / LEG_FRACTION_OF_STATURE
 
 
-def _build(motion: BvhMotion, tags: list[SegmentTag], scale: float, world_from_input: np.ndarray,
-           opts: BvhBodyOptions) -> tuple[pin.Model, list[int], list[int]]:
-    """Model + per-BVH-joint frame ids + per-channel q index."""
+def _build(motion: BvhMotion, part: BvhPart, tags: list[SegmentTag], scale: float, world_from_input: np.ndarray,
+           opts: BvhBodyOptions) -> tuple[pin.Model, dict[int, int], list[int]]:
+    """Model of ``part`` + frame id of each of its joints (by file index) + per-channel q index. The segments'
+    shapes come from the whole skeleton: a hand's from its fingers' offsets, whether or not they are built."""
     model = pin.Model()
     model.name = "bvh"
-    frames: list[int] = []
+    frames: dict[int, int] = {}
     q_index: list[int] = []
-    anchor: list[tuple[int, pin.SE3]] = []  # (pin joint, placement in it) of each BVH joint
+    anchor: dict[int, tuple[int, pin.SE3]] = {}  # (pin joint, placement in it) of each BVH joint built
     stature = _stature(motion, tags, scale)
-    masses = _mass_table(tags, motion, opts.hat_fraction)
-    for i, j in enumerate(motion.joints):
+    masses = _mass_table(tags, motion.joints, opts.hat_fraction)
+    for i in part.kept:
+        j = motion.joints[i]
         pos_axes = [_AXES[c[0]] for c in j.channels if c.endswith("position")]
         seen_rot = False
         for c in j.channels:
@@ -176,8 +200,8 @@ def _build(motion: BvhMotion, tags: list[SegmentTag], scale: float, world_from_i
             parent_joint = model.addJoint(parent_joint, jm, place, f"{j.name}.{c}")
             q_index.append(model.joints[parent_joint].idx_q)
             place = pin.SE3.Identity()
-        anchor.append((parent_joint, place))
-        frames.append(model.addFrame(pin.Frame(j.name, parent_joint, place, pin.FrameType.OP_FRAME)))
+        anchor[i] = (parent_joint, place)
+        frames[i] = model.addFrame(pin.Frame(j.name, parent_joint, place, pin.FrameType.OP_FRAME))
         if j.end_site is not None:
             site = place * pin.SE3(np.eye(3), scale * j.end_site)
             model.addFrame(pin.Frame(f"{j.name}.end", parent_joint, site, pin.FrameType.OP_FRAME))
@@ -201,11 +225,11 @@ def _build(motion: BvhMotion, tags: list[SegmentTag], scale: float, world_from_i
     return model, frames, q_index
 
 
-def _detect_up(motion: BvhMotion, tags: list[SegmentTag], scale: float, opts: BvhBodyOptions) -> str:
+def _detect_up(motion: BvhMotion, part: BvhPart, tags: list[SegmentTag], scale: float, opts: BvhBodyOptions) -> str:
     """The axis along which the head is above the feet in the first frame."""
-    model, frames, _ = _build(motion, tags, scale, np.eye(3), opts)
+    model, frames, _ = _build(motion, part, tags, scale, np.eye(3), opts)
     data = model.createData()
-    q = _channel_scale(motion, scale) * motion.frames[0]
+    q = _channel_scale(part.joints, scale) * motion.frames[0, part.columns]
     pin.framesForwardKinematics(model, data, q)
     pos = lambda kind: np.mean([data.oMf[frames[i]].translation for i, t in enumerate(tags) if t.kind == kind], 0)  # noqa: E731
     head_kind = "head" if any(t.kind == "head" for t in tags) else "pelvis"
@@ -218,8 +242,8 @@ def _detect_up(motion: BvhMotion, tags: list[SegmentTag], scale: float, opts: Bv
     raise InputError(f"{motion.source}: cannot tell the up axis (head-to-feet vector {np.round(v, 3)}); give --up")
 
 
-def _channel_scale(motion: BvhMotion, scale: float) -> np.ndarray:
-    return np.array([scale if c.endswith("position") else np.pi / 180 for j in motion.joints for c in j.channels])
+def _channel_scale(joints: list[BvhJoint], scale: float) -> np.ndarray:
+    return np.array([scale if c.endswith("position") else np.pi / 180 for j in joints for c in j.channels])
 
 
 def _calibrate_heels(model: pin.Model, feet: dict[str, Foot], qs: np.ndarray, stature: float) -> None:
@@ -247,15 +271,16 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
     if opts.total_mass <= 0:
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
     tags = tag_joints([j.name for j in motion.joints], opts.mapping, motion.source)
+    part = model_part(motion.joints, tags, motion.source)
     units = opts.units or detect_length_unit(_stature(motion, tags, 1.0), motion.source)
     if units not in UNIT_SCALES:
         raise InputError(f"unknown length unit {units!r} (one of {', '.join(UNIT_SCALES)})")
     scale = UNIT_SCALES[units]
-    up = opts.up_axis or _detect_up(motion, tags, scale, opts)
+    up = opts.up_axis or _detect_up(motion, part, tags, scale, opts)
     if up not in WORLD_FROM_INPUT:
         raise InputError(f"unsupported up axis {up!r} (y or z)")
     r_in = WORLD_FROM_INPUT[up]
-    model, frames, q_index = _build(motion, tags, scale, r_in, opts)
+    model, frames, q_index = _build(motion, part, tags, scale, r_in, opts)
     if q_index != list(range(model.nq)):
         raise AssertionError("channel order and q order must agree")
     stature = _stature(motion, tags, scale)
@@ -263,10 +288,10 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
     named = {}
     for side in ("left", "right"):
         fi = next(i for i, t in enumerate(tags) if t.kind == "foot" and t.side == side)
-        toes = [c for c in motion.joints[fi].children if tags[c].kind == "toe"]
-        if toes:
-            toe_frame = frames[toes[0]]
-            tj = motion.joints[toes[0]]
+        toe = _toe(motion.joints, tags, fi)
+        if toe is not None:
+            toe_frame = frames[toe]
+            tj = motion.joints[toe]
             tip = scale * float(np.linalg.norm(tj.end_site)) if tj.end_site is not None else 0.0
         else:
             toe_frame = model.getFrameId(f"{motion.joints[fi].name}.end") if motion.joints[fi].end_site is not None \
@@ -282,17 +307,18 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
         )
         named[f"{side}_ankle"] = frames[fi]
         named[f"{side}_toe"] = toe_frame
+    scales = _channel_scale(part.joints, scale)
     calib = motion.frames[: max(1, round(CALIBRATION_S / motion.frame_time))]
-    _calibrate_heels(model, feet, calib * _channel_scale(motion, scale), stature)
+    _calibrate_heels(model, feet, calib[:, part.columns] * scales, stature)
     pelvis = next(i for i, t in enumerate(tags) if t.kind == "pelvis")
-    pj = motion.joints[pelvis]
+    pj = part.joint(pelvis)
     if not any(c.endswith("position") for c in pj.channels) or not any(c.endswith("rotation") for c in pj.channels):
         raise InputError(f"{motion.source}: the pelvis joint {pj.name} needs position and rotation channels")
     legs, hips = {}, {}
     for side in ("left", "right"):
         th = next(i for i, t in enumerate(tags) if t.kind == "thigh" and t.side == side)
-        c0 = motion.joints[th].first_channel
-        legs[side] = [c0 + k for k, c in enumerate(motion.joints[th].channels) if c.endswith("rotation")]
+        tj = part.joint(th)
+        legs[side] = [tj.first_channel + k for k, c in enumerate(tj.channels) if c.endswith("rotation")]
         hips[side] = frames[th]
     correction = CorrectionJoints(
         root_channels=list(range(pj.first_channel, pj.first_channel + len(pj.channels))),
@@ -300,11 +326,11 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")},
         full_foot_pose=False,
     )
-    names = motion.channel_labels()
+    names = [f"{j.name}.{c}" for j in part.joints for c in j.channels]
     return BodyModel(
         kind="bvh", model=model, point_model=point_mass_copy(model), channel_names=names,
-        channel_scale=_channel_scale(motion, scale),
+        channel_scale=scales,
         angle_mask=np.array([n.endswith("rotation") for n in names]),
         feet=feet, world_from_input=r_in, up_axis=up, units=units, total_mass=opts.total_mass,
-        correction=correction, named_points=named,
+        correction=correction, named_points=named, input_columns=part.columns,
     )

@@ -24,7 +24,8 @@ from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
 @dataclass
 class LoadedMotion:
-    """``frames`` (F, nq) raw input channels in the body's channel order; ``times`` (F,) s."""
+    """``frames`` (F, nq) raw input channels in the body's channel order (a BVH's: of the joints its model is built
+    on); ``times`` (F,) s."""
 
     body: BodyModel
     times: np.ndarray
@@ -56,7 +57,7 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         clear = reexpressed(motion, orders)
         body = body_from_bvh(clear, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time
-        return LoadedMotion(body, times, clear.frames, str(p), bvh=motion, bvh_orders=orders)
+        return LoadedMotion(body, times, body.input_rows(clear.frames), str(p), bvh=motion, bvh_orders=orders)
     if suffix == ".c3d":
         trial = read_c3d(p)
         take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),
@@ -88,9 +89,12 @@ def trajectory_frames(body: BodyModel, traj: JointTrajectory, placer: BasePlacer
 
 def write_motion(loaded: LoadedMotion, frames: np.ndarray, path: str | Path) -> None:
     """Write ``frames`` (F, nq, the body's raw channels) in the format ``loaded`` came from: a BVH with
-    its skeleton, or a joint-trajectory CSV with its joint names (base as x, y, z, roll, pitch, yaw)."""
-    if loaded.bvh is not None:
-        write_bvh(replace(loaded.bvh, frames=restore(loaded.bvh, loaded.bvh_orders, frames)), path)
+    its skeleton (every joint: those the model dropped as the file has them), or a joint-trajectory CSV with its
+    joint names (base as x, y, z, roll, pitch, yaw)."""
+    bvh, body = loaded.bvh, loaded.body
+    if bvh is not None:
+        restored = body.input_rows(restore(bvh, loaded.bvh_orders, body.into_input(bvh.frames, frames)))
+        write_bvh(replace(bvh, frames=body.into_input(bvh.frames, restored)), path)
         return
     traj = loaded.trajectory
     if traj is None:

@@ -91,7 +91,7 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
             if orders:
                 block = reexpress(header.joints, block, orders, previous)
                 previous = block[-1]
-            yield np.arange(start, start + len(block)) * header.frame_time, block
+            yield np.arange(start, start + len(block)) * header.frame_time, body.input_rows(block)
             start += len(block)
 
     return TakeStream(body, fps, header.n_frames, header.source, pieces)

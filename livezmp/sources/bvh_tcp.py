@@ -7,8 +7,9 @@ a newline or by ``||``. A leading avatar index and name (``0 Avatar00 ...``, as 
 Neuron's string broadcast) is skipped. Lines with the wrong value count, non-numbers,
 non-finite values, or longer than the limit are counted and dropped. The lines carry no
 time: frame k is at ``k × frame period``. A dropped connection is reported and
-re-opened every ``retry`` seconds; frames keep counting on. Joints the body analyses in
-other rotation orders (clear of gimbal lock) are re-expressed line by line (``orders``).
+re-opened every ``retry`` seconds; frames keep counting on. Each line, every joint of the
+hierarchy, is made the body's channels by ``rows`` (joints the body analyses in other rotation
+orders re-expressed, those it does not build dropped).
 """
 
 from __future__ import annotations
@@ -23,8 +24,7 @@ import numpy as np
 from livezmp.checks import MAX_CHANNEL_VALUE, first_out_of_range
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
-from livezmp.model.body_spec import BodySpec
-from livezmp.model.euler_orders import StreamOrders
+from livezmp.model.body_spec import BodySpec, SkeletonStream
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 DELIMITER = re.compile(rb"\r?\n|\|\|")
@@ -50,18 +50,19 @@ def parse_frame_line(line: bytes, n_channels: int) -> np.ndarray:
 
 class BvhTcpSource:
     """Client of a BVH broadcast at ``host``:``port`` (see the module docstring);
-    ``frame_time`` s per frame; lines longer than ``max_line`` bytes are dropped; ``orders`` re-expresses each
-    line's values into the body's rotation orders (None: the body's are the file's)."""
+    ``frame_time`` s per frame; lines longer than ``max_line`` bytes are dropped; ``rows`` makes each line's values
+    the body's channels (None: they are)."""
 
     def __init__(self, host: str, port: int, body: BodyModel, body_spec: BodySpec, frame_time: float,
-                 max_line: int | None = None, retry: float = 0.5, orders: StreamOrders | None = None):
+                 max_line: int | None = None, retry: float = 0.5, rows: SkeletonStream | None = None):
         self.name = f"tcp://{host}:{port}"
         self.host, self.port = host, port
         self.body, self.body_spec = body, body_spec
         self.nominal_dt = frame_time
-        self.max_line = max_line or 1024 + 32 * body.nq
+        self.rows = rows
+        self.n_channels = body.nq if rows is None else rows.n_channels
+        self.max_line = max_line or 1024 + 32 * self.n_channels
         self.retry = retry
-        self.orders = orders
         self.stats, self.errors = SourceStats(), ErrorLog()
         self._buf = bytearray()
         self._skipping = False  # inside an over-long line, up to its delimiter
@@ -129,14 +130,14 @@ class BvhTcpSource:
 
     def _frame(self, line: bytes) -> SourceFrame | None:
         try:
-            values = parse_frame_line(line, self.body.nq)
+            values = parse_frame_line(line, self.n_channels)
         except InputError as e:
             self._count("malformed", str(e))
             return None
         t = self._k * self.nominal_dt
         self._k += 1
         self.stats.delivered += 1
-        return SourceFrame(t, values if self.orders is None else self.orders(values), None, time.monotonic())
+        return SourceFrame(t, values if self.rows is None else self.rows(values), None, time.monotonic())
 
     def read(self, timeout: float) -> SourceFrame | None:
         deadline = time.monotonic() + timeout

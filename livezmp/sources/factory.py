@@ -27,10 +27,17 @@ import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
-from livezmp.model.body_spec import BodySpec, clear_skeleton, marker_body, read_skeleton, robot_body, skeleton_body
+from livezmp.model.body_spec import (
+    BodySpec,
+    SkeletonStream,
+    clear_skeleton,
+    marker_body,
+    read_skeleton,
+    robot_body,
+    skeleton_body,
+)
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
-from livezmp.model.euler_orders import StreamOrders
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.trajectory_csv import read_joint_csv
@@ -76,7 +83,7 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         sk = clear_skeleton(sk)
         body, spec = skeleton_body(sk, o.bvh)
         times = np.arange(len(sk.motion.frames)) * sk.motion.frame_time
-        return FileReplaySource(str(path), body, spec, times, sk.motion.frames, o.speed, o.loop)
+        return FileReplaySource(str(path), body, spec, times, body.input_rows(sk.motion.frames), o.speed, o.loop)
     if suffix == ".c3d":
         trial = read_c3d(path)
         take, spec = marker_body(trial, replace(o.markers, total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))
@@ -92,12 +99,14 @@ def _replay(path: Path, o: SourceOptions) -> Source:
 
 
 def _stream_body(spec: str, o: SourceOptions, robot_ok: bool
-                 ) -> tuple[BodyModel, BodySpec, float | None, StreamOrders | None]:
-    """Body, spec and frame period (s) of a stream source, and for a skeleton whose frames come near gimbal lock the
-    re-expression of each streamed row into the orders its body is built in. Those orders are decided before the
-    first frame, from the skeleton file's frames, and kept: a joint that switched orders mid-stream would change the
-    meaning of its three channels under the estimator, whose history (up to a 180° step in each) would turn into
-    spurious accelerations. A skeleton whose frames never near the lock (a T-pose) leaves the file's orders."""
+                 ) -> tuple[BodyModel, BodySpec, float | None, SkeletonStream | None]:
+    """Body, spec and frame period (s) of a stream source, and for a skeleton what makes each streamed row (every
+    joint of the skeleton file) the body's channels: the re-expression into the orders its body is built in, for a
+    skeleton whose frames come near gimbal lock, and the cut to the joints the body is built on. Those orders are
+    decided before the first frame, from the skeleton file's frames, and kept: a joint that switched orders
+    mid-stream would change the meaning of its three channels under the estimator, whose history (up to a 180° step
+    in each) would turn into spurious accelerations. A skeleton whose frames never near the lock (a T-pose) leaves
+    the file's orders."""
     if o.skeleton and o.robot:
         raise InputError(f"{spec}: give --skeleton or --robot, not both")
     dt = 1.0 / o.fps if o.fps else None
@@ -105,8 +114,7 @@ def _stream_body(spec: str, o: SourceOptions, robot_ok: bool
         sk = read_skeleton(o.skeleton)
         clear = clear_skeleton(sk)
         body, bspec = skeleton_body(clear, o.bvh)
-        orders = StreamOrders(sk.motion.joints, clear.orders) if clear.orders else None
-        return body, bspec, dt or (sk.motion.frame_time if sk.has_motion else None), orders
+        return body, bspec, dt or (sk.motion.frame_time if sk.has_motion else None), SkeletonStream(sk, clear, body)
     if o.robot and robot_ok:
         body, bspec = robot_body(o.robot, o.urdf)
         return body, bspec, dt, None
@@ -190,10 +198,10 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
     if unknown:
         raise InputError(f"{spec}: unknown parameter {sorted(unknown)[0]!r} "
                          f"(one of {', '.join(sorted(QUERY_KEYS[url.scheme]))})")
-    body, bspec, dt, orders = _stream_body(spec, o, robot_ok=url.scheme == "udp")
+    body, bspec, dt, rows = _stream_body(spec, o, robot_ok=url.scheme == "udp")
     if dt is None:
         raise InputError(f"{spec}: the stream's frame rate is unknown (no frame time in a skeleton file); give --fps")
     if url.scheme == "udp":
         allow = parse_allowlist(",".join(query["allow"]), spec) if "allow" in query else None
-        return UdpSource(host, port, body, bspec, allow, _int_param(query, "max_bytes", spec), dt, orders)
-    return BvhTcpSource(host, port, body, bspec, dt, _int_param(query, "max_line", spec), orders=orders)
+        return UdpSource(host, port, body, bspec, allow, _int_param(query, "max_bytes", spec), dt, rows)
+    return BvhTcpSource(host, port, body, bspec, dt, _int_param(query, "max_line", spec), rows=rows)

@@ -20,9 +20,10 @@ so the analysis starts over on the new clock. A single far-ahead packet thus cos
 nothing, a restarted sender is followed after ``RESYNC_FRAMES`` frames, and genuine
 frames arriving in between clear the candidate run, so stray packets cannot take over.
 
-The allowlist defaults to loopback senders; binding beyond loopback requires one. Joints the
-body analyses in other rotation orders (clear of gimbal lock) are re-expressed frame by frame
-(``orders``).
+The allowlist defaults to loopback senders; binding beyond loopback requires one. A skeleton's
+frames carry every joint of its file (``rows``: re-expressed clear of gimbal lock frame by frame
+where the body's orders are others, and cut to the joints the body is built on); a robot's, the
+body's channels.
 """
 
 from __future__ import annotations
@@ -34,8 +35,7 @@ import time
 
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
-from livezmp.model.body_spec import BodySpec
-from livezmp.model.euler_orders import StreamOrders
+from livezmp.model.body_spec import BodySpec, SkeletonStream
 from livezmp.sources.frame_format import SEQ_MOD, FrameError, decode_frame, max_packet_bytes
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
@@ -127,15 +127,16 @@ class UdpSource:
 
     def __init__(self, host: str, port: int, body: BodyModel, body_spec: BodySpec,
                  allow: tuple[Network, ...] | None = None, max_bytes: int | None = None,
-                 nominal_dt: float | None = None, orders: StreamOrders | None = None):
+                 nominal_dt: float | None = None, rows: SkeletonStream | None = None):
         self.name = f"udp://{host}:{port}"
         if allow is None and not is_loopback(host):
             raise InputError(f"{self.name}: listening beyond loopback needs an allowlist of senders "
                              "(?allow=ADDRESS[/BITS],...)")
         self.body, self.body_spec, self.nominal_dt = body, body_spec, nominal_dt
-        self.orders = orders
+        self.rows = rows
+        self.n_channels = body.nq if rows is None else rows.n_channels
         self.allow = allow or LOOPBACK
-        self.max_bytes = max_packet_bytes(body.nq) if max_bytes is None else max_bytes
+        self.max_bytes = max_packet_bytes(self.n_channels) if max_bytes is None else max_bytes
         self.stats, self.errors = SourceStats(), ErrorLog()
         self.sequence, self.resync = SequenceFilter(), Resync()
         self._lost_before = 0  # lost before the last resynchronisation
@@ -166,7 +167,7 @@ class UdpSource:
             if not any(ipaddress.ip_address(sender.split("%")[0]) in n for n in self.allow):
                 self._drop("rejected", "sender not on the allowlist", sender)
                 return None
-            f = decode_frame(data, self.body.nq, self.max_bytes)
+            f = decode_frame(data, self.n_channels, self.max_bytes)
         except FrameError as e:
             self._drop(e.kind, str(e), sender)
             return None
@@ -198,10 +199,10 @@ class UdpSource:
         self.stats.delivered += 1
         self._last_t = f.t
         channels = f.channels
-        if self.orders is not None:
+        if self.rows is not None:
             if restart:
-                self.orders.restart()
-            channels = self.orders(channels)
+                self.rows.restart()
+            channels = self.rows(channels)
         return SourceFrame(f.t, channels, f.contacts, received, restart=restart)
 
     def read(self, timeout: float) -> SourceFrame | None:
