@@ -110,6 +110,19 @@ def test_units_detected_from_skeleton_height(scale, unit):
     assert head - toe == pytest.approx(1.76, abs=1e-5)  # offsets are written with 6 digits
 
 
+def test_a_child_in_inches_is_no_giant_in_cmu_units():
+    """AnimatedDrawings' skeletons of its fair1, 5yr_old and 8yr_old takes are 41 and 44 inches tall: read as CMU units
+    (2.3-2.5 m), their walks' ZMP left the feet at 63 % of the frames (8yr_old/walk.bvh; 5 % in inches)."""
+    motion = parse_bvh(make_bvh(1.05 / 1.76 / 2.54), "child.bvh")
+    body = body_from_bvh(motion)
+    assert body.units == "in"
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, body.channels_to_q(motion.frames[0]))
+    head = data.oMf[body.model.getFrameId("Head.end")].translation[2]
+    toe = data.oMf[body.model.getFrameId("LeftToeBase.end")].translation[2]
+    assert head - toe == pytest.approx(1.05, abs=1e-4)
+
+
 def test_up_axis_detected_and_overridden():
     body = body_from_bvh(parse_bvh(make_bvh(up="z"), "z.bvh"))
     assert body.up_axis == "z"
