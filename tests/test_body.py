@@ -280,3 +280,28 @@ def test_urdf_errors(tmp_path):
     garbage.write_text("<robot")
     with pytest.raises(InputError, match="b.urdf"):
         body_from_urdf(garbage)
+
+
+def test_a_root_above_the_pelvis_places_it_and_twist_bones_weigh_nothing():
+    """Reallusion Character Creator's skeleton (kscalelabs/ksim's examples/data/walk_normal_dh.bvh) carries its
+    position channels on CC_Base_BoneRoot above the pelvis CC_Base_Hip (refused: "the pelvis joint needs position and
+    rotation channels"), and twist and share bones beside each limb's own (CC_Base_L_ThighTwist01,
+    CC_Base_L_KneeShareBone), which each took the segment's mass: its legs weighed 60 % of the body, not 40 %."""
+    bare = parse_bvh(make_bvh(), "bare.bvh")
+    text = make_bvh().replace("ROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition ",
+                              "ROOT BoneRoot\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition "
+                              "Zrotation Xrotation Yrotation\nJOINT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 ", 1)
+    text = text.replace("MOTION", "}\nMOTION")
+    for side in ("Left", "Right"):
+        text = text.replace(f"JOINT {side}Leg\n", f"JOINT {side}ThighTwist01\n{{\nOFFSET 0 -20 0\nCHANNELS 3 "
+                            "Zrotation Xrotation Yrotation\nEnd Site\n{\nOFFSET 0 -20 0\n}\n}\n"
+                            f"JOINT {side}KneeShareBone\n{{\nOFFSET 0 -42 0\nCHANNELS 3 Zrotation Xrotation "
+                            f"Yrotation\nEnd Site\n{{\nOFFSET 0 -10 0\n}}\n}}\nJOINT {side}Leg\n", 1)
+    rows = [" ".join(r.split()[:6] + ["0"] * 3 + r.split()[6:] + ["0"] * 12) for r in text.split("\n")[-4:-1]]
+    cc = parse_bvh("\n".join(text.split("\n")[:-4] + rows) + "\n", "cc.bvh")
+    body, want = body_from_bvh(cc), body_from_bvh(bare)
+    assert [body.channel_names[c] for c in body.correction.root_channels][:3] == [
+        "BoneRoot.Xposition", "BoneRoot.Yposition", "BoneRoot.Zposition"]
+    q, q0 = body.channels_to_q(body.input_rows(cc.frames[0])), want.channels_to_q(bare.frames[0])
+    com = pin.centerOfMass(body.model, body.model.createData(), q)
+    assert np.allclose(com, pin.centerOfMass(want.model, want.model.createData(), q0), atol=1e-9)

@@ -153,6 +153,21 @@ def model_part(joints: list[BvhJoint], tags: list[SegmentTag], source: str = "")
     return part
 
 
+def _placing_joint(joints: list[BvhJoint], pelvis: int, source: str) -> int:
+    """The joint whose position and rotation channels place the body (what a correction moves): the pelvis, or
+    when it has no position channels the nearest joint above it with both (Reallusion's CC_Base_BoneRoot above
+    CC_Base_Hip, whose rotations then follow it)."""
+    i = pelvis
+    while i >= 0:
+        kinds = {c[1:] for c in joints[i].channels}
+        if kinds == {"position", "rotation"}:
+            return i
+        if i == pelvis and "position" in kinds:
+            break
+        i = joints[i].parent
+    raise InputError(f"{source}: the pelvis joint {joints[pelvis].name} needs position and rotation channels")
+
+
 def _stature(motion: BvhMotion, tags: list[SegmentTag], scale: float) -> float:
     legs = []
     for side in ("left", "right"):
@@ -311,9 +326,8 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
     calib = motion.frames[: max(1, round(CALIBRATION_S / motion.frame_time))]
     _calibrate_heels(model, feet, calib[:, part.columns] * scales, stature)
     pelvis = next(i for i, t in enumerate(tags) if t.kind == "pelvis")
-    pj = part.joint(pelvis)
-    if not any(c.endswith("position") for c in pj.channels) or not any(c.endswith("rotation") for c in pj.channels):
-        raise InputError(f"{motion.source}: the pelvis joint {pj.name} needs position and rotation channels")
+    root = _placing_joint(motion.joints, pelvis, motion.source)
+    pj = part.joint(root)
     legs, hips = {}, {}
     for side in ("left", "right"):
         th = next(i for i, t in enumerate(tags) if t.kind == "thigh" and t.side == side)
@@ -322,7 +336,7 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
         hips[side] = frames[th]
     correction = CorrectionJoints(
         root_channels=list(range(pj.first_channel, pj.first_channel + len(pj.channels))),
-        root_frame_id=frames[pelvis], legs=legs, hips=hips,
+        root_frame_id=frames[root], legs=legs, hips=hips,
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")},
         full_foot_pose=False,
     )

@@ -8,7 +8,9 @@ inferred from the name or given as ``"thigh:left"``).
 Kinds: pelvis, spine (any trunk joint between pelvis and neck), neck, head, collar,
 upper_arm, forearm, hand, thigh, shank, foot, toe, and the massless ones: fingers,
 root (a static reference joint above the pelvis) and link (a short connector bone such
-as CMU's LHipJoint).
+as CMU's LHipJoint, or a helper bone beside a segment's own: a twist, roll or share bone,
+as Reallusion's CC_Base_L_ThighTwist01 and CC_Base_L_KneeShareBone, part of the segment
+whose name it carries and not another of its kind).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ KINDS = (
 
 # Order matters: first match wins. Names are lower-cased with separators removed.
 _PATTERNS: list[tuple[str, str]] = [
+    (r"(twist|sharebone|roll\d*$)", "link"),  # a limb's helper bones, before the limb's name matches
     (r"(thumb|index|middle|ring|pinky|finger|handend|handtip|hand_?site)", "fingers"),
     (r"(toebase|toe|ball|forefoot)", "toe"),  # the forefoot (metatarsals and toes) is the foot's distal part
     (r"hipjoint", "link"),
