@@ -68,7 +68,7 @@ def skeleton(massless: bool) -> list[BvhJoint]:
 
 
 def motion(massless: bool) -> BvhMotion:
-    """A take swaying over its feet, its trunk swinging ±40° (its ZMP leaves the feet), its arms ±12°; the massless
+    """A take swaying over its feet, its trunk swinging ±8° (its ZMP leaves the feet), its arms ±12°; the massless
     joints move at random (one face joint, flexed to 89°, near gimbal lock). The joints both skeletons have move alike
     in both."""
     joints = skeleton(massless)
@@ -85,7 +85,7 @@ def motion(massless: bool) -> BvhMotion:
                 cols.append(3 * np.sin(2 * np.pi * 0.8 * t) if c[0] == "X" else np.zeros(FRAMES))
             else:
                 phase = sum(map(ord, j.name + c)) % 7
-                amplitude = 40 if j.name + c == "SpineXrotation" else 12 if "Arm" in j.name else 1
+                amplitude = 8 if j.name + c == "SpineXrotation" else 12 if "Arm" in j.name else 1
                 cols.append(amplitude * np.sin(2 * np.pi * 0.8 * t + phase))
     frames = np.column_stack(cols)
     if massless:
