@@ -80,6 +80,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
           f"{summary['out_of_support_frames']} out of support, inside "
           f"{'n/a' if inside is None else f'{100 * inside:.1f} %'}, "
           f"max excursion {1000 * summary['max_excursion_m']:.1f} mm")
+    if summary.get("rest_pose_frames"):
+        print(f"  the first {summary['rest_pose_frames']} frame(s) are the skeleton's rest pose (rotations zero), not "
+              "motion: analysed at the first moving frame's pose")
     if inside is not None:
         print(f"  within {summary['tolerance_mm']:g} mm of support (the ZMP's validated error): "
               f"{100 * summary['inside_fraction_tol']:.1f} %; motion: {summary['plausibility']['verdict']}")

@@ -35,6 +35,7 @@ from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
 from livezmp.model.marker_map import MarkerMap, load_marker_map
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
+from livezmp.model.rest_pose import without_rest_pose
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
 
@@ -185,7 +186,7 @@ def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: s
     if markers and p.suffix.lower() != ".c3d":
         raise InputError(f"{markers}: --markers is for C3D walks (got {p})")
     if p.suffix.lower() == ".bvh":
-        return take_from_bvh(read_bvh(p), up, units)
+        return take_from_bvh(without_rest_pose(read_bvh(p))[0], up, units)
     if p.suffix.lower() == ".c3d":
         return take_from_c3d(read_c3d(check_input_file(p, "walk")), load_marker_map(markers) if markers else None)
     if p.suffix.lower() == ".csv":

@@ -27,6 +27,7 @@ from livezmp.model.c3d import C3dTrial
 from livezmp.model.euler_orders import StreamOrders, gimbal_orders, reexpressed
 from livezmp.model.marker_map import MarkerMap
 from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers, marker_labels
+from livezmp.model.rest_pose import without_rest_pose
 from livezmp.model.segments import SegmentTag
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
@@ -60,14 +61,15 @@ class Skeleton:
 
 
 def read_skeleton(path: str | Path) -> Skeleton:
-    """A BVH file (hierarchy and frames, e.g. a T-pose or a take), or a hierarchy alone."""
+    """A BVH file (hierarchy and frames, e.g. a T-pose or a take; a take's leading rest-pose frames held at its first
+    moving pose, :mod:`livezmp.model.rest_pose`), or a hierarchy alone."""
     p = Path(path)
     text = read_input_text(p, "skeleton")
     joints, cur = parse_hierarchy(text, str(p))
     lines = text.splitlines()
     hierarchy = "\n".join(lines[: cur.lineno]) + "\n"
     if any(ln.strip() for ln in lines[cur.lineno :]):
-        return Skeleton(parse_bvh(text, str(p)), hierarchy, True)
+        return Skeleton(without_rest_pose(parse_bvh(text, str(p)))[0], hierarchy, True)
     rest = [j.offset["XYZ".index(c[0])] if c.endswith("position") else 0.0 for j in joints for c in j.channels]
     return Skeleton(BvhMotion(joints, 1.0 / 30.0, np.array([rest]), str(p)), hierarchy, False)
 

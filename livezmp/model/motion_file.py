@@ -18,6 +18,7 @@ from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.euler_orders import gimbal_orders, reexpressed, restore
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.mimic import follow
+from livezmp.model.rest_pose import without_rest_pose
 from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv, write_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
@@ -35,6 +36,7 @@ class LoadedMotion:
     bvh_orders: dict[int, str] = field(default_factory=dict)  # joints near gimbal lock (livezmp.model.euler_orders)
     trajectory: JointTrajectory | None = None
     c3d: C3dTrial | None = None
+    rest_frames: int = 0  # a BVH's leading rest-pose frames, held at its first moving pose (livezmp.model.rest_pose)
 
     @property
     def fps(self) -> float:
@@ -53,11 +55,13 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         if robot is not None:
             raise InputError(f"{p}: --robot is for a joint-trajectory CSV; a BVH carries its own skeleton")
         motion = read_bvh(p)
-        orders = gimbal_orders(motion)
-        clear = reexpressed(motion, orders)
+        held, rest = without_rest_pose(motion)
+        orders = gimbal_orders(held)
+        clear = reexpressed(held, orders)
         body = body_from_bvh(clear, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time
-        return LoadedMotion(body, times, body.input_rows(clear.frames), str(p), bvh=motion, bvh_orders=orders)
+        return LoadedMotion(body, times, body.input_rows(clear.frames), str(p), bvh=motion, bvh_orders=orders,
+                            rest_frames=rest)
     if suffix == ".c3d":
         trial = read_c3d(p)
         take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),
@@ -90,11 +94,13 @@ def trajectory_frames(body: BodyModel, traj: JointTrajectory, placer: BasePlacer
 def write_motion(loaded: LoadedMotion, frames: np.ndarray, path: str | Path) -> None:
     """Write ``frames`` (F, nq, the body's raw channels) in the format ``loaded`` came from: a BVH with
     its skeleton (every joint: those the model dropped as the file has them), or a joint-trajectory CSV with its
-    joint names (base as x, y, z, roll, pitch, yaw)."""
+    joint names (base as x, y, z, roll, pitch, yaw); a BVH's leading rest-pose frames as the file has them."""
     bvh, body = loaded.bvh, loaded.body
     if bvh is not None:
         restored = body.input_rows(restore(bvh, loaded.bvh_orders, body.into_input(bvh.frames, frames)))
-        write_bvh(replace(bvh, frames=body.into_input(bvh.frames, restored)), path)
+        rows = body.into_input(bvh.frames, restored)
+        rows[: loaded.rest_frames] = bvh.frames[: loaded.rest_frames]
+        write_bvh(replace(bvh, frames=rows), path)
         return
     traj = loaded.trajectory
     if traj is None:

@@ -150,8 +150,13 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
     result = analyse_loaded(loaded, options.mode, options.ground, progress, options.cutoff_hz)
     summary = {"source": loaded.source,
                **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
-               "estimator": _estimator_settings(loaded, options)}
+               **_rest_note(loaded.rest_frames), "estimator": _estimator_settings(loaded, options)}
     return TakeAnalysis(loaded.body, result, loaded.fps, loaded.source, summary)
+
+
+def _rest_note(rest: int) -> dict:
+    """The summary's ``rest_pose_frames``: a BVH's leading rest-pose frames, analysed at its first moving pose."""
+    return {"rest_pose_frames": rest} if rest else {}
 
 
 def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -> dict:
@@ -184,7 +189,7 @@ def stream_take(take: str | Path | TakeStream, options: TakeOptions, csv: str | 
             stack.callback(writer.close)  # before the file replaces ``csv``
             consumers.append(writer)
         analyse_stream(take, cfg, consumers, chunk, progress)
-    summary = {"source": take.source, **stats.summary(take.body, options.mode),
+    summary = {"source": take.source, **stats.summary(take.body, options.mode), **_rest_note(take.rest_frames),
                "estimator": _estimator_settings(take, options)}
     if series:
         with atomic_path(plot) as tmp:

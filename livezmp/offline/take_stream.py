@@ -32,6 +32,7 @@ from livezmp.model.bvh import BvhMotion, stream_bvh
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.euler_orders import reexpress, reordered_joints, scan_orders
 from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.rest_pose import hold_rest, without_rest_pose
 from livezmp.model.trajectory_csv import joint_csv_blocks, scan_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, NotBatchable, batch_chunks
@@ -49,13 +50,15 @@ class Consumer(Protocol):
 class TakeStream:
     """A take read lazily: its ``body``, frame rate ``fps`` (Hz, as :class:`LoadedMotion` computes it),
     ``total`` frames, ``source``; ``pieces(chunk)`` reads it (again) from its first frame as
-    (times (c,) s, frames (c, nq) raw channels), ``chunk`` frames each but the last."""
+    (times (c,) s, frames (c, nq) raw channels), ``chunk`` frames each but the last; ``rest_frames`` a BVH's
+    leading rest-pose frames, held at its first moving pose (:mod:`livezmp.model.rest_pose`)."""
 
     body: BodyModel
     fps: float
     total: int
     source: str
     pieces: Callable[[int], Iterator[tuple[np.ndarray, np.ndarray]]]
+    rest_frames: int = 0
 
     def check_length(self) -> None:
         """Refuse a take too short to analyse (before its rate, 0 Hz for one frame, is used)."""
@@ -67,7 +70,8 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     """A BVH file as a :class:`TakeStream`: the header and the first seconds are read now (the body),
     the frames when ``pieces`` is iterated. Bad rows raise :class:`InputError` when they are reached. Joints near
     gimbal lock are re-expressed as :func:`livezmp.model.euler_orders.clear_of_gimbal_lock` does (the file is
-    scanned for them first)."""
+    scanned for them first); leading rest-pose frames are held as :func:`livezmp.model.motion_file.load_motion`
+    holds them."""
     path = check_input_file(path, "motion file")
     header, blocks = stream_bvh(path)
     calibration = max(1, round(CALIBRATION_S / header.frame_time))
@@ -79,7 +83,9 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
             break
     blocks.close()
     orders = scan_orders(header.joints, lambda: stream_bvh(path)[1])
-    start = reexpress(header.joints, np.concatenate(first), orders)
+    held, rest = without_rest_pose(BvhMotion(header.joints, header.frame_time, np.concatenate(first), header.source))
+    first_moving = held.frames[rest]
+    start = reexpress(header.joints, held.frames, orders)
     body = body_from_bvh(BvhMotion(reordered_joints(header.joints, orders), header.frame_time, start, header.source),
                          options)
     ends = np.array([0, header.n_frames - 1]) * header.frame_time  # as load_motion's times
@@ -88,13 +94,14 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     def pieces(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         start, previous = 0, None
         for block in stream_bvh(path, rows=chunk)[1]:
+            block = hold_rest(block, rest, first_moving, start)
             if orders:
                 block = reexpress(header.joints, block, orders, previous)
                 previous = block[-1]
             yield np.arange(start, start + len(block)) * header.frame_time, body.input_rows(block)
             start += len(block)
 
-    return TakeStream(body, fps, header.n_frames, header.source, pieces)
+    return TakeStream(body, fps, header.n_frames, header.source, pieces, rest)
 
 
 def open_joint_csv_take(path: str | Path, robot: str | Path, options: UrdfBodyOptions) -> TakeStream:
