@@ -209,8 +209,8 @@ class Lab:
 
     ``rot`` (3, 3) and ``origin`` (3,) m place the reference in the lab (p_lab = rot @ p_ref + origin): a y-up lab,
     walking along -x, a far origin; ``units`` POINT:UNITS (``units_given`` False: left empty, the data in
-    ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 2, 3 (Kistler, 8 channels), 4 (CAL_MATRIX) or 5 (8
-    channels, 6 x 8 CAL_MATRIX);
+    ``units``); ``rate``, ``analog`` Hz; ``plate_type`` 1 (CoP channels Px Py and the free moment), 2, 3 (Kistler,
+    8 channels), 4 (CAL_MATRIX) or 5 (8 channels, 6 x 8 CAL_MATRIX);
     ``spec_plates``: the plates as the C3D spec has them (z axis down, corner 1 in the plate's +x +y quadrant, then
     -x +y, -x -y, +x -y; ORIGIN the vector from the transducer origin to the surface centre, plate axes, its z
     negative); ``origin_sign`` -1 writes that vector negated (z positive, the original AMTI convention; TYPE 3:
@@ -257,6 +257,8 @@ def _plate_origin(lab: Lab) -> np.ndarray:
         return np.array([*KISTLER_AB, -0.045])
     if lab.corner_origin:
         return np.array([0.25, 0.15, 0.0])
+    if lab.plate_type == 1:  # its CoP channels are from the surface centre
+        return np.zeros(3)
     return np.array([0.002, -0.001, -0.04]) if lab.spec_plates else np.zeros(3)
 
 
@@ -272,6 +274,13 @@ def _channels(force: np.ndarray, moment: np.ndarray, lab: Lab) -> np.ndarray:
     sensors k at (±a, ±b) in the corners' quadrant order), which give back the wrench through the C3D spec's TYPE-3
     formulae."""
     o = _plate_origin(lab)
+    if lab.plate_type == 1:  # Fx Fy Fz, the CoP Px Py from the centre and the free moment Tz: M = (Px, Py, 0) x F + Tz
+        fz = force[:, 2]
+        loaded = np.abs(fz) > 1e-9
+        px = np.where(loaded, -moment[:, 1] / np.where(loaded, fz, 1.0), 0.0)
+        py = np.where(loaded, moment[:, 0] / np.where(loaded, fz, 1.0), 0.0)
+        tz = moment[:, 2] - (px * force[:, 1] - py * force[:, 0])
+        return np.column_stack([force, PER_METRE[lab.units] * np.column_stack([px, py, tz])])
     if lab.plate_type == 3:
         (a, b), (fx, fy, fz) = KISTLER_AB, force.T
         mx, my, mz = (moment - np.cross(force, [0.0, 0.0, o[2]])).T
@@ -291,7 +300,7 @@ def _write_plates(c3d, lab: Lab, plates: dict[str, tuple[float, float]], wrenche
     channels = np.hstack([_channels(f @ axes, m @ axes, lab) for f, m in wrenches])
     scale, offset, gen = lab.scale
     names = ("Fx12", "Fx34", "Fy14", "Fy23", "Fz1", "Fz2", "Fz3", "Fz4") if n == 8 else \
-        ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+        ("Fx", "Fy", "Fz", "Px", "Py", "Mz") if lab.plate_type == 1 else ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
     c3d["parameters"]["ANALOG"]["RATE"]["value"] = [lab.analog]
     c3d["parameters"]["ANALOG"]["LABELS"]["value"] = [f"{c}{k + 1}" for k in range(len(plates)) for c in names]
     c3d["data"]["analogs"] = channels.T[None]

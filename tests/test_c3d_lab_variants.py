@@ -1,7 +1,8 @@
 """The synthetic gait lab (tests/test_c3d_gaitlab.py) written the ways real labs write C3D: a y-up, an x-up and a z-down
 lab, walking along -x, +y or a diagonal, an origin far from the plates; POINT:UNITS cm and m; point rates 50-240 Hz
 with analog rates 1-20 times them; TYPE-2 plates as the C3D spec has them (z down, corners in its quadrant order,
-ORIGIN below the surface) and with ORIGIN's z written positive or its x, y from the centre to a corner, TYPE-4
+ORIGIN below the surface) and with ORIGIN's z written positive or its x, y from the centre to a corner, TYPE-1 (the CoP
+and free moment as channels), TYPE-4
 (CAL_MATRIX), TYPE-3 (Kistler's eight channels), TYPE-5 (eight channels through a 6 x 8 CAL_MATRIX); ANALOG SCALE,
 OFFSET and GEN_SCALE; integer files (POINT:SCALE > 0); plates turned 90 and 180 degrees in the floor; labels without
 a subject prefix and no mass in the file. Each must give the true CoP from its plates and the ZMP on it to a
@@ -60,6 +61,8 @@ VARIANTS = {
     "type 4, SCALE OFFSET GEN_SCALE": Lab(plate_type=4, scale=(0.25, 1500, 2.0), **SPEC),
     # Qualisys' Kistler plates as QTM writes them (cgm2-web-report-uploader's WithNewPafFields walk): ezc3d refuses them
     "type 5 (CAL_MATRIX 6 x 8)": Lab(plate_type=5, **SPEC),
+    # BTS writes its Bertec plates so (RehabEngGroup/MOtoNMS' UNIPD walks): ezc3d's moment for them is negated
+    "type 1 (CoP channels), y-up": Lab(plate_type=1, rot=Y_UP, **SPEC),
     "integer mm": Lab(integer=0.06, scale=(1.0, 2048, 1.0)),
     "integer cm, y-up, type 3": Lab(integer=0.006, units="cm", rot=Y_UP, plate_type=3, **SPEC),
     "type 3": Lab(plate_type=3, **SPEC),

@@ -14,7 +14,8 @@ corners, x = corner 1 − corner 2 and y = corner 1 − corner 4 (the corners ar
 M + F × ORIGIN, ORIGIN being the vector from the plate's measurement origin to that centre in plate axes (its z
 negative; a positive z, the original AMTI convention, is negated, as Visual3D does); TYPE 3 from Kistler's
 eight channels with ORIGIN's x, y the sensor offsets (kept positive where ezc3d negates them with a positive z:
-:func:`_kistler_moment`); TYPE 4 through CAL_MATRIX stored by columns; TYPE 5, which ezc3d refuses, here
+:func:`_kistler_moment`); TYPE 1 from its CoP and free-moment channels (:func:`_cop_moment`: ezc3d's moment for it
+has the wrong sign); TYPE 4 through CAL_MATRIX stored by columns; TYPE 5, which ezc3d refuses, here
 (:func:`_calibrated_platforms`). The
 synthetic labs of tests/test_c3d_lab_variants.py write every one of these and meet their true CoP. Its analog
 scaling subtracts |ANALOG:OFFSET| where the spec's offset is signed: a negative offset on a plate channel of
@@ -218,6 +219,18 @@ def _kistler_moment(p: dict) -> np.ndarray:
     return -moment + 2.0 * np.cross(np.asarray(p["force"], dtype=float).T, lever).T
 
 
+def _cop_moment(p: dict) -> np.ndarray:
+    """(3, S) the moment of ezc3d's TYPE-1 platform ``p`` (file units, world axes) about its surface centre, from
+    the CoP and free moment the plate gives (channels Fx Fy Fz Px Py Mz; ezc3d's ``center_of_pressure`` and ``Tz``):
+    (CoP - centre) x F + Tz. ezc3d's own moment for such a plate is that negated, which mirrors the CoP through the
+    plate's centre: the BTS walks of RehabEngGroup/MOtoNMS (``TestData/InputData/Control1_UNIPD``, two Bertec
+    plates: "plate 2: its CoP lies off the foot standing on it in 100 %", 236 mm off at the 95th percentile); so
+    read, each CoP lies 56-87 mm (median) from the heel-to-toe mid-point of the foot on its plate."""
+    centre = np.asarray(p["corners"], dtype=float).mean(axis=1)
+    lever = np.asarray(p["center_of_pressure"], dtype=float).T - centre
+    return np.cross(lever, np.asarray(p["force"], dtype=float).T).T + np.asarray(p["Tz"], dtype=float)
+
+
 # the ORIGIN read the other way round must put the CoP on the plate in this share of its loaded samples, where the
 # spec's reading puts it there in under half of them; a loaded sample carries this much across the plate (N); "on"
 # spares a tenth of the plate's half-sizes (a foot at the edge, noise at light loads)
@@ -343,7 +356,9 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
         moment = newtons * length
         corners = np.asarray(p["corners"], dtype=float).T * length
         force = np.asarray(p["force"], dtype=float).T * newtons
-        mom, reading = (_kistler_moment(p), "") if k < len(types) and types[k] == 3 else _origin_moment(p)
+        kind = types[k] if k < len(types) else 0
+        mom, reading = (_kistler_moment(p), "") if kind == 3 else (_cop_moment(p), "") if kind == 1 else \
+            _origin_moment(p)
         mom = mom.T * moment
         zero = _zero_samples(c3d["parameters"], len(force), frames)
         out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero,
