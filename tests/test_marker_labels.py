@@ -46,7 +46,7 @@ CONVENTIONS = {
     ("LANKLELATERAL", "LANK"), ("RLMAL", "RANK"), ("LMMAL", "LMED"), ("LMT2", "LTOE"), ("LLKNE", "LKNE"),
     ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
     ("L_ANKLE_MED", "LMED"), ("RFCL", "RKNE"), ("LFCM", "LKNM"), ("RMALL", "RANK"), ("LMALM", "LMED"),
-    ("LKNEL", "LKNE"), ("RKNEM", "RKNM"),
+    ("LKNEL", "LKNE"), ("RKNEM", "RKNM"), ("RLM", "RANK"), ("LMM", "LMED"), ("RCA", "RHEE"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role
@@ -242,6 +242,36 @@ def test_the_metatarsal_heads_stand_in_for_a_missing_toe():
     lateral = {s + "LA_TOE": trial.marker(s + "TOE") + (across if s == "L" else -across) for s in "LR"}
     match = match_labels(_with_markers(trial, lateral, drop=("LTOE", "RTOE")))
     assert match.roles["LTOE"] == "LLA_TOE" and "fifth metatarsal head alone" in match.toe["LTOE"]
+
+
+def test_an_epicondyle_is_the_knees_where_it_lies_along_the_leg():
+    """La Trobe's RLEPI, the UNIPD set's RLE / RME name an epicondyle, the femur's or the humerus'. Along the leg
+    (half way from the ASIS down to the ankle marker) it is the knee's; beside the waist, an elbow's, it claims
+    nothing. The UNIPD set's malleoli RLM / RMM, calcaneus RCA and metatarsal heads RIMH / RVMH are read too."""
+    trial = _trial(np.arange(200) / RATE, RATE)
+    ref = body_from_markers(trial)
+    knees = {s + "LEPI": trial.marker(s + "KNE") for s in "LR"}
+    match = match_labels(_with_markers(trial, knees, drop=("LKNE", "RKNE")))
+    assert match.roles["LKNE"] == "LLEPI" and match.roles["RKNE"] == "RLEPI" and not match.ambiguous
+    assert match.epicondyles["LLEPI"].startswith("LKNE: ") and "of the way from LASI down to LANK" in \
+        match.epicondyles["LLEPI"]
+    take = body_from_markers(_with_markers(trial, knees, drop=("LKNE", "RKNE")))
+    assert np.abs(take.frames - ref.frames).max() < 1e-9  # the same markers: the same body
+    # the UNIPD names, the toe from the two metatarsal heads
+    across = np.array([0.0, 0.03, 0.0])
+    unipd = {s + "LE": trial.marker(s + "KNE") for s in "LR"} | {s + "LM": trial.marker(s + "ANK") for s in "LR"} | \
+        {s + "CA": trial.marker(s + "HEE") for s in "LR"} | \
+        {s + h: trial.marker(s + "TOE") + (1 if (s == "L") == (h == "VMH") else -1) * across
+         for s in "LR" for h in ("IMH", "VMH")}
+    take = body_from_markers(_with_markers(trial, unipd, drop=[s + m for s in "LR" for m in ("KNE", "ANK", "HEE",
+                                                                                         "TOE")]))
+    assert take.notes["labels"]["aliases"]["RKNE"] == "RLE" and take.notes["labels"]["aliases"]["LTOE"] == "LIMH+LVMH"
+    assert np.abs(take.frames - ref.frames).max() < 1e-9
+    # an elbow's epicondyle: level with the ASIS, 0.25 m out from it; the knee marker keeps its role alone
+    elbows = {s + "LE": trial.marker(s + "ASI") + (1 if s == "L" else -1) * np.array([0.0, 0.25, 0.05]) for s in "LR"}
+    match = match_labels(_with_markers(trial, elbows))
+    assert match.roles["LKNE"] == "LKNE" and not match.ambiguous
+    assert match.epicondyles["RLE"].startswith("not read (RKNE?): ") and "an elbow's" in match.epicondyles["RLE"]
 
 
 def test_a_set_read_but_for_one_role_is_refused_naming_only_that_role(std, tmp_path, capsys):

@@ -36,9 +36,15 @@ Where each name comes from:
   ``RFCL``/``RFCM`` and ``RMALL``/``RMALM`` lateral / medial, with ``RCAL RMT1 RMT5 RPSI`` (the
   Vicon Nexus set of RealTimeBiomechanics/rtosim's ``data/ViconNexus/walking_1.c3d`` and its subject file
   ``S01.vsk`` write them: ``RFCL`` on its ``rknee`` segment, ``RMALL`` on ``rankle``); the knee's as ``RKNEL``/``RKNEM``
-  beside them (keenon/nimblephysics' ``data/osim/Return11`` trial, with ``RHEE RTOE RM5``). Not read:
-  ``RLEP``/``RMEP`` (AnyBody's ``Runner``): a lateral or medial epicondyle of the femur or of the humerus alike
-  (ISB names them apart, ``FLE``/``HLE``).
+  beside them (keenon/nimblephysics' ``data/osim/Return11`` trial, with ``RHEE RTOE RM5``). Malleoli ``RLM``/``RMM``,
+  calcaneus ``RCA``, first and fifth metatarsal heads ``RIMH``/``RVMH`` (the BTS "UNIPD-Fullbody" set of
+  RehabEngGroup/MOtoNMS' ``TestData/InputData/Control1_UNIPD``; CGM2's ``RFMH``/``RVMH`` likewise).
+- Epicondyles: ``RLEPI`` (La Trobe's Vicon set, psbiomech/lasem-data-processing), ``RLE``/``RME`` (the UNIPD set),
+  ``RLEP``/``RMEP`` (AnyBody's ``Runner``) name a lateral or medial epicondyle of the femur or of the humerus alike
+  (ISB names them apart, ``FLE``/``HLE``): such a label is the knee's only where it lies along its side's leg, at
+  least :data:`MIN_KNEE_ALONG_LEG` of the way from the ASIS marker down to the ankle marker (median over the take;
+  the knee's lie about half way, an elbow's beside the waist); else it claims nothing (``markers.labels.epicondyles``
+  says which and why).
 
 Two labels of a file claiming one role are refused in one line naming both (a marker map's ``[labels]`` then
 chooses): which one the lab meant cannot be told from the names. One case is told by position: two labels
@@ -93,10 +99,10 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     # centres 55-60 mm from the file's own (VLAN, VRAN), 14-19 mm without it (docs/validation.md)
     "TIB": (("TIB", PIG),),
     "ANK": (("ANK", PIG), ("ANKLE", HH), ("FAL", CAST), ("LMA", LAB), ("LMAL", LAB), ("ANKLELATERAL", LAB),
-            ("ANKLELAT", LAB), ("MALL", LAB)),
+            ("ANKLELAT", LAB), ("MALL", LAB), ("LM", LAB)),
     "MED": (("MED", PIG), ("MMA", LAB), ("ANKM", LAB), ("MANK", LAB), ("MMAL", LAB), ("TAM", CAST),
-            ("ANKLEMEDIAL", HH), ("ANKLEMED", LAB), ("MALM", LAB)),
-    "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB)),
+            ("ANKLEMEDIAL", HH), ("ANKLEMED", LAB), ("MALM", LAB), ("MM", LAB)),
+    "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB), ("CA", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST), ("MT2", LAB)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
 }
@@ -110,9 +116,20 @@ UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
 # the forefoot markers that stand in for the toe marker when no label claims it (module docstring)
 FOREFOOT_TOE = "toe from the metatarsal heads"
 FOREFOOT: dict[str, tuple[tuple[str, str], ...]] = {
-    "MT1": (("MT1", LAB), ("FM1", CAST)),
-    "MT5": (("MT5", LAB), ("FM5", CAST), ("LATOE", LAB)),  # LATOE: "lateral toe" (tsalemink's AUC set)
+    "MT1": (("MT1", LAB), ("FM1", CAST), ("IMH", LAB), ("FMH", LAB)),
+    "MT5": (("MT5", LAB), ("FM5", CAST), ("LATOE", LAB), ("VMH", LAB)),  # LATOE: "lateral toe" (tsalemink's AUC set)
 }
+# an epicondyle's name says not whether it is the femur's or the humerus' (ISB names them apart, FLE / HLE): such a
+# label is read as the knee's marker only where it lies along its side's leg (:func:`_epicondyles_on_the_leg`)
+EPICONDYLE = "epicondyle told femoral by position"
+EPICONDYLES: dict[str, tuple[tuple[str, str], ...]] = {
+    "KNE": (("LEPI", EPICONDYLE), ("LEP", EPICONDYLE), ("LE", EPICONDYLE)),
+    "KNM": (("MEP", EPICONDYLE), ("ME", EPICONDYLE)),
+}
+# the knee's epicondyles lie about half way from the ASIS down to the ankle marker (de Leva's thigh and shank are
+# 0.245 and 0.246 of the stature), an elbow's beside the waist, near the ASIS' height: a quarter of the way
+# tells them apart, with room for a hip flexed in swing or a knee bent
+MIN_KNEE_ALONG_LEG = 0.25
 BY_POSITION = "lateral / medial told by position"
 _MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
 # two markers of one knee or ankle lie a joint's width (plus a marker's 14 mm) apart across the body: the knee and
@@ -130,6 +147,7 @@ _SEPARATORS = re.compile(r"[._\-\s]+")
 _LOOKUP = {name: (role, conv) for role, names in SIDED.items() for name, conv in names}
 _LOOKUP_UNSIDED = {name: (role, conv) for role, names in UNSIDED.items() for name, conv in names}
 _LOOKUP_FOREFOOT = {name: (role, conv) for role, names in FOREFOOT.items() for name, conv in names}
+_LOOKUP_EPICONDYLE = {name: (role, conv) for role, names in EPICONDYLES.items() for name, conv in names}
 
 
 @dataclass(frozen=True)
@@ -144,11 +162,13 @@ class LabelMatch:
     by_position: dict[str, str] = field(default_factory=dict)  # role -> why its label was chosen by position
     toe: dict[str, str] = field(default_factory=dict)  # TOE role -> why its marker was chosen (at the foot, forefoot)
     midpoints: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role -> the labels it is the mean of
+    epicondyles: dict[str, str] = field(default_factory=dict)  # epicondyle label -> why it is or is not the knee's
 
     def summary(self) -> dict:
         return {"conventions": list(self.conventions), "aliases": dict(sorted(self.aliases.items())),
                 **({"by_position": dict(sorted(self.by_position.items()))} if self.by_position else {}),
-                **({"toe": dict(sorted(self.toe.items()))} if self.toe else {})}
+                **({"toe": dict(sorted(self.toe.items()))} if self.toe else {}),
+                **({"epicondyles": dict(sorted(self.epicondyles.items()))} if self.epicondyles else {})}
 
     def check(self, source: str, roles=None) -> None:
         """InputError naming the first of ``roles`` (default: any) that two labels claim."""
@@ -219,6 +239,8 @@ def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> Label
         if found and (found[0] not in pinned or lab == found[0]):
             claims.setdefault(found[0], []).append(lab)
             convention[lab] = found[1]
+    along_leg = _epicondyles_on_the_leg(trial, labels, bare, claims, pinned)
+    convention.update({lab: EPICONDYLE for lab in along_leg})  # only those read are looked up (aliases)
     by_position = _lateral_and_medial(trial, claims, pinned)
     convention.update({claims[role][0]: BY_POSITION for role in by_position})
     toe = _toe_at_foot(trial, claims, pinned)
@@ -235,7 +257,37 @@ def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> Label
     roles = {role: labs[0] for role, labs in claims.items() if len(labs) == 1}
     aliases = {role: lab for role, lab in roles.items() if lab != role}
     return LabelMatch(roles, aliases, tuple(dict.fromkeys(convention[lab] for _, lab in sorted(aliases.items()))),
-                      ambiguous, by_position, toe, midpoints)
+                      ambiguous, by_position, toe, midpoints, along_leg)
+
+
+def _epicondyles_on_the_leg(trial: C3dTrial, labels: list[str], bare: dict[str, str],
+                            claims: dict[str, list[str]], pinned: frozenset[str]) -> dict[str, str]:
+    """Add, in place in ``claims``, each epicondyle label (:data:`EPICONDYLES`) lying along its side's leg: its
+    median position projected on the line from the side's ASIS marker to its ankle marker (each claimed once) at
+    least :data:`MIN_KNEE_ALONG_LEG` of the way down. Returns label -> why, for each so read and each set aside."""
+    out = {}
+    for lab in labels:
+        found = _named(bare[lab], _LOOKUP_EPICONDYLE, {})
+        if not found or found[0] in pinned:
+            continue
+        side = found[0][0]
+        asis, ankle = claims.get(side + "ASI", []), claims.get(side + "ANK", [])
+        if len(asis) != 1 or len(ankle) != 1:
+            continue
+        top, leg = trial.marker(asis[0]), trial.marker(ankle[0]) - trial.marker(asis[0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            down = np.sum((trial.marker(lab) - top) * leg, axis=1) / np.sum(leg * leg, axis=1)
+        down = down[np.isfinite(down)]
+        if not down.size:
+            continue
+        along = float(np.median(down))
+        if along >= MIN_KNEE_ALONG_LEG:
+            claims.setdefault(found[0], []).append(lab)
+            out[lab] = f"{found[0]}: {100 * along:.0f} % of the way from {asis[0]} down to {ankle[0]}"
+        else:
+            out[lab] = (f"not read ({found[0]}?): {100 * along:.0f} % of the way from {asis[0]} down to {ankle[0]}, "
+                        f"not along the leg (an elbow's epicondyle)")
+    return out
 
 
 def _from_ankle(trial: C3dTrial, label: str, ankle: str) -> tuple[bool, float]:
