@@ -7,6 +7,7 @@ import pytest
 from scipy.integrate import quad_vec
 from scipy.linalg import expm, solve_discrete_are
 
+from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
 from livezmp.estimate.kalman import ConstantAccelerationKalman, ca_transition, white_jerk_covariance, wrap_angle
 
 DT = 1.0 / 120.0
@@ -130,6 +131,19 @@ def test_angle_state_stays_continuous_through_pi():
     out = np.array([kf.step(None if i == 0 else DT, wrap_angle(truth[i : i + 1]))[0] for i in range(600)])
     np.testing.assert_allclose(out, truth, atol=1e-9)
     assert kf.x[0, 1] == pytest.approx(rate, rel=1e-9)
+
+
+def test_an_angle_glitch_does_not_leave_the_rate_whole_turns_off():
+    """UNIPD Walking5's left foot yaw at 60 Hz (MOtoNMS' BTS walk read with its toes mapped): a marker glitch swings it
+    1.7 rad and back within a few frames. Unwrapped against the prediction, the rate it drove past half a turn per step
+    was never taken back (every later prediction whole turns off, the innovation near 0): the state ran away by
+    thousands of turns. Unwrapped against the previous sample, it settles where the measurement does."""
+    dt = 1.0 / 60.0
+    kf = StreamingEstimator(1, np.array([True]), EstimatorConfig(rate_hz=60.0)).kalman
+    glitch = [0.07, 0.17, -0.42, 1.28, 1.89, 1.23, 0.88, 0.66, 0.49, 0.65, 0.32]
+    yaw = np.array([0.0] * 60 + glitch + [0.1] * 120)
+    out = np.array([kf.step(None if i == 0 else dt, yaw[i:i + 1])[0] for i in range(len(yaw))])
+    assert np.abs(out[-60:] - 0.1).max() < 1e-3 and abs(kf.x[0, 1]) < 1e-2
 
 
 def test_late_channel_starts_at_its_first_sample():

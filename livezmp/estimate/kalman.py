@@ -17,9 +17,15 @@ converge to each other within some tens of steps, and once every entry agrees
 with the first channel's to ``SHARE_RTOL`` that one is shared again.
 
 Missing samples (NaN or inf, for some or all channels) only predict; a
-dropped frame is simply a larger dt.  Angle channels compare the measurement
-with the prediction modulo 2 pi (innovation wrapped to (-pi, pi]) so the
-state stays continuous through +-pi.
+dropped frame is simply a larger dt.  Angle channels are unwrapped so the state
+stays continuous through +-pi: each sample is taken on the branch nearest the
+channel's previous sample when that one was measured (as the batch estimator,
+:mod:`livezmp.offline.estimator`, unwraps them), else nearest the prediction.
+Against the prediction alone a filter whose angle rate had been driven past
+half a turn per step (a marker glitch flipping a segment for a frame) predicted
+whole turns off, saw an innovation near 0 and never took its rate back: the
+foot of MOtoNMS' UNIPD Walking5 ran away by 3319 turns at 30037 rad/s
+(docs/validation.md, held-out round 5).
 """
 
 from __future__ import annotations
@@ -82,6 +88,7 @@ class ConstantAccelerationKalman:
         self.started = np.zeros(n, dtype=bool)
         self.all_started = False
         self._any_angle = bool(self.angle_mask.any())
+        self._last = np.full(n, np.nan)  # each channel's previous sample, unwrapped; NaN: not measured then
         self._dt = None
         self._F = self._FF = self._Q = self._Q1 = self._h = None
 
@@ -103,6 +110,7 @@ class ConstantAccelerationKalman:
         self._shared = None
         self.started[:] = False
         self.all_started = False
+        self._last[:] = np.nan
 
     def _unshare(self) -> None:
         if self._shared is not None:
@@ -156,7 +164,7 @@ class ConstantAccelerationKalman:
             innovation = y - self.x[:, 0]
             largest = np.abs(innovation).max()
             if largest < math.inf:  # else some sample is missing (NaN or inf)
-                return self._update_shared(innovation, largest)
+                return self._update_shared(y, innovation, largest)
             if not np.isfinite(y).any():
                 return self.x[:, 0]  # nothing measured: every channel only predicts, alike
             self._unshare()
@@ -169,17 +177,25 @@ class ConstantAccelerationKalman:
             (a, b, c), (_, d, e), (_, _, f) = P[0].tolist()
             self._shared = (a, b, c, d, e, f)
 
-    def _update_shared(self, innovation: np.ndarray, largest: float) -> np.ndarray:
+    def _update_shared(self, y: np.ndarray, innovation: np.ndarray, largest: float) -> np.ndarray:
         """Every channel measured, one covariance for all: the gain is one (3,) vector."""
         a, b, c, d, e, f = self._shared
         scale = 1.0 / (a + float(self.meas_var[0]))
         k0, k1, k2 = a * scale, b * scale, c * scale
         self._shared = (a - k0 * a, b - k0 * b, c - k0 * c, d - k1 * b, e - k1 * c, f - k2 * c)
-        # Innovations inside (-pi, pi) need no wrapping (the common case).
+        # Innovations inside (-pi, pi) need no unwrapping (the common case).
         if self._any_angle and not largest < math.pi:
-            innovation = np.where(self.angle_mask, wrap_angle(innovation), innovation)
+            y = self._unwrapped(y, self.x[:, 0])
+            innovation = y - self.x[:, 0]
+        self._last[:] = y
         self.x += innovation[:, None] * np.array((k0, k1, k2))
         return self.x[:, 0]
+
+    def _unwrapped(self, y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """``y`` (n,) with each angle channel's sample on the branch nearest its previous sample (else nearest
+        ``predicted``)."""
+        ref = np.where(np.isfinite(self._last), self._last, predicted)
+        return np.where(self.angle_mask, ref + wrap_angle(y - ref), y)
 
     def _step_general(self, dt: float | None, y: np.ndarray) -> np.ndarray:
         valid = np.isfinite(y)
@@ -203,7 +219,8 @@ class ConstantAccelerationKalman:
             innovation = np.where(update, y, predicted) - predicted
             scale *= update
         if self._any_angle:
-            innovation = np.where(self.angle_mask, wrap_angle(innovation), innovation)
+            innovation = np.where(valid, self._unwrapped(innovation + predicted, predicted), predicted) - predicted
+        self._last = np.where(valid, innovation + predicted, np.nan)
         gain = col * scale[:, None]
         self.x += gain * innovation[:, None]
         P -= gain[:, :, None] * col[:, None, :]
