@@ -96,7 +96,8 @@ class HumanoidSpec:
     (the waist then sits above the legs' chains); ``flip``: share of joints whose axis is given negated;
     ``frames``: "aligned" link frames, "pitch_z" (leg links rotated so the pitch axis is local z) or "random";
     ``names``: a `CONVENTIONS` key or "numbered" (joint_1...); ``limits``: "wide", "tight" (what standing needs and
-    a little) or "absent" (no <limit> on any joint); ``continuous``: head and upper-arm yaw continuous;
+    a little), "absent" (no <limit> on any joint) or "zero" (lower = upper = 0 on every joint: Z-Bot2's CAD
+    export); ``continuous``: head and upper-arm yaw continuous;
     ``grippers``: a two-finger gripper on each hand, one finger mimicking the other (multiplier -1);
     ``double_knee``: each knee split in two pitch joints 0.04 heights apart (a kid-size linkage), the lower
     (``knee2``) mimicking the upper with multiplier 1; ``double_shoulder``: each arm's first joint followed,
@@ -233,6 +234,8 @@ def _limits(spec: HumanoidSpec, role: str, side: str, axis: np.ndarray) -> tuple
         return None
     if spec.limits == "wide":
         return (-2.8, 2.8)
+    if spec.limits == "zero":
+        return (0.0, 0.0)
     if role == "knee":
         return (0.0, 1.4) if (axis[1] > 0) != (spec.odd_limits and side == "l") else (-1.4, 0.0)
     if role in ("hip_roll", "ank_roll", "hip_yaw"):

@@ -111,6 +111,15 @@ def test_continuous_and_unlimited_joints_are_one_angle_without_bounds(tmp_path):
     assert "l_finger1" in robot.body.joint_names  # the mimic finger: its own joint
 
 
+def test_limits_with_no_range_are_no_limits(tmp_path):
+    # before: every joint limited to [0, 0], as Z-Bot2's CAD export writes joints whose limits nobody set, and
+    # every scenario refused ("standing with bent knees needs leg joint ... outside its limits")
+    body = load_robot(str(build_humanoid(tmp_path / "z.urdf", HumanoidSpec(limits="zero", seed=48))), None).body
+    model = body.model
+    assert np.all(np.isinf(model.lowerPositionLimit[6:])) and np.all(np.isinf(model.upperPositionLimit[6:]))
+    assert make_scenario("lean", body).name == "lean"
+
+
 def test_a_link_named_as_a_joint_and_a_robot_named_in_words_load(tmp_path):
     # before: a traceback from Pinocchio ("Several frames match the filter"), and a refusal of the name
     spec = HumanoidSpec(root="l_knee", robot_name="My Humanoid v2")

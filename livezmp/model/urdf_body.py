@@ -9,7 +9,7 @@ their plane for its level, else its sole is a level box under the link's centre 
 ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × /
 0.28 × / 0.12 × the hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
 chain does not share (a waist above the legs is the trunk's). Continuous joints, and
-revolute ones without a ``<limit>``, are revolute joints without bounds; a mimic joint
+revolute ones without a ``<limit>`` or with lower = upper, are revolute joints without bounds; a mimic joint
 keeps its own angle in the model and follows its parent's (``BodyModel.mimics``,
 :mod:`livezmp.model.mimic`); a link named as a joint is renamed ``<name>_link``.
 """
@@ -165,8 +165,21 @@ JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 UNBOUNDED = '<limit lower="-1" upper="1" effort="0" velocity="0"/>'  # placeholder, made ±inf once built
 
 
+def _has_range(joint: ET.Element, where: str) -> bool:
+    """Whether a joint's ``<limit>`` gives it a range: lower and upper differ. Lower equal to upper (both 0, or left
+    out: the URDF's default) is how CAD exports write a joint whose limits nobody set (Z-Bot2's file, every one of
+    its 18 joints; raisim ignores such a limit): taken as absent, not as a joint locked at one angle (a locked
+    joint is a fixed one)."""
+    limit = joint.find("limit")
+    if limit is None:
+        return False
+    lower = _numbers(limit, "lower", 1, "0", f"{where} <limit>")[0]
+    return bool(lower != _numbers(limit, "upper", 1, "0", f"{where} <limit>")[0])
+
+
 def _check_joints(root: ET.Element, path: Path) -> list[str]:
-    """Check every joint; turn continuous joints, and revolute ones without a <limit>, into revolute joints
+    """Check every joint; turn continuous joints, and revolute ones without a <limit> or whose limit gives no range
+    (`_has_range`), into revolute joints
     without bounds (one angle each, as a servo reports it; the URDF parser needs a limit on a revolute joint);
     rename links named as a joint (Pinocchio needs frame names unique). Returns the unbounded joints' names."""
     _check_tree(root, path)
@@ -184,7 +197,7 @@ def _check_joints(root: ET.Element, path: Path) -> list[str]:
         axis = j.find("axis") if j.get("type") != "fixed" else None  # a fixed one means nothing: files give 0 0 0
         if axis is not None and not np.any(_numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
             raise InputError(f"{where} <axis>: zero vector")
-        if j.get("type") == "continuous" or (j.get("type") == "revolute" and j.find("limit") is None):
+        if j.get("type") == "continuous" or (j.get("type") == "revolute" and not _has_range(j, where)):
             j.set("type", "revolute")
             for limit in j.findall("limit"):
                 j.remove(limit)
