@@ -120,6 +120,23 @@ def test_limits_with_no_range_are_no_limits(tmp_path):
     assert make_scenario("lean", body).name == "lean"
 
 
+def _zero_pose_soles(body) -> dict[str, np.ndarray]:
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, np.zeros(body.model.nq))
+    return foot_soles(body, data)
+
+
+def test_default_soles_keep_to_their_own_side_of_the_feet(tmp_path):
+    # before: a foot without a collision box got a box 0.28 hip heights wide centred under its centre of mass; here
+    # the two overlapped by 24 mm between the feet (Z-Bot2's by 18 mm, and its corrected push rolled the trunk 3.7°
+    # over the foot the simulated feet's load jumped to, its true ZMP 0.44 m off the feet for moments)
+    body = load_robot(str(build_humanoid(tmp_path / "m.urdf", HumanoidSpec(foot="mesh", seed=50))), None).body
+    soles = _zero_pose_soles(body)
+    assert soles["left"][:, 1].min() == pytest.approx(0.0, abs=1e-9)  # the mid-line between the feet
+    assert soles["right"][:, 1].max() == pytest.approx(0.0, abs=1e-9)
+    assert soles["left"][:, 1].max() > 0.055 * 0.5 > -soles["right"][:, 1].min() - 0.1  # the outer edges kept
+
+
 def test_a_link_named_as_a_joint_and_a_robot_named_in_words_load(tmp_path):
     # before: a traceback from Pinocchio ("Several frames match the filter"), and a refusal of the name
     spec = HumanoidSpec(root="l_knee", robot_name="My Humanoid v2")

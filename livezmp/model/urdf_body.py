@@ -7,11 +7,12 @@ legs; a foot whose leaf links include three or more on one plane near level (cle
 points, force sensors: :mod:`livezmp.model.foot_contacts`) has their hull for its sole and
 their plane for its level, else its sole is a level box under the link's centre of mass:
 ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × /
-0.28 × / 0.12 × the hip-to-foot height. A leg is the joints from the trunk to a foot that the other foot's
-chain does not share (a waist above the legs is the trunk's). Continuous joints, and
-revolute ones without a ``<limit>`` or with lower = upper, are revolute joints without bounds; a mimic joint
-keeps its own angle in the model and follows its parent's (``BodyModel.mimics``,
-:mod:`livezmp.model.mimic`); a link named as a joint is renamed ``<name>_link``.
+0.28 × / 0.12 × the hip-to-foot height, its inner edge no further in than the mid-line between the feet. A leg
+is the joints from the trunk to a foot that the other foot's chain does not share (a waist
+above the legs is the trunk's). Continuous joints, and revolute ones without a ``<limit>`` or
+with lower = upper, are revolute joints without bounds; a mimic joint keeps its own angle in
+the model and follows its parent's (``BodyModel.mimics``, :mod:`livezmp.model.mimic`); a link
+named as a joint is renamed ``<name>_link``.
 """
 
 from __future__ import annotations
@@ -429,6 +430,23 @@ def _box(length: float, width: float, center: np.ndarray) -> np.ndarray:
     return center + np.array([[-dx, -dy, 0.0], [dx, -dy, 0.0], [dx, dy, 0.0], [-dx, dy, 0.0]])
 
 
+def _own_side(sole: np.ndarray, lateral: float) -> np.ndarray:
+    """A default sole (corners (k, 3), level foot frame, m) kept on its own side of the mid-line between the feet,
+    ``lateral`` (m, its frame's y) away: its inner edge moved to the mid-line where it crosses it, its outer edge
+    kept. A default box is as wide as 0.28 hip heights, centred under the foot's centre of mass: Z-Bot2's feet,
+    10 cm apart with their centres of mass 18 mm inside their ankles, had soles overlapping by 18 mm, where the
+    simulated feet's load split between them jumped as the centre of pressure crossed from one sole's corner to
+    the other's (its corrected push rolled the trunk 3.7° over the one foot the load went to, and its true ZMP
+    left the feet by 0.44 m for moments). Unchanged where the outer edge too is past the mid-line."""
+    y = sole[:, 1]
+    clipped = np.maximum(y, lateral) if lateral < 0 else np.minimum(y, lateral)
+    if np.ptp(clipped) <= 0:
+        return sole
+    out = sole.copy()
+    out[:, 1] = clipped
+    return out
+
+
 def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> BodyModel:
     """Build the body model of a URDF robot (see module docstring)."""
     opts = opts or UrdfBodyOptions()
@@ -454,6 +472,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     hip_h = float(np.mean([data.oMi[leg_ids[s][0]].translation[2] - data.oMf[f].translation[2]
                            for s, f in feet_frames.items()]))
     turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
+    ankles_y = {side: float(data.oMf[fid].translation[1]) for side, fid in feet_frames.items()}
     feet = {}
     for side, link in feet_frames.items():
         spec = cfg.feet.get(side, {})
@@ -478,6 +497,9 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
                       else np.array([com_in_link[0], com_in_link[1], -drop]))
             sole = _box(box.get("length", opts.sole_length or 0.5 * hip_h),
                         box.get("width", opts.sole_width or 0.28 * hip_h), center)
+            if not box:
+                other = next(y for s, y in ankles_y.items() if s != side)
+                sole = _own_side(sole, 0.5 * (other - ankles_y[side]))
         feet[side] = Foot(side, fid, sole_local=sole)
     names = [model.names[j] for j in range(1, model.njoints)]
     jid = {n: model.getJointId(n) for n in names}
