@@ -126,6 +126,18 @@ def _zero_pose_soles(body) -> dict[str, np.ndarray]:
     return foot_soles(body, data)
 
 
+def test_a_foot_with_a_collision_box_stands_on_its_lowest_face(tmp_path):
+    # before: the default box, 0.5 x 0.28 hip heights (240 x 134 mm here), whatever the foot's collision box (its
+    # real 80 x 40 mm; Bez2's 170 x 90, Valkyrie's 270 x 160, the Berkeley Humanoid's 160 x 55 tilted 10°)
+    spec = HumanoidSpec(frames="random", seed=49)  # the foot link's frame turned, its box written level in it
+    soles = _zero_pose_soles(load_robot(str(build_humanoid(tmp_path / "b.urdf", spec)), None).body)
+    for side in ("left", "right"):
+        np.testing.assert_allclose(np.ptp(soles[side], axis=0), [0.16 * spec.height, 0.08 * spec.height, 0.0],
+                                   atol=1e-6)  # the file's 9 digits
+        # the box's bottom, 0.015 heights up, in the root's frame: at the torso's centre of mass
+        np.testing.assert_allclose(soles[side][:, 2], (0.015 - spec.torso_com) * spec.height, atol=1e-6)
+
+
 def test_default_soles_keep_to_their_own_side_of_the_feet(tmp_path):
     # before: a foot without a collision box got a box 0.28 hip heights wide centred under its centre of mass; here
     # the two overlapped by 24 mm between the feet (Z-Bot2's by 18 mm, and its corrected push rolled the trunk 3.7°

@@ -1,5 +1,5 @@
 """A foot's sole from its contact frames: the leaf links a URDF fixes under a foot (cleats, contact points, toe and
-heel frames) that lie on one plane.
+heel frames) that lie on one plane; else from its collision boxes (`box_sole`).
 
 Wolfgang-OP's feet (bit-bots/wolfgang_robot) end in four cleats, the real sole's corners, on a plane turned 15°
 from the world's level in the zero posture (its front pair 48 mm higher); the lowest leaf alone, under a level box
@@ -98,3 +98,42 @@ def contact_sole(model: pin.Model, data: pin.Data, joint: int) -> ContactSole | 
     placement = pin.SE3(rotation, points[on][0] + rotation @ centre)
     corners = np.column_stack([hull - centre[:2], np.zeros(len(hull))])
     return ContactSole(placement, corners, tuple(model.frames[f].name for f, o in zip(leaves, on, strict=True) if o))
+
+
+FACES = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0],
+                  [0.0, 0.0, -1.0]])  # a box's faces by their outward normals, in its own frame
+
+
+def _lowest_face(size: np.ndarray, world: pin.SE3) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(height of its centre, upward unit normal, corners (4, 3) world) of the face of a box (``size`` (3,) m, its
+    centre's world placement ``world``) that faces down within `MAX_TILT` of straight down; None without one."""
+    for normal in FACES:
+        out = world.rotation @ normal
+        if -out[2] < np.cos(MAX_TILT):
+            continue
+        k = int(np.flatnonzero(normal)[0])
+        u, v = (np.eye(3)[i] * size[i] / 2 for i in range(3) if i != k)
+        centre = world.act(normal * size[k] / 2)
+        corners = np.array([centre + world.rotation @ (a * u + b * v) for a, b in ((1, 1), (1, -1), (-1, -1), (-1, 1))])
+        return float(centre[2]), -out, corners
+    return None
+
+
+def box_sole(model: pin.Model, data: pin.Data, joint: int,
+             boxes: dict[str, list[tuple[np.ndarray, pin.SE3]]]) -> ContactSole | None:
+    """The sole of the foot on ``joint`` from the collision boxes of its links (``boxes``: link name -> (size (3,)
+    m, the box's centre in the link's frame) per ``<collision>`` box): the face of them that faces down, within
+    `MAX_TILT`, lowest (Bez2's foot box, 17 x 9 cm; Valkyrie's, 27 x 16 cm; a heel's box above a sole's is not
+    the sole), on its own plane. None where the foot's links have no box (a mesh's size is not in the URDF; the
+    caller keeps its default box). ``data``: frame placements of the zero posture."""
+    faces = [face for f in range(model.nframes)
+             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+             for size, origin in boxes.get(model.frames[f].name, ())
+             if (face := _lowest_face(size, data.oMf[f] * origin)) is not None]
+    if not faces:
+        return None
+    _, normal, corners = min(faces, key=lambda face: face[0])
+    rotation = plane_frame(normal)
+    centre = corners.mean(axis=0)
+    hull = convex_hull(((corners - centre) @ rotation)[:, :2])
+    return ContactSole(pin.SE3(rotation, centre), np.column_stack([hull, np.zeros(len(hull))]), ())

@@ -5,9 +5,11 @@ the robot config (:mod:`livezmp.model.robot_config`); without one, the feet are 
 lowest leaf links in the zero pose (left = +y), level and side by side at the ends of two
 legs; a foot whose leaf links include three or more on one plane near level (cleats, contact
 points, force sensors: :mod:`livezmp.model.foot_contacts`) has their hull for its sole and
-their plane for its level, else its sole is a level box under the link's centre of mass:
-``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin, by default 0.5 × /
-0.28 × / 0.12 × the hip-to-foot height, its inner edge no further in than the mid-line between the feet. A leg
+their plane for its level, else a foot whose links have ``<collision>`` boxes stands on the
+lowest face of them that faces down (`box_sole`), else its sole is a level box under the link's
+centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin (given,
+they are the sole: no collision box is looked at), by default 0.5 × / 0.28 × / 0.12 × the
+hip-to-foot height, its inner edge no further in than the mid-line between the feet. A leg
 is the joints from the trunk to a foot that the other foot's chain does not share (a waist
 above the legs is the trunk's). Continuous joints, and revolute ones without a ``<limit>`` or
 with lower = upper, are revolute joints without bounds; a mimic joint keeps its own angle in
@@ -30,7 +32,7 @@ import pinocchio as pin
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.foot_contacts import contact_sole
+from livezmp.model.foot_contacts import box_sole, contact_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
@@ -233,8 +235,29 @@ def _quiet_stderr():
         os.close(saved)
 
 
-def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]]]:
-    """The URDF's model without a base, and its mimics (`read_mimics`)."""
+Boxes = dict[str, list[tuple[np.ndarray, pin.SE3]]]  # link name -> (size (3,) m, centre in the link's frame)
+
+
+def _collision_boxes(root: ET.Element, path: Path) -> Boxes:
+    """Each link's ``<collision>`` boxes (`Boxes`); a box of a size not three positive numbers is left out."""
+    boxes: Boxes = {}
+    for link in root.findall("link"):
+        for collision in link.findall("collision"):
+            box = collision.find("geometry/box")
+            if box is None:
+                continue
+            where = f"{path}: link {link.get('name')!r} <collision> <box>"
+            size = _numbers(box, "size", 3, "0 0 0", where)
+            origin = collision.find("origin")
+            xyz, rpy = ((_numbers(origin, attr, 3, "0 0 0", f"{where} <origin>") for attr in ("xyz", "rpy"))
+                        if origin is not None else (np.zeros(3), np.zeros(3)))
+            if np.all(size > 0):
+                boxes.setdefault(link.get("name"), []).append((size, pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)))
+    return boxes
+
+
+def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]], Boxes]:
+    """The URDF's model without a base, its mimics (`read_mimics`) and its links' collision boxes."""
     text = read_input_text(path, "URDF")
     try:
         root = ET.fromstring(text)
@@ -260,7 +283,7 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
-    return model, mimics
+    return model, mimics, _collision_boxes(root, path)
 
 
 def _with_base(fixed: pin.Model, yaw: float = 0.0) -> pin.Model:
@@ -451,7 +474,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     """Build the body model of a URDF robot (see module docstring)."""
     opts = opts or UrdfBodyOptions()
     path = Path(path)
-    fixed, mimics = _load_fixed(path)
+    fixed, mimics, boxes = _load_fixed(path)
     model = _with_base(fixed)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
     data = model.createData()
@@ -473,10 +496,13 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
                            for s, f in feet_frames.items()]))
     turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
     ankles_y = {side: float(data.oMf[fid].translation[1]) for side, fid in feet_frames.items()}
+    chosen = opts.sole_length is None and opts.sole_width is None and opts.sole_drop is None  # else: the box asked
     feet = {}
     for side, link in feet_frames.items():
         spec = cfg.feet.get(side, {})
-        contact = None if {"sole", "box"} & set(spec) else contact_sole(model, data, model.frames[link].parentJoint)
+        joint = model.frames[link].parentJoint
+        contact = None if {"sole", "box"} & set(spec) else (contact_sole(model, data, joint)
+                                                              or box_sole(model, data, joint, boxes if chosen else {}))
         if contact is not None:
             fid = _foot_frame(model, data, link, contact.placement, f"{side}_contact_sole")
             feet_frames[side] = fid
