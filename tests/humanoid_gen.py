@@ -112,7 +112,8 @@ class HumanoidSpec:
     2.4e-35 product of inertia (iCub's), the torso's moments (a, a, 3a) breaking the triangle inequality
     (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
     kept (Talos' reduced model); ``facing``: the way the robot faces in its file, "x" (REP 103), "-y" (Poppy's)
-    or "-x" (iCub's); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
+    or "-x" (iCub's); ``upside_down``: the robot then turned half a turn about x, standing on its head in its
+    file (K-Scale's GPR); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
     file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
     torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
@@ -155,6 +156,7 @@ class HumanoidSpec:
     odd_inertias: bool = False
     fixed_finger: bool = False
     facing: str = "x"
+    upside_down: bool = False
     odd_limits: bool = False
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
@@ -338,7 +340,8 @@ def _build(spec: HumanoidSpec) -> _Builder:
     total = sum(v["mass"] for v in b.links.values())
     for v in b.links.values():
         v["mass"] *= spec.mass / total
-    turn = _rot((0.0, 0.0, FACING[spec.facing]))  # the robot turned about z in its root's frame, boxes with it
+    # the robot turned about z in its root's frame (then about x, upside down), boxes with it
+    turn = _rot((np.pi if spec.upside_down else 0.0, 0.0, 0.0)) @ _rot((0.0, 0.0, FACING[spec.facing]))
     for v in b.links.values():
         v["com"], v["size"] = turn @ v["com"], np.abs(turn) @ v["size"]
     for j in b.joints:

@@ -149,6 +149,19 @@ def test_default_soles_keep_to_their_own_side_of_the_feet(tmp_path):
     assert soles["left"][:, 1].max() > 0.055 * 0.5 > -soles["right"][:, 1].min() - 0.1  # the outer edges kept
 
 
+def test_a_robot_upside_down_in_its_file_is_turned_onto_its_feet(tmp_path):
+    # before: "no two feet" (its feet above its hips in the zero pose, as K-Scale's GPR file has them)
+    spec = HumanoidSpec(upside_down=True, seed=51)
+    body = load_robot(str(build_humanoid(tmp_path / "u.urdf", spec)), None).body
+    model = body.model
+    feet = {s: model.names[model.frames[f.frame_id].parentJoint] for s, f in body.feet.items()}
+    assert feet == {"left": "l_ank_roll", "right": "r_ank_roll"}
+    soles = _zero_pose_soles(body)
+    assert soles["left"][:, 1].min() > 0 > soles["right"][:, 1].max()  # left on the left, facing +x
+    assert all(soles[s][:, 2].max() < -0.5 * spec.height for s in soles)  # below the root
+    assert make_scenario("lean", body).name == "lean"
+
+
 def test_a_link_named_as_a_joint_and_a_robot_named_in_words_load(tmp_path):
     # before: a traceback from Pinocchio ("Several frames match the filter"), and a refusal of the name
     spec = HumanoidSpec(root="l_knee", robot_name="My Humanoid v2")

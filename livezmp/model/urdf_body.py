@@ -286,16 +286,42 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     return model, mimics, _collision_boxes(root, path)
 
 
-def _with_base(fixed: pin.Model, yaw: float = 0.0) -> pin.Model:
-    """The URDF's model on the six base joints, turned by ``yaw`` (rad, about z) on the base (`_heading`)."""
+def _with_base(fixed: pin.Model, yaw: float = 0.0, upside_down: bool = False) -> pin.Model:
+    """The URDF's model on the six base joints, turned by ``yaw`` (rad, about z) on the base (`_heading`), after
+    a half turn about x where it stands ``upside_down`` in its file (`_upright_feet`)."""
     base = pin.Model()
     j = 0
     for name, jm in BASE_JOINTS:
         j = base.addJoint(j, jm(), pin.SE3.Identity(), name)
     f = base.addFrame(pin.Frame("base_attach", j, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-    model = pin.appendModel(base, fixed, f, pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.zeros(3)))
+    turn = pin.rpy.rpyToMatrix(np.pi if upside_down else 0.0, 0.0, 0.0)
+    model = pin.appendModel(base, fixed, f, pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw) @ turn, np.zeros(3)))
     model.name = fixed.name
     return model
+
+
+def _posed(fixed: pin.Model, yaw: float = 0.0, upside_down: bool = False) -> tuple[pin.Model, pin.Data]:
+    """`_with_base`'s model and its data with the zero posture's frame placements."""
+    model = _with_base(fixed, yaw, upside_down)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.zeros(model.nq))
+    return model, data
+
+
+def _upright_feet(fixed: pin.Model, cfg: RobotConfig, path: Path) -> tuple[pin.Model, pin.Data, dict[str, int], bool]:
+    """The model on its base (`_posed`), its feet (`_feet`) and whether it was turned upside down to find them: a
+    file may stand the robot on its head (K-Scale's GPR file: its feet 0.6 m above its hips in the zero pose, "no
+    two feet"); where no two feet are found, the robot turned upside down is tried, and where none are found
+    either, the upright robot's refusal stands."""
+    model, data = _posed(fixed)
+    try:
+        return model, data, _feet(model, data, cfg, path), False
+    except InputError as upright:
+        model, data = _posed(fixed, upside_down=True)
+        try:
+            return model, data, _feet(model, data, cfg, path), True
+        except InputError:
+            raise upright from None
 
 
 def _chain(model: pin.Model, frame_id: int) -> list[int]:
@@ -475,17 +501,11 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     opts = opts or UrdfBodyOptions()
     path = Path(path)
     fixed, mimics, boxes = _load_fixed(path)
-    model = _with_base(fixed)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
-    data = model.createData()
-    q0 = np.zeros(model.nq)
-    pin.framesForwardKinematics(model, data, q0)
-    feet_frames = _feet(model, data, cfg, path)
+    model, data, feet_frames, upside_down = _upright_feet(fixed, cfg, path)
     yaw = _heading(model, data, feet_frames, sided=len(cfg.feet) >= 2)
     if yaw:  # the same model turned: frame ids are kept, the default feet's sides found again
-        model = _with_base(fixed, yaw)
-        data = model.createData()
-        pin.framesForwardKinematics(model, data, q0)
+        model, data = _posed(fixed, yaw, upside_down)
         feet_frames = _feet(model, data, cfg, path)
     leg_ids = leg_joints(model, feet_frames)
     for side, chain in leg_ids.items():
