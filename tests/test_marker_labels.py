@@ -47,6 +47,7 @@ CONVENTIONS = {
     ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
     ("L_ANKLE_MED", "LMED"), ("RFCL", "RKNE"), ("LFCM", "LKNM"), ("RMALL", "RANK"), ("LMALM", "LMED"),
     ("LKNEL", "LKNE"), ("RKNEM", "RKNM"), ("RLM", "RANK"), ("LMM", "LMED"), ("RCA", "RHEE"),
+    ("SNJ", "CLAV"), ("SJN", "CLAV"), ("SXS", "STRN"), ("TV8", "T10"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role
@@ -284,3 +285,18 @@ def test_a_set_read_but_for_one_role_is_refused_naming_only_that_role(std, tmp_p
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert "no Plug-in Gait / Helen Hayes marker set: missing LPSI+RPSI or SACR (markers in the file:" in err
+
+
+@pytest.mark.parametrize("names", [("CV7", "TV8", "SNJ", "SXS"), ("CV7", "TV10", "SJN", "SXS")])
+def test_the_isb_trunk_names_track_the_thorax(tmp_path, names):
+    """A Qualisys sample's (ezc3d's Qualisys.c3d) and AnyBody's (AMMR 2014001) trunk names, the jugular notch
+    SNJ / SJN, the xiphisternal joint SXS and the eighth (or tenth) thoracic spinous process: the thorax is tracked
+    as by Plug-in Gait's C7 T10 CLAV STRN, the same ZMP to the last digit (unread, the HAT was placed)."""
+    path = tmp_path / "trunk.c3d"
+    write_lab_c3d(path, PLATES, trunk=True)
+    isb_names = dict(zip(("C7", "T10", "CLAV", "STRN"), names, strict=True))
+    _relabelled(path, tmp_path / "isb.c3d", lambda lab: isb_names.get(lab, lab))
+    ref, isb = (analyse_lab_take(read_c3d(p)) for p in (path, tmp_path / "isb.c3d"))
+    assert "thorax from C7 T10 CLAV STRN" in isb.summary["markers"]["marker_set"]
+    np.testing.assert_array_equal(isb.result.zmp, ref.result.zmp)
+    assert isb.summary["cop_vs_zmp"]["max_mm"] < 1.0

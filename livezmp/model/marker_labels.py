@@ -21,7 +21,10 @@ Where each name comes from:
   Atlas of Skeletal Landmark Definitions): ``L_IAS L_IPS SACR L_FLE L_FME L_FAL L_TAM L_FCC L_FM2``.
   Trunk: ``CV7``, ``TV10``, incisura jugularis ``IJ`` (Plug-in Gait's CLAV), processus xiphoideus ``PX`` (its
   STRN), sternoclavicular joint ``L_SC`` (the clavicle's sternal end: the Helen Hayes LCLA) (Wu et al. 2005,
-  J Biomech 38:981).
+  J Biomech 38:981); the same landmarks as a Qualisys sample (ezc3d's ``test/c3dFiles/Qualisys.c3d``: ``CV7 TV8 SNJ
+  SXS``) and AnyBody's Qualisys gait set (AMMR ``2014001_C1_01``: ``CV7 TV10 SJN SXS``) write them: the sternum's
+  jugular notch ``SNJ``/``SJN``, its xiphisternal joint ``SXS``, and the eighth thoracic spinous process ``TV8``,
+  read as T10: ISB's thorax axis starts between PX and T8 where Plug-in Gait's starts between STRN and T10.
 - Landmark names seen in the c3d.org samples: ``RLFC`` lateral femoral condyle, ``RLMA`` lateral malleolus,
   ``RCAL`` calcaneus, medial ``RMFC``/``RMMA`` (Innovative Sports Training), ``RLKN``/``RMKN`` lateral / medial
   knee (TYPE-3), ``SACRUM`` (Walking_Hybrid, Capture0002); medial ``MKNE KNEM MFC MEPI ANKM MANK MMAL``
@@ -109,9 +112,11 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
 UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "SACR": (("SACR", PIG), ("VSAC", HH), ("VSACRAL", HH), ("SACRUM", LAB)),
     "C7": (("C7", PIG), ("CV7", CAST)),
-    "T10": (("T10", PIG), ("TV10", CAST)),
-    "CLAV": (("CLAV", PIG), ("IJ", CAST)),
-    "STRN": (("STRN", PIG), ("PX", CAST)),
+    # ISB's thorax axis runs from between PX and T8 up to between IJ and C7 (Wu et al. 2005), Plug-in Gait's from
+    # between STRN and T10 up to between CLAV and C7: the eighth thoracic spinous process takes T10's place in it
+    "T10": (("T10", PIG), ("TV10", CAST), ("TV8", CAST)),
+    "CLAV": (("CLAV", PIG), ("IJ", CAST), ("SNJ", CAST), ("SJN", CAST)),
+    "STRN": (("STRN", PIG), ("PX", CAST), ("SXS", CAST)),
 }
 # the forefoot markers that stand in for the toe marker when no label claims it (module docstring)
 FOREFOOT_TOE = "toe from the metatarsal heads"
