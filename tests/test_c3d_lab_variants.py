@@ -324,3 +324,37 @@ def test_a_running_step_is_no_pull():
 
     assert aside(step) == []
     assert [p["plate"] for p in aside(step - 60.0 * np.clip(t - 1.5, 0.0, None) * 2)] == [1]
+
+
+def test_plates_raised_above_the_floor_are_read_from_the_feet_on_them(tmp_path):
+    """Qualisys' ClinicalGait walks step 88 mm up onto their plates (portable plates on the lab's floor): the take's
+    lowest markers stand off the plates, below their surface, and the soles measured from that surface lay the feet
+    on the plates 40 mm and more above it: no frame was complete. The subject here first stands 1 m behind the
+    plates on a floor 88 mm below them, then steps up (0.5 s) onto them: the soles are the level lab's, the summary
+    says how far the plates stand up, and the ZMP on them is the plates' CoP."""
+    path, stepped = tmp_path / "level.c3d", tmp_path / "stepped.c3d"
+    write_lab_c3d(path, PLATES, with_offsets=False, lab=Lab(seconds=SECONDS))
+    c3d = ezc3d.c3d(str(path))
+    pts = np.array(c3d["data"]["points"])
+    toe = [v.split(":")[-1] for v in c3d["parameters"]["POINT"]["LABELS"]["value"]].index("RTOE")
+    pts[:, toe] = pts[:, toe, -1:]  # its gap at the start (the feet stand still)
+    before, up = 1.0, 0.5  # s: standing off the plates, stepping up onto them
+    t = np.arange(round((before + up) * 100)) / 100.0
+    w = np.clip((t - before) / up, 0.0, 1.0)
+    shift = np.outer([-1000.0, 0.0, -88.0, 0.0], 1 - w * w * (3 - 2 * w))  # mm, the x and z of the floor stance
+    pts = np.concatenate([pts[:, :, :1] + shift[:, None], pts], axis=2)
+    analogs = np.array(c3d["data"]["analogs"])
+    analogs = np.concatenate([np.zeros((1, analogs.shape[1], round((before + up) * 1000))), analogs], axis=2)
+    c3d["data"]["points"], c3d["data"]["analogs"] = pts, analogs
+    del c3d["data"]["meta_points"]  # residuals of the shorter take
+    c3d.write(str(stepped))
+    # the written plates read nothing of the step's own dynamics: no delay to measure against it
+    ref, a = (analyse_lab_take(read_c3d(p), LabOptions(plate_delay_s=0.0)) for p in (path, stepped))
+    assert a.summary["markers"]["floor"]["below_plates_mm"] == pytest.approx(88.0, abs=2.0)
+    for side, foot in a.take.body.feet.items():
+        level = ref.take.body.feet[side]
+        assert (foot.ankle_height, foot.toe_height) == pytest.approx((level.ankle_height, level.toe_height), abs=0.003)
+    # the placed HAT's slow follow carries the step for a second: compared 1.5 s after it
+    rows = a.complete & (a.times > before + up + 1.5)
+    assert rows.sum() > 100
+    assert 1000 * np.abs(a.result.zmp[rows, :2] - a.plates.cop[rows, :2]).max() < 1.0

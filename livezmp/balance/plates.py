@@ -32,6 +32,10 @@ G = 9.81
 # the plates of the trials read so far lie within 3 mm of each other)
 LEVEL_M = 0.05
 STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
+# a foot stands still (stance, :func:`raised_by`) while its ankle centre moves slower than this horizontally, for at
+# least STILL_S: a walking stance's ankle holds still 0.3-0.4 s, a swing moves it at 1-5 m/s
+STILL_MPS = 0.15
+STILL_S = 0.1
 # stance-frame mass: at least this many frames carried whole, and at least this part of the frames with the feet on
 # the plates (fewer: the plates miss the load in most of them, e.g. a plate set aside)
 STANCE_MIN_FRAMES = 10
@@ -76,6 +80,30 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
                          f"{', '.join(str(k + 1) for k in on)} at {mm} mm): a stair or a step, and the ZMP needs "
                          f"one floor")
     return float(heights.mean())
+
+
+def raised_by(ankles: list[np.ndarray], outlines: list[np.ndarray], rate: float) -> float:
+    """How far (m) the plates stand above the floor the feet stand on off them: the median height of the stances
+    (runs of at least ``STILL_S`` with an ankle centre slower than ``STILL_MPS``; each its median) whose ankle lies
+    over a plate's ``outlines`` (k, 3) less that of those off the plates, when more than ``LEVEL_M`` and the stances
+    of each kind lie within ``LEVEL_M`` of each other (two floors, each level); else 0: one level floor, a stair or
+    a slope (AnyBody's SpecialFeatures: stances over its plates 77-589 mm up), or no stance on or off the plates.
+    ``ankles``: each foot's ankle centre (F, 3) m, internal frame, at ``rate`` Hz. Qualisys' ClinicalGait walks
+    (held-out round 4) step 86-88 mm up onto their two plates and down off them, the pelvis rising 80 mm with
+    them: plates standing on the lab's floor, not let into it."""
+    n = max(2, round(STILL_S * rate))
+    heights: dict[bool, list[float]] = {True: [], False: []}
+    for a in ankles:
+        still = np.linalg.norm(np.gradient(a[:, :2], 1.0 / rate, axis=0), axis=1) < STILL_MPS
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+        for i, j in zip(edges[::2], edges[1::2], strict=True):
+            if j - i >= n:
+                mid = np.median(a[i:j], axis=0)
+                heights[any(_inside(mid, o, 0.0) for o in outlines)].append(float(mid[2]))
+    if not heights[True] or not heights[False] or max(np.ptp(h) for h in heights.values()) > LEVEL_M:
+        return 0.0
+    step = float(np.median(heights[True]) - np.median(heights[False]))
+    return step if step > LEVEL_M else 0.0
 
 
 def unloaded_offset(plate: PlateRecord, analog_rate: float,

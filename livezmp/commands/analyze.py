@@ -96,6 +96,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f"  {summary['markers']['hat']}")
         if "note" in summary["mass"]:
             print(f"  mass: {summary['mass']['note']}")
+        if "floor" in summary["markers"]:
+            print(f"  floor: {summary['markers']['floor']['why']}")
         if "no_complete_frame" in (summary.get("plates") or {}):
             print(f"  no ZMP vs plate CoP: {summary['plates']['no_complete_frame']}")
         for w in (summary.get("cop_under_foot") or {}).get("warnings", []):

@@ -34,6 +34,7 @@ from livezmp.balance.plates import (
     plate_frames,
     plate_mass,
     plates_floor,
+    raised_by,
     stance_mass,
     standing_span,
 )
@@ -138,9 +139,21 @@ def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
 
 
 def run_take(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
-    """The marker body of ``trial`` (``mass`` kg, soles at ``floor``) through the lab pipeline: the take, its
-    frame times (s), the pipeline's settings and its result."""
+    """The marker body of ``trial`` (``mass`` kg, soles at ``floor``, the plates' surface) through the lab pipeline:
+    the take, its frame times (s), the pipeline's settings and its result. Plates raised above the floor the feet
+    stand on off them (:func:`livezmp.balance.plates.raised_by`): the soles' heights are measured from that floor,
+    the ZMP and the contacts kept on the plates' surface, where the complete frames stand; ``take.notes["floor"]``
+    says so."""
     take = body_from_markers(trial, replace(opts.markers, total_mass=mass, floor_z=floor))
+    raised = 0.0 if floor is None or "ankle" not in take.centres else raised_by(
+        list(take.centres["ankle"].values()), [p.corners @ take.body.world_from_input.T for p in trial.plates],
+        trial.rate)
+    if raised:
+        take = body_from_markers(trial, replace(opts.markers, total_mass=mass, floor_z=floor - raised))
+        take.notes["floor"] = {"below_plates_mm": round(1000 * raised, 1), "why": (
+            f"the feet stand {1000 * raised:.0f} mm higher on the plates than off them: plates raised above the "
+            "floor (a step onto them); the soles' heights from the floor, the ZMP on the plates' surface, compared "
+            "where every loaded foot is on them")}
     times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
     cfg = default_config(take.body, trial.rate, opts.mode, floor)
     cfg = replace(cfg, estimator=replace(cfg.estimator, **{**LAB_ESTIMATOR, **(opts.estimator or {})}))
