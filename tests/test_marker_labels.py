@@ -300,3 +300,32 @@ def test_the_isb_trunk_names_track_the_thorax(tmp_path, names):
     assert "thorax from C7 T10 CLAV STRN" in isb.summary["markers"]["marker_set"]
     np.testing.assert_array_equal(isb.result.zmp, ref.result.zmp)
     assert isb.summary["cop_vs_zmp"]["max_mm"] < 1.0
+
+
+def test_a_toe_marker_off_the_foots_long_axis_gives_way_to_the_metatarsal_heads():
+    """Qualisys' NewPaf 1 (CGM2.4's forefoot LFMH LSMH LVMH): its toe markers lie 33 deg off the line from the heel
+    to the first and fifth metatarsal heads' mid-point, behind the heads; the foot read along them turned its sole
+    and the plates' CoP fell off it. Such a toe gives way to the heads' mid-point; one 10 deg off is kept."""
+    trial = _trial(np.arange(200) / RATE, RATE)
+    ref = body_from_markers(trial)
+    across = np.array([0.0, 0.03, 0.0])  # the synthetic lab's +y is the left side's lateral
+    heads = {"LFMH": trial.marker("LTOE") - across, "LVMH": trial.marker("LTOE") + across,
+             "RFMH": trial.marker("RTOE") + across, "RVMH": trial.marker("RTOE") - across}
+
+    def toe_turned(deg: float) -> dict:
+        """The toe markers turned ``deg`` medially about the heel marker, 60 % as far from it."""
+        out = {}
+        for s, sign in (("L", -1.0), ("R", 1.0)):
+            heel, toe = trial.marker(s + "HEE"), trial.marker(s + "TOE")
+            a = np.radians(sign * deg)
+            turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+            out[s + "TOE"] = heel + 0.6 * (toe - heel) @ turn.T
+        return out
+
+    off = _with_markers(_with_markers(trial, heads), toe_turned(33.0), drop=("LTOE", "RTOE"))
+    take = body_from_markers(off)
+    assert take.notes["labels"]["aliases"]["LTOE"] == "LFMH+LVMH"
+    assert "LTOE set aside: 33 deg off the line from LHEE" in take.notes["labels"]["toe"]["LTOE"]
+    assert np.abs(take.frames - ref.frames).max() < 1e-9  # the heads' mid-point is where the toe marker was
+    kept = match_labels(_with_markers(_with_markers(trial, heads), toe_turned(10.0), drop=("LTOE", "RTOE")))
+    assert kept.roles["LTOE"] == "LTOE" and kept.roles["RTOE"] == "RTOE" and not kept.toe

@@ -73,6 +73,12 @@ the fifth head (or a "lateral toe" ``LA_TOE``, tsalemink's AUC set) alone. The h
 from CAST's FM2 in AnyBody's 2014001_C1_01, its heel-to-toe line turned under 1 degree; the fifth alone turns
 the foot's long axis outward, by 25-27 degrees (88 mm from the toe marker) in AnyBody's GaitNormal_1, and the
 ZMP falls outside the support polygon more often: docs/validation.md ("Toe markers").
+
+A toe marker off the foot's long axis gives way to the heads' mid-point: where the one label claiming a side's toe
+lies more than :data:`MAX_TOE_OFF_AXIS_DEG` off the line from the heel marker to the first and fifth heads'
+mid-point (median over the take), that mid-point is the toe (``markers.labels.toe`` says so, with the angle). The
+toe sits on that line (Plug-in Gait's on the second metatarsal head); Qualisys' NewPaf 1 placed its 33 degrees
+medial of it and behind the heads, the foot's sole turned with it and its plates' CoP fell off the foot.
 """
 
 from __future__ import annotations
@@ -135,6 +141,11 @@ EPICONDYLES: dict[str, tuple[tuple[str, str], ...]] = {
 # 0.245 and 0.246 of the stature), an elbow's beside the waist, near the ASIS' height: a quarter of the way
 # tells them apart, with room for a hip flexed in swing or a knee bent
 MIN_KNEE_ALONG_LEG = 0.25
+# a toe marker further than this off the line from the heel marker to the first and fifth metatarsal heads' mid-point
+# (median over the take) is not on the foot's long axis: the toes of the other sets with both heads lie 2-16 deg off
+# it (the CGM2 walks of held-out round 4 9-16, cgm24 and c3d.org's pyCGM2 sample 2-4, AnyBody's FM2 4), Qualisys'
+# NewPaf 1's 33 deg, medial of it and behind the heads (docs/validation.md, held-out round 4)
+MAX_TOE_OFF_AXIS_DEG = 25.0
 BY_POSITION = "lateral / medial told by position"
 _MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
 # two markers of one knee or ankle lie a joint's width (plus a marker's 14 mm) apart across the body: the knee and
@@ -251,8 +262,9 @@ def match_labels(trial: C3dTrial, pinned: frozenset[str] = frozenset()) -> Label
     toe = _toe_at_foot(trial, claims, pinned)
     midpoints = {}
     for side in "LR":
-        if side + "TOE" not in claims and side + "TOE" not in pinned:
-            chosen = _forefoot_toe(trial, labels, bare, claims, side)
+        if side + "TOE" not in pinned:
+            chosen = (_forefoot_toe(trial, labels, bare, claims, side) if side + "TOE" not in claims else
+                      _toe_off_axis(trial, labels, bare, claims, side))
             if chosen:
                 name, why, parts = chosen
                 claims[side + "TOE"], convention[name], toe[side + "TOE"] = [name], FOREFOOT_TOE, why
@@ -325,16 +337,45 @@ def _toe_at_foot(trial: C3dTrial, claims: dict[str, list[str]], pinned: frozense
     return out
 
 
-def _forefoot_toe(trial: C3dTrial, labels: list[str], bare: dict[str, str], claims: dict[str, list[str]],
-                  side: str) -> tuple[str, str, tuple[str, ...]] | None:
-    """The toe marker's stand-in on ``side`` (module docstring): the name it goes by, why, and the labels it is
-    the mean of; None without one."""
+def _heads(trial: C3dTrial, labels: list[str], bare: dict[str, str], claims: dict[str, list[str]],
+           side: str) -> dict[str, list[str]]:
+    """``side``'s metatarsal-head markers at the foot (near its ankle marker, when one label claims it): role
+    (``MT1``, ``MT5``) -> the labels naming it."""
     ankle = claims.get(side + "ANK", [])
     heads: dict[str, list[str]] = {}
     for lab in labels:
         found = _named(bare[lab], _LOOKUP_FOREFOOT, {})
         if found and found[0][0] == side and (len(ankle) != 1 or _from_ankle(trial, lab, ankle[0])[0]):
             heads.setdefault(found[0][1:], []).append(lab)
+    return heads
+
+
+def _toe_off_axis(trial: C3dTrial, labels: list[str], bare: dict[str, str], claims: dict[str, list[str]],
+                  side: str) -> tuple[str, str, tuple[str, ...]] | None:
+    """The first and fifth metatarsal heads' mid-point in place of ``side``'s toe marker (the one label claiming
+    it) when that lies more than :data:`MAX_TOE_OFF_AXIS_DEG` off the line from the heel marker to the mid-point
+    (median over the frames seeing all four): as :func:`_forefoot_toe`; None: the toe is kept."""
+    heads, toe, heel = _heads(trial, labels, bare, claims, side), claims[side + "TOE"], claims.get(side + "HEE", [])
+    mt1, mt5 = heads.get("MT1", []), heads.get("MT5", [])
+    if len(toe) != 1 or len(heel) != 1 or len(mt1) != 1 or len(mt5) != 1:
+        return None
+    back = trial.marker(heel[0])
+    mid = (trial.marker(mt1[0]) + trial.marker(mt5[0])) / 2 - back
+    ahead = trial.marker(toe[0]) - back
+    cos = np.sum(mid * ahead, axis=1) / (np.linalg.norm(mid, axis=1) * np.linalg.norm(ahead, axis=1))
+    cos = cos[np.isfinite(cos)]
+    off = float(np.degrees(np.arccos(np.clip(np.median(cos), -1.0, 1.0)))) if cos.size else 0.0
+    if off <= MAX_TOE_OFF_AXIS_DEG:
+        return None
+    return (f"{mt1[0]}+{mt5[0]}", f"mid-point of {mt1[0]} and {mt5[0]} ({toe[0]} set aside: {off:.0f} deg off the "
+            f"line from {heel[0]} to the metatarsal heads, not on the foot's long axis)", (mt1[0], mt5[0]))
+
+
+def _forefoot_toe(trial: C3dTrial, labels: list[str], bare: dict[str, str], claims: dict[str, list[str]],
+                  side: str) -> tuple[str, str, tuple[str, ...]] | None:
+    """The toe marker's stand-in on ``side`` (module docstring): the name it goes by, why, and the labels it is
+    the mean of; None without one."""
+    heads = _heads(trial, labels, bare, claims, side)
     mt1, mt5 = heads.get("MT1", []), heads.get("MT5", [])
     if len(mt1) == 1 and len(mt5) == 1:
         return (f"{mt1[0]}+{mt5[0]}", f"mid-point of {mt1[0]} and {mt5[0]} (no toe marker: the first and fifth "
