@@ -89,8 +89,11 @@ def test_the_zmp_dynamics_stay_sane_and_fail_without_it():
     load, has = loads(clear_of_gimbal_lock(motion))
     assert has.all()
     assert np.all(np.abs(load - 1.0) < 0.15)  # a slow knee flexion: the ground carries the weight
-    raw_load, raw_has = loads(motion)  # the file's own angles: the spins' errors blow the dynamics up
-    assert np.max(np.abs(raw_load - 1.0)) > 10.0 or not raw_has.all()  # measured: 280 times the weight
+    # the file's own angles spin up to 180° a frame: 280 times the weight until the per-frame Kalman filter unwrapped
+    # each sample against the previous one (held-out C3D round 5); now 0.038 of it, 5.6 times the re-expressed
+    # angles' error, and only these keep the batch path (the spins' innovations reach ±π)
+    raw_load, raw_has = loads(motion)
+    assert np.max(np.abs(raw_load - 1.0)) > 3 * np.max(np.abs(load - 1.0))
 
 
 @pytest.mark.parametrize("chunk", [7, 1000])

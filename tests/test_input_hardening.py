@@ -79,13 +79,15 @@ def test_deep_hierarchy_is_one_line_not_recursion_error(tmp_path, capsys):
 
 
 def test_channel_count_is_refused_before_allocating(tmp_path, capsys):
+    """A file's channels are bounded by its joints (MAX_JOINTS, 6 channels each; the model's own channels by
+    MAX_CHANNELS, tests/test_bvh_massless.py): a flat skeleton of 301 joints is refused while its hierarchy is read."""
     lines = ["HIERARCHY", "ROOT R", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition "
              "Zrotation Xrotation Yrotation"]
-    for k in range(50):  # a flat skeleton of 51 joints with 306 channels
+    for k in range(300):  # 1806 channels
         lines += [f"JOINT J{k}", "{", "OFFSET 0 1 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation "
                   "Xrotation Yrotation", "}"]
-    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.01", " ".join(["0"] * 306)]
-    refused(capsys, "analyze", put(tmp_path, "wide.bvh", "\n".join(lines)), names="wide.bvh:", says="channels")
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.01", " ".join(["0"] * 1806)]
+    refused(capsys, "analyze", put(tmp_path, "wide.bvh", "\n".join(lines)), names="wide.bvh:", says="joints")
 
 
 def test_estimator_window_limit_refuses_before_allocating():
