@@ -206,7 +206,7 @@ class ConstantAccelerationKalman:
         col = P[:, :, 0].copy()  # P is symmetric: column 0 is also row 0 (H P)
         scale = 1.0 / (col[:, 0] + self.meas_var)
         if valid.all() and self.all_started:
-            innovation = y - predicted  # every channel measured
+            measured = y  # every channel measured
         else:
             fresh = valid & ~self.started
             if fresh.any():
@@ -216,11 +216,12 @@ class ConstantAccelerationKalman:
                 self.started |= fresh
                 self.all_started = bool(self.started.all())
             update = valid & ~fresh
-            innovation = np.where(update, y, predicted) - predicted
+            measured = np.where(update, y, predicted)  # a fresh channel's state is its sample: no innovation
             scale *= update
         if self._any_angle:
-            innovation = np.where(valid, self._unwrapped(innovation + predicted, predicted), predicted) - predicted
-        self._last = np.where(valid, innovation + predicted, np.nan)
+            measured = np.where(valid, self._unwrapped(measured, predicted), predicted)
+        self._last = np.where(valid, measured, np.nan)
+        innovation = measured - predicted
         gain = col * scale[:, None]
         self.x += gain * innovation[:, None]
         P -= gain[:, :, None] * col[:, None, :]
