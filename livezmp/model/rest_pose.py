@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from livezmp.model.bvh import BvhMotion
+from livezmp.model.bvh_body import CALIBRATION_S
 
 # of the rotation channels that move through the frames after it (non-zero in MOVING_SHARE of them), the share
 # exactly zero in a frame that makes it a rest pose. Measured over 61 public takes: the CMU conversions' first
@@ -23,7 +24,9 @@ from livezmp.model.bvh import BvhMotion
 REST_SHARE = 0.4
 MOVING_SHARE = 0.9
 MIN_MOVING = 3  # channels: fewer moving ones say nothing about a pose (a single-joint test take)
-REST_SCAN_S = 2.0  # s: the window the frames after a candidate are judged by (a stream knows no more at its start)
+# s: the window the frames after a candidate are judged by: the first seconds a take's body is made from, all a take
+# read in pieces has read when its body is made (livezmp.offline.take_stream)
+REST_SCAN_S = CALIBRATION_S
 MAX_REST_FRAMES = 5  # leading frames at most held; exporters write one
 
 
@@ -41,11 +44,6 @@ def leading_rest_frames(labels: list[str], frames: np.ndarray) -> int:
     return n
 
 
-def scan_rows(frame_time: float) -> int:
-    """Rows of :data:`REST_SCAN_S` s at ``frame_time`` s a frame."""
-    return max(2, round(REST_SCAN_S / frame_time))
-
-
 def hold_rest(frames: np.ndarray, rest: int, first_moving: np.ndarray | None = None, start: int = 0) -> np.ndarray:
     """``frames`` (rows ``start``.. of a take) with the take's first ``rest`` rows set to its first moving row
     (``first_moving``, (C,); default: row ``rest`` of these frames); a copy only where a row changes."""
@@ -60,5 +58,5 @@ def hold_rest(frames: np.ndarray, rest: int, first_moving: np.ndarray | None = N
 def without_rest_pose(motion: BvhMotion) -> tuple[BvhMotion, int]:
     """``motion`` with its leading rest frames (:func:`leading_rest_frames` over its first :data:`REST_SCAN_S` s)
     held at its first moving pose, and how many there were."""
-    rest = leading_rest_frames(motion.channel_labels(), motion.frames[: scan_rows(motion.frame_time)])
+    rest = leading_rest_frames(motion.channel_labels(), motion.frames[: max(2, round(REST_SCAN_S / motion.frame_time))])
     return (replace(motion, frames=hold_rest(motion.frames, rest)), rest) if rest else (motion, 0)
