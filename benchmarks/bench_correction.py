@@ -15,6 +15,13 @@ weight-bearing feet move with the final check on the feet (livezmp.correct.edit.
 and without it (the solver's first-order rotation bounds alone), and the frames outside:
 
     python benchmarks/bench_correction.py --skeletons [--frames 90]
+
+With ``--every-walk`` it corrects each of the 24 Bandai walks whole with `livezmp correct`, re-analyses the result
+at the correction's cutoff and prints, per walk, the frames outside before and after, the largest root rotation,
+how far the loaded feet move and the solver's time a frame (two walks at a time; minutes). The suite checks the
+six hardest (tests/test_correction_bandai.py):
+
+    python benchmarks/bench_correction.py --every-walk
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from unittest import mock
 
@@ -38,11 +46,12 @@ from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import body_from_bvh
 
 BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh" / "bandai"
+TESTS = Path(__file__).resolve().parents[1] / "tests"
 
 
 def variant_motions(walk: str, frames: int) -> dict[str, BvhMotion]:
     """The walk's first ``frames`` frames re-expressed exactly on other skeletons (tests/skeleton_variants.py)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    sys.path.insert(0, str(TESTS))
     import skeleton_variants as sv
 
     s = sv.decompose(read_bvh(BANDAI / walk))
@@ -78,6 +87,22 @@ def skeleton_table(walk: str, frames: int) -> None:
               f"{without['max_foot_displacement_mm']:>8.3f} {len(with_check['foot_held_frames']):>11d}")
 
 
+def every_walk_table() -> None:
+    """Every Bandai walk corrected and re-analysed, as tests/test_correction_bandai.py does for the hardest."""
+    sys.path.insert(0, str(TESTS))
+    from bandai_correction import correct_and_reanalyse, table
+
+    files = sorted(str(p) for p in BANDAI.glob("*.bvh"))
+    start = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        results = dict(zip(files, pool.map(correct_and_reanalyse, files), strict=True))
+    print(f"load average {load_averages(' ')}; {len(files)} walks in {time.perf_counter() - start:.0f} s")
+    print(table(results))
+    good = sum(r["after"]["inside_fraction"] >= 0.99 and r["report"]["max_foot_displacement_mm"] <= 1.0
+               for r in results.values())
+    print(f"{good} of {len(files)} walks at least 99 % inside after with the loaded feet moved at most 1 mm")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--walk", default="walk_normal_001.bvh")
@@ -85,7 +110,12 @@ def main() -> None:
     ap.add_argument("--step-deg", type=float, default=0.5)
     ap.add_argument("--skeletons", action="store_true",
                     help="the walk on other skeletons: loaded feet, with and without the final check")
+    ap.add_argument("--every-walk", action="store_true",
+                    help="every Bandai walk corrected whole and re-analysed (the suite checks the hardest six)")
     args = ap.parse_args()
+    if args.every_walk:
+        every_walk_table()
+        return
     if args.skeletons:
         skeleton_table(args.walk, args.frames)
         return
