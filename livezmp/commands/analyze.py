@@ -17,7 +17,6 @@ from rich.progress import Progress
 
 from livezmp.checks import check_output_path
 from livezmp.commands.common import check_body_options, load_from_args, take_options
-from livezmp.offline.plot import plot_analysis
 from livezmp.offline.report import write_json, write_zmp_csv
 from livezmp.offline.take import (
     TakeAnalysis,
@@ -69,6 +68,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         if args.out:
             write_zmp_csv(a.body, a.result, args.out, a.columns)
         if args.plot:
+            from livezmp.offline.plot import plot_analysis  # matplotlib: only when a figure is asked for
+
             plot_analysis(a.body, a.result, args.plot, title=f"{Path(a.source).name} ({args.mode} ZMP)", cop=a.cop,
                           complete=a.complete)
     source = summary["source"]
