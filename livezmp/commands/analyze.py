@@ -84,6 +84,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if summary.get("rest_pose_frames"):
         print(f"  the first {summary['rest_pose_frames']} frame(s) are the skeleton's rest pose (rotations zero), not "
               "motion: analysed at the first moving frame's pose")
+    if summary.get("loop"):
+        print(f"  a looped cycle (its last frame repeats its first): analysed as the loop played on, "
+              f"{summary['loop']['padded_frames']} frames of it before and after")
     if inside is not None:
         print(f"  within {summary['tolerance_mm']:g} mm of support (the ZMP's validated error): "
               f"{100 * summary['inside_fraction_tol']:.1f} %; motion: {summary['plausibility']['verdict']}")

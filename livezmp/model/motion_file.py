@@ -16,6 +16,7 @@ from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.euler_orders import gimbal_orders, reexpressed, restore
+from livezmp.model.loop_cycle import Loop, find_loop
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.mimic import follow
 from livezmp.model.rest_pose import without_rest_pose
@@ -37,6 +38,7 @@ class LoadedMotion:
     trajectory: JointTrajectory | None = None
     c3d: C3dTrial | None = None
     rest_frames: int = 0  # a BVH's leading rest-pose frames, held at its first moving pose (livezmp.model.rest_pose)
+    loop: Loop | None = None  # a looped cycle's (livezmp.model.loop_cycle), over the columns of ``frames``
 
     @property
     def fps(self) -> float:
@@ -60,8 +62,9 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         clear = reexpressed(held, orders)
         body = body_from_bvh(clear, bvh_options)
         times = np.arange(len(motion.frames)) * motion.frame_time
+        loop = find_loop(held.channel_labels(), held.frames, held.frame_time)
         return LoadedMotion(body, times, body.input_rows(clear.frames), str(p), bvh=motion, bvh_orders=orders,
-                            rest_frames=rest)
+                            rest_frames=rest, loop=loop and replace(loop, positions=body.input_rows(loop.positions)))
     if suffix == ".c3d":
         trial = read_c3d(p)
         take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),

@@ -24,6 +24,7 @@ from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
+from livezmp.model.loop_cycle import Loop
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import LoadedMotion, load_motion, write_motion
@@ -33,7 +34,13 @@ from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
 from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
 from livezmp.offline.report import TakeStats, ZmpCsvWriter, atomic_path, summarize, write_zmp_csv
-from livezmp.offline.take_stream import TakeStream, analyse_stream, open_bvh_take, open_joint_csv_take
+from livezmp.offline.take_stream import (
+    TakeStream,
+    analyse_stream,
+    open_bvh_take,
+    open_joint_csv_take,
+    within_take,
+)
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 ZMP_CSV = "zmp.csv"
@@ -118,12 +125,18 @@ def take_config(loaded: LoadedMotion | TakeStream, mode: str, ground: float | No
 
 def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | None = None,
                    progress: Callable[[int], None] | None = None, cutoff_hz: float | None = None) -> BatchResult:
-    """The pipeline over a loaded take: its per-frame results."""
+    """The pipeline over a loaded take: its per-frame results (a looped cycle's with its pads, as
+    :mod:`livezmp.model.loop_cycle` says, their results dropped)."""
     if len(loaded.frames) < 2:
         raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
     cfg = take_config(loaded, mode, ground, cutoff_hz)
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
-    return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
+    if loaded.loop is None:
+        return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
+    lead, n = loaded.loop.pad_frames(1.0 / loaded.fps), len(loaded.frames)
+    padded = loaded.loop.rows(loaded.frames, -lead, n + lead)
+    result = run_batch(pipe, loaded.times[0] + np.arange(-lead, n + lead) / loaded.fps, padded)
+    return within_take(result, lead, n)
 
 
 @dataclass
@@ -150,13 +163,19 @@ def analyse_motion(loaded: LoadedMotion, options: TakeOptions,
     result = analyse_loaded(loaded, options.mode, options.ground, progress, options.cutoff_hz)
     summary = {"source": loaded.source,
                **summarize(loaded.body, result, loaded.fps, options.mode, options.tolerance_mm),
-               **_rest_note(loaded.rest_frames), "estimator": _estimator_settings(loaded, options)}
+               **_rest_note(loaded.rest_frames), **_loop_note(loaded.loop, loaded.fps),
+               "estimator": _estimator_settings(loaded, options)}
     return TakeAnalysis(loaded.body, result, loaded.fps, loaded.source, summary)
 
 
 def _rest_note(rest: int) -> dict:
     """The summary's ``rest_pose_frames``: a BVH's leading rest-pose frames, analysed at its first moving pose."""
     return {"rest_pose_frames": rest} if rest else {}
+
+
+def _loop_note(loop: Loop | None, fps: float) -> dict:
+    """The summary's ``loop``: a looped cycle's period and the frames of it analysed before and after the take."""
+    return {"loop": {"period_frames": loop.period, "padded_frames": loop.pad_frames(1.0 / fps)}} if loop else {}
 
 
 def _estimator_settings(take: LoadedMotion | TakeStream, options: TakeOptions) -> dict:
@@ -190,7 +209,7 @@ def stream_take(take: str | Path | TakeStream, options: TakeOptions, csv: str | 
             consumers.append(writer)
         analyse_stream(take, cfg, consumers, chunk, progress)
     summary = {"source": take.source, **stats.summary(take.body, options.mode), **_rest_note(take.rest_frames),
-               "estimator": _estimator_settings(take, options)}
+               **_loop_note(take.loop, take.fps), "estimator": _estimator_settings(take, options)}
     if series:
         with atomic_path(plot) as tmp:
             plot_analysis(take.body, series.result(), tmp, title=f"{Path(take.source).name} ({options.mode} ZMP)")

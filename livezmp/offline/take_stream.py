@@ -17,7 +17,7 @@ from the start and stepped frame by frame, the consumers restarted, as the whole
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -31,6 +31,7 @@ from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, stream_bvh
 from livezmp.model.bvh_body import CALIBRATION_S, BvhBodyOptions, body_from_bvh
 from livezmp.model.euler_orders import reexpress, reordered_joints, scan_orders
+from livezmp.model.loop_cycle import MAX_LOOP_S, Loop, find_loop
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.rest_pose import hold_rest, without_rest_pose
 from livezmp.model.trajectory_csv import joint_csv_blocks, scan_joint_csv
@@ -51,7 +52,9 @@ class TakeStream:
     """A take read lazily: its ``body``, frame rate ``fps`` (Hz, as :class:`LoadedMotion` computes it),
     ``total`` frames, ``source``; ``pieces(chunk)`` reads it (again) from its first frame as
     (times (c,) s, frames (c, nq) raw channels), ``chunk`` frames each but the last; ``rest_frames`` a BVH's
-    leading rest-pose frames, held at its first moving pose (:mod:`livezmp.model.rest_pose`)."""
+    leading rest-pose frames, held at its first moving pose (:mod:`livezmp.model.rest_pose`); ``loop`` a looped
+    cycle's, whose ``pieces`` then play ``lead`` frames of the loop before the take's first and after its last
+    (:mod:`livezmp.model.loop_cycle`; their results are dropped)."""
 
     body: BodyModel
     fps: float
@@ -59,6 +62,8 @@ class TakeStream:
     source: str
     pieces: Callable[[int], Iterator[tuple[np.ndarray, np.ndarray]]]
     rest_frames: int = 0
+    loop: Loop | None = None
+    lead: int = 0
 
     def check_length(self) -> None:
         """Refuse a take too short to analyse (before its rate, 0 Hz for one frame, is used)."""
@@ -74,12 +79,14 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
     holds them."""
     path = check_input_file(path, "motion file")
     header, blocks = stream_bvh(path)
-    calibration = max(1, round(CALIBRATION_S / header.frame_time))
+    # the first seconds make the body; a take short enough to be a looped cycle is read whole to be judged one
+    needed = header.n_frames if header.n_frames * header.frame_time <= MAX_LOOP_S else 1
+    needed = max(needed, round(CALIBRATION_S / header.frame_time))
     first, count = [], 0
     for block in blocks:
         first.append(block)
         count += len(block)
-        if count >= calibration:
+        if count >= needed:
             break
     blocks.close()
     orders = scan_orders(header.joints, lambda: stream_bvh(path)[1])
@@ -90,6 +97,17 @@ def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:
                          options)
     ends = np.array([0, header.n_frames - 1]) * header.frame_time  # as load_motion's times
     fps = float((header.n_frames - 1) / (ends[1] - ends[0])) if header.n_frames > 1 else 0.0
+    loop = find_loop(held.channel_labels(), held.frames, header.frame_time) if count == header.n_frames else None
+    if loop is not None:  # the whole (short) take is in hand: the loop is played from it
+        loop = replace(loop, positions=body.input_rows(loop.positions))
+        rows, lead = body.input_rows(start), loop.pad_frames(header.frame_time)
+
+        def looped(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+            for a in range(-lead, header.n_frames + lead, chunk):
+                b = min(a + chunk, header.n_frames + lead)
+                yield np.arange(a, b) * header.frame_time, loop.rows(rows, a, b)
+
+        return TakeStream(body, fps, header.n_frames, header.source, looped, rest, loop, lead)
 
     def pieces(chunk: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         start, previous = 0, None
@@ -128,15 +146,26 @@ def analyse_stream(take: TakeStream, config: PipelineConfig, consumers: Sequence
     :func:`livezmp.offline.batch.run_batch` says). ``progress(frames_done)`` after each chunk."""
     take.check_length()
     pipe = Pipeline(take.body, config, nominal_dt=1.0 / take.fps)
+    fed = take.total + 2 * take.lead
     try:
-        _feed(batch_chunks(take.body, config, pipe.estimator, pipe.contacts, take.total, take.pieces(chunk), chunk),
-              consumers, progress)
+        parts = batch_chunks(take.body, config, pipe.estimator, pipe.contacts, fed, take.pieces(chunk), chunk)
+        _feed((within_take(p, take.lead, take.total) for p in parts), consumers, progress)
         return "batch"
     except NotBatchable as e:
         reason = str(e)
-    _feed(_stepped(Pipeline(take.body, config, nominal_dt=1.0 / take.fps), take.pieces(chunk), chunk), consumers,
-          progress)
+    parts = _stepped(Pipeline(take.body, config, nominal_dt=1.0 / take.fps), take.pieces(chunk), chunk)
+    _feed((within_take(p, take.lead, take.total) for p in parts), consumers, progress)
     return f"per-frame: {reason}"
+
+
+def within_take(part: BatchResult, lead: int, total: int) -> BatchResult:
+    """The rows of ``part`` that are the take's own frames when ``lead`` padding frames were analysed before its
+    ``total`` (and as many after), numbered from the take's first frame."""
+    if not lead:
+        return part
+    out = part.select((part.index >= lead) & (part.index < lead + total))
+    out.index = out.index - lead
+    return out
 
 
 def _feed(parts: Iterator[BatchResult], consumers: Sequence[Consumer],

@@ -1,0 +1,87 @@
+"""A looped animation cycle (its last frame repeats its first) is analysed as the loop it is: every frame, the first
+and last included, gets the ZMP it has in the middle of the loop played on, as a take of three cycles gives it."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from test_bvh_massless import skeleton
+
+from livezmp.cli import main
+from livezmp.model.bvh import BvhMotion, write_bvh
+from livezmp.model.loop_cycle import MAX_LOOP_S, find_loop
+from livezmp.model.motion_file import load_motion
+from livezmp.offline.take import analyse_loaded
+
+PERIOD, DT = 40, 1 / 30  # frames a cycle: 1.33 s, longer than the pads (1 s)
+SPEED = 60.0  # cm/s forward, so each cycle starts where the last ended
+
+
+def cycles(n: int) -> BvhMotion:
+    """``n`` cycles of a take swaying over its feet (trunk ±8°, arms ±12°, the rest ±1°, each at the cycle's
+    frequency, the root sideways ±3 cm) while it glides forward, ``n * PERIOD + 1`` frames: the last repeats the
+    first pose, carried on by the travel."""
+    joints = skeleton(False)
+    t = np.arange(n * PERIOD + 1) * DT
+    w = 2 * np.pi / (PERIOD * DT)
+    cols = []
+    for j in joints:
+        for c in j.channels:
+            if c == "Yposition":
+                cols.append(np.full(len(t), 96.0))
+            elif c == "Zposition":
+                cols.append(SPEED * t)
+            elif c == "Xposition":
+                cols.append(3 * np.sin(w * t))
+            else:
+                amplitude = 8 if j.name + c == "SpineXrotation" else 12 if "Arm" in j.name else 1
+                cols.append(amplitude * np.sin(w * t + sum(map(ord, j.name + c)) % 7))
+    return BvhMotion(joints, DT, np.column_stack(cols))
+
+
+@pytest.fixture(scope="module")
+def takes(tmp_path_factory):
+    d = tmp_path_factory.mktemp("loop")
+    paths = {"loop": d / "loop.bvh", "three": d / "three.bvh"}
+    write_bvh(cycles(1), paths["loop"])
+    write_bvh(cycles(3), paths["three"])
+    return paths
+
+
+def test_a_looped_cycle_is_analysed_as_the_middle_of_its_loop(takes):
+    loop, three = load_motion(takes["loop"]), load_motion(takes["three"])
+    assert loop.loop is not None and loop.loop.period == PERIOD
+    middle = analyse_loaded(three).zmp[PERIOD: 2 * PERIOD + 1]
+    looped = analyse_loaded(loop).zmp
+    travel = loop.body.world_from_input @ [0.0, 0.0, SPEED * PERIOD * DT / 100]  # a cycle's, internal frame, m
+    err = np.linalg.norm(looped - (middle - travel), axis=1)
+    assert err.max() < 2e-3  # m, every frame, the first and last included (0.9 mm: the pads' 1 s against 1.33 s)
+    alone = analyse_loaded(replace(loop, loop=None)).zmp  # without the rule: the cycle's ends are the filter's edges
+    edge = np.linalg.norm(alone - (middle - travel), axis=1)
+    assert edge[[0, 1, -2, -1]].min() > 0.02 and edge[PERIOD // 2] < 1e-3  # 53, 33, 31, 39 mm
+
+
+def test_analyze_says_so_and_streams_what_the_whole_take_gives(takes, tmp_path):
+    csv, js = tmp_path / "z.csv", tmp_path / "s.json"
+    assert main(["analyze", str(takes["loop"]), "--out", str(csv), "--summary-json", str(js)]) == 0
+    s = json.loads(js.read_text())
+    assert s["loop"] == {"period_frames": PERIOD, "padded_frames": 30} and s["frames"] == PERIOD + 1
+    rows = np.genfromtxt(csv, delimiter=",", names=True)
+    whole = load_motion(takes["loop"]).body.to_input_frame(analyse_loaded(load_motion(takes["loop"])).zmp)
+    for axis, name in enumerate(("zmp_x", "zmp_y", "zmp_z")):
+        assert np.abs(rows[name] - whole[:, axis]).max() < 1e-6, name  # zmp.csv's 6 decimals
+
+
+def test_only_a_take_whose_last_frame_repeats_its_first_is_a_loop():
+    m = cycles(1)
+    labels = m.channel_labels()
+    assert find_loop(labels, m.frames, DT) is not None
+    assert find_loop(labels, m.frames[:-3], DT) is None  # stops short of its first pose
+    moved = m.frames.copy()
+    moved[-1, labels.index("Spine.Xrotation")] += 2.0  # one joint 2° off at the seam: not a repeat of the first
+    assert find_loop(labels, moved, DT) is None
+    long = cycles(9)  # closes on itself too, but is longer than an animation cycle is
+    assert len(long.frames) * DT > MAX_LOOP_S and find_loop(labels, long.frames, DT) is None
