@@ -309,6 +309,30 @@ def test_plates_stepped_on_at_two_heights_are_refused_in_one_line(plate, refused
         assert code == 0 and err == ""
 
 
+def test_a_plate_stepped_on_leaning_like_a_ramp_is_refused_in_one_line(tmp_path, capsys):
+    """fhstp/autoSIM's FH Campus Wien walks go up two plates leaning 9.9 deg (a ramp). A plate stepped on with its
+    far edge 86 mm up (its mean height 43 mm up, within one floor's LEVEL_M) was read as level, its CoP compared
+    with a ZMP on a floor it is not; it is refused in one line naming the plate and its lean. Leaning 0.5 deg (the
+    most of any plate stepped on in the trials read is 0.8) it is read."""
+    for rise, refused in ((86.0, True), (4.0, False)):
+        path = tmp_path / f"trial_{rise:.0f}.c3d"
+        write_lab_c3d(path, PLATES, lab=Lab(seconds=SECONDS))
+        c3d = ezc3d.c3d(str(path))
+        corners = np.array(c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"], dtype=float)
+        far = np.argsort(corners[0, :, 1])[2:]  # plate 2's two corners furthest along the lab's x
+        corners[2, far, 1] += rise  # mm
+        c3d.add_parameter("FORCE_PLATFORM", "CORNERS", corners)
+        c3d.write(str(path))
+        code = main(["analyze", str(path), "--out", str(tmp_path / "z.csv")])
+        err = capsys.readouterr().err.strip()
+        if refused:
+            lean = np.degrees(np.arctan(rise / np.ptp(corners[0, :, 1])))
+            assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err
+            assert f"force plate stepped on 2 leans {lean:.1f} deg from level: a ramp" in err
+        else:
+            assert code == 0 and err == ""
+
+
 def test_a_running_step_is_no_pull():
     """A running step loads a plate hard and briefly (AnyBody's SlowRun: 1750 N over about 0.25 s); low-passed at
     the estimator's 4.9 Hz it rings 40 N below zero after the step, and both of SlowRun's plates were set aside as

@@ -31,6 +31,10 @@ G = 9.81
 # m: stepped-on plates' surfaces further apart in height than this are not one floor (a stair's step is 150-200 mm;
 # the plates of the trials read so far lie within 3 mm of each other)
 LEVEL_M = 0.05
+# deg: a stepped-on plate whose surface (the plane of its corners) leans further than this from level is a ramp's or a
+# slope's, no level floor (FH Campus Wien's ramp plates in fhstp/autoSIM lean 9.9 deg; every other plate stepped on
+# in the 269 of the trials read so far lies within 0.8 deg of it: docs/validation.md, held-out round 6)
+MAX_TILT_DEG = 2.0
 STANDING_S = 1.5  # s: plates loaded this long without a break are stood on, not walked over
 # a foot stands still (stance, :func:`raised_by`) while its ankle centre moves slower than this horizontally, for at
 # least STILL_S: a walking stance's ankle holds still 0.3-0.4 s, a swing moves it at 1-5 m/s
@@ -67,19 +71,35 @@ def plates_floor(trial: C3dTrial, mmap: MarkerMap | None = None) -> float | None
     """Height (m, internal frame) of the trial's plates' surface (the mean of their corners): the floor;
     None without plates. ``mmap``: the trial's marker map, if it needs one. Raises InputError when the plates
     stepped on (vertical force varying by more than ``UNLOADED_MAX_N``) lie more than ``LEVEL_M`` apart in height:
-    a stair's or a step's plates are no one floor for the ZMP (pyCGM's Movement_trial: plates 0-584 mm up)."""
+    a stair's or a step's plates are no one floor for the ZMP (pyCGM's Movement_trial: plates 0-584 mm up); or when
+    one of them leans more than ``MAX_TILT_DEG`` from level (:func:`plate_tilt_deg`): a ramp's (fhstp/autoSIM's
+    FH Campus Wien walks up two plates leaning 9.9 deg, 86 mm apart in height: "a stair or a step" before)."""
     if not trial.plates:
         return None
     r_in = input_rotation(trial, mmap)[1]
     heights = np.array([(p.corners @ r_in.T)[:, 2].mean() for p in trial.plates])
     stepped = np.array([len(p.force) > 0 and np.ptp(p.force @ r_in[2]) > UNLOADED_MAX_N for p in trial.plates])
     on = np.flatnonzero(stepped) if stepped.any() else np.arange(len(heights))
+    tilts = {k: plate_tilt_deg(trial.plates[k].corners @ r_in.T) for k in on}
+    leaning = [k for k in on if tilts[k] > MAX_TILT_DEG]
+    if leaning:
+        raise InputError(f"{trial.source}: force plate{'s' if len(leaning) > 1 else ''} stepped on "
+                         f"{', '.join(str(k + 1) for k in leaning)} lean{'' if len(leaning) > 1 else 's'} "
+                         f"{', '.join(f'{tilts[k]:.1f}' for k in leaning)} deg from level: a ramp or a slope, and "
+                         f"the ZMP needs one level floor")
     if np.ptp(heights[on]) > LEVEL_M:
         mm = ", ".join(f"{1000 * (heights[k] - heights[on].min()):.0f}" for k in on)
         raise InputError(f"{trial.source}: the force plates stepped on are not one level floor (plates "
                          f"{', '.join(str(k + 1) for k in on)} at {mm} mm): a stair or a step, and the ZMP needs "
                          f"one floor")
     return float(heights.mean())
+
+
+def plate_tilt_deg(corners: np.ndarray) -> float:
+    """How far (deg) the plane of a plate's ``corners`` (4, 3), internal frame (z up), leans from level: the angle
+    between its normal (the cross product of its diagonals) and the vertical, either way up."""
+    normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
+    return float(np.degrees(np.arccos(min(1.0, abs(normal[2]) / np.linalg.norm(normal)))))
 
 
 def raised_by(ankles: list[np.ndarray], outlines: list[np.ndarray], rate: float) -> float:
