@@ -274,3 +274,54 @@ def test_correct_moves_a_mapped_sets_markers_and_writes_a_file_with_more_labels_
     assert np.allclose(back.marker(s01.labels[0]), moved[0], atol=1e-6, equal_nan=True)
     assert np.allclose(back.marker("HATP"), added["HATP"], atol=1e-6, equal_nan=True)
     assert all(np.array_equal(a.force, b.force) for a, b in zip(back.plates, s01.plates, strict=True))
+
+
+def _segment_outputs(m: dict[str, np.ndarray], take) -> dict[str, np.ndarray]:
+    """Plug-in Gait's segment outputs for the synthetic lab's markers ``m`` and their standard ``take``: each segment's
+    origin and three axis tips (O A L P) rigid with it, the femur's proximal tip at the hip centre, its origin at the
+    knee centre, the tibia's origin at the ankle centre, the foot's origin at the toe marker."""
+    def centre(joint, side):
+        return take.centres[joint]["left" if side == "L" else "right"]
+
+    mid_hip = (centre("hip", "L") + centre("hip", "R")) / 2
+    out = {"PELO": mid_hip, "PELA": mid_hip + (m["LASI"] + m["RASI"] - m["LPSI"] - m["RPSI"]) / 2,
+           "PELL": mid_hip + (m["LASI"] - m["RASI"]) / 2, "PELP": mid_hip + (m["LASI"] - m["LKNE"]) / 4}
+    for s in "LR":  # the synthetic body above the ankles moves as one: any two of its markers' difference is rigid
+        knee, ankle = centre("knee", s), centre("ankle", s)
+        out |= {f"{s}FEO": knee, f"{s}FEP": centre("hip", s), f"{s}FEA": knee + m[f"{s}ASI"] - m[f"{s}PSI"],
+                f"{s}FEL": knee + (m["LASI"] - m["RASI"]) / 2, f"{s}TIO": ankle, f"{s}TIP": knee,
+                f"{s}TIA": ankle + m[f"{s}ASI"] - m[f"{s}PSI"], f"{s}TIL": ankle + (m["LASI"] - m["RASI"]) / 2,
+                f"{s}FOO": m[f"{s}TOE"], f"{s}FOL": m[f"{s}TOE"] + (m["LASI"] - m["RASI"]) / 4, f"{s}FOP": ankle}
+    return out
+
+
+def test_plug_in_gaits_segment_outputs_are_read_where_the_landmarks_are_missing(tmp_path):
+    """fhstp/autoSIM's FH Campus Wien walks track thighs and shanks with clusters (LT1-4, LS1-4) and carry no
+    ASIS, knee or ankle marker a standard set reads, but Vicon Nexus wrote Plug-in Gait's segment outputs beside
+    them (PELO ..., LFEO LFEA LFEL LFEP, LTIO ..., LFOO ...): refused before ("missing LASI, RASI, LKNE ..."). A file
+    whose markers make no standard set is read as the cluster set of those outputs, the hip, knee and ankle centres
+    the model's (femur proximal tip, femur origin, tibia origin): here exactly the standard take's. A file with
+    both keeps its standard set."""
+    t = np.arange(int(SECONDS * RATE)) / RATE
+    full = _trial(t, RATE)
+    std = body_from_markers(full)
+    m = {label: full.marker(label) for label in full.labels}
+    outputs = _segment_outputs(m, std)
+    keep = range(std.first_frame, std.first_frame + len(std.frames))
+    pad = {k: np.full((len(t), 3), np.nan) for k in outputs}
+    for k, v in outputs.items():
+        pad[k][keep] = v
+    clusters = {k: v for k, v in m.items() if k[1:] in ("HEE", "TOE", "THI", "TIB")}  # no ASIS, knee or ankle marker
+    only = replace(full, labels=list(clusters) + list(pad),
+                   points=np.stack([*clusters.values(), *pad.values()], axis=1))
+    take = body_from_markers(only)
+    assert take.notes["marker_set"] == "cluster set (Plug-in Gait's segment outputs)"
+    assert take.notes["joint_centres"]["left_knee"] == "mid-point of LFEO"
+    first = take.first_frame - std.first_frame
+    for joint in ("hip", "knee", "ankle"):
+        for side in ("left", "right"):
+            got = take.centres[joint][side]
+            assert np.abs(got - std.centres[joint][side][first:first + len(got)]).max() < 1e-9
+    both = replace(full, labels=full.labels + list(pad), points=np.concatenate(
+        [full.points, np.stack(list(pad.values()), axis=1)], axis=1))
+    assert body_from_markers(both).notes["marker_set"] == std.notes["marker_set"]

@@ -13,6 +13,10 @@ A TOML file (``livezmp analyze TRIAL.c3d --markers MAP.toml``) with either or bo
   leaves the point free along its axis: it is pinned there nearest the mid-point of the two clusters.
   Optional ``stature_m`` (else from the leg length).
 
+Without a map, a file whose markers make no Plug-in Gait / Helen Hayes set but which carries Plug-in Gait's
+segment outputs (``PELO PELA PELL PELP``, ``LFEO``..., ``LTIO``..., ``LFOO``...: every Vicon Nexus trial its model
+ran on) is read as the cluster set they make, its joint centres the model's (:func:`segment_outputs_map`).
+
 Segment frames of a cluster set: the pelvis' lateral axis joins the hip centres, its up axis is
 the cluster's mean up direction carried by the cluster; a thigh or shank runs from its proximal to
 its distal joint centre, turned about that line by its cluster; the foot runs from the ankle centre to
@@ -32,6 +36,16 @@ from livezmp.tomlfile import read_toml
 
 CLUSTER_SEGMENTS = ("pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 JOINTS = {"hip": ("pelvis", "thigh"), "knee": ("thigh", "shank"), "ankle": ("shank", "foot")}
+# Plug-in Gait's model outputs, which Vicon Nexus writes with each modelled trial whatever markers tracked the
+# segments (its own set or a lab's clusters: fhstp/autoSIM's FH Campus Wien walks, a Cleveland set with thigh and
+# shank clusters and no knee or ankle landmark): each segment's origin and its anterior, lateral and proximal axis
+# tips, O A L P after the segment's name. Measured on the shared walk_plugingait and cgm24 trials: the femur's origin
+# lies 58-59 mm medial of the knee marker (the knee centre) and its proximal tip a femur's length (364-414 mm) up it
+# (the hip centre), the tibia's origin 37-43 mm medial of the ankle marker (the ankle centre), the foot's origin
+# 28-31 mm from the toe marker; the foot's anterior tip points up the shank, not along the foot, and is not read
+SEGMENT_OUTPUTS = {"pelvis": "PEL", "thigh": "FE", "shank": "TI", "foot": "FO"}
+JOINT_OUTPUTS = {"hip": "FEP", "knee": "FEO", "ankle": "TIO"}
+SEGMENT_OUTPUTS_SOURCE = "Plug-in Gait's segment outputs"
 # a direction of the joint centre the relative rotation exercises less than this part of its main direction was
 # not exercised (a hinge's axis): the prior decides there, not marker noise; below STILL rad RMS, none was
 FREE_BELOW = 0.1
@@ -103,6 +117,24 @@ def load_marker_map(path: str | Path) -> MarkerMap:
         raise InputError(f"{p}: a marker map needs [labels] or [segments]")
     return MarkerMap(str(p), tuple((k, v.strip()) for k, v in labels.items()), tuple(seg_out), tuple(joint_out),
                      None if stature is None else float(stature))
+
+
+def segment_outputs_map(trial: C3dTrial) -> MarkerMap | None:
+    """The cluster set the file's Plug-in Gait segment outputs make (:data:`SEGMENT_OUTPUTS`), when it has all of
+    them seen: each segment's origin and axis tips are its cluster, the hip centre the femur's proximal tip, the knee
+    the femur's origin, the ankle the tibia's origin; None without them."""
+    seen = {lab for lab, ok in zip(trial.labels, np.isfinite(trial.points).all(axis=2).any(axis=0), strict=True)
+            if ok}
+    segments = [("pelvis", tuple(f"{SEGMENT_OUTPUTS['pelvis']}{k}" for k in "OALP"))]
+    joints = []
+    for side, t in (("L", "l"), ("R", "r")):
+        segments += [(f"{seg}_{t}", tuple(f"{side}{SEGMENT_OUTPUTS[seg]}{k}" for k in tips))
+                     for seg, tips in (("thigh", "OALP"), ("shank", "OALP"), ("foot", "OLP"))]
+        joints += [(f"{joint}_{t}", (f"{side}{label}",)) for joint, label in JOINT_OUTPUTS.items()]
+    if not all(label in seen for _, labels in segments for label in labels):
+        return None
+    order = {s: k for k, s in enumerate(CLUSTER_SEGMENTS)}
+    return MarkerMap(SEGMENT_OUTPUTS_SOURCE, (), tuple(sorted(segments, key=lambda s: order[s[0]])), tuple(joints))
 
 
 def renamed(trial: C3dTrial, mmap: MarkerMap) -> C3dTrial:

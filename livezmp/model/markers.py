@@ -53,7 +53,16 @@ from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.euler import other_branch, wrapped
 from livezmp.model.marker_labels import MIN_JOINT_WIDTH_M, LabelMatch, standard_trial
-from livezmp.model.marker_map import JOINTS, MarkerMap, cluster_frames, functional_centre, map_labels, renamed
+from livezmp.model.marker_map import (
+    JOINTS,
+    SEGMENT_OUTPUTS_SOURCE,
+    MarkerMap,
+    cluster_frames,
+    functional_centre,
+    map_labels,
+    renamed,
+    segment_outputs_map,
+)
 
 MARKER_RADIUS = 0.007  # m: Plug-in Gait's default 14 mm markers
 KNEE_WIDTH_OF_STATURE = 0.064  # typical knee / ankle widths (m / m) when the file gives none
@@ -289,6 +298,19 @@ def _standard(trial: C3dTrial, mmap: MarkerMap | None) -> tuple[C3dTrial, dict[s
     return std, roles, match
 
 
+def _map_for(trial: C3dTrial, mmap: MarkerMap | None) -> MarkerMap | None:
+    """``mmap``; without one, the cluster set of the file's Plug-in Gait segment outputs where its markers make no
+    standard set (:func:`livezmp.model.marker_map.segment_outputs_map`), else None."""
+    implied = segment_outputs_map(trial) if mmap is None else None
+    if implied is None:
+        return mmap
+    try:
+        _standard(trial, None)
+    except InputError:
+        return implied
+    return None
+
+
 def _as_written(roles: dict[str, str | None], match: LabelMatch) -> dict[str, str | None]:
     """``roles`` (role -> the standard trial's label) with the file's own labels."""
     return {r: None if lab is None else match.roles.get(lab, lab) for r, lab in roles.items()}
@@ -305,6 +327,7 @@ def marker_roles(trial: C3dTrial, mmap: MarkerMap | None = None) -> dict[str, st
 def marker_labels(trial: C3dTrial, mmap: MarkerMap | None = None) -> list[str]:
     """The labels of ``trial``'s markers that its marker body (through the marker map ``mmap``, if any) is built
     from, as the file writes them."""
+    mmap = _map_for(trial, mmap)
     if mmap is not None and mmap.segments:
         return _cluster_labels(trial, mmap)
     return [label for label in marker_roles(trial, mmap).values() if label is not None]
@@ -312,6 +335,7 @@ def marker_labels(trial: C3dTrial, mmap: MarkerMap | None = None) -> list[str]:
 
 def input_rotation(trial: C3dTrial, mmap: MarkerMap | None = None) -> tuple[str, np.ndarray]:
     """The trial's up axis and the rotation (3, 3) from its world frame into the internal z-up one."""
+    mmap = _map_for(trial, mmap)
     if mmap is not None and mmap.segments:
         return _up_from(_cluster_up_vector(_cluster_markers(renamed(trial, mmap), mmap), mmap), trial.source)
     trial, roles, match = _standard(trial, mmap)
@@ -468,8 +492,9 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     opts = opts or MarkerBodyOptions()
     if not opts.total_mass > 0:
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
-    if opts.marker_map is not None and opts.marker_map.segments:
-        return _cluster_take(renamed(trial, opts.marker_map), opts, opts.marker_map)
+    mmap = _map_for(trial, opts.marker_map)
+    if mmap is not None and mmap.segments:
+        return _cluster_take(renamed(trial, mmap), opts, mmap)
     trial, roles, match = _standard(trial, opts.marker_map)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
     _check_coordinates(raw, _as_written(roles, match), trial)
@@ -845,7 +870,8 @@ def _cluster_segments(m: dict[str, np.ndarray], mmap: MarkerMap, trial: C3dTrial
         seg[f"thigh_{t}"], seg[f"shank_{t}"] = (hip, thigh), (knee, shank)
         seg[f"foot_{t}"] = (ankle, _foot_frame(m[toe] - ankle, shank[:, :, 1]))
         rules[f"{side}_toe"] = toe
-    notes = {"marker_set": f"cluster set (marker map {Path(mmap.source).name})",
+    notes = {"marker_set": f"cluster set ({mmap.source})" if mmap.source == SEGMENT_OUTPUTS_SOURCE else
+             f"cluster set (marker map {Path(mmap.source).name})",
              "hip_joint_centre": rules["left_hip"], "joint_centres": rules, "stature_m": round(stature, 4)}
     return seg, centres, notes
 
