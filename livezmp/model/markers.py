@@ -33,7 +33,10 @@ cluster sets: :mod:`livezmp.model.marker_map`.
   attaches it to the pelvis instead (at the take's mean tilt), for comparison.
 
 Short marker gaps (up to ``max_gap_s``) are filled by cubic interpolation; longer gaps are
-reported and the take is cut to the longest stretch where every needed marker is present.
+reported and the take is cut to the longest stretch where every needed marker is present. A toe marker (or its
+metatarsal stand-in) lost for longer is first placed from the heel and the two malleoli where a set has them
+and they are seen (:func:`toe_from_heel_and_malleoli`): BTS' few cameras lose Padova's forefoot markers on most
+frames (MOtoNMS' UNIPD walks: the right metatarsal heads seen together on 41-45 of 276-307 frames).
 """
 
 from __future__ import annotations
@@ -106,6 +109,8 @@ _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
 MAX_COORDINATE_M = 1000.0  # m from the capture origin: larger than any capture volume
 STATURE_RANGE_M = (0.5, 2.6)
 SEGMENT_LENGTH_RANGE_M = (0.01, 1.5)  # joint centre to joint centre (median over the take)
+# frames seeing a toe with the heel and both malleoli that place it where it is lost (toe_from_heel_and_malleoli)
+RIGID_FILL_MIN_FRAMES = 10
 _SIDES = {"left": ("L", 1.0, "l"), "right": ("R", -1.0, "r")}
 # How far (fore-aft, lateral) the head-arms-trunk centre of mass sways about the walk's straight-line trend,
 # as a fraction of the mid-hip's sway (:func:`hat_sway`): measured on the two trials whose trunk is tracked by
@@ -214,6 +219,39 @@ def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, 
         else:
             left_open.append((int(a), int(b - 1)))
     return out, left_open
+
+
+def _foot_frames(heel: np.ndarray, lateral: np.ndarray, medial: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) frames of the heel and the two malleoli (F, 3): x from the heel to the lateral malleolus, z normal
+    to the three (NaN where one is unseen)."""
+    x = _unit(lateral - heel)
+    z = _unit(np.cross(x, medial - heel))
+    return _columns(x, np.cross(z, x), z)
+
+
+def toe_from_heel_and_malleoli(toe: np.ndarray, heel: np.ndarray, lateral: np.ndarray, medial: np.ndarray,
+                               max_gap: int) -> tuple[np.ndarray, int]:
+    """``toe`` (F, 3) with its gaps longer than ``max_gap`` frames (those :func:`fill_gaps` leaves open) placed from
+    the ``heel`` and the ``lateral`` and ``medial`` malleoli where those three are seen: at its median position in
+    their frame over the frames seeing all four, at least :data:`RIGID_FILL_MIN_FRAMES` (else unchanged). The
+    malleoli lie on the ankle's flexion axis, so the heel carries the foot's turn about it. Returns the filled toe
+    and how many frames were placed."""
+    _, open_gaps = fill_gaps(toe, max_gap)
+    if not open_gaps:
+        return toe, 0
+    rot = _foot_frames(heel, lateral, medial)
+    refs = np.isfinite(rot).all(axis=(1, 2))
+    both = refs & np.isfinite(toe).all(axis=1)
+    if both.sum() < RIGID_FILL_MIN_FRAMES:
+        return toe, 0
+    local = np.median(np.einsum("fji,fj->fi", rot[both], toe[both] - heel[both]), axis=0)
+    gap = np.zeros(len(toe), dtype=bool)
+    for a, b in open_gaps:
+        gap[a:b + 1] = True
+    fill = gap & refs
+    out = toe.copy()
+    out[fill] = heel[fill] + rot[fill] @ local
+    return out, int(fill.sum())
 
 
 def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str | None]:
@@ -499,6 +537,13 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
     _check_coordinates(raw, _as_written(roles, match), trial)
     max_gap = max(1, round(opts.max_gap_s * trial.rate))
+    placed_toes = {}
+    for s in "LR":  # a toe lost for long, placed from the heel and the malleoli where they are seen
+        if all(s + k in raw for k in ("TOE", "HEE", "ANK", "ANK_med")):
+            raw[s + "TOE"], n = toe_from_heel_and_malleoli(raw[s + "TOE"], raw[s + "HEE"], raw[s + "ANK"],
+                                                          raw[s + "ANK_med"], max_gap)
+            if n:
+                placed_toes[match.roles.get(roles[s + "TOE"], roles[s + "TOE"])] = n
     optional = {k: raw.pop(k) for k in list(raw) if k[1:] in _OPTIONAL}
     try:
         keep, open_gaps = _trim(raw, max_gap, trial.rate)
@@ -531,6 +576,8 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
     notes.update(marker_gaps_open=open_gaps, frames_used=[keep.start, keep.stop - 1])
     if dropped:
         notes["optional_markers_not_used"] = sorted(match.roles.get(d, d) for d in dropped)
+    if placed_toes:
+        notes["toe_placed_from_heel_and_malleoli"] = {k: f"{n} frames" for k, n in placed_toes.items()}
     if match.aliases or match.toe:
         notes["labels"] = match.summary()
     if match.conventions:
