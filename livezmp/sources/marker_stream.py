@@ -38,7 +38,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import world_from_up_axis
 from livezmp.model.body_spec import marker_body, stream_marker_body
 from livezmp.model.c3d import C3dTrial, strip_prefix
-from livezmp.model.markers import MarkerBodyOptions, marker_channels, segment_channels
+from livezmp.model.markers import MarkerBodyOptions, marker_channels, marker_roles, segment_channels
 from livezmp.sources.interface import SourceFrame
 from livezmp.sources.mocap_frame import MocapFrame, MocapSource
 
@@ -69,6 +69,10 @@ class MarkerStreamSource:
             calibration = self._calibrate_on_stream(calibration_s, timeout)
         self.ground_z = plates_floor(calibration)  # internal frame; None: detected by the pipeline
         take, spec = marker_body(calibration, replace(opts, floor_z=self.ground_z))
+        if not take.roles:  # a cluster set (a map's, or a file's Plug-in Gait segment outputs): not streamed
+            marker_roles(calibration, opts.marker_map)  # refused as a standard set is, naming what it lacks
+            raise InputError(f"{calibration.source}: a cluster set is not streamed: the live body reads a Plug-in "
+                             f"Gait / Helen Hayes set's markers")
         self.take = take
         self.body, self.body_spec = stream_marker_body(take, spec, self.up)
         self.roles = [r for r, label in take.roles.items() if label is not None]
