@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import tempfile
 from pathlib import Path
@@ -13,7 +15,7 @@ def correct_and_reanalyse(path: str) -> dict:
     (from its report): {"report": the correction's report, "after": the re-analysis' summary}."""
     from livezmp.cli import main
 
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):  # the table says it
         out, rep, summ = (str(Path(tmp) / n) for n in ("c.bvh", "r.json", "s.json"))
         assert main(["correct", path, "-o", out, "--report", rep]) == 0
         report = json.loads(Path(rep).read_text())
