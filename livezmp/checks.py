@@ -117,6 +117,28 @@ def check_output_path(path: str | Path | None, option: str) -> None:
         raise InputError(f"{option} {p}: directory {parent} is not writable")
 
 
+def check_output_dir(path: str | Path, option: str) -> None:
+    """Refuse an output directory that is a file, or lies under one, or whose nearest existing directory is
+    not writable (before work starts; it is made when the work writes into it)."""
+    p = Path(path).absolute()
+    existing = next(a for a in (p, *p.parents) if a.exists())
+    if not existing.is_dir():
+        raise InputError(f"{option} {path}: {existing} is a file, not a directory")
+    if not os.access(existing, os.W_OK):
+        raise InputError(f"{option} {path}: directory {existing} is not writable")
+
+
+# Figure formats Matplotlib writes with its own backends (the suffix chooses the format)
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff")
+
+
+def check_figure_path(path: str | Path | None, option: str) -> None:
+    """:func:`check_output_path`, and a file name whose suffix is a figure format."""
+    check_output_path(path, option)
+    if path is not None and Path(path).suffix.lower() not in FIGURE_SUFFIXES:
+        raise InputError(f"{option} {path}: not a figure file name; end it in one of {', '.join(FIGURE_SUFFIXES)}")
+
+
 def check_number(value: float | None, what: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
     """``value`` finite and within [lo, hi] (or (lo, hi] with ``lo_open``); None passes."""
     if value is None:
@@ -158,6 +180,7 @@ FRAME_PERIOD_RANGE = (1e-4, 0.1)  # s
 # Largest magnitude of a channel value in file units (cm, mm, degrees, rad): 10 km in mm,
 # thousands of turns; beyond it products in the dynamics overflow rather than mean anything.
 MAX_CHANNEL_VALUE = 1e7
+MAX_COORDINATE_M = 1000.0  # m from the capture origin (a marker, a force plate's corner): beyond any capture volume
 
 
 def check_frame_period(dt: float, where: str) -> None:

@@ -154,11 +154,13 @@ def _sink_options(p: argparse.ArgumentParser) -> None:
 
 
 def _monitor_commands(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams")
+    p = sub.add_parser("monitor", help="watch balance live: a file replayed in real time, udp://, tcp:// streams, "
+                                       "capture systems, a servo link (read only)")
     p.add_argument("motion", nargs="?", metavar="SOURCE",
-                   help="motion file (.bvh, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
+                   help="motion file (.bvh, .c3d, .csv with --robot, .mcap), udp://HOST:PORT[?allow=NET,...] "
                         "(livezmp frames), tcp://HOST:PORT (BVH broadcast), lsl://NAME, qtm://HOST, natnet://HOST "
-                        "(capture systems' markers and plates); default: built-in demo")
+                        "(capture systems' markers and plates), a link URL with --robot (dynamixel:PATH, "
+                        "can:INTERFACE:CHANNEL, fw:URL; read only, no commands); default: built-in demo")
     p.add_argument("--calibration", metavar="TRIAL.c3d",
                    help="a capture stream's subject: C3D trial (same marker labels) calibrating the marker body "
                         "(default: the stream's first 2 s)")
@@ -182,7 +184,8 @@ def _monitor_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler="livezmp.commands.monitor:cmd_monitor")
 
     p = sub.add_parser("replay", help="re-run the analysis of a recorded session (MCAP)")
-    p.add_argument("recording", help="session.mcap written by `livezmp monitor --record`")
+    p.add_argument("recording", help="an MCAP recording of `livezmp monitor --record` or of the live loop's "
+                   "`run|demo --record`")
     p.add_argument("--speed", type=float, default=0.0, help="speed factor (default 0: as fast as possible)")
     _sink_options(p)
     p.set_defaults(handler="livezmp.commands.monitor:cmd_replay")

@@ -1505,3 +1505,26 @@ def test_a_toe_lost_for_long_is_placed_from_the_heel_and_the_malleoli():
     assert take.notes["toe_placed_from_heel_and_malleoli"] == {"LTOE": f"{gap.stop - gap.start} frames"}
     assert take.notes["frames_used"] == ref.notes["frames_used"]
     assert np.abs(take.frames - ref.frames).max() < 1e-9
+
+
+def test_a_rate_outside_the_frame_periods_read_is_refused(tmp_path):
+    """POINT:RATE was not checked against the frame periods every input keeps to (a 3 Hz file was refused
+    as "only 1 frames have every needed marker", a 1e9 Hz one as a pelvis turning 179 deg a frame)."""
+    c3d = ezc3d.c3d(str(_points_c3d(tmp_path / "ok.c3d", _markers(np.arange(20) / RATE))))
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [5.0]
+    c3d.write(str(tmp_path / "slow.c3d"))
+    with pytest.raises(InputError, match=r"slow\.c3d: POINT:RATE 5: frame period 0.2 s is outside"):
+        read_c3d(tmp_path / "slow.c3d")
+
+
+@pytest.mark.parametrize("key", ["CORNERS", "ORIGIN"])
+def test_a_plate_geometry_not_finite_is_refused_naming_the_parameter(lab, tmp_path, key):
+    """NaN corners had reached the ground's height and were refused as "GroundConfig.override: ... nan"; an
+    ORIGIN of 1e30 mm put the CoP 1e30 mm off the foot, exit 0."""
+    c3d = ezc3d.c3d(str(lab[0] / "on.c3d"))
+    values = np.array(c3d["parameters"]["FORCE_PLATFORM"][key]["value"], dtype=float)
+    values[...] = np.nan if key == "CORNERS" else 1e30
+    c3d["parameters"]["FORCE_PLATFORM"][key]["value"] = values
+    c3d.write(str(tmp_path / "bad.c3d"))
+    with pytest.raises(InputError, match=rf"bad\.c3d: force platform 1: FORCE_PLATFORM:{key} not finite or beyond"):
+        read_c3d(tmp_path / "bad.c3d")

@@ -82,4 +82,4 @@ def test_analyze_reports_the_settings_and_takes_the_override(walk, tmp_path, cap
     capsys.readouterr()
     assert main(["analyze", str(path), "--cutoff-hz", "20"]) == 2  # above 15 Hz, the Nyquist frequency at 30 Hz
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "cutoff_hz = 20" in err and "Nyquist" in err
+    assert err.count("\n") == 1 and "--cutoff-hz 20 at 30 frames/s" in err and "Nyquist frequency, 15 Hz" in err

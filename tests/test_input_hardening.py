@@ -280,3 +280,78 @@ def test_good_robot_still_loads(tmp_path, capsys, robot):
     assert np.isfinite(s["max_excursion_m"])
     # the estimator's settings are in the summary, at the take's rate (the demo CSV is at 100 Hz)
     assert s["estimator"]["rate_hz"] == pytest.approx(100.0) and s["estimator"]["cutoff_hz"] > 0
+
+
+# -- the sixth audit: faults found by hostile inputs (/work/coord/audit6.txt) ---------------------------------------
+
+
+def test_a_hierarchy_without_channels_is_one_line(tmp_path, capsys, walk_text):
+    """No channels: its rows of no values cannot be counted (a ZeroDivisionError traceback)."""
+    text = re.sub(r"CHANNELS \d+[^\n]*", "CHANNELS 0", walk_text.split("MOTION")[0]) + "MOTION\nFrames: 2\n" \
+        "Frame Time: 0.01\n\n\n"
+    refused(capsys, "analyze", put(tmp_path, "w.bvh", text), names="w.bvh:", says="no channels")
+
+
+@pytest.mark.parametrize("encoding, line", [("utf-16", 1), ("latin-1", 2)])
+def test_a_bvh_in_another_encoding_is_named_so_not_an_empty_file(tmp_path, capsys, walk_text, encoding, line):
+    """The first line's decoding error had been taken for the end of the file ("empty file, not a BVH")."""
+    text = walk_text.replace("ROOT ", "ROOT é", 1)
+    refused(capsys, "analyze", put(tmp_path, "w.bvh", text.encode(encoding)), names=f"w.bvh:{line}:", says="UTF")
+
+
+@pytest.mark.parametrize("option", [["--tolerance-mm", "nan"], ["--tolerance-mm", "-5"], ["--cutoff-hz", "1e6"],
+                                    ["--cutoff-hz", "nan"]])
+def test_analysis_numbers_are_refused_naming_the_option(tmp_path, capsys, walk_text, option):
+    """--tolerance-mm nan was refused only when the summary came to be written, naming its field (without
+    --summary-json: "within nan mm"), -5 was used; --cutoff-hz 1e6 was refused as EstimatorConfig.window_s."""
+    p = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "analyze", p, *option, "--summary-json", tmp_path / "s.json", names=option[0], says="outside")
+
+
+def test_a_figure_name_without_a_figure_format_is_refused_before_work(tmp_path, capsys, walk_text):
+    """Matplotlib's ValueError (a traceback) after the whole analysis."""
+    refused(capsys, "analyze", put(tmp_path, "w.bvh", walk_text), "--plot", tmp_path / "z.txt", names="--plot",
+            says="not a figure file name")
+
+
+@pytest.mark.parametrize("option", [["--max-rotation-deg", "nan", "5", "5"], ["--max-rate-deg-s", "nan"],
+                                    ["--margin-mm", "nan"], ["--margin-mm", "1e9"]])
+def test_correction_limits_are_refused_when_not_finite(tmp_path, capsys, walk_text, option):
+    """NaN passed the old `<= 0` test and reached the solver (an unnamed "point: non-finite coordinate")."""
+    refused(capsys, "correct", put(tmp_path, "w.bvh", walk_text), "-o", tmp_path / "o.bvh", *option,
+            names=option[0], says="outside")
+
+
+def test_correct_refuses_a_one_frame_take_as_analyze_does(tmp_path, capsys, walk_text):
+    """It had said "rate_hz = 0.0: must be a positive number"."""
+    lines = walk_text.split("MOTION")[1].strip().splitlines()
+    text = walk_text.split("MOTION")[0] + "MOTION\nFrames: 1\n" + lines[1] + "\n" + lines[2] + "\n"
+    refused(capsys, "correct", put(tmp_path, "w.bvh", text), "-o", tmp_path / "o.bvh", names="w.bvh",
+            says="need at least 2 frames, got 1")
+
+
+def test_batch_checks_the_body_options_before_starting_a_cluster(tmp_path, capsys, walk_text):
+    """Every take had failed on the cluster ("total mass must be positive") and the command exited 0."""
+    refused(capsys, "batch", "analyze", put(tmp_path, "w.bvh", walk_text), "--out", tmp_path / "b", "--mass", "-1",
+            names="--mass", says="outside")
+    assert not (tmp_path / "b").exists()
+
+
+def test_calibrate_checks_its_options_and_that_a_trial_is_a_c3d(tmp_path, capsys, walk_text):
+    """A BVH given as a trial was read as a C3D's parameters ("claims 7.25e+76 values"); --mass nan was named
+    "total mass"; -o a directory was an IsADirectoryError traceback after the fit."""
+    bvh = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "calibrate", bvh, names="w.bvh", says="not a readable C3D file .no C3D header")
+    refused(capsys, "calibrate", bvh, "--mass", "nan", names="--mass", says="outside")
+    refused(capsys, "calibrate", bvh, "-o", tmp_path, names="-o", says="is a directory")
+
+
+def test_batch_output_and_cluster_options_are_one_line(tmp_path, capsys, walk_text):
+    """--out naming a file was a FileExistsError traceback, --scheduler wibble a ValueError one, and
+    --workers 100000 started that many processes."""
+    w = put(tmp_path, "w.bvh", walk_text)
+    refused(capsys, "batch", "analyze", w, "--out", w, names="--out", says="is a file, not a directory")
+    refused(capsys, "batch", "analyze", w, "--out", tmp_path / "b", "--scheduler", "wibble", names="--scheduler wibble",
+            says="cannot connect")
+    refused(capsys, "batch", "analyze", w, "--out", tmp_path / "b", "--workers", "100000", names="--workers",
+            says="must be 1 to")

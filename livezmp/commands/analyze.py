@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rich.progress import Progress
 
-from livezmp.checks import check_output_path
+from livezmp.checks import check_figure_path, check_output_path
 from livezmp.commands.common import check_body_options, load_from_args, take_options
 from livezmp.offline.report import write_json, write_zmp_csv
 from livezmp.offline.take import (
@@ -56,8 +56,9 @@ def _stream(args: argparse.Namespace, options: TakeOptions) -> dict:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot")):
+    for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json")):
         check_output_path(path, option)
+    check_figure_path(args.plot, "--plot")
     check_body_options(args)
     options = take_options(args)
     if options.streams(args.motion):

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from livezmp.checks import check_number
+from livezmp.checks import check_number, check_output_path
+from livezmp.commands.common import MAX_BODY_MASS
 from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
@@ -15,8 +16,10 @@ from livezmp.offline.gaitlab import LabOptions
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    trials = [read_c3d(p) for p in args.trials]
+    check_output_path(args.output, "-o")
     check_number(args.age, "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
+    check_number(args.mass, "--mass (kg)", 0.0, MAX_BODY_MASS, lo_open=True)
+    trials = [read_c3d(p) for p in args.trials]
     markers = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
                                 age_years=args.age)
     subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))

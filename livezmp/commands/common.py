@@ -12,7 +12,6 @@ from dataclasses import replace
 from livezmp.balance.pipeline import PipelineConfig
 from livezmp.checks import check_number
 from livezmp.correct.limits import CorrectionLimits
-from livezmp.errors import InputError
 from livezmp.estimate.estimator import default_cutoff
 from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -24,6 +23,11 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 MAX_BODY_MASS = 1000.0  # kg
 MAX_GROUND_M = 1000.0  # m from the input's origin
 MAX_SOLE_WIDTH_M = 1.0
+MAX_TOLERANCE_MM = 1000.0  # a ZMP error of a metre is no measurement: every frame would count as inside
+MAX_CUTOFF_HZ = 5000.0  # half the highest frame rate read (checks.FRAME_PERIOD_RANGE); the rate's own limit later
+MAX_ROTATION_DEG = 180.0
+MAX_RATE_DEG_S = 36000.0  # 100 turns a second: beyond any joint
+MAX_MARGIN_MM = 1000.0  # no support polygon is two metres across
 
 
 def check_body_options(args: argparse.Namespace) -> None:
@@ -32,6 +36,8 @@ def check_body_options(args: argparse.Namespace) -> None:
     check_number(args.ground, "--ground (m)", -MAX_GROUND_M, MAX_GROUND_M)
     check_number(args.sole_width, "--sole-width (m)", 0.0, MAX_SOLE_WIDTH_M, lo_open=True)
     check_number(getattr(args, "age", None), "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
+    check_number(getattr(args, "tolerance_mm", None), "--tolerance-mm (mm)", 0.0, MAX_TOLERANCE_MM)
+    check_number(args.cutoff_hz, "--cutoff-hz (Hz)", 0.0, MAX_CUTOFF_HZ, lo_open=True)
 
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
@@ -46,7 +52,8 @@ def load_from_args(args: argparse.Namespace) -> LoadedMotion:
 
 
 def take_options(args: argparse.Namespace) -> TakeOptions:
-    """The body options of the command line."""
+    """The body options of the command line (checked: every command that loads a take comes here)."""
+    check_body_options(args)
     return TakeOptions(robot=args.robot, robot_config=args.robot_config, mass=args.mass, units=args.units,
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
@@ -56,8 +63,10 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:
     """The correction limits of the command line (degrees, deg/s, mm → m)."""
-    if min(args.max_rotation_deg) <= 0 or args.max_rate_deg_s <= 0 or args.margin_mm < 0:
-        raise InputError("--max-rotation-deg and --max-rate-deg-s must be positive, --margin-mm not negative")
+    for deg in args.max_rotation_deg:
+        check_number(deg, "--max-rotation-deg (deg)", 0.0, MAX_ROTATION_DEG, lo_open=True)
+    check_number(args.max_rate_deg_s, "--max-rate-deg-s (deg/s)", 0.0, MAX_RATE_DEG_S, lo_open=True)
+    check_number(args.margin_mm, "--margin-mm (mm)", 0.0, MAX_MARGIN_MM)
     return replace(CorrectionLimits(), max_rotation_deg=tuple(args.max_rotation_deg),
                    max_rate_deg_s=args.max_rate_deg_s, margin_m=args.margin_mm / 1000)
 

@@ -161,8 +161,12 @@ def default_estimator(rate_hz: float, cutoff_hz: float | None = None) -> Estimat
     if not (isinstance(rate_hz, int | float) and math.isfinite(rate_hz) and rate_hz > 0):
         raise EstimatorError(f"rate_hz = {rate_hz!r}: must be a positive number")
     cutoff = default_cutoff(rate_hz) if cutoff_hz is None else cutoff_hz
-    if not (math.isfinite(cutoff) and cutoff > 0):
-        raise EstimatorError(f"cutoff_hz = {cutoff!r}: must be a positive number")
+    # the window 2.4 / cutoff must hold MAX_WINDOW samples at most (3 at least: below Nyquist it does)
+    lowest, nyquist = 2.4 * rate_hz / MAX_WINDOW, 0.5 * rate_hz
+    if not (math.isfinite(cutoff) and lowest <= cutoff < nyquist):
+        raise EstimatorError(f"--cutoff-hz {cutoff:g} at {rate_hz:g} frames/s: must be at least {lowest:.3g} Hz "
+                             f"(a smoothing window of 2.4 / cutoff s, {MAX_WINDOW} frames at most) and below "
+                             f"the Nyquist frequency, {nyquist:g} Hz")
     return EstimatorConfig(rate_hz=rate_hz, window_s=2.4 / cutoff, lag_s=0.6 / cutoff, cutoff_hz=cutoff)
 
 

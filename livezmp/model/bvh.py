@@ -216,10 +216,10 @@ def parse_hierarchy(text: str, source: str = "<stream>") -> tuple[list[BvhJoint]
 
 
 def _read_hierarchy(cur: _Cursor) -> list[BvhJoint]:
-    try:
-        toks = cur.next_tokens()
-    except InputError:
-        raise InputError(f"{cur.source}:1: empty file, not a BVH") from None
+    # the first line with tokens; a decoding error of the text (not UTF-8) propagates as it is
+    toks = next((t for _, line in cur if (t := line.split())), None)
+    if toks is None:
+        raise InputError(f"{cur.source}:1: empty file, not a BVH")
     if toks != ["HIERARCHY"]:
         raise cur.error("not a BVH file: first line must be HIERARCHY")
     toks = cur.next_tokens()
@@ -276,6 +276,8 @@ class BvhHeader:
 def _read_header(cur: _Cursor) -> BvhHeader:
     """The hierarchy, then MOTION, ``Frames: N`` and ``Frame Time: s``; the cursor is left on the rows."""
     joints = _read_hierarchy(cur)
+    if not any(j.channels for j in joints):  # rows of no values: nothing moves, and nothing to count them by
+        raise cur.error("the hierarchy has no channels: no motion to read")
     if cur.next_tokens() != ["MOTION"]:
         raise cur.error("expected MOTION after the hierarchy")
     toks = cur.next_tokens()

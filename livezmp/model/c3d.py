@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import check_input_file
+from livezmp.checks import MAX_COORDINATE_M, check_frame_period, check_input_file
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.plate_frame import plate_axes
@@ -354,6 +354,10 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
             raise InputError(f"{source}: force platform {k + 1}: unknown force unit {p['unit_force']!r} "
                              "(FORCE_PLATFORM:UNITS)")
         moment = newtons * length
+        for key in ("corners", "origin"):  # NaN too: every plate's geometry is used
+            if not (np.abs(np.asarray(p[key], dtype=float)) * length <= MAX_COORDINATE_M).all():
+                raise InputError(f"{source}: force platform {k + 1}: FORCE_PLATFORM:{key.upper()} not finite or "
+                                 f"beyond {MAX_COORDINATE_M:g} m")
         corners = np.asarray(p["corners"], dtype=float).T * length
         force = np.asarray(p["force"], dtype=float).T * newtons
         kind = types[k] if k < len(types) else 0
@@ -446,6 +450,9 @@ def _check_ezc3d_survives(p: Path, size: int, plates: bool) -> None:
         raise InputError(f"{p}: not a readable C3D file (ezc3d's reader crashed on it: {signal.Signals(sig).name})")
 
 
+C3D_KEY = 0x50  # the second byte of every C3D file (the C3D specification's header, word 1)
+
+
 def open_c3d(path: str | Path, plates: bool = False):
     """The ezc3d object of ``path`` (``plates``: with ezc3d's force-platform data). Raises InputError for
     files ezc3d cannot read."""
@@ -456,6 +463,8 @@ def open_c3d(path: str | Path, plates: bool = False):
         data = p.read_bytes()
     except OSError as e:
         raise InputError(f"{p}: cannot read ({e.strerror})") from None
+    if len(data) < 512 or data[1] != C3D_KEY:  # read as one, a text's lines were parameters claiming 1e76 values
+        raise InputError(f"{p}: not a readable C3D file (no C3D header: a 512-byte block whose second byte is 0x50)")
     _check_parameter_section(p, data)
     _check_ezc3d_survives(p, len(data), plates)
     try:
@@ -497,7 +506,8 @@ def read_c3d(path: str | Path) -> C3dTrial:
         raise InputError(f"{p}: POINT:UNITS {unit!r} is not a length unit (mm, cm, m)")
     rate = _first_number(_param(groups, "POINT", "RATE"))
     if rate is None:
-        raise InputError(f"{p}: POINT:RATE is missing or zero")
+        raise InputError(f"{p}: POINT:RATE is missing or not a positive number")
+    check_frame_period(1.0 / rate, f"{p}: POINT:RATE {rate:g}")
     pts = np.asarray(c3d["data"]["points"][:3], dtype=float)  # (3, P, F)
     labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
     labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]

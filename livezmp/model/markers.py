@@ -49,6 +49,7 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
+from livezmp.checks import MAX_COORDINATE_M
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import ADULT, DE_LEVA_MALE, BspTable, SegmentParams, choose_table
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy, world_from_up_axis
@@ -106,7 +107,6 @@ MAX_TURN_RAD = np.pi / 2  # between two frames: 78 rad/s at 50 Hz, beyond any se
 _OPTIONAL = ("THI", "TIB", "HEE", "FIN", "KNE_med", "ANK_med")  # role suffixes the body can do without
 _CHANNELS = ("x", "y", "z", "yaw", "pitch", "roll")
 # Plausibility of marker-derived geometry: beyond these a file is corrupt, not a person
-MAX_COORDINATE_M = 1000.0  # m from the capture origin: larger than any capture volume
 STATURE_RANGE_M = (0.5, 2.6)
 SEGMENT_LENGTH_RANGE_M = (0.01, 1.5)  # joint centre to joint centre (median over the take)
 # frames seeing a toe with the heel and both malleoli that place it where it is lost (toe_from_heel_and_malleoli)

@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from livezmp.checks import check_output_dir
 from livezmp.errors import InputError
 from livezmp.offline.jobs import Job
 from livezmp.offline.report import write_json
@@ -52,7 +53,8 @@ class Take:
 def find_takes(sources: Iterable[str], out: str | Path, job: Job) -> list[Take]:
     """The takes named by ``sources`` (files, directories searched recursively, glob patterns) that
     ``job`` takes (its suffixes, e.g. ``.bvh`` and ``.c3d``, ``.csv`` with a robot); sorted, without
-    repeats, anything under ``out`` left out."""
+    repeats, anything under ``out`` left out. ``out`` is checked first (:func:`check_output_dir`)."""
+    check_output_dir(out, "--out")
     suffixes = job.suffixes()
     out = Path(out).resolve()
     found: set[Path] = set()
@@ -188,6 +190,12 @@ class Progress:
         self.frames += row["frames"] or 0
 
 
+def max_local_workers() -> int:
+    """The most worker processes a local cluster starts: 4 a CPU (a take's analysis keeps one CPU busy; beyond
+    that, workers only add memory, ~0.2 GB each), and never fewer than the default 2."""
+    return max(2, 4 * (os.cpu_count() or 1))
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int = 2, dashboard_address: str = "127.0.0.1:0",
                 config: dict | None = None):
@@ -200,13 +208,14 @@ def dask_client(scheduler: str | None = None, workers: int = 2, dashboard_addres
     if scheduler:
         try:
             client = Client(scheduler, timeout="10s")
-        except OSError as e:
+        except (OSError, ValueError) as e:  # ValueError: not an address ("missing port number")
             raise InputError(f"--scheduler {scheduler}: cannot connect ({one_line(e)})") from None
         with client:
             yield client
         return
-    if workers < 1:
-        raise InputError(f"--workers must be at least 1, got {workers}")
+    most = max_local_workers()
+    if not 1 <= workers <= most:
+        raise InputError(f"--workers must be 1 to {most} (4 a CPU: each is a process holding a take), got {workers}")
     with dask.config.set(LOCAL_CLUSTER_CONFIG if config is None else config), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                          dashboard_address=dashboard_address, silence_logs=logging.ERROR) as cluster, \

@@ -37,6 +37,7 @@ from livezmp.offline.report import TakeStats, ZmpCsvWriter, atomic_path, summari
 from livezmp.offline.take_stream import (
     TakeStream,
     analyse_stream,
+    check_enough_frames,
     open_bvh_take,
     open_joint_csv_take,
     within_take,
@@ -127,8 +128,7 @@ def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | Non
                    progress: Callable[[int], None] | None = None, cutoff_hz: float | None = None) -> BatchResult:
     """The pipeline over a loaded take: its per-frame results (a looped cycle's with its pads, as
     :mod:`livezmp.model.loop_cycle` says, their results dropped)."""
-    if len(loaded.frames) < 2:
-        raise InputError(f"{loaded.source}: need at least 2 frames, got {len(loaded.frames)}")
+    check_enough_frames(loaded.source, len(loaded.frames))
     cfg = take_config(loaded, mode, ground, cutoff_hz)
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     if loaded.loop is None:
@@ -280,7 +280,9 @@ def analyse_take(path: str | Path, out_dir: str | Path, options: TakeOptions, pl
 
 
 def check_correctable(source: str | Path, frames: int) -> None:
-    """Refuse a take too long for the correction, which holds it whole (:data:`MAX_CORRECT_FRAMES`)."""
+    """Refuse a take too short (:func:`check_enough_frames`) or too long for the correction, which holds it
+    whole (:data:`MAX_CORRECT_FRAMES`)."""
+    check_enough_frames(source, frames)
     if frames > MAX_CORRECT_FRAMES:
         raise InputError(f"{source}: {frames} frames; correct solves a whole take at once and takes at most "
                          f"{MAX_CORRECT_FRAMES} (split the take)")

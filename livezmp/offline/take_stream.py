@@ -66,9 +66,14 @@ class TakeStream:
     lead: int = 0
 
     def check_length(self) -> None:
-        """Refuse a take too short to analyse (before its rate, 0 Hz for one frame, is used)."""
-        if self.total < 2:
-            raise InputError(f"{self.source}: need at least 2 frames, got {self.total}")
+        """Refuse a take too short to analyse (:func:`check_enough_frames`)."""
+        check_enough_frames(self.source, self.total)
+
+
+def check_enough_frames(source: str | Path, frames: int) -> None:
+    """Refuse a take of fewer than 2 frames, before its rate (0 Hz for one frame) is used."""
+    if frames < 2:
+        raise InputError(f"{source}: need at least 2 frames, got {frames}")
 
 
 def open_bvh_take(path: str | Path, options: BvhBodyOptions) -> TakeStream:

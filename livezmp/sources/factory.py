@@ -177,7 +177,8 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
     if "://" not in spec:
         path = Path(spec)
         if not path.exists():
-            raise InputError(f"{spec}: no such file (or give udp://HOST:PORT, tcp://HOST:PORT)")
+            raise InputError(f"{spec}: no such file (or give a stream: udp://HOST:PORT, tcp://HOST:PORT, lsl://NAME, "
+                             "qtm://HOST, natnet://HOST, or a link URL such as dynamixel:PATH)")
         return _replay(path, o)
     url = urlsplit(spec)
     if url.scheme in MOCAP_SCHEMES:
