@@ -98,7 +98,9 @@ def test_a_subject_file_names_its_table_unless_the_command_line_does(tmp_path):
     assert (opts.hat_sway_gain, opts.hat_follow_hz) == (TRUNK_STEP_GAIN, TRUNK_FOLLOW_HZ)
     path.write_text('[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\nhat_follow_hz = 0.5\n')
     assert load_subject(path).marker_options().hat_follow_hz == 0.5
+    # a misspelt key had been ignored (the table's value used in its place)
     for line, field in (('bsp = "toddler"', "subject.bsp"), ("age_years = -1", "subject.age_years"),
+                        ("hat_sway_gains = [0.5, 0.5]", "subject.hat_sway_gains: unknown key"),
                         *((f"hat_follow_hz = {v}", "subject.hat_follow_hz") for v in ("0", "-1", "6", '"1"', "true"))):
         path.write_text(f'[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\n{line}\n')
         with pytest.raises(InputError, match=field):

@@ -248,6 +248,10 @@ def test_urdf_bad_physics_is_refused(tmp_path, capsys, robot, change, says):
     ("feet = 3\n", "table"),
     ("[servos.l_knee]\nid = \"x\"\n", "id"),
     ("[servos.l_knee]\nid = 1\ndirection = 2\n", "direction"),
+    # these two were accepted: a misspelt key ignored (the joint driven the default way), and one servo given
+    # two joints' goals
+    ("[servos.l_knee]\nid = 1\ndirecton = -1\n", "unknown key 'directon'"),
+    ("[servos.l_knee]\nid = 1\n[servos.r_knee]\nid = 1\n", r"\[servos.r_knee\] id: 1 is already the id of l_knee"),
     ('[correction.legs]\nleft = "l_knee"\n', "list"),
 ])
 def test_robot_config_types_one_line_per_field(tmp_path, capsys, robot, toml, says):
@@ -355,3 +359,12 @@ def test_batch_output_and_cluster_options_are_one_line(tmp_path, capsys, walk_te
             says="cannot connect")
     refused(capsys, "batch", "analyze", w, "--out", tmp_path / "b", "--workers", "100000", names="--workers",
             says="must be 1 to")
+
+
+def test_a_joint_limit_whose_lower_is_above_its_upper_is_refused(tmp_path, capsys, robot):
+    """It was accepted: the live loop then refused every reading as beyond the limits and held (exit 0)."""
+    urdf, csv_text = robot
+    bad = re.sub(r'lower="[^"]*" upper="[^"]*"', 'lower="1" upper="-1"', urdf, count=1)
+    assert bad != urdf
+    refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", put(tmp_path, "r.urdf", bad),
+            names="r.urdf: joint", says="lower 1 is above upper -1")

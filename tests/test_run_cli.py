@@ -181,7 +181,10 @@ def test_a_required_realtime_priority_refused_stops_before_the_link_opens(monkey
     (["run", "--robot", "nope.urdf", "--link", "mock:"], "nope.urdf: no such file"),
     (["run", "--robot", str(demo_robot_path()), "--link", "serial:/dev/x"], "link URL 'serial:/dev/x': expected"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--scenario", "dance"], "unknown scenario 'dance'"),
-    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0"], "--rate 0.0: must be"),
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0"], "--rate 0: must be"),
+    # below the estimator's slowest input it had been refused as "EstimatorConfig.window_s = 0.2 s is 0 samples"
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0.001"],
+     "--rate 0.001: must be a number of Hz in [10, 2000]"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--watchdog-ms", "-5"], "--watchdog-ms -5.0"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--motion", "m.csv", "--scenario", "lean"],
      "give --motion or --scenario, not both"),

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import check_output_path
+from livezmp.checks import FRAME_PERIOD_RANGE, check_output_path
 from livezmp.commands.common import stop_on_signals
 from livezmp.errors import InputError
 from livezmp.links import LinkError, open_link
@@ -87,6 +87,7 @@ def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, so
     return LoopRecorder(args.record, robot.spec, session, robot.body.channel_names, robot.body.joint_names)
 
 
+MAX_LOOP_HZ = 2000.0
 CEILING_SHARE = 0.85  # of a serial bus's ceiling: the default rate leaves the rest for the host's own delays
 
 
@@ -97,8 +98,10 @@ def loop_rate(args: argparse.Namespace, link) -> float:
     if args.rate is None and hasattr(link, "bus_ceilings"):
         ceiling = min(c.ceiling_hz for c in link.bus_ceilings(assumed_adapter(args)))
         rate = min(rate, float(math.floor(CEILING_SHARE * ceiling)))
-    if not (np.isfinite(rate) and 0 < rate <= 2000):
-        raise InputError(f"--rate {rate}: must be a number of Hz in (0, 2000]")
+    lowest = 1.0 / FRAME_PERIOD_RANGE[1]  # the estimator's slowest input
+    if not (np.isfinite(rate) and lowest <= rate <= MAX_LOOP_HZ):
+        why = "" if args.rate is not None else f" ({CEILING_SHARE:.0%} of what the bus carries: a faster --baud?)"
+        raise InputError(f"--rate {rate:g}{why}: must be a number of Hz in [{lowest:g}, {MAX_LOOP_HZ:g}]")
     return rate
 
 

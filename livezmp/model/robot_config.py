@@ -55,6 +55,9 @@ class ServoConfig:
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
 
+SERVO_KEYS = {"id", "zero", "direction", "ticks_per_rev"}
+
+
 @dataclass(frozen=True)
 class ImuConfig:
     """An IMU sub-controller at bus ``id``; ``axes``: the sign of each of its axes in the
@@ -154,13 +157,20 @@ def _parse(data: dict, source: str) -> RobotConfig:
     for joint, s in _table(data.get("servos"), f"{source}: [servos]").items():
         where = f"{source}: [servos.{joint}]"
         s = _table(s, where)
+        unknown = set(s) - SERVO_KEYS  # a misspelt direction or zero, ignored, would drive the joint wrongly
+        if unknown:
+            raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} ({', '.join(sorted(SERVO_KEYS))})")
         if "id" not in s:
             raise InputError(f"{where}: missing 'id'")
         d = s.get("direction", 1)
         if type(d) is not int or d not in (1, -1):
             raise InputError(f"{where} direction: must be 1 or -1")
         ticks = _int(s.get("ticks_per_rev", 4096), f"{where} ticks_per_rev", 1, 1 << 24)
-        cfg.servos[joint] = ServoConfig(joint, _int(s["id"], f"{where} id", 0, 252),
+        servo_id = _int(s["id"], f"{where} id", 0, 252)
+        same = next((o.joint for o in cfg.servos.values() if o.id == servo_id), None)
+        if same is not None:  # one servo would take both joints' goals (and the links find a servo by its id)
+            raise InputError(f"{where} id: {servo_id} is already the id of {same}")
+        cfg.servos[joint] = ServoConfig(joint, servo_id,
                                         _int(s.get("zero", 2048), f"{where} zero", -(1 << 31), (1 << 31) - 1),
                                         d, ticks)
     if "imu" in data:

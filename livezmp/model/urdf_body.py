@@ -177,7 +177,10 @@ def _has_range(joint: ET.Element, where: str) -> bool:
     if limit is None:
         return False
     lower = _numbers(limit, "lower", 1, "0", f"{where} <limit>")[0]
-    return bool(lower != _numbers(limit, "upper", 1, "0", f"{where} <limit>")[0])
+    upper = _numbers(limit, "upper", 1, "0", f"{where} <limit>")[0]
+    if lower > upper:  # no angle satisfies it: every reading would be refused, every goal clipped to one end
+        raise InputError(f"{where} <limit>: lower {lower:g} is above upper {upper:g}")
+    return bool(lower != upper)
 
 
 def _check_joints(root: ET.Element, path: Path) -> list[str]:

@@ -100,6 +100,9 @@ class Subject:
                        age_years=base.age_years if base.age_years is not None else self.age_years)
 
 
+SUBJECT_KEYS = {"hat_fraction", "hat_offset_m", "hat_sway_gain", "hat_follow_hz", "bsp", "age_years"}
+
+
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
     optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_STEP_GAIN`, the sway above
@@ -110,6 +113,9 @@ def load_subject(path: str | Path) -> Subject:
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
         raise InputError(f"{p}: missing [subject] table")
+    unknown = set(s) - SUBJECT_KEYS  # a misspelt key, ignored, would leave the table's value in its place
+    if unknown:
+        raise InputError(f"{p}: subject.{sorted(unknown)[0]}: unknown key ({', '.join(sorted(SUBJECT_KEYS))})")
     f, off = s.get("hat_fraction"), s.get("hat_offset_m")
     if not isinstance(f, int | float) or not 0.0 < f < 1.0:
         raise InputError(f"{p}: subject.hat_fraction must be a number between 0 and 1, got {f!r}")
