@@ -147,6 +147,8 @@ def test_stream_too_short_to_calibrate_is_one_line(c3d):
 @pytest.mark.parametrize(("args", "message"), [
     (["qtm://127.0.0.1:1", "--calibration", "/no/such.c3d"], "/no/such.c3d: no such file"),
     (["udp://127.0.0.1:9", "--calibration", str(TRIAL)], "--calibration is for capture streams"),
+    # a file (or a link) carries its own body: the calibration had been ignored without a word
+    ([str(TRIAL), "--calibration", str(TRIAL)], "--calibration is for capture streams"),
     (["qtm://127.0.0.1:1", "--frames", "0"], "--frames must be a positive number"),
     (["qtm://127.0.0.1:1", "--lag-s", "-1"], "--lag-s (s): -1 is outside [0, 10]"),
     (["qtm://127.0.0.1:1", "--window-s", "nan"], "--window-s (s): nan is outside (0, 10]"),

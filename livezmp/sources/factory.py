@@ -172,6 +172,8 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
     o = options or SourceOptions()
     if o.fps is not None and not o.fps > 0:
         raise InputError(f"{spec}: --fps must be positive, got {o.fps}")
+    if o.calibration and urlsplit(spec).scheme not in MOCAP_SCHEMES:  # a file or link carries its own body
+        raise InputError(f"{spec}: --calibration is for capture streams (lsl://, qtm://, natnet://)")
     if spec.split(":", 1)[0] in LINK_SCHEMES:
         return _link(spec, o)
     if "://" not in spec:
@@ -183,8 +185,6 @@ def open_source(spec: str, options: SourceOptions | None = None) -> Source:
     url = urlsplit(spec)
     if url.scheme in MOCAP_SCHEMES:
         return _capture(spec, o)
-    if o.calibration:
-        raise InputError(f"{spec}: --calibration is for capture streams (lsl://, qtm://, natnet://)")
     if url.scheme not in SCHEMES:
         raise InputError(f"{spec}: unknown source scheme {url.scheme!r} (udp://, tcp://, lsl://, qtm://, natnet://, "
                          "or a file)")
