@@ -12,6 +12,13 @@ poses unchanged to rounding), in other channels, unwrapped so that they run cont
 BVH writes them; the order is one for the whole take, so a take read in pieces is scanned once first. A live stream
 cannot be scanned ahead: its orders are the ones its skeleton file's frames call for, fixed before the first frame
 (the body's joints follow them), and each streamed row is re-expressed as it comes (:class:`StreamOrders`).
+
+Away from gimbal lock a file may still jump from one branch of the same rotations to the other (R_a(x) R_b(y) R_c(z)
+= R_a(x + 180°) R_b(180° − y) R_c(z + 180°)): Perception Neuron's Axis exports do it at the neck every few frames
+(AnyBody's ammr Sit-Stand3_chr00.bvh, 273 jumps in 920 frames, each angle by ~180°), and the estimator, filtering
+each channel on its own, mixes the two branches into poses the body never took (the head swinging, a ZMP 529 km
+off). A joint whose rows jump so (:func:`branch_jumps`) is re-expressed too: in its own order, which folds the middle
+angle into ±90° and so keeps one branch, unless its own order also nears gimbal lock.
 """
 
 from __future__ import annotations
@@ -65,6 +72,21 @@ def near_lock(joints: list[BvhJoint], block: np.ndarray) -> set[int]:
     return out
 
 
+def branch_jumps(joints: list[BvhJoint], block: np.ndarray) -> set[int]:
+    """Indices of the joints whose rotation triple, from one row of ``block`` (F, C) (degrees) to the next, is nearer
+    the previous row on its other branch than as written: the file jumped between the two branches."""
+    out = set()
+    for k, joint in enumerate(joints):
+        if (slots := rotation_slots(joint)) is not None and len(block) > 1:
+            angles = block[:, [joint.first_channel + i for i in slots]]
+            prev, nxt = angles[:-1], angles[1:]
+            own = (wrapped(nxt - prev, 180.0) ** 2).sum(axis=1)
+            other = (wrapped(other_branch(nxt, 180.0) - prev, 180.0) ** 2).sum(axis=1)
+            if np.any(other < own):
+                out.add(k)
+    return out
+
+
 def middle_extents(joints: list[BvhJoint], block: np.ndarray, only: set[int]) -> dict[int, dict[str, float]]:
     """Per joint index in ``only``, per Tait-Bryan order: the largest |middle angle| (deg, in [0, 90]) over the rows
     of ``block`` (F, C) (degrees)."""
@@ -83,15 +105,19 @@ def merge_extents(a: dict[int, dict[str, float]], b: dict[int, dict[str, float]]
     return out
 
 
-def choose_orders(joints: list[BvhJoint], extents: dict[int, dict[str, float]]) -> dict[int, str]:
+def choose_orders(joints: list[BvhJoint], extents: dict[int, dict[str, float]],
+                  jumping: frozenset[int] = frozenset()) -> dict[int, str]:
     """{joint index: new order} for the joints whose own order comes within ``GIMBAL_MARGIN_DEG`` of gimbal lock
-    and another keeps farther from it."""
+    and another keeps farther from it; a joint of ``jumping`` (:func:`branch_jumps`) otherwise keeps its own order,
+    re-expressed on one branch."""
     out = {}
     for k, ext in extents.items():
         own = _order(joints[k], rotation_slots(joints[k]))
         best = min(ORDERS, key=lambda o: ext[o])
         if ext[own] > 90.0 - GIMBAL_MARGIN_DEG and ext[best] < ext[own]:
             out[k] = best
+        elif k in jumping:
+            out[k] = own
     return out
 
 
@@ -162,16 +188,21 @@ def restore(original: BvhMotion, orders: dict[int, str], frames: np.ndarray) -> 
 
 def scan_orders(joints: list[BvhJoint], blocks: Callable[[], Iterable[np.ndarray]]) -> dict[int, str]:
     """:func:`choose_orders` for a take read in pieces: ``blocks()`` gives its rows a block at a time, once for the
-    cheap scan and, only where a joint nears gimbal lock, once more for the orders' extents."""
+    cheap scan (each block with the row before it, for the branch jumps between blocks) and, only where a joint nears
+    gimbal lock or jumps branch, once more for the orders' extents."""
     flagged: set[int] = set()
+    jumping: set[int] = set()
+    last = None
     for block in blocks():
         flagged |= near_lock(joints, block)
-    if not flagged:
+        jumping |= branch_jumps(joints, block if last is None else np.vstack([last, block]))
+        last = block[-1:] if len(block) else last
+    if not flagged | jumping:
         return {}
     extents: dict[int, dict[str, float]] = {}
     for block in blocks():
-        extents = merge_extents(extents, middle_extents(joints, block, flagged))
-    return choose_orders(joints, extents)
+        extents = merge_extents(extents, middle_extents(joints, block, flagged | jumping))
+    return choose_orders(joints, extents, frozenset(jumping))
 
 
 class StreamOrders:
