@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
 import sys
 import warnings
 from importlib.metadata import PackageNotFoundError, version
@@ -58,12 +59,17 @@ def main(argv: list[str] | None = None) -> int:
     # so numerical warnings would only add lines to a one-line error.
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     try:
-        return int(getattr(importlib.import_module(module), function)(args) or 0)
+        code = int(getattr(importlib.import_module(module), function)(args) or 0)
+        sys.stdout.flush()  # a reader gone shows here, not as an "Exception ignored" at the interpreter's exit
+        return code
     except InputError as e:
         print(f"livezmp: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader of the output went away (`| head`): stop quietly, as SIGPIPE would
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more reaches the closed pipe
+        return 141
 
 
 # -- analyze, correct -----------------------------------------------------------------------------

@@ -53,3 +53,14 @@ def test_help_and_every_subcommand_help_import_nothing_heavy():
 def test_version():
     out = subprocess.run([sys.executable, "-m", "livezmp", "--version"], capture_output=True, text=True, check=True)
     assert out.stdout.startswith("livezmp ") and out.stdout.split()[1][0].isdigit()
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """`livezmp analyze | head -1` style: the pipe closed before the lines are written gives no traceback and no
+    "Exception ignored" at exit, only SIGPIPE's exit status."""
+    proc = subprocess.Popen([sys.executable, "-m", "livezmp", "analyze"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader is gone before the built-in demo's summary lines are printed
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 141
+    assert err == "", err
