@@ -104,7 +104,8 @@ class HumanoidSpec:
     0.04 heights lower, by a second about the same axis (``sho2``) mimicking it with multiplier 1; ``extras``:
     camera, IMU and sole frames as fixed massless links, and a massless root link; ``root``: the root link's name,
     its frame at its centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
-    humanoid_SEED); ``foot``: "box", "mesh" or "none" collision;
+    humanoid_SEED); ``foot``: "box", "mesh" or "none" collision, or "split": two boxes, the foot's front and rear
+    halves, on one plane (ergoCub's);
     as published files write them (held-out real robots): ``placeholders``, how the extras' massless links are
     written: "" without <inertial>, "zero_mass" mass 0 with a small inertia (Bolt's feet), "point_mass" 1e-4 kg
     with a zero inertia (Talos', Wolfgang's sensor frames); ``fixed_axis_zero``: fixed joints with
@@ -351,6 +352,18 @@ def _build(spec: HumanoidSpec) -> _Builder:
     return b
 
 
+def _foot_boxes(spec: HumanoidSpec, com: np.ndarray, size: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(centre, size) world, m, of a foot's collision boxes: one, or (``foot="split"``) its front and rear halves
+    (ergoCub's)."""
+    if spec.foot != "split":
+        return [(com, size)]
+    long = int(np.argmax(size[:2]))  # the foot's length: along x, or y for a robot facing -y in its file
+    half = size.copy()
+    half[long] /= 2
+    step = np.eye(3)[long] * half[long] / 2
+    return [(com + step, half), (com - step, half)]
+
+
 def _write(b: _Builder, path: Path) -> Path:
     spec = b.spec
     robot = ET.Element("robot", name=spec.robot_name or f"humanoid_{spec.seed}")
@@ -382,13 +395,14 @@ def _write(b: _Builder, path: Path) -> Path:
                 ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                 strict=True)})
         if role.endswith("_foot") and spec.foot != "none":
-            collision = ET.SubElement(link, "collision")
-            ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (v["com"] - p)), rpy=_fmt(pin.rpy.matrixToRpy(R.T)))
-            geometry = ET.SubElement(collision, "geometry")
-            if spec.foot == "box":
-                ET.SubElement(geometry, "box", size=_fmt(v["size"]))
-            else:
-                ET.SubElement(geometry, "mesh", filename=f"package://humanoid/meshes/{names[role]}.stl")
+            for centre, size in _foot_boxes(spec, v["com"], v["size"]):
+                collision = ET.SubElement(link, "collision")
+                ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (centre - p)), rpy=_fmt(pin.rpy.matrixToRpy(R.T)))
+                geometry = ET.SubElement(collision, "geometry")
+                if spec.foot == "mesh":
+                    ET.SubElement(geometry, "mesh", filename=f"package://humanoid/meshes/{names[role]}.stl")
+                else:
+                    ET.SubElement(geometry, "box", size=_fmt(size))
         elements.append(link)
     for j in b.joints:
         Rp, Rc = b.links[j["parent"]]["R"], b.links[j["child"]]["R"]

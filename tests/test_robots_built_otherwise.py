@@ -138,6 +138,17 @@ def test_a_foot_with_a_collision_box_stands_on_its_lowest_face(tmp_path):
         np.testing.assert_allclose(soles[side][:, 2], (0.015 - spec.torso_com) * spec.height, atol=1e-6)
 
 
+def test_a_foot_of_two_collision_boxes_on_one_plane_stands_on_both(tmp_path):
+    # before: the lowest face alone, one box: half the foot (ergoCub's front and rear links, a 117 x 100 mm box
+    # under each on one plane, stood on the front one, its CoM 84 mm behind it: every scenario refused)
+    spec = HumanoidSpec(foot="split", frames="random", seed=52)
+    soles = _zero_pose_soles(load_robot(str(build_humanoid(tmp_path / "s.urdf", spec)), None).body)
+    for side in ("left", "right"):
+        np.testing.assert_allclose(np.ptp(soles[side], axis=0), [0.16 * spec.height, 0.08 * spec.height, 0.0],
+                                   atol=1e-6)
+        np.testing.assert_allclose(soles[side][:, 0].mean(), 0.02 * spec.height, atol=1e-6)
+
+
 def test_default_soles_keep_to_their_own_side_of_the_feet(tmp_path):
     # before: a foot without a collision box got a box 0.28 hip heights wide centred under its centre of mass; here
     # the two overlapped by 24 mm between the feet (Z-Bot2's by 18 mm, and its corrected push rolled the trunk 3.7°

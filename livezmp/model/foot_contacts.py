@@ -124,16 +124,21 @@ def box_sole(model: pin.Model, data: pin.Data, joint: int,
     """The sole of the foot on ``joint`` from the collision boxes of its links (``boxes``: link name -> (size (3,)
     m, the box's centre in the link's frame) per ``<collision>`` box): the face of them that faces down, within
     `MAX_TILT`, lowest (Bez2's foot box, 17 x 9 cm; Valkyrie's, 27 x 16 cm; a heel's box above a sole's is not
-    the sole), on its own plane. None where the foot's links have no box (a mesh's size is not in the URDF; the
-    caller keeps its default box). ``data``: frame placements of the zero posture."""
+    the sole), on its own plane, with every other such face on that plane (`ON_PLANE`): the sole is their convex
+    hull (ergoCub's foot is a front and a rear link, a 117 x 100 mm box under each, on one plane: one alone is half
+    its 237 mm sole). None where the foot's links have no box (a mesh's size is not in the URDF; the caller keeps
+    its default box). ``data``: frame placements of the zero posture."""
     faces = [face for f in range(model.nframes)
              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
              for size, origin in boxes.get(model.frames[f].name, ())
              if (face := _lowest_face(size, data.oMf[f] * origin)) is not None]
     if not faces:
         return None
-    _, normal, corners = min(faces, key=lambda face: face[0])
+    _, normal, lowest = min(faces, key=lambda face: face[0])
+    span = float(np.ptp(np.vstack([c for _, _, c in faces]), axis=0).max())
+    corners = np.vstack([c for _, _, c in faces if np.all(np.abs((c - lowest[0]) @ normal) <= ON_PLANE * span)])
     rotation = plane_frame(normal)
-    centre = corners.mean(axis=0)
-    hull = convex_hull(((corners - centre) @ rotation)[:, :2])
-    return ContactSole(pin.SE3(rotation, centre), np.column_stack([hull, np.zeros(len(hull))]), ())
+    hull = convex_hull(((corners - lowest.mean(axis=0)) @ rotation)[:, :2])
+    centre = hull.mean(axis=0)
+    placement = pin.SE3(rotation, lowest.mean(axis=0) + rotation @ np.array([*centre, 0.0]))
+    return ContactSole(placement, np.column_stack([hull - centre, np.zeros(len(hull))]), ())
