@@ -2,8 +2,9 @@
 
 Every robot variant (tests/humanoid_gen.py's `HumanoidSpec`: joint orders, 5/6-DOF legs, negated axes, rotated
 link frames, waist or none, 0-4 arm joints, fixed sensor links, mimic (gripper finger, double knee, double
-shoulder) and continuous joints, feet with box, mesh or no collision or ending in four cleats on a tilted plane,
-0.3-1.8 m and 0.5-60 kg, names in other conventions, scrambled file order, tight or absent limits), plus
+shoulder) and continuous joints, feet with box (or two boxes), mesh or no collision or ending in four cleats on a
+tilted plane, a hip pitch 30° off the lateral axis, 0.3-1.8 m and 0.5-60 kg, names in other conventions,
+scrambled file order, tight or absent limits), plus
 livezmp_mini and the OP3, plays ``lean``, ``arm_swing`` and ``push`` in the closed loop on simulated time
 (tests/test_live_loop_closed.balance: the mock link on the simulated humanoid, whose true ZMP is its exact
 whole-body dynamics), uncorrected and corrected (push: with the feet's CoP). A row passes when the uncorrected
@@ -76,6 +77,8 @@ VARIANTS: dict[str, HumanoidSpec | str | None] = {
     "double_knee_mimic": replace(BASE, double_knee=True, names="poppy", seed=30),
     "double_shoulder_mimic": replace(BASE, double_shoulder=True, seed=31),
     "cleat_feet": replace(BASE, cleats=0.26, seed=40),
+    "feet_two_boxes": replace(BASE, foot="split", seed=52),
+    "hip_pitch_tilted_30": replace(BASE, hip="pry", hip_tilt=0.5236, seed=46),
     "combined": replace(BASE, waist="yp", torso_root=True, frames="pitch_z", arm="pr", extras=True, names="darwin",
                         hip="rpy", flip=0.5, limits="absent", root="j_tibia_l", robot_name="kid size #3", seed=29),
 }

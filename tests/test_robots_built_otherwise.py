@@ -18,6 +18,7 @@ from test_live_loop_closed import balance
 
 from livezmp.cli import main
 from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
+from livezmp.correct.root_motion import RootMover
 from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import foot_soles
@@ -320,12 +321,31 @@ def test_a_lean_or_push_the_corrector_cannot_take_back_is_refused_in_one_line(tm
     assert "could not stand corrected" in err[0]
 
 
-def test_a_hip_pitch_mounted_off_the_lateral_axis_is_refused_saying_how_far(tmp_path, capsys):
-    # before: "found no l_hip_pitch" and what a leg needs, not which joint came near (Fourier GR2: 30° off)
-    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(hip_tilt=np.radians(30), seed=46))
+def test_a_hip_pitch_mounted_off_the_lateral_axis_bends_the_knees_by_the_legs_ik(tmp_path):
+    # before: refused, "found no l_hip_pitch" (Unitree H2's and Fourier GR2's hip pitch turned 30° about the forward
+    # axis, R1's 25°: every scenario of the three); the corrector's pivot was the knee, the first joint within 8°
+    spec = HumanoidSpec(hip="pry", hip_tilt=np.radians(30), seed=46)
+    body = load_robot(str(build_humanoid(tmp_path / "t.urdf", spec)), None).body
+    twin = load_robot(str(build_humanoid(tmp_path / "u.urdf", replace(spec, hip_tilt=0.0))), None).body
+    assert joint_roles(body)["l_hip_pitch"] == "l_hip_pitch"
+    assert {s: body.model.frames[f].name for s, f in body.correction.hips.items()} == {
+        "left": "l_hip_pitch", "right": "r_hip_pitch"}
+    tilted, untilted = (RootMover(b).feet_of(np.concatenate([np.zeros(len(b.base_channels)), Poser(b).standing()]))
+                        for b in (body, twin))
+    for side in ("left", "right"):  # each foot where the untilted twin's hip -θ, knee +2θ, ankle -θ puts it
+        assert tilted[side][0].isApprox(untilted[side][0], 1e-8)
+    scenario = make_scenario("lean", body, hold_s=1.0)
+    off, _ = balance(body, scenario, correct=False)
+    on, _ = balance(body, scenario, correct=True)
+    assert off.fallen is not None and on.fallen is None
+
+
+def test_a_hip_pitch_mounted_far_off_the_lateral_axis_is_refused_saying_how_far(tmp_path, capsys):
+    # before: "found no l_hip_pitch" and what a leg needs, not which joint came near
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(hip_tilt=np.radians(40), seed=46))
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()
-    assert rc == 2 and len(err) == 1 and "found no l_hip_pitch" in err[0] and "l_hip_pitch 30°" in err[0], err
+    assert rc == 2 and len(err) == 1 and "found no l_hip_pitch" in err[0] and "l_hip_pitch 40°" in err[0], err
 
 
 SAYS = {"one_leg": "two feet", "loop": "kinematic loop", "no_feet": "two feet", "no_axes": "found no l_hip_pitch",

@@ -5,7 +5,8 @@ corrector adds its offsets to the leg joints on top. Scenarios work for any huma
 whatever its joint names, order and the signs of its URDF axes: the joints they move are
 found from the kinematic tree (`joint_roles`: each leg is the chain from the trunk to a
 foot, its hip, knee and ankle the first, middle and last joints turning about the
-lateral axis, its hip and ankle roll the first and last about the forward axis; each
+lateral axis (a hip pitch up to 32° off it, above the other two, Unitree H2's: that leg
+then bends by the legs' IK, `Poser._bent_feet`), its hip and ankle roll the first and last about the forward axis; each
 arm the chain to a hand that no other limb shares, its shoulder the first joints turning
 about the lateral axis and about the axis that turns the upper arm out to the side
 (`_abduction`), its elbow the next that bends the arm), and
@@ -45,7 +46,7 @@ from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import read_joint_csv
-from livezmp.model.urdf_body import ALIGNED, leg_joints
+from livezmp.model.urdf_body import ALIGNED, TILTED, leg_joints
 
 SIDES = ("l", "r")
 G = 9.81  # m/s^2
@@ -160,6 +161,9 @@ def _roles_and_arms(body: BodyModel) -> tuple[dict[str, str], dict[str, Arm]]:
     for side, full in chains.items():
         chain = [n for n in full if n not in followers]
         pitch = [n for n in chain if _about(axis, n, Y)]
+        if len(pitch) == 2:  # a hip pitch turned off the lateral axis above the knee and ankle (H2's, 30°)
+            hip = next((n for n in chain[:chain.index(pitch[0])] if _about(axis, n, Y, TILTED)), None)
+            pitch = [hip, *pitch] if hip else pitch
         if len(pitch) >= 3:
             hip, ankle = pitch[0], pitch[-1]
             middle = 0.5 * (origin[hip][Z] + origin[ankle][Z])
@@ -298,8 +302,12 @@ class Poser:
         # the legs' postures are re-solved where a mimic joint is on a leg (so the feet go where they were asked)
         # or the soles do not lie flat on one plane in the zero posture (so they are put there: `on_feet`)
         self.level = not soles_flat(body)
+        # legs whose hip pitch turns off the lateral axis (`TILTED`) bend by the legs' IK (`_bent_feet`)
+        self.tilted = {s for s in SIDES if f"{s}_hip_pitch" in self.roles
+                       and not _about(self.axis, self.roles[f"{s}_hip_pitch"], Y)}
         self.mover = (RootMover(body, ik_iterations=100, ik_tolerance=1e-10)
-                      if self.level or any({base + m.joint, base + m.parent} & legs for m in body.mimics) else None)
+                      if self.level or self.tilted or any({base + m.joint, base + m.parent} & legs for m in body.mimics)
+                      else None)
         self.leg_index = np.array(sorted(legs), dtype=int) - base
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (asked, solved) configurations of on_feet
 
@@ -330,7 +338,7 @@ class Poser:
         i = self.index(role)
         name = self.roles[role]
         along = float(self.axis[name][world_axis])
-        if abs(along) < (SHOULDER_ALIGNED if "_sho_" in role else ALIGNED):
+        if abs(along) < (SHOULDER_ALIGNED if "_sho_" in role else TILTED if role.endswith("hip_pitch") else ALIGNED):
             raise InputError(f"{self.body.model.name}: joint {name!r} turns about {np.round(self.axis[name], 3)}, "
                              f"not the world {'xyz'[world_axis]} axis this scenario needs")
         out = np.zeros(len(self.names))
@@ -339,12 +347,34 @@ class Poser:
 
     def legs_flexed(self, angle: float, sides: tuple[str, ...] = SIDES) -> np.ndarray:
         """Legs ("l", "r") bent by ``angle``: hip −θ, knee +2θ, ankle −θ about y (each sole
-        stays parallel to the pelvis), the feet then kept where that puts them (`on_feet`)."""
-        out = self.soles_levelled() if self.level else np.zeros(len(self.names))
-        for s in sides:
+        stays parallel to the pelvis), the feet then kept where that puts them (`on_feet`); a leg whose hip
+        pitch turns off the lateral axis is solved to put its foot where that bend about y would (`_bent_feet`)."""
+        base = self.soles_levelled() if self.level else np.zeros(len(self.names))
+        out = base.copy()
+        for s in sides:  # a tilted hip's share, turned by 1 / its axis' y: the IK's start near the bent knee
             out += angle * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
                             - self.unit(f"{s}_ank_pitch", Y))
-        return self.on_feet(out)
+        return self.on_feet(out, self._bent_feet(base, angle, [s for s in sides if s in self.tilted]))
+
+    def _bent_feet(self, joints: np.ndarray, angle: float, sides: list[str]) -> dict[str, list[pin.SE3]]:
+        """Foot side -> its frames' placements (`RootMover.feet_of`) for each leg of ``sides`` bent by ``angle``
+        about the lateral axis from the posture ``joints`` (rad): the thigh turned −θ about y at the hip pitch's
+        origin, the shank +θ, the foot kept parallel to the pelvis, moved as its ankle moves (zero-posture
+        origins). The bend the hip, knee and ankle pitch give where all three turn about y; a hip pitch turned
+        off it (Unitree H2's, 30° about the forward axis) would also yaw the leg: the legs' IK takes the
+        difference up in the hip's other joints."""
+        if not sides:
+            return {}
+        feet = self.mover.feet_of(np.concatenate([np.zeros(len(self.body.base_channels)), joints]))
+        thigh, shank = pin.rpy.rpyToMatrix(0.0, -angle, 0.0), pin.rpy.rpyToMatrix(0.0, angle, 0.0)
+        out = {}
+        for s in sides:
+            hip, knee, ankle = (self.origin[self.roles[f"{s}_{r}"]] for r in ("hip_pitch", "knee", "ank_pitch"))
+            bent_knee = hip + thigh @ (knee - hip)
+            moved = bent_knee + shank @ (ankle - knee) - ankle
+            side = next(side for side in feet if side[0] == s)
+            out[side] = [pin.SE3(pose.rotation, pose.translation + moved) for pose in feet[side]]
+        return out
 
     def soles_levelled(self) -> np.ndarray:
         """Ankle pitch and roll (rad) that turn each sole level, the trunk upright, from the zero posture: a sole
@@ -360,21 +390,22 @@ class Poser:
                 out += math.atan2(n[Y], n[Z]) * self.unit(f"{side[0]}_ank_roll", X)
         return out
 
-    def on_feet(self, joints: np.ndarray) -> np.ndarray:
+    def on_feet(self, joints: np.ndarray, feet: dict[str, list[pin.SE3]] | None = None) -> np.ndarray:
         """``joints`` (rad) with the legs' joints re-solved so that, with every mimic joint following its
         parent, each foot is where ``joints`` put it relative to the trunk (its joints taken as they are), and,
         where the soles do not lie flat on one plane in the zero posture (`soles_flat`: Wolfgang-OP's cleats
         lie 15° from the pelvis' level, its right foot's 1.3° rolled and 0.9 mm lower), each sole then turned
         level about its frame's origin (its heading kept) and both raised or lowered to their mean height, so
         that with the trunk upright both stand flat on the floor; ``joints`` itself for a robot with neither
-        (`RootMover.place_feet`: a follower's Jacobian column folded into its parent's)."""
+        (`RootMover.place_feet`: a follower's Jacobian column folded into its parent's). ``feet``: foot side ->
+        its frames' placements, where those feet go instead (`_bent_feet`)."""
         if self.mover is None:
             return joints
         asked = np.concatenate([np.zeros(len(self.body.base_channels)), joints])
         start = asked
         if self._last is not None:  # warm start: the last solution moved as the legs' ask moved (squat: each cycle)
             start = self._last[1] + asked - self._last[0]
-        targets = self.mover.feet_of(asked)
+        targets = {**self.mover.feet_of(asked), **(feet or {})}
         solved = self.mover.place_feet(start, _levelled(self.body, targets) if self.level else targets)
         self._last = asked, solved
         out = np.array(joints, dtype=float)
