@@ -178,6 +178,9 @@ def _continued(angles: Array, previous: Array) -> Array:
     return previous + (angles - previous + np.pi) % (2 * np.pi) - np.pi
 
 
+SAME_CORNER = 1e-5  # corners this share of their span apart are one point: the legs' IK holds the feet to 1e-7 m
+
+
 def cop_weights(corners: Array, point: Array) -> Array:
     """Non-negative weights (k,) summing to 1 whose weighted mean of ``corners`` (k, 2)
     is ``point`` (2,), which must lie in their hull (m, world plane).
@@ -185,11 +188,16 @@ def cop_weights(corners: Array, point: Array) -> Array:
     The hull is fanned into triangles from the corners' mean g; in the triangle (g, v_i,
     v_i+1) that holds the point, its barycentric weight on g is spread evenly over all
     corners and the other two go to v_i and v_i+1: the point at g loads every corner
-    equally, and the load moves towards the edge the point approaches."""
+    equally, and the load moves towards the edge the point approaches. A hull vertex where
+    several corners meet (two soles touching at the mid-line between the feet, as default soles
+    trimmed to it do) shares its weight evenly among them: given to the first alone, the load
+    jumped to one foot whenever rounding made that meeting point a vertex, the other foot read as
+    lifted, and the corrector rolled the trunk over the one (Cassie's, Z-Bot2's)."""
     k = len(corners)
     hull = convex_hull(corners)
-    # convex_hull returns the input coordinates (subnormal ones as 0): the nearest corner is the one
-    idx = [int(np.argmin(np.abs(corners - v).sum(axis=1))) for v in hull]
+    # convex_hull returns the input coordinates (subnormal ones as 0): the corners at a vertex are those
+    same = SAME_CORNER * float(np.ptp(corners, axis=0).max())
+    at = [np.flatnonzero(np.abs(corners - v).sum(axis=1) <= same) for v in hull]
     g = corners.mean(axis=0)
     a, b = hull - g, np.roll(hull, -1, axis=0) - g
     p = point - g
@@ -200,8 +208,8 @@ def cop_weights(corners: Array, point: Array) -> Array:
     i = int(np.argmax(bary.min(axis=1)))  # the triangle holding the point (the most inside one)
     lg, li, lj = np.maximum(bary[i], 0.0) / np.maximum(bary[i], 0.0).sum()
     w = np.full(k, lg / k)
-    w[idx[i]] += li
-    w[idx[(i + 1) % len(hull)]] += lj
+    w[at[i]] += li / len(at[i])
+    w[at[(i + 1) % len(hull)]] += lj / len(at[(i + 1) % len(hull)])
     return w
 
 

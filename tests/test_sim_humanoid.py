@@ -158,6 +158,17 @@ def test_cop_weights_are_non_negative_and_reproduce_any_point_of_the_hull(dx, ga
     np.testing.assert_allclose(w @ corners, point, atol=1e-12)
 
 
+def test_two_soles_touching_at_the_mid_line_share_the_load_of_a_point_where_they_meet():
+    # before: where rounding put one foot's front edge 1e-8 m behind the other's, the corner both soles share at the
+    # mid-line became a hull vertex and all its weight went to the left foot's copy: the right foot read as lifted
+    # (Cassie's default soles, trimmed to the mid-line: the corrector rolled its trunk over the left foot and its
+    # corrected push fell, its true ZMP 3.6 m off its feet for moments)
+    left = np.array([[-0.2, 0.0], [0.2, 0.0], [0.2, 0.15], [-0.2, 0.15]])
+    right = left * [1.0, -1.0] - [1e-8, 0.0]
+    w = cop_weights(np.vstack([left, right]), np.array([0.19, 0.0]))
+    assert w[:4].sum() == pytest.approx(w[4:].sum(), abs=1e-6)
+
+
 def test_imu_reads_gravity_at_rest_and_the_tilt_of_a_lean(body):
     poser = sc.Poser(body)
     h = SimHumanoid(body, poser.standing())
