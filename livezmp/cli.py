@@ -16,6 +16,7 @@ import os
 import sys
 import warnings
 from importlib.metadata import PackageNotFoundError, version
+from typing import NoReturn
 
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
@@ -40,8 +41,16 @@ def package_version() -> str:
         return "unknown"
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are one line, as every other user mistake's (argparse prints the usage first:
+    two lines or more); ``--help`` still shows the usage. Its subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="livezmp", description="Real-time balance monitor for humanoid motion.")
+    p = OneLineParser(prog="livezmp", description="Real-time balance monitor for humanoid motion.")
     p.add_argument("--version", action="version", version=f"livezmp {package_version()}")
     sub = p.add_subparsers(dest="command", required=True)
     _analysis_commands(sub)

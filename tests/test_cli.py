@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from livezmp.cli import BSP_NAMES, DEFAULT_DASHBOARD, SCENARIO_NAMES, SIM_LINKS, build_parser
 from livezmp.live.scenarios import SCENARIOS
 from livezmp.model.anthropometry import BSP_CHOICES
@@ -64,3 +66,15 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
     err = proc.stderr.read()
     assert proc.wait(timeout=120) == 141
     assert err == "", err
+
+
+@pytest.mark.parametrize("argv", [["frobnicate"], [], ["analyze", "--cutoff-hz", "abc"], ["analyze", "--bogus"],
+                                  ["demo", "--link", "nosuch"]])
+def test_a_mistyped_command_line_is_one_line_and_exit_2(argv, capsys):
+    """argparse's own errors (usage, then the error) are one line, as every other user mistake's."""
+    from livezmp.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1 and "error:" in err and "--help" in err, err
