@@ -14,7 +14,7 @@ from livezmp.cli import main
 from livezmp.model.bvh import BvhMotion, write_bvh
 from livezmp.model.loop_cycle import MAX_LOOP_S, find_loop
 from livezmp.model.motion_file import load_motion
-from livezmp.offline.take import analyse_loaded
+from livezmp.offline.take import TakeOptions, analyse_loaded, stream_take
 
 PERIOD, DT = 40, 1 / 30  # frames a cycle: 1.33 s, longer than the pads (1 s)
 SPEED = 60.0  # cm/s forward, so each cycle starts where the last ended
@@ -85,3 +85,14 @@ def test_only_a_take_whose_last_frame_repeats_its_first_is_a_loop():
     assert find_loop(labels, moved, DT) is None
     long = cycles(9)  # closes on itself too, but is longer than an animation cycle is
     assert len(long.frames) * DT > MAX_LOOP_S and find_loop(labels, long.frames, DT) is None
+
+
+def test_a_loop_streamed_in_small_chunks_gives_the_whole_takes_rows(takes, tmp_path):
+    """Chunks of 7 frames: the first ones are all padding (left out, not passed on empty); progress counts the
+    take's own frames."""
+    done = []
+    stream_take(takes["loop"], TakeOptions(), csv=tmp_path / "z.csv", chunk=7, progress=done.append)
+    rows = np.genfromtxt(tmp_path / "z.csv", delimiter=",", names=True)
+    whole = load_motion(takes["loop"]).body.to_input_frame(analyse_loaded(load_motion(takes["loop"])).zmp)
+    assert len(rows) == PERIOD + 1 and done[-1] == PERIOD + 1 and done == sorted(done)
+    assert np.abs(rows["zmp_x"] - whole[:, 0]).max() < 1e-6  # zmp.csv's 6 decimals

@@ -154,13 +154,21 @@ def analyse_stream(take: TakeStream, config: PipelineConfig, consumers: Sequence
     fed = take.total + 2 * take.lead
     try:
         parts = batch_chunks(take.body, config, pipe.estimator, pipe.contacts, fed, take.pieces(chunk), chunk)
-        _feed((within_take(p, take.lead, take.total) for p in parts), consumers, progress)
+        _feed(_own_frames(parts, take), consumers, progress)
         return "batch"
     except NotBatchable as e:
         reason = str(e)
     parts = _stepped(Pipeline(take.body, config, nominal_dt=1.0 / take.fps), take.pieces(chunk), chunk)
-    _feed((within_take(p, take.lead, take.total) for p in parts), consumers, progress)
+    _feed(_own_frames(parts, take), consumers, progress)
     return f"per-frame: {reason}"
+
+
+def _own_frames(parts: Iterator[BatchResult], take: TakeStream) -> Iterator[BatchResult]:
+    """The parts' rows that are the take's own frames (:func:`within_take`); a part all padding is left out."""
+    for part in parts:
+        own = within_take(part, take.lead, take.total)
+        if len(own):
+            yield own
 
 
 def within_take(part: BatchResult, lead: int, total: int) -> BatchResult:
