@@ -116,6 +116,14 @@ def test_rate_limit_projection():
     assert changed and np.abs(out).max() <= 1.0
 
 
+def test_rate_limit_of_a_loop_wraps_from_its_last_frame_to_its_first():
+    d = np.zeros((6, 3))
+    d[:, 1] = [0.0, 0.25, 0.5, 0.75, 1.0, 1.0]  # within the rate frame to frame, but 1 rad from the last to the first
+    assert np.array_equal(rate_limit(d, 0.25)[0], d)  # as a take: nothing to limit
+    out, changed = rate_limit(d, 0.25, periodic=True)
+    assert changed and np.abs(np.diff(np.vstack([out, out[:1]]), axis=0)).max() <= 0.25 + 1e-12
+
+
 def test_correct_cli_on_a_bandai_walk(tmp_path):
     """walk_normal_002: the corrected BVH, re-analysed by `livezmp analyze`, is ≥ 99 % inside;
     the feet stay put; only root and thigh channels change; hierarchy and timing are kept."""

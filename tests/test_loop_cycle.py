@@ -45,9 +45,14 @@ def cycles(n: int) -> BvhMotion:
 @pytest.fixture(scope="module")
 def takes(tmp_path_factory):
     d = tmp_path_factory.mktemp("loop")
-    paths = {"loop": d / "loop.bvh", "three": d / "three.bvh"}
+    paths = {"loop": d / "loop.bvh", "three": d / "three.bvh", "cut": d / "cut.bvh"}
     write_bvh(cycles(1), paths["loop"])
     write_bvh(cycles(3), paths["three"])
+    one = cycles(1)
+    # the same loop cut where it leans out of its support (frames 14-24 of the cycle are outside): its seam is in
+    # the stretch a correction changes most
+    write_bvh(replace(one, frames=find_loop(one.channel_labels(), one.frames, DT).rows(one.frames, 17, 18 + PERIOD)),
+              paths["cut"])
     return paths
 
 
@@ -96,3 +101,37 @@ def test_a_loop_streamed_in_small_chunks_gives_the_whole_takes_rows(takes, tmp_p
     whole = load_motion(takes["loop"]).body.to_input_frame(analyse_loaded(load_motion(takes["loop"])).zmp)
     assert len(rows) == PERIOD + 1 and done[-1] == PERIOD + 1 and done == sorted(done)
     assert np.abs(rows["zmp_x"] - whole[:, 0]).max() < 1e-6  # zmp.csv's 6 decimals
+
+
+def _seam(frames: np.ndarray, labels: list[str]) -> float:
+    """The largest rotation channel's difference (deg, wrapped) between a take's last frame and its first."""
+    rot = np.array([label.endswith("rotation") for label in labels])
+    return float(np.abs((frames[-1, rot] - frames[0, rot] + 180.0) % 360.0 - 180.0).max())
+
+
+def test_a_looped_cycle_is_corrected_as_a_loop_that_still_closes(takes, tmp_path):
+    """`correct` gives a loop one rotation per frame of its cycle, smooth and rate-limited across the seam: the cycle
+    it writes closes as the original did and, played as a loop, has no frame outside. Corrected frame by frame (the
+    cycle's ends as a take's edges) the seam opens and the loop it makes has frames outside."""
+    original = load_motion(takes["cut"])
+    labels = original.bvh.channel_labels()
+    out, report = tmp_path / "fixed.bvh", tmp_path / "r.json"
+    assert main(["correct", str(takes["cut"]), "-o", str(out), "--report", str(report)]) == 0
+    r = json.loads(report.read_text())
+    assert r["loop"]["period_frames"] == PERIOD and r["out_of_support_before"] == 12 and r["out_of_support_after"] == 0
+    fixed = load_motion(out)
+    assert fixed.loop is not None and fixed.loop.period == PERIOD
+    assert abs(_seam(fixed.bvh.frames, labels) - _seam(original.bvh.frames, labels)) < 1e-5  # BVH's decimals
+    played = analyse_loaded(fixed)
+    assert not np.any(played.judged & ~played.inside)
+
+    from livezmp.correct.limits import CORRECTION_CUTOFF_HZ
+    from livezmp.correct.solver import correct_motion
+    from livezmp.offline.take import take_config
+
+    edges = correct_motion(original.body, original.times, original.frames,
+                           take_config(original, "full", None, CORRECTION_CUTOFF_HZ), nominal_dt=DT)
+    opened = original.body.into_input(original.bvh.frames, edges.frames)
+    assert _seam(opened, labels) > 0.2  # deg (0.29)
+    played = analyse_loaded(replace(original, frames=edges.frames))  # as the loop the original is
+    assert np.sum(played.judged & ~played.inside) >= 3  # 5

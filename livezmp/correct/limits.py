@@ -91,21 +91,23 @@ def zmp_target(r: FrameResult, margin: float) -> np.ndarray | None:
     return inset(r.clamped[:2] if not r.inside else r.zmp[:2], r.polygon, margin)
 
 
-def rate_limit(delta: np.ndarray, max_step: float) -> tuple[np.ndarray, list[int]]:
+def rate_limit(delta: np.ndarray, max_step: float, periodic: bool = False) -> tuple[np.ndarray, list[int]]:
     """Project ``delta`` (F, 3) so no frame-to-frame step exceeds ``max_step`` (rad),
-    moving values toward zero; returns the result and the frames changed."""
+    moving values toward zero; ``periodic``: the last frame is followed by the first (a
+    loop's). Returns the result and the frames changed."""
     out = delta.copy()
     changed = set()
+    pairs = [(k - 1, k) for k in range(1, len(out))] + ([(len(out) - 1, 0)] if periodic and len(out) > 1 else [])
     for _ in range(len(out)):
         moved = False
-        for k in range(1, len(out)):
-            step = out[k] - out[k - 1]
+        for before, k in pairs:
+            step = out[k] - out[before]
             bad = np.abs(step) > max_step + 1e-12
             if bad.any():
                 # shrink the larger-magnitude end toward the other
                 for a in np.nonzero(bad)[0]:
-                    hi = k if abs(out[k, a]) > abs(out[k - 1, a]) else k - 1
-                    lo = k - 1 if hi == k else k
+                    hi = k if abs(out[k, a]) > abs(out[before, a]) else before
+                    lo = before if hi == k else k
                     out[hi, a] = out[lo, a] + np.sign(out[hi, a] - out[lo, a]) * max_step
                     changed.add(hi)
                 moved = True

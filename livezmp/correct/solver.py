@@ -37,6 +37,7 @@ from livezmp.balance.zmp import compute_zmp
 from livezmp.correct.edit import apply_delta, changed_channels, foot_displacement, hold_feet
 from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, inset, rate_limit, stance_weights, zmp_target
 from livezmp.correct.root_motion import RootMover
+from livezmp.correct.unknowns import Unknowns, per_frame
 from livezmp.estimate.estimator import EstimatorConfig, StreamingEstimator
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion
@@ -221,21 +222,17 @@ def _row_values(e: sp.csr_matrix, k: int, js: np.ndarray) -> np.ndarray:
     return np.where(idx[pos] == js, val[pos], 0.0)
 
 
-def _second_difference(f: int, dt: float) -> sp.csr_matrix:
-    d2 = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(max(f - 2, 0), f)) / dt**2
-    return sp.kron(d2, sp.eye(3)).tocsr()
-
-
-def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt) -> np.ndarray:
-    """One damped linearised step. ZMP rows are active for frames short of the margin;
-    frames that the predicted step would push short of it join the active set, and so do
-    frame-to-frame steps beyond the rate limit (held at the limit by stiff rows), in up
+def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc, bounds, dt,
+                previous) -> np.ndarray:
+    """One damped linearised step over the unknown rotations ``delta`` (each after its ``previous``, −1 for none).
+    ZMP rows are active for frames short of the margin; frames that the predicted step would push short of it join
+    the active set, and so do frame-to-frame steps beyond the rate limit (held at the limit by stiff rows), in up
     to five rounds, so a correction neither trades one frame for another nor jerks."""
     f = len(delta)
     x0 = delta.ravel()
     active = {i for i, k in enumerate(judged) if zmp_target(current[k], limits.margin_m) is not None}
     hold: dict[int, np.ndarray] = {}
-    rate: dict[int, float] = {}  # flat index of δ_k,a (k ≥ 1) → signed step to hold
+    rate: dict[int, float] = {}  # flat index of δ_k,a (k with a previous) → signed step to hold
     max_step = np.radians(limits.max_rate_deg_s) * dt
     stiff = 100.0 / max_step
     trust = sp.eye(3 * f, format="csr") * np.sqrt(mu) / np.radians(limits.rotation_scale_deg)
@@ -248,8 +245,8 @@ def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, 
         jz = sp.diags(wrow) @ jall[rows]
         rhs = jz @ x0 - wrow * (zall[idx] - tgt).ravel() / limits.zmp_tolerance_m
         keys = sorted(rate)
-        steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)),
-                               (np.repeat(np.arange(len(keys)), 2), np.ravel([[c, c - 3] for c in keys]))),
+        pairs = np.ravel([[c, 3 * previous[c // 3] + c % 3] for c in keys])
+        steps = sp.csr_matrix((np.tile([stiff, -stiff], len(keys)), (np.repeat(np.arange(len(keys)), 2), pairs)),
                               shape=(len(keys), 3 * f))
         a = sp.csr_array(sp.vstack([jz, reg_size, reg_acc, trust, steps]))
         b = np.concatenate([rhs, np.zeros(3 * f), np.zeros(reg_acc.shape[0]), trust @ x0,
@@ -270,31 +267,33 @@ def _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, 
                 # brought back inside
                 hold[i] = inset(c.point, current[k].polygon, limits.margin_m)
                 grew = True
-        inc = np.diff(x.reshape(f, 3), axis=0).ravel()
-        for c in np.nonzero(np.abs(inc) > max_step * 1.001)[0]:
-            if c + 3 not in rate:
-                rate[c + 3] = float(np.sign(inc[c]) * max_step)
+        after = np.nonzero(previous >= 0)[0]
+        inc = x.reshape(f, 3)[after] - x.reshape(f, 3)[previous[after]]
+        for k, a in zip(*np.nonzero(np.abs(inc) > max_step * 1.001), strict=True):
+            if 3 * after[k] + a not in rate:
+                rate[3 * after[k] + a] = float(np.sign(inc[k, a]) * max_step)
                 grew = True
         if not grew:
             break
     return x.reshape(f, 3)
 
 
-def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimits, reg_size, reg_acc) -> float:
-    """The exact objective: per frame, the distance short of ``margin`` inside, times the
-    frame's load (a moment about the polygon edge, which stays finite where the ZMP, a
-    ratio, runs off near flight), squared; plus the regularisers."""
+def _cost(results: list[FrameResult], delta: np.ndarray, limits: CorrectionLimits, reg_size, reg_acc,
+          judged: np.ndarray) -> float:
+    """The exact objective: per ``judged`` frame, the distance short of ``margin`` inside, times
+    the frame's load (a moment about the polygon edge, which stays finite where the ZMP, a
+    ratio, runs off near flight), squared; plus the regularisers (of the unknowns ``delta``)."""
     short = np.array([max(0.0, limits.margin_m - r.margin) * min(1.0, max(r.load, 0.0))
-                      for r in results if r.margin is not None])
+                      for r in results if r.margin is not None and judged[r.index]])
     x = delta.ravel()
     return float(np.sum((short / limits.zmp_tolerance_m) ** 2) + np.sum((reg_size @ x) ** 2)
                  + np.sum((reg_acc @ x) ** 2))
 
 
 def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str], body: BodyModel,
-                     q_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame bounds on δ. Roll about the pivot P lifts or lowers each hip by
-    |h − P|·δ, yaw moves it fore and aft; where the legs may only turn at the thigh (a
+                     q_base: np.ndarray, unk: Unknowns) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds on each unknown δ: the tightest of its analysed frames'. Roll about the pivot P
+    lifts or lowers each hip by |h − P|·δ, yaw moves it fore and aft; where the legs may only turn at the thigh (a
     skeleton) a hip that moves along the leg moves its foot. So for every foot bearing
     weight (per the support label) roll and yaw are bounded to keep it within
     ``limits.foot_hold_m`` to first order (the final correction is checked on the feet
@@ -314,28 +313,27 @@ def _rotation_bounds(limits: CorrectionLimits, w: np.ndarray, supports: list[str
             pin.framesForwardKinematics(body.model, data, q_base[k])
             width = np.linalg.norm(data.oMf[hips["left"]].translation - data.oMf[hips["right"]].translation)
             hi[k, [0, 2]] = np.minimum(hi[k, [0, 2]], limits.foot_hold_m / (width * lever))
-    return -hi.ravel(), hi.ravel()
+    tightest = np.full((unk.count, 3), np.inf)
+    np.minimum.at(tightest, unk.index, hi)
+    return -tightest.ravel(), tightest.ravel()
 
 
-def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs, half_width):
+def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs, half_width, unk):
     """Last resort for frames pushed out by a contact that changed: at touchdown a
     corrected swing foot whose estimated speed lands a hair on the other side of a
     contact threshold turns double support into single, a jump no gradient sees. For
     each such frame outside, try small smooth changes of the correction around it (a
     fade toward zero, and bumps of ±0.25° on each axis) and keep the first that leaves
-    fewer frames outside at no higher cost."""
+    fewer frames outside at no higher cost. ``delta`` and the changes are of the unknowns ``unk``."""
     f = len(delta)
-
-    def outside(results):
-        return sum(1 for x in results if x.inside is False)
-
     for r in list(current):
         k = r.index
-        if r.inside is not False or (r.support in ("left", "double"), r.support in ("right", "double")) == held[k]:
+        if (r.inside is not False or not unk.judged[k]
+                or (r.support in ("left", "double"), r.support in ("right", "double")) == held[k]):
             continue
-        lo, hi = max(0, k - half_width), min(f, k + half_width + 1)
+        at, weight = unk.near(k, half_width)
         bump = np.zeros(f)
-        bump[lo:hi] = np.hanning(hi - lo + 2)[1:-1]
+        bump[at] = weight
         candidates = [delta * (1 - (1 - keep) * bump)[:, None] for keep in (0.5, 0.0)]
         for axis in range(3):
             for sign in (1, -1):
@@ -345,11 +343,22 @@ def _ease_contact_flips(delta, current, cost, held, analyse, limits, apply, regs
         for cand in candidates:
             fr, cand = apply(cand)
             trial = analyse(fr)
-            trial_cost = _cost(trial, cand, limits, *regs)
-            if outside(trial) < outside(current) and trial_cost <= 1.5 * cost:
+            trial_cost = _cost(trial, cand, limits, *regs, unk.judged)
+            if _outside(trial, unk) < _outside(current, unk) and trial_cost <= 1.5 * cost:
                 delta, current, cost = cand, trial, trial_cost
                 break
     return delta, current, cost
+
+
+def _outside(results: list[FrameResult], unk: Unknowns) -> int:
+    """Judged frames whose ZMP is outside the support polygon."""
+    return sum(1 for r in results if r.inside is False and unk.judged[r.index])
+
+
+def _own(results: list[FrameResult], unk: Unknowns) -> list[FrameResult]:
+    """The judged frames' results, numbered from the first judged frame."""
+    first = int(np.argmax(unk.judged))
+    return [replace(r, index=r.index - first) if first else r for r in results if unk.judged[r.index]]
 
 
 def _stalled(phase: list[int], patience: int, progress: float) -> bool:
@@ -361,10 +370,14 @@ def _stalled(phase: list[int], patience: int, progress: float) -> bool:
 
 def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, config: PipelineConfig,
                    limits: CorrectionLimits | None = None, nominal_dt: float | None = None,
-                   progress: Callable[[str], None] | None = None) -> CorrectionResult:
+                   progress: Callable[[str], None] | None = None,
+                   unknowns: Unknowns | None = None) -> CorrectionResult:
     """Correct a whole take (raw channels ``frames`` (F, nq) at ``times``); see module docstring.
-    ``progress(message)`` is told each stage and solver iteration (a long take takes a while)."""
+    ``progress(message)`` is told each stage and solver iteration (a long take takes a while). ``unknowns``: which
+    rotation each frame takes and which frames are judged (:mod:`livezmp.correct.unknowns`; default one per frame,
+    all judged); the result holds the judged frames only."""
     limits = limits or CorrectionLimits()
+    unk = unknowns or per_frame(len(frames))
     tell = progress or (lambda message: None)
     t0 = time.perf_counter()
     dt = nominal_dt or float(np.median(np.diff(times)))
@@ -372,28 +385,29 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     def analyse(fr: np.ndarray, contacts=None) -> list[FrameResult]:
         return analyse_frames(Pipeline(body, config, dt), times, fr, contacts)
 
-    tell(f"analysing {len(frames)} frames")
+    tell(f"analysing {int(unk.judged.sum())} frames")
     before = analyse(frames)
-    tell(f"{sum(1 for r in before if r.inside is False)} frames outside the support polygon; solving")
+    tell(f"{_outside(before, unk)} frames outside the support polygon; solving")
     # while solving, the feet keep the contacts detected on the original motion: the
     # corrected motion moves a swing foot by millimetres, which must not flip a contact
     # (and with it the polygon) from one trial to the next; the final check re-detects
     held = [(r.support in ("left", "double"), r.support in ("right", "double")) for r in before]
-    f = len(frames)
     pipe = Pipeline(body, config, dt)
     model = pipe.model
     mover = RootMover(body)
     changed = changed_channels(body)
-    w = stance_weights(before, max(1, round(0.1 / dt)))
+    first = unk.first_frames()
+    w = stance_weights(before, max(1, round(0.1 / dt)))[first][unk.index]  # a loop's copies pivot alike
     est = estimator_matrices(pipe, times, edge=3 * pipe.estimator.config.window + pipe.estimator.lag)
     lin = _Linearisation(model, mover, changed, est)
+    pick = unk.selection()
     q_base = np.array([body.channels_to_q(fr) for fr in frames])
-    reg_size = sp.eye(3 * f, format="csr") / np.radians(limits.rotation_scale_deg)
-    reg_acc = _second_difference(f, dt) / np.radians(limits.accel_scale_deg_s2)
-    bounds = _rotation_bounds(limits, w, [r.support for r in before], body, q_base)
-    delta = np.zeros((f, 3))
+    reg_size = sp.eye(3 * unk.count, format="csr") / np.radians(limits.rotation_scale_deg)
+    reg_acc = unk.second_difference(dt) / np.radians(limits.accel_scale_deg_s2)
+    bounds = _rotation_bounds(limits, w, [r.support for r in before], body, q_base, unk)
+    delta = np.zeros((unk.count, 3))
     current = before
-    cost = _cost(current, delta, limits, reg_size, reg_acc)
+    cost = _cost(current, delta, limits, reg_size, reg_acc, unk.judged)
     history = []
     mu = 1.0
     # phase 1 with the original contacts held; phase 2 (a few iterations) re-detects them,
@@ -403,29 +417,29 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
         if stalled:
             break  # the take cannot be corrected within the limits: no more searching, only the final checks
         if contacts is None:
-            current = analyse(apply_delta(mover, body, frames, delta, w))
-            cost = _cost(current, delta, limits, reg_size, reg_acc)
+            current = analyse(apply_delta(mover, body, frames, unk.expand(delta), w))
+            cost = _cost(current, delta, limits, reg_size, reg_acc, unk.judged)
         phase: list[int] = []
         for _ in range(iterations):
-            judged = [k for k, r in enumerate(current) if r.margin is not None]
+            judged = [k for k, r in enumerate(current) if r.margin is not None and unk.judged[k]]
             if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
                 break
-            cjac = lin.channel_jacobians(q_base, delta, w)
+            cjac = lin.channel_jacobians(q_base, unk.expand(delta), w)
             jmat, load = lin.matrix(current, judged, cjac)
-            jall = (jmat / limits.zmp_tolerance_m).tocsr()
+            jall = (jmat @ pick / limits.zmp_tolerance_m).tocsr()
             zall = np.array([current[k].zmp[:2] for k in judged])
             accepted = False
             for _attempt in range(6):  # Levenberg-Marquardt: damp the step until the exact cost drops
                 cand = _solve_step(current, judged, jall, zall, load, delta, mu, limits, reg_size, reg_acc,
-                                   bounds, dt)
-                trial = analyse(apply_delta(mover, body, frames, cand, w), contacts)
-                trial_cost = _cost(trial, cand, limits, reg_size, reg_acc)
+                                   bounds, dt, unk.previous())
+                trial = analyse(apply_delta(mover, body, frames, unk.expand(cand), w), contacts)
+                trial_cost = _cost(trial, cand, limits, reg_size, reg_acc, unk.judged)
                 if trial_cost < cost:
                     delta, current, cost, accepted = cand, trial, trial_cost, True
                     mu = max(mu / 3, 1e-3)
                     break
                 mu *= 10
-            history.append(sum(1 for r in current if r.inside is False))
+            history.append(_outside(current, unk))
             phase.append(history[-1])
             tell(f"iteration {len(history)}: {history[-1]} frames outside")
             if not accepted or history[-1] == 0:
@@ -437,22 +451,24 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     tell("final check" if stalled else "easing contact changes, final check")
     if not stalled:
         delta, current, cost = _ease_contact_flips(delta, current, cost, held, analyse, limits,
-                                                   lambda d: (apply_delta(mover, body, frames, d, w), d),
-                                                   (reg_size, reg_acc), max(1, round(0.3 / dt)))
+                                                   lambda d: (apply_delta(mover, body, frames, unk.expand(d), w), d),
+                                                   (reg_size, reg_acc), max(1, round(0.3 / dt)), unk)
     supports = [r.support for r in before]
     held_feet: set[int] = set()
     for _ in range(3):  # both only shrink rotations; the feet are checked last
-        delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt)
-        delta, held = hold_feet(mover, body, frames, delta, w, supports, limits.foot_hold_m)
+        delta, limited = rate_limit(delta, np.radians(limits.max_rate_deg_s) * dt, unk.periodic)
+        delta, held = hold_feet(mover, body, frames[first], delta, w[first], [supports[k] for k in first],
+                                limits.foot_hold_m)
         held_feet.update(held)
         if not held:
             break
-    corrected = apply_delta(mover, body, frames, delta, w)
+    corrected = apply_delta(mover, body, frames, unk.expand(delta), w)
     after = analyse(corrected)
     solver_s = time.perf_counter() - t0
-    feet = foot_displacement(body, frames, corrected, supports)
-    return CorrectionResult(delta, corrected, before, after, feet, limited, solver_s, history, sorted(held_feet),
-                            config.estimator)
+    own = unk.judged
+    feet = foot_displacement(body, frames[own], corrected[own], [s for s, j in zip(supports, own, strict=True) if j])
+    return CorrectionResult(unk.expand(delta)[own], corrected[own], _own(before, unk), _own(after, unk), feet,
+                            limited, solver_s, history, sorted(held_feet), config.estimator)
 
 
 def correct_bvh(motion: BvhMotion, total_mass: float = 70.0, mode: str = "full",

@@ -294,14 +294,21 @@ def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOption
     take's own format. Returns the correction report."""
     check_correctable(loaded.source, len(loaded.frames))
     from livezmp.correct.solver import correct_motion  # the correction's modules: heavy
+    from livezmp.correct.unknowns import looped
 
     cfg = take_config(loaded, options.mode, options.ground, correction_cutoff(options.cutoff_hz))
-    result = correct_motion(loaded.body, loaded.times, loaded.frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
-                            progress=progress)
+    times, frames, unknowns = loaded.times, loaded.frames, None
+    if loaded.loop is not None:  # corrected as the loop it is analysed as: one rotation per frame of its cycle
+        lead, n = loaded.loop.pad_frames(1.0 / loaded.fps), len(loaded.frames)
+        times = loaded.times[0] + np.arange(-lead, n + lead) / loaded.fps
+        frames, unknowns = loaded.loop.rows(loaded.frames, -lead, n + lead), looped(lead, n, loaded.loop.period)
+    result = correct_motion(loaded.body, times, frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
+                            progress=progress, unknowns=unknowns)
     with atomic_path(output) as tmp:
         write_motion(loaded, result.frames, tmp)
     return {"source": loaded.source, "output": str(output), "mode": cfg.mode, "fps": round(loaded.fps, 6),
-            "duration_s": round(float(loaded.times[-1] - loaded.times[0]), 6), **result.report()}
+            "duration_s": round(float(loaded.times[-1] - loaded.times[0]), 6), **result.report(),
+            **_loop_note(loaded.loop, loaded.fps)}
 
 
 def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions, limits: CorrectionLimits,
