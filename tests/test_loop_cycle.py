@@ -135,3 +135,22 @@ def test_a_looped_cycle_is_corrected_as_a_loop_that_still_closes(takes, tmp_path
     assert _seam(opened, labels) > 0.2  # deg (0.29)
     played = analyse_loaded(replace(original, frames=edges.frames))  # as the loop the original is
     assert np.sum(played.judged & ~played.inside) >= 3  # 5
+
+
+def test_monitor_loop_plays_a_looped_cycle_on_as_one_timeline(takes, tmp_path):
+    """`monitor --loop` of a looped cycle streams what the three-cycle take holds, frame for frame, with no restart;
+    a take that is not a loop still starts over, marked, each lap."""
+    from livezmp.sources.factory import SourceOptions, open_source
+
+    three = load_motion(takes["three"])
+    source = open_source(str(takes["loop"]), SourceOptions(loop=True, speed=0.0))
+    frames = [source.read(1.0) for _ in range(3 * PERIOD + 1)]
+    assert not any(f.restart for f in frames)
+    assert np.abs(np.array([f.channels for f in frames]) - three.frames).max() < 1e-4  # the BVH's decimals
+    assert np.allclose(np.diff([f.t for f in frames]), DT)
+    short = tmp_path / "short.bvh"  # stops 3 frames short of its first pose: not a loop
+    write_bvh(replace(cycles(1), frames=cycles(1).frames[:-3]), short)
+    replay = open_source(str(short), SourceOptions(loop=True, speed=0.0))
+    laps = [replay.read(1.0) for _ in range(2 * (PERIOD - 2))]
+    assert [k for k, f in enumerate(laps) if f.restart] == [PERIOD - 2]
+

@@ -38,6 +38,7 @@ from livezmp.model.body_spec import (
 )
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
 from livezmp.model.c3d import read_c3d
+from livezmp.model.loop_cycle import find_loop
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.trajectory_csv import read_joint_csv
@@ -83,7 +84,9 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         sk = clear_skeleton(sk)
         body, spec = skeleton_body(sk, o.bvh)
         times = np.arange(len(sk.motion.frames)) * sk.motion.frame_time
-        return FileReplaySource(str(path), body, spec, times, body.input_rows(sk.motion.frames), o.speed, o.loop)
+        cycle = find_loop(sk.motion.channel_labels(), sk.motion.frames, sk.motion.frame_time) if o.loop else None
+        return FileReplaySource(str(path), body, spec, times, body.input_rows(sk.motion.frames), o.speed, o.loop,
+                                cycle and replace(cycle, positions=body.input_rows(cycle.positions)))
     if suffix == ".c3d":
         trial = read_c3d(path)
         take, spec = marker_body(trial, replace(o.markers, total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))

@@ -5,6 +5,9 @@ at ``start + t / speed`` on the monotonic clock; ``speed`` 0 means as fast as th
 takes them. With ``loop`` the motion starts over after its end, time continuing (one
 frame period after the last frame), so the stream's time keeps increasing; each lap
 after the first is marked ``restart`` (the motion jumps back), so the analysis starts over.
+A looped cycle (:mod:`livezmp.model.loop_cycle`: its last frame repeats its first) is
+played on as the loop it is instead: its repeated frame once, its root carried on by each
+cycle's travel, one timeline, no restart.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel
 from livezmp.model.body_spec import BodySpec
+from livezmp.model.loop_cycle import Loop
 from livezmp.sources.interface import ErrorLog, SourceFrame, SourceStats
 
 
@@ -47,10 +51,11 @@ class Pacer:
 
 
 class FileReplaySource:
-    """Replays ``frames`` (F, nq) at ``times`` (F,) s; see the module docstring."""
+    """Replays ``frames`` (F, nq) at ``times`` (F,) s; ``cycle`` the take's loop, over the columns of ``frames``,
+    played on when ``loop``; see the module docstring."""
 
     def __init__(self, name: str, body: BodyModel, body_spec: BodySpec, times: np.ndarray, frames: np.ndarray,
-                 speed: float = 1.0, loop: bool = False):
+                 speed: float = 1.0, loop: bool = False, cycle: Loop | None = None):
         if len(frames) < 2:
             raise InputError(f"{name}: need at least 2 frames to replay, got {len(frames)}")
         self.name, self.body, self.body_spec = name, body, body_spec
@@ -59,6 +64,7 @@ class FileReplaySource:
         self.nominal_dt = float((self.times[-1] - self.times[0]) / (len(self.times) - 1))
         self.period = float(self.times[-1] - self.times[0]) + self.nominal_dt  # one pass of a loop
         self.pacer, self.loop = Pacer(speed, name), loop
+        self.cycle = cycle if loop else None
         self.stats, self.errors = SourceStats(), ErrorLog()
         self._k = 0
         self._closed = False
@@ -70,16 +76,21 @@ class FileReplaySource:
     def read(self, timeout: float) -> SourceFrame | None:
         if self.finished:
             return None
-        n = len(self.frames)
-        i, lap = self._k % n, self._k // n
-        t = float(self.times[i] - self.times[0]) + lap * self.period
+        if self.cycle is not None:
+            k = self._k
+            t, row, restart = k * self.nominal_dt, self.cycle.rows(self.frames, k, k + 1)[0], False
+        else:
+            n = len(self.frames)
+            i, lap = self._k % n, self._k // n
+            # each lap after the first restarts the analysis: the wrap is a jump in the motion
+            t, row = float(self.times[i] - self.times[0]) + lap * self.period, self.frames[i]
+            restart = i == 0 and lap > 0
         sent = self.pacer.due(t, timeout)
         if sent is None:
             return None
         self._k += 1
         self.stats.delivered += 1
-        # each lap after the first restarts the analysis: the wrap is a jump in the motion
-        return SourceFrame(float(self.times[0]) + t, self.frames[i], None, sent, restart=i == 0 and lap > 0)
+        return SourceFrame(float(self.times[0]) + t, row, None, sent, restart=restart)
 
     def close(self) -> None:
         self._closed = True
