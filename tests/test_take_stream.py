@@ -195,6 +195,22 @@ def test_plausibility_in_chunks_down_to_one_frame():
     assert stats.result() == want
 
 
+def test_plausibility_reads_its_spill_back_in_blocks(monkeypatch):
+    """The path's means read the spilled velocities and accelerations back block by block with a margin of two
+    means' reach: blocks of 37 frames give the figures of one block."""
+    from livezmp.offline import plausibility as module
+
+    rng = np.random.default_rng(5)
+    n, dt = 700, 1 / 100
+    t = np.arange(n) * dt
+    com = np.column_stack([np.cos(t), np.sin(t), np.full(n, 0.9)]) + rng.standard_normal((n, 3)) * 0.002
+    want = plausibility(com, com, np.ones(n, bool), dt)
+    monkeypatch.setattr(module, "BLOCK_FRAMES", 37)
+    got = plausibility(com, com, np.ones(n, bool), dt)
+    assert got["com_acc_p99_mps2"] == pytest.approx(want["com_acc_p99_mps2"], abs=1e-3)
+    assert got["path_acc_p99_mps2"] == pytest.approx(want["path_acc_p99_mps2"], abs=1e-3) != 0
+
+
 def test_plot_series_keeps_every_kth_frame_within_the_bound(monkeypatch):
     from livezmp.offline import plot
 
