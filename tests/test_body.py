@@ -130,6 +130,18 @@ def test_up_axis_detected_and_overridden():
         body_from_bvh(parse_bvh(make_bvh(up="z"), "z.bvh"), BvhBodyOptions(up_axis="x"))
 
 
+def test_a_take_opening_lying_down_reads_its_up_axis_from_the_skeleton():
+    """A keyframed take may open with the body on its side (Alderson's TARZAN.bvh, head-to-feet along -x) or upside
+    down; the skeleton's zero pose still stands: y up, not refused."""
+    text = make_bvh(frames=3)
+    head, rows = text.rsplit("Frame Time: 0.01\n", 1)
+    lines = rows.splitlines()
+    values = lines[0].split()
+    values[1], values[3] = "10", "90"  # the root low and turned 90° about z: lying on its side
+    motion = parse_bvh(head + "Frame Time: 0.01\n" + "\n".join([" ".join(values), *lines[1:]]) + "\n", "lying.bvh")
+    assert body_from_bvh(motion).up_axis == "y"
+
+
 def test_static_standing_com_over_feet():
     motion = parse_bvh(make_bvh(), "s.bvh")
     body = body_from_bvh(motion)

@@ -241,20 +241,24 @@ def _build(motion: BvhMotion, part: BvhPart, tags: list[SegmentTag], scale: floa
 
 
 def _detect_up(motion: BvhMotion, part: BvhPart, tags: list[SegmentTag], scale: float, opts: BvhBodyOptions) -> str:
-    """The axis along which the head is above the feet in the first frame."""
+    """The axis along which the head is above the feet in the first frame, or where that pose cannot tell (lying,
+    upside down: a keyframed take may open with a tumble) in the skeleton's zero pose, its offsets alone (which the
+    exporters write standing; not every skeleton's is, and then the file is refused)."""
     model, frames, _ = _build(motion, part, tags, scale, np.eye(3), opts)
     data = model.createData()
-    q = _channel_scale(part.joints, scale) * motion.frames[0, part.columns]
-    pin.framesForwardKinematics(model, data, q)
-    pos = lambda kind: np.mean([data.oMf[frames[i]].translation for i, t in enumerate(tags) if t.kind == kind], 0)  # noqa: E731
     head_kind = "head" if any(t.kind == "head" for t in tags) else "pelvis"
-    v = pos(head_kind) - pos("foot")
-    ax = int(np.argmax(np.abs(v)))
-    if ax == 1 and v[1] > 0:
-        return "y"
-    if ax == 2 and v[2] > 0:
-        return "z"
-    raise InputError(f"{motion.source}: cannot tell the up axis (head-to-feet vector {np.round(v, 3)}); give --up")
+    first = _channel_scale(part.joints, scale) * motion.frames[0, part.columns]
+    seen = []
+    for q in (first, np.zeros_like(first)):
+        pin.framesForwardKinematics(model, data, q)
+        pos = lambda kind: np.mean([data.oMf[frames[i]].translation for i, t in enumerate(tags) if t.kind == kind], 0)  # noqa: E731
+        v = pos(head_kind) - pos("foot")
+        ax = int(np.argmax(np.abs(v)))
+        if ax in (1, 2) and v[ax] > 0:
+            return "yz"[ax - 1]
+        seen.append(np.round(v, 3))
+    raise InputError(f"{motion.source}: cannot tell the up axis (head-to-feet vector {seen[0]} in the first frame, "
+                     f"{seen[1]} in the skeleton's zero pose); give --up")
 
 
 def _channel_scale(joints: list[BvhJoint], scale: float) -> np.ndarray:
