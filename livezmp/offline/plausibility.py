@@ -41,8 +41,8 @@ PLAUSIBLE_RATIO = 1.5
 FLIGHT_SHARE = 0.1
 FLIGHT_FALL_MPS2 = -9.81 / 2
 # s: the moving mean's length (taken twice): a stride. A walk's lateral sway repeats at the stride frequency (0.75-1.1
-# Hz), its fore-aft swing at twice it: the two means keep 9 % of a sway at 0.75 Hz, 5 % at 0.8, under 1 % above 0.95,
-# and a turn's acceleration (seconds long) nearly whole
+# Hz), its fore-aft swing at twice it: the two means keep 9 % of a sway at 0.75 Hz, 5 % at 0.8, under 1 % at 0.95-1.1,
+# under 4 % of a swing at 1.6-2.2 Hz, and a turn's acceleration (seconds long) nearly whole
 STRIDE_S = 1.0
 PATH_MIN_SPEED = 0.2  # m/s: slower (standing, stepping in place), the take's net travel gives the axes, not its path
 BLOCK_FRAMES = 1 << 16  # horizontal velocities and accelerations read back 65536 frames at a time (and a margin)
