@@ -302,7 +302,8 @@ def add_device_options(p: argparse.ArgumentParser) -> None:
 
 
 def _gait_input_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--up", choices=("y", "z"), default="y", help="BVH up axis (default y; ground = the other two)")
+    p.add_argument("--up", choices=("y", "z"),
+                   help="BVH up axis (default: detected, as analyze does; ground = the other two)")
     p.add_argument("--units", choices=("m", "cm", "mm", "in", "cmu"), help="BVH length unit (default: detect)")
     p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
     p.add_argument("--markers", help="C3D marker map (TOML), for C3D walks whose labels need one (as for analyze)")

@@ -180,3 +180,28 @@ def test_bvh_round_trip_keeps_features(tmp_path):
     b = walk_features(take_from_bvh(parse_bvh(path.read_text(), str(path))))
     assert b.frequency == pytest.approx(a.frequency, rel=1e-6)
     assert np.allclose(b.amplitude, a.amplitude, atol=1e-6)
+
+
+def test_a_looped_stride_is_read_as_the_walk_it_loops(tmp_path):
+    """An animation cycle (one stride whose last frame repeats its first, as Mixamo's walks) is played on as a walk:
+    it gives the features of the long walk it is a stride of. Read as it is, it has no whole gait cycle."""
+    spec, f, v, fps = walk_spec(), 1.0, 1.2, 30.0
+    long = walk_features(take_from_bvh(sine_bvh(spec, f, v, 7.0, fps)))
+    stride = sine_bvh(spec, f, v, 1.0 + 1.0 / fps, fps)  # 31 frames: the 31st is the first's pose, a stride on
+    write_bvh(stride, tmp_path / "loop.bvh")
+    looped = walk_features(load_take(tmp_path / "loop.bvh"))
+    assert looped.frequency == pytest.approx(f, rel=1e-6) and looped.speed == pytest.approx(v, rel=1e-3)
+    for name in spec:
+        assert np.allclose(by_name(looped, name), by_name(long, name), atol=1e-3), name  # deg (the file's decimals)
+    with pytest.raises(InputError, match="fewer than two whole gait cycles"):
+        walk_features(take_from_bvh(stride))
+
+
+def test_a_z_up_walk_is_read_with_its_detected_up_axis(tmp_path):
+    """A walk exported z up is read as one (as `analyze` detects it), not taken as y up by default."""
+    import skeleton_variants as sv
+
+    spec, f, v = walk_spec(), 0.93, 1.25
+    write_bvh(sv.compose(sv.z_up(sv.decompose(sine_bvh(spec, f, v, 7.0)))), tmp_path / "zup.bvh")
+    feats = walk_features(load_take(tmp_path / "zup.bvh"))
+    assert feats.frequency == pytest.approx(f, rel=1e-6) and feats.speed == pytest.approx(v, rel=1e-4)

@@ -96,8 +96,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
                   f"{rep['support_frames']} support frames outside; root rotation max "
                   f"{rep['max_root_rotation_deg']:.2f}°; stance feet moved ≤ {rep['max_foot_displacement_mm']:.3f} mm")
         write_bvh(motion, out)
-        print(f"wrote {out}: {len(motion.frames)} frames at {motion.fps:g} fps, up {args.up}, "
-              f"ground plane {GROUND[args.up]}")
+        print(f"wrote {out}: {len(motion.frames)} frames at {motion.fps:g} fps, up {take.body.up_axis}, "
+              f"ground plane {GROUND[take.body.up_axis]}")
     else:
         if args.balance:
             raise InputError("--balance: balance correction works on BVH walks only")

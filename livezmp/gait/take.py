@@ -19,6 +19,7 @@ turns a changed walk back before it is written.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.loop_cycle import find_loop
 from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
 from livezmp.model.marker_map import MarkerMap, load_marker_map
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
@@ -102,7 +104,11 @@ def _turn(q: np.ndarray, body: BodyModel, root_xyz: list[int], root_rot: list[in
         out[:, root_xyz] = q[:, root_xyz] @ r_in.T
     if root_rot:
         turned = Rotation.from_matrix(r_in) * Rotation.from_euler(seq, q[:, root_rot])
-        out[:, root_rot] = turned.as_euler(seq)
+        with warnings.catch_warnings():
+            # at gimbal lock (a z-up export's root turned 90° in a ZXY order) only the sum of the first and third
+            # angles is defined: scipy's split (the third 0) keeps the rotation exactly; said once in docs/gait.md
+            warnings.filterwarnings("ignore", "Gimbal lock detected", UserWarning)
+            out[:, root_rot] = turned.as_euler(seq)
     return out
 
 
@@ -147,9 +153,10 @@ def _make(source: str, t: np.ndarray, q_raw: np.ndarray, body: BodyModel, origin
     return GaitTake(source, t, q, body, np.nonzero(body.angle_mask)[0], tags, xyz, rot, seq, heading, origin)
 
 
-def take_from_bvh(motion: BvhMotion, up: str = "y", units: str | None = None) -> GaitTake:
-    """A BVH walk; ``up`` is the file's up axis ("y" or "z"), ``units`` its length unit (None = detect)."""
-    if up not in ("y", "z"):
+def take_from_bvh(motion: BvhMotion, up: str | None = None, units: str | None = None) -> GaitTake:
+    """A BVH walk; ``up`` is the file's up axis ("y" or "z"; None = detect, as ``analyze``), ``units`` its length unit
+    (None = detect)."""
+    if up not in (None, "y", "z"):
         raise InputError(f"{motion.source}: up axis must be 'y' or 'z', got {up!r}")
     body = body_from_bvh(motion, BvhBodyOptions(units=units, up_axis=up))
     t = np.arange(len(motion.frames)) * motion.frame_time
@@ -178,7 +185,19 @@ def take_from_c3d(trial: C3dTrial, mmap: MarkerMap | None = None) -> GaitTake:
     return replace(walk, min_cycles=1)
 
 
-def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: str | Path | None = None,
+# A looped cycle (its last frame repeats its first: Mixamo's walks) holds one or a few gait cycles; read as a walk it
+# is played on this many laps, so that two whole gait cycles lie within wherever the thigh's cycle starts in the lap
+LOOP_LAPS = 4
+
+
+def _played_on(motion: BvhMotion) -> BvhMotion:
+    """``motion`` played on for :data:`LOOP_LAPS` laps when it is a looped cycle (:mod:`livezmp.model.loop_cycle`),
+    else itself."""
+    loop = find_loop(motion.channel_labels(), motion.frames, motion.frame_time)
+    return motion if loop is None else replace(motion, frames=loop.rows(motion.frames, 0, LOOP_LAPS * loop.period + 1))
+
+
+def load_take(path: str | Path, up: str | None = None, units: str | None = None, urdf: str | Path | None = None,
               markers: str | Path | None = None) -> GaitTake:
     """Read a walk from a ``.bvh`` or ``.c3d`` file (through the marker map file ``markers``, if given), or a
     ``.csv`` joint trajectory (needs ``urdf``)."""
@@ -186,7 +205,7 @@ def load_take(path: str | Path, up: str = "y", units: str | None = None, urdf: s
     if markers and p.suffix.lower() != ".c3d":
         raise InputError(f"{markers}: --markers is for C3D walks (got {p})")
     if p.suffix.lower() == ".bvh":
-        return take_from_bvh(without_rest_pose(read_bvh(p))[0], up, units)
+        return take_from_bvh(_played_on(without_rest_pose(read_bvh(p))[0]), up, units)
     if p.suffix.lower() == ".c3d":
         return take_from_c3d(read_c3d(check_input_file(p, "walk")), load_marker_map(markers) if markers else None)
     if p.suffix.lower() == ".csv":

@@ -140,7 +140,7 @@ class GaitJob(Job):
     stride, speed, per-channel DC and amplitude over whole cycles) in ``features.json``; the
     population statistics are computed from them once every take is done."""
 
-    up: str = "y"
+    up: str | None = None  # None: detected
     units: str | None = None
     urdf: str | None = None
     markers: str | None = None  # a marker map file, for C3D walks
