@@ -26,11 +26,12 @@ delay on sinusoids (why row 4 matters).
 Figures: over each trial's complete frames (every loaded foot on a plate); lag > 0: the ZMP comes after
 the CoP; bias: mean ZMP - CoP along the walk and to its left.
 
-    python benchmarks/bench_forceplates.py [MORE.c3d | DIR ...]
+    python benchmarks/bench_forceplates.py [MORE.c3d | DIR ...] [--static WALK.c3d=STATIC.c3d ...]
 
 Extra trials (files, or directories searched for *.c3d) get one row each with `livezmp analyze`'s
 default settings, or the one line that refuses them; the median is then over every trial with
-complete frames (the shared ones included).
+complete frames (the shared ones included). `--static` gives an extra walk (by its file name) the static
+trial of its cluster set, as `livezmp analyze WALK.c3d --static STATIC.c3d` does.
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from livezmp.model.markers import (
     input_rotation,
     sway_basis,
 )
+from livezmp.model.static_trial import read_walk
 from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
 from livezmp.offline.gaitlab import (
     COP_CHECK_WEIGHT,
@@ -159,14 +161,14 @@ def extra_paths(args: list[str]) -> list[Path]:
     return out
 
 
-def extra_table(paths: list[Path]) -> dict[str, tuple]:
+def extra_table(paths: list[Path], statics: dict[str, str]) -> dict[str, tuple]:
     """One row per extra trial at the defaults (or why it is refused); {name: (trial, analysis)} of those
-    with complete frames."""
+    with complete frames. ``statics``: a walk's file name -> its static trial."""
     print(f"\nmore trials, `livezmp analyze` defaults  mm\n{'trial':40s} {header()[41:]}  rate, plates, marker set")
     done = {}
     for path in paths:
         try:
-            trial = read_c3d(path)
+            trial = read_walk(path, statics.get(path.name))
             a = analyse_lab_take(trial)
         except InputError as e:
             print(f"{path.name[:40]:40s} refused: {str(e).replace(str(path) + ': ', '')[:150]}")
@@ -175,6 +177,8 @@ def extra_table(paths: list[Path]) -> dict[str, tuple]:
         info = f"{trial.rate:g} Hz, {len(trial.plates)} plates, {a.summary['markers']['marker_set'][:28]}"
         if "labels" in a.summary["markers"]:
             info += f" (labels: {len(a.summary['markers']['labels']['aliases'])} aliases)"
+        if "from_static_trial" in a.summary["markers"]:
+            info += f"; {len(a.summary['markers']['from_static_trial']['landmarks'])} landmarks from its static trial"
         aside = a.summary["plates"]["set_aside"]
         info += f"; plate(s) {', '.join(str(p['plate']) for p in aside)} set aside (pulling)" if aside else ""
         if not cv["frames"]:
@@ -993,7 +997,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("more", nargs="*", help="more C3D trials, or directories holding them")
     ap.add_argument("--figures", type=Path, help="write the figures (docs/validation/) into this directory")
+    ap.add_argument("--static", action="append", default=[], metavar="WALK.c3d=STATIC.c3d",
+                    help="an extra walk's static trial (the walk by its file name or path; repeatable)")
     args = ap.parse_args()
+    statics = {Path(walk).name: static for walk, _, static in (s.partition("=") for s in args.static)}
     t0 = time.perf_counter()
     print(f"load average {load_averages(' ')}")
     results = {name: trial_table(DATA / name) for name in TRIALS}
@@ -1002,7 +1009,7 @@ def main() -> None:
         print(f"  {name:40s} {np.median([results[t][k]['rms_mm'] for t in TRIALS]):7.1f}")
     done = {name: (trial, analyse_lab_take(trial)) for name in TRIALS for trial in [read_c3d(DATA / name)]}
     if args.more:
-        done |= extra_table(extra_paths(args.more))
+        done |= extra_table(extra_paths(args.more), statics)
         rms = [a.summary["cop_vs_zmp"]["rms_mm"] for _, a in done.values()]
         print(f"median RMS over all {len(rms)} trials with complete frames (defaults): {np.median(rms):.1f} mm")
     trunk_sway(done)

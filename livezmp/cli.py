@@ -104,6 +104,9 @@ def add_marker_options(p: argparse.ArgumentParser) -> None:
     """How a C3D trial's markers make a body: the marker map and the body-segment table."""
     p.add_argument("--markers", help="C3D marker map (TOML: label renames, or a cluster set's segments and "
                                      "joint-centre rules; docs/validation.md)")
+    p.add_argument("--static", metavar="STATIC.c3d",
+                   help="a cluster set's static trial: the landmarks (knee, ankle ...) the C3D walk lacks, carried "
+                        "by their segment's cluster (docs/validation.md, \"Static trials for cluster sets\")")
     p.add_argument("--bsp", choices=BSP_NAMES, default="auto",
                    help="C3D body-segment table: de Leva's adult, or for a child scaled by Jensen's proportions at "
                         "its age (default auto: child when the file's Age is under 18 or its Height under 1.40 m)")
@@ -307,6 +310,8 @@ def _gait_input_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--units", choices=("m", "cm", "mm", "in", "cmu"), help="BVH length unit (default: detect)")
     p.add_argument("--urdf", help="robot URDF, for joint-trajectory CSV walks")
     p.add_argument("--markers", help="C3D marker map (TOML), for C3D walks whose labels need one (as for analyze)")
+    p.add_argument("--static", metavar="STATIC.c3d",
+                   help="a cluster set's static trial, for C3D walks (as for analyze)")
 
 
 def add_population_options(p: argparse.ArgumentParser) -> None:

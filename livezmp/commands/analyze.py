@@ -103,6 +103,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             print(f"  mass: {summary['mass']['note']}")
         if "floor" in summary["markers"]:
             print(f"  floor: {summary['markers']['floor']['why']}")
+        if static := summary["markers"].get("from_static_trial"):
+            print(f"  from the static trial {Path(static['file']).name}, carried by their clusters: "
+                  + ", ".join(static["landmarks"]))
         if "no_complete_frame" in (summary.get("plates") or {}):
             print(f"  no ZMP vs plate CoP: {summary['plates']['no_complete_frame']}")
         for w in (summary.get("cop_under_foot") or {}).get("warnings", []):

@@ -60,7 +60,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
 def cmd_gait(args: argparse.Namespace) -> int:
     """Each take's features on the cluster, then the population statistics here, from the takes'
     ``features.json`` files (a few numbers per channel and take)."""
-    job = GaitJob(args.up, args.units, args.urdf, args.markers)
+    job = GaitJob(args.up, args.units, args.urdf, args.markers, args.static)
     if args.manifest:
         if args.sources:
             raise InputError("batch gait: give either --manifest or the library's sources, not both")

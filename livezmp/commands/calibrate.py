@@ -8,9 +8,9 @@ import argparse
 from livezmp.checks import check_number, check_output_path
 from livezmp.commands.common import MAX_BODY_MASS
 from livezmp.model.anthropometry import MAX_AGE_YEARS
-from livezmp.model.c3d import read_c3d
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
+from livezmp.model.static_trial import read_walk
 from livezmp.offline.calibrate import calibrate, write_subject
 from livezmp.offline.gaitlab import LabOptions
 
@@ -19,7 +19,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     check_output_path(args.output, "-o")
     check_number(args.age, "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
     check_number(args.mass, "--mass (kg)", 0.0, MAX_BODY_MASS, lo_open=True)
-    trials = [read_c3d(p) for p in args.trials]
+    trials = [read_walk(p, args.static) for p in args.trials]
     markers = MarkerBodyOptions(marker_map=load_marker_map(args.markers) if args.markers else None, bsp=args.bsp,
                                 age_years=args.age)
     subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))

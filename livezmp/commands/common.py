@@ -58,6 +58,7 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
                        up=args.up, mapping=args.mapping, sole_width=args.sole_width, ground=args.ground,
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
                        subject=getattr(args, "subject", None), markers=getattr(args, "markers", None),
+                       static=getattr(args, "static", None),
                        cutoff_hz=args.cutoff_hz, bsp=getattr(args, "bsp", "auto"), age=getattr(args, "age", None))
 
 

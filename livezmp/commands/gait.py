@@ -27,7 +27,7 @@ GROUND = {"y": "xz", "z": "xy"}
 
 
 def _load(path: str | Path, args: argparse.Namespace) -> GaitTake:
-    return load_take(path, args.up, args.units, args.urdf, args.markers)
+    return load_take(path, args.up, args.units, args.urdf, args.markers, args.static)
 
 
 def _pct(s) -> str:

@@ -54,7 +54,7 @@ def _source(args: argparse.Namespace) -> Source:
                          hat_fraction=subject and subject.hat_fraction)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
                          speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration,
-                         markers=markers)
+                         markers=markers, static=args.static)
     return open_source(args.motion, opts)
 
 
@@ -69,6 +69,9 @@ def _marker_options(args: argparse.Namespace, subject: Subject | None) -> Marker
     if args.markers and not c3d:
         raise InputError(f"{args.markers}: --markers is for a C3D file replayed (got {source or 'the built-in demo'}; "
                          "a capture stream's labels must be ones the built-in conventions read)")
+    if args.static and not c3d:
+        raise InputError(f"{args.static}: --static is for a C3D file replayed (got {source or 'the built-in demo'}; "
+                         "a capture stream's markers must make a standard set)")
     if not (c3d or source.split("://")[0] in MOCAP_SCHEMES) and (args.bsp != "auto" or args.age is not None):
         raise InputError("--bsp / --age: the segment table is for a C3D file's or a capture stream's markers (got "
                          f"{args.motion or 'the built-in demo'})")

@@ -32,12 +32,13 @@ from livezmp.gait.channels import ChannelTag, tag_channels
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
-from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.c3d import C3dTrial
 from livezmp.model.loop_cycle import find_loop
 from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
 from livezmp.model.marker_map import MarkerMap, load_marker_map
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.rest_pose import without_rest_pose
+from livezmp.model.static_trial import read_walk
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
 
@@ -198,16 +199,18 @@ def _played_on(motion: BvhMotion) -> BvhMotion:
 
 
 def load_take(path: str | Path, up: str | None = None, units: str | None = None, urdf: str | Path | None = None,
-              markers: str | Path | None = None) -> GaitTake:
-    """Read a walk from a ``.bvh`` or ``.c3d`` file (through the marker map file ``markers``, if given), or a
-    ``.csv`` joint trajectory (needs ``urdf``)."""
+              markers: str | Path | None = None, static: str | Path | None = None) -> GaitTake:
+    """Read a walk from a ``.bvh`` or ``.c3d`` file (through the marker map file ``markers``, and with the
+    landmarks it lacks from the ``static`` trial, if given), or a ``.csv`` joint trajectory (needs ``urdf``)."""
     p = Path(path)
-    if markers and p.suffix.lower() != ".c3d":
-        raise InputError(f"{markers}: --markers is for C3D walks (got {p})")
+    for option, name in ((markers, "--markers"), (static, "--static")):
+        if option and p.suffix.lower() != ".c3d":
+            raise InputError(f"{option}: {name} is for C3D walks (got {p})")
     if p.suffix.lower() == ".bvh":
         return take_from_bvh(_played_on(without_rest_pose(read_bvh(p))[0]), up, units)
     if p.suffix.lower() == ".c3d":
-        return take_from_c3d(read_c3d(check_input_file(p, "walk")), load_marker_map(markers) if markers else None)
+        return take_from_c3d(read_walk(check_input_file(p, "walk"), static),
+                             load_marker_map(markers) if markers else None)
     if p.suffix.lower() == ".csv":
         if urdf is None:
             raise InputError(f"{p}: a joint-trajectory CSV needs the robot's URDF (--urdf)")

@@ -81,6 +81,9 @@ class C3dTrial:
     events: list[tuple[str, str, float]] = field(default_factory=list)  # (context, label, time s)
     units: str = "m"
     age_years: float | None = None
+    # landmarks carried from a static trial by their clusters (livezmp.model.static_trial): its file and
+    # label -> "segment: cluster markers"; empty for a trial as read
+    from_static: dict = field(default_factory=dict)
 
     def marker(self, label: str) -> np.ndarray | None:
         """(F, 3) trajectory of ``label`` (m), or None when the file has no such marker."""

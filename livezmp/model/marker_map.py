@@ -167,13 +167,35 @@ def cluster_frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centred = points - origin[:, None]
     ref = np.median(centred, axis=0)
     ref -= ref.mean(axis=0)
-    h = np.einsum("ki,fkj->fij", ref, centred)  # sum_k ref_k centred_k^T
+    return origin, _rotation(np.einsum("ki,fkj->fij", ref, centred))  # sum_k ref_k centred_k^T
+
+
+def _rotation(h: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) the proper rotations R best carrying points onto others, from their covariances ``h`` (F, 3, 3)
+    = sum_k p_k q_k^T of centred pairs (q_k ~ R p_k): V diag(1, 1, det(V U^T)) U^T of h's SVD (Kabsch)."""
     u, _, vt = np.linalg.svd(h)
     d = np.sign(np.linalg.det(np.einsum("fij,fjk->fik", vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
-    fix = np.ones((len(points), 3))
+    fix = np.ones((len(h), 3))
     fix[:, 2] = d
-    rot = np.einsum("fji,fj,fkj->fik", vt, fix, u)  # V diag(1, 1, d) U^T
-    return origin, rot
+    return np.einsum("fji,fj,fkj->fik", vt, fix, u)  # V diag(1, 1, d) U^T
+
+
+def rigid_fit(ref: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation (F, 3, 3) and shift (F, 3) m carrying the shape ``ref`` (k, 3) m onto each frame of ``points``
+    (F, k, 3) m, ``points`` ~ R ref + shift by least squares over the markers each frame sees (NaN where unseen);
+    NaN in a frame seeing fewer than 3."""
+    seen = np.isfinite(points).all(axis=2)
+    w = seen.astype(float)
+    n = np.maximum(w.sum(axis=1), 1.0)[:, None]
+    p = np.where(seen[..., None], points, 0.0)
+    cp = p.sum(axis=1) / n
+    cr = w @ ref / n
+    h = np.einsum("fk,fki,fkj->fij", w, ref[None] - cr[:, None], p - cp[:, None])
+    rot = _rotation(h)
+    shift = cp - np.einsum("fij,fj->fi", rot, cr)
+    few = seen.sum(axis=1) < 3
+    rot[few], shift[few] = np.nan, np.nan
+    return rot, shift
 
 
 def functional_centre(o1: np.ndarray, r1: np.ndarray, o2: np.ndarray, r2: np.ndarray) -> np.ndarray:

@@ -300,8 +300,16 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
                    for m in missing]
         seen = ", ".join(shown[:12]) + (" ..." if len(shown) > 12 else "")
         raise InputError(f"{trial.source}: no Plug-in Gait / Helen Hayes marker set: missing {', '.join(missing)} "
-                         f"(markers in the file: {seen})")
+                         f"(markers in the file: {seen}){_static_hint(missing)}")
     return roles
+
+
+def _static_hint(missing: list[str]) -> str:
+    """For a set missing only knee and ankle markers (a cluster set's landmarks, which its static trial carries):
+    how to give them."""
+    if all(m[1:4] in ("KNE", "ANK") for m in missing):
+        return "; a cluster set's knee and ankle landmarks come from its static trial: --static STATIC.c3d"
+    return ""
 
 
 # the mean pelvis-above-ankles vector within ~35 deg of a lab axis: that axis is up (a standing or walking
@@ -532,7 +540,16 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         raise InputError(f"total mass must be positive, got {opts.total_mass}")
     mmap = _map_for(trial, opts.marker_map)
     if mmap is not None and mmap.segments:
-        return _cluster_take(renamed(trial, mmap), opts, mmap)
+        take = _cluster_take(renamed(trial, mmap), opts, mmap)
+    else:
+        take = _standard_take(trial, opts)
+    if trial.from_static:  # which landmarks a static trial gave (livezmp.model.static_trial)
+        take.notes["from_static_trial"] = trial.from_static
+    return take
+
+
+def _standard_take(trial: C3dTrial, opts: MarkerBodyOptions) -> MarkerTake:
+    """The body of a Plug-in Gait / Helen Hayes set (see the module docstring)."""
     trial, roles, match = _standard(trial, opts.marker_map)
     raw = {role: trial.marker(label) for role, label in roles.items() if label is not None}
     _check_coordinates(raw, _as_written(roles, match), trial)

@@ -14,12 +14,13 @@ from livezmp.model.base_placement import BasePlacer, place_base
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import BvhMotion, read_bvh, write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions, body_from_bvh
-from livezmp.model.c3d import C3dTrial, read_c3d
+from livezmp.model.c3d import C3dTrial
 from livezmp.model.euler_orders import gimbal_orders, reexpressed, restore
 from livezmp.model.loop_cycle import Loop, find_loop
 from livezmp.model.markers import MarkerBodyOptions, body_from_markers
 from livezmp.model.mimic import follow
 from livezmp.model.rest_pose import without_rest_pose
+from livezmp.model.static_trial import read_walk
 from livezmp.model.trajectory_csv import JointTrajectory, read_joint_csv, write_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 
@@ -47,10 +48,10 @@ class LoadedMotion:
 
 def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: BvhBodyOptions | None = None,
                 urdf_options: UrdfBodyOptions | None = None, c3d_mass: float | None = None,
-                markers: MarkerBodyOptions | None = None) -> LoadedMotion:
+                markers: MarkerBodyOptions | None = None, static: str | Path | None = None) -> LoadedMotion:
     """Load ``path``: ``.bvh`` or ``.c3d`` on its own, ``.csv`` with ``robot`` (a URDF). A C3D's body
-    (``markers`` options) weighs ``c3d_mass`` kg, else the file's subject mass, else 70 kg (plates are for
-    :mod:`livezmp.offline.gaitlab`)."""
+    (``markers`` options; the landmarks it lacks from the ``static`` trial, if given) weighs ``c3d_mass`` kg, else
+    the file's subject mass, else 70 kg (plates are for :mod:`livezmp.offline.gaitlab`)."""
     p = check_input_file(path, "motion file")
     suffix = p.suffix.lower()
     if suffix == ".bvh":
@@ -66,7 +67,7 @@ def load_motion(path: str | Path, robot: str | Path | None = None, bvh_options: 
         return LoadedMotion(body, times, body.input_rows(clear.frames), str(p), bvh=motion, bvh_orders=orders,
                             rest_frames=rest, loop=loop and replace(loop, positions=body.input_rows(loop.positions)))
     if suffix == ".c3d":
-        trial = read_c3d(p)
+        trial = read_walk(p, static)
         take = body_from_markers(trial, replace(markers or MarkerBodyOptions(),
                                                 total_mass=c3d_mass or trial.mass_kg or DEFAULT_MASS))
         times = (take.first_frame + np.arange(len(take.frames))) / trial.rate

@@ -144,6 +144,7 @@ class GaitJob(Job):
     units: str | None = None
     urdf: str | None = None
     markers: str | None = None  # a marker map file, for C3D walks
+    static: str | None = None  # a cluster set's static trial, for C3D walks
 
     name: ClassVar[str] = "gait"
     columns: ClassVar = (("cycles", "int64"), ("frequency_hz", "float64"), ("stride_length_m", "float64"),
@@ -156,7 +157,7 @@ class GaitJob(Job):
         return (FEATURES_JSON,)
 
     def run(self, path: Path, out_dir: Path) -> dict:
-        take = load_take(path, self.up, self.units, self.urdf, self.markers)
+        take = load_take(path, self.up, self.units, self.urdf, self.markers, self.static)
         feats = walk_features(take)
         write_json(feats.to_json(), out_dir / FEATURES_JSON)
         t = take.t

@@ -23,12 +23,12 @@ from livezmp.estimate.estimator import FILE_CUTOFF_HZ
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
-from livezmp.model.c3d import read_c3d
 from livezmp.model.loop_cycle import Loop
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import LoadedMotion, load_motion, write_motion
 from livezmp.model.segments import load_mapping
+from livezmp.model.static_trial import read_walk
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
 from livezmp.offline.calibrate import Subject, load_subject
@@ -53,7 +53,8 @@ class TakeOptions:
     """How a take is loaded and analysed (the body options of ``livezmp analyze``):
     ``mass`` kg (None: the file's subject mass for a C3D, else 70 kg), ``sole_width`` m, ``ground`` m in
     the input frame, ``mode`` "full" or "seed", ``tolerance_mm`` of ``inside_fraction_tol``; ``subject``
-    and ``markers``: a subject file and a marker map (C3D only); ``cutoff_hz`` the estimator's
+    and ``markers``: a subject file and a marker map (C3D only); ``static`` a cluster set's static trial (C3D only:
+    :mod:`livezmp.model.static_trial`); ``cutoff_hz`` the estimator's
     cutoff, Hz (None: the default for the take's rate)."""
 
     robot: str | None = None
@@ -68,6 +69,7 @@ class TakeOptions:
     tolerance_mm: float = VALIDATED_P95_MM
     subject: str | None = None  # subject file (livezmp calibrate): a BVH's HAT mass fraction, a C3D's HAT
     markers: str | None = None
+    static: str | None = None
     cutoff_hz: float | None = None
     bsp: str = "auto"  # a C3D body's segment table (livezmp.model.anthropometry.choose_table)
     age: float | None = None  # years: the subject's age, replacing a C3D file's
@@ -77,7 +79,7 @@ class TakeOptions:
         if Path(path).suffix.lower() != ".c3d":
             check_not_c3d_options(self, path)
         return load_motion(path, self.robot, self.bvh_options(subject), UrdfBodyOptions(config=self.robot_config),
-                           c3d_mass=self.mass, markers=self.marker_options())
+                           c3d_mass=self.mass, markers=self.marker_options(), static=self.static)
 
     def marker_options(self) -> MarkerBodyOptions:
         """How a C3D's marker body is made: the marker map, the segment table, and the subject file's
@@ -235,7 +237,7 @@ def lab_options(options: TakeOptions, cutoff_hz: float | None) -> LabOptions:
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
-    lab = analyse_lab_take(read_c3d(path), lab_options(options, options.cutoff_hz))
+    lab = analyse_lab_take(read_walk(path, options.static), lab_options(options, options.cutoff_hz))
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
                                                 options.tolerance_mm), **lab.summary,
                "estimator": asdict(lab.config.estimator)}
@@ -256,6 +258,8 @@ def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None
     """A marker map and a segment table's choice only apply to C3D trials: say so for any other input."""
     if options.markers:
         raise InputError(f"{options.markers}: --markers is for C3D trials (got {path or 'the built-in demo'})")
+    if options.static:
+        raise InputError(f"{options.static}: --static is for C3D trials (got {path or 'the built-in demo'})")
     if options.bsp != "auto" or options.age is not None:
         raise InputError("--bsp and --age choose a C3D marker body's segment table (got "
                          f"{path or 'the built-in demo'}; a BVH's body is de Leva's adult table)")
@@ -320,13 +324,16 @@ def correct_c3d_take(path: str | Path, output: str | Path, options: TakeOptions,
     from livezmp.model.c3d_write import non_position_labels, write_moved_points
     from livezmp.model.marker_bvh import chain_to_bvh
 
-    trial = read_c3d(path)
+    trial = read_walk(path, options.static)
     check_correctable(path, len(trial.points))
     fix = correct_marker_take(trial, lab_options(options, correction_cutoff(options.cutoff_hz)), limits,
                               non_position_labels(path), progress=progress)
+    # a static trial's landmarks are not the file's: its clusters, moved, carry them again when it is read
+    landmarks = trial.from_static.get("landmarks", {})
+    moved = {i: xyz for i, xyz in fix.moved.items() if trial.labels[i] not in landmarks}
     with atomic_path(output) as tmp:
         if str(output).lower().endswith(".c3d"):
-            write_moved_points(path, tmp, fix.moved, fix.added, fix.first_frame)
+            write_moved_points(path, tmp, moved, fix.added, fix.first_frame)
         else:
             write_bvh(chain_to_bvh(fix.body, fix.result.frames, 1.0 / trial.rate, str(path)), tmp)
     report = fix.result.report()

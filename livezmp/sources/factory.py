@@ -41,6 +41,7 @@ from livezmp.model.c3d import read_c3d
 from livezmp.model.loop_cycle import find_loop
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.motion_file import trajectory_frames
+from livezmp.model.static_trial import read_walk
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.sources.bvh_tcp import BvhTcpSource
@@ -68,6 +69,7 @@ class SourceOptions:
     loop: bool = False
     mass: float | None = None  # kg; None: a C3D's subject mass, else the BVH default
     calibration: str | None = None  # a C3D trial calibrating a capture stream's marker body
+    static: str | None = None  # a cluster set's static trial, for a C3D replayed (livezmp.model.static_trial)
     markers: MarkerBodyOptions = field(default_factory=MarkerBodyOptions)  # a marker body's options (mass set here)
 
 
@@ -88,7 +90,7 @@ def _replay(path: Path, o: SourceOptions) -> Source:
         return FileReplaySource(str(path), body, spec, times, body.input_rows(sk.motion.frames), o.speed, o.loop,
                                 cycle and replace(cycle, positions=body.input_rows(cycle.positions)))
     if suffix == ".c3d":
-        trial = read_c3d(path)
+        trial = read_walk(path, o.static)
         take, spec = marker_body(trial, replace(o.markers, total_mass=o.mass or trial.mass_kg or DEFAULT_MASS))
         times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
         return FileReplaySource(str(path), take.body, spec, times, take.frames, o.speed, o.loop)
