@@ -7,7 +7,8 @@ Helen Hayes upper body's SHO, ELB and WRI on both sides the arms are tracked too
 Hayes / modified Helen Hayes (SACR or LPSI/RPSI), CGM 2.x lower limb.
 Needed: LASI, RASI, LPSI+RPSI or SACR, and per side KNE, ANK, TOE; optional TIB wands (the ankle's chord
 rule; THI wands are read but do not place the knee), medial knee/ankle markers, HEE. Other labels and
-cluster sets: :mod:`livezmp.model.marker_map`.
+cluster sets: :mod:`livezmp.model.marker_map`; a cluster set's landmarks from its static trial:
+:mod:`livezmp.model.static_trial`.
 
 - Hip joint centres: Harrington et al. 2007 (J Biomech 40:595-602), the pelvic-width-only
   regression in the ASIS/PSIS pelvis frame (x anterior, z lateral, y superior; mm):
