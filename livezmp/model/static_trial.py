@@ -25,7 +25,6 @@ segment's cluster frame in the static trial and carries it with the cluster thro
 
 from __future__ import annotations
 
-import itertools
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -117,16 +116,33 @@ def _spread(walk: C3dTrial, labels: list[str]) -> tuple[np.ndarray, np.ndarray]:
         return np.where(ok, np.nanstd(d, axis=0), np.inf), np.where(ok, np.nanmedian(d, axis=0), np.inf)
 
 
+def _cliques(adjacent: np.ndarray) -> list[list[int]]:
+    """The maximal cliques of the graph ``adjacent`` (k, k) bool (Bron-Kerbosch): groups of markers every two of
+    which move rigidly together (a full-body set's static trial may put twenty markers near the pelvis' height, whose
+    subsets are too many to try one by one)."""
+    near = [{int(j) for j in np.flatnonzero(row)} - {i} for i, row in enumerate(adjacent)]
+    out = []
+
+    def grow(group: set[int], could: set[int], done: set[int]) -> None:
+        if not could and not done:
+            out.append(sorted(group))
+            return
+        pivot = max(could | done, key=lambda u: len(could & near[u]))  # its neighbours come with it: not tried apart
+        for v in list(could - near[pivot]):
+            grow(group | {v}, could & near[v], done & near[v])
+            could, done = could - {v}, done | {v}
+
+    grow(set(), set(range(len(adjacent))), set())
+    return out
+
+
 def _cluster(walk: C3dTrial, candidates: list[str]) -> list[str]:
     """The largest group of ``candidates`` moving rigidly together over the walk (ties: the stiffest), or []."""
+    if len(candidates) < 3:
+        return []
     spread, _ = _spread(walk, candidates)
-    for size in range(len(candidates), 2, -1):
-        groups = [g for g in itertools.combinations(range(len(candidates)), size)
-                  if spread[np.ix_(g, g)].max() < RIGID_SPREAD_M]
-        if groups:
-            best = min(groups, key=lambda g: spread[np.ix_(g, g)].max())
-            return [candidates[i] for i in best]
-    return []
+    best = max(_cliques(spread < RIGID_SPREAD_M), key=lambda g: (len(g), -spread[np.ix_(g, g)].max()))
+    return [candidates[i] for i in best] if len(best) >= 3 else []
 
 
 def _check_shape(walk: C3dTrial, static: C3dTrial, seg: str, cluster: list[str], ref: np.ndarray) -> None:
