@@ -70,7 +70,14 @@ from livezmp.offline.gaitlab import (
     plates_at,
 )
 from livezmp.offline.plausibility import WALK_COM_ACC_P99, com_accelerations, plausibility
-from livezmp.offline.validation import LAG_AGREE_S, MAX_LAG_S, cop_vs_zmp, lag_with_halves, walking_axes
+from livezmp.offline.validation import (
+    LAG_AGREE_S,
+    MAX_LAG_S,
+    cop_vs_zmp,
+    lag_with_halves,
+    path_axes,
+    walking_axes,
+)
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "c3d"
 TRIALS = ("walk_plugingait_forceplates.c3d", "cgm24_walking01_forceplate.c3d")
@@ -310,9 +317,15 @@ def lateral_sources(done: dict[str, tuple]) -> None:
                                                                    for g, v in zip(LATERAL_GAINS, gains, strict=False)))
 
 
+def _along(d: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(n,) horizontal differences ``d`` (n, 2) along each row's ``axis`` (n, 3)."""
+    return np.einsum("ij,ij->i", d, axis[:, :2])
+
+
 def _rms(d: np.ndarray, axes: tuple[np.ndarray, np.ndarray]) -> str:
-    """'total (fore-aft / lateral)' RMS in mm of horizontal differences ``d`` (n, 2)."""
-    fa, lat = (1000 * np.sqrt(np.mean((d @ ax[:2]) ** 2)) for ax in axes)
+    """'total (fore-aft / lateral)' RMS in mm of horizontal differences ``d`` (n, 2), along each row's ``axes``
+    (fore-aft, lateral: (n, 3) each, `path_axes`)."""
+    fa, lat = (1000 * np.sqrt(np.mean(_along(d, ax) ** 2)) for ax in axes)
     return f"{1000 * np.sqrt(np.mean(np.sum(d * d, axis=1))):5.1f} ({fa:5.1f}/{lat:5.1f})"
 
 
@@ -352,7 +365,8 @@ def _linear_parts(trial, a) -> list[np.ndarray]:
 
 
 def error_sources(done: dict[str, tuple]) -> None:
-    """Per trial: the error split by axis and support phase; the ZMP's linear part (CoM - h a / (a_z + g))
+    """Per trial: the error split by axis (fore-aft and lateral along the path at each frame, `path_axes`) and
+    support phase; the ZMP's linear part (CoM - h a / (a_z + g))
     with the kinematic CoM acceleration and with the plates' (GRF / m: what the plates say the same CoM
     term is); the lateral CoM acceleration's spread, kinematics vs plates."""
     print("\nerror sources over complete frames, mm: total (fore-aft / lateral)")
@@ -361,17 +375,18 @@ def error_sources(done: dict[str, tuple]) -> None:
     for name, (trial, a) in done.items():
         r, p = a.result, a.plates
         rows = _scored(a)
-        axes = walking_axes(r.com)
+        axes = tuple(ax[rows] for ax in path_axes(r.com, trial.rate, facing(a.take)))
         cop = p.cop[rows, :2]
         loaded = [may_bear_weight(sole, p.surface_z, 1.0 / trial.rate)[rows] for sole in r.soles.values()]
         double = loaded[0] & loaded[1]
         acc, plate_acc = (x[rows] for x in _accelerations(trial, a))
         lin = [x[rows] for x in _linear_parts(trial, a)]
         d = r.zmp[rows, :2] - cop
-        parts = [_rms(d, axes), _rms(d[~double], axes) if (~double).any() else f"{'-':>19s}",
-                 _rms(d[double], axes) if double.any() else f"{'-':>19s}", _rms(lin[0] - cop, axes),
+        single_axes, double_axes = (tuple(ax[k] for ax in axes) for k in (~double, double))
+        parts = [_rms(d, axes), _rms(d[~double], single_axes) if (~double).any() else f"{'-':>19s}",
+                 _rms(d[double], double_axes) if double.any() else f"{'-':>19s}", _rms(lin[0] - cop, axes),
                  _rms(lin[1] - cop, axes)]
-        sd = [float(np.std(x @ axes[1])) for x in (acc, plate_acc)]
+        sd = [float(np.std(_along(x[:, :2], axes[1]))) for x in (acc, plate_acc)]
         print(f"{name[:34]:34s} " + " ".join(parts) + f"  {sd[0]:.2f} / {sd[1]:.2f}")
 
 
@@ -403,9 +418,9 @@ def lag_split(done: dict[str, tuple]) -> None:
 def bias_and_lead(done: dict[str, tuple]) -> None:
     """How much of the fore-aft bias is the ZMP's lead: the CoP travels forward through each stance, so a ZMP
     that runs a time ``lag`` ahead of it sits ``-lag`` times the CoP's mean fore-aft speed in front. Per trial:
-    the fore-aft bias (mm, as ``bias_mm``), the lag (ms, ? = not determined), the CoP's mean fore-aft speed over
-    scored frames whose neighbours are scored (m/s), the bias the lead alone gives, and the bias left with the
-    ZMP moved back by its lag (interpolated between frames)."""
+    the fore-aft bias (mm, as ``bias_mm``: along the path at each frame), the lag (ms, ? = not determined), the
+    CoP's mean fore-aft speed over scored frames whose neighbours are scored (m/s), the bias the lead alone gives,
+    and the bias left with the ZMP moved back by its lag (interpolated between frames)."""
     print("\nfore-aft bias and the lead: bias mm, lag ms, CoP fore-aft speed m/s, -lag x speed mm, bias with the "
           "ZMP shifted by its lag mm")
     cols = []
@@ -416,13 +431,14 @@ def bias_and_lead(done: dict[str, tuple]) -> None:
         lag, ok, _ = lag_with_halves(zmp, p.cop[:, :2], rows, dt)
         if lag is None:
             continue
-        fwd = walking_axes(r.com)[0][:2]
+        fwd = path_axes(r.com, trial.rate, facing(a.take))[0]
         t = np.arange(len(zmp)) * dt
-        bias = 1000 * float(np.mean(zmp[rows] - p.cop[rows, :2], axis=0) @ fwd)
+        bias = 1000 * float(np.mean(_along(zmp[rows] - p.cop[rows, :2], fwd[rows])))
         moved = _delayed(np.nan_to_num(zmp), t, -lag)  # ZMP(t + lag): where it stood lag later
-        left = 1000 * float(np.mean(moved[rows] - p.cop[rows, :2], axis=0) @ fwd)
+        left = 1000 * float(np.mean(_along(moved[rows] - p.cop[rows, :2], fwd[rows])))
         mid = np.flatnonzero(rows[1:-1] & rows[:-2] & rows[2:]) + 1
-        speed = float(np.mean((p.cop[mid + 1, :2] - p.cop[mid - 1, :2]) @ fwd) / (2 * dt)) if len(mid) else np.nan
+        speed = (float(np.mean(_along(p.cop[mid + 1, :2] - p.cop[mid - 1, :2], fwd[mid])) / (2 * dt)) if len(mid)
+                 else np.nan)
         cols.append((bias, -1000 * lag * speed, left, ok))
         print(f"{name[:34]:34s} {bias:+7.1f} {_lag_cell(lag, ok):>7s} {speed:6.2f} {-1000 * lag * speed:+7.1f} "
               f"{left:+7.1f}")

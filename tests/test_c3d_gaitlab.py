@@ -38,7 +38,7 @@ from livezmp.model.markers import (
     hat_table,
 )
 from livezmp.offline import calibrate as calibration
-from livezmp.offline import gaitlab
+from livezmp.offline import gaitlab, validation
 from livezmp.offline.gaitlab import LabOptions, analyse_lab_take, lateral_band
 from livezmp.offline.validation import lag_with_halves, stance_gap
 from tests.data_paths import DATA
@@ -792,6 +792,29 @@ def test_lateral_band_follows_a_turning_walk():
     across = np.einsum("ij,ij->i", out[:, :3] - path, left)
     np.testing.assert_allclose(along[inner], wobble[inner], atol=0.0008)
     assert np.abs(across[inner]).max() < 0.0008
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 90.0, 180.0])
+def test_a_turning_walks_bias_is_split_along_its_path(turn_deg):
+    """A walk at 1.2 m/s turning ``turn_deg`` to the left over 2 s (180: it walks back), its ZMP 15 mm ahead of the
+    CoP and 5 mm to its left at every frame, both with a stride's sway: the bias is 15 mm fore-aft and 5 mm lateral
+    before, in and after the turn, and the lag (a distance's, so no axis's) the straight walk's. Along the net
+    travel instead (half-way between the legs of a 90 deg turn, across those of a U-turn) 15 mm went half or wholly
+    into the lateral."""
+    def scored(turn: float) -> dict:
+        t = np.arange(0, 8, 1 / RATE)
+        s = np.clip((t - 3.0) / 2.0, 0.0, 1.0)
+        heading = np.radians(turn) * (1 - np.cos(np.pi * s)) / 2  # smooth in and out of the turn
+        fwd = np.column_stack([np.cos(heading), np.sin(heading), 0 * t])
+        left = np.column_stack([-np.sin(heading), np.cos(heading), 0 * t])
+        com = np.cumsum(1.2 * fwd / RATE, axis=0) + 0.02 * np.sin(np.pi * t)[:, None] * left + [0, 0, 0.95]
+        cop = com + 0.06 * np.sin(2 * np.pi * t)[:, None] * fwd  # through each step and back
+        every = np.ones(len(t), dtype=bool)
+        return validation.cop_vs_zmp(cop + 0.015 * fwd + 0.005 * left, every, cop[:, :2], every, com, 1 / RATE)
+
+    cv = scored(turn_deg)
+    assert cv["bias_mm"] == pytest.approx([15.0, 5.0], abs=1.0)
+    assert cv["lag_ms"] == pytest.approx(scored(0.0)["lag_ms"], abs=1.0)
 
 
 def test_pelvis_markers_shaking_sideways_are_kept_out_of_the_zmp(tmp_path):

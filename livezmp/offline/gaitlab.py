@@ -43,14 +43,16 @@ from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
 from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
-from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers, sway_basis
+from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers
 from livezmp.offline.batch import BatchResult, run_batch
 from livezmp.offline.validation import (
+    HEADING_HZ,
     com_acc_vs_plates,
     cop_vs_force_line,
     cop_vs_zmp,
     ms,
     plate_delay,
+    walk_heading,
     walking_axes,
 )
 
@@ -68,11 +70,6 @@ LAB_ESTIMATOR = {"window_s": 0.8, "lag_s": 0.4, "cutoff_hz": 6.0}
 # harmonics of the lateral motion lie below half the frequency. The segments' lateral positions are low-passed at
 # this part of the estimator's cutoff (whole takes; docs/validation.md, "The lateral band").
 LATERAL_CUTOFF_FRACTION = 0.5
-# The walk's heading at each frame (:func:`walk_heading`): its velocity low-passed below the stride (a slow walk's
-# 0.7 Hz strides sway the heading by 1 deg through it), counted from half a slow walk's speed (0.4 m/s) up; slower,
-# swaying or standing, the whole take's travel or the way the subject faces
-HEADING_HZ = 0.5
-HEADING_SPEEDS_MPS = (0.2, 0.4)
 # The plates are matched to the estimator's acceleration gain at this part of its cutoff: the estimator's response
 # falls off faster than the plates' 4th-order low-pass, so they can agree over the band below it, not everywhere
 PLATE_BAND_MATCH = 2 / 3
@@ -196,24 +193,6 @@ def lateral_band(frames: np.ndarray, rate: float, cutoff_hz: float, facing: np.n
         across = np.einsum("ij,ij->i", pos - lowpass(pos, rate, HEADING_HZ), left)
         out[:, k:k + 3] = pos + (lowpass(across, rate, cutoff_hz) - across)[:, None] * left
     return out
-
-
-def walk_heading(origin: np.ndarray, rate: float, facing: np.ndarray | None = None) -> np.ndarray:
-    """(F, 3) unit horizontal direction (internal frame) in which a walk whose point ``origin`` (F, 3) m at
-    ``rate`` Hz heads at each frame: its velocity low-passed at ``HEADING_HZ`` (below the stride, so that the
-    lateral sway does not swing it) where it moves faster than ``HEADING_SPEEDS_MPS``' upper end, the whole
-    take's travel (:func:`sway_basis`; standing: the way it faces) below the lower, blended between."""
-    _, fwd, _ = sway_basis(origin, facing)
-    vel = np.gradient(lowpass(origin, rate, HEADING_HZ), 1.0 / rate, axis=0)
-    vel[:, 2] = 0.0
-    speed = np.linalg.norm(vel, axis=1, keepdims=True)
-    lo, hi = HEADING_SPEEDS_MPS
-    w = np.clip((speed - lo) / (hi - lo), 0.0, 1.0)
-    w = w * w * (3 - 2 * w)  # smoothstep: no kink where the walk starts to count
-    # an axis, not a direction: a heading against the take's travel is the same axis
-    local = vel / np.maximum(speed, 1e-9) * np.sign(vel @ fwd + 1e-12)[:, None]
-    d = w * local + (1 - w) * fwd
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def may_bear_weight(sole: np.ndarray, floor: float, dt: float) -> np.ndarray:

@@ -9,20 +9,63 @@ from __future__ import annotations
 
 import numpy as np
 
-from livezmp.balance.plates import G
-from livezmp.model.markers import travel_axes
+from livezmp.balance.plates import G, lowpass
+from livezmp.model.markers import sway_basis, travel_axes
 
 MAX_LAG_S = 0.1  # s: the lag search covers ± this
 # A lag is *determined* when the first and second halves of the frames give lags this close (and neither at the
 # search's edge): their difference estimates the lag's own uncertainty, and one wider than the ±10 ms a lag is
 # judged against cannot tell a clock offset from noise (on one stance the RMS hardly depends on the shift).
 LAG_AGREE_S = 0.02
+# The walk's heading at each frame (:func:`walk_heading`): its velocity low-passed below the stride (a slow walk's
+# 0.7 Hz strides sway the heading by 1 deg through it), counted from half a slow walk's speed (0.4 m/s) up; slower,
+# swaying or standing, the whole take's travel or the way the subject faces
+HEADING_HZ = 0.5
+HEADING_SPEEDS_MPS = (0.2, 0.4)
 
 
 def walking_axes(com: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Unit horizontal (3,) fore-aft (the CoM's net travel; when it barely moves, ``facing`` (horizontal: the way
     the subject faces), else +x) and lateral (left of it) directions."""
     return travel_axes(com[-1, :2] - com[0, :2], facing)
+
+
+def _slow_velocity(origin: np.ndarray, rate: float) -> np.ndarray:
+    """(F, 3) m/s horizontal velocity of ``origin`` (F, 3) m at ``rate`` Hz, low-passed at ``HEADING_HZ``."""
+    vel = np.gradient(lowpass(origin, rate, HEADING_HZ), 1.0 / rate, axis=0)
+    vel[:, 2] = 0.0
+    return vel
+
+
+def walk_heading(origin: np.ndarray, rate: float, facing: np.ndarray | None = None) -> np.ndarray:
+    """(F, 3) unit horizontal axis (internal frame) along which a walk whose point ``origin`` (F, 3) m at
+    ``rate`` Hz heads at each frame: its velocity low-passed at ``HEADING_HZ`` (below the stride, so that the
+    lateral sway does not swing it) where it moves faster than ``HEADING_SPEEDS_MPS``' upper end, the whole
+    take's travel (:func:`sway_basis`; standing: the way it faces) below the lower, blended between. An axis, not
+    a direction: it points along the take's travel (:func:`path_axes` turns it the way the walk goes)."""
+    _, fwd, _ = sway_basis(origin, facing)
+    vel = _slow_velocity(origin, rate)
+    speed = np.linalg.norm(vel, axis=1, keepdims=True)
+    lo, hi = HEADING_SPEEDS_MPS
+    w = np.clip((speed - lo) / (hi - lo), 0.0, 1.0)
+    w = w * w * (3 - 2 * w)  # smoothstep: no kink where the walk starts to count
+    # a heading against the take's travel is the same axis: blended with the travel it must not cancel it
+    local = vel / np.maximum(speed, 1e-9) * np.sign(vel @ fwd + 1e-12)[:, None]
+    d = w * local + (1 - w) * fwd
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def path_axes(com: np.ndarray, rate: float, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unit horizontal fore-aft and lateral (left of it) axes (F, 3 each, internal frame) that follow the path of
+    a walk whose centre of mass ``com`` (F, 3) m at ``rate`` Hz turns: at each frame :func:`walk_heading`, pointed
+    the way the CoM moves where it moves faster than ``HEADING_SPEEDS_MPS``' lower end (a walk that turns back
+    turns its fore-aft with it). On a straight walk they are :func:`walking_axes`' to within the heading's sway;
+    on a turn those, the net travel's, would put half of a 90 deg turn's fore-aft offset into the lateral."""
+    axis = walk_heading(com, rate, facing)
+    vel = _slow_velocity(com, rate)
+    back = (np.linalg.norm(vel, axis=1) > HEADING_SPEEDS_MPS[0]) & (np.einsum("ij,ij->i", axis, vel) < 0)
+    fwd = np.where(back[:, None], -axis, axis)
+    return fwd, np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)
 
 
 def _errors(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shift: int) -> np.ndarray:
@@ -76,7 +119,8 @@ def ms(v: float | None) -> float | None:
 def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: np.ndarray, com: np.ndarray,
                dt: float, facing: np.ndarray | None = None) -> dict:
     """ZMP against plate CoP over the complete frames that have a ZMP: count, RMS, p95 and max of the
-    horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left (mm), and
+    horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left at each frame
+    (:func:`path_axes`: on a turning walk the axes turn with the path) (mm), and
     the lag (ms, see :func:`best_lag`; reported, not applied; None when not determined, see
     :func:`lag_with_halves`) and the lags over the first and second halves of those frames (ms)."""
     rows = complete & has_zmp & np.isfinite(cop).all(axis=1)
@@ -85,15 +129,14 @@ def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: 
         return {"frames": 0, "rms_mm": None, "p95_mm": None, "max_mm": None, "bias_mm": None, "lag_ms": None,
                 "lag_halves_ms": None}
     dist = np.hypot(d[:, 0], d[:, 1])
-    mean = d.mean(axis=0)
-    fwd, left = walking_axes(com, facing)
+    fwd, left = (ax[rows, :2] for ax in path_axes(com, 1.0 / dt, facing))
     lag, determined, halves = lag_with_halves(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
     return {
         "frames": int(rows.sum()),
         "rms_mm": round(1000 * float(np.sqrt(np.mean(dist ** 2))), 2),
         "p95_mm": round(1000 * float(np.percentile(dist, 95)), 2),
         "max_mm": round(1000 * float(dist.max()), 2),
-        "bias_mm": [round(1000 * float(mean @ fwd[:2]), 2), round(1000 * float(mean @ left[:2]), 2)],
+        "bias_mm": [round(1000 * float(np.mean(np.einsum("ij,ij->i", d, ax))), 2) for ax in (fwd, left)],
         "lag_ms": ms(lag) if determined else None,
         "lag_halves_ms": [ms(h) for h in halves],
     }
