@@ -218,14 +218,6 @@ Message = (
 MESSAGE_CLASSES: dict[int, type] = dict(_CLASSES)
 
 
-def message_class(msg_id: int) -> type:
-    """The dataclass of a message id; ProtocolError if the id is not in the schema."""
-    try:
-        return MESSAGE_CLASSES[msg_id]
-    except KeyError:
-        raise ProtocolError(f"unknown message id {msg_id:#04x}") from None
-
-
 def to_dict(msg: Message) -> dict[str, Any]:
     """A JSON-ready dict: {"type": NAME, field: value...}; tuples become lists, enums plain ints."""
     out: dict[str, Any] = {"type": msg.spec.name}

@@ -132,7 +132,7 @@ class WaitingPortHandler(PortHandler):
 
     bytes_out = 0
     bytes_in = 0
-    _held: bytearray | None = None  # packets kept for one write (`one_write`)
+    _held: bytearray | None = None  # packets kept back (`held`)
     silence_limit = math.inf  # s: a longer gap between two writes may have tripped the servos' Bus Watchdog
     last_out = -math.inf  # time.monotonic() of the last bytes written
     silent_too_long = False  # a gap longer than silence_limit came before a write since it was cleared
@@ -167,16 +167,6 @@ class WaitingPortHandler(PortHandler):
     def clearPort(self):
         if self._held is None:  # while packets are held, the input was cleared before the first
             super().clearPort()
-
-    @contextmanager
-    def one_write(self):
-        """The packets sent inside go out in one write at the end: one USB transfer on a real
-        adapter (one out latency for both), one wake-up of the device at the other end."""
-        with self.held() as data:
-            yield
-        if data:
-            self.stamp()
-            self.ser.write(bytes(data))
 
     @contextmanager
     def held(self):

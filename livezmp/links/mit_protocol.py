@@ -26,7 +26,6 @@ MASTER_ID = 0  # the id state replies are sent on (the firmware's CAN_MASTER)
 ENTER_MOTOR_MODE = bytes([0xFF] * 7 + [0xFC])
 EXIT_MOTOR_MODE = bytes([0xFF] * 7 + [0xFD])
 SET_ZERO = bytes([0xFF] * 7 + [0xFE])
-SPECIAL = (ENTER_MOTOR_MODE, EXIT_MOTOR_MODE, SET_ZERO)
 COMMAND_BYTES, REPLY_BYTES = 8, 6
 
 

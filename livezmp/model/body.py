@@ -74,7 +74,6 @@ class BodyModel:
     correction: CorrectionJoints
     named_points: dict[str, int] = field(default_factory=dict)  # e.g. ankle/toe frames for checks
     base_channels: list[int] = field(default_factory=list)  # q indices of a robot's floating base
-    has_base_input: bool = True
     joint_names: list[str] = field(default_factory=list)  # a robot's actuated joints (URDF names)
     mimics: tuple[Mimic, ...] = ()  # joints that follow another (indices into joint_names)
     # a skeleton's: the input row's column of each channel (the part of the skeleton the model is built on,

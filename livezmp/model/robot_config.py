@@ -48,9 +48,6 @@ class ServoConfig:
     direction: int = 1
     ticks_per_rev: int = 4096
 
-    def to_ticks(self, rad: float) -> int:
-        return int(round(self.zero + self.direction * rad * self.ticks_per_rev / (2 * np.pi)))
-
     def to_rad(self, ticks: float) -> float:
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
