@@ -165,6 +165,31 @@ def test_lsl_stream_without_up_axis_needs_one(trial):
     del outlet
 
 
+def test_lsl_frames_waiting_for_a_slow_reader_stay_bounded(trial):
+    """A reader slower than the stream: each read pulls every sample liblsl holds and hands
+    out one; the frames waiting are capped at the inlet's own buffer (10 s), the rest
+    counted as overflow, however long the reader lags."""
+    import pylsl
+
+    from sim_devices.lsl_publisher import marker_info
+
+    name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
+    outlet = pylsl.StreamOutlet(marker_info(trial, name, name))
+    src = open_mocap_source(f"lsl://{name}?plates=none")
+    assert wait_until(outlet.have_consumers, 5.0)
+    bound = int(10 * src.rate)
+    row, sent, t0 = [0.0] * (3 * len(trial.labels)), 0, pylsl.local_clock()
+    for _ in range(6):  # 6 bursts of 8 s of frames, one frame read after each
+        stamps = [t0 + (sent + i) / src.rate for i in range(800)]
+        outlet.push_chunk([row] * 800, stamps)
+        sent += 800
+        assert wait_until(lambda n=sent: src.read(0.0) is not None and src.stats.delivered >= n, 5.0)
+    assert len(src._pending) <= bound
+    assert src.stats.delivered == sent and src.stats.overflow > 0
+    src.close()
+    del outlet
+
+
 def test_lsl_publisher_that_goes_away_is_reconnected(trial):
     pub, src = lsl_pair(trial, speed=1.0, loop=True, plates=False)
     player = threading.Thread(target=pub.run, daemon=True)

@@ -19,7 +19,8 @@ nominal rate. Plates are paired with the marker frame of the same number; a mark
 frame waits at most ``align`` frame periods for its plates (``?align=``, default 3), then goes
 without (``plates_missing``): a longer wait delays every frame whose plate sample is late by as
 much. LSL re-connects by itself when a stream with the same source id comes back: data resuming
-after more than 0.5 s of silence counts as a reconnect.
+after more than 0.5 s of silence counts as a reconnect. Frames pulled and not yet read are at most
+liblsl's own buffer (10 s of frames); more, from a reader that far behind, are counted as ``overflow``.
 """
 
 from __future__ import annotations
@@ -175,7 +176,8 @@ class LslSource:
         self.offset = self.inlet.time_correction(timeout)
         self._offset_at = time.monotonic()
         self._first: float | None = None  # stamp of frame 0, sender's clock
-        self._pending: deque[MocapFrame] = deque()
+        self._pending: deque[MocapFrame] = deque()  # pulled, not yet read: at most _max_pending
+        self._max_pending = max(1, int(buffer_s * rate))  # as many as liblsl's own buffer keeps
         self._plate_rows: dict[int, np.ndarray] = {}
         self._last_data = time.monotonic()
         self._closed = False
@@ -239,6 +241,9 @@ class LslSource:
             v = np.asarray(row, float)
             markers = v[self.index] * self.scale
             t = stamp + self.offset
+            if len(self._pending) >= self._max_pending:  # the reader is buffer_s behind: drop the newest, as
+                self.stats.overflow += 1  # FrameQueue does, so that what is delivered stays in order
+                continue
             self._pending.append(MocapFrame(t, received, k, self.labels, markers, self.up, latency=clock - t))
         if self.plates is not None:
             rows, pstamps = self.plates.pull_chunk(0.0)
