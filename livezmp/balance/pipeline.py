@@ -101,6 +101,7 @@ class Pipeline:
 
     @property
     def lag(self) -> int:
+        """Frames a result comes after its input frame (the estimator's smoothing lag)."""
         return self.estimator.lag
 
     def step(self, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None = None,

@@ -165,7 +165,8 @@ def unloaded_offset(plate: PlateRecord, analog_rate: float,
 
 
 def lowpass(x: np.ndarray, rate: float, cutoff_hz: float | None) -> np.ndarray:
-    """Zero-phase 4th-order Butterworth low-pass along axis 0 (no time shift); ``cutoff_hz`` None: as is."""
+    """Zero-phase 4th-order Butterworth low-pass along axis 0 (time; ``rate`` Hz samples, no time shift), in
+    ``x``'s units; ``cutoff_hz`` (Hz) None, at or above Nyquist, or under 16 samples: ``x`` as is."""
     if cutoff_hz is None or cutoff_hz >= rate / 2 or len(x) < 16:
         return x
     sos = butter(2, cutoff_hz, fs=rate, output="sos")  # 2nd order, run forward and back: 4th

@@ -204,8 +204,9 @@ def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
 
 
 def support_and_clamp(left_sole_xy, right_sole_xy, support: str, p_xy) -> tuple[np.ndarray, Clamp | None]:
-    """:func:`support_polygon` and :func:`clamp_to_polygon` of ``p_xy`` to it, in one call (the polygon is
-    not checked again). Clamp is None in flight or when ``p_xy`` is None (no ZMP)."""
+    """:func:`support_polygon` and :func:`clamp_to_polygon` of ``p_xy`` (2,) m to it, in one call (the polygon is
+    not checked again): the polygon (k, 2) m on the ground plane, world frame, and the Clamp, None in flight or
+    when ``p_xy`` is None (no ZMP)."""
     rows = _support_rows(left_sole_xy, right_sole_xy, support)
     poly = np.array(rows, dtype=float).reshape(-1, 2)
     if p_xy is None or not rows:

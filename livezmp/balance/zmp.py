@@ -47,7 +47,8 @@ def _zmp_xy(com: tuple, force: tuple, moment: tuple, ground_z: float, min_fz: fl
 
 def zmp_from_wrench(com: np.ndarray, force: np.ndarray, moment: np.ndarray, ground_z: float,
                     min_fz: float) -> np.ndarray | None:
-    """ZMP on z = ground_z of a contact wrench (force, moment about ``com``); None if F_z < min_fz."""
+    """ZMP (3,) m on z = ``ground_z`` (m) of a contact wrench: ``force`` (3,) N, ``moment`` (3,) N·m about
+    ``com`` (3,) m, all in the internal z-up frame; None if F_z < ``min_fz`` (N)."""
     xy = _zmp_xy(tuple(map(float, com)), tuple(map(float, force)), tuple(map(float, moment)), ground_z, min_fz)
     return None if xy is None else np.array((xy[0], xy[1], ground_z))
 

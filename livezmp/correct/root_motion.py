@@ -147,6 +147,7 @@ class RootMover:
         q[c.rot_q] = old + (angles - old + np.pi) % (2 * np.pi) - np.pi  # nearest to the old values
 
     def foot_targets(self) -> dict[str, list[pin.SE3]]:
+        """Each side's foot frames' world poses (m, internal frame) at the last forward-kinematics call."""
         return {s: [self.data.oMf[f].copy() for f in fs] for s, fs in self.body.correction.foot_frames.items()}
 
     def apply(self, q: np.ndarray, delta: np.ndarray, w_left: float,

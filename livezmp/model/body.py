@@ -89,6 +89,7 @@ class BodyModel:
         return channels * self.channel_scale
 
     def q_to_channels(self, q: np.ndarray) -> np.ndarray:
+        """q (m, rad) → input channel values (file units, degrees): :meth:`channels_to_q` undone."""
         return q / self.channel_scale
 
     def input_rows(self, rows: np.ndarray) -> np.ndarray:

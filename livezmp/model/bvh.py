@@ -60,6 +60,7 @@ class BvhMotion:
 
     @property
     def fps(self) -> float:
+        """Frames a second (Hz), from ``frame_time`` (s)."""
         return 1.0 / self.frame_time
 
     def joint_index(self, name: str) -> int:

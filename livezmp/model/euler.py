@@ -9,7 +9,8 @@ import numpy as np
 
 
 def other_branch(angles: np.ndarray, half_turn: float = np.pi) -> np.ndarray:
-    """(F, 3) the same rotations as ``angles`` (F, 3) on the other branch."""
+    """(F, 3) the same rotations as the Euler ``angles`` (F, 3) on the other branch (middle angle mirrored
+    about a quarter turn), in the unit of ``half_turn`` (rad by default; 180 for degrees)."""
     return np.column_stack([angles[:, 0] + half_turn, half_turn - angles[:, 1], angles[:, 2] + half_turn])
 
 

@@ -34,7 +34,7 @@ class Loop:
     positions: np.ndarray
 
     def pad_frames(self, frame_time: float) -> int:
-        """Frames of the cycle analysed before the take and after it (:data:`PAD_S`)."""
+        """Frames of the cycle analysed before the take and after it (:data:`PAD_S` s, ``frame_time`` s a frame)."""
         return max(1, round(PAD_S / frame_time))
 
     def rows(self, frames: np.ndarray, start: int, stop: int) -> np.ndarray:

@@ -43,6 +43,7 @@ class LoadedMotion:
 
     @property
     def fps(self) -> float:
+        """Mean frame rate (Hz) over ``times`` (s); 0 for a single frame."""
         return float((len(self.times) - 1) / (self.times[-1] - self.times[0])) if len(self.times) > 1 else 0.0
 
 

@@ -49,6 +49,7 @@ class ServoConfig:
     ticks_per_rev: int = 4096
 
     def to_rad(self, ticks: float) -> float:
+        """The joint angle (rad) of a servo position in ticks."""
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
 
@@ -191,6 +192,7 @@ def _imu(t: dict, where: str, cfg: RobotConfig) -> ImuConfig:
 
 
 def load_robot_config(path: str | Path) -> RobotConfig:
+    """The robot config TOML at ``path``; InputError naming the file and key when it is not valid."""
     p = Path(path)
     return _parse(read_toml(p, "robot config"), str(p))
 

@@ -57,12 +57,10 @@ class SourceStats:
     not increasing), ``oversized`` (longer than the limit), ``duplicate`` (a sequence
     number already seen), ``late`` (older than one already delivered: out of order),
     ``rejected`` (sender not on the allowlist), ``overflow`` (arrived while the reader's
-    bounded queue was full). ``lost``: sequence numbers skipped and never delivered in
-    order. ``reconnects``: connections re-opened.;
-    ``rejected`` (sender not on the allowlist). ``lost``: sequence numbers skipped and
-    never delivered in order. ``jumps``: frames whose sequence or time jumped too far ahead
-    (dropped); ``resyncs``: times the source moved onto a new timeline (see
-    :mod:`livezmp.sources.udp`). ``reconnects``: connections re-opened."""
+    bounded queue was full), ``jumps`` (sequence or time jumped too far ahead). ``lost``:
+    sequence numbers skipped and never delivered in order. ``resyncs``: times the source
+    moved onto a new timeline (see :mod:`livezmp.sources.udp`). ``reconnects``:
+    connections re-opened."""
 
     delivered: int = 0
     malformed: int = 0
