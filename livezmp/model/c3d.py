@@ -39,7 +39,7 @@ from livezmp.errors import InputError
 from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.plate_frame import plate_axes
 
-_LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}  # m per POINT:UNITS unit
 _NEWTONS = {"n": 1.0, "newton": 1.0, "newtons": 1.0}  # FORCE_PLATFORM:UNITS
 
 
@@ -348,7 +348,7 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
     _check_plate_offsets(c3d["parameters"], source)
     out = []
-    length = _LENGTH[unit]
+    length = LENGTH_UNITS[unit]
     frames = int(np.shape(c3d["data"]["points"])[2])
     types = _plate_types(c3d["parameters"])  # none, or text: ezc3d has read the plates as it could
     for k, p in enumerate(c3d["data"].get("platform", [])):
@@ -505,7 +505,7 @@ def read_c3d(path: str | Path) -> C3dTrial:
     units = _param(groups, "POINT", "UNITS")
     # missing or empty: mm, the unit nearly every writer uses (a metre file is then refused by its stature)
     unit = (str(units[0]).strip().lower() if units is not None and len(units) else "") or "mm"
-    if unit not in _LENGTH:
+    if unit not in LENGTH_UNITS:
         raise InputError(f"{p}: POINT:UNITS {unit!r} is not a length unit (mm, cm, m)")
     rate = _first_number(_param(groups, "POINT", "RATE"))
     if rate is None:
@@ -518,7 +518,7 @@ def read_c3d(path: str | Path) -> C3dTrial:
     residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=float)[0]  # (P, F); < 0: not seen
     # a gap: a negative residual, a non-finite coordinate, or the all-zero point some writers put in gaps
     unseen = (residual < 0) | ~np.isfinite(pts).all(axis=0) | (pts == 0).all(axis=0)
-    pts = np.where(unseen[None], np.nan, pts) * _LENGTH[unit]
+    pts = np.where(unseen[None], np.nan, pts) * LENGTH_UNITS[unit]
     first = _first_number(_param(groups, "TRIAL", "ACTUAL_START_FIELD"))
     mass, where, height, widths = _subject(groups)
     return C3dTrial(

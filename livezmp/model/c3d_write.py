@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from livezmp.errors import InputError
-from livezmp.model.c3d import open_c3d, strip_prefix
+from livezmp.model.c3d import LENGTH_UNITS, open_c3d, strip_prefix
 
 NON_POSITION = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
-_TO_METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 
 
 def non_position_labels(path: str | Path) -> set[str]:
@@ -32,7 +31,7 @@ def write_moved_points(source: str | Path, dest: str | Path, moved: dict[int, np
     frames."""
     c3d = open_c3d(source)
     point = c3d["parameters"]["POINT"]
-    scale = 1.0 / _TO_METRES[str(point["UNITS"]["value"][0]).strip().lower()]
+    scale = 1.0 / LENGTH_UNITS[str(point["UNITS"]["value"][0]).strip().lower()]
     pts = np.array(c3d["data"]["points"], dtype=float)
     residuals = np.array(c3d["data"]["meta_points"]["residuals"], dtype=float)
     masks = c3d["data"]["meta_points"].get("camera_masks")

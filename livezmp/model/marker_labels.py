@@ -147,7 +147,7 @@ MIN_KNEE_ALONG_LEG = 0.25
 # NewPaf 1's 33 deg, medial of it and behind the heads (docs/validation.md, held-out round 4)
 MAX_TOE_OFF_AXIS_DEG = 25.0
 BY_POSITION = "lateral / medial told by position"
-_MEDIAL_ROLE = {"KNE": "KNM", "ANK": "MED"}
+MEDIAL_ROLES = {"KNE": "KNM", "ANK": "MED"}  # a lateral marker's role -> its medial partner's
 # two markers of one knee or ankle lie a joint's width (plus a marker's 14 mm) apart across the body: the knee and
 # ankle widths the shared trials' files give are 63-109 mm; 30 mm leaves room for the pelvis' lateral axis turned
 # against the joint's (a foot toeing out), and is more than two markers meant for one point are apart
@@ -402,7 +402,7 @@ def _lateral_and_medial(trial: C3dTrial, claims: dict[str, list[str]], pinned: f
     claims its medial role, by position (module docstring); returns role -> why, for each role so filled."""
     out = {}
     for side in "LR":
-        for lateral, medial in _MEDIAL_ROLE.items():
+        for lateral, medial in MEDIAL_ROLES.items():
             lat, med = side + lateral, side + medial
             labs = claims.get(lat, [])
             if len(labs) != 2 or labs[0] == labs[1] or med in claims or {lat, med} & pinned:

@@ -57,7 +57,7 @@ from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_cop
 from livezmp.model.bvh_body import DEFAULT_MASS, LEG_FRACTION_OF_STATURE
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.euler import other_branch, wrapped
-from livezmp.model.marker_labels import MIN_JOINT_WIDTH_M, LabelMatch, standard_trial
+from livezmp.model.marker_labels import MEDIAL_ROLES, MIN_JOINT_WIDTH_M, LabelMatch, standard_trial
 from livezmp.model.marker_map import (
     JOINTS,
     SEGMENT_OUTPUTS_SOURCE,
@@ -74,7 +74,6 @@ KNEE_WIDTH_OF_STATURE = 0.064  # typical knee / ankle widths (m / m) when the fi
 ANKLE_WIDTH_OF_STATURE = 0.040
 FOOT_LENGTH_OF_STATURE = 258.1 / 1741  # de Leva foot length over stature
 SOLE_WIDTH_OF_STATURE = 0.055
-_MEDIAL = {"KNE": "KNM", "ANK": "MED"}  # the medial markers' roles (their other names: marker_labels)
 _LEGS = ("thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
 # Plug-in Gait full body: trunk, head and arm markers (FIN optional); all present or the HAT is placed
 _UPPER = ("C7", "T10", "CLAV", "STRN", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA",
@@ -276,7 +275,7 @@ def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str
                 missing.append(s + m)
         for m in ("THI", "TIB", "HEE"):
             roles[s + m] = s + m if s + m in have else None
-        for m, medial in _MEDIAL.items():
+        for m, medial in MEDIAL_ROLES.items():
             roles[s + m + "_med"] = s + medial if s + medial in have else None
     roles.update({p: p for p in HAT_POINTS if set(HAT_POINTS) <= have})
     upper = [u for u in _UPPER if u in have]
