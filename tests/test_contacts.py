@@ -404,3 +404,23 @@ def test_pure_steps_reject_non_finite_input():
 def test_bad_config(make, match):
     with pytest.raises(ContactError, match=match):
         make()
+
+
+def test_a_frame_the_estimator_refuses_leaves_no_contacts_for_a_later_frame(mini):
+    """Foot-sensor contacts given with a frame the estimator refuses (a time not after the last) belong to no frame:
+    the frames after it keep their own contacts."""
+    from livezmp.balance.pipeline import Pipeline, default_config
+    from livezmp.estimate.estimator import EstimatorError
+
+    rate = 100.0
+    pipe = Pipeline(mini, default_config(mini, rate), 1 / rate)
+    rows = np.zeros(mini.nq)
+    said = {True: (True, False), False: (False, True)}  # even frames left, odd frames right
+    out = []
+    for k in range(60):
+        if k == 30:
+            with pytest.raises(EstimatorError):
+                pipe.step((k - 1) / rate, rows, contacts=(True, True))  # not after the last frame: refused
+        out += [r for r in [pipe.step(k / rate, rows, contacts=said[k % 2 == 0])] if r is not None]
+    out += pipe.flush()
+    assert len(out) == 60 and [r.support for r in out] == ["left" if k % 2 == 0 else "right" for k in range(60)]

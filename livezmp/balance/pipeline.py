@@ -113,12 +113,14 @@ class Pipeline:
         ``gravity`` (3,) m/s²: gravity in the internal frame for this frame, when the ground
         is not level (e.g. from an IMU, :mod:`livezmp.estimate.ground_tilt`); the ZMP is then
         the centre of pressure on the ground plane, whatever its tilt."""
+        # the estimator first: a frame it refuses (EstimatorError) leaves no contacts or gravity behind to be
+        # read as a later frame's
+        est = self.estimator.step(t, self.body.channels_to_q(np.asarray(channels, dtype=float)))
         if contacts is not None:
             self._outside_contacts[self._count] = contacts
         if gravity is not None:
             self._gravity[self._count] = gravity
         self._count += 1
-        est = self.estimator.step(t, self.body.channels_to_q(np.asarray(channels, dtype=float)))
         return None if est is None else self._analyse(est)
 
     def flush(self) -> list[FrameResult]:
