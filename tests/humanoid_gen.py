@@ -130,6 +130,8 @@ class HumanoidSpec:
     so each foot ends in several leaves at one height (JVRC-1's, XBot-L's); ``parallel_legs``: a massless copy
     of each leg below its hip roll, thigh and shank pitch and ankle roll joints ending in a foot-plane link at
     the sole (NimbRo-OP2X's parallel-linkage model, beside its serial legs);
+    ``root_joint``: with ``extras``, the joint from the massless root link to the robot, "fixed" or "floating"
+    (HighTorque's Hi: a ``world`` link and a floating joint, as MuJoCo conversions write the free base);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -168,6 +170,7 @@ class HumanoidSpec:
     cleats: float = 0.0
     foot_frames: bool = False
     parallel_legs: bool = False
+    root_joint: str = "fixed"
     seed: int = 0
 
 
@@ -336,8 +339,8 @@ def _build(spec: HumanoidSpec) -> _Builder:
             b.link(role, 0.0, at, (0.0, 0.0, 0.0))
             b.joint(f"{role}_fixed", "", parent, role, at, None, "fixed")
         b.link("dummy_root", 0.0, (0.0, 0.0, 0.58), (0.0, 0.0, 0.0))
-        b.joint("root_fixed", "", "dummy_root", pelvis if not spec.torso_root else trunk, (0.0, 0.0, 0.58), None,
-                "fixed")
+        b.joint(f"root_{spec.root_joint}", "", "dummy_root", pelvis if not spec.torso_root else trunk,
+                (0.0, 0.0, 0.58), None, spec.root_joint)
     total = sum(v["mass"] for v in b.links.values())
     for v in b.links.values():
         v["mass"] *= spec.mass / total

@@ -201,14 +201,15 @@ PLAIN = HumanoidSpec(extras=True, grippers=True, seed=40)
 
 @pytest.mark.parametrize("quirk", [{"placeholders": "zero_mass"}, {"placeholders": "point_mass"},
                                    {"fixed_axis_zero": True}, {"odd_inertias": True}, {"fixed_finger": True},
-                                   {"foot_frames": True}, {"parallel_legs": True}])
+                                   {"foot_frames": True}, {"parallel_legs": True}, {"root_joint": "floating"}])
 def test_quirks_of_published_urdfs_load_with_the_masses_and_legs_of_the_plain_robot(tmp_path, quirk):
     # before, refused: a link of mass 0 (Bolt's feet) or a point mass with a zero inertia (Talos', Wolfgang's
     # sensor frames), a fixed joint's <axis xyz="0 0 0"> (Unitree H1, NAO), a point-mass head with a 2.4e-35
     # product of inertia (iCub) or a torso breaking the triangle inequality (Darwin-OP, Romeo), a fixed finger
     # keeping its <mimic> (Talos' reduced model), a foot ending in several leaves at one height (JVRC-1's and
     # XBot-L's sensor and end-effector frames: both feet were taken on one leg), a massless copy of each leg
-    # (NimbRo-OP2X's parallel linkage: its foot plane was taken for a foot)
+    # (NimbRo-OP2X's parallel linkage: its foot plane was taken for a foot), a floating joint from a massless root
+    # link (HighTorque Hi's `world`: "type 'floating' not supported")
     plain = load_robot(str(build_humanoid(tmp_path / "plain.urdf", PLAIN)), None).body
     body = load_robot(str(build_humanoid(tmp_path / "odd.urdf", replace(PLAIN, **quirk))), None).body
     extra = 5 * 1e-4 if quirk.get("placeholders") == "point_mass" else 0.0  # 2 soles, camera, IMU, dummy root

@@ -14,7 +14,8 @@ is the joints from the trunk to a foot that the other foot's chain does not shar
 above the legs is the trunk's). Continuous joints, and revolute ones without a ``<limit>`` or
 with lower = upper, are revolute joints without bounds; a mimic joint keeps its own angle in
 the model and follows its parent's (``BodyModel.mimics``, :mod:`livezmp.model.mimic`); a link
-named as a joint is renamed ``<name>_link``.
+named as a joint is renamed ``<name>_link``; a floating joint from a massless root link is the file's free base
+(`_fix_free_base`), any other floating joint is refused.
 """
 
 from __future__ import annotations
@@ -183,12 +184,27 @@ def _has_range(joint: ET.Element, where: str) -> bool:
     return bool(lower != upper)
 
 
+def _fix_free_base(root: ET.Element) -> None:
+    """Make fixed a floating joint from the root link where that link is massless (no ``<inertial>``: a mass of 0
+    is none by then, `_check_inertial`) and the floating joint its only child: the file's way of saying the robot's
+    base is free (HighTorque's Hi: ``<link name="world"/>``, as MuJoCo conversions write it), which every robot here
+    is on its six base joints (`BASE_JOINTS`); its ``<origin>`` still places the robot on them, as a fixed base
+    joint's does. Any other floating joint is refused (`JOINT_TYPES`)."""
+    children = {j.find("child").get("link") for j in root.findall("joint")}
+    masses = {link.get("name"): link.find("inertial") is not None for link in root.findall("link")}
+    base = [name for name in masses if name not in children]
+    from_base = [j for j in root.findall("joint") if base and j.find("parent").get("link") == base[0]]
+    if len(from_base) == 1 and from_base[0].get("type") == "floating" and not masses[base[0]]:
+        from_base[0].set("type", "fixed")
+
+
 def _check_joints(root: ET.Element, path: Path) -> list[str]:
     """Check every joint; turn continuous joints, and revolute ones without a <limit> or whose limit gives no range
     (`_has_range`), into revolute joints
     without bounds (one angle each, as a servo reports it; the URDF parser needs a limit on a revolute joint);
     rename links named as a joint (Pinocchio needs frame names unique). Returns the unbounded joints' names."""
     _check_tree(root, path)
+    _fix_free_base(root)
     unbounded = []
     joint_names = {j.get("name") for j in root.findall("joint")}
     for j in root.findall("joint"):
