@@ -19,6 +19,7 @@ from test_live_loop_closed import balance
 from livezmp.cli import main
 from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
 from livezmp.correct.root_motion import RootMover
+from livezmp.live.config import SafetyConfig
 from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import foot_soles
@@ -304,10 +305,32 @@ def test_arms_held_forward_in_the_zero_posture_are_brought_down_and_swung_from_t
 def test_a_lean_its_ankles_cannot_make_is_refused_in_one_line(tmp_path, capsys):
     # before: the loop held the ankles at their limits and the robot stood, short of its toes, uncorrected
     # (Romeo: 88 mm inside them; its default soles put the toes where 0.67 rad of ankle leans to them)
-    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(ankle_range=0.35, seed=45))
+    urdf = build_humanoid(tmp_path / "a.urdf", HumanoidSpec(ankle_range=0.3, seed=45))
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
     err = capsys.readouterr().err.splitlines()
-    assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.35" in err[0], err
+    assert rc == 2 and len(err) == 1 and "lean needs joint 'l_ank_pitch' at -0.30" in err[0], err
+    assert "from every straighter stance down to 0.1 rad" in err[0]
+
+
+def test_a_lean_its_ankles_cannot_make_from_the_knees_bent_stance_is_made_from_a_straighter_one(tmp_path):
+    # before: refused ("lean needs joint 'l_ank_pitch' at -0.3657 rad", the knees-bent stance's -0.3 and the
+    # lean's share of one ±0.365 range), as Fourier GR-Mini's three scenarios were (its ankles ±0.436 rad); and a
+    # straighter stance's goals may not come within the loop's limit margin, which would cut them at t = 0 (GR-Mini's
+    # push asked -0.4334 rad, the loop sent -0.426: its true ZMP 516 mm past its toes for 20 ms)
+    body = load_robot(str(build_humanoid(tmp_path / "a.urdf", HumanoidSpec(ankle_range=0.365, seed=45))), None).body
+    roles = joint_roles(body)
+    legs = [body.joint_names.index(roles[f"{s}_{r}"]) for s in "lr" for r in LEG_ROLES]
+    n, margin = len(body.joint_names), SafetyConfig().limit_margin_rad
+    lower, upper = body.model.lowerPositionLimit[-n:][legs] + margin, body.model.upperPositionLimit[-n:][legs] - margin
+    for name in ("lean", "push", "arm_swing"):
+        scenario = make_scenario(name, body)
+        goals = np.array([scenario.goals(t)[legs] for t in np.arange(0.0, scenario.duration, 0.05)])
+        assert goals[0, legs.index(body.joint_names.index(roles["l_knee"]))] < 0.6 - 1e-6, name  # straighter
+        assert np.all(goals >= lower) and np.all(goals <= upper), name
+    lean = make_scenario("lean", body)
+    off, _ = balance(body, lean, correct=False)
+    on, _ = balance(body, lean, correct=True)
+    assert off.fallen is not None and on.fallen is None
 
 
 @pytest.mark.parametrize("name", ["lean", "push"])

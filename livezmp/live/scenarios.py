@@ -19,7 +19,8 @@ left), which keeps each sole parallel to the pelvis (flat on the ground) and the
 away from their straight-knee singularity (soles not level and on one plane in the zero
 posture, as Wolfgang-OP's cleats, are first turned level at the ankles and the legs
 re-solved to put both on the floor: `Poser.on_feet`); arms hang down, turned out a little by the
-shoulder roll (OP3's zero posture holds them out sideways).
+shoulder roll (OP3's zero posture holds them out sideways). θ is 0.3 rad, or the first of `FLEXIONS` at which the
+scenario's leg goals keep within their limits (the stance's ankle and the lean's share one range).
 
 Angles in rad, times in s, world frame z up, x forward, y left. ``livezmp run --scenario``
 sends them to a robot; ``livezmp sim``/``demo`` also play them on the simulated humanoid,
@@ -42,11 +43,17 @@ from livezmp.balance.zmp import compute_zmp
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
+from livezmp.live.config import SafetyConfig
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 from livezmp.model.mimic import follow
 from livezmp.model.trajectory_csv import read_joint_csv
 from livezmp.model.urdf_body import ALIGNED, TILTED, leg_joints
+
+
+class BeyondLimits(InputError):
+    """A scenario's stance or goals take a leg joint beyond its limits (`Poser.standing`, `_check_limits`)."""
+
 
 SIDES = ("l", "r")
 G = 9.81  # m/s^2
@@ -497,7 +504,7 @@ class Poser:
         lower, upper = model.lowerPositionLimit[-len(q):], model.upperPositionLimit[-len(q):]
         for i in self.leg_index:
             if not lower[i] - 1e-9 <= q[i] <= upper[i] + 1e-9:
-                raise InputError(f"{model.name}: standing with bent knees needs leg joint {self.names[i]!r} at "
+                raise BeyondLimits(f"{model.name}: standing with bent knees needs leg joint {self.names[i]!r} at "
                                  f"{q[i]:.2f} rad, outside its limits [{lower[i]:.2f}, {upper[i]:.2f}] (the legs' "
                                  "limits let neither leg, or only one, stand so facing either way)")
         return np.clip(q, lower, upper)
@@ -882,16 +889,37 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
     "slope": slope,
     "edge": step_edge,
     "push": lambda body, **kw: push(body, **{**PUSH, **kw}),
-    "demo": lambda body, **kw: sequence("demo", [lean(body, hold_s=2.0),
-                                                  arm_swing(body, duration=3.0, **ARM_SWING)], **kw),
+    "demo": lambda body, flexion=0.3, **kw: sequence("demo", [
+        lean(body, hold_s=2.0, flexion=flexion), arm_swing(body, duration=3.0, flexion=flexion, **ARM_SWING)], **kw),
 }
+# rad: the standing posture's leg flexion θ (module docstring), then the straighter stances a scenario is made on,
+# in turn, where at the one before it takes a leg joint beyond its limits: the stance's ankle (−θ) and the lean's
+# share the ankle's one range (Fourier GR-Mini's ±0.436 rad: from θ = 0.3 its push leaned to −0.53, its lean to
+# −0.437, and all three scenarios were refused; from 0.2 they fit). Not below 0.1: the knee's flexion keeps the
+# legs' IK, the corrector's, away from the straight knee's singularity.
+FLEXIONS = (0.3, 0.25, 0.2, 0.15, 0.1)
 
 
 def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
     """A scenario by name (``SCENARIOS``) for ``body``, with its keyword ``options``;
-    InputError naming the choices."""
+    InputError naming the choices. Without a ``flexion`` option, on the first stance of `FLEXIONS` that keeps the
+    legs within their limits; where none does, the refusal is the first stance's."""
     if name not in SCENARIOS:
         raise InputError(f"unknown scenario '{name}' (choose from {', '.join(SCENARIOS)})")
+    first = None
+    for flexion in (options["flexion"],) if "flexion" in options else FLEXIONS:
+        try:
+            return _within_limits(name, body, {**options, "flexion": flexion})
+        except BeyondLimits as e:
+            first = first or e
+    if "flexion" not in options:
+        raise BeyondLimits(f"{first} (and from every straighter stance down to {FLEXIONS[-1]} rad of flexion)")
+    raise first
+
+
+def _within_limits(name: str, body: BodyModel, options: dict) -> Scenario:
+    """The scenario ``name`` for ``body`` with ``options``; BeyondLimits where its stance or goals take a leg joint
+    beyond its limits."""
     scenario = SCENARIOS[name](body, **options)
     if body.mimics:  # a mimic joint is not moved on its own: its goal is its parent's times the multiplier + offset
         scenario = replace(scenario, goals=lambda t, goals=scenario.goals: follow(goals(t), body.mimics))
@@ -912,13 +940,17 @@ def _check_limits(scenario: Scenario, body: BodyModel) -> None:
     n = len(body.joint_names)
     legs = np.zeros(n, dtype=bool)
     legs[[c - (model.nq - n) for cols in body.correction.legs.values() for c in cols]] = True
-    lower, upper = model.lowerPositionLimit[-n:] - 1e-6, model.upperPositionLimit[-n:] + 1e-6
+    # the loop sends goals within the limits less this (GoalLimiter): a goal between would be cut at t = 0, the
+    # stance's ankle jumping (Fourier GR-Mini's push asked -0.4334 rad of an ankle the loop held at -0.426: its true
+    # ZMP 516 mm past its toes for 20 ms)
+    margin = SafetyConfig().limit_margin_rad - 1e-9
+    lower, upper = model.lowerPositionLimit[-n:] + margin, model.upperPositionLimit[-n:] - margin
     for t in np.arange(0.0, scenario.duration, LIMIT_CHECK_S):
         goals = scenario.goals(float(t))
         out = np.flatnonzero(legs & ((goals < lower) | (goals > upper)))
         if out.size:
             i = int(out[0])
-            raise InputError(f"{model.name}: {scenario.name} needs joint {body.joint_names[i]!r} at {goals[i]:.4f} "
-                             f"rad (t = {t:.2f} s), beyond its limits [{lower[i] + 1e-6:.4f}, "
-                             f"{upper[i] - 1e-6:.4f}]: the robot would not do it (soles nearer its real feet, in a "
-                             "robot config, may ask less)")
+            raise BeyondLimits(f"{model.name}: {scenario.name} needs joint {body.joint_names[i]!r} at {goals[i]:.4f} "
+                               f"rad (t = {t:.2f} s), beyond its limits [{lower[i] - margin:.4f}, "
+                               f"{upper[i] + margin:.4f}] less the loop's {margin:.2f} rad: the robot would not do it "
+                               "(soles nearer its real feet, in a robot config, may ask less)")
