@@ -456,6 +456,20 @@ def test_a_tall_heavy_robot_turns_its_trunk_fast_enough_and_keeps_its_zmp_on_its
     assert fixed.counters.worst_margin < 0 and fixed.counters.unsupported_steps > 0
 
 
+def test_a_tall_robot_nearer_its_toes_than_its_aim_turns_its_trunk_back_without_toppling_itself(tmp_path):
+    # before: this 1.8 m robot, its upper body's mass high (as Atlas v5's), fell corrected in `push` at 0.29 s, before
+    # it was pushed: standing 20 mm inside its toes, 35 mm short of its corrector's 54.8 mm aim, it had its trunk turned
+    # back at the full acceleration limit, whose answer moved its ZMP 24.5 mm forward, past its toes for the 0.2 s the
+    # trunk accelerated (Atlas: 24.8 mm, fell at 0.29 s); the acceleration is now cut to keep half its CoM's room
+    spec = HumanoidSpec(height=1.8, mass=60.0, waist="yp", torso_com=0.95, seed=24)
+    body = load_robot(str(build_humanoid(tmp_path / "a.urdf", spec)), None).body
+    push = make_scenario("push", body)
+    off, _ = balance(body, push, correct=False, foot_sensors=True)
+    on, _ = balance(body, push, correct=True, foot_sensors=True)
+    assert off.fallen is not None and on.fallen is None
+    assert on.counters.worst_margin > 0
+
+
 def test_a_slow_arm_swing_lasts_a_whole_period_at_full_swing(tmp_path):
     # before: 4 s whatever the swing: JAXON's 0.16 Hz swing grows over 6.3 s, its arms swung a quarter of the way
     # and it stood uncorrected; this robot's swing reached 87 % of its amplitude in 4 s

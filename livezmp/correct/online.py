@@ -35,8 +35,10 @@ import pinocchio as pin
 
 from livezmp.balance.pipeline import FrameResult
 from livezmp.balance.support import clamp_to_polygon
+from livezmp.balance.zmp import compute_zmp
 from livezmp.correct.limits import CorrectionLimits, clip, zmp_target
 from livezmp.correct.root_motion import RootMover, hip_axes
+from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel, foot_soles
 
 
@@ -101,6 +103,37 @@ def size_scaled_margin(body: BodyModel, margin_m: float = MARGIN_M) -> float:
     return margin_m * size_factor(body)
 
 
+# share of the static CoM's distance inside the feet that the ZMP's answer to the trunk's acceleration may take up
+REACTION_SHARE = 0.5
+PITCH = 1  # δ's component about the lateral axis (hip axes: `hip_axes`)
+
+
+def reaction_per_accel(body: BodyModel, mover: RootMover, joints: np.ndarray) -> np.ndarray:
+    """K (2, 3), m per rad/s^2: how far the ZMP moves (world x, y) when the root rotation δ (hip axes, as
+    `RootMover` turns it) accelerates by 1 rad/s^2 from rest, the feet held: the robot's whole-body dynamics
+    standing in ``joints`` (rad; not straight-kneed: a roll about the hips then asks the knees to bend at their
+    singularity), its base placed by its feet. Turning the trunk back first pushes the ground's reaction forward:
+    at the corrector's largest acceleration (`size_scaled_accel`) Atlas v5's ZMP moves 24.8 mm in its push's
+    stance, livezmp_mini's 5.3. Only the pitch's column (the lateral axis: the corrector's turn for every lean
+    forward) is filled: taken the same way, a roll's came out at metres per rad/s^2 on the OP3 (its feet
+    re-placed from legs re-solved for a hip moved sideways), not the robot's dynamics, and cut its push's
+    correction to a twentieth. Zeros for a skeleton (its root is no robot's base)."""
+    k = np.zeros((2, 3))
+    if body.kind != "urdf":
+        return k
+    model, data, base = body.model, body.model.createData(), len(body.base_channels)
+    q = np.concatenate([BasePlacer(body).update(joints), joints])
+    rest = np.zeros(model.nv)
+    at_rest = compute_zmp(model, data, q, rest, rest).zmp
+    eps = 1e-4  # rad: small enough for the motion's first order, large enough for the legs' IK tolerance
+    moved = mover.apply(q, eps * np.eye(3)[PITCH], 0.5)[base:]
+    accel = (np.concatenate([BasePlacer(body).update(moved), moved]) - q) / eps
+    zmp = compute_zmp(model, data, q, rest, accel).zmp
+    if at_rest is not None and zmp is not None:
+        k[:, PITCH] = zmp[:2] - at_rest[:2]
+    return k
+
+
 def _leg_root(body: BodyModel, side: str) -> int:
     """The top joint of a leg (Pinocchio id), whose subtree is the leg: from the hip's joint up the joints the
     leg's correction channels turn (a robot's hip pitch may hang below its hip yaw and roll)."""
@@ -130,6 +163,7 @@ class OnlineCorrector:
         self.pivot_alpha = min(1.0, dt / pivot_tau_s)
         self._damp = np.diag([1e-6, 1e-6, 1e-4])  # the gain's damping (m², per δ axis), made once
         self.mover = RootMover(body)
+        self.reaction: np.ndarray | None = None  # reaction_per_accel in the first frame's posture
         self.data = body.model.createData()
         corr = body.correction
         self.leg_roots = [_leg_root(body, s) for s in ("left", "right")]
@@ -143,6 +177,7 @@ class OnlineCorrector:
         self.delta = np.zeros(3)
         self.prev_step = np.zeros(3)
         self.w_left = 0.5
+        self._room = -np.inf  # m: the static CoM's distance inside the feet at the last frame
         self._last_offsets = np.zeros(self.body.nq)  # the IK's warm start
 
     def sensitivity(self, q: np.ndarray) -> np.ndarray:
@@ -177,6 +212,7 @@ class OnlineCorrector:
         self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
         s = self.sensitivity(result.q)
+        com, polygon = result.com, result.polygon  # the robot's own: before the feet's CoP moves the result
         result = with_measured_cop(result, cop)
         target = zmp_target(result, self.limits.margin_m)
         if target is not None:
@@ -192,12 +228,40 @@ class OnlineCorrector:
                     want = self.delta.copy()
         step = want - self.delta
         lo, hi = self.prev_step - self.max_accel_step, self.prev_step + self.max_accel_step
-        clipped = clip(clip(step, lo, hi), -self.max_step, self.max_step)
+        clipped = clip(self._reaction_kept(clip(step, lo, hi), result.q, com, polygon), -self.max_step,
+                               self.max_step)
         new = clip(self.delta + clipped, -self.max_rot, self.max_rot)
         limited = bool((np.abs(new - want) > 1e-12).any())
         self.prev_step = new - self.delta
         self.delta = new
         return limited
+
+    def _reaction_kept(self, step: np.ndarray, q: np.ndarray, com: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+        """``step`` (rad, δ's change this frame) with its change from the last step, the trunk's acceleration, cut
+        so that the ZMP's answer to it (`reaction_per_accel`) takes up at most `REACTION_SHARE` of the static CoM's
+        distance inside the support polygon (m, ``com`` (3,) and ``polygon`` (k, 2) of the frame). A robot standing
+        nearer its toes than the corrector's aim (a big robot's aim is wide: `size_scaled_margin`) is otherwise
+        turned back at the full acceleration limit, whose answer can be wider than its distance to them: Atlas v5
+        in ``push`` stood 20 mm inside, its ZMP moved 24.8 mm forward and stayed past its toes for the 0.2 s the
+        trunk took to accelerate, and it fell before it was pushed. Where the CoM is outside, nothing is cut."""
+        if len(polygon) < 3:
+            return step
+        if self.reaction is None:
+            self.reaction = reaction_per_accel(self.body, self.mover, q[len(self.body.base_channels):])
+        room = clamp_to_polygon(com[:2], polygon).margin
+        nearing, self._room = room < self._room, room
+        accel = step - self.prev_step
+        moved = self.reaction @ accel / (self.dt * self.dt)
+        if nearing or room <= 0 or clamp_to_polygon(com[:2] + moved, polygon).margin >= (1 - REACTION_SHARE) * room:
+            return step
+        lo, hi = 0.0, 1.0  # the margin is concave along the segment: bisect for the largest share that keeps it
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            if clamp_to_polygon(com[:2] + mid * moved, polygon).margin >= (1 - REACTION_SHARE) * room:
+                lo = mid
+            else:
+                hi = mid
+        return self.prev_step + lo * accel
 
     def offsets(self, q_command: np.ndarray) -> np.ndarray:
         """The second part of :meth:`step`, the costlier (the legs' IK): offsets (nq,) of the corrector's channels
