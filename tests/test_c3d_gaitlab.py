@@ -1540,6 +1540,21 @@ def test_a_rate_outside_the_frame_periods_read_is_refused(tmp_path):
         read_c3d(tmp_path / "slow.c3d")
 
 
+def test_a_file_cut_short_or_read_at_another_analog_rate_is_refused(lab, tmp_path):
+    """ezc3d reads a C3D cut short as the frames that are left (half the Plug-in Gait walk was analysed, exit 0),
+    and steps through the data by ANALOG:RATE / POINT:RATE whatever the header says (1050 Hz against its 20 samples
+    a frame was refused as "only 1 frames have every needed marker", 150 Hz as a pelvis turning 179 deg)."""
+    data = (lab[0] / "on.c3d").read_bytes()
+    (tmp_path / "cut.c3d").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"cut\.c3d: truncated: the header says \d+ frames \(1\.\.\d+\), the file"):
+        read_c3d(tmp_path / "cut.c3d")
+    odd = bytearray(data)
+    struct.pack_into("<f", odd, parameter_at(data)[("ANALOG", "RATE")], 1500.0)
+    (tmp_path / "odd.c3d").write_bytes(bytes(odd))
+    with pytest.raises(InputError, match=r"odd\.c3d: ANALOG:RATE 1500 is not POINT:RATE \d+ times the header's \d+"):
+        read_c3d(tmp_path / "odd.c3d")
+
+
 @pytest.mark.parametrize("key", ["CORNERS", "ORIGIN"])
 def test_a_plate_geometry_not_finite_is_refused_naming_the_parameter(lab, tmp_path, key):
     """NaN corners had reached the ground's height and were refused as "GroundConfig.override: ... nan"; an

@@ -471,10 +471,37 @@ def open_c3d(path: str | Path, plates: bool = False):
     _check_parameter_section(p, data)
     _check_ezc3d_survives(p, len(data), plates)
     try:
-        return ezc3d.c3d(str(p), extract_forceplat_data=plates)
+        c3d = ezc3d.c3d(str(p), extract_forceplat_data=plates)
     except Exception as e:  # ezc3d raises plain RuntimeError/ValueError with a C++ message  # noqa: BLE001
         raise InputError(f"{p}: not a readable C3D file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") \
             from None
+    _check_data_read_whole(p, data, c3d)
+    return c3d
+
+
+def _check_data_read_whole(p: Path, data: bytes, c3d) -> None:
+    """Refuse a file whose POINT:RATE is no frame rate read (:func:`check_frame_period`), or whose data ezc3d read
+    otherwise than its header lays it out: analog samples a frame other than the header's (ezc3d steps through the
+    data by ANALOG:RATE / POINT:RATE: one that is not the header's count reads markers from the analog words, refused
+    later as an up axis or a pelvis it could not make out, or runs out of file), or fewer frames than the header's
+    first..last (a file cut short: ezc3d reads what is there without a word)."""
+    rate = _first_number(_param(c3d["parameters"], "POINT", "RATE"))
+    if rate is None:
+        raise InputError(f"{p}: POINT:RATE is missing or not a positive number")
+    check_frame_period(1.0 / rate, f"{p}: POINT:RATE {rate:g}")
+    mips = 1 <= data[0] and len(data) >= data[0] * 512 and data[(data[0] - 1) * 512 + 3] == 86  # big-endian
+    order = ">" if mips else "<"
+    analog_words, first, last = struct.unpack_from(order + "3H", data, 4)  # header words 3-5
+    (per_frame,) = struct.unpack_from(order + "H", data, 18)  # word 10
+    frames = c3d["data"]["points"].shape[2]
+    samples = c3d["data"]["analogs"].shape[2]
+    if analog_words and samples != frames * per_frame:
+        analog_rate = _first_number(_param(c3d["parameters"], "ANALOG", "RATE")) or 0.0
+        raise InputError(f"{p}: ANALOG:RATE {analog_rate:g} is not POINT:RATE {rate:g} times the header's "
+                         f"{per_frame} analog samples a frame: the frames cannot be told apart")
+    if first <= last < 0xFFFF and frames < last - first + 1:  # 0xFFFF: a longer trial's count is in TRIAL
+        raise InputError(f"{p}: truncated: the header says {last - first + 1} frames ({first}..{last}), "
+                         f"the file holds {frames}")
 
 
 def told_apart(labels: list[str], descriptions: list[str]) -> list[str]:
@@ -507,10 +534,7 @@ def read_c3d(path: str | Path) -> C3dTrial:
     unit = (str(units[0]).strip().lower() if units is not None and len(units) else "") or "mm"
     if unit not in LENGTH_UNITS:
         raise InputError(f"{p}: POINT:UNITS {unit!r} is not a length unit (mm, cm, m)")
-    rate = _first_number(_param(groups, "POINT", "RATE"))
-    if rate is None:
-        raise InputError(f"{p}: POINT:RATE is missing or not a positive number")
-    check_frame_period(1.0 / rate, f"{p}: POINT:RATE {rate:g}")
+    rate = _first_number(_param(groups, "POINT", "RATE"))  # checked by open_c3d
     pts = np.asarray(c3d["data"]["points"][:3], dtype=float)  # (3, P, F)
     labels = [strip_prefix(s) for s in (_param(groups, "POINT", "LABELS") or [])][: pts.shape[1]]
     labels += [f"point{i + 1}" for i in range(len(labels), pts.shape[1])]
