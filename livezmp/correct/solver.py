@@ -398,8 +398,7 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
     changed = changed_channels(body)
     first = unk.first_frames()
     w = stance_weights(before, max(1, round(0.1 / dt)))[first][unk.index]  # a loop's copies pivot alike
-    est = estimator_matrices(pipe, times, edge=3 * pipe.estimator.config.window + pipe.estimator.lag)
-    lin = _Linearisation(model, mover, changed, est)
+    lin = None  # the estimator's linear maps: built when a frame needs moving (a minute on a long or fast take)
     pick = unk.selection()
     q_base = np.array([body.channels_to_q(fr) for fr in frames])
     reg_size = sp.eye(3 * unk.count, format="csr") / np.radians(limits.rotation_scale_deg)
@@ -424,6 +423,9 @@ def correct_motion(body: BodyModel, times: np.ndarray, frames: np.ndarray, confi
             judged = [k for k, r in enumerate(current) if r.margin is not None and unk.judged[k]]
             if not any(zmp_target(current[k], limits.margin_m) is not None for k in judged):
                 break
+            if lin is None:
+                edge = 3 * pipe.estimator.config.window + pipe.estimator.lag
+                lin = _Linearisation(model, mover, changed, estimator_matrices(pipe, times, edge))
             cjac = lin.channel_jacobians(q_base, unk.expand(delta), w)
             jmat, load = lin.matrix(current, judged, cjac)
             jall = (jmat @ pick / limits.zmp_tolerance_m).tocsr()
