@@ -83,3 +83,8 @@ def test_analyze_reports_the_settings_and_takes_the_override(walk, tmp_path, cap
     assert main(["analyze", str(path), "--cutoff-hz", "20"]) == 2  # above 15 Hz, the Nyquist frequency at 30 Hz
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--cutoff-hz 20 at 30 frames/s" in err and "Nyquist frequency, 15 Hz" in err
+    slow = tmp_path / "slow.bvh"  # 10 frames/s: a file's default cutoff, 6 Hz, is above its Nyquist frequency
+    write_bvh(replace(walk[0], frames=walk[0].frames[::3], frame_time=3 * walk[0].frame_time), slow)
+    assert main(["analyze", str(slow)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a file's default is 6 Hz: give --cutoff-hz below 5" in err

@@ -164,9 +164,12 @@ def default_estimator(rate_hz: float, cutoff_hz: float | None = None) -> Estimat
     # the window 2.4 / cutoff must hold MAX_WINDOW samples at most (3 at least: below Nyquist it does)
     lowest, nyquist = 2.4 * rate_hz / MAX_WINDOW, 0.5 * rate_hz
     if not (math.isfinite(cutoff) and lowest <= cutoff < nyquist):
+        # named as the option that changes it, whether the user gave it or a file's default (6 Hz) set it
         raise EstimatorError(f"--cutoff-hz {cutoff:g} at {rate_hz:g} frames/s: must be at least {lowest:.3g} Hz "
                              f"(a smoothing window of 2.4 / cutoff s, {MAX_WINDOW} frames at most) and below "
-                             f"the Nyquist frequency, {nyquist:g} Hz")
+                             f"the Nyquist frequency, {nyquist:g} Hz"
+                             + (f" (a file's default is {FILE_CUTOFF_HZ:g} Hz: give --cutoff-hz below {nyquist:g})"
+                                if cutoff >= nyquist else ""))
     return EstimatorConfig(rate_hz=rate_hz, window_s=2.4 / cutoff, lag_s=0.6 / cutoff, cutoff_hz=cutoff)
 
 
