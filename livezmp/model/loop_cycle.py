@@ -37,6 +37,12 @@ class Loop:
         """Frames of the cycle analysed before the take and after it (:data:`PAD_S` s, ``frame_time`` s a frame)."""
         return max(1, round(PAD_S / frame_time))
 
+    def padded(self, frames: np.ndarray, t0: float, fps: float) -> tuple[int, np.ndarray, np.ndarray]:
+        """The take's ``frames`` (F, C) at ``fps`` Hz with :meth:`pad_frames` of the loop before and after them:
+        that count ``lead``, their times (s, the take's first at ``t0``) and rows (F + 2 ``lead``, C)."""
+        lead, n = self.pad_frames(1.0 / fps), len(frames)
+        return lead, t0 + np.arange(-lead, n + lead) / fps, self.rows(frames, -lead, n + lead)
+
     def rows(self, frames: np.ndarray, start: int, stop: int) -> np.ndarray:
         """Frames ``start``..``stop``-1 of the loop played on (negative: before the take's first frame), from the
         take's ``frames`` (F, C), whose columns ``positions`` names: a frame k is the cycle's frame k mod

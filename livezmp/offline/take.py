@@ -135,10 +135,8 @@ def analyse_loaded(loaded: LoadedMotion, mode: str = "full", ground: float | Non
     pipe = Pipeline(loaded.body, cfg, nominal_dt=1.0 / loaded.fps)
     if loaded.loop is None:
         return run_batch(pipe, loaded.times, loaded.frames, progress=progress)
-    lead, n = loaded.loop.pad_frames(1.0 / loaded.fps), len(loaded.frames)
-    padded = loaded.loop.rows(loaded.frames, -lead, n + lead)
-    result = run_batch(pipe, loaded.times[0] + np.arange(-lead, n + lead) / loaded.fps, padded)
-    return within_take(result, lead, n)
+    lead, times, padded = loaded.loop.padded(loaded.frames, loaded.times[0], loaded.fps)
+    return within_take(run_batch(pipe, times, padded), lead, len(loaded.frames))
 
 
 @dataclass
@@ -303,9 +301,8 @@ def correct_loaded(loaded: LoadedMotion, output: str | Path, options: TakeOption
     cfg = take_config(loaded, options.mode, options.ground, correction_cutoff(options.cutoff_hz))
     times, frames, unknowns = loaded.times, loaded.frames, None
     if loaded.loop is not None:  # corrected as the loop it is analysed as: one rotation per frame of its cycle
-        lead, n = loaded.loop.pad_frames(1.0 / loaded.fps), len(loaded.frames)
-        times = loaded.times[0] + np.arange(-lead, n + lead) / loaded.fps
-        frames, unknowns = loaded.loop.rows(loaded.frames, -lead, n + lead), looped(lead, n, loaded.loop.period)
+        lead, times, frames = loaded.loop.padded(loaded.frames, loaded.times[0], loaded.fps)
+        unknowns = looped(lead, len(loaded.frames), loaded.loop.period)
     result = correct_motion(loaded.body, times, frames, cfg, limits, nominal_dt=1.0 / loaded.fps,
                             progress=progress, unknowns=unknowns)
     with atomic_path(output) as tmp:
