@@ -92,6 +92,11 @@ class C3dTrial:
         except ValueError:
             return None
 
+    def seen_labels(self) -> set[str]:
+        """The labels of the markers seen in at least one frame (a label never seen is a marker the trial lacks)."""
+        seen = np.isfinite(self.points).all(axis=2).any(axis=0)
+        return {label for label, ok in zip(self.labels, seen, strict=True) if ok}
+
 
 def strip_prefix(label: str) -> str:
     """``Subject:LASI`` -> ``LASI``; surrounding blanks removed."""

@@ -123,8 +123,7 @@ def segment_outputs_map(trial: C3dTrial) -> MarkerMap | None:
     """The cluster set the file's Plug-in Gait segment outputs make (:data:`SEGMENT_OUTPUTS`), when it has all of
     them seen: each segment's origin and axis tips are its cluster, the hip centre the femur's proximal tip, the knee
     the femur's origin, the ankle the tibia's origin; None without them."""
-    seen = {lab for lab, ok in zip(trial.labels, np.isfinite(trial.points).all(axis=2).any(axis=0), strict=True)
-            if ok}
+    seen = trial.seen_labels()
     segments = [("pelvis", tuple(f"{SEGMENT_OUTPUTS['pelvis']}{k}" for k in "OALP"))]
     joints = []
     for side, t in (("L", "l"), ("R", "r")):

@@ -257,8 +257,7 @@ def toe_from_heel_and_malleoli(toe: np.ndarray, heel: np.ndarray, lateral: np.nd
 def _need(trial: C3dTrial, match: LabelMatch, shown: list[str]) -> dict[str, str | None]:
     """Marker roles -> labels found; raises InputError naming what a usable set lacks (a role that several
     labels claim in ``match``: naming them; the file's labels ``shown`` as it writes them)."""
-    seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
-    have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}  # a label never seen is missing
+    have = trial.seen_labels()  # a label never seen is missing
     roles: dict[str, str | None] = {"LASI": "LASI", "RASI": "RASI"}
     missing = [m for m in ("LASI", "RASI") if m not in have]
     if {"LPSI", "RPSI"} <= have:
@@ -394,8 +393,7 @@ def _cluster_markers(trial: C3dTrial, mmap: MarkerMap) -> dict[str, np.ndarray]:
     """The cluster map's markers (F, 3) m, and the HAT points when the file has them all (a corrected take);
     InputError naming those the file does not have (or never sees)."""
     labels = _cluster_labels(trial, mmap)
-    seen = np.isfinite(trial.points).all(axis=2).any(axis=0)
-    have = {label for label, ok in zip(trial.labels, seen, strict=True) if ok}
+    have = trial.seen_labels()
     missing = [label for label in labels if label not in have]
     if missing:
         raise InputError(f"{trial.source}: markers of the map {mmap.source} not in the file (or never seen): "

@@ -60,11 +60,6 @@ def _segment(role: str) -> str | None:
     return part if part == "pelvis" else f"{part}_{role[0].lower()}"
 
 
-def _seen(trial: C3dTrial) -> set[str]:
-    return {lab for lab, ok in zip(trial.labels, np.isfinite(trial.points).all(axis=2).any(axis=0), strict=True)
-            if ok}
-
-
 def _missing(walk: C3dTrial, static: C3dTrial) -> dict[str, list[str]]:
     """Segment -> the static trial's labels of its landmarks that the walk does not see (under any of the names
     the label matcher reads for that role)."""
@@ -73,8 +68,8 @@ def _missing(walk: C3dTrial, static: C3dTrial) -> dict[str, list[str]]:
     except InputError as e:
         raise InputError(f"static trial {e}") from None
     by_label = {lab: role for role, lab in standard_trial(static)[1].roles.items()}
-    walk_std = _seen(standard_trial(walk)[0])
-    walk_seen = _seen(walk)
+    walk_std = standard_trial(walk)[0].seen_labels()
+    walk_seen = walk.seen_labels()
     out: dict[str, list[str]] = {}
     for role, label in roles.items():
         seg = _segment(role)
@@ -88,7 +83,7 @@ def _missing(walk: C3dTrial, static: C3dTrial) -> dict[str, list[str]]:
 def _static_points(static: C3dTrial) -> tuple[dict[str, np.ndarray], dict[str, str | None]]:
     """The static trial's seen markers (F, 3) m in the internal z-up frame, and its roles -> labels."""
     _, r_in = input_rotation(static)
-    return ({lab: static.marker(lab) @ r_in.T for lab in _seen(static)}, marker_roles(static))
+    return ({lab: static.marker(lab) @ r_in.T for lab in static.seen_labels()}, marker_roles(static))
 
 
 def _candidates(seg: str, pts: dict[str, np.ndarray], roles: dict[str, str | None], common: list[str]) -> list[str]:
@@ -184,7 +179,8 @@ def with_static_landmarks(walk: C3dTrial, static: C3dTrial) -> C3dTrial:
     if not missing:
         return walk
     pts, roles = _static_points(static)
-    common = [lab for lab in walk.labels if lab in pts and lab in _seen(walk)]
+    seen = walk.seen_labels()
+    common = [lab for lab in walk.labels if lab in pts and lab in seen]
     labels, points = list(walk.labels), walk.points
     told = {}
     for seg, landmarks in missing.items():
