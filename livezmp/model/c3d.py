@@ -378,6 +378,13 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     return out
 
 
+def _byte_order(data: bytes) -> str:
+    """The struct byte order of a C3D file's words: big-endian (">") where the parameter section's header (the
+    block the file's first byte names) says processor type 84 + 2 (MIPS), else little-endian ("<")."""
+    start = (data[0] - 1) * 512
+    return ">" if 1 <= data[0] and start + 4 <= len(data) and data[start + 3] == 86 else "<"
+
+
 def _check_parameter_section(p: Path, data: bytes) -> None:
     """Refuse, before ezc3d reads it, a parameter section that would make ezc3d allocate without
     bound: a description length byte above 127 (read as a negative count, then as an unsigned one:
@@ -390,7 +397,7 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
     start = (data[0] - 1) * 512
     if start + 4 > size:  # a section that begins inside the file is read even when the file ends in its block
         return
-    order = ">" if data[start + 3] == 86 else "<"  # processor type 84 + 2 (MIPS): big-endian
+    order = _byte_order(data)
     # the first parameter follows the 4-byte section header: its first byte (the parameters' start, 0 in
     # Codamotion and Motion Analysis files) is read as 1 whatever it says, as ezc3d does
     pos = start + 4
@@ -494,8 +501,7 @@ def _check_data_read_whole(p: Path, data: bytes, c3d) -> None:
     if rate is None:
         raise InputError(f"{p}: POINT:RATE is missing or not a positive number")
     check_frame_period(1.0 / rate, f"{p}: POINT:RATE {rate:g}")
-    mips = 1 <= data[0] and len(data) >= data[0] * 512 and data[(data[0] - 1) * 512 + 3] == 86  # big-endian
-    order = ">" if mips else "<"
+    order = _byte_order(data)
     analog_words, first, last = struct.unpack_from(order + "3H", data, 4)  # header words 3-5
     (per_frame,) = struct.unpack_from(order + "H", data, 18)  # word 10
     frames = c3d["data"]["points"].shape[2]
