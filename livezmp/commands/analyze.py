@@ -16,7 +16,7 @@ from pathlib import Path
 from rich.progress import Progress
 
 from livezmp.checks import check_figure_path, check_output_path
-from livezmp.commands.common import check_body_options, load_from_args, take_options
+from livezmp.commands.common import load_from_args, take_options
 from livezmp.offline.report import write_json, write_zmp_csv
 from livezmp.offline.take import (
     TakeAnalysis,
@@ -59,7 +59,6 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json")):
         check_output_path(path, option)
     check_figure_path(args.plot, "--plot")
-    check_body_options(args)
     options = take_options(args)
     if options.streams(args.motion):
         summary = _stream(args, options)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from livezmp.checks import check_output_path
-from livezmp.commands.common import check_body_options, limits_from_args, load_from_args, take_options
+from livezmp.commands.common import limits_from_args, load_from_args, take_options
 from livezmp.errors import InputError
 from livezmp.offline.report import write_json
 from livezmp.offline.take import correct_c3d_take, correct_loaded
@@ -33,7 +33,6 @@ def cmd_correct(args: argparse.Namespace) -> int:
 
 def _correct_c3d(args: argparse.Namespace, as_c3d: bool) -> int:
     """A gait-lab take: its marker body corrected as a chain, written as C3D (markers moved) or BVH."""
-    check_body_options(args)
     report = correct_c3d_take(args.motion, args.output, take_options(args), limits_from_args(args),
                               progress=lambda message: print(f"correct: {message}", flush=True))
     _tell(report, args)
