@@ -53,7 +53,15 @@ class ServoConfig:
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
 
-SERVO_KEYS = {"id", "zero", "direction", "ticks_per_rev"}
+SERVO_KEYS = ("direction", "id", "ticks_per_rev", "zero")
+
+
+def _known_keys(table: dict, keys: tuple[str, ...], where: str) -> None:
+    """Refuse a key of ``table`` not among ``keys``: misspelt, it would be ignored (a servo's direction or zero
+    would then drive its joint wrongly)."""
+    unknown = set(table) - set(keys)
+    if unknown:
+        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} ({', '.join(keys)})")
 
 
 @dataclass(frozen=True)
@@ -114,9 +122,7 @@ def _polygon_area(xy: np.ndarray) -> float:
 def _foot(side: str, f: object, source: str) -> dict:
     where = f"{source}: [feet.{side}]"
     f = _table(f, where)
-    unknown = set(f) - {"link", "sole", "box"}
-    if unknown:
-        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} (link, sole, box)")
+    _known_keys(f, ("link", "sole", "box"), where)
     if not isinstance(f.get("link"), str):
         raise InputError(f"{where} link: need the link's name (a string)")
     out: dict = {"link": f["link"]}
@@ -129,9 +135,7 @@ def _foot(side: str, f: object, source: str) -> dict:
         out["sole"] = sole
     if "box" in f:
         box = _table(f["box"], f"{where} box")
-        unknown = set(box) - {"length", "width", "center"}
-        if unknown:
-            raise InputError(f"{where} box: unknown key {sorted(unknown)[0]!r} (length, width, center)")
+        _known_keys(box, ("length", "width", "center"), f"{where} box")
         out["box"] = {k: _length(box[k], f"{where} box.{k}", True) for k in ("length", "width") if k in box}
         if "center" in box:
             out["box"]["center"] = _point(box["center"], f"{where} box.center")
@@ -155,9 +159,7 @@ def _parse(data: dict, source: str) -> RobotConfig:
     for joint, s in _table(data.get("servos"), f"{source}: [servos]").items():
         where = f"{source}: [servos.{joint}]"
         s = _table(s, where)
-        unknown = set(s) - SERVO_KEYS  # a misspelt direction or zero, ignored, would drive the joint wrongly
-        if unknown:
-            raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} ({', '.join(sorted(SERVO_KEYS))})")
+        _known_keys(s, SERVO_KEYS, where)
         if "id" not in s:
             raise InputError(f"{where}: missing 'id'")
         d = s.get("direction", 1)
@@ -177,9 +179,7 @@ def _parse(data: dict, source: str) -> RobotConfig:
 
 
 def _imu(t: dict, where: str, cfg: RobotConfig) -> ImuConfig:
-    unknown = set(t) - {"id", "axes"}
-    if unknown:
-        raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r} (id, axes)")
+    _known_keys(t, ("id", "axes"), where)
     if "id" not in t:
         raise InputError(f"{where}: missing 'id'")
     dxl_id = _int(t["id"], f"{where} id", 0, 252)
