@@ -1555,6 +1555,17 @@ def test_a_file_cut_short_or_read_at_another_analog_rate_is_refused(lab, tmp_pat
         read_c3d(tmp_path / "odd.c3d")
 
 
+@pytest.mark.parametrize(("key", "value"), [("POINT", float("nan")), ("POINT", -100.0), ("ANALOG", float("nan"))])
+def test_a_rate_that_is_no_number_is_refused_before_ezc3d_reads_it(lab, tmp_path, key, value):
+    """ezc3d sizes its frames by POINT:RATE and ANALOG:RATE: NaN or a negative rate ended in its C++ allocation
+    message ("not a readable C3D file (vector::_M_default_append)"), naming neither the parameter nor its value."""
+    data = bytearray((lab[0] / "on.c3d").read_bytes())
+    struct.pack_into("<f", data, parameter_at(data)[(key, "RATE")], value)
+    (tmp_path / "rate.c3d").write_bytes(bytes(data))
+    with pytest.raises(InputError, match=rf"rate\.c3d: {key}:RATE {value:g} is not a rate in Hz \(a finite number"):
+        read_c3d(tmp_path / "rate.c3d")
+
+
 @pytest.mark.parametrize("key", ["CORNERS", "ORIGIN"])
 def test_a_plate_geometry_not_finite_is_refused_naming_the_parameter(lab, tmp_path, key):
     """NaN corners had reached the ground's height and were refused as "GroundConfig.override: ... nan"; an

@@ -389,8 +389,9 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
     """Refuse, before ezc3d reads it, a parameter section that would make ezc3d allocate without
     bound: a description length byte above 127 (read as a negative count, then as an unsigned one:
     gigabytes) or dimensions claiming more values than the file holds bytes (also those before a zero
-    dimension, which ezc3d loops over without reading anything). The walk follows ezc3d's
-    reader; where the structure breaks off, ezc3d's own check refuses the file."""
+    dimension, which ezc3d loops over without reading anything), or a POINT:RATE or ANALOG:RATE that is not
+    a finite number >= 0 (ezc3d sizes its frames by them: NaN ends in a C++ allocation message). The walk
+    follows ezc3d's reader; where the structure breaks off, ezc3d's own check refuses the file."""
     size = len(data)
     if size < 512 or data[0] < 1:
         return
@@ -401,6 +402,7 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
     # the first parameter follows the 4-byte section header: its first byte (the parameters' start, 0 in
     # Codamotion and Motion Analysis files) is read as 1 whatever it says, as ezc3d does
     pos = start + 4
+    groups: dict[int, str] = {}
     while pos + 2 <= size:
         n, gid = struct.unpack_from("bb", data, pos)
         at = pos + 2 + abs(n)  # after the name
@@ -409,6 +411,8 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
         (offset,) = struct.unpack_from(order + "H", data, at)
         at += 2
         what = data[pos + 2 : pos + 2 + abs(n)].decode("ascii", "replace")
+        if gid < 0:
+            groups[-gid] = what.upper()
         if gid > 0:  # a parameter: type, dimensions, values
             if at + 2 > size:
                 return
@@ -420,6 +424,7 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
             if max(claimed, loops) > size:
                 raise InputError(f"{p}: parameter {what!r} claims {max(claimed, loops):.3g} values, more than "
                                  f"the file's {size} bytes")
+            _check_rate(p, f"{groups.get(gid, '')}:{what.upper()}", kind, data, at + 2 + max(ndims, 0), order)
             at += 2 + max(ndims, 0) + claimed
         if at < size and data[at] > 127:
             raise InputError(f"{p}: {'parameter' if gid > 0 else 'group'} {what!r} has a description length of "
@@ -427,6 +432,14 @@ def _check_parameter_section(p: Path, data: bytes) -> None:
         if offset == 0:
             return
         pos = pos + 2 + abs(n) + offset
+
+
+def _check_rate(p: Path, key: str, kind: int, data: bytes, at: int, order: str) -> None:
+    """Refuse POINT:RATE or ANALOG:RATE (Hz, a 4-byte float at ``at``) when it is not a finite number >= 0."""
+    if key in ("POINT:RATE", "ANALOG:RATE") and kind == 4 and at + 4 <= len(data):
+        (rate,) = struct.unpack_from(order + "f", data, at)
+        if not math.isfinite(rate) or rate < 0:
+            raise InputError(f"{p}: {key} {rate:g} is not a rate in Hz (a finite number >= 0)")
 
 
 READ_SECONDS = 20.0  # a forked trial read gets this long, plus a second per 10 MB of file
