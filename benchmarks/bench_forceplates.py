@@ -60,7 +60,7 @@ from livezmp.model.markers import (
     sway_basis,
 )
 from livezmp.model.static_trial import read_walk
-from livezmp.offline.calibrate import BLOCK_S, PARAMETERS, calibrate
+from livezmp.offline.calibrate import BLOCK_S, calibrate
 from livezmp.offline.gaitlab import (
     COP_CHECK_WEIGHT,
     LabOptions,
@@ -890,17 +890,21 @@ SUBSETS = {"offset fa+lat": ("forward", "left"), "offset fa": ("forward",), "swa
 
 def calibration_subsets(done: dict[str, tuple]) -> None:
     """`livezmp calibrate` fitting only some of the HAT's parameters (the others at the table), held out as in
-    the calibration table, on the trials it accepts; and each fit without the prior on its own frames."""
+    the calibration table, on the trials it accepts (a tracked thorax: all its parameters only); and each fit
+    without the prior on its own frames."""
     print("\ncalibrated with fewer parameters: held out (fit on every other 0.2 s block, scored on the others) / "
           "unconstrained on its own frames, mm")
     print(f"{'trial':34s} {'table':>6s} {'all six':>13s} " + " ".join(f"{k:>15s}" for k in SUBSETS))
     for name, (trial, _) in done.items():
         cells = []
-        for fit in (PARAMETERS, *SUBSETS.values()):
+        for fit in (None, *SUBSETS.values()):
             try:
                 _, rep = calibrate([trial], fit=fit)
             except InputError:
                 break
+            except ValueError:  # a HAT's subset, the trial's thorax tracked
+                cells.append("-")
+                continue
             cells.append(f"{rep['rms_held_out_fitted_mm']:6.1f} / {rep['rms_fitted_unconstrained_mm']:4.1f}")
         if cells:
             print(f"{name[:34]:34s} {rep['rms_held_out_table_mm']:6.1f} {cells[0]:>13s} "
@@ -951,8 +955,8 @@ def calibration_table(done: dict[str, tuple]) -> None:
           f"scored on the other; folds: every other {BLOCK_S:g} s block (blocks), or the first and second halves of "
           "the complete frames (halves, as before) (mm)")
     print(f"{'trial':34s} {'frames':>6s} {'table':>7s} {'fitted':>7s} {'held-out table':>15s} {'halves':>7s} "
-          f"{'blocks':>7s}  weight (all / held-out folds); HAT fraction, CoM fwd/left/up mm, sway gain "
-          "fore-aft/lateral above the follow frequency (± jackknife SD); table: analyze's default")
+          f"{'blocks':>7s}  weight (all / held-out folds); segment (hat, thorax); fraction, CoM fwd/left/up mm, a "
+          "HAT's sway gain fore-aft/lateral above the follow frequency (± jackknife SD); table: analyze's default")
     table, halves, blocks, every, off_default = [], [], [], [], []
     for name, (trial, a) in done.items():
         try:
@@ -968,12 +972,13 @@ def calibration_table(done: dict[str, tuple]) -> None:
         blocks.append(rep["rms_held_out_fitted_mm"])
         every.append(rep["rms_held_out_fitted_mm"])
         w = ", ".join("table" if v is None else f"{v:g}" for v in [rep["prior_weight"], *rep["held_out_prior_weights"]])
-        theta = [subject.hat_fraction, *subject.hat_offset, *subject.hat_sway_gain]
+        theta = [subject.fraction, *subject.offset, *subject.hat_sway_gain][:len(rep["parameter_sd"])]
         scale = [1, 1000, 1000, 1000, 1, 1]
-        fit = ", ".join(f"{v * k:.3g}±{e * k:.2g}" for v, e, k in zip(theta, rep["parameter_sd"], scale, strict=True))
+        fit = ", ".join(f"{v * k:.3g}±{e * k:.2g}" for v, e, k in zip(theta, rep["parameter_sd"], scale, strict=False))
         print(f"{name[:34]:34s} {rep['frames']:6d} {rep['rms_table_mm']:7.1f} {rep['rms_fitted_mm']:7.1f} "
               f"{rep['rms_held_out_table_mm']:15.1f} {old['rms_held_out_fitted_mm']:7.1f} "
-              f"{rep['rms_held_out_fitted_mm']:7.1f}  {w}; {'table kept' if rep['table_kept'] else fit}")
+              f"{rep['rms_held_out_fitted_mm']:7.1f}  {w}; {subject.segment}; "
+              f"{'table kept' if rep['table_kept'] else fit}")
     if blocks:
         print(f"median held-out RMS over the {len(blocks)} calibrated trials: table {np.median(table):.1f} mm, "
               f"calibrated with halves {np.median(halves):.1f} mm, with blocks {np.median(blocks):.1f} mm; over all "

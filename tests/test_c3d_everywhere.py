@@ -343,8 +343,30 @@ def test_monitor_replays_a_c3d_with_the_subjects_hat(corrected, tmp_path):
     assert main(["replay", str(tmp_path / "subject.mcap")]) == 0
 
 
+def test_monitor_replays_a_full_body_c3d_with_a_tracked_trunks_subject(tmp_path, capsys):
+    """A tracked trunk's subject file (trunk_fraction, trunk_offset_m) on a full-body C3D: the monitor's per-frame
+    pipeline gives the whole-take analysis' ZMP with the subject's thorax, which moves it, and the recording's body
+    keeps the thorax (replay: the same analysis)."""
+    from tests.test_c3d_gaitlab import PLATES, write_lab_c3d
+
+    path, subject = tmp_path / "full.c3d", tmp_path / "s.toml"
+    write_lab_c3d(path, PLATES, full_body=True)
+    subject.write_text("[subject]\ntrunk_fraction = 0.38\ntrunk_offset_m = [0.04, 0.0, -0.20]\n")
+    assert main(["monitor", str(path), "--speed", "0", "--record", str(tmp_path / "s.mcap"),
+                 "--subject", str(subject)]) == 0
+    live = _recorded_zmp(tmp_path / "s.mcap")
+    offline = analyse_loaded(TakeOptions(subject=str(subject)).load(path))
+    table = analyse_loaded(TakeOptions().load(path))
+    assert np.abs(offline.zmp[:, :2] - live).max() < 1e-9
+    assert np.abs(table.zmp[:, :2] - live).max() > 0.005  # the subject's thorax moved it
+    capsys.readouterr()
+    assert main(["replay", str(tmp_path / "s.mcap")]) == 0
+    assert "same analysis" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize(("subject", "source", "message"), [
     ("[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.3]\n", "bvh", "hat_offset_m"),
+    ("[subject]\ntrunk_fraction = 0.35\ntrunk_offset_m = [0.0, 0.0, -0.2]\n", "bvh", "a BVH takes a placed HAT's"),
     ("[person]\nhat_fraction = 0.5\n", "bvh", "[subject]"),
     ("[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\nhat_follow_hz = 0\n", "bvh", "hat_follow_hz"),
     (SUBJECT, "mcap", "describes a person"),

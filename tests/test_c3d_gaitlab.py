@@ -497,8 +497,6 @@ def test_full_body_set_tracks_trunk_head_and_arms(tmp_path):
     assert a.summary["cop_vs_zmp"]["max_mm"] < 1.0
     # every segment on its own markers: no lateral band (docs/validation.md, "... where every segment is tracked")
     assert a.take.placed == () and a.summary["lateral_band_hz"] is None
-    with pytest.raises(InputError, match="full-body"):
-        calibration.calibrate([read_c3d(path)])
 
 
 def test_why_upper_body_labels_are_not_used_is_said():
@@ -1253,7 +1251,7 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     assert report["rms_fitted_unconstrained_mm"] < 1.0  # the true HAT is among the parameters: the floor is ~0
     # its offset alone: mass fraction and sway stay the table's (not the true 0.45), so the truth is out of reach
     part, partial = calibration.calibrate([trial], fit=("forward", "left"))
-    assert part.hat_fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12) and part.hat_fraction > 0.47
+    assert part.fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12) and part.fraction > 0.47
     assert part.hat_sway_gain == calibration.TRUNK_STEP_GAIN
     assert partial["rms_fitted_unconstrained_mm"] > 5 * report["rms_fitted_unconstrained_mm"]
     with pytest.raises(ValueError, match="fit takes some of"):
@@ -1261,17 +1259,71 @@ def test_calibration_finds_a_subjects_hat_and_analyze_uses_it(tmp_path, monkeypa
     monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
     assert main(["calibrate", str(path), "-o", str(tmp_path / "s.toml")]) == 0
     exact = calibration.load_subject(tmp_path / "s.toml")
-    assert exact.hat_offset[0] == pytest.approx(0.04, abs=0.002)
+    assert exact.offset[0] == pytest.approx(0.04, abs=0.002)
     # the report in the subject file is TOML; the truth lies within 3 jackknife standard errors of the fit
     cal = tomllib.loads((tmp_path / "s.toml").read_text())["calibration"]
     assert cal["parameters"] == list(calibration.PARAMETERS) and cal["table_kept"] is False
-    fit = np.array([exact.hat_fraction, *exact.hat_offset, *exact.hat_sway_gain])
+    fit = np.array([exact.fraction, *exact.offset, *exact.hat_sway_gain])
     truth = np.array([0.45, 0.04, 0.0, 0.33, 1.0, 1.0])
     sd = np.array(cal["parameter_sd"])
     assert np.all(np.abs(fit - truth)[[0, 1, 3]] < 3 * sd[[0, 1, 3]]) and np.all(sd[:4] < calibration.PRIOR_SD[:4] / 10)
-    assert abs(exact.hat_offset[1]) < 1e-4  # left: found to 0.1 mm (its SD rounds to 0 in the file)
+    assert abs(exact.offset[1]) < 1e-4  # left: found to 0.1 mm (its SD rounds to 0 in the file)
     rc, s = _analyze(path, tmp_path, "--subject", str(tmp_path / "s.toml"))
     assert rc == 0 and s["cop_vs_zmp"]["rms_mm"] < 1.0
+
+
+TRUNK_TRUTH = (0.38, (0.04, 0.0, -0.20))  # the synthetic thorax: fraction, CoM fwd, left, up (m; table 0.323, -0.162)
+
+
+def test_calibration_finds_a_tracked_trunks_thorax_and_analyze_uses_it(tmp_path, monkeypatch):
+    """A full-body subject whose tracked thorax weighs 38 % (the table 32.3 %) with its centre of mass 40 mm forward
+    and 200 mm below its origin (the table: 0, 162 mm): the table is off by mm; the fit's model at the truth is the
+    plates' (exact), calibrate (prior off) finds fraction and offset within 0.01 / 3 mm, the subject file writes
+    them as trunk_* keys, and `analyze --subject` agrees with the plates to < 1 mm. The thorax turns in 3-D (pitch
+    and roll), so its acceleration and spin terms are exercised."""
+    fraction, offset = TRUNK_TRUTH
+    path = tmp_path / "trunk.c3d"
+    write_lab_c3d(path, PLATES, full_body=True, body=MarkerBodyOptions(trunk_fraction=fraction, trunk_offset=offset))
+    trial = read_c3d(path)
+    rc, table = _analyze(path, tmp_path)
+    assert rc == 0 and table["cop_vs_zmp"]["rms_mm"] > 3
+    lab = analyse_lab_take(trial)
+    rows = lab.complete & lab.result.has_zmp
+    terms = calibration._terms(trial, lab, rows, LabOptions(), calibration.THORAX_SEGMENT)
+    zmp, _ = calibration._model(terms, np.array([fraction, *offset, 0.0, 0.0]))
+    assert np.abs(zmp - lab.plates.cop[rows, :2]).max() < 1e-3
+    monkeypatch.setattr(calibration, "PRIOR_MM", 0.0)
+    assert main(["calibrate", str(path), "-o", str(tmp_path / "s.toml")]) == 0
+    subject = calibration.load_subject(tmp_path / "s.toml")
+    assert subject.segment == "thorax" and subject.fraction == pytest.approx(fraction, abs=0.01)
+    assert np.abs(np.array(subject.offset) - offset).max() < 0.003
+    text = (tmp_path / "s.toml").read_text()
+    assert "trunk_fraction" in text and "hat_" not in text.split("[calibration]")[0]
+    assert tomllib.loads(text)["calibration"]["parameters"] == list(calibration.TRUNK_PARAMETERS)
+    rc, s = _analyze(path, tmp_path, "--subject", str(tmp_path / "s.toml"))
+    assert rc == 0 and s["cop_vs_zmp"]["rms_mm"] < 1.0 and "thorax 3" in s["markers"]["hat"]
+
+
+def test_a_subject_file_for_the_other_kind_of_marker_set_is_refused(tmp_path, capsys):
+    """A placed HAT's subject file (lower-body set) with a full-body take, a tracked trunk's with a lower-body take,
+    or one file with both kinds of keys: each refused in one line, exit 2."""
+    full, lower = tmp_path / "full.c3d", tmp_path / "lower.c3d"
+    write_lab_c3d(full, PLATES, full_body=True)
+    write_lab_c3d(lower, PLATES)
+    hat, trunk, both = tmp_path / "hat.toml", tmp_path / "trunk.toml", tmp_path / "both.toml"
+    hat.write_text("[subject]\nhat_fraction = 0.45\nhat_offset_m = [0.04, 0, 0.33]\n")
+    trunk.write_text("[subject]\ntrunk_fraction = 0.35\ntrunk_offset_m = [0.02, 0, -0.18]\n")
+    both.write_text("[subject]\ntrunk_fraction = 0.35\ntrunk_offset_m = [0.02, 0, -0.18]\nhat_fraction = 0.45\n")
+    for take, subject, why in ((full, hat, "placed HAT's"), (lower, trunk, "tracked trunk's"),
+                               (full, both, "not both")):
+        assert main(["analyze", str(take), "--subject", str(subject)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and why in err
+    for take, subject in ((full, trunk), (lower, hat)):  # each with its own kind of set
+        assert main(["analyze", str(take), "--subject", str(subject)]) == 0
+    capsys.readouterr()
+    assert main(["monitor", str(full), "--speed", "0", "--subject", str(hat)]) == 2
+    assert "placed HAT's" in capsys.readouterr().err
 
 
 def test_calibration_of_frames_within_one_block_keeps_the_table(tmp_path):
@@ -1284,7 +1336,7 @@ def test_calibration_of_frames_within_one_block_keeps_the_table(tmp_path):
     trial = read_c3d(path)
     subject, report = calibration.calibrate([trial], block_s=1e3)  # every frame in the first block
     assert report["table_kept"] and report["rms_held_out_fitted_mm"] == report["rms_held_out_table_mm"]
-    assert subject.hat_fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12)
+    assert subject.fraction == pytest.approx(hat_table(1.75)[0], abs=1e-12)
 
 
 def test_calibrated_sway_gains_bring_a_swaying_trunk_to_its_plates(tmp_path, monkeypatch):

@@ -24,10 +24,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                                 age_years=args.age)
     subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))
     write_subject(subject, args.output, report)
-    print(f"{args.output}: HAT {100 * subject.hat_fraction:.1f} % of the mass, centre of mass "
-          f"{1000 * subject.hat_offset[0]:+.0f} mm forward, {1000 * subject.hat_offset[1]:+.0f} mm left, "
-          f"{1000 * subject.hat_offset[2]:.0f} mm above the mid-hip, swaying {subject.hat_sway_gain[0]:.2f} (fore-aft) "
-          f"and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip above {subject.hat_follow_hz:g} Hz")
+    fwd, left, up = (1000 * v for v in subject.offset)
+    if subject.segment == "thorax":
+        print(f"{args.output}: thorax (tracked) {100 * subject.fraction:.1f} % of the mass, centre of mass "
+              f"{fwd:+.0f} mm forward, {left:+.0f} mm left, {up:+.0f} mm up the trunk from its origin")
+    else:
+        print(f"{args.output}: HAT {100 * subject.fraction:.1f} % of the mass, centre of mass {fwd:+.0f} mm forward, "
+              f"{left:+.0f} mm left, {up:.0f} mm above the mid-hip, swaying {subject.hat_sway_gain[0]:.2f} "
+              f"(fore-aft) and {subject.hat_sway_gain[1]:.2f} (lateral) times the mid-hip above "
+              f"{subject.hat_follow_hz:g} Hz")
     print(f"  ZMP vs CoP RMS over {report['frames']} frames: table {report['rms_table_mm']:.1f} mm, fitted "
           f"{report['rms_fitted_mm']:.1f} mm; held out ({report['folds']}): table "
           f"{report['rms_held_out_table_mm']:.1f} mm, calibrated {report['rms_held_out_fitted_mm']:.1f} mm")
@@ -38,15 +43,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print("  the others' calibration is worse than the table on the trials it did not see: "
                   "are these takes of one subject?")
     print("  unconstrained (prior off, scored on the frames it is fitted on): "
-          f"{report['rms_fitted_unconstrained_mm']:.1f} mm, the least any HAT parameters reach on these trials")
+          f"{report['rms_fitted_unconstrained_mm']:.1f} mm, the least any {subject.segment} parameters reach on "
+          "these trials")
     if report["table_kept"]:
         print("  the table's values are kept: no prior weight's fit beat the table on held-out frames both ways round")
         return 0
     sd = dict(zip(report["parameters"], report["parameter_sd"], strict=True))
     print(f"  prior weight {report['prior_weight']:g} (chosen by cross-validation); standard errors (jackknife over "
-          f"the blocks): fraction {100 * sd['hat_fraction']:.1f} %, forward/left/up "
-          f"{1000 * sd['forward']:.0f}/{1000 * sd['left']:.0f}/{1000 * sd['up']:.0f} mm, sway "
-          f"{sd['sway_fore_aft']:.2f}/{sd['sway_lateral']:.2f}")
+          f"the blocks): fraction {100 * sd[report['parameters'][0]]:.1f} %, forward/left/up "
+          f"{1000 * sd['forward']:.0f}/{1000 * sd['left']:.0f}/{1000 * sd['up']:.0f} mm"
+          + (f", sway {sd['sway_fore_aft']:.2f}/{sd['sway_lateral']:.2f}" if "sway_fore_aft" in sd else ""))
     if report["rms_held_out_fitted_mm"] >= report["rms_held_out_table_mm"]:
         print("  the fit does not beat the table on held-out frames: more plate trials are needed")
     return 0

@@ -51,7 +51,8 @@ def _source(args: argparse.Namespace) -> Source:
         return FileReplaySource("<demo>", body, spec, traj.t, trajectory_frames(body, traj), args.speed, args.loop)
     bvh = BvhBodyOptions(total_mass=args.mass or DEFAULT_MASS, units=args.units, up_axis=args.up,
                          mapping=load_mapping(args.mapping) if args.mapping else None, sole_width=args.sole_width,
-                         hat_fraction=subject and subject.hat_fraction)
+                         hat_fraction=subject.bvh_hat_fraction(args.subject)
+                         if subject and (args.skeleton or Path(args.motion or "").suffix.lower() == ".bvh") else None)
     opts = SourceOptions(bvh=bvh, urdf=urdf, robot=args.robot, skeleton=args.skeleton, fps=args.fps,
                          speed=args.speed, loop=args.loop, mass=args.mass, calibration=args.calibration,
                          markers=markers, static=args.static)

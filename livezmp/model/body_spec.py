@@ -146,6 +146,7 @@ def marker_body(trial: C3dTrial, opts: MarkerBodyOptions | None = None) -> tuple
         ",".join(repr(float(v)) for v in row) for row in pts) + "\n"
     options = {"rate": trial.rate, "total_mass": opts.total_mass, "height_m": trial.height_m,
                "widths_m": trial.widths_m, "hat_offset": opts.hat_offset, "hat_fraction": opts.hat_fraction,
+               "trunk_fraction": opts.trunk_fraction, "trunk_offset": opts.trunk_offset,
                "floor_z": opts.floor_z, "hat_sway_gain": opts.hat_sway_gain,
                "hat_follow_hz": opts.hat_follow_hz, "source": trial.source,
                "marker_map": None if opts.marker_map is None else asdict(opts.marker_map), "bsp": opts.bsp,
@@ -175,9 +176,10 @@ def _markers_from_spec(spec: BodySpec) -> BodyModel:
     pts = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]]).reshape(len(lines) - 1, len(labels), 3)
     trial = C3dTrial(o.get("source", MARKERS_FILE), labels, pts, o["rate"], o["rate"], 0.0, [], o["total_mass"],
                      "", o.get("height_m"), o.get("widths_m") or {})
-    hat, gain = o.get("hat_offset"), o.get("hat_sway_gain")
+    hat, gain, trunk = o.get("hat_offset"), o.get("hat_sway_gain"), o.get("trunk_offset")
     opts = MarkerBodyOptions(total_mass=o["total_mass"], hat_offset=None if hat is None else tuple(hat),
-                             hat_fraction=o.get("hat_fraction"), floor_z=o.get("floor_z"),
+                             hat_fraction=o.get("hat_fraction"), trunk_fraction=o.get("trunk_fraction"),
+                             trunk_offset=None if trunk is None else tuple(trunk), floor_z=o.get("floor_z"),
                              hat_sway_gain=None if gain is None else tuple(gain),
                              hat_follow_hz=o.get("hat_follow_hz"), bsp=o.get("bsp", "auto"),
                              age_years=o.get("age_years"), marker_map=_marker_map(o.get("marker_map")))

@@ -141,11 +141,16 @@ class MarkerBodyOptions:
     from the lowest foot markers; ``max_gap_s`` s, the longest gap filled; ``hat_sway_gain`` (fore-aft,
     lateral) how far a placed HAT sways relative to the mid-hip over a whole take (:func:`hat_sway`; None:
     it moves with the mid-hip), above ``hat_follow_hz`` Hz, below which it follows the mid-hip (None: at every
-    frequency)."""
+    frequency); ``trunk_fraction`` of total mass and ``trunk_offset`` m, a tracked thorax' (middle + upper trunk)
+    mass and centre of mass in its own frame (forward, left, up the trunk from its origin at the cervicale's level)
+    replacing the table's (a full-body or trunk set's subject file; the hat_* are a placed HAT's, a lower-body
+    set's: each kind is refused for the other)."""
 
     total_mass: float = DEFAULT_MASS
     hat_offset: tuple[float, float, float] | None = None
     hat_fraction: float | None = None
+    trunk_fraction: float | None = None
+    trunk_offset: tuple[float, float, float] | None = None
     floor_z: float | None = None
     max_gap_s: float = 0.1
     hat_follows_pelvis: bool = False
@@ -543,7 +548,21 @@ def body_from_markers(trial: C3dTrial, opts: MarkerBodyOptions | None = None) ->
         take = _standard_take(trial, opts)
     if trial.from_static:  # which landmarks a static trial gave (livezmp.model.static_trial)
         take.notes["from_static_trial"] = trial.from_static
+    _check_subject_kind(take, opts, trial.source)
     return take
+
+
+def _check_subject_kind(take: MarkerTake, opts: MarkerBodyOptions, source: str) -> None:
+    """Refuse a subject's parameters for the other kind of marker set: a placed HAT's (``hat_*``, calibrated on a
+    lower-body set) for a set that tracks the trunk, a tracked thorax' (``trunk_*``) for one that places the HAT."""
+    placed = "hat" in take.placed
+    if placed and (opts.trunk_fraction is not None or opts.trunk_offset is not None):
+        raise InputError(f"{source}: the subject is a tracked trunk's (trunk_fraction, calibrated on a full-body or "
+                         "trunk marker set) but this set places the head, arms and trunk on the pelvis: calibrate on "
+                         "a trial of this marker set")
+    if not placed and (opts.hat_fraction is not None or opts.hat_offset is not None):
+        raise InputError(f"{source}: the subject is a placed HAT's (hat_fraction, calibrated on a lower-body marker "
+                         "set) but this set tracks the trunk: calibrate on a trial of this marker set")
 
 
 def _standard_take(trial: C3dTrial, opts: MarkerBodyOptions) -> MarkerTake:
@@ -1061,6 +1080,13 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
     return out, hands
 
 
+def thorax_table(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, np.ndarray]:
+    """A tracked thorax' (middle + upper trunk) mass fraction and centre of mass (m, its own frame: below the
+    cervicale, :func:`trunk_com_below_cervicale`) from the segment table ``t``."""
+    return (t["middle_trunk"].mass_fraction + t["upper_trunk"].mass_fraction,
+            np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)]))
+
+
 def trunk_com_below_cervicale(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> float:
     """Depth (m) of the middle + upper trunk's combined centre of mass below the cervicale (de Leva:
     the upper trunk from the cervicale down to the xiphion, the middle trunk on to the omphalion; masses from
@@ -1088,6 +1114,9 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     hat_mass, hat_height, hat_inertia = hat_table(stature, table=t)
     full = "hat" not in seg
     hat_fraction = hat_mass if full or opts.hat_fraction is None else opts.hat_fraction
+    # the segment a subject file weighs (the placed HAT, or the tracked thorax) and its table fraction
+    weighed, weighed_table = (opts.trunk_fraction, thorax_table(stature, t)[0]) if full else (hat_fraction, hat_mass)
+    weighed = weighed_table if weighed is None else weighed
     lower = t["lower_trunk"]
     pelvis_len = 145.7 / 1741 * stature
     # the pelvis' mean tilt about its lateral axis, for a HAT riding on the pelvis
@@ -1095,7 +1124,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     tilt = float(np.median(np.arctan2(rot_p[:, 2, 0], rot_p[:, 2, 2])))  # forward lean of the pelvis z axis
     upright = pin.utils.rotate("y", tilt) if opts.hat_follows_pelvis else np.eye(3)
     hat_up = np.array(opts.hat_offset) if opts.hat_offset is not None else np.array([0.0, 0.0, hat_height])
-    scale_rest = (1.0 - hat_fraction) / (1.0 - hat_mass)  # keep the total at 1 when the HAT fraction is set
+    scale_rest = (1.0 - weighed) / (1.0 - weighed_table)  # keep the total at 1 when the fraction is set
     model = pin.Model()
     model.name = "markers"
     body_frame = {}
@@ -1121,14 +1150,17 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             continue
         if kind in ("headarms", "arms"):  # placed on the tracked thorax, whose origin is at the cervicale
             frac, height, inertia = hat_table(stature, "head_and_arms" if kind == "headarms" else "arms", table=t)
-            mass = opts.total_mass * frac
+            mass = opts.total_mass * frac * scale_rest
             model.appendBodyToJoint(parent, pin.Inertia(mass, np.array([0.0, 0.0, height]), mass * inertia),
                                     pin.SE3.Identity())
             continue
         if kind in ("thorax", "head", "hand"):
             mass, com, inertia = _upper_inertia(kind, name, seg, m, stature, t)
-            model.appendBodyToJoint(parent, pin.Inertia(opts.total_mass * mass, com, opts.total_mass * inertia),
-                                    pin.SE3.Identity())
+            scale = weighed / mass if kind == "thorax" else scale_rest
+            if kind == "thorax" and opts.trunk_offset is not None:
+                com = np.array(opts.trunk_offset)
+            model.appendBodyToJoint(parent, pin.Inertia(opts.total_mass * mass * scale, com,
+                                                        opts.total_mass * inertia * scale), pin.SE3.Identity())
             continue
         p = t[{"upperarm": "upper_arm"}.get(kind, kind)]
         mass = opts.total_mass * p.mass_fraction * scale_rest
@@ -1152,7 +1184,10 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         legs={s: [6 * list(seg).index(f"thigh_{s[0]}") + k for k in (3, 4, 5)] for s in ("left", "right")},
         hips={"left": body_frame["thigh_l"], "right": body_frame["thigh_r"]},
         foot_frames={s: [named[f"{s}_ankle"], named[f"{s}_toe"]] for s in ("left", "right")}, full_foot_pose=False)
-    notes["hat"] = _tracked_note(seg, m, "de Leva" if table.name == "adult" else "child table") if full else (
+    notes["hat"] = _tracked_note(seg, m, "de Leva" if table.name == "adult" else "child table") + (
+        "" if opts.trunk_fraction is None else f"; thorax {100 * weighed:.1f} % of the mass (subject file)" + (
+            "" if opts.trunk_offset is None else ", its centre of mass {:+.0f} mm forward, {:+.0f} mm left, {:+.0f} mm "
+            "up from its origin".format(*(1000 * np.array(opts.trunk_offset))))) if full else (
         f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
         f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
         + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
@@ -1193,9 +1228,8 @@ def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
     thorax (middle + upper trunk), head or hand, from the segment table ``t`` (de Leva 1996's layout)."""
     h = stature / 1741.0
     if kind == "thorax":
-        frac = t["middle_trunk"].mass_fraction + t["upper_trunk"].mass_fraction
+        frac, com = thorax_table(stature, t)
         length = (170.7 + 215.5) * h
-        com = np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)])
         gyr = t["middle_trunk"].gyration
     elif kind == "head":  # at its four markers' centre; from the vertex or above the cervicale by de Leva's fraction
         length = 242.9 * h

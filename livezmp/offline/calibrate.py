@@ -1,4 +1,4 @@
-"""A subject's head-arms-trunk (HAT) parameters identified from force-plate trials.
+"""A subject's head-arms-trunk (HAT) or trunk parameters identified from force-plate trials.
 
 A lower-body marker set does not see the trunk, so the table places the HAT (about half the body
 mass) straight above the mid-hip. Its mass fraction and centre of mass (forward, left, up from the
@@ -27,6 +27,15 @@ weight chosen the same way within that fold's own blocks) and scored on the othe
 choice. Each parameter's uncertainty: the delete-one-block jackknife of the fit at the chosen weight (the
 blocks, not the frames, are the independent samples). Given several trials of one subject, each is also scored
 with the parameters calibrated on the others.
+
+A full-body or trunk marker set tracks the thorax (middle + upper trunk; head and arms tracked or placed on it), so
+there the thorax is the fitted segment, the same way: its mass fraction and centre of mass (forward, left, up the
+trunk from its origin at the cervicale's level, in its own tracked frame, the full rotation R: its acceleration is
+a_o + R([ω̇]× + [ω]×²) r, ω in that frame, and its own rate of angular momentum about its centre of mass is the
+table's inertia's, scaled with its mass), the rest of the body (scaled to the remainder of the mass) computed once,
+with the table (:func:`livezmp.model.markers.thorax_table`) as the prior and the same cross-validation, jackknife
+and refusals; no sway gains (the trunk's markers say where it is). Its subject file has ``trunk_fraction`` and
+``trunk_offset_m`` instead of the ``hat_*`` keys, and either kind is refused with the other kind of set.
 """
 
 from __future__ import annotations
@@ -49,12 +58,12 @@ from livezmp.model.markers import (
     body_from_markers,
     hat_table,
     sway_basis,
+    thorax_table,
 )
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take, com_accelerations, facing, run_take
 from livezmp.offline.validation import walking_axes
 from livezmp.tomlfile import read_toml
 
-HAT = slice(6, 12)  # the HAT segment's channels: x, y, z, yaw, pitch, roll
 ACC_WEIGHT = 0.09  # m per m/s²: a CoM acceleration error counts like the ZMP shift it causes (h / g)
 # fraction, m, m, m: what subjects plausibly differ by; sway gains: no table gives them, so a weak prior that
 # only holds them at the trunk-marker trials' where the data do not say otherwise
@@ -75,32 +84,67 @@ FREE_WEIGHT = 1e-3
 PARAMETERS = ("hat_fraction", "forward", "left", "up", "sway_fore_aft", "sway_lateral")  # theta's entries
 # fraction, forward, left, up (m), sway gain fore-aft, lateral
 BOUNDS = ([0.30, -0.15, -0.10, 0.10, 0.0, 0.0], [0.70, 0.15, 0.10, 0.60, 1.5, 1.5])
+# a tracked thorax: theta's first four (its sway gains are not used: its markers place it)
+TRUNK_PARAMETERS = ("trunk_fraction", "forward", "left", "up")
+# fraction (the table: 0.31-0.32), forward, left, up the trunk from the cervicale's level (the table: 0.11-0.17 m
+# below it for statures of 1.3-1.8 m), m
+TRUNK_BOUNDS = ([0.15, -0.15, -0.10, -0.45, 0.0, 0.0], [0.50, 0.15, 0.10, 0.0, 1.5, 1.5])
+
+
+@dataclass(frozen=True)
+class Segment:
+    """The segment a marker set's fit moves: its channels' prefix in the marker body (``"hat"``: a lower-body set's
+    placed HAT; ``"thorax"``: a full-body or trunk set's tracked thorax), the parameters fitted (theta's first
+    entries), theta's bounds, and the :class:`MarkerBodyOptions` field that sets its mass fraction."""
+
+    name: str
+    parameters: tuple[str, ...]
+    bounds: tuple[list[float], list[float]]
+    fraction_option: str
+
+
+HAT_SEGMENT = Segment("hat", PARAMETERS, BOUNDS, "hat_fraction")
+THORAX_SEGMENT = Segment("thorax", TRUNK_PARAMETERS, TRUNK_BOUNDS, "trunk_fraction")
 
 
 @dataclass(frozen=True)
 class Subject:
-    """HAT mass fraction of the body, its centre of mass (forward, left, up) m from the mid-hip, and how far
-    it sways (fore-aft, lateral) relative to the mid-hip above ``hat_follow_hz`` Hz, following it below
+    """The fitted segment's (``segment``: ``"hat"``, a lower-body set's placed HAT, or ``"thorax"``, a full-body or
+    trunk set's tracked thorax) mass fraction of the body and centre of mass (forward, left, up) m: the HAT's from
+    the mid-hip in the pelvis' heading frame, the thorax' from its origin in its own frame; how far a HAT sways
+    (fore-aft, lateral) relative to the mid-hip above ``hat_follow_hz`` Hz, following it below
     (:func:`livezmp.model.markers.hat_sway`); the rest of the body's segment table ``bsp`` ("adult", "child";
     None: chosen from each file) and the subject's age, years."""
 
-    hat_fraction: float
-    hat_offset: tuple[float, float, float]
+    fraction: float
+    offset: tuple[float, float, float]
     hat_sway_gain: tuple[float, float] = TRUNK_STEP_GAIN
     bsp: str | None = None
     age_years: float | None = None
     hat_follow_hz: float = TRUNK_FOLLOW_HZ
+    segment: str = "hat"
 
     def marker_options(self, base: MarkerBodyOptions | None = None) -> MarkerBodyOptions:
-        """``base`` with this subject's HAT; its table and age unless ``base`` asks for its own."""
+        """``base`` with this subject's HAT or thorax; its table and age unless ``base`` asks for its own."""
         base = base or MarkerBodyOptions()
-        return replace(base, hat_fraction=self.hat_fraction, hat_offset=self.hat_offset,
-                       hat_sway_gain=self.hat_sway_gain, hat_follow_hz=self.hat_follow_hz,
-                       bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
+        base = replace(base, bsp=self.bsp if base.bsp == "auto" and self.bsp else base.bsp,
                        age_years=base.age_years if base.age_years is not None else self.age_years)
+        if self.segment == "thorax":
+            return replace(base, trunk_fraction=self.fraction, trunk_offset=self.offset)
+        return replace(base, hat_fraction=self.fraction, hat_offset=self.offset, hat_sway_gain=self.hat_sway_gain,
+                       hat_follow_hz=self.hat_follow_hz)
+
+    def bvh_hat_fraction(self, where: str) -> float:
+        """The HAT fraction a BVH's head, arms and trunk are rescaled to; a tracked thorax' subject (``where``: its
+        file) is refused (its fraction is the thorax' alone)."""
+        if self.segment != "hat":
+            raise InputError(f"{where}: a tracked trunk's subject file (trunk_fraction) is for a full-body or trunk "
+                             "C3D marker set; a BVH takes a placed HAT's (hat_fraction)")
+        return self.fraction
 
 
 SUBJECT_KEYS = {"hat_fraction", "hat_offset_m", "hat_sway_gain", "hat_follow_hz", "bsp", "age_years"}
+TRUNK_KEYS = {"trunk_fraction", "trunk_offset_m", "bsp", "age_years"}  # a tracked thorax' subject file
 
 
 def load_subject(path: str | Path) -> Subject:
@@ -108,20 +152,25 @@ def load_subject(path: str | Path) -> Subject:
     optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_STEP_GAIN`, the sway above
     ``hat_follow_hz`` (Hz, else :data:`TRUNK_FOLLOW_HZ`: a file written before it was, whose gains were fitted
     at every frequency, is read with it too); ``bsp = "adult"`` or ``"child"`` and ``age_years``, else the table
-    is chosen from each file)."""
+    is chosen from each file). A tracked thorax' file (a full-body or trunk set's) has ``trunk_fraction`` and
+    ``trunk_offset_m = [fwd, left, up]`` (its own frame, from its origin) instead of the ``hat_*`` keys."""
     p = Path(path)
     s = read_toml(p, "subject file").get("subject")
     if not isinstance(s, dict):
         raise InputError(f"{p}: missing [subject] table")
-    unknown = set(s) - SUBJECT_KEYS  # a misspelt key, ignored, would leave the table's value in its place
+    trunk = "trunk_fraction" in s or "trunk_offset_m" in s
+    keys, prefix = (TRUNK_KEYS, "trunk") if trunk else (SUBJECT_KEYS, "hat")
+    unknown = set(s) - keys  # a misspelt key, ignored, would leave the table's value in its place
     if unknown:
-        raise InputError(f"{p}: subject.{sorted(unknown)[0]}: unknown key ({', '.join(sorted(SUBJECT_KEYS))})")
-    f, off = s.get("hat_fraction"), s.get("hat_offset_m")
+        raise InputError(f"{p}: subject.{sorted(unknown)[0]}: unknown key ({', '.join(sorted(keys))})"
+                         + ("; a subject file is a tracked trunk's (trunk_*) or a placed HAT's (hat_*), not both"
+                            if trunk and unknown & SUBJECT_KEYS else ""))
+    f, off = s.get(f"{prefix}_fraction"), s.get(f"{prefix}_offset_m")
     if not isinstance(f, int | float) or not 0.0 < f < 1.0:
-        raise InputError(f"{p}: subject.hat_fraction must be a number between 0 and 1, got {f!r}")
+        raise InputError(f"{p}: subject.{prefix}_fraction must be a number between 0 and 1, got {f!r}")
     if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
             and all(abs(v) < 1.5 for v in off)):
-        raise InputError(f"{p}: subject.hat_offset_m must be [forward, left, up] in metres, got {off!r}")
+        raise InputError(f"{p}: subject.{prefix}_offset_m must be [forward, left, up] in metres, got {off!r}")
     gain = s.get("hat_sway_gain", list(TRUNK_STEP_GAIN))
     if not (isinstance(gain, list) and len(gain) == 2
             and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
@@ -136,16 +185,20 @@ def load_subject(path: str | Path) -> Subject:
     if age is not None and not (isinstance(age, int | float) and 0 < age < MAX_AGE_YEARS):
         raise InputError(f"{p}: subject.age_years must be a number of years, got {age!r}")
     return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain), bsp,
-                   None if age is None else float(age), float(follow))
+                   None if age is None else float(age), float(follow), "thorax" if trunk else "hat")
 
 
 def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
-    lines = ["# livezmp subject file (livezmp calibrate)", "[subject]",
-             f"hat_fraction = {subject.hat_fraction:.5f}",
-             "hat_offset_m = [" + ", ".join(f"{v:.5f}" for v in subject.hat_offset) + "]  # forward, left, up",
-             "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
-             f"hat_follow_hz = {subject.hat_follow_hz:g}  # the HAT follows the mid-hip below, sways the gains above",
-             *([f'bsp = "{subject.bsp}"  # the segment table the HAT was fitted with'] if subject.bsp else []),
+    offset = "[" + ", ".join(f"{v:.5f}" for v in subject.offset) + "]"
+    segment = ([f"trunk_fraction = {subject.fraction:.5f}  # the tracked thorax (middle + upper trunk)",
+                f"trunk_offset_m = {offset}  # forward, left, up the trunk, its own frame, from its origin"]
+               if subject.segment == "thorax" else
+               [f"hat_fraction = {subject.fraction:.5f}", f"hat_offset_m = {offset}  # forward, left, up",
+                "hat_sway_gain = [" + ", ".join(f"{v:.4f}" for v in subject.hat_sway_gain) + "]  # fore-aft, lateral",
+                f"hat_follow_hz = {subject.hat_follow_hz:g}  # the HAT follows the mid-hip below, sways the gains "
+                "above"])
+    lines = ["# livezmp subject file (livezmp calibrate)", "[subject]", *segment,
+             *([f'bsp = "{subject.bsp}"  # the segment table the fit used'] if subject.bsp else []),
              *([f"age_years = {subject.age_years:.3f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
     for k, v in report.items():
@@ -157,10 +210,11 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
 @dataclass
 class _Terms:
     """Per complete frame: the rest of the body's wrench for the whole mass (F (n, 3) N, moment about
-    the origin (n, 3) N·m), the HAT frame's origin o, acceleration a_o, heading A and its second
-    derivative B (p = o + A r, a = a_o + B r), the plates' CoP (n, 2) and acceleration (n, 3); the origin
-    without its sway above the follow frequency (base, a_base) and the walk's axes (for the sway gains:
-    o -> base + K (o - base)); the frames' times (n,) s."""
+    the origin (n, 3) N·m), the fitted segment's origin o, acceleration a_o, rotation A and its second
+    derivative B (p = o + A r, a = a_o + B r) and its own rate of angular momentum about its centre of mass per kg
+    of it (``spin`` (n, 3) N·m/kg), the plates' CoP (n, 2) and acceleration (n, 3); the origin without its sway
+    above the follow frequency (base, a_base; a tracked thorax': its origin) and the walk's axes (for the sway
+    gains: o -> base + K (o - base)); the frames' times (n,) s; the ``segment`` fitted."""
 
     f_rest: np.ndarray
     m_rest: np.ndarray
@@ -168,6 +222,7 @@ class _Terms:
     a_o: np.ndarray
     A: np.ndarray
     B: np.ndarray
+    spin: np.ndarray
     cop: np.ndarray
     plate_acc: np.ndarray
     mass: float
@@ -177,6 +232,7 @@ class _Terms:
     fwd: np.ndarray
     left: np.ndarray
     times: np.ndarray
+    segment: Segment = HAT_SEGMENT
 
     def part(self, sel: np.ndarray) -> _Terms:
         """The same terms on the frames ``sel`` (boolean over this one's frames)."""
@@ -184,52 +240,66 @@ class _Terms:
                          and f.name not in ("fwd", "left") else v for f in fields(self)})
 
 
-def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, opts: LabOptions) -> _Terms:
-    """The terms on the frames ``rows`` of ``lab``, ``trial`` analysed with ``opts`` (its HAT swaying
-    ``opts.markers.hat_sway_gain`` above ``hat_follow_hz``)."""
+def _skew(w: np.ndarray) -> np.ndarray:
+    """(3, 3) the cross-product matrix of ``w`` (3,)."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, opts: LabOptions,
+           segment: Segment = HAT_SEGMENT) -> _Terms:
+    """The terms on the frames ``rows`` of ``lab``, ``trial`` analysed with ``opts`` (a HAT swaying
+    ``opts.markers.hat_sway_gain`` above ``hat_follow_hz``), for the fitted ``segment``."""
     mass = lab.summary["mass"]["used_kg"]
     markers = opts.markers
-    rest = body_from_markers(trial, replace(markers, total_mass=mass, hat_fraction=0.0)).body.model
+    rest = body_from_markers(trial, replace(markers, total_mass=mass, **{segment.fraction_option: 0.0})).body.model
     data = rest.createData()
+    model = lab.take.body.model  # the table's body: the segment's rotation, velocity and inertia
+    mdata = model.createData()
+    joint = model.getJointId(f"{segment.name}.roll")  # its last channel: the joint frame is the segment's
+    inertia = model.inertias[joint]
+    per_kg = inertia.inertia / inertia.mass  # about its centre of mass, its frame
+    channels = [lab.take.body.channel_names.index(f"{segment.name}.{c}") for c in ("x", "y", "z")]
     r = lab.result
     idx = np.flatnonzero(rows)
-    f_rest, m_rest = np.empty((len(idx), 3)), np.empty((len(idx), 3))
+    f_rest, m_rest, spin = np.empty((len(idx), 3)), np.empty((len(idx), 3)), np.empty((len(idx), 3))
+    A, B = np.empty((len(idx), 3, 3)), np.empty((len(idx), 3, 3))
     for k, i in enumerate(idx):
         pin.computeCentroidalMomentumTimeVariation(rest, data, r.q[i], r.v[i], r.a[i])
         f = data.dhg.linear - mass * rest.gravity.linear
         f_rest[k], m_rest[k] = f, data.dhg.angular + np.cross(data.com[0], f)
-    q, v, a = r.q[idx, HAT], r.v[idx, HAT], r.a[idx, HAT]
-    c, s = np.cos(q[:, 3]), np.sin(q[:, 3])
-    zero, one = np.zeros_like(c), np.ones_like(c)
-    A = np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], 1)
-    d1 = np.stack([np.stack([-s, -c, zero], -1), np.stack([c, -s, zero], -1), np.stack([zero] * 3, -1)], 1)
-    d2 = np.stack([np.stack([-c, s, zero], -1), np.stack([-s, -c, zero], -1), np.stack([zero] * 3, -1)], 1)
-    B = a[:, 3, None, None] * d1 + (v[:, 3] ** 2)[:, None, None] * d2
+        pin.forwardKinematics(model, mdata, r.q[i], r.v[i], r.a[i])
+        w, dw = mdata.v[joint].angular, mdata.a[joint].angular  # its own frame
+        A[k] = mdata.oMi[joint].rotation
+        B[k] = A[k] @ (_skew(dw) + _skew(w) @ _skew(w))
+        spin[k] = A[k] @ (per_kg @ dw + np.cross(w, per_kg @ w))
+    o, a_o = r.q[idx][:, channels], r.a[idx][:, channels]
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
-    # the HAT with no sway above the follow frequency, through the same pipeline: the swayed HAT minus it is the
-    # gains times the sway, as are their estimated accelerations (hat_sway and the estimator are linear in it)
-    still = run_take(trial, replace(opts, markers=replace(markers, hat_sway_gain=(0.0, 0.0))), mass,
-                     plates_floor(trial, markers.marker_map))[3]
-    base, a_base = still.q[idx, HAT][:, :3], still.a[idx, HAT][:, :3]
-    _, fwd, left = sway_basis(still.q[:, HAT][:, :3], facing(lab.take))
-    k_fa, k_lat = markers.hat_sway_gain
-    unscale = np.outer(fwd, fwd) / k_fa + np.outer(left, left) / k_lat + np.diag([0.0, 0.0, 1.0])
-    o, a_o = base + (q[:, :3] - base) @ unscale.T, a_base + (a[:, :3] - a_base) @ unscale.T  # gains 1
-    return _Terms(f_rest, m_rest, o, a_o, A, B, lab.plates.cop[idx, :2], plate_acc, mass,
-                  lab.plates.surface_z, base, a_base, fwd, left, lab.times[idx])
+    base, a_base, fwd, left = o, a_o, np.zeros(3), np.zeros(3)  # a tracked thorax does not sway: its markers place it
+    if segment is HAT_SEGMENT:
+        # the HAT with no sway above the follow frequency, through the same pipeline: the swayed HAT minus it is the
+        # gains times the sway, as are their estimated accelerations (hat_sway and the estimator are linear in it)
+        still = run_take(trial, replace(opts, markers=replace(markers, hat_sway_gain=(0.0, 0.0))), mass,
+                         plates_floor(trial, markers.marker_map))[3]
+        base, a_base = still.q[idx][:, channels], still.a[idx][:, channels]
+        _, fwd, left = sway_basis(still.q[:, channels], facing(lab.take))
+        k_fa, k_lat = markers.hat_sway_gain
+        unscale = np.outer(fwd, fwd) / k_fa + np.outer(left, left) / k_lat + np.diag([0.0, 0.0, 1.0])
+        o, a_o = base + (o - base) @ unscale.T, a_base + (a_o - a_base) @ unscale.T  # gains 1
+    return _Terms(f_rest, m_rest, o, a_o, A, B, spin, lab.plates.cop[idx, :2], plate_acc, mass,
+                  lab.plates.surface_z, base, a_base, fwd, left, lab.times[idx], segment)
 
 
 def _model(t: _Terms, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """ZMP (n, 2) m and CoM acceleration (n, 3) m/s² for parameters (fraction, forward, left, up, sway gain
-    fore-aft, lateral)."""
+    fore-aft, lateral; a tracked thorax' gains do nothing, its base being its origin)."""
     f_h, r, (k_fa, k_lat) = theta[0], theta[1:4], theta[4:6]
-    rest = 1.0 - f_h  # the rest's wrench was computed with no HAT, i.e. the rest carrying the whole mass
+    rest = 1.0 - f_h  # the rest's wrench was computed with no segment mass, i.e. the rest carrying the whole mass
     m_h = f_h * t.mass
     k = k_fa * np.outer(t.fwd, t.fwd) + k_lat * np.outer(t.left, t.left) + np.diag([0.0, 0.0, 1.0])
     p = t.base + (t.o - t.base) @ k.T + t.A @ r
     acc = t.a_base + (t.a_o - t.a_base) @ k.T + t.B @ r - np.array([0.0, 0.0, -G])
     force = rest * t.f_rest + m_h * acc
-    moment = rest * t.m_rest + m_h * np.cross(p, acc)
+    moment = rest * t.m_rest + m_h * (np.cross(p, acc) + t.spin)
     z0 = t.floor
     zmp = np.column_stack([(z0 * force[:, 0] - moment[:, 1]) / force[:, 2],
                            (moment[:, 0] + z0 * force[:, 1]) / force[:, 2]])
@@ -269,7 +339,7 @@ def _fit(terms: list[_Terms], prior: np.ndarray, weight: float, free: np.ndarray
         out[free] = x
         return out
 
-    lo, hi = (np.asarray(b)[free] for b in BOUNDS)
+    lo, hi = (np.asarray(b)[free] for b in terms[0].segment.bounds)
     x = least_squares(lambda x: _residuals(theta(x), terms, prior, weight), prior[free], bounds=(lo, hi),
                       x_scale=PRIOR_SD[free]).x
     return theta(x)
@@ -362,43 +432,68 @@ def _other_trials(terms: list[_Terms], prior: np.ndarray, free: np.ndarray, bloc
     return {"rms_other_trials_table_mm": round(table, 2), "rms_other_trials_fitted_mm": round(fitted, 2)}
 
 
+def _segment(lab: LabAnalysis, source: str, segments: list[Segment]) -> Segment:
+    """The segment ``lab``'s marker set lets the fit move (a placed HAT or a tracked thorax); the same as the
+    other trials' (``segments``), else refused: one subject file describes one kind of marker set."""
+    names = lab.take.body.channel_names
+    segment = HAT_SEGMENT if "hat.x" in names else THORAX_SEGMENT if "thorax.x" in names else None
+    if segment is None:
+        raise InputError(f"{source}: neither a placed head-arms-trunk nor a tracked thorax: nothing to calibrate")
+    if segments and segment is not segments[0]:
+        kind = "places the HAT" if segment is HAT_SEGMENT else "tracks the trunk"
+        raise InputError(f"{source}: its marker set {kind}, the other trials' does not: calibrate one kind of marker "
+                         "set at a time")
+    return segment
+
+
+def _prior(segment: Segment, stature: float, table: BspTable) -> np.ndarray:
+    """theta at the segment table ``table`` for a subject of ``stature`` m (a placed HAT's sway gains
+    :data:`TRUNK_STEP_GAIN`; a tracked thorax' gains do nothing)."""
+    if segment is HAT_SEGMENT:
+        fraction, height, _ = hat_table(stature, table=table.segments)
+        return np.array([fraction, 0.0, 0.0, height, *TRUNK_STEP_GAIN])
+    fraction, com = thorax_table(stature, table.segments)
+    return np.array([fraction, *com, *TRUNK_STEP_GAIN])
+
+
 def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
-              fit: tuple[str, ...] = PARAMETERS, block_s: float | None = BLOCK_S) -> tuple[Subject, dict]:
-    """Fit the HAT parameters on ``trials`` (see the module docstring); returns the subject and a report
+              fit: tuple[str, ...] | None = None, block_s: float | None = BLOCK_S) -> tuple[Subject, dict]:
+    """Fit the HAT's (a lower-body set) or the thorax' (a full-body or trunk set) parameters on ``trials`` (see the
+    module docstring); returns the subject and a report
     (RMS ZMP − CoP with the table, fitted, fitted without the prior on the same frames (the floor of what
     these parameters can do there), and held out, mm; whether the table was kept, the prior weight chosen;
     each parameter's standard error; with several trials, each scored with the others' calibration).
-    The HAT follows the mid-hip below ``opts.markers.hat_follow_hz`` (default :data:`TRUNK_FOLLOW_HZ`).
-    ``fit``: which of ``PARAMETERS`` are fitted (the others keep the table's value); ``block_s``: the
-    cross-validation's block length, s (None: the halves of each trial's frames, as before)."""
-    unknown = set(fit) - set(PARAMETERS)
-    if unknown or not fit:
-        raise ValueError(f"calibrate: fit takes some of {PARAMETERS}, got {fit}")
-    free = np.isin(PARAMETERS, fit)
+    A HAT follows the mid-hip below ``opts.markers.hat_follow_hz`` (default :data:`TRUNK_FOLLOW_HZ`).
+    ``fit``: which of the segment's parameters (``PARAMETERS``, ``TRUNK_PARAMETERS``; None: all) are fitted (the
+    others keep the table's value); ``block_s``: the cross-validation's block length, s (None: the halves of each
+    trial's frames, as before)."""
     opts = opts or LabOptions()
     follow = opts.markers.hat_follow_hz
-    if follow is None:
-        raise ValueError("calibrate: the HAT's sway is fitted above a follow frequency; hat_follow_hz is None")
     # analysed as analyze's default (the table's HAT and sway, the prior), so the plate delay and complete frames
     # are analyze's
     opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=TRUNK_STEP_GAIN))
-    whole = []
+    whole, segments = [], []
     for trial in trials:
         if not trial.plates:
             raise InputError(f"{trial.source}: no force plates: nothing to calibrate against")
         lab = analyse_lab_take(trial, opts)
-        if "hat.x" not in lab.take.body.channel_names:
-            raise InputError(f"{trial.source}: a full-body or trunk marker set tracks the trunk: "
-                             "there is no placed HAT to calibrate")
+        segments.append(_segment(lab, trial.source, segments))
         rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
         if rows.sum() < MIN_FRAMES:
             raise InputError(f"{trial.source}: only {int(rows.sum())} complete frames; need {MIN_FRAMES}")
         _check_agreement(trial, lab, rows)
-        whole.append(_terms(trial, lab, rows, opts))
+        if segments[0] is HAT_SEGMENT and follow is None:
+            raise ValueError("calibrate: the HAT's sway is fitted above a follow frequency; hat_follow_hz is None")
+        whole.append(_terms(trial, lab, rows, opts, segments[0]))
         stature, bsp = lab.summary["markers"]["stature_m"], lab.summary["markers"]["bsp"]
+    segment = segments[0]
+    fit = segment.parameters if fit is None else fit
+    if set(fit) - set(segment.parameters) or not fit:
+        raise ValueError(f"calibrate: fit takes some of {segment.parameters}, got {fit}")
+    n = len(segment.parameters)
+    free = np.array([p in fit for p in segment.parameters] + [False] * (len(PARAMETERS) - n))  # over theta
     table = ADULT if bsp["table"] == "adult" else BspTable(child_segments(bsp["age_years"]), "child", bsp["age_years"])
-    fraction, height, _ = hat_table(stature, table=table.segments)
-    prior = np.array([fraction, 0.0, 0.0, height, *TRUNK_STEP_GAIN])
+    prior = _prior(segment, stature, table)
     weight, scores = _cross_validated(whole, prior, free, block_s)
     fitted = _fit(whole, prior, weight, free)
     unconstrained = _fit(whole, prior, FREE_WEIGHT, free)
@@ -406,6 +501,7 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     kept = not np.isfinite(weight)
     sd = None if kept else _jackknife_sd(whole, prior, weight, free, BLOCK_S)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
+              "segment": segment.name,
               "folds": "halves" if block_s is None else f"every other {block_s:g} s block",
               "rms_table_mm": round(_rms_mm(prior, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
               "rms_fitted_unconstrained_mm": round(_rms_mm(unconstrained, whole), 2),
@@ -414,12 +510,15 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
               "prior_weight": None if kept else weight,
               "prior_weight_scores_mm": [round(v, 2) for v in scores],
               "held_out_prior_weights": [None if not np.isfinite(w) else w for w in weights],
-              "parameters": list(PARAMETERS),
+              "parameters": list(segment.parameters),
               # the table kept: nothing was measured, its spread is the prior's between-subject one
-              "parameter_sd": [round(float(v), 5) for v in (PRIOR_SD if sd is None else sd)],
+              "parameter_sd": [round(float(v), 5) for v in (PRIOR_SD if sd is None else sd)[:n]],
               "parameter_sd_from": "the table's assumed spread (nothing fitted)" if sd is None
               else "jackknife over the blocks"}
     if len(whole) > 1:
         report.update(_other_trials(whole, prior, free, block_s))
+    if segment is THORAX_SEGMENT:
+        return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), bsp=table.name,
+                       age_years=table.age_years, segment=segment.name), report
     return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), tuple(float(v) for v in fitted[4:6]),
                    table.name, table.age_years, follow), report

@@ -78,7 +78,7 @@ class TakeOptions:
         subject = load_subject(self.subject) if self.subject else None
         if Path(path).suffix.lower() != ".c3d":
             check_not_c3d_options(self, path)
-        return load_motion(path, self.robot, self.bvh_options(subject), UrdfBodyOptions(config=self.robot_config),
+        return load_motion(path, self.robot, self.bvh_options(subject, path), UrdfBodyOptions(config=self.robot_config),
                            c3d_mass=self.mass, markers=self.marker_options(), static=self.static)
 
     def marker_options(self) -> MarkerBodyOptions:
@@ -88,13 +88,16 @@ class TakeOptions:
                                     age_years=self.age)
         return load_subject(self.subject).marker_options(markers) if self.subject else markers
 
-    def bvh_options(self, subject: Subject | None = None) -> BvhBodyOptions:
-        """How a BVH's body is made (``subject``: the loaded subject file, if any)."""
+    def bvh_options(self, subject: Subject | None = None, path: str | Path | None = None) -> BvhBodyOptions:
+        """How a BVH's body is made (``subject``: the loaded subject file, if any; ``path``: the take, whose
+        subject is a BVH's when it is one)."""
         if subject is not None and self.robot is not None:
             raise InputError(f"{self.subject}: a subject file describes a person (BVH or C3D takes), not a robot")
+        bvh = subject is not None and Path(path or "").suffix.lower() == ".bvh"
         return BvhBodyOptions(total_mass=self.mass or DEFAULT_MASS, units=self.units, up_axis=self.up,
                               mapping=load_mapping(self.mapping) if self.mapping else None,
-                              sole_width=self.sole_width, hat_fraction=subject and subject.hat_fraction)
+                              sole_width=self.sole_width, hat_fraction=subject.bvh_hat_fraction(self.subject)
+                              if bvh else None)
 
     def streams(self, path: str | Path | None) -> bool:
         """Whether the take at ``path`` is analysed in bounded memory (:mod:`livezmp.offline.take_stream`):
@@ -107,7 +110,7 @@ class TakeOptions:
         :meth:`load` checks it."""
         check_not_c3d_options(self, path)
         subject = load_subject(self.subject) if self.subject else None
-        bvh = self.bvh_options(subject)  # refuses a subject file for a robot, as load does
+        bvh = self.bvh_options(subject, path)  # refuses a subject file for a robot, as load does
         if Path(path).suffix.lower() == ".csv":
             return open_joint_csv_take(path, self.robot, UrdfBodyOptions(config=self.robot_config))
         return open_bvh_take(path, bvh)
