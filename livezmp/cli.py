@@ -126,7 +126,8 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
 
-    p = sub.add_parser("calibrate", help="subject parameters (HAT mass and centre of mass) from force-plate C3D trials")
+    p = sub.add_parser("calibrate", help="subject parameters (a placed HAT's or a tracked thorax' mass and centre of "
+                       "mass) from force-plate C3D trials")
     p.add_argument("trials", nargs="+", help="C3D trials of one subject with force plates")
     p.add_argument("-o", "--output", default="subject.toml", help="subject file to write (default subject.toml)")
     p.add_argument("--mass", type=float, help="body mass, kg (default: the plates', else the file's)")
@@ -387,7 +388,8 @@ def _batch_commands(subparsers: argparse._SubParsersAction) -> None:
     _batch_common(p, ".bvh, .c3d; .csv with --robot")
     p.add_argument("--tolerance-mm", type=float, default=VALIDATED_P95_MM,
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
-    p.add_argument("--subject", help="subject file from `livezmp calibrate` (C3D takes: HAT mass and centre of mass)")
+    p.add_argument("--subject",
+                   help="subject file from `livezmp calibrate` (C3D takes: HAT or thorax mass and centre of mass)")
     p.add_argument("--plot", action="store_true", help="also write each take's figure (zmp.png, as analyze --plot)")
     add_marker_options(p)
     add_body_options(p)

@@ -1,5 +1,5 @@
-"""`livezmp calibrate`: a subject's head-arms-trunk parameters from force-plate trials, written to a
-subject file that `livezmp analyze --subject` uses (see :mod:`livezmp.offline.calibrate`)."""
+"""`livezmp calibrate`: a subject's head-arms-trunk (or tracked thorax) parameters from force-plate trials, written
+to a subject file that `livezmp analyze --subject` uses (see :mod:`livezmp.offline.calibrate`)."""
 
 from __future__ import annotations
 
