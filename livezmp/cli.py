@@ -67,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     # Inputs are checked at the edges and outputs before they are written (never NaN with exit 0),
     # so numerical warnings would only add lines to a one-line error.
     warnings.filterwarnings("ignore", category=RuntimeWarning)
+    # what livezmp warns of (a foot's mesh not found) is one line, as its errors are
+    warnings.formatwarning = lambda message, *_args, **_kwargs: f"livezmp: warning: {message}\n"
     try:
         code = int(getattr(importlib.import_module(module), function)(args) or 0)
         sys.stdout.flush()  # a reader gone shows here, not as an "Exception ignored" at the interpreter's exit

@@ -6,9 +6,11 @@ lowest leaf links in the zero pose (left = +y), level and side by side at the en
 legs; a foot whose leaf links include three or more on one plane near level (cleats, contact
 points, force sensors: :mod:`livezmp.model.foot_contacts`) has their hull for its sole and
 their plane for its level, else a foot whose links have ``<collision>`` boxes stands on the
-lowest face of them that faces down (`box_sole`), else its sole is a level box under the link's
-centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin (given,
-they are the sole: no collision box is looked at), by default 0.5 × / 0.28 × / 0.12 × the
+lowest face of them that faces down (`box_sole`), else one whose links have meshes (``<collision>``, else
+``<visual>``; found beside the URDF or above it: :mod:`livezmp.model.foot_meshes`) on the footprint of their
+vertices on the ground (`mesh_sole`; a mesh not found or unreadable is warned of in one line), else its sole is a
+level box under the link's centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin
+(given, they are the sole: no collision box or mesh is looked at), by default 0.5 × / 0.28 × / 0.12 × the
 hip-to-foot height, its inner edge no further in than the mid-line between the feet. A leg
 is the joints from the trunk to a foot that the other foot's chain does not share (a waist
 above the legs is the trunk's). Continuous joints, and revolute ones without a ``<limit>`` or
@@ -23,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +36,8 @@ import pinocchio as pin
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.foot_contacts import box_sole, contact_sole
+from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole
+from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
 
@@ -275,8 +279,9 @@ def _collision_boxes(root: ET.Element, path: Path) -> Boxes:
     return boxes
 
 
-def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]], Boxes]:
-    """The URDF's model without a base, its mimics (`read_mimics`) and its links' collision boxes."""
+def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]], Boxes, ET.Element]:
+    """The URDF's model without a base, its mimics (`read_mimics`), its links' collision boxes and its XML as the
+    model was built from it (links renamed, a free base fixed)."""
     text = read_input_text(path, "URDF")
     try:
         root = ET.fromstring(text)
@@ -302,7 +307,46 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
-    return model, mimics, _collision_boxes(root, path)
+    return model, mimics, _collision_boxes(root, path), root
+
+
+def _mesh_points(root: ET.Element, fixed: pin.Model, links: set[str], path: Path) -> tuple[Points, str]:
+    """The mesh vertices of ``links`` (`Points`) read by Pinocchio's geometry model (coal's loader; a mesh's
+    ``scale`` applied): their ``<collision>`` meshes, else, where those are absent, not found or unreadable, their
+    ``<visual>`` ones; and where neither loads, why not (one line naming the file; "" where the links have no mesh).
+    ``root``, ``fixed``: `_load_fixed`'s."""
+    why = ""
+    for tag, kind in (("collision", pin.GeometryType.COLLISION), ("visual", pin.GeometryType.VISUAL)):
+        xml, missing = foot_only_urdf(root, links, tag, path)
+        if missing:
+            why = why or f"mesh {missing!r} not found"
+        if xml is None:
+            continue
+        try:
+            with _quiet_stderr():
+                geometry = pin.buildGeomFromUrdfString(fixed, xml, kind)
+        except (RuntimeError, ValueError) as e:
+            why = why or f"cannot read a mesh of {sorted(links)[0]!r}: {str(e).strip().splitlines()[-1]}"
+            continue
+        points: Points = {}
+        for g in geometry.geometryObjects:
+            frame = fixed.frames[g.parentFrame]
+            local = frame.placement.actInv(g.placement)  # the mesh in its link's frame
+            points.setdefault(frame.name, []).append(np.asarray(g.geometry.vertices()) @ local.rotation.T
+                                                      + local.translation)
+        return points, ""
+    return {}, why
+
+
+def _sole_of_meshes(model: pin.Model, data: pin.Data, joint: int, root: ET.Element, fixed: pin.Model,
+                    path: Path) -> tuple[ContactSole | None, str]:
+    """(`mesh_sole` of the meshes of the links on ``joint``, `_mesh_points`; where there is none though the links
+    have meshes, why not, else "")."""
+    links = {model.frames[f].name for f in range(model.nframes)
+             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint}
+    points, why = _mesh_points(root, fixed, links, path)
+    sole = mesh_sole(model, data, joint, points)
+    return sole, ("" if sole is not None or not (why or points) else why or "its meshes have no face that faces down")
 
 
 def _with_base(fixed: pin.Model, yaw: float = 0.0, upside_down: bool = False) -> pin.Model:
@@ -521,7 +565,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     """Build the body model of a URDF robot (see module docstring)."""
     opts = opts or UrdfBodyOptions()
     path = Path(path)
-    fixed, mimics, boxes = _load_fixed(path)
+    fixed, mimics, boxes, root = _load_fixed(path)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
     model, data, feet_frames, upside_down = _upright_feet(fixed, cfg, path)
     yaw = _heading(model, data, feet_frames, sided=len(cfg.feet) >= 2)
@@ -538,12 +582,16 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     turns = {side: data.oMf[fid].rotation.copy() for side, fid in feet_frames.items()}
     ankles_y = {side: float(data.oMf[fid].translation[1]) for side, fid in feet_frames.items()}
     chosen = opts.sole_length is None and opts.sole_width is None and opts.sole_drop is None  # else: the box asked
-    feet = {}
+    feet, unread = {}, []
     for side, link in feet_frames.items():
         spec = cfg.feet.get(side, {})
         joint = model.frames[link].parentJoint
-        contact = None if {"sole", "box"} & set(spec) else (contact_sole(model, data, joint)
-                                                              or box_sole(model, data, joint, boxes if chosen else {}))
+        given = bool({"sole", "box"} & set(spec))
+        contact = None if given else (contact_sole(model, data, joint)
+                                      or box_sole(model, data, joint, boxes if chosen else {}))
+        if contact is None and chosen and not given:
+            contact, why = _sole_of_meshes(model, data, joint, root, fixed, path)
+            unread += [f"{side} foot: {why}"] if why else []
         if contact is not None:
             fid = _foot_frame(model, data, link, contact.placement, f"{side}_contact_sole")
             feet_frames[side] = fid
@@ -568,6 +616,9 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
                 other = next(y for s, y in ankles_y.items() if s != side)
                 sole = _own_side(sole, 0.5 * (other - ankles_y[side]))
         feet[side] = Foot(side, fid, sole_local=sole)
+    if unread:
+        warnings.warn(f"{path}: {'; '.join(unread)}: default box sole{'s' * (len(unread) > 1)} used", UserWarning,
+                      stacklevel=2)
     names = [model.names[j] for j in range(1, model.njoints)]
     jid = {n: model.getJointId(n) for n in names}
     legs = {}

@@ -1,0 +1,140 @@
+"""A foot's sole from its meshes, where its links have no collision box: the footprint of the mesh vertices that
+bear on the ground.
+
+Most published humanoids give their feet as meshes only (Fourier GR-Mini's ``left_ankle_roll_link.STL``, K-Scale
+Z-Bot2's ``FOOT.stl``): a mesh's size is not in the URDF, and such feet stood on a default box of half the hip
+height (GR-Mini's 295 mm for its 170 mm feet). Here the URDF's ``<mesh>`` files are found (`resolve_mesh`), read
+by Pinocchio's geometry model (coal's mesh loader: STL, DAE, OBJ ..., the ``scale`` attribute applied), and the
+vertices in the foot's frame at the zero posture give the sole (`mesh_sole`): the downward face of their convex
+hull with the most area (the sole's plane, within `MAX_TILT` of level), and the hull, on that plane, of the
+vertices within `CONTACT_DEPTH` of it.
+
+World frame z up, the robot's zero posture, metres.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import ConvexHull, QhullError
+
+from livezmp.balance.support import convex_hull
+from livezmp.model.foot_contacts import MAX_TILT, ContactSole, plane_frame
+
+CONTACT_DEPTH = 0.003  # m: vertices this close to the sole's plane bear on the ground (a tread, a chamfer's start)
+SAME_PLANE = np.cos(np.radians(2.0))  # hull facets whose normals lie this close are one face (a curved sole's)
+SIMPLIFY = 0.0005  # m: a footprint corner this close to the line through its neighbours is left out
+
+Points = dict[str, list[np.ndarray]]  # link name -> the vertices (k, 3) m of each of its meshes, in its frame
+
+
+def _search_dirs(urdf: Path) -> list[Path]:
+    """The URDF's directory, each directory above it, then ROS_PACKAGE_PATH's (ROS's own search path)."""
+    here = urdf.resolve().parent
+    ros = [Path(p) for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p]
+    return [here, *here.parents, *ros]
+
+
+def resolve_mesh(filename: str, urdf: Path) -> Path | None:
+    """The file a ``<mesh filename>`` of ``urdf`` names, None where none is found. ``package://PKG/REST``:
+    PKG/REST, then REST, under the URDF's directory and each above it (a package's root holds its ``urdf/``
+    folder; a package may be checked out under another name), then under ROS_PACKAGE_PATH's directories;
+    ``file://`` and absolute paths as written; a relative path against the URDF's directory, then each above."""
+    if filename.startswith("file://"):
+        filename = filename[len("file://"):]
+    if filename.startswith("package://"):
+        rest = filename[len("package://"):]
+        tails = [rest, rest.partition("/")[2]]
+    elif Path(filename).is_absolute():
+        return Path(filename) if Path(filename).is_file() else None
+    else:
+        tails = [filename]
+    return next((d / t for d in _search_dirs(urdf) for t in tails if t and (d / t).is_file()), None)
+
+
+def foot_only_urdf(root: ET.Element, links: set[str], tag: str, urdf: Path) -> tuple[str | None, str]:
+    """(the URDF with no geometry but the ``<tag>`` meshes of ``links``, their files' paths resolved
+    (`resolve_mesh`); the first mesh not found, as written, else ""). None for the URDF where ``links`` have no
+    such mesh or one is not found. ``root`` is not changed."""
+    copy = ET.fromstring(ET.tostring(root))
+    found = False
+    for link in copy.findall("link"):
+        for element in link.findall("collision") + link.findall("visual"):
+            mesh = element.find("geometry/mesh")
+            if element.tag != tag or link.get("name") not in links or mesh is None:
+                link.remove(element)
+                continue
+            path = resolve_mesh(mesh.get("filename", ""), urdf)
+            if path is None:
+                return None, mesh.get("filename", "")
+            mesh.set("filename", str(path))
+            found = True
+    return (ET.tostring(copy, encoding="unicode") if found else None), ""
+
+
+def _support_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(upward unit normal, offset: n·x = offset on it) of the face of ``points``' convex hull that faces down
+    within `MAX_TILT` with the most area, its facets within `SAME_PLANE` and `CONTACT_DEPTH` of each other one
+    face; None where the points span no volume or no facet faces down."""
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return None
+    normals, offsets = hull.equations[:, :3], hull.equations[:, 3]  # outward: n·x + d <= 0 inside
+    tri = points[hull.simplices]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    centres = tri.mean(axis=1)
+    down = np.flatnonzero(-normals[:, 2] >= np.cos(MAX_TILT))
+    if not len(down):
+        return None
+    face_area = [areas[down][(normals[down] @ normals[i] >= SAME_PLANE)
+                             & (np.abs(centres[down] @ normals[i] + offsets[i]) <= CONTACT_DEPTH)].sum()
+                 for i in down]
+    best = down[int(np.argmax(face_area))]
+    return -normals[best], float(offsets[best])
+
+
+def _simplified(polygon: np.ndarray) -> np.ndarray:
+    """A convex polygon (k, 2) m, counter-clockwise, without the corners within `SIMPLIFY` of the line through
+    their neighbours (a mesh's rounded corner of dozens), one at a time, the closest first; at least three kept."""
+    poly = polygon
+    while len(poly) > 3:
+        prev, nxt = np.roll(poly, 1, axis=0), np.roll(poly, -1, axis=0)
+        chord = nxt - prev
+        cross = chord[:, 0] * (poly - prev)[:, 1] - chord[:, 1] * (poly - prev)[:, 0]
+        off = np.abs(cross) / np.maximum(np.linalg.norm(chord, axis=1), 1e-12)
+        k = int(np.argmin(off))
+        if off[k] > SIMPLIFY:
+            break
+        poly = np.delete(poly, k, axis=0)
+    return poly
+
+
+def mesh_sole(model: pin.Model, data: pin.Data, joint: int, points: Points) -> ContactSole | None:
+    """The sole of the foot on ``joint`` from the mesh vertices of its links (``points``, `Points`; module
+    docstring), or None where they give no face that faces down or no area on it. ``data``: frame placements of
+    the zero posture."""
+    world = [v @ data.oMf[f].rotation.T + data.oMf[f].translation for f in range(model.nframes)
+             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+             for v in points.get(model.frames[f].name, ())]
+    if not world:
+        return None
+    cloud = np.vstack(world)
+    plane = _support_plane(cloud)
+    if plane is None:
+        return None
+    normal, offset = plane
+    rotation = plane_frame(normal)
+    origin = normal * offset
+    on = cloud[cloud @ normal - offset <= CONTACT_DEPTH]
+    hull = convex_hull(((on - origin) @ rotation)[:, :2])
+    if len(hull) < 3:
+        return None
+    hull = _simplified(hull)
+    centre = hull.mean(axis=0)
+    placement = pin.SE3(rotation, origin + rotation @ np.array([*centre, 0.0]))
+    return ContactSole(placement, np.column_stack([hull - centre, np.zeros(len(hull))]), ())

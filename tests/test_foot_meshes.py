@@ -1,0 +1,114 @@
+"""Soles from a foot's meshes (livezmp/model/foot_meshes.py): generated humanoids (tests/humanoid_gen.py) whose
+feet are meshes the test writes, an STL box (scaled, offset, in a turned link frame) and a tapered five-sided
+foot, then one missing and one unreadable. Before: every mesh-only foot stood on the default box sole, 0.5 x 0.28
+hip heights under the foot's centre of mass (Fourier GR-Mini's 295 mm for its feet of 170 mm). Truth: the
+geometry the test wrote."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from humanoid_gen import HumanoidSpec, build_humanoid
+from scipy.spatial import ConvexHull
+
+from livezmp.model.body import foot_soles
+from livezmp.model.robot import load_robot
+
+SPEC = HumanoidSpec(foot="mesh", frames="random", seed=53)  # foot link frames turned, the mesh placed level in them
+FEET = ("l_foot", "r_foot")
+
+
+def _write_stl(path: Path, vertices: np.ndarray) -> None:
+    """An ASCII STL of the convex solid of ``vertices`` (its hull's triangles)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = ["solid foot"]
+    for tri in vertices[ConvexHull(vertices).simplices]:
+        lines += ["facet normal 0 0 0", "outer loop", *(f"vertex {x:.9g} {y:.9g} {z:.9g}" for x, y, z in tri),
+                  "endloop", "endfacet"]
+    path.write_text("\n".join([*lines, "endsolid foot", ""]))
+
+
+def _cube(size=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    return corners * size + centre
+
+
+def _zero_pose_soles(body) -> dict[str, np.ndarray]:
+    data = body.model.createData()
+    pin.framesForwardKinematics(body.model, data, np.zeros(body.model.nq))
+    return foot_soles(body, data)
+
+
+def _edit_meshes(urdf: Path, visual: bool = False, **attrs: str) -> None:
+    """Set ``attrs`` on every foot ``<mesh>`` of ``urdf`` (``{name}`` in a value: the foot link's name); ``visual``:
+    its ``<collision>`` made a ``<visual>``."""
+    tree = ET.parse(urdf)
+    for link in tree.getroot().findall("link"):
+        for collision in link.findall("collision"):
+            collision.tag = "visual" if visual else "collision"
+            mesh = collision.find("geometry/mesh")
+            mesh.attrib.update({k: v.format(name=link.get("name")) for k, v in attrs.items()})
+    tree.write(urdf)
+
+
+def _assert_same_corners(got: np.ndarray, want: np.ndarray) -> None:
+    """The same polygon's corners (k, 3) m, in any order, to 1 µm."""
+    assert got.shape == want.shape
+    np.testing.assert_allclose(np.linalg.norm(got[:, None] - want[None], axis=2).min(axis=1), 0.0, atol=1e-6)
+
+
+def test_a_foot_mesh_of_a_scaled_offset_box_stands_on_its_bottom_face(tmp_path):
+    # before: the default box (240 x 134 mm here) under the foot's centre of mass, whatever the mesh
+    size = np.array([0.16, 0.08, 0.03]) * SPEC.height  # the generator's foot box
+    boxed = load_robot(str(build_humanoid(tmp_path / "b.urdf", replace(SPEC, foot="box"))), None).body
+    urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
+    scale = np.array([2.0, 0.5, 1.0])
+    _edit_meshes(urdf, scale=" ".join(f"{s:g}" for s in scale))
+    for name in FEET:  # a unit cube, 10 mm off in its own frame; scaled, the generator's box 10 mm off centre
+        _write_stl(tmp_path / "humanoid" / "meshes" / f"{name}.stl",
+                   _cube(size / scale, np.array([0.01, 0.0, 0.0]) / scale))
+    soles, truth = _zero_pose_soles(load_robot(str(urdf), None).body), _zero_pose_soles(boxed)
+    for side in ("left", "right"):
+        _assert_same_corners(soles[side], truth[side] + np.array([0.01, 0.0, 0.0]))
+
+
+def test_a_tapered_five_sided_visual_mesh_gives_its_footprint(tmp_path):
+    # before: the default box. The foot's only mesh a <visual> one, by a relative path (Fourier GR-Mini's
+    # "../meshes/*.STL"); its top 20 mm narrower all round than its 5-sided bottom, which is the sole
+    (tmp_path / "urdf").mkdir()
+    urdf = build_humanoid(tmp_path / "urdf" / "t.urdf", SPEC)
+    _edit_meshes(urdf, visual=True, filename="../meshes/tapered.stl")
+    bottom = np.array([[-0.03, -0.02], [0.03, -0.02], [0.05, 0.0], [0.03, 0.02], [-0.03, 0.02]])  # a toe's point
+    top = bottom * 0.6
+    _write_stl(tmp_path / "meshes" / "tapered.stl",
+               np.vstack([np.column_stack([bottom, np.full(5, -0.02)]), np.column_stack([top, np.zeros(5)])]))
+    soles = _zero_pose_soles(load_robot(str(urdf), None).body)
+    boxed = _zero_pose_soles(load_robot(str(build_humanoid(tmp_path / "b.urdf", replace(SPEC, foot="box"))),
+                                        None).body)
+    for side in ("left", "right"):
+        # the mesh's origin is the generator's box centre, 0.015 heights above its bottom; the mesh's bottom 20 mm below
+        offset = boxed[side].mean(axis=0) + np.array([0.0, 0.0, 0.015 * SPEC.height - 0.02])
+        _assert_same_corners(soles[side], np.column_stack([bottom, np.zeros(5)]) + offset)
+
+
+def test_a_missing_or_unreadable_foot_mesh_keeps_the_default_box_and_says_so_once(tmp_path):
+    # before: no word; the default box was used without saying the meshes were looked for
+    urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
+    (tmp_path / "humanoid" / "meshes").mkdir(parents=True)
+    (tmp_path / "humanoid" / "meshes" / "r_foot.stl").write_text("not a mesh\n")
+    default = _zero_pose_soles(load_robot(str(build_humanoid(tmp_path / "n.urdf", replace(SPEC, foot="none"))),
+                                          None).body)
+    with pytest.warns(UserWarning) as record:
+        soles = _zero_pose_soles(load_robot(str(urdf), None).body)
+    assert len(record) == 1
+    message = str(record[0].message)
+    assert message.startswith(f"{urdf}: left foot: mesh 'package://humanoid/meshes/l_foot.stl' not found; "
+                              "right foot: cannot read a mesh of 'r_foot': ")
+    assert message.endswith(": default box soles used") and "\n" not in message
+    for side in ("left", "right"):
+        np.testing.assert_allclose(soles[side], default[side], atol=1e-12)
