@@ -7,7 +7,7 @@ height (GR-Mini's 295 mm for its 170 mm feet). Here the URDF's ``<mesh>`` files 
 by Pinocchio's geometry model (coal's mesh loader: STL, DAE, OBJ ..., the ``scale`` attribute applied), and the
 vertices in the foot's frame at the zero posture give the sole (`mesh_sole`): the downward face of their convex
 hull with the most area (the sole's plane, within `MAX_TILT` of level), and the hull, on that plane, of the
-vertices within `CONTACT_DEPTH` of it.
+vertices within `CONTACT_DEPTH` of it, cut to the four corners that keep the most of its area (`_quadrilateral`).
 
 World frame z up, the robot's zero posture, metres.
 """
@@ -27,7 +27,6 @@ from livezmp.model.foot_contacts import MAX_TILT, ContactSole, plane_frame
 
 CONTACT_DEPTH = 0.003  # m: vertices this close to the sole's plane bear on the ground (a tread, a chamfer's start)
 SAME_PLANE = np.cos(np.radians(2.0))  # hull facets whose normals lie this close are one face (a curved sole's)
-SIMPLIFY = 0.0005  # m: a footprint corner this close to the line through its neighbours is left out
 
 Points = dict[str, list[np.ndarray]]  # link name -> the vertices (k, 3) m of each of its meshes, in its frame
 
@@ -98,19 +97,16 @@ def _support_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:
     return -normals[best], float(offsets[best])
 
 
-def _simplified(polygon: np.ndarray) -> np.ndarray:
-    """A convex polygon (k, 2) m, counter-clockwise, without the corners within `SIMPLIFY` of the line through
-    their neighbours (a mesh's rounded corner of dozens), one at a time, the closest first; at least three kept."""
+def _quadrilateral(polygon: np.ndarray) -> np.ndarray:
+    """The convex polygon (k, 2) m, counter-clockwise, cut to four corners by leaving out, one at a time, the corner
+    whose triangle with its neighbours is smallest: the sole keeps the most of the footprint's area and lies
+    within it (a rounded toe's dozens of corners cut off, not covered). The simulated foot sensors have one force
+    cell a corner, one per quadrant (`sim_devices.launch.humanoid_sensors`); a triangle is kept."""
     poly = polygon
-    while len(poly) > 3:
+    while len(poly) > 4:
         prev, nxt = np.roll(poly, 1, axis=0), np.roll(poly, -1, axis=0)
-        chord = nxt - prev
-        cross = chord[:, 0] * (poly - prev)[:, 1] - chord[:, 1] * (poly - prev)[:, 0]
-        off = np.abs(cross) / np.maximum(np.linalg.norm(chord, axis=1), 1e-12)
-        k = int(np.argmin(off))
-        if off[k] > SIMPLIFY:
-            break
-        poly = np.delete(poly, k, axis=0)
+        a, b = poly - prev, nxt - prev
+        poly = np.delete(poly, int(np.argmin(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))), axis=0)
     return poly
 
 
@@ -134,7 +130,7 @@ def mesh_sole(model: pin.Model, data: pin.Data, joint: int, points: Points) -> C
     hull = convex_hull(((on - origin) @ rotation)[:, :2])
     if len(hull) < 3:
         return None
-    hull = _simplified(hull)
+    hull = _quadrilateral(hull)
     centre = hull.mean(axis=0)
     placement = pin.SE3(rotation, origin + rotation @ np.array([*centre, 0.0]))
     return ContactSole(placement, np.column_stack([hull - centre, np.zeros(len(hull))]), ())
