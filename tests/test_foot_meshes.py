@@ -62,22 +62,28 @@ def _assert_same_corners(got: np.ndarray, want: np.ndarray) -> None:
     np.testing.assert_allclose(np.linalg.norm(got[:, None] - want[None], axis=2).min(axis=1), 0.0, atol=1e-6)
 
 
-def test_a_foot_mesh_of_a_scaled_offset_box_stands_on_its_bottom_face(tmp_path):
+@pytest.fixture(scope="module")
+def boxed(tmp_path_factory) -> dict[str, np.ndarray]:
+    """The zero-pose soles of the robot whose feet are the generator's collision boxes."""
+    urdf = build_humanoid(tmp_path_factory.mktemp("boxed") / "b.urdf", replace(SPEC, foot="box"))
+    return _zero_pose_soles(load_robot(str(urdf), None).body)
+
+
+def test_a_foot_mesh_of_a_scaled_offset_box_stands_on_its_bottom_face(tmp_path, boxed):
     # before: the default box (240 x 134 mm here) under the foot's centre of mass, whatever the mesh
     size = np.array([0.16, 0.08, 0.03]) * SPEC.height  # the generator's foot box
-    boxed = load_robot(str(build_humanoid(tmp_path / "b.urdf", replace(SPEC, foot="box"))), None).body
     urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
     scale = np.array([2.0, 0.5, 1.0])
     _edit_meshes(urdf, scale=" ".join(f"{s:g}" for s in scale))
     for name in FEET:  # a unit cube, 10 mm off in its own frame; scaled, the generator's box 10 mm off centre
         _write_stl(tmp_path / "humanoid" / "meshes" / f"{name}.stl",
                    _cube(size / scale, np.array([0.01, 0.0, 0.0]) / scale))
-    soles, truth = _zero_pose_soles(load_robot(str(urdf), None).body), _zero_pose_soles(boxed)
+    soles = _zero_pose_soles(load_robot(str(urdf), None).body)
     for side in ("left", "right"):
-        _assert_same_corners(soles[side], truth[side] + np.array([0.01, 0.0, 0.0]))
+        _assert_same_corners(soles[side], boxed[side] + np.array([0.01, 0.0, 0.0]))
 
 
-def test_a_tapered_five_sided_visual_mesh_gives_the_four_corners_of_most_of_its_footprint(tmp_path):
+def test_a_tapered_five_sided_visual_mesh_gives_the_four_corners_of_most_of_its_footprint(tmp_path, boxed):
     # before: the default box. The foot's only mesh a <visual> one, by a relative path (Fourier GR-Mini's
     # "../meshes/*.STL"); its top narrower all round than its 5-sided bottom, which is the footprint; the simulated
     # foot sensors take four corners: the toe's point, the corner whose cut loses least area, is left out
@@ -89,8 +95,6 @@ def test_a_tapered_five_sided_visual_mesh_gives_the_four_corners_of_most_of_its_
     _write_stl(tmp_path / "meshes" / "tapered.stl",
                np.vstack([np.column_stack([bottom, np.full(5, -0.02)]), np.column_stack([top, np.zeros(5)])]))
     soles = _zero_pose_soles(load_robot(str(urdf), None).body)
-    boxed = _zero_pose_soles(load_robot(str(build_humanoid(tmp_path / "b.urdf", replace(SPEC, foot="box"))),
-                                        None).body)
     for side in ("left", "right"):
         # the mesh's origin is the generator's box centre, 0.015 heights above its bottom; the mesh's bottom 20 mm below
         offset = boxed[side].mean(axis=0) + np.array([0.0, 0.0, 0.015 * SPEC.height - 0.02])
