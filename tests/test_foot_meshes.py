@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from dataclasses import replace
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,9 @@ import pytest
 from humanoid_gen import HumanoidSpec, build_humanoid
 from scipy.spatial import ConvexHull
 
+from livezmp.balance.support import convex_hull
 from livezmp.model.body import foot_soles
+from livezmp.model.foot_meshes import _quadrilateral
 from livezmp.model.robot import load_robot
 
 SPEC = HumanoidSpec(foot="mesh", frames="random", seed=53)  # foot link frames turned, the mesh placed level in them
@@ -117,3 +120,21 @@ def test_a_missing_or_unreadable_foot_mesh_keeps_the_default_box_and_says_so_onc
     assert message.endswith(": default box soles used") and "\n" not in message
     for side in ("left", "right"):
         np.testing.assert_allclose(soles[side], default[side], atol=1e-12)
+
+
+def test_a_rounded_footprint_gives_the_four_of_its_corners_that_enclose_the_most_area():
+    # before (cutting one corner at a time, the smallest triangle first): 91 % of the best four's area on this
+    # 200 x 100 mm sole with 28 mm round corners (TienKung Lite's footprint kept 82 % of its area, now 84 %)
+    arcs = [(cx + 0.028 * np.cos(a), cy + 0.028 * np.sin(a))
+            for cx, cy, start in ((0.072, -0.022, -90), (0.072, 0.022, 0), (-0.072, 0.022, 90), (-0.072, -0.022, 180))
+            for a in np.radians(start + np.linspace(0.0, 90.0, 5))]
+    footprint = convex_hull(np.array(arcs))
+    assert len(footprint) == 20
+
+    def area(corners: np.ndarray) -> float:
+        x, y = corners[:, 0], corners[:, 1]
+        return 0.5 * abs(float(x @ np.roll(y, 1) - y @ np.roll(x, 1)))
+
+    best = max(area(footprint[list(four)]) for four in combinations(range(len(footprint)), 4))
+    sole = _quadrilateral(footprint)
+    assert len(sole) == 4 and area(sole) == pytest.approx(best, rel=1e-12)
