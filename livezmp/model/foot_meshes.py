@@ -1,7 +1,7 @@
 """A foot's sole from its meshes, where its links have no collision box: the footprint of the mesh vertices that
 bear on the ground.
 
-Most published humanoids give their feet as meshes only (Fourier GR-Mini's ``left_ankle_roll_link.STL``, K-Scale
+Most published humanoids give their feet as meshes only (Fourier GR-Mini's ``left_foot_pitch_link.STL``, K-Scale
 Z-Bot2's ``FOOT.stl``): a mesh's size is not in the URDF, and such feet stood on a default box of half the hip
 height (GR-Mini's 295 mm for its 170 mm feet). Here the URDF's ``<mesh>`` files are found (`resolve_mesh`), read
 by Pinocchio's geometry model (coal's mesh loader: STL, DAE, OBJ ..., the ``scale`` attribute applied), and the
