@@ -47,16 +47,19 @@ CONVENTIONS = {
     ("RLKNE", "RKNE"), ("LKneeLat", "LKNE"), ("RAnkleLat", "RANK"), ("LLMA", "LANK"), ("R_KNEE_MED", "RKNM"),
     ("L_ANKLE_MED", "LMED"), ("RFCL", "RKNE"), ("LFCM", "LKNM"), ("RMALL", "RANK"), ("LMALM", "LMED"),
     ("LKNEL", "LKNE"), ("RKNEM", "RKNM"), ("RLM", "RANK"), ("LMM", "LMED"), ("RCA", "RHEE"),
-    ("SNJ", "CLAV"), ("SJN", "CLAV"), ("SXS", "STRN"), ("TV8", "T10"),
+    ("SNJ", "CLAV"), ("SJN", "CLAV"), ("SXS", "STRN"), ("TV8", "T10"), ("r knee 1", "RKNE"), ("l should", "LSHO"),
+    ("r mall", "RANK"), ("sacrum", "SACR"),
 ])
 def test_labels_of_the_common_conventions_name_their_roles(label, role):
     assert role_of(label)[0] == role
 
 
-# RLEP: a lateral epicondyle, the femur's or the humerus' (ISB names them apart: FLE, HLE); LLA_TOE and LMT5 are
-# the toe's stand-ins only where no label claims the toe (test_the_metatarsal_heads_stand_in_for_a_missing_toe)
+# RLEP: a lateral epicondyle, the femur's or the humerus' (ISB names them apart: FLE, HLE); LLA_TOE, LMT5 and r met
+# are the toe's stand-ins only where no label claims the toe (test_the_metatarsal_heads_stand_in_for_a_missing_toe);
+# r knee 2, r bar 1: the Davis set's fibular head and thigh wand
 @pytest.mark.parametrize("label", ["LKneeAngles", "R_THIGH_1", "VLKN", "LFEO", "L.Sac.Wand", "LTHI2", "LMT5",
-                                   "r knee 1", "PELO", "LHipPower", "RLEP", "LLA_TOE", "RBackAsis"])
+                                   "r knee 2", "r bar 1", "r met", "PELO", "LHipPower", "RLEP", "LLA_TOE",
+                                   "RBackAsis", "R.Shoulder"])
 def test_other_labels_name_no_role(label):
     assert role_of(label) is None
 
@@ -94,6 +97,26 @@ def test_a_relabelled_trial_gives_the_plug_in_gait_zmp(std, tmp_path, convention
     assert "labels read as" in a.summary["markers"]["marker_set"]
     # the long gap is reported under the file's own label
     assert a.summary["markers"]["marker_gaps_open"][0]["marker"] == prefix + name("R", "TOE") + suffix
+
+
+DAVIS = {"ASI": "asis", "KNE": "knee 1", "ANK": "mall", "HEE": "heel", "TOE": "met", "SHO": "should"}
+
+
+def test_the_davis_set_as_bts_labels_it_gives_the_plug_in_gait_zmp(tmp_path):
+    """The Davis protocol as BTS writes it (``r asis``, ``r knee 1``, ``r mall``, ``r met``, ``r should``: lower case,
+    a blank after the side) on a lab whose thorax is tracked by its shoulders: the same markers read, the same ZMP;
+    ``met``, the fifth metatarsal head, stands in for the toe."""
+    path, davis = tmp_path / "pig.c3d", tmp_path / "davis.c3d"
+    write_lab_c3d(path, PLATES, trunk="shoulders")
+    _relabelled(path, davis, lambda lab: f"{lab[0].lower()} {DAVIS[lab[1:]]}" if lab[1:] in DAVIS and lab[0] in "LR"
+                else lab)
+    ref, a = analyse_lab_take(read_c3d(path)), analyse_lab_take(read_c3d(davis))
+    np.testing.assert_array_equal(a.result.zmp, ref.result.zmp)
+    assert a.summary["cop_vs_zmp"]["frames"] == ref.summary["cop_vs_zmp"]["frames"] > 250
+    labels = a.summary["markers"]["labels"]
+    assert labels["aliases"]["LKNE"] == "l knee 1" and labels["aliases"]["RSHO"] == "r should"
+    assert "fifth metatarsal head alone" in labels["toe"]["LTOE"]
+    assert "thorax from LSHO RSHO" in a.summary["markers"]["marker_set"]
 
 
 def test_two_labels_claiming_one_marker_are_refused_naming_both(std, tmp_path, capsys):

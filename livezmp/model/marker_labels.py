@@ -42,6 +42,14 @@ Where each name comes from:
   beside them (keenon/nimblephysics' ``data/osim/Return11`` trial, with ``RHEE RTOE RM5``). Malleoli ``RLM``/``RMM``,
   calcaneus ``RCA``, first and fifth metatarsal heads ``RIMH``/``RVMH`` (the BTS "UNIPD-Fullbody" set of
   RehabEngGroup/MOtoNMS' ``TestData/InputData/Control1_UNIPD``; CGM2's ``RFMH``/``RVMH`` likewise).
+- The Davis et al. (1991, Hum Mov Sci 10:575) protocol as BTS Bioengineering's Elite / SMART systems label it, lower
+  case with a blank after the side: ``sacrum``, ``r asis``, lateral femoral epicondyle ``r knee 1``, lateral
+  malleolus ``r mall``, fifth metatarsal head ``r met`` (the toe's stand-in, below), heel ``r heel`` (static trials),
+  shoulders ``r should``, ``c7``; its thigh and shank wands ``r bar 1``/``r bar 2`` and the fibular head ``r knee 2``
+  are not Plug-in Gait's markers and are not read. So written by BTKData's ``Input/TDFSamples/gait9.tdf.c3d`` (a BTS
+  TDF trial) and BTKCore's ``561xxa01_anonym.C3D`` (a BTS Elite file); in the first, ``knee 1`` lies at the knee,
+  55-56 % of the way from the ASIS down to the malleolus, ``knee 2`` 35-47 mm below it, ``met`` 61-75 mm lateral of
+  the malleolus and 19-31 mm above the floor (medians over the take).
 - Epicondyles: ``RLEPI`` (La Trobe's Vicon set, psbiomech/lasem-data-processing), ``RLE``/``RME`` (the UNIPD set),
   ``RLEP``/``RMEP`` (AnyBody's ``Runner``) name a lateral or medial epicondyle of the femur or of the humerus alike
   (ISB names them apart, ``FLE``/``HLE``): such a label is the knee's only where it lies along its side's leg, at
@@ -95,13 +103,14 @@ PIG = "Plug-in Gait"
 HH = "Helen Hayes as Codamotion / Motion Analysis write it"
 CAST = "CAST / ISB landmark names (Qualisys, Visual3D, OptiTrack)"
 LAB = "lateral / medial landmark names"
+DAVIS = "Davis et al. (1991) as BTS labels it"
 # role suffix (after the side letter) -> (name after the side, convention) ...
 SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "ASI": (("ASI", PIG), ("ASIS", HH), ("IAS", CAST)),
     "PSI": (("PSI", PIG), ("PSIS", HH), ("IPS", CAST)),
     "THI": (("THI", PIG),),
     "KNE": (("KNE", PIG), ("KNEE", HH), ("FLE", CAST), ("LFC", LAB), ("LKN", LAB), ("KNEELATERAL", LAB),
-            ("LKNE", LAB), ("KNEELAT", LAB), ("FCL", LAB), ("KNEL", LAB)),
+            ("LKNE", LAB), ("KNEELAT", LAB), ("FCL", LAB), ("KNEL", LAB), ("KNEE1", DAVIS)),
     "KNM": (("KNM", PIG), ("MKNE", LAB), ("KNEM", LAB), ("FME", CAST), ("MFC", LAB), ("MEPI", LAB), ("MKN", LAB),
             ("KNEEMEDIAL", HH), ("KNEEMED", LAB), ("FCM", LAB)),
     # not Helen Hayes' shank wand (Motion Analysis' RSHA): in Plug-in Gait's ankle chord rule it put Walk1's ankle
@@ -114,6 +123,9 @@ SIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "HEE": (("HEE", PIG), ("HEEL", HH), ("FCC", CAST), ("CAL", LAB), ("CA", LAB)),
     "TOE": (("TOE", PIG), ("TO", HH), ("FM2", CAST), ("MT2", LAB)),
     "CLA": (("CLA", PIG), ("SC", CAST)),
+    # the acromion; Plug-in Gait's own SHO is read by its name (as a role here, a two-person file's LSHO twice over
+    # would be refused naming it, where it is refused naming the legs' markers it lacks)
+    "SHO": (("SHOULD", DAVIS),),
 }
 UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
     "SACR": (("SACR", PIG), ("VSAC", HH), ("VSACRAL", HH), ("SACRUM", LAB)),
@@ -128,7 +140,8 @@ UNSIDED: dict[str, tuple[tuple[str, str], ...]] = {
 FOREFOOT_TOE = "toe from the metatarsal heads"
 FOREFOOT: dict[str, tuple[tuple[str, str], ...]] = {
     "MT1": (("MT1", LAB), ("FM1", CAST), ("IMH", LAB), ("FMH", LAB)),
-    "MT5": (("MT5", LAB), ("FM5", CAST), ("LATOE", LAB), ("VMH", LAB)),  # LATOE: "lateral toe" (tsalemink's AUC set)
+    # LATOE: "lateral toe" (tsalemink's AUC set); MET: Davis' fifth metatarsal head (BTS)
+    "MT5": (("MT5", LAB), ("FM5", CAST), ("LATOE", LAB), ("VMH", LAB), ("MET", DAVIS)),
 }
 # an epicondyle's name says not whether it is the femur's or the humerus' (ISB names them apart, FLE / HLE): such a
 # label is read as the knee's marker only where it lies along its side's leg (:func:`_epicondyles_on_the_leg`)
