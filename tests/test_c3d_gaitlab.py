@@ -935,6 +935,20 @@ def test_a_step_on_the_plates_without_a_file_mass_weighs_the_subject(tmp_path, m
     assert analyse_lab_take(trial).summary["mass"]["source"] == "default"  # the 70 kg default without it
 
 
+def test_plates_weighing_the_subject_as_no_person_say_so(tmp_path):
+    """Open3DMotion's Codamotion export weighs its subject at 1174 kg: plates whose channels all read 16 times too
+    much weigh the lab's 75 kg subject (no mass in the file) at 1200 kg or so, a body-mass index near 400, and it is
+    said. The true scale says nothing."""
+    write_lab_c3d(tmp_path / "on.c3d", PLATES, lab=Lab(mass=False))
+    c3d = ezc3d.c3d(str(tmp_path / "on.c3d"))
+    c3d["data"]["analogs"] = c3d["data"]["analogs"] * 16.0  # written back through the file's unchanged SCALE
+    c3d.write(str(tmp_path / "x16.c3d"))
+    ref, s = (analyse_lab_take(read_c3d(tmp_path / n)).summary for n in ("on.c3d", "x16.c3d"))
+    assert s["mass"]["used_kg"] == pytest.approx(16 * ref["mass"]["used_kg"], rel=0.1)  # weighed over other frames
+    assert "no person's: their ANALOG:SCALE or FORCE_PLATFORM:UNITS may be wrong" in s["mass"]["note"]
+    assert "no person" not in ref["mass"].get("note", "")
+
+
 def test_stance_mass_sums_over_the_frames_the_plates_carry_whole():
     """Two seconds on the plates at 2 steps/s: F_z = m (g + a) with a the CoM's vertical acceleration (3 m/s²), while
     the kinematics' a_z keeps half of it and lags 40 ms (a smoothed second derivative). Frame by frame F_z / (g + a_z)

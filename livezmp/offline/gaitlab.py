@@ -57,6 +57,10 @@ from livezmp.offline.validation import (
 )
 
 MASS_DISAGREE = 0.03
+# a body-mass index (kg/m^2) outside this no walking subject has: WHO's classes run from severe thinness (under 16)
+# to obese class III (40 and over); the plates that weighed someone so are scaled wrongly (ANALOG:SCALE,
+# FORCE_PLATFORM:UNITS): Open3DMotion's Codamotion export gait-bilateral-2005-amtix2 weighs its subject at 1174 kg
+PERSON_BMI = (10.0, 80.0)
 LOADED_HEIGHT_M = 0.04  # m: a sole corner this low ...
 LOADED_SPEED_MPS = 1.0  # m/s: ... and this slow may carry load (completeness check)
 # A whole take needs no low latency: a symmetric spline window (look as far ahead as back). The live
@@ -312,6 +316,21 @@ def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycl
     return info
 
 
+def _weighed_as_no_person(info: dict, stature_m: float | None) -> None:
+    """Add to the mass ``info`` (:func:`_decide_mass`) a note where the plates weighed the subject at a body-mass
+    index outside :data:`PERSON_BMI` at the markers' stature (m): their scale is wrong. Their mass stays in use: a
+    scale common to a plate's channels leaves its CoP (a ratio) where it is, and the thresholds scale with it."""
+    if not info["source"].startswith("plates") or not stature_m:
+        return
+    bmi = info["used_kg"] / stature_m**2
+    if PERSON_BMI[0] <= bmi <= PERSON_BMI[1]:
+        return
+    note = (f"the plates weigh the subject at {info['used_kg']:.0f} kg, a body-mass index of {bmi:.0f} kg/m^2 at the "
+            f"markers' stature of {stature_m:.2f} m, no person's: their ANALOG:SCALE or FORCE_PLATFORM:UNITS may be "
+            "wrong (a scale common to a plate's channels leaves its CoP where it is; --mass gives the mass)")
+    info["note"] = f"{info['note']}; {note}" if "note" in info else note
+
+
 def facing(take: MarkerTake) -> np.ndarray:
     """(2,) the horizontal way the pelvis faces on average (internal frame)."""
     yaw = take.frames[:, take.body.channel_names.index("pelvis.yaw")]
@@ -346,6 +365,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                                standing_span(times, complete, [t for s in strikes.values() for t in s]))
     mass_info = _decide_mass(trial, opts, m_plates, cycles, first, m_standing,
                              stance_mass(plates.force[:, 2], com_acc[:, 2], feet_on, FORCE_SEEN))
+    _weighed_as_no_person(mass_info, take.notes.get("stature_m"))
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
         take, times, cfg, result = run_take(trial, opts, used, floor)
