@@ -239,6 +239,35 @@ def test_urdf_bad_physics_is_refused(tmp_path, capsys, robot, change, says):
     refused(capsys, "analyze", put(tmp_path, "t.csv", csv_text), "--robot", u, names="r.urdf: link", says=says)
 
 
+def test_an_inertia_below_semi_definite_by_a_negligible_amount_is_taken_as_the_nearest(tmp_path, capsys, robot):
+    """HRP-4C's 13 g wrists are written with a principal moment of -7e-08 kg m^2 (a CAD export's rounding): the
+    whole robot was refused for them. A deficit negligible for the robot (its ZMP answer well under a mm) is now
+    taken as the nearest positive semi-definite inertia with one warning; one that is not is still refused."""
+    urdf, csv_text = robot
+    turn = np.linalg.qr(np.array([[1.0, 0.4, 0.2], [0.3, 1.0, 0.5], [0.1, 0.2, 1.0]]))[0]
+
+    def inertia(moments) -> str:
+        i = (turn @ np.diag(moments) @ turn.T).tolist()
+        return (f'<inertia ixx="{i[0][0]!r}" ixy="{i[0][1]!r}" ixz="{i[0][2]!r}" iyy="{i[1][1]!r}" '
+                f'iyz="{i[1][2]!r}" izz="{i[2][2]!r}"/>')
+
+    u = put(tmp_path, "r.urdf", _first_inertial(urdf, inertia=inertia([-1e-8, 2e-4, 3e-4])))
+    ref = put(tmp_path, "ref.urdf", _first_inertial(urdf, inertia=inertia([0.0, 2e-4, 3e-4])))
+    link = re.search(r'<link name="([^"]+)">\s*<inertial>', urdf)[1]
+    got, want = body_from_urdf(u).model, body_from_urdf(ref).model
+    assert max(np.abs(a.inertia - b.inertia).max() for a, b in zip(got.inertias, want.inertias, strict=True)) < 1e-12
+    out = tmp_path / "z.csv"
+    with pytest.warns(UserWarning) as said:
+        assert main(["analyze", str(put(tmp_path, "t.csv", csv_text)), "--robot", str(u), "--out", str(out)]) == 0
+    ours = [str(w.message) for w in said if w.category is UserWarning]
+    assert len(ours) == 1 and ours[0].startswith(f"{u}: link '{link}' <inertia>: principal moments down to -1e-08")
+    assert main(["analyze", str(tmp_path / "t.csv"), "--robot", str(ref), "--out", str(tmp_path / "ref.csv")]) == 0
+    assert out.read_text() == (tmp_path / "ref.csv").read_text()
+    big = put(tmp_path, "big.urdf", _first_inertial(urdf, inertia=inertia([-1e-3, 2e-4, 3e-4])))
+    refused(capsys, "analyze", tmp_path / "t.csv", "--robot", big, names="big.urdf: link",
+            says="positive semi-definite")
+
+
 @pytest.mark.parametrize("toml, says", [
     ('[feet.left]\nlink = 3\n', "link"),
     ('[feet.left]\nlink = "l_foot"\nbox = { length = -0.1, width = 0.05 }\n', "box.length"),

@@ -6,7 +6,9 @@ figure's series, the streaming reader) against their whole-array references."""
 
 from __future__ import annotations
 
+import gc
 import math
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -253,3 +255,17 @@ def test_c3d_input_has_the_input_size_limit(tmp_path, capsys, monkeypatch):
     assert main(["analyze", str(trial)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and f"{trial}: 156672 bytes, more than the 0 MiB limit for a C3D file" in err[0], err
+
+
+def test_a_restarted_takes_stats_leave_no_spill_file_open(tmp_path):
+    """TakeStats starts on creation and again when the stream starts it: the first start's plausibility spill (a
+    temporary file) was dropped unclosed, one ResourceWarning ("unclosed file") per analysed take."""
+    stats = TakeStats(10, 100.0)
+    first = stats.plausibility.spill
+    stats.start()
+    assert first.closed and not stats.plausibility.spill.closed
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        assert main(["analyze", str(BANDAI / "walk_normal_006.bvh"), "--out", str(tmp_path / "z.csv")]) == 0
+        gc.collect()
+    assert not [w for w in said if w.category is ResourceWarning]

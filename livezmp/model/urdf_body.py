@@ -59,6 +59,11 @@ class UrdfBodyOptions:
 MAX_LINK_MASS = 1e4  # kg: heavier than any humanoid's link
 MAX_LENGTH = 1e3  # m: joint origins and centres of mass
 ROUNDOFF = 1e-9  # a principal moment this far below zero (relative: `_check_inertial`) is a zero written in decimals
+# kg m^2 per kg m^2 of the whole robot (mass x size^2): a link's principal moment this far below zero or less is
+# taken as zero, its inertia as the nearest positive semi-definite one. Its ZMP answer at 100 rad/s^2 is under
+# 1e-6 s^2 100 / g (0.03 mm on a 1.6 m robot): HRP-4C's 13 g wrists are written -7e-08 kg m^2 (a CAD export's
+# rounding of a tiny link), and refusing the robot for them would serve no one
+NEGLIGIBLE_INERTIA = 1e-6
 
 
 def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.ndarray:
@@ -72,28 +77,32 @@ def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.
     return vals
 
 
-def _check_inertial(link: ET.Element, path: Path) -> float:
+def _check_inertial(link: ET.Element, path: Path) -> tuple[float, np.ndarray]:
     """Mass finite and >= 0, centre of mass finite, inertia finite and positive semi-definite: what the
-    ZMP's dynamics need. Principal moments that break the triangle inequality (one larger than the sum of
-    the other two: no rigid body has them) are used as written: CAD exports give them to published robots
-    (Darwin-OP's neck, Romeo's shoulder, iCub's 1 mg base link) and a monitor that refused the robot for
-    one link's inertia would serve no one.
+    ZMP's dynamics need. An inertia below positive semi-definite by more than roundoff is written back as the
+    nearest one (its negative principal moments zeroed) and returned for `_check_deficits`, which refuses it
+    unless it is negligible for the whole robot. Principal moments that break the triangle inequality (one
+    larger than the sum of the other two: no rigid body has them) are used as written: CAD exports give them to
+    published robots (Darwin-OP's neck, Romeo's shoulder, iCub's 1 mg base link) and a monitor that refused the
+    robot for one link's inertia would serve no one.
     A mass of 0 makes the link massless (a frame, a sensor's placeholder, as real URDFs write
     them): its ``<inertial>`` is removed, whatever inertia it gives (no massless body has one).
     Zero principal moments are a point mass or a thin rod (a sensor link of 0.01 kg written
     with a zero inertia): the limits of rigid bodies, accepted. Returns the largest principal moment (kg m^2; 0
-    for a massless link), for `_check_sizes`."""
+    for a massless link), for `_check_sizes`, and the principal moments as written where they were not positive
+    semi-definite (else empty)."""
     where = f"{path}: link {link.get('name')!r} <inertial>"
     inertial = link.find("inertial")
+    none = np.zeros(0)
     if inertial is None:
-        return 0.0
+        return 0.0, none
     mass_el, inertia_el, origin = inertial.find("mass"), inertial.find("inertia"), inertial.find("origin")
     if mass_el is None or inertia_el is None:
         raise InputError(f"{where}: needs <mass> and <inertia>")
     mass = _numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
     if mass == 0:
         link.remove(inertial)
-        return 0.0
+        return 0.0, none
     if not 0 < mass <= MAX_LINK_MASS:
         raise InputError(f"{where} <mass> value: {mass:g} kg is outside [0, {MAX_LINK_MASS:g}]")
     if origin is not None:
@@ -106,22 +115,45 @@ def _check_inertial(link: ET.Element, path: Path) -> float:
         comps[k] = _numbers(inertia_el, k, 1, "0", f"{where} <inertia>")[0]
     c = comps
     inertia = np.array([[c["ixx"], c["ixy"], c["ixz"]], [c["ixy"], c["iyy"], c["iyz"]], [c["ixz"], c["iyz"], c["izz"]]])
-    moments = np.linalg.eigvalsh(inertia)
-    if moments[0] < -ROUNDOFF * max(float(np.abs(moments).max()), mass * 1.0):  # kg m^2: the mass 1 m out
-        raise InputError(f"{where} <inertia>: not positive semi-definite (principal moments "
-                         f"{', '.join(f'{m:.3g}' for m in moments)} kg m^2)")
-    return float(moments[2])
+    moments, axes = np.linalg.eigh(inertia)
+    if moments[0] >= -ROUNDOFF * max(float(np.abs(moments).max()), mass * 1.0):  # kg m^2: the mass 1 m out
+        return float(moments[2]), none
+    nearest = axes @ np.diag(np.maximum(moments, 0.0)) @ axes.T
+    for (i, j), k in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), c, strict=True):
+        inertia_el.set(k, repr(float(nearest[i, j])))
+    return float(moments[2]), moments
 
 
-def _check_sizes(model: pin.Model, mass: float, moments: dict[str, float], path: Path) -> None:
+def _check_deficits(written: dict[str, np.ndarray], mass: float, size: float, path: Path) -> None:
+    """Refuse a link whose inertia as written (``written``: principal moments, kg m^2, by link name; those not
+    positive semi-definite) falls below zero by more than ``NEGLIGIBLE_INERTIA`` x the robot's ``mass`` (kg) x
+    ``size``^2 (m); warn once of the others, taken as their nearest positive semi-definite inertia."""
+    if not written:
+        return
+    scale = NEGLIGIBLE_INERTIA * mass * size**2
+    for name, moments in written.items():
+        if -moments[0] > scale:
+            raise InputError(f"{path}: link {name!r} <inertial> <inertia>: not positive semi-definite (principal "
+                             f"moments {', '.join(f'{m:.3g}' for m in moments)} kg m^2)")
+    worst = min(m[0] for m in written.values())
+    warnings.warn(f"{path}: link{'s' * (len(written) > 1)} {', '.join(map(repr, written))} <inertia>: principal "
+                  f"moments down to {worst:.2g} kg m^2, negligible for a {mass:.3g} kg robot {size:.2f} m across: "
+                  f"taken as the nearest positive semi-definite inertia", UserWarning, stacklevel=3)
+
+
+def _robot_size(model: pin.Model) -> float:
+    """m: the largest distance between two of the robot's joints in its zero pose."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, np.zeros(model.nq))
+    points = np.array([data.oMi[j].translation for j in range(model.njoints)])
+    return float(np.linalg.norm(points[:, None] - points[None], axis=2).max())
+
+
+def _check_sizes(mass: float, size: float, moments: dict[str, float], path: Path) -> None:
     """No link's largest principal moment (``moments``, kg m^2 by link name) above what the whole robot's mass
     (``mass``, kg) could have at its size (all of it at the largest distance between two of its joints, zero
     pose): no link of the robot can have it (Darwin-OP's file gives its 1 kg body 6.5 kg m^2, 9 times the whole
     robot's most, and its ZMP then moved by metres; a unit error). InputError naming the link."""
-    data = model.createData()
-    pin.forwardKinematics(model, data, np.zeros(model.nq))
-    points = np.array([data.oMi[j].translation for j in range(model.njoints)])
-    size = float(np.linalg.norm(points[:, None] - points[None], axis=2).max())
     name, moment = max(moments.items(), key=lambda item: item[1])
     if size > 0 and moment > mass * size**2:  # 0: a single link, no size to judge by
         raise InputError(f"{path}: link {name!r} <inertia>: a principal moment of {moment:.3g} kg m^2, more than "
@@ -292,7 +324,8 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     links = root.findall("link")
     if len(links) > MAX_LINKS:
         raise InputError(f"{path}: {len(links)} links, more than the {MAX_LINKS} this tool analyses")
-    moments = {link.get("name"): _check_inertial(link, path) for link in links}
+    checked = {link.get("name"): _check_inertial(link, path) for link in links}
+    moments = {name: largest for name, (largest, _) in checked.items()}
     if root.find("./link/inertial") is None:
         raise InputError(f"{path}: URDF has no <inertial> with a mass on any link; masses are needed for the ZMP")
     unbounded = _check_joints(root, path)
@@ -303,7 +336,10 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     except (RuntimeError, ValueError) as e:
         first = str(e).splitlines()[0] if str(e).strip() else type(e).__name__
         raise InputError(f"{path}: Pinocchio cannot load it: {first}") from None
-    _check_sizes(model, sum(float(m.get("value")) for m in root.findall("./link/inertial/mass")), moments, path)
+    mass = sum(float(m.get("value")) for m in root.findall("./link/inertial/mass"))
+    size = _robot_size(model)
+    _check_deficits({name: w for name, (_, w) in checked.items() if len(w)}, mass, size, path)
+    _check_sizes(mass, size, moments, path)
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf

@@ -89,7 +89,7 @@ class PlausibilityStats:
     def __init__(self, total: int, dt: float):
         self.total, self.dt = total, dt
         self.vertical, self.distance = UpperQuantile(total), UpperQuantile(total)
-        self.spill = tempfile.TemporaryFile()  # noqa: SIM115 (closed by result)
+        self.spill = tempfile.TemporaryFile()  # noqa: SIM115 (closed by close)
         self.com = np.empty((0, 3))  # CoM of frames [self.first, self.received)
         self.flight = np.empty(0, dtype=bool)  # flight frames among them
         self.flight_count, self.flight_acc = 0, 0.0  # flight frames out, sum of their vertical accelerations
@@ -123,6 +123,10 @@ class PlausibilityStats:
         drop = max(done - 2, 0) - self.first
         self.com, self.flight, self.first = self.com[drop:], self.flight[drop:], self.first + drop
 
+    def close(self) -> None:
+        """Close the spill file (:meth:`result` does; a stats object dropped before its result must)."""
+        self.spill.close()
+
     def result(self) -> dict:
         fwd, _ = walking_axes(np.stack([self.start, self.com[-1]]))
         parts = tuple(UpperQuantile(self.total) for _ in range(3))  # fore-aft, lateral within steps; path
@@ -140,7 +144,7 @@ class PlausibilityStats:
             whole = np.arange(lo, hi)  # the slow part is reported where its two means are whole
             whole = whole[(whole >= reach) & (whole < self.done - reach)]
             parts[2].add(path[whole - first])
-        self.spill.close()
+        self.close()
         fall = self.flight_acc / self.flight_count if self.flight_count else None
         share = self.flight_count / self.total if self.total else 0.0
         return _verdict([parts[0].value(), parts[1].value(), self.vertical.value()], self.distance.value() or 0.0,

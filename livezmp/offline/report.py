@@ -124,10 +124,13 @@ class TakeStats:
 
     def __init__(self, total: int, fps: float, tolerance_mm: float = VALIDATED_P95_MM):
         self.total, self.fps, self.tolerance_mm = total, fps, tolerance_mm
+        self.plausibility: PlausibilityStats | None = None
         self.start()
 
     def start(self) -> None:
-        """(Re)start: no frame added."""
+        """(Re)start: no frame added (the plausibility's spill file of a start before is closed)."""
+        if self.plausibility is not None:
+            self.plausibility.close()
         self.count = self.judged = self.inside = self.inside_tol = self.flight = 0
         self.excursion: float | None = None
         self.support = np.zeros(len(SUPPORT_LABELS), dtype=np.int64)
@@ -175,8 +178,16 @@ class TakeStats:
             "max_excursion_m": round(self.excursion or 0.0, 6),
             "support_counts": {label: int(c) for label, c in zip(SUPPORT_LABELS, self.support, strict=True)},
             "ground_height_m": round(self.ground, 6) if n else None,
-            "plausibility": self.plausibility.result() if n else None,
+            "plausibility": self._plausibility(),
         }
+
+    def _plausibility(self) -> dict | None:
+        """The plausibility verdict of the frames added (None for none); its spill file closed either way."""
+        if not self.count:
+            if self.plausibility is not None:
+                self.plausibility.close()
+            return None
+        return self.plausibility.result()
 
 
 @contextlib.contextmanager
