@@ -10,6 +10,7 @@ import struct
 import threading
 import time
 import uuid
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -106,8 +107,11 @@ def test_qtm_server_that_goes_away_is_reconnected(trial):
     server.close()
     assert wait_until(lambda: any(e.kind == "disconnected" for e in src.errors.drain()), 3.0)
     server = QtmServer(trial, port=port, speed=2.0, loop=True).start()  # QTM back on its port
-    after = collect(src, lambda out: len(out) >= 5)
+    after = collect(src, lambda out: len(out) >= 5 and any(f.restart for f in out[:-4]))
     assert len(after) >= 5 and src.stats.reconnects == 1
+    # the new server's numbers and clock start afresh (frames of the old one may still wait before them): its
+    # first frame delivered restarts the analysis
+    assert sum(f.restart for f in after) == 1
     src.close()
     server.close()
 
@@ -249,7 +253,46 @@ def test_natnet_server_that_goes_away_is_reconnected(trial):
     server.start()  # numbers from 0 again, below the first server's last: not late
     after = collect(src, lambda out: len(out) >= 5)
     assert len(after) >= 5 and src.stats.reconnects == 1 and src.stats.late == 0
-    assert after[0].frame == 0
+    assert after[0].frame == 0 and after[0].restart and not any(f.restart for f in after[1:])
+    src.close()
+    server.close()
+
+
+def test_natnet_stray_datagrams_never_stop_the_stream():
+    """One datagram each (from loopback, to the client's data port): a frame numbered far ahead (every later
+    frame was late: locked out), a skeleton bone whose quaternion is NaN (the receiving thread died on it: no
+    frame ever again), a frame whose time goes back (the monitor stopped on it). Each is dropped or read
+    as untracked, and the frames that follow them are read."""
+    import livezmp.sources.natnet_protocol as nn
+    from sim_devices.mocap_trial import generated_trial
+
+    trial = generated_trial(100.0, 2.0, n_markers=3, n_plates=1)
+    n = trial.n_frames
+    trial = replace(trial, segment_names=("pelvis",), segment_pos=trial.markers[:, :1],
+                    segment_rot=np.tile(np.eye(3), (n, 1, 1, 1)))
+    data_port = free_udp_port()
+    server = NatNetServer(trial, data_port=data_port, speed=1.0, loop=False, max_frames=20)
+    src = open_mocap_source(f"natnet://127.0.0.1:{server.command_port}?data_port={data_port}")
+    server.start()
+    served = collect(src, lambda out: len(out) == 20, deadline=3.0)  # then the server is silent: only ours come
+    assert len(served) == 20 and served[-1].segments.tracked.all()
+    last = served[-1]
+
+    def stray(number: int, t: float, quat) -> bytes:
+        bone = {1: {1: nn.Pose(np.zeros(3), np.array(quat, float))}}
+        return nn.message(nn.FRAMEOFDATA, nn.pack_frame(nn.FrameOfData(number, {"trial": trial.markers[0]}, {}, t,
+                                                                          skeletons=bone)))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for packet in (stray(last.frame + 10**6, last.t + 0.02, [0, 0, 0, 1]),  # dropped: jumps
+                       stray(last.frame + 1, last.t + 0.01, [np.nan, 0, 0, 1]),  # delivered, its bone untracked
+                       stray(last.frame + 2, last.t - 1.0, [0, 0, 0, 1]),  # dropped: time goes back (malformed)
+                       *(stray(last.frame + k, last.t + 0.01 * k, [0, 0, 0, 1]) for k in range(2, 12))):
+            s.sendto(packet, ("127.0.0.1", data_port))
+    after = collect(src, lambda out: len(out) >= 11, deadline=3.0)
+    assert [f.frame for f in after] == list(range(last.frame + 1, last.frame + 12))
+    assert not after[0].segments.tracked.any() and all(f.segments.tracked.all() for f in after[1:])
+    assert not any(f.restart for f in after[1:])  # (the first restarts if the client reconnected in the silence)
+    assert (src.stats.jumps, src.stats.malformed) == (1, 1)
     src.close()
     server.close()
 

@@ -60,6 +60,8 @@ class AlarmTracker:
         if r.inside is False:
             if self.since is None:
                 self.since, self.worst, self.raised = r.t, 0.0, False
+            elif r.t < self.since:  # a stream that started over on an earlier clock: the run is timed from here
+                self.since = r.t
             self.worst = min(self.worst, r.margin)
             if not self.raised and r.t - self.since >= self.threshold:
                 self.raised = True

@@ -237,6 +237,7 @@ class Monitor:
         if frame.restart and self.pipeline.frames_in:  # a new timeline: finish the old one, start over
             for r in self.pipeline.restart():
                 self._result(r)
+            self._gait_tried = False  # the cadence's estimator starts over too: its times may go back
         if frame.cop is not None:
             self._cops.append((k, self.source.body.world_from_input @ frame.cop))
         r = self.pipeline.step(frame.t, frame.channels, frame.contacts, frame.gravity)

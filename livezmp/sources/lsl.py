@@ -10,17 +10,18 @@ second stream: ``?plates=NAME``, else a stream of type ``Force`` on the markers'
 its last ``_``) and ``type`` ForceX/Y/Z (N), MomentX/Y/Z (N·m, or N·mm), CoPX/Y/Z
 (length units as above).
 
-Times: each sample's LSL timestamp plus the stream's clock offset (``time_correction``,
-refreshed every second) is on this machine's LSL clock, so ``latency`` is the time from
-the capture's stamp to the sample's arrival here. Frame numbers are the stamps in frame
-periods from the first, so drops (numbers skipped), late samples (stamped before one
-already delivered) and duplicates are counted exactly for a stream stamped at its
-nominal rate. Plates are paired with the marker frame of the same number; a marker
-frame waits at most ``align`` frame periods for its plates (``?align=``, default 3), then goes
-without (``plates_missing``): a longer wait delays every frame whose plate sample is late by as
-much. LSL re-connects by itself when a stream with the same source id comes back: data resuming
-after more than 0.5 s of silence counts as a reconnect. Frames pulled and not yet read are at most
-liblsl's own buffer (10 s of frames); more, from a reader that far behind, are counted as ``overflow``.
+Times: each sample's LSL timestamp plus the stream's clock offset (``time_correction``, refreshed
+every second) is on this machine's LSL clock, so ``latency`` is the time from the capture's stamp to
+the sample's arrival here. Frame numbers are the stamps in frame periods from the first, so drops
+(numbers skipped), late samples (stamped before one already delivered) and duplicates are counted
+exactly for a stream stamped at its nominal rate. A stamp far ahead, or not after the last, is
+dropped as the UDP streams' are (:class:`~livezmp.sources.udp.Timeline`). Plates are paired with the
+marker frame of the same number; a marker frame waits at most ``align`` frame periods for its plates
+(``?align=``, default 3), then goes without (``plates_missing``): a longer wait delays every frame
+whose plate sample is late by as much. LSL re-connects by itself when a stream with the same source
+id comes back: data resuming after more than 0.5 s of silence counts as a reconnect. Frames pulled
+and not yet read are at most liblsl's own buffer (10 s of frames); more, from a reader that far
+behind, are counted as ``overflow``.
 """
 
 from __future__ import annotations
@@ -28,13 +29,15 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from dataclasses import replace
 from urllib.parse import urlsplit
 
 import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import InOrder, MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.mocap_frame import MocapFrame, PlateSamples, parse_up_axis
+from livezmp.sources.udp import Timeline
 from livezmp.sources.url_query import query_params
 
 LENGTH = {"millimeters": 1e-3, "mm": 1e-3, "centimeters": 1e-2, "cm": 1e-2, "meters": 1.0, "m": 1.0}
@@ -171,7 +174,7 @@ class LslSource:
         if query.get("plates", "") != "none":
             self.plates = self._open_plates(query.get("plates"), full.hostname(), timeout, buffer_s)
         self.stats, self.errors = SourceStats(), ErrorLog()
-        self.order = InOrder(self.stats, self.errors, url)
+        self.order = Timeline(self.stats, self.errors)
         self.align = align
         self.offset = self.inlet.time_correction(timeout)
         self._offset_at = time.monotonic()
@@ -236,7 +239,8 @@ class LslSource:
         self._refresh_offset(received)
         for row, stamp in zip(samples, stamps, strict=True):
             k = self._number(stamp)
-            if not self.order.admit(k):
+            restart = self.order.admit(k, stamp, self.name)  # the sender's stamps: the offset's refreshes move t
+            if restart is None:
                 continue
             v = np.asarray(row, float)
             markers = v[self.index] * self.scale
@@ -244,7 +248,8 @@ class LslSource:
             if len(self._pending) >= self._max_pending:  # the reader is buffer_s behind: drop the newest, as
                 self.stats.overflow += 1  # FrameQueue does, so that what is delivered stays in order
                 continue
-            self._pending.append(MocapFrame(t, received, k, self.labels, markers, self.up, latency=clock - t))
+            self._pending.append(MocapFrame(t, received, k, self.labels, markers, self.up, latency=clock - t,
+                                            restart=restart))
         if self.plates is not None:
             rows, pstamps = self.plates.pull_chunk(0.0)
             for row, stamp in zip(rows, pstamps, strict=True):
@@ -276,7 +281,7 @@ class LslSource:
         if plates is None:
             self.errors.report("plates_missing", f"{self.name}: frame {f.frame} without its force-plate sample")
             return f
-        return MocapFrame(f.t, f.received, f.frame, f.labels, f.markers, f.up, plates, f.latency)
+        return replace(f, plates=plates)
 
     def read(self, timeout: float) -> MocapFrame | None:
         deadline = time.monotonic() + timeout

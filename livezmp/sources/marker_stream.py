@@ -162,6 +162,9 @@ class MarkerStreamSource:
         """(n roles, 3) m internal frame, short gaps carried on (see the module docstring)."""
         if f.labels != self._labels:
             self._map_labels(f.labels)
+        if f.restart:  # a new timeline: no marker is carried on from the old one
+            self._last[:], self._prev[:], self._t_last[:], self._t_prev[:] = np.nan, np.nan, -np.inf, -np.inf
+            self._long[:] = False
         padded = np.vstack([f.markers, np.full((1, 3), np.nan)])
         p = padded[self._index]
         if self._means is not None:
@@ -247,7 +250,7 @@ class MarkerStreamSource:
             channels = self._to_channels(batch)
             for f, ch in zip(batch, channels, strict=True):
                 cop = f.plates.combined_cop(self.rotation[2]) if len(f.plates) else None
-                self._ready.append(SourceFrame(f.t, ch, None, f.received, f.latency, cop))
+                self._ready.append(SourceFrame(f.t, ch, None, f.received, f.latency, cop, restart=f.restart))
         return self._ready.popleft()
 
     def details(self) -> dict:

@@ -15,9 +15,7 @@ from typing import Protocol
 
 import numpy as np
 
-from livezmp.sources.frame_format import SEQ_MOD
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.udp import SequenceFilter
 
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 MIN_LOAD_N = 20.0  # N: plates carrying less are unloaded (no CoP), as in the C3D analysis
@@ -77,7 +75,8 @@ class MocapFrame:
     stream's up axis ("+z", "+y", ...); ``plates`` the force plates (empty without);
     ``latency`` s from the source's timestamp to ``received`` when the source's clock can
     be related to this machine's (LSL), else None; ``segments`` the rigid bodies and skeleton
-    segments the system solved (empty without)."""
+    segments the system solved (empty without); ``restart``: the stream's timeline starts over
+    here (connected anew, or resynchronised: :class:`~livezmp.sources.udp.Timeline`)."""
 
     t: float
     received: float
@@ -88,6 +87,7 @@ class MocapFrame:
     plates: PlateSamples = field(default_factory=PlateSamples)
     latency: float | None = None
     segments: SegmentPoses = field(default_factory=SegmentPoses)
+    restart: bool = False
 
     def marker(self, label: str) -> np.ndarray:
         """Position (3,) m of the marker ``label``; KeyError if the stream has no such label."""
@@ -148,31 +148,3 @@ class FrameQueue:
             if not self._q:
                 self._cv.wait(timeout)
             return self._q.popleft() if self._q else None
-
-
-class InOrder:
-    """In-order delivery by frame number into ``stats`` (``delivered``, ``duplicate``,
-    ``late``, ``lost``), over :class:`~livezmp.sources.udp.SequenceFilter`. :meth:`restart`
-    after a reconnection: the new server's numbers start afresh, the lost count stays."""
-
-    def __init__(self, stats: SourceStats, errors: ErrorLog, name: str):
-        self.stats, self.errors, self.name = stats, errors, name
-        self._filter = SequenceFilter()
-        self._lost_before = 0
-
-    def admit(self, number: int) -> bool:
-        """True if frame ``number`` is the next in order (counted delivered); else counted."""
-        f = self._filter
-        verdict = f.check(number % SEQ_MOD)
-        if verdict != "ok":
-            setattr(self.stats, verdict, getattr(self.stats, verdict) + 1)
-            self.errors.report(verdict, f"{self.name}: frame {number} after {f.last}")
-            return False
-        f.accept(number % SEQ_MOD)
-        self.stats.lost = self._lost_before + f.lost
-        self.stats.delivered += 1
-        return True
-
-    def restart(self) -> None:
-        self._lost_before = self.stats.lost
-        self._filter = SequenceFilter()

@@ -15,7 +15,8 @@ up axis: Motive streams y up unless its Up Axis setting says z (then ``?up=z``).
 
 A receiving thread drains the data socket as datagrams arrive and queues the frames
 (at most 4096 wait; more are counted as ``overflow``). Frames go in order by frame
-number (late, duplicate, lost counted; bad datagrams ``malformed``). No frame for
+number and timestamp (:class:`~livezmp.sources.udp.Timeline`: late, duplicate, lost, jumps counted; bad
+datagrams ``malformed``; a pose whose quaternion or position is not finite untracked). No frame for
 ``retry`` s: connect is sent again every ``retry`` s (Motive restarted, or a new take)
 and the model re-read; a server info answering it after a silence, followed by frames,
 counts as a reconnect. NatNet timestamps are Motive's own clock, so
@@ -36,7 +37,8 @@ import numpy as np
 from livezmp.errors import InputError
 from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
+from livezmp.sources.mocap_frame import FrameQueue, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
+from livezmp.sources.udp import Timeline
 from livezmp.sources.url_query import query_params
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
@@ -69,7 +71,7 @@ class NatNetSource:
             raise InputError(f"{url}: {e}") from None
         self.name, self.retry = url, retry
         self.stats, self.errors = SourceStats(), ErrorLog()
-        self.order = InOrder(self.stats, self.errors, url)
+        self.order = Timeline(self.stats, self.errors)
         self.cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.data.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -173,7 +175,8 @@ class NatNetSource:
             self._rejoined = False
             self.stats.reconnects += 1
             self.order.restart()
-        if not self.order.admit(f.frame):
+        restart = self.order.admit(f.frame, f.timestamp, self.name)
+        if restart is None:
             return None
         if self._last_stamp is not None and f.timestamp > self._last_stamp and self._dt is None:
             self._dt = f.timestamp - self._last_stamp
@@ -190,7 +193,7 @@ class NatNetSource:
                 out[q][i, ok] = values[idx[i][ok]]
         return MocapFrame(f.timestamp, received, f.frame, self.labels, markers, self.up,
                           PlateSamples(self.plate_names, out["force"], out["moment"], out["cop"]),
-                          segments=self._segments(f))
+                          segments=self._segments(f), restart=restart)
 
     def _segments(self, f: nn.FrameOfData) -> SegmentPoses:
         """The frame's rigid bodies and skeleton bones in the model's order (untracked: NaN)."""
@@ -200,7 +203,9 @@ class NatNetSource:
         pos, quat, tracked = np.full((k, 3), np.nan), np.tile([0.0, 0.0, 0.0, 1.0], (k, 1)), np.zeros(k, bool)
         for i, (sid, bid) in enumerate(self.bodies):
             p = f.rigid_bodies.get(bid) if sid is None else f.skeletons.get(sid, {}).get(bid)
-            if p is not None and p.tracked and np.any(p.quat):
+            # a pose with a non-finite or zero quaternion (not a rotation) or position counts as untracked
+            if p is not None and p.tracked and np.any(p.quat) and np.isfinite(p.quat).all() \
+                    and np.isfinite(p.position).all():
                 pos[i], quat[i], tracked[i] = p.position, p.quat, True
         rot = Rotation.from_quat(quat).as_matrix() if k else np.zeros((0, 3, 3))
         return SegmentPoses(self.segment_names, pos, rot, tracked)

@@ -9,7 +9,8 @@ the corners, :mod:`livezmp.sources.plate_frame`; ``6d`` rigid bodies named in ``
 position mm and rotation matrix, 9 floats column by column as Qualisys' own clients read
 them, an untracked body NaN, as the frame's segment poses; then ``skeleton:global``: the segments of
 the skeletons QTM solves, named in ``Skeletons``, position mm and quaternion). Frames go in order by
-QTM's frame number (late, duplicate, lost counted). A lost connection is reported and re-made every
+QTM's frame number and timestamp (:class:`~livezmp.sources.udp.Timeline`: late, duplicate, lost, jumps
+counted; a restarted numbering followed). A lost connection is reported and re-made every
 ``retry`` s, parameters read again (a changed marker set is taken as it comes).
 
 QTM timestamps are µs on QTM's own clock, which this machine cannot relate to its own:
@@ -23,14 +24,15 @@ import struct
 import threading
 import time
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from livezmp.errors import InputError
 from livezmp.model.plate_frame import plate_axes
 from livezmp.sources.interface import ErrorLog, SourceStats
-from livezmp.sources.mocap_frame import FrameQueue, InOrder, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
+from livezmp.sources.mocap_frame import FrameQueue, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
+from livezmp.sources.udp import Timeline
 
 DEFAULT_PORT = 22223  # QTM's little-endian RT port, the one qtm-rt speaks
 LENGTH = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -203,7 +205,7 @@ class QtmSource:
         self.name = f"qtm://{host}:{port}"
         self.host, self.port, self.version, self.retry = host, port, version, retry
         self.stats, self.errors = SourceStats(), ErrorLog()
-        self.order = InOrder(self.stats, self.errors, self.name)
+        self.order = Timeline(self.stats, self.errors)
         self.queue = FrameQueue(self.stats, queue)
         self.params: QtmParameters | None = None
         self._closed = False
@@ -292,8 +294,9 @@ class QtmSource:
             self.stats.malformed += 1
             self.errors.report("malformed", f"{self.name}: frame {packet.framenumber}: {e}")
             return
-        if self.order.admit(packet.framenumber):
-            self.queue.put(frame)
+        restart = self.order.admit(packet.framenumber, frame.t, self.name)
+        if restart is not None:
+            self.queue.put(replace(frame, restart=True) if restart else frame)
 
     def read(self, timeout: float) -> MocapFrame | None:
         return None if self._closed else self.queue.get(timeout)

@@ -29,6 +29,7 @@ body's channels.
 from __future__ import annotations
 
 import ipaddress
+import math
 import select
 import socket
 import time
@@ -100,6 +101,69 @@ class Resync:
         return self.run >= RESYNC_FRAMES
 
 
+class Timeline:
+    """The rules of the module docstring for one stream of (sequence number, time) frames, counted into
+    ``stats`` and reported to ``errors``: :meth:`admit` says whether a frame is delivered and whether the
+    analysis must start over with it. Used by every stream with frame numbers: UDP frames and the capture
+    systems' (their frame numbers and stamps; :class:`~livezmp.sources.mocap_frame.InOrder`)."""
+
+    def __init__(self, stats: SourceStats, errors: ErrorLog):
+        self.stats, self.errors = stats, errors
+        self.sequence, self.resync = SequenceFilter(), Resync()
+        self._lost_before = 0  # lost before the last new timeline
+        self._last_t: float | None = None
+        self._new = False  # the next delivered frame starts a new timeline
+
+    def drop(self, kind: str, message: str) -> None:
+        """Count a dropped frame as ``kind`` (a :class:`SourceStats` field) and report ``message``."""
+        setattr(self.stats, kind, getattr(self.stats, kind) + 1)
+        self.errors.report(kind, message)
+
+    def admit(self, seq: int, t: float, where: str) -> bool | None:
+        """Frame ``seq`` (modulo 2^32) at ``t`` s (the sender's clock): None when dropped (counted, and
+        reported naming ``where``), else True when the analysis starts over with it (a new timeline:
+        resynchronised, or the first frame after :meth:`restart`), False when it follows on."""
+        if not math.isfinite(t):  # no candidate for a new timeline either: it has no place on one
+            self.drop("malformed", f"{where}: time {t} is not a finite number of seconds")
+            return None
+        seq %= SEQ_MOD
+        verdict = self.sequence.check(seq)
+        last = self.sequence.last
+        if verdict == "ok" and last is not None and (seq - last) % SEQ_MOD > MAX_SEQ_JUMP:
+            verdict, why = "jumps", f"seq {seq} jumps ahead of {last}"
+        elif verdict == "ok" and self._last_t is not None and not t > self._last_t:
+            verdict, why = "malformed", f"field t: {t} does not increase (last {self._last_t})"
+        elif verdict == "ok" and self._last_t is not None and t - self._last_t > MAX_GAP_S:
+            verdict, why = "jumps", f"field t: {t} jumps {t - self._last_t:.3g} s ahead"
+        else:
+            why = f"seq {seq} after {last}"
+        restart = self._new
+        if verdict != "ok":
+            self.drop(verdict, f"{where}: {why}")
+            if not self.resync.offer(seq, t):
+                return None
+            self.stats.resyncs += 1
+            self.errors.report("resync", f"{where}: following a new timeline at seq {seq}, t {t:g} s after "
+                                         f"{RESYNC_FRAMES} consistent frames")
+            self.sequence = SequenceFilter()
+            restart = True
+        self.resync.clear()
+        self.sequence.accept(seq)
+        self.stats.lost = self._lost_before + self.sequence.lost
+        if restart:
+            self._lost_before = self.stats.lost
+        self.stats.delivered += 1
+        self._last_t, self._new = t, False
+        return restart
+
+    def restart(self) -> None:
+        """The stream was connected anew: its numbers and clock may start afresh; the next frame delivered
+        starts a new timeline. The lost count stays."""
+        self._lost_before = self.stats.lost
+        self.sequence, self._last_t, self._new = SequenceFilter(), None, True
+        self.resync.clear()
+
+
 def parse_allowlist(text: str, where: str) -> tuple[Network, ...]:
     """Comma-separated addresses or CIDR networks → networks."""
     out = []
@@ -138,9 +202,7 @@ class UdpSource:
         self.allow = allow or LOOPBACK
         self.max_bytes = max_packet_bytes(self.n_channels) if max_bytes is None else max_bytes
         self.stats, self.errors = SourceStats(), ErrorLog()
-        self.sequence, self.resync = SequenceFilter(), Resync()
-        self._lost_before = 0  # lost before the last resynchronisation
-        self._last_t: float | None = None
+        self.timeline = Timeline(self.stats, self.errors)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self.sock = socket.socket(family, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECV_BUFFER)
@@ -158,46 +220,18 @@ class UdpSource:
     def finished(self) -> bool:
         return self._closed
 
-    def _drop(self, kind: str, message: str, sender: str) -> None:
-        setattr(self.stats, kind, getattr(self.stats, kind) + 1)
-        self.errors.report(kind, f"{self.name}: from {sender}: {message}")
-
     def _accept(self, data: bytes, sender: str, received: float) -> SourceFrame | None:
         try:
             if not any(ipaddress.ip_address(sender.split("%")[0]) in n for n in self.allow):
-                self._drop("rejected", "sender not on the allowlist", sender)
+                self.timeline.drop("rejected", f"{self.name}: from {sender}: sender not on the allowlist")
                 return None
             f = decode_frame(data, self.n_channels, self.max_bytes)
         except FrameError as e:
-            self._drop(e.kind, str(e), sender)
+            self.timeline.drop(e.kind, f"{self.name}: from {sender}: {e}")
             return None
-        verdict = self.sequence.check(f.seq)
-        last = self.sequence.last
-        if verdict == "ok" and last is not None and (f.seq - last) % SEQ_MOD > MAX_SEQ_JUMP:
-            verdict, why = "jumps", f"seq {f.seq} jumps ahead of {last}"
-        elif verdict == "ok" and self._last_t is not None and not f.t > self._last_t:
-            verdict, why = "malformed", f"field t: {f.t} does not increase (last {self._last_t})"
-        elif verdict == "ok" and self._last_t is not None and f.t - self._last_t > MAX_GAP_S:
-            verdict, why = "jumps", f"field t: {f.t} jumps {f.t - self._last_t:.3g} s ahead"
-        else:
-            why = f"seq {f.seq} after {last}"
-        restart = False
-        if verdict != "ok":
-            self._drop(verdict, why, sender)
-            if not self.resync.offer(f.seq, f.t):
-                return None
-            self.stats.resyncs += 1
-            self.errors.report("resync", f"{self.name}: from {sender}: following a new timeline at seq {f.seq}, "
-                                         f"t {f.t:g} s after {RESYNC_FRAMES} consistent frames")
-            self.sequence = SequenceFilter()
-            restart = True
-        self.resync.clear()
-        self.sequence.accept(f.seq)
-        self.stats.lost = self._lost_before + self.sequence.lost
-        if restart:
-            self._lost_before = self.stats.lost
-        self.stats.delivered += 1
-        self._last_t = f.t
+        restart = self.timeline.admit(f.seq, f.t, f"{self.name}: from {sender}")
+        if restart is None:
+            return None
         channels = f.channels
         if self.rows is not None:
             if restart:
