@@ -5,6 +5,7 @@ frames and gaps are counted exactly, and a server that goes away is re-connected
 
 from __future__ import annotations
 
+import re
 import socket
 import struct
 import threading
@@ -411,6 +412,11 @@ def test_qtm_skeleton_segments_nested_untracked_and_unknown():
     ("lsl://no-such-stream-livezmp?timeout=0.2", "no LSL stream with name"),
     ("natnet://127.0.0.1?data_port=abc", "data_port: need a port number"),
     ("natnet://127.0.0.1?up=w", "up axis 'w'"),
+    # waits taken as given: -1 made liblsl wait for ever, 1e308 overflowed select() (a traceback)
+    ("lsl://x?timeout=-1", re.escape("timeout: need seconds in (0, 3600], got '-1'")),
+    ("lsl://x?timeout=nan", re.escape("timeout: need seconds in (0, 3600]")),
+    ("natnet://127.0.0.1:9?timeout=1e308", re.escape("timeout: need seconds in (0, 3600], got '1e308'")),
+    ("natnet://127.0.0.1:9?timeout=0", re.escape("timeout: need seconds in (0, 3600]")),
 ])
 def test_bad_capture_urls_are_one_line_errors(url, message):
     with pytest.raises(InputError, match=message):

@@ -38,7 +38,7 @@ from livezmp.errors import InputError
 from livezmp.sources.interface import ErrorLog, SourceStats
 from livezmp.sources.mocap_frame import MocapFrame, PlateSamples, parse_up_axis
 from livezmp.sources.udp import Timeline
-from livezmp.sources.url_query import query_params
+from livezmp.sources.url_query import query_params, query_seconds
 
 LENGTH = {"millimeters": 1e-3, "mm": 1e-3, "centimeters": 1e-2, "cm": 1e-2, "meters": 1.0, "m": 1.0}
 MOMENT = {"newton meters": 1.0, "nm": 1.0, "n.m": 1.0, "newton millimeters": 1e-3, "nmm": 1e-3, "n.mm": 1e-3}
@@ -139,10 +139,7 @@ class LslSource:
         self.name = url
         u = urlsplit(url)
         query = query_params(url, QUERY_KEYS)
-        try:
-            timeout = float(query.get("timeout", 5.0))
-        except ValueError:
-            raise InputError(f"{url}: timeout: need seconds, got {query['timeout']!r}") from None
+        timeout = query_seconds(query, "timeout", 5.0, url)
         try:
             align = float(query.get("align", align))
         except ValueError:

@@ -39,7 +39,7 @@ from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
 from livezmp.sources.mocap_frame import FrameQueue, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
 from livezmp.sources.udp import Timeline
-from livezmp.sources.url_query import query_params
+from livezmp.sources.url_query import query_params, query_seconds
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
 POLL_S = 0.1  # s: the receiving thread looks at its stop flag and the silence this often
@@ -65,10 +65,10 @@ class NatNetSource:
         query = query_params(url, QUERY_KEYS)
         try:
             self.server = (u.hostname or "127.0.0.1", u.port or COMMAND_PORT)
-            timeout = float(query.get("timeout", 5.0))
             self.up = parse_up_axis(query.get("up", "y"), url)
         except ValueError as e:
             raise InputError(f"{url}: {e}") from None
+        timeout = query_seconds(query, "timeout", 5.0, url)
         self.name, self.retry = url, retry
         self.stats, self.errors = SourceStats(), ErrorLog()
         self.order = Timeline(self.stats, self.errors)
