@@ -5,6 +5,7 @@ frames and gaps are counted exactly, and a server that goes away is re-connected
 
 from __future__ import annotations
 
+import math
 import re
 import socket
 import struct
@@ -166,6 +167,28 @@ def test_lsl_stream_without_up_axis_needs_one(trial):
         open_mocap_source(f"lsl://{name}?plates=none")
     src = open_mocap_source(f"lsl://{name}?plates=none&up=y")
     assert src.up == "+y" and src.labels == trial.labels and src.plates is None
+    src.close()
+    del outlet
+
+
+def test_lsl_samples_stamped_nan_or_back_in_time_are_dropped_and_a_new_clock_followed(trial):
+    """A sample stamped NaN (int(nan) raised out of read(): the monitor stopped) is dropped as malformed; a
+    sender whose clock jumps 100 s back is followed at its 8th sample (counted late, then delivered), which
+    restarts the analysis."""
+    import pylsl
+
+    from sim_devices.lsl_publisher import marker_info
+
+    name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
+    outlet = pylsl.StreamOutlet(marker_info(trial, name, name))
+    src = open_mocap_source(f"lsl://{name}?plates=none")
+    t0, row = pylsl.local_clock(), np.zeros(3 * len(trial.labels))
+    stamps = [t0 + 0.01 * k for k in range(10)] + [math.nan] + [t0 - 100.0 + 0.01 * k for k in range(20)]
+    for stamp in stamps:
+        outlet.push_sample(row, stamp)
+    frames = collect(src, lambda out: len(out) >= 10 + 20 - 7, deadline=3.0)
+    assert len(frames) == 23 and (src.stats.malformed, src.stats.late, src.stats.resyncs) == (1, 8, 1)
+    assert [f.restart for f in frames].index(True) == 10 and sum(f.restart for f in frames) == 1
     src.close()
     del outlet
 

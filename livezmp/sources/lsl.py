@@ -235,6 +235,9 @@ class LslSource:
             self._last_data = received
         self._refresh_offset(received)
         for row, stamp in zip(samples, stamps, strict=True):
+            if not math.isfinite(stamp):  # no frame number: dropped (int(nan) raised out of read())
+                self.order.drop("malformed", f"{self.name}: stamp {stamp} is not a finite number of seconds")
+                continue
             k = self._number(stamp)
             restart = self.order.admit(k, stamp, self.name)  # the sender's stamps: the offset's refreshes move t
             if restart is None:
@@ -250,7 +253,8 @@ class LslSource:
         if self.plates is not None:
             rows, pstamps = self.plates.pull_chunk(0.0)
             for row, stamp in zip(rows, pstamps, strict=True):
-                self._plate_rows[self._number(stamp)] = np.asarray(row, float)
+                if math.isfinite(stamp):  # else no frame to pair it with
+                    self._plate_rows[self._number(stamp)] = np.asarray(row, float)
             if len(self._plate_rows) > 4 * self.rate:  # bounded: keep the newest few seconds
                 for k in sorted(self._plate_rows)[: len(self._plate_rows) - int(2 * self.rate)]:
                     del self._plate_rows[k]
