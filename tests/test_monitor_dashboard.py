@@ -180,3 +180,5 @@ def test_busy_port_is_a_one_line_error():
         server = DashboardServer("127.0.0.1", s.getsockname()[1], dict, HELLO)
         with pytest.raises(InputError, match="cannot listen"):
             server.start()
+        server._thread.join(5.0)  # the server's loop has closed: stopping it (the monitor's finally) is a no-op,
+        server.stop()  # not 'Event loop is closed' (a traceback after the one-line error, when the loop closed first)

@@ -153,7 +153,10 @@ class DashboardServer:
 
     def stop(self, timeout: float = 5.0) -> None:
         if self._loop is not None and self._stopping is not None:
-            self._loop.call_soon_threadsafe(lambda: self._stopping.done() or self._stopping.set_result(None))
+            try:
+                self._loop.call_soon_threadsafe(lambda: self._stopping.done() or self._stopping.set_result(None))
+            except RuntimeError:  # its loop is closed: the server ended by itself (it could not listen)
+                pass
         if self._thread is not None:
             self._thread.join(timeout)
 
