@@ -81,7 +81,7 @@ import numpy as np
 import pinocchio as pin
 
 from livezmp.balance.contacts import support_label
-from livezmp.balance.support import clamp_to_polygon, convex_hull, support_polygon
+from livezmp.balance.support import clamp_to_vertices, convex_hull, support_vertices
 from livezmp.balance.zmp import compute_zmp, zmp_from_wrench
 from livezmp.errors import InputError
 from livezmp.live.scenarios import Push
@@ -327,7 +327,7 @@ class SimHumanoid:
         self._requested = 0.0
         self._unsupported_since: float | None = None
         self._pushes: list[Push] = []
-        self._polygon_cache: tuple[str, Array, Array] | None = None
+        self._polygon_cache: tuple[str, Array, Array, list] | None = None
         q = np.concatenate([self._placer.update(servo.position), servo.position])
         self._history = [q, q, q]  # configurations at steps k-2, k-1, k
         self._state = self._evaluate(0.0)
@@ -462,28 +462,30 @@ class SimHumanoid:
         soles = foot_soles(self.body, data)
         touching = [float(soles[s][:, 2].min()) <= self.contact_tolerance for s in ("left", "right")]
         support = support_label(*touching)
-        polygon = self._polygon(soles, support)
+        polygon, vertices = self._polygon(soles, support)
         clamped, margin = None, None
         if zmp is not None:
-            c = clamp_to_polygon(zmp[:2], polygon)
+            c = clamp_to_vertices(zmp[:2], vertices)
             clamped, margin = c.point, c.margin
         return HumanoidState(t, q1, v, a, zmp, res.com, force, push[:2], self._placer.stance, support, polygon,
                              soles, clamped, margin)
 
-    def _polygon(self, soles: dict[str, Array], support: str) -> Array:
-        """The support polygon; reused while the soles in contact stay within 1 nm of where
-        it was built (feet on the ground do not move), as building a hull costs more than a step."""
+    def _polygon(self, soles: dict[str, Array], support: str) -> tuple[Array, list[tuple[float, float]]]:
+        """The support polygon (m, 2) and its vertices as float pairs (checked once, when built: the ZMP is
+        clamped to them every step); reused while the soles in contact stay within 1 nm of where it was built
+        (feet on the ground do not move), as building a hull costs more than a step."""
         held = [soles[s] for s in ("left", "right") if support in (s, "double")]
         key = np.concatenate(held) if held else np.zeros((0, 3))
         cached = self._polygon_cache
         if cached is not None and cached[0] == support and np.abs(cached[1] - key).max(initial=0.0) <= 1e-9:
-            return cached[2]
+            return cached[2], cached[3]
         bearing = dict(soles)
         if self.edge is not None:
             bearing[self.edge[0]] = edge_strip(soles[self.edge[0]], self.edge[1])
-        polygon = support_polygon(bearing["left"], bearing["right"], support)
-        self._polygon_cache = (support, key, polygon)
-        return polygon
+        vertices = support_vertices(bearing["left"], bearing["right"], support)
+        polygon = np.array(vertices, dtype=float).reshape(-1, 2)  # as support_polygon makes it
+        self._polygon_cache = (support, key, polygon, vertices)
+        return polygon, vertices
 
     def _check_fall(self, s: HumanoidState) -> None:
         c = self.counters

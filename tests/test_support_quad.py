@@ -1,14 +1,25 @@
 """The closed-form hull of a single sole (four corners round a convex quadrilateral) equals the general
 hull, vertex for vertex, on rotated rectangles, arbitrary four-point sets and degenerate ones; the
-combined support_and_clamp equals support_polygon then clamp_to_polygon."""
+combined support_and_clamp, and clamp_to_vertices on support_vertices (the simulator's kept polygon), equal
+support_polygon then clamp_to_polygon."""
 
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from livezmp.balance.support import _quad_hull, clamp_to_polygon, convex_hull, support_and_clamp, support_polygon
+from livezmp.balance.support import (
+    SupportError,
+    _quad_hull,
+    clamp_to_polygon,
+    clamp_to_vertices,
+    convex_hull,
+    support_and_clamp,
+    support_polygon,
+    support_vertices,
+)
 
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
 size = st.floats(1e-3, 0.4, allow_nan=False)
@@ -85,3 +96,21 @@ def test_support_and_clamp_equals_polygon_then_clamp(left, right, support, p):
         point, inside, margin = clamp_to_polygon(p, expected)
         np.testing.assert_array_equal(clamp.point, point)
         assert (clamp.inside, clamp.margin) == (inside, margin)
+
+
+@settings(max_examples=300, deadline=None)
+@given(soles(), soles(), st.sampled_from(["left", "right", "double"]),
+       st.tuples(st.floats(-2e4, 2e4), st.floats(-2e4, 2e4)))
+def test_clamp_to_kept_vertices_equals_polygon_then_clamp(left, right, support, p):
+    vertices = support_vertices(left, right, support)
+    expected = support_polygon(left, right, support)
+    np.testing.assert_array_equal(np.array(vertices, dtype=float).reshape(-1, 2), expected)
+    point, inside, margin = clamp_to_polygon(p, expected)
+    clamp = clamp_to_vertices(p, vertices)
+    assert clamp.point.tobytes() == point.tobytes()
+    assert (clamp.inside, clamp.margin) == (inside, margin)
+
+
+def test_clamp_to_no_vertices_is_refused_as_an_empty_polygon():
+    with pytest.raises(SupportError, match="empty"):
+        clamp_to_vertices((0.0, 0.0), support_vertices(None, None, "none"))

@@ -203,6 +203,23 @@ def support_polygon(left_sole_xy, right_sole_xy, support: str) -> np.ndarray:
     return np.array(_support_rows(left_sole_xy, right_sole_xy, support), dtype=float).reshape(-1, 2)
 
 
+def support_vertices(left_sole_xy, right_sole_xy, support: str) -> list[tuple[float, float]]:
+    """:func:`support_polygon`'s vertices as plain (x, y) float pairs (m, ground plane, world frame), for a caller
+    that keeps a polygon and clamps to it many times (:func:`clamp_to_vertices`): checked here, once."""
+    return _support_rows(left_sole_xy, right_sole_xy, support)
+
+
+def clamp_to_vertices(p_xy, vertices: list[tuple[float, float]]) -> Clamp:
+    """:func:`clamp_to_polygon` of ``p_xy`` (2,) m to a polygon given as :func:`support_vertices` made it (not
+    checked again: the simulator clamps its true ZMP every step to a polygon it rebuilds only when the feet move).
+    Raises SupportError for an empty polygon or a bad point, as clamp_to_polygon does."""
+    px, py = _point(p_xy)
+    if not vertices:
+        raise SupportError("polygon: empty (flight phase, no support), nothing to clamp to")
+    qx, qy, inside, margin = _clamp_rows(px, py, vertices)
+    return Clamp(np.array((qx, qy)), inside, margin)
+
+
 def support_and_clamp(left_sole_xy, right_sole_xy, support: str, p_xy) -> tuple[np.ndarray, Clamp | None]:
     """:func:`support_polygon` and :func:`clamp_to_polygon` of ``p_xy`` (2,) m to it, in one call (the polygon is
     not checked again): the polygon (k, 2) m on the ground plane, world frame, and the Clamp, None in flight or

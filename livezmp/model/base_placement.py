@@ -42,7 +42,9 @@ class BasePlacer:
         self.switch_depth = switch_depth
         self.stance: str | None = None
         self.anchor = pin.SE3.Identity()  # world pose of the stance foot frame (flat)
-        self._q = np.zeros(body.nq)
+        self._q = np.zeros(body.nq)  # its base coordinates stay 0: the feet are placed relative to the base
+        self._nb = len(body.base_channels)
+        self._frames = {s: f.frame_id for s, f in body.feet.items()}
         self._sole_bottom = {s: float(f.sole_local[:, 2].min()) for s, f in body.feet.items()}
 
     def _sole_min_z(self, world_from_base: pin.SE3, side: str, base_from_foot: dict[str, pin.SE3]) -> float:
@@ -58,11 +60,12 @@ class BasePlacer:
     def update(self, q_joints: np.ndarray) -> np.ndarray:
         """Joint angles (rad, URDF order) → base (x, y, z, yaw, pitch, roll) in m, rad."""
         q = self._q
-        nb = len(self.body.base_channels)
-        q[:nb] = 0.0
-        q[nb:] = q_joints
+        q[self._nb:] = q_joints
         pin.framesForwardKinematics(self.body.model, self.data, q)
-        bf = {s: self.data.oMf[f.frame_id].copy() for s, f in self.body.feet.items()}
+        # the feet's placements read in place, not copied (the loop and the simulator place a base every cycle):
+        # nothing below moves the kinematics, and what is kept (the anchor) is a new SE3
+        placements = self.data.oMf
+        bf = {s: placements[frame] for s, frame in self._frames.items()}
         if self.stance is None:
             self._start(bf)
         other = "right" if self.stance == "left" else "left"

@@ -1,0 +1,63 @@
+"""The simulated humanoid's CPU cuts compute the states the straightforward code computed, bit for bit.
+
+The humanoid is stepped twice over the same scenario on simulated time, the second time with the
+straightforward code patched in (the reference, kept here), and every step's state is compared: the
+configuration and its derivatives, the true ZMP, CoM, contact force, support, polygon, clamped ZMP and margin,
+and the servos' positions, velocities and currents. The push scenario, uncorrected, pushes the robot until
+it falls: the steps cover double support, the push's wrench, the ZMP leaving the polygon and the fall."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import sim_devices.humanoid as humanoid_module
+from livezmp.balance.support import clamp_to_polygon
+from livezmp.live import scenarios as sc
+from livezmp.model.robot import load_robot
+from sim_devices.humanoid import SimHumanoid
+from sim_devices.scenario_player import ScenarioPlayer
+
+
+def clamp_checked_every_step(p_xy, vertices):
+    """The clamp as it was: to the kept polygon's array, its vertices checked again each step."""
+    return clamp_to_polygon(p_xy, np.array(vertices, dtype=float).reshape(-1, 2))
+
+
+def stepped_states(seconds: float) -> list[tuple]:
+    body = load_robot(None, None).body
+    scenario = sc.make_scenario("push", body)
+    h = SimHumanoid(body, scenario.goals(0.0))
+    for push in scenario.pushes:
+        h.push(push)
+    states = []
+    check_fall = h._check_fall
+
+    def recorded(s):
+        states.append((s.t, s.q, s.v, s.a, s.zmp, s.com, s.force, s.push, s.stance, s.support, s.polygon,
+                       s.clamped, s.margin, h.servo.position.copy(), h.servo.velocity.copy(),
+                       h.servo.current.copy()))
+        check_fall(s)
+
+    h._check_fall = recorded
+    ScenarioPlayer(h, scenario, rate_hz=125.0).run(seconds)
+    assert h.fallen is not None  # the run reached the fall
+    return states
+
+
+def same(a, b) -> bool:
+    if a is None or b is None or isinstance(a, str):
+        return a == b
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_humanoid_states_bit_for_bit_as_before(monkeypatch):
+    after = stepped_states(2.5)
+    with monkeypatch.context() as m:
+        m.setattr(humanoid_module, "clamp_to_vertices", clamp_checked_every_step)
+        before = stepped_states(2.5)
+    assert len(after) == len(before) > 1000
+    assert any(s[12] is not None and s[12] < 0 for s in after)  # the ZMP left the polygon
+    for a, b in zip(after, before, strict=True):
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert same(x, y), f"t = {a[0]:.3f} s: state {k} differs: {x!r} != {y!r}"
