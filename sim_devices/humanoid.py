@@ -175,7 +175,10 @@ class BalanceCounters:
 def _continued(angles: Array, previous: Array) -> Array:
     """``angles`` (rad) shifted by whole turns to lie within π of ``previous``, so that
     differences across ±π stay small."""
-    return previous + (angles - previous + np.pi) % (2 * np.pi) - np.pi
+    # plain floats: the base's three angles every physics step, where numpy's per-call cost is most of the work;
+    # Python's float % is numpy's remainder (the same result bit for bit)
+    return np.array([p + (a - p + math.pi) % (2 * math.pi) - math.pi
+                     for a, p in zip(angles.tolist(), previous.tolist(), strict=True)])
 
 
 SAME_CORNER = 1e-5  # corners this share of their span apart are one point: the legs' IK holds the feet to 1e-7 m
