@@ -36,6 +36,7 @@ from livezmp.model.robot import load_robot
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.mock_link import MockLink
 from sim_devices.servo_plant import ServoPlant
+from sim_devices.sim_time_can import SimClock  # time that moves only when the loop sleeps
 
 START_S = 1.5  # where the loop enters the demo scenario (s): the lean brings the corrector in
 CYCLES = 1000
@@ -54,19 +55,6 @@ PHYSICS_PARTS = [("goal shaping", "update", "humanoid.py"), ("servo plant", "ste
                  ("ZMP dynamics", "compute_zmp", "zmp.py"), ("push wrench", "_push_wrench", "humanoid"),
                  ("soles", "foot_soles", "body.py"), ("support polygon (kept)", "_polygon", "humanoid"),
                  ("clamp", "clamp_to_vertices", "support.py"), ("fall check", "_check_fall", "humanoid")]
-
-
-class SimClock:
-    """Time that moves only when the loop sleeps (s)."""
-
-    def __init__(self):
-        self.t = 0.0
-
-    def now(self) -> float:
-        return self.t
-
-    def sleep(self, seconds: float) -> None:
-        self.t += max(seconds, 0.0)
 
 
 def loop_run(body, scenario):
