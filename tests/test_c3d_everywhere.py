@@ -326,8 +326,9 @@ def test_monitor_replays_a_c3d_with_the_subjects_hat(corrected, tmp_path):
     d, _ = corrected
     (tmp_path / "s.toml").write_text(SUBJECT)
     # the table's HAT as a subject file (its sway the default's, as calibrate fits it)
-    fraction, height, _ = hat_table(body_from_markers(read_c3d(d / "cut.c3d")).notes["stature_m"])
-    (tmp_path / "t.toml").write_text(f"[subject]\nhat_fraction = {fraction}\nhat_offset_m = [0.0, 0.0, {height}]\n")
+    fraction, com, _ = hat_table(body_from_markers(read_c3d(d / "cut.c3d")).notes["stature_m"])
+    (tmp_path / "t.toml").write_text(f"[subject]\nhat_fraction = {fraction}\n"
+                                     f"hat_offset_m = [{com[0]}, {com[1]}, {com[2]}]\n")
     runs = {}
     for name, extra in (("subject", ["--subject", str(tmp_path / "s.toml")]),
                         ("table", ["--subject", str(tmp_path / "t.toml")])):

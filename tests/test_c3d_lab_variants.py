@@ -132,7 +132,9 @@ def test_a_lab_variant_reads_as_the_reference(name, reference, tmp_path_factory)
     # along the way the subject faces and to its left, whichever way the lab's axes point (walking along -x the
     # lab's +x made it [-0.05, -0.06] against the reference's [0.05, 0.06])
     same = lab.rate == 100 and lab.analog == 1000 and lab.mass and not lab.integer
-    assert cv["bias_mm"] == pytest.approx(rv["bias_mm"], abs=0.011 if same else 0.07)
+    # without the file's Height (written with its mass) the stature comes from the legs, and it sizes the placed HAT
+    # and its centre of mass' offset behind the mid-hip (anthropometry: Dumas et al.) that the plates were made with
+    assert cv["bias_mm"] == pytest.approx(rv["bias_mm"], abs=0.011 if same else 0.07 if lab.mass else 0.25)
     if same:  # the same samples: the same figures
         assert (cv["rms_mm"], cv["max_mm"]) == pytest.approx((rv["rms_mm"], rv["max_mm"]), abs=0.011)
     # no mass in the file and no whole gait cycle: the plates' mean vertical force over the take stood on them

@@ -188,9 +188,10 @@ def test_sample01_cluster_set_through_a_map(tmp_path):
     # this one stance it went from +27 to -80 ms with the sway while the RMS moved by 0.1 mm. Following the mid-hip
     # below 1 Hz and swaying TRUNK_STEP_GAIN above: 43.9 mm RMS, 66.8 mm p95, bias -12 / +26 mm. Without the frames
     # within the plates' low-pass reach (4 a side at 50 Hz) of its other foot's steps off the plates: 25 frames,
-    # 36.1 mm RMS, 48.5 mm p95, bias -12 / +24 mm
-    assert cv["frames"] >= 22 and cv["rms_mm"] < 38 and cv["p95_mm"] < 52
-    assert abs(cv["bias_mm"][0]) < 15 and abs(cv["bias_mm"][1]) < 35
+    # 36.1 mm RMS, 48.5 mm p95, bias -12 / +24 mm; with the centres of mass off the joint lines (Dumas et al.):
+    # 38.4 mm RMS, 52.5 mm p95, fore-aft bias -19 mm (one stance's: its cluster set places the HAT)
+    assert cv["frames"] >= 22 and cv["rms_mm"] < 40 and cv["p95_mm"] < 55
+    assert abs(cv["bias_mm"][0]) < 25 and abs(cv["bias_mm"][1]) < 35
     assert s["markers"]["joint_centres"]["right_knee"].startswith("functional")
     with pytest.raises(InputError, match="never seen|not in the file"):
         bad = _map_file(SAMPLE01_MAP.replace('"pv4"', '"PV9"'), tmp_path, "bad.toml")

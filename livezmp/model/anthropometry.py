@@ -6,6 +6,14 @@ Mass is a fraction of total body mass; the centre of mass a fraction of segment
 length from the proximal end; radii of gyration (sagittal, transverse, longitudinal)
 fractions of segment length. Lengths as fractions of stature come from the same
 table's mean segment lengths divided by the mean stature (1741 mm).
+
+De Leva places each centre of mass on the line between the segment's end points only. The anteroposterior
+position off that line comes from R. Dumas, L. Chèze and J.-P. Verriest, "Adjustments to McConville et al. and
+Young et al. body segment inertial parameters", Journal of Biomechanics 40(3):543-553, 2007, table 2 (men, as de
+Leva's table; their 3-D scans of the body): the thigh's and the shank's mass lie behind the femur's and the
+tibia's joint-centre lines (the gluteal, hamstring and calf muscles), the torso's behind the line from the lumbar
+to the cervical joint, the head's behind the neck. Without it a marker body's centre of mass stood about 10 mm
+ahead of the plates' CoP at rest and in walking (docs/validation.md, "The fore-aft bias").
 """
 
 from __future__ import annotations
@@ -21,19 +29,22 @@ class SegmentParams:
     com_fraction: float  # from the proximal joint, along the segment
     gyration: tuple[float, float, float]  # sagittal, transverse, longitudinal (fractions of length)
     length_fraction: float  # of stature, used when the skeleton gives no length
+    # forward (+) of the segment's joint-centre line, a fraction of its length: Dumas et al. 2007 (module docstring)
+    anterior_fraction: float = 0.0
 
 
 # kind -> parameters. Trunk is split into its three parts (upper, middle, lower).
 DE_LEVA_MALE: dict[str, SegmentParams] = {
-    "head": SegmentParams(0.0694, 0.5976, (0.362, 0.376, 0.312), 242.9 / 1741),
-    "upper_trunk": SegmentParams(0.1596, 0.2999, (0.716, 0.454, 0.659), 170.7 / 1741),
-    "middle_trunk": SegmentParams(0.1633, 0.4502, (0.482, 0.383, 0.468), 215.5 / 1741),
-    "lower_trunk": SegmentParams(0.1117, 0.6115, (0.615, 0.551, 0.587), 145.7 / 1741),
-    "upper_arm": SegmentParams(0.0271, 0.5772, (0.285, 0.269, 0.158), 281.7 / 1741),
-    "forearm": SegmentParams(0.0162, 0.4574, (0.276, 0.265, 0.121), 268.9 / 1741),
-    "hand": SegmentParams(0.0061, 0.7900, (0.628, 0.513, 0.401), 86.2 / 1741),
-    "thigh": SegmentParams(0.1416, 0.4095, (0.329, 0.329, 0.149), 422.2 / 1741),
-    "shank": SegmentParams(0.0433, 0.4459, (0.255, 0.249, 0.103), 434.0 / 1741),
+    "head": SegmentParams(0.0694, 0.5976, (0.362, 0.376, 0.312), 242.9 / 1741, -0.062),
+    "upper_trunk": SegmentParams(0.1596, 0.2999, (0.716, 0.454, 0.659), 170.7 / 1741, -0.036),  # Dumas' torso
+    "middle_trunk": SegmentParams(0.1633, 0.4502, (0.482, 0.383, 0.468), 215.5 / 1741, -0.036),
+    "lower_trunk": SegmentParams(0.1117, 0.6115, (0.615, 0.551, 0.587), 145.7 / 1741, 0.028),  # Dumas' pelvis
+    "upper_arm": SegmentParams(0.0271, 0.5772, (0.285, 0.269, 0.158), 281.7 / 1741, 0.017),
+    "forearm": SegmentParams(0.0162, 0.4574, (0.276, 0.265, 0.121), 268.9 / 1741, 0.010),
+    "hand": SegmentParams(0.0061, 0.7900, (0.628, 0.513, 0.401), 86.2 / 1741, 0.035),
+    "thigh": SegmentParams(0.1416, 0.4095, (0.329, 0.329, 0.149), 422.2 / 1741, -0.041),
+    "shank": SegmentParams(0.0433, 0.4459, (0.255, 0.249, 0.103), 434.0 / 1741, -0.048),
+    # the foot's centre of mass is Winter's, half-way from the ankle to the toe marker (markers.py), not placed here
     "foot": SegmentParams(0.0137, 0.4415, (0.257, 0.245, 0.124), 258.1 / 1741),
 }
 

@@ -23,12 +23,14 @@ cluster sets: :mod:`livezmp.model.marker_map`; a cluster set's landmarks from it
   degrees of freedom (three prismatic, then yaw, pitch, roll) placed on its own markers every frame
   (no joint constraints: soft-tissue motion cannot break a chain). Masses, centres of mass and
   radii of gyration from de Leva (1996), or for a child that table with Jensen's mass proportions at the
-  child's age (:mod:`livezmp.model.anthropometry`, chosen from the file's age or height, or ``bsp``); the
-  foot's centre of mass at the middle of ankle centre
+  child's age (:mod:`livezmp.model.anthropometry`, chosen from the file's age or height, or ``bsp``), each
+  centre of mass off its joint-centre line along the segment's forward axis by Dumas et al.'s (2007)
+  fraction of its length (the thigh's 4.1 % behind); the foot's centre of mass at the middle of ankle centre
   to toe marker (Winter 2009, table 4.1).
 - Head, arms and trunk (HAT) of a lower-body set are placed from the pelvis: de Leva's head,
   trunk and arm segments stacked upright above the mid-hip (arms hanging from the cervicale),
-  their combined centre of mass straight above the mid-hip. The HAT moves with the mid-hip and
+  their combined centre of mass above the mid-hip, 6 mm behind it for a 1.75 m subject (each part off its
+  line as Dumas et al. measured). The HAT moves with the mid-hip and
   turns with the pelvis' heading but stays upright: the trunk does not follow the pelvis'
   obliquity and tilt in walking (the spine takes them up). ``hat_follows_pelvis`` rigidly
   attaches it to the pelvis instead (at the take's mean tilt), for comparison.
@@ -483,39 +485,45 @@ def _euler_zyx(rot: np.ndarray, unwrap: bool = True) -> np.ndarray:
 
 
 def hat_table(stature: float, part: str = "hat",
-              table: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, float, np.ndarray]:
+              table: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, np.ndarray, np.ndarray]:
     """Head-arms-trunk above the lower trunk, from de Leva (1996) (masses from ``table``, a segment table of
-    :mod:`livezmp.model.anthropometry`): mass fraction, height (m) of its
-    centre of mass above the mid-hip, and its inertia (3, 3) per kg of HAT about that point
-    (x forward, y left, z up). Segments stacked upright: lower, middle, upper trunk, head; each arm
-    hangs from the cervicale (the top of the upper trunk) along the body's side. ``part``: ``"hat"`` all of it;
-    ``"head_and_arms"`` without the middle and upper trunk, ``"arms"`` the two arms alone, the height then
+    :mod:`livezmp.model.anthropometry`): mass fraction, centre of mass (3,) m from the mid-hip
+    (x forward, y left, z up; forward each part's ``anterior_fraction`` of its length, Dumas et al. 2007), and
+    its inertia (3, 3) per kg of HAT about that point. Segments stacked upright: lower, middle, upper trunk, head;
+    each arm hangs from the cervicale (the top of the upper trunk) along the body's side. ``part``: ``"hat"`` all
+    of it; ``"head_and_arms"`` without the middle and upper trunk, ``"arms"`` the two arms alone, the centre then
     measured from the cervicale."""
     t = table
     h = stature / 1741.0  # de Leva lengths are mm for a 1741 mm man
-    parts = []  # (mass fraction, CoM height m, segment, length m)
+    parts = []  # (mass fraction, CoM (3,) m, segment, length m)
+
+    def at(name: str, z: float, length: float) -> tuple[float, np.ndarray, str, float]:
+        return t[name].mass_fraction, np.array([t[name].anterior_fraction * length, 0.0, z]), name, length
+
     base = 145.7 * h  # omphalion above the mid-hip: the lower trunk's length
     for name, length_mm in (("middle_trunk", 215.5), ("upper_trunk", 170.7)):
         top = base + length_mm * h  # proximal end is the top
-        parts.append((t[name].mass_fraction, top - t[name].com_fraction * length_mm * h, name, length_mm * h))
+        parts.append(at(name, top - t[name].com_fraction * length_mm * h, length_mm * h))
         base = top
     head_len = 242.9 * h
-    parts.append((t["head"].mass_fraction, base + head_len * (1 - t["head"].com_fraction), "head", head_len))
+    parts.append(at("head", base + head_len * (1 - t["head"].com_fraction), head_len))
     joint = joint_top = base  # shoulders at the cervicale
     for name in ("upper_arm", "forearm", "hand"):
         length = t[name].length_fraction * stature
-        parts += [(t[name].mass_fraction, joint - t[name].com_fraction * length, name, length)] * 2
+        parts += [at(name, joint - t[name].com_fraction * length, length)] * 2
         joint -= length
     if part != "hat":
         left_out = ("middle_trunk", "upper_trunk") + (("head",) if part == "arms" else ())
-        parts = [(f, z - joint_top, n, length) for f, z, n, length in parts if n not in left_out]
+        parts = [(f, c - [0.0, 0.0, joint_top], n, length) for f, c, n, length in parts if n not in left_out]
     mass = sum(p[0] for p in parts)
-    height = sum(p[0] * p[1] for p in parts) / mass
+    com = sum(p[0] * p[1] for p in parts) / mass
     inertia = np.zeros((3, 3))
-    for frac, z, name, length in parts:
+    for frac, c, name, length in parts:
         rs, rt, rl = (g * length for g in t[name].gyration)
-        inertia += frac / mass * (np.diag([rs * rs, rt * rt, rl * rl]) + (z - height) ** 2 * np.diag([1.0, 1.0, 0.0]))
-    return mass, height, inertia
+        # parallel axes along the vertical only, as for the arms' spread across (the parts' forward offsets, under
+        # 20 mm, are left out: a HAT that turns only about the vertical then has no horizontal angular momentum)
+        inertia += frac / mass * (np.diag([rs * rs, rt * rt, rl * rl]) + (c[2] - com[2]) ** 2 * np.diag([1, 1, 0.0]))
+    return mass, com, inertia
 
 
 def _trim(markers: dict[str, np.ndarray], max_gap: int, rate: float) -> tuple[slice, list[dict]]:
@@ -1081,10 +1089,12 @@ def _upper_segments(m: dict[str, np.ndarray], mid_hip: np.ndarray, stature: floa
 
 
 def thorax_table(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> tuple[float, np.ndarray]:
-    """A tracked thorax' (middle + upper trunk) mass fraction and centre of mass (m, its own frame: below the
-    cervicale, :func:`trunk_com_below_cervicale`) from the segment table ``t``."""
+    """A tracked thorax' (middle + upper trunk) mass fraction and centre of mass (m, its own frame, x forward: below
+    the cervicale, :func:`trunk_com_below_cervicale`, and behind its axis by the table's ``anterior_fraction`` of its
+    length, as Dumas et al.'s torso lies behind its lumbar-to-cervical line) from the segment table ``t``."""
+    length = (170.7 + 215.5) * stature / 1741.0
     return (t["middle_trunk"].mass_fraction + t["upper_trunk"].mass_fraction,
-            np.array([0.0, 0.0, -trunk_com_below_cervicale(stature, t)]))
+            np.array([t["upper_trunk"].anterior_fraction * length, 0.0, -trunk_com_below_cervicale(stature, t)]))
 
 
 def trunk_com_below_cervicale(stature: float, t: dict[str, SegmentParams] = DE_LEVA_MALE) -> float:
@@ -1111,7 +1121,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
            notes: dict, lengths: dict[str, float], table: BspTable = ADULT) -> tuple[BodyModel, np.ndarray]:
     t = table.segments
     stature = notes["stature_m"]
-    hat_mass, hat_height, hat_inertia = hat_table(stature, table=t)
+    hat_mass, hat_com, hat_inertia = hat_table(stature, table=t)
     full = "hat" not in seg
     hat_fraction = hat_mass if full or opts.hat_fraction is None else opts.hat_fraction
     # the segment a subject file weighs (the placed HAT, or the tracked thorax) and its table fraction
@@ -1123,7 +1133,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
     rot_p = seg["pelvis"][1]
     tilt = float(np.median(np.arctan2(rot_p[:, 2, 0], rot_p[:, 2, 2])))  # forward lean of the pelvis z axis
     upright = pin.utils.rotate("y", tilt) if opts.hat_follows_pelvis else np.eye(3)
-    hat_up = np.array(opts.hat_offset) if opts.hat_offset is not None else np.array([0.0, 0.0, hat_height])
+    hat_up = np.array(opts.hat_offset) if opts.hat_offset is not None else hat_com
     scale_rest = (1.0 - weighed) / (1.0 - weighed_table)  # keep the total at 1 when the fraction is set
     model = pin.Model()
     model.name = "markers"
@@ -1144,15 +1154,14 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
         if name == "pelvis":
             mass = opts.total_mass * lower.mass_fraction * scale_rest
             r = [g * pelvis_len for g in lower.gyration]
-            com = np.array([0.0, 0.0, (1 - lower.com_fraction) * pelvis_len])
+            com = np.array([lower.anterior_fraction * pelvis_len, 0.0, (1 - lower.com_fraction) * pelvis_len])
             model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * np.diag(np.square(r))), pin.SE3.Identity())
             body_frame["pelvis_joint"] = parent
             continue
         if kind in ("headarms", "arms"):  # placed on the tracked thorax, whose origin is at the cervicale
-            frac, height, inertia = hat_table(stature, "head_and_arms" if kind == "headarms" else "arms", table=t)
+            frac, com, inertia = hat_table(stature, "head_and_arms" if kind == "headarms" else "arms", table=t)
             mass = opts.total_mass * frac * scale_rest
-            model.appendBodyToJoint(parent, pin.Inertia(mass, np.array([0.0, 0.0, height]), mass * inertia),
-                                    pin.SE3.Identity())
+            model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * inertia), pin.SE3.Identity())
             continue
         if kind in ("thorax", "head", "hand"):
             mass, com, inertia = _upper_inertia(kind, name, seg, m, stature, t)
@@ -1172,7 +1181,7 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             rot_in = pin.utils.rotate("y", -np.arctan2(toe[2], toe[0]))  # long axis along ankle -> toe
         else:
             length = lengths[name]
-            com = np.array([0.0, 0.0, -p.com_fraction * length])
+            com = np.array([p.anterior_fraction * length, 0.0, -p.com_fraction * length])
             rot_in = np.eye(3)
         r = np.array([g * length for g in p.gyration])
         model.appendBodyToJoint(parent, pin.Inertia(mass, com, mass * rot_in @ np.diag(r * r) @ rot_in.T),
@@ -1189,8 +1198,8 @@ def _build(seg: dict, m: dict, opts: MarkerBodyOptions, up: str, r_in: np.ndarra
             "" if opts.trunk_offset is None else ", its centre of mass {:+.0f} mm forward, {:+.0f} mm left, {:+.0f} mm "
             "up from its origin".format(*(1000 * np.array(opts.trunk_offset))))) if full else (
         f"head, arms and trunk ({100 * hat_fraction:.1f} % of the mass) placed from the pelvis: "
-        f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip"
-        + ("" if opts.hat_offset is None else f", {1000 * hat_up[0]:.0f} mm forward (subject file)")
+        f"centre of mass {1000 * hat_up[2]:.0f} mm above the mid-hip, {1000 * hat_up[0]:.0f} mm forward"
+        + (" (Dumas et al. 2007)" if opts.hat_offset is None else " (subject file)")
         + ("; oriented by the file's HAT points (" + ", ".join(HAT_POINTS) + ")" if "HATO" in m else
            "; upright, turning with the pelvis" if not opts.hat_follows_pelvis else
            f"; rigid on the pelvis, its mean anterior tilt {np.degrees(-tilt):.1f} deg removed")
@@ -1233,15 +1242,16 @@ def _upper_inertia(kind: str, name: str, seg: dict, m: dict, stature: float,
         gyr = t["middle_trunk"].gyration
     elif kind == "head":  # at its four markers' centre; from the vertex or above the cervicale by de Leva's fraction
         length = 242.9 * h
-        com = (np.zeros(3) if "LFHD" in m else np.array([0.0, 0.0, -t["head"].com_fraction * length]) if "THEA" in m
-               else np.array([0.0, 0.0, (1 - t["head"].com_fraction) * length]))
+        fwd = t["head"].anterior_fraction * length
+        com = (np.zeros(3) if "LFHD" in m else np.array([fwd, 0.0, -t["head"].com_fraction * length]) if "THEA" in m
+               else np.array([fwd, 0.0, (1 - t["head"].com_fraction) * length]))
         frac, gyr = t["head"].mass_fraction, t["head"].gyration
     else:
         s = name[-1].upper()
         origin, rot = seg[name]
         length = float(np.linalg.norm(_local(rot, origin, m[s + "FIN"]))) if s + "FIN" in m else 86.2 * h
         frac, gyr = t["hand"].mass_fraction, t["hand"].gyration
-        com = np.array([0.0, 0.0, -t["hand"].com_fraction * length])
+        com = np.array([t["hand"].anterior_fraction * length, 0.0, -t["hand"].com_fraction * length])
     r = np.array(gyr) * length
     return frac, com, frac * np.diag(r * r)
 

@@ -450,8 +450,8 @@ def _prior(segment: Segment, stature: float, table: BspTable) -> np.ndarray:
     """theta at the segment table ``table`` for a subject of ``stature`` m (a placed HAT's sway gains
     :data:`TRUNK_STEP_GAIN`; a tracked thorax' gains do nothing)."""
     if segment is HAT_SEGMENT:
-        fraction, height, _ = hat_table(stature, table=table.segments)
-        return np.array([fraction, 0.0, 0.0, height, *TRUNK_STEP_GAIN])
+        fraction, com, _ = hat_table(stature, table=table.segments)
+        return np.array([fraction, *com, *TRUNK_STEP_GAIN])
     fraction, com = thorax_table(stature, table.segments)
     return np.array([fraction, *com, *TRUNK_STEP_GAIN])
 
