@@ -12,8 +12,11 @@ position off that line comes from R. Dumas, L. Chèze and J.-P. Verriest, "Adjus
 Young et al. body segment inertial parameters", Journal of Biomechanics 40(3):543-553, 2007, table 2 (men, as de
 Leva's table; their 3-D scans of the body): the thigh's and the shank's mass lie behind the femur's and the
 tibia's joint-centre lines (the gluteal, hamstring and calf muscles), the torso's behind the line from the lumbar
-to the cervical joint, the head's behind the neck. Without it a marker body's centre of mass stood about 10 mm
-ahead of the plates' CoP at rest and in walking (docs/validation.md, "The fore-aft bias").
+to the cervical joint. The head and neck's are those of the same authors' corrigendum (J Biomech 40(10), 2007),
+as Dumas & Wojtusch (2018, "Estimation of the body segment inertial parameters for the rigid body biomechanical
+models used in motion analysis", Handbook of Human Motion) tabulate them: 2.0 % of its length ahead of the neck.
+Without it a marker body's centre of mass stood 7-10 mm ahead of the plates' CoP at rest and in walking
+(docs/validation.md, "The fore-aft bias").
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ class SegmentParams:
 
 # kind -> parameters. Trunk is split into its three parts (upper, middle, lower).
 DE_LEVA_MALE: dict[str, SegmentParams] = {
-    "head": SegmentParams(0.0694, 0.5976, (0.362, 0.376, 0.312), 242.9 / 1741, -0.062),
+    "head": SegmentParams(0.0694, 0.5976, (0.362, 0.376, 0.312), 242.9 / 1741, 0.020),
     "upper_trunk": SegmentParams(0.1596, 0.2999, (0.716, 0.454, 0.659), 170.7 / 1741, -0.036),  # Dumas' torso
     "middle_trunk": SegmentParams(0.1633, 0.4502, (0.482, 0.383, 0.468), 215.5 / 1741, -0.036),
     "lower_trunk": SegmentParams(0.1117, 0.6115, (0.615, 0.551, 0.587), 145.7 / 1741, 0.028),  # Dumas' pelvis

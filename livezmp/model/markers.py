@@ -29,7 +29,7 @@ cluster sets: :mod:`livezmp.model.marker_map`; a cluster set's landmarks from it
   to toe marker (Winter 2009, table 4.1).
 - Head, arms and trunk (HAT) of a lower-body set are placed from the pelvis: de Leva's head,
   trunk and arm segments stacked upright above the mid-hip (arms hanging from the cervicale),
-  their combined centre of mass above the mid-hip, 6 mm behind it for a 1.75 m subject (each part off its
+  their combined centre of mass above the mid-hip, 3 mm behind it for a 1.75 m subject (each part off its
   line as Dumas et al. measured). The HAT moves with the mid-hip and
   turns with the pelvis' heading but stays upright: the trunk does not follow the pelvis'
   obliquity and tilt in walking (the spine takes them up). ``hat_follows_pelvis`` rigidly
