@@ -14,13 +14,26 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from humanoid_gen import CONVENTIONS, HumanoidSpec, build_humanoid, com_height, malformed
+from scipy.optimize import brentq
 from test_live_loop_closed import balance
 
 from livezmp.cli import main
 from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
 from livezmp.correct.root_motion import RootMover
 from livezmp.live.config import SafetyConfig
-from livezmp.live.scenarios import LEAN_LEAD, Poser, joint_roles, lean_angle, lean_ramp, make_scenario, standing_support
+from livezmp.live.scenarios import (
+    LEAN_LEAD,
+    G,
+    Poser,
+    Push,
+    Scenario,
+    hip_height,
+    joint_roles,
+    lean_angle,
+    lean_ramp,
+    make_scenario,
+    standing_support,
+)
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import foot_soles
 from livezmp.model.robot import load_robot
@@ -343,6 +356,33 @@ def test_a_lean_or_push_the_corrector_cannot_take_back_is_refused_in_one_line(tm
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and f"{name}: its trunk turned back" in err[0], err
     assert "could not stand corrected" in err[0]
+
+
+def test_a_tall_robot_near_its_side_edge_rolls_its_trunk_without_toppling_itself(tmp_path):
+    # before: the trunk's acceleration was cut by its ZMP answer in pitch only; this 1.8 m robot (its upper body's
+    # mass high, as in the push test above), leaning sideways 20 mm inside its feet's outer edge, 35 mm short of its
+    # corrector's aim, had its trunk rolled at the full acceleration limit, whose answer moved its ZMP past that edge:
+    # it fell at 0.29 s, before it was pushed
+    spec = HumanoidSpec(height=1.8, mass=60.0, waist="yp", torso_com=0.95, seed=24)
+    body = load_robot(str(build_humanoid(tmp_path / "a.urdf", spec)), None).body
+    poser = Poser(body)
+    stood = poser.standing(0.3)
+    rolls = [poser.unit(f"{s}_{j}_roll", 0) for s in "lr" for j in ("ank", "hip")]
+
+    def room(angle: float) -> float:  # m from the CoM to the left feet's outer edge, leaning sideways (parallelogram)
+        com, polygon = standing_support(body, stood + angle * (rolls[0] - rolls[1] + rolls[2] - rolls[3]))
+        return float(polygon[:, 1].max() - com[1])
+
+    side = 1.0 if room(0.05) < room(0.0) else -1.0
+    angle = side * brentq(lambda a: room(side * a) - 0.02, 0.0, 0.6)
+    q0 = stood + angle * (rolls[0] - rolls[1] + rolls[2] - rolls[3])
+    height = hip_height(body, q0)
+    force = (0.0, (0.02 + 0.005) * body.total_mass * G / height)
+    push = Scenario("push", lambda t: q0.copy(), 4.5, (Push(force, height, 1.0, 3.0, 1.0),))
+    off, _ = balance(body, push, correct=False, foot_sensors=True)
+    on, _ = balance(body, push, correct=True, foot_sensors=True)
+    assert off.fallen is not None and on.fallen is None
+    assert on.counters.worst_margin > 0
 
 
 def test_a_hip_pitch_mounted_off_the_lateral_axis_bends_the_knees_by_the_legs_ik(tmp_path):

@@ -105,7 +105,7 @@ def size_scaled_margin(body: BodyModel, margin_m: float = MARGIN_M) -> float:
 
 # share of the static CoM's distance inside the feet that the ZMP's answer to the trunk's acceleration may take up
 REACTION_SHARE = 0.5
-PITCH = 1  # δ's component about the lateral axis (hip axes: `hip_axes`)
+ROLL, PITCH = 0, 1  # δ's components about the forward and lateral axes (hip axes: `hip_axes`)
 
 
 def reaction_per_accel(body: BodyModel, mover: RootMover, joints: np.ndarray) -> np.ndarray:
@@ -114,23 +114,26 @@ def reaction_per_accel(body: BodyModel, mover: RootMover, joints: np.ndarray) ->
     standing in ``joints`` (rad; not straight-kneed: a roll about the hips then asks the knees to bend at their
     singularity), its base placed by its feet. Turning the trunk back first pushes the ground's reaction forward:
     at the corrector's largest acceleration (`size_scaled_accel`) Atlas v5's ZMP moves 24.8 mm in its push's
-    stance, livezmp_mini's 5.3. Only the pitch's column (the lateral axis: the corrector's turn for every lean
-    forward) is filled: taken the same way, a roll's came out at metres per rad/s^2 on the OP3 (its feet
-    re-placed from legs re-solved for a hip moved sideways), not the robot's dynamics, and cut its push's
-    correction to a twentieth. Zeros for a skeleton (its root is no robot's base)."""
+    stance, livezmp_mini's 5.3. The roll's and pitch's columns (the forward and lateral axes: the corrector's turns
+    for a lean sideways or forward) are filled; the yaw's, which barely moves the ZMP, is left zero. Both postures
+    are placed by one `BasePlacer`, so on the same stance foot: placed each by a fresh one, a roll's lowered one
+    foot by micrometres, the first posture stood on the other and the base jumped by the feet's distance apart
+    (the OP3's roll column came out at 20 m per rad/s^2 for 2.5 mm). Zeros for a skeleton (its root is no robot's
+    base)."""
     k = np.zeros((2, 3))
     if body.kind != "urdf":
         return k
-    model, data, base = body.model, body.model.createData(), len(body.base_channels)
-    q = np.concatenate([BasePlacer(body).update(joints), joints])
+    model, data, base, placer = body.model, body.model.createData(), len(body.base_channels), BasePlacer(body)
+    q = np.concatenate([placer.update(joints), joints])
     rest = np.zeros(model.nv)
     at_rest = compute_zmp(model, data, q, rest, rest).zmp
     eps = 1e-4  # rad: small enough for the motion's first order, large enough for the legs' IK tolerance
-    moved = mover.apply(q, eps * np.eye(3)[PITCH], 0.5)[base:]
-    accel = (np.concatenate([BasePlacer(body).update(moved), moved]) - q) / eps
-    zmp = compute_zmp(model, data, q, rest, accel).zmp
-    if at_rest is not None and zmp is not None:
-        k[:, PITCH] = zmp[:2] - at_rest[:2]
+    for axis in (ROLL, PITCH):
+        moved = mover.apply(q, eps * np.eye(3)[axis], 0.5)[base:]
+        accel = (np.concatenate([placer.update(moved), moved]) - q) / eps
+        zmp = compute_zmp(model, data, q, rest, accel).zmp
+        if at_rest is not None and zmp is not None:
+            k[:, axis] = zmp[:2] - at_rest[:2]
     return k
 
 
