@@ -132,6 +132,8 @@ class HumanoidSpec:
     the sole (NimbRo-OP2X's parallel-linkage model, beside its serial legs);
     ``root_joint``: with ``extras``, the joint from the massless root link to the robot, "fixed" or "floating"
     (HighTorque's Hi: a ``world`` link and a floating joint, as MuJoCo conversions write the free base);
+    ``trunk_mass``: the torso's and head's masses times this before the whole is scaled to ``mass`` (with ``arm``
+    "" and ``torso_com`` near the hips' 0.54, a legs-only robot whose light trunk is a short lever: Alexbotmini's);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
 
     height: float = 0.5
@@ -171,6 +173,7 @@ class HumanoidSpec:
     foot_frames: bool = False
     parallel_legs: bool = False
     root_joint: str = "fixed"
+    trunk_mass: float = 1.0
     seed: int = 0
 
 
@@ -251,7 +254,7 @@ def _limits(spec: HumanoidSpec, role: str, side: str, axis: np.ndarray) -> tuple
 
 def _build(spec: HumanoidSpec) -> _Builder:
     b = _Builder(spec)
-    trunk = b.link("torso", 0.30, (0.0, 0.0, spec.torso_com), (0.12, 0.2, 0.24))
+    trunk = b.link("torso", 0.30 * spec.trunk_mass, (0.0, 0.0, spec.torso_com), (0.12, 0.2, 0.24))
     pelvis = b.link("pelvis", 0.10, (0.0, 0.0, 0.58), (0.1, 0.16, 0.06)) if spec.waist else trunk
     if spec.waist:  # the chain from pelvis up to torso (or down, when the torso is the root)
         chain = [pelvis] + [b.link(f"waist_{k}", 0.01, (0.0, 0.0, 0.6), (0.04, 0.04, 0.02))
@@ -260,7 +263,7 @@ def _build(spec: HumanoidSpec) -> _Builder:
             chain = chain[::-1]
         for k, axis in enumerate(spec.waist):
             b.joint(f"waist_{ROLE_OF[axis]}", "", chain[k], chain[k + 1], (0.0, 0.0, 0.6), ROLE_OF[axis])
-    head = b.link("head", 0.07, (0.0, 0.0, 0.93), (0.1, 0.1, 0.12))
+    head = b.link("head", 0.07 * spec.trunk_mass, (0.0, 0.0, 0.93), (0.1, 0.1, 0.12))
     b.joint("head", "", trunk, head, (0.0, 0.0, 0.86), "yaw", "continuous" if spec.continuous else "revolute")
     for s, y in (("l", 1.0), ("r", -1.0)):
         w = 0.055 * y

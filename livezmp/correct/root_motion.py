@@ -151,20 +151,22 @@ class RootMover:
         return {s: [self.data.oMf[f].copy() for f in fs] for s, fs in self.body.correction.foot_frames.items()}
 
     def apply(self, q: np.ndarray, delta: np.ndarray, w_left: float,
-              leg_start: np.ndarray | None = None) -> np.ndarray:
+              leg_start: np.ndarray | None = None, shift: np.ndarray | None = None) -> np.ndarray:
         """New configuration for root rotation offset ``delta`` (rad, hip axes) about the
         pivot ``w_left`` · left hip + (1 − w_left) · right hip; feet kept in place.
         ``leg_start`` (nq,): offsets added to the leg channels of ``q`` as the IK's starting
         point (a warm start from the last solution: the IK then needs one or two iterations);
-        the solution is the same to the IK tolerance."""
+        the solution is the same to the IK tolerance. ``shift`` (3,): m (internal world frame) the root is then
+        moved by, the legs carrying it over the feet (the online corrector's legs strategy)."""
         return self.apply_many(np.asarray(q, dtype=float)[None], np.asarray(delta, dtype=float)[None],
-                               np.array([w_left]), None if leg_start is None else np.asarray(leg_start)[None])[0]
+                               np.array([w_left]), None if leg_start is None else np.asarray(leg_start)[None],
+                               None if shift is None else np.asarray(shift, dtype=float)[None])[0]
 
     def apply_many(self, q: np.ndarray, delta: np.ndarray, w_left: np.ndarray,
-                   leg_start: np.ndarray | None = None) -> np.ndarray:
+                   leg_start: np.ndarray | None = None, shift: np.ndarray | None = None) -> np.ndarray:
         """:meth:`apply` to N configurations at once: ``q`` (N, nq), ``delta`` (N, 3), ``w_left``
-        (N,), ``leg_start`` (N, nq) or None; the legs' Gauss-Newton steps of all N are solved
-        as one stacked system, each configuration and leg stopping as :meth:`apply` does.
+        (N,), ``leg_start`` (N, nq) or None, ``shift`` (N, 3) or None; the legs' Gauss-Newton steps of all N are
+        solved as one stacked system, each configuration and leg stopping as :meth:`apply` does.
         ``last_foot_error`` is then the largest over the N."""
         q_new = np.array(q, dtype=float)
         corr = self.body.correction
@@ -177,7 +179,8 @@ class RootMover:
             pivot = w_left[n] * h_left + (1.0 - w_left[n]) * h_right
             root = self.data.oMf[corr.root_frame_id]
             r = pin.exp3(hip_axes(h_left, h_right) @ delta[n])
-            self.set_root_pose(qn, pin.SE3(r @ root.rotation, pivot + r @ (root.translation - pivot)))
+            moved = pivot + r @ (root.translation - pivot)
+            self.set_root_pose(qn, pin.SE3(r @ root.rotation, moved if shift is None else moved + shift[n]))
         if leg_start is not None:
             for cols in corr.legs.values():
                 q_new[:, cols] += leg_start[:, cols]

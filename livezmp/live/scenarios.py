@@ -41,6 +41,7 @@ from scipy.optimize import brentq
 from livezmp.balance.support import clamp_to_polygon, support_polygon
 from livezmp.balance.zmp import compute_zmp
 from livezmp.correct.limits import CorrectionLimits
+from livezmp.correct.online import hips_height, size_scaled_margin, uses_legs
 from livezmp.correct.root_motion import RootMover
 from livezmp.errors import InputError
 from livezmp.live.config import SafetyConfig
@@ -561,28 +562,34 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
 def trunk_takes_back(body: BodyModel, joints: np.ndarray) -> float:
     """How far back (m, along -x: the robot faces +x) the static CoM's ground point moves when the robot standing
     in ``joints`` (rad) has its root turned back as far as the corrector may (`CorrectionLimits.max_rotation_deg`
-    about the lateral axis, whichever way moves the CoM back), the feet held where they are (`RootMover`). A
+    about the lateral axis, whichever way moves the CoM back) and, a robot whose trunk is too short a lever for the
+    live loop's corrector (`uses_legs`, its margin `size_scaled_margin`), its pelvis carried back by its legs as far
+    as the corrector may (`hips_height` × the sine of that turn), the feet held where they are (`RootMover`). A
     distance, not a change of the support margin: from a centred stance a move back brings the CoM nearer the
     heels' edge, and the margin falls."""
     joints = follow(joints, body.mimics)
     q = np.concatenate([BasePlacer(body).update(joints), joints])
     mover, turn = RootMover(body, ik_iterations=50), np.radians(CorrectionLimits().max_rotation_deg[Y])
+    legs = uses_legs(body, mover, q, turn, size_scaled_margin(body))
+    shift = np.array([-hips_height(body, q) * math.sin(turn), 0.0, 0.0]) if legs else None
     base = len(body.base_channels)
     x0 = standing_support(body, joints)[0][X]
-    return max(x0 - standing_support(body, mover.apply(q, np.array([0.0, sign * turn, 0.0]), 0.5)[base:])[0][X]
-               for sign in (1.0, -1.0))
+    return max(x0 - standing_support(body, mover.apply(q, np.array([0.0, sign * turn, 0.0]), 0.5,
+                                                       shift=shift)[base:])[0][X] for sign in (1.0, -1.0))
 
 
 def _check_trunk_reach(body: BodyModel, name: str, joints: np.ndarray, need: float, why: str) -> None:
-    """InputError (one line) where the corrector's largest trunk turn (`trunk_takes_back`) moves the static CoM of
-    the posture ``joints`` (rad) back less than ``need`` (m; ``why`` says what for): the robot could not stand
-    the scenario ``name`` corrected (a robot whose upper body's CoM lies just above its hips: turned about its
-    hip yaws, the corrector's former pivot, NimbRo-OP2X's moved 4 mm back at 15° and it fell corrected)."""
+    """InputError (one line) where the corrector's largest trunk turn and pelvis shift (`trunk_takes_back`) move the
+    static CoM of the posture ``joints`` (rad) back less than ``need`` (m; ``why`` says what for): the robot could
+    not stand the scenario ``name`` corrected (a robot whose upper body's CoM lies just above its hips: turned about
+    its hip yaws, the corrector's former pivot, NimbRo-OP2X's moved 4 mm back at 15° and it fell corrected; before
+    the corrector's legs carried the pelvis, Alexbotmini's trunk alone moved it 1.8 mm where 8 were needed)."""
     back = trunk_takes_back(body, joints)
     if back < need:
         length = float(np.ptp(body.feet["left"].sole_local[:, X]))
         raise InputError(f"{body.model.name}: {name}: its trunk turned back by the corrector's largest "
-                         f"{CorrectionLimits().max_rotation_deg[Y]:g}° moves its CoM back only {back * 1e3:.1f} mm, "
+                         f"{CorrectionLimits().max_rotation_deg[Y]:g}° (and its pelvis carried back by its legs) "
+                         f"moves its CoM back only {back * 1e3:.1f} mm, "
                          f"{need * 1e3:.1f} needed ({why}): it could not stand corrected (its soles are "
                          f"{length * 1e3:.0f} mm long; a robot config gives its real ones)")
 
