@@ -321,6 +321,38 @@ def test_natnet_stray_datagrams_never_stop_the_stream():
     server.close()
 
 
+def test_natnet_takes_frames_from_the_server_only():
+    """Off loopback the data port listens on every interface: a frame any host sent it was taken as the
+    server's. Datagrams from another address (here 127.0.0.2) are counted as rejected and dropped; the same
+    frames from the server's address are read."""
+    import livezmp.sources.natnet_protocol as nn
+    from sim_devices.mocap_trial import generated_trial
+
+    trial = generated_trial(100.0, 2.0, n_markers=3, n_plates=1)
+    data_port = free_udp_port()
+    server = NatNetServer(trial, data_port=data_port, speed=1.0, loop=False, max_frames=5)
+    src = open_mocap_source(f"natnet://127.0.0.1:{server.command_port}?data_port={data_port}")
+    server.start()
+    served = collect(src, lambda out: len(out) == 5, deadline=3.0)
+    last = served[-1]
+    frames = [nn.message(nn.FRAMEOFDATA, nn.pack_frame(nn.FrameOfData(last.frame + k, {"trial": trial.markers[0]},
+                                                                        {}, last.t + 0.01 * k))) for k in (1, 2, 3)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+        other.bind(("127.0.0.2", 0))
+        for packet in frames:
+            other.sendto(packet, ("127.0.0.1", data_port))
+    wait_until(lambda: src.stats.rejected == 3, 2.0)
+    assert src.read(0.2) is None
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as same:
+        for packet in frames:
+            same.sendto(packet, ("127.0.0.1", data_port))
+    after = collect(src, lambda out: len(out) >= 3, deadline=3.0)
+    assert [f.frame for f in after] == [last.frame + 1, last.frame + 2, last.frame + 3]
+    assert src.stats.rejected == 3
+    src.close()
+    server.close()
+
+
 def test_natnet_nobody_there():
     port, data_port = free_udp_port(), free_udp_port()
     with pytest.raises(InputError, match="no NatNet server answered"):

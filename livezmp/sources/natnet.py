@@ -14,7 +14,8 @@ Fx Fy Fz (N), Mx My Mz (N·m), Cx Cy Cz (m). NatNet streams metres; it does not 
 up axis: Motive streams y up unless its Up Axis setting says z (then ``?up=z``).
 
 A receiving thread drains the data socket as datagrams arrive and queues the frames
-(at most 4096 wait; more are counted as ``overflow``). Frames go in order by frame
+(at most 4096 wait; more are counted as ``overflow``); a datagram from any address but the server's is
+counted as ``rejected`` and dropped (off loopback the data port listens on every interface). Frames go in order by frame
 number and timestamp (:class:`~livezmp.sources.udp.Timeline`: late, duplicate, lost, jumps counted; bad
 datagrams ``malformed``; a pose whose quaternion or position is not finite untracked). No frame for
 ``retry`` s: connect is sent again every ``retry`` s (Motive restarted, or a new take)
@@ -78,6 +79,9 @@ class NatNetSource:
         self.data.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
         try:
             self.cmd.connect(self.server)
+            # frames are taken from the server's address only: off loopback the data socket listens on every
+            # interface, where anyone on the network could otherwise send it frames
+            self.server_ip = self.cmd.getpeername()[0]
             self.data.bind(("127.0.0.1" if self.server[0] in ("127.0.0.1", "localhost") else "",
                             _int(query, "data_port", DATA_PORT, url)))
         except OSError as e:
@@ -225,7 +229,7 @@ class NatNetSource:
         only a fraction of a second at 1 kHz), hands frames to the queue, reconnects on silence."""
         while not self._closed:
             try:
-                packet = self.data.recv(65536)
+                packet, (sender, _) = self.data.recvfrom(65536)
             except BlockingIOError:
                 self._keep_connected(time.monotonic())
                 try:
@@ -235,6 +239,10 @@ class NatNetSource:
                 continue
             except OSError:
                 return
+            if sender != self.server_ip:
+                self.order.drop("rejected", f"{self.name}: a datagram from {sender}, not the server "
+                                            f"{self.server_ip}: dropped")
+                continue
             now = time.monotonic()
             self._silent_since = None
             try:
