@@ -20,6 +20,7 @@ from test_live_loop_closed import balance
 from livezmp.cli import main
 from livezmp.correct.online import MARGIN_M, size_scaled_accel, size_scaled_margin
 from livezmp.correct.root_motion import RootMover
+from livezmp.live import scenarios as scenarios_module
 from livezmp.live.config import SafetyConfig
 from livezmp.live.scenarios import (
     LEAN_LEAD,
@@ -370,6 +371,17 @@ def test_a_robot_whose_trunk_is_too_short_a_lever_is_carried_back_by_its_legs(tm
     on, _ = balance(body, scenario, correct=True, foot_sensors=name == "push")
     assert off.fallen is not None and on.fallen is None
     assert on.counters.worst_margin > 0
+
+
+def test_a_lean_neither_trunk_nor_legs_can_take_back_is_refused_in_one_line(tmp_path, capsys, monkeypatch):
+    # no robot on hand is beyond its trunk and legs both: the light-trunk lean robot with its legs' help taken away
+    # stands for one (with the trunk alone its CoM goes back 0.8 mm of the 8.0 needed, and it fell corrected)
+    monkeypatch.setattr(scenarios_module, "uses_legs", lambda *args: False)
+    urdf = build_humanoid(tmp_path / "a.urdf", LIGHT_TRUNK["lean"])
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "lean: its trunk turned back" in err[0], err
+    assert "could not stand corrected" in err[0]
 
 
 def test_a_tall_robot_near_its_side_edge_rolls_its_trunk_without_toppling_itself(tmp_path):
