@@ -132,18 +132,30 @@ def reaction_per_accel(body: BodyModel, mover: RootMover, joints: np.ndarray) ->
     k = np.zeros((2, 3))
     if body.kind != "urdf":
         return k
+    # rad: small enough for the motion's first order, large enough for the legs' IK tolerance
+    _, _, k[:, [ROLL, PITCH]] = _first_order(body, mover, joints, [(np.eye(3)[a], None) for a in (ROLL, PITCH)], 1e-4)
+    return k
+
+
+def _first_order(body: BodyModel, mover: RootMover, joints: np.ndarray, moves: list, eps: float
+                 ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """The robot ``body`` standing in ``joints`` (rad), its base placed by its feet: its configuration q (base and
+    joints), and for each move (δ (3,) rad, shift (3,) m or None: `RootMover.apply`'s, the feet held) of ``moves``
+    the configuration moved by ``eps`` of it and the ZMP's answer (m, world x, y; zero where there is no ZMP) to
+    accelerating by one unit of it per s^2 from rest. One `BasePlacer` places every configuration, so all stand on
+    the same foot (`reaction_per_accel`)."""
     model, data, base, placer = body.model, body.model.createData(), len(body.base_channels), BasePlacer(body)
     q = np.concatenate([placer.update(joints), joints])
     rest = np.zeros(model.nv)
     at_rest = compute_zmp(model, data, q, rest, rest).zmp
-    eps = 1e-4  # rad: small enough for the motion's first order, large enough for the legs' IK tolerance
-    for axis in (ROLL, PITCH):
-        moved = mover.apply(q, eps * np.eye(3)[axis], 0.5)[base:]
-        accel = (np.concatenate([placer.update(moved), moved]) - q) / eps
-        zmp = compute_zmp(model, data, q, rest, accel).zmp
+    moved_qs, answers = [], np.zeros((2, len(moves)))
+    for i, (delta, shift) in enumerate(moves):
+        moved = mover.apply(q, eps * delta, 0.5, shift=None if shift is None else eps * shift)[base:]
+        moved_qs.append(np.concatenate([placer.update(moved), moved]))
+        zmp = compute_zmp(model, data, q, rest, (moved_qs[-1] - q) / eps).zmp
         if at_rest is not None and zmp is not None:
-            k[:, axis] = zmp[:2] - at_rest[:2]
-    return k
+            answers[:, i] = zmp[:2] - at_rest[:2]
+    return q, moved_qs, answers
 
 
 # A trunk whose largest turn moves the static CoM less than this share of the corrector's margin is too short a
@@ -181,22 +193,15 @@ def legs_response(body: BodyModel, mover: RootMover, joints: np.ndarray) -> tupl
     (`RootMover.apply`'s ``shift``), the robot standing in ``joints`` (rad), its base placed by its feet: S is
     the legs' lever, the share of the robot's mass the shift carries (legs-only Alexbotmini: ~0.5); zeros for a
     skeleton (its legs turn at the thigh alone, they cannot carry its root)."""
-    s, k = np.zeros((2, 2)), np.zeros((2, 2))
+    s = np.zeros((2, 2))
     if body.kind != "urdf":
-        return s, k
-    model, data, base, placer = body.model, body.model.createData(), len(body.base_channels), BasePlacer(body)
-    q = np.concatenate([placer.update(joints), joints])
-    rest = np.zeros(model.nv)
-    com = pin.centerOfMass(model, data, q).copy()
-    at_rest = compute_zmp(model, data, q, rest, rest).zmp
+        return s, np.zeros((2, 2))
     eps = 1e-5  # m: the motion's first order, well above the legs' IK tolerance
-    for axis in range(2):
-        moved = mover.apply(q, np.zeros(3), 0.5, shift=eps * np.eye(3)[axis])[base:]
-        q_moved = np.concatenate([placer.update(moved), moved])
-        s[:, axis] = (pin.centerOfMass(model, data, q_moved)[:2] - com[:2]) / eps
-        zmp = compute_zmp(model, data, q, rest, (q_moved - q) / eps).zmp
-        if at_rest is not None and zmp is not None:
-            k[:, axis] = zmp[:2] - at_rest[:2]
+    q, moved, k = _first_order(body, mover, joints, [(np.zeros(3), np.eye(3)[axis]) for axis in range(2)], eps)
+    model, data = body.model, body.model.createData()
+    com = pin.centerOfMass(model, data, q)[:2].copy()
+    for axis, q_moved in enumerate(moved):
+        s[:, axis] = (pin.centerOfMass(model, data, q_moved)[:2] - com) / eps
     return s, k
 
 
