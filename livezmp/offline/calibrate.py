@@ -240,11 +240,6 @@ class _Terms:
                          and f.name not in ("fwd", "left") else v for f in fields(self)})
 
 
-def _skew(w: np.ndarray) -> np.ndarray:
-    """(3, 3) the cross-product matrix of ``w`` (3,)."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
 def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, opts: LabOptions,
            segment: Segment = HAT_SEGMENT) -> _Terms:
     """The terms on the frames ``rows`` of ``lab``, ``trial`` analysed with ``opts`` (a HAT swaying
@@ -270,7 +265,7 @@ def _terms(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray, opts: LabOptions
         pin.forwardKinematics(model, mdata, r.q[i], r.v[i], r.a[i])
         w, dw = mdata.v[joint].angular, mdata.a[joint].angular  # its own frame
         A[k] = mdata.oMi[joint].rotation
-        B[k] = A[k] @ (_skew(dw) + _skew(w) @ _skew(w))
+        B[k] = A[k] @ (pin.skew(dw) + pin.skew(w) @ pin.skew(w))
         spin[k] = A[k] @ (per_kg @ dw + np.cross(w, per_kg @ w))
     o, a_o = r.q[idx][:, channels], r.a[idx][:, channels]
     plate_acc = lab.plates.force[idx] / mass - np.array([0.0, 0.0, G])
