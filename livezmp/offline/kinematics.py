@@ -66,11 +66,6 @@ class _Body:
     inertia: np.ndarray | None  # rotational inertia about the centre of mass, joint frame (None: point mass)
 
 
-def _skew(p: np.ndarray) -> np.ndarray:
-    """(3, 3) matrix S with S x = p × x."""
-    return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
-
-
 def _basis_with_z(u: np.ndarray) -> np.ndarray:
     """A rotation whose third column is the unit vector ``u``."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -176,7 +171,7 @@ class BatchKinematics:
             inertia = model.inertias[j]
             lever = np.array(inertia.lever)
             rot = np.array(inertia.inertia)
-            self.bodies[j] = _Body(j, float(inertia.mass), lever, -_skew(lever), rot if rot.any() else None)
+            self.bodies[j] = _Body(j, float(inertia.mass), lever, -pin.skew(lever), rot if rot.any() else None)
         self.mass = float(sum(b.mass for b in self.bodies.values()))
         self._children = {0: 0} | {j.index: 0 for j in self.joints}
         for j in self.joints:
@@ -246,7 +241,7 @@ def _joint_step(jt: _Joint, z: np.ndarray, o: np.ndarray, q: np.ndarray, qd: np.
     if jt.translation is not None:
         t = jt.translation
         # v += ω × t and a += α × t (spatial quantities moved to the new origin)
-        z[:, _V:_AC + 1:2] += np.tensordot(-_skew(t), z[:, _W:_AL + 1:2], 1)
+        z[:, _V:_AC + 1:2] += np.tensordot(-pin.skew(t), z[:, _W:_AL + 1:2], 1)
         o = o + np.tensordot(t, z[:, _E], 1)
     if jt.rotation_t is not None:
         z = np.tensordot(jt.rotation_t, z, 1)
