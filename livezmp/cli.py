@@ -115,6 +115,14 @@ def add_marker_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--age", type=float, metavar="YEARS", help="the C3D subject's age, replacing the file's")
 
 
+def add_treadmill_option(p: argparse.ArgumentParser) -> None:
+    """``--treadmill``: a C3D walk on an instrumented treadmill (livezmp.offline.treadmill)."""
+    p.add_argument("--treadmill", default="auto", metavar="auto|off|SPEED[,RIGHT]",
+                   help="C3D walk on an instrumented treadmill: its feet's contacts, support, plausibility and speed "
+                        "judged on the belts. auto (default): found from the stance feet; off: a floor at rest; "
+                        "SPEED: belt speed, m/s, running against the way the subject faces (LEFT,RIGHT: split belts)")
+
+
 def _analysis_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("analyze", help="ZMP, support and balance of a motion file (BVH, C3D, or CSV + URDF)")
     p.add_argument("motion", nargs="?", help="motion file (.bvh, .c3d, or .csv with --robot); default: built-in demo")
@@ -125,6 +133,7 @@ def _analysis_commands(sub: argparse._SubParsersAction) -> None:
                    help=f"ZMP uncertainty for inside_fraction_tol, mm (default {VALIDATED_P95_MM:g}: validated p95)")
     p.add_argument("--subject", help="subject file from `livezmp calibrate` (a BVH's or C3D's head, arms and trunk)")
     add_marker_options(p)
+    add_treadmill_option(p)
     add_body_options(p)
     p.set_defaults(handler="livezmp.commands.analyze:cmd_analyze")
 

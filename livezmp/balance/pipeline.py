@@ -29,7 +29,10 @@ PROGRESS_EVERY = 500  # frames between progress reports of the per-frame path
 @dataclass(frozen=True)
 class PipelineConfig:
     """``mode``: "full" (rigid bodies) or "seed" (point masses). ``ground_z`` fixes the
-    ground height (internal frame, m) instead of detecting it from the feet."""
+    ground height (internal frame, m) instead of detecting it from the feet. ``belt``: the (left, right)
+    horizontal velocities (vx, vy) m/s, internal frame, of the surface under each foot (an instrumented
+    treadmill's belts, :mod:`livezmp.offline.treadmill`): a foot's contact is judged by its speed relative
+    to it; None: a floor at rest."""
 
     mode: str = "full"
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
@@ -37,6 +40,7 @@ class PipelineConfig:
     ground_z: float | None = None
     ground_warmup_frames: int = 60
     flight_fraction: float = 0.05
+    belt: tuple[tuple[float, float], tuple[float, float]] | None = None
 
 
 @dataclass
@@ -167,7 +171,7 @@ class Pipeline:
         z = compute_zmp(model, data, est.q, est.qd, est.qdd, 0.0, self.config.flight_fraction, gravity)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
-        low = lowest_sole_points(self.body, model, data, soles)
+        low = lowest_sole_points(self.body, model, data, soles, self.config.belt)
         outside = self._outside_contacts.pop(est.index, None) if self._outside_contacts else None
         support = self.contacts.update_lowest(*low["left"], *low["right"], outside)
         left, right = soles["left"], soles["right"]

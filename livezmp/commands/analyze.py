@@ -96,6 +96,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
               + (f"lag {cv['lag_ms']:+.1f} ms" if cv["lag_ms"] is not None else "lag not determined (its halves give "
                  + " / ".join("-" if h is None else f"{h:+.0f}" for h in cv["lag_halves_ms"]) + " ms)"))
+    if tm := summary.get("treadmill"):
+        print(f"  treadmill: belts at {' / '.join(f'{v:.2f}' for v in tm['belt_mps'])} m/s (left / right, "
+              f"{tm['source']}), the body travelling {tm['body_mps']:.2f} m/s over the take: contacts, support and "
+              "plausibility judged on the belts")
     if "markers" in summary:
         print(f"  {summary['markers']['hat']}")
         if "note" in summary["mass"]:

@@ -18,6 +18,7 @@ from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
 from livezmp.offline.take import TakeOptions, take_config
+from livezmp.offline.treadmill import parse_treadmill
 from livezmp.offline.validated import VALIDATED_P95_MM
 
 MAX_BODY_MASS = 1000.0  # kg
@@ -59,7 +60,8 @@ def take_options(args: argparse.Namespace) -> TakeOptions:
                        mode=args.mode, tolerance_mm=getattr(args, "tolerance_mm", VALIDATED_P95_MM),
                        subject=getattr(args, "subject", None), markers=getattr(args, "markers", None),
                        static=getattr(args, "static", None),
-                       cutoff_hz=args.cutoff_hz, bsp=getattr(args, "bsp", "auto"), age=getattr(args, "age", None))
+                       cutoff_hz=args.cutoff_hz, bsp=getattr(args, "bsp", "auto"), age=getattr(args, "age", None),
+                       treadmill=parse_treadmill(getattr(args, "treadmill", "auto")))
 
 
 def limits_from_args(args: argparse.Namespace) -> CorrectionLimits:

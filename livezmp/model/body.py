@@ -190,12 +190,14 @@ def sole_velocities(body: BodyModel, model: pin.Model, data: pin.Data, soles: di
     return out
 
 
-def lowest_sole_points(body: BodyModel, model: pin.Model, data: pin.Data,
-                       soles: dict[str, np.ndarray]) -> dict[str, tuple[float, float]]:
+def lowest_sole_points(body: BodyModel, model: pin.Model, data: pin.Data, soles: dict[str, np.ndarray],
+                       belt: tuple[tuple[float, float], tuple[float, float]] | None = None,
+                       ) -> dict[str, tuple[float, float]]:
     """Per foot, the height z (m, internal world frame) of its lowest sole corner (the first of equal
     ones) and that corner's horizontal speed (m/s): what contact detection needs
     (:meth:`livezmp.balance.contacts.ContactDetector.update_lowest`), without every corner's velocity. Equal to
-    the lowest row of ``soles`` and of :func:`sole_velocities`; ``data`` as for that function."""
+    the lowest row of ``soles`` and of :func:`sole_velocities`; ``data`` as for that function. ``belt``: the
+    (left, right) horizontal velocities (m/s) of the surface under each foot, the speed taken relative to it."""
     out = {}
     for side, foot in body.feet.items():
         corners = soles[side].tolist()
@@ -205,5 +207,8 @@ def lowest_sole_points(body: BodyModel, model: pin.Model, data: pin.Data,
         # a skeleton's toe corners (1, 2) move with the toe joint, its heel corners with the ankle
         frame = foot.toe_frame_id if foot.sole_local is None and i in (1, 2) else foot.frame_id
         ((vx, vy, _),) = _rigid_velocities(_twist(model, data, frame), [corners[i]])
+        if belt is not None:  # the stance foot rides the belt: its speed relative to it says contact
+            bx, by = belt[0 if side == "left" else 1]
+            vx, vy = vx - bx, vy - by
         out[side] = (z, math.hypot(vx, vy))
     return out

@@ -174,11 +174,15 @@ def _empty(count: int, body: BodyModel, keep_states: bool) -> BatchResult:
     )
 
 
-def _lowest(sole: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """z (C,) of each frame's lowest sole corner (the first of equals) and its horizontal speed (C,)."""
+def _lowest(sole: np.ndarray, velocity: np.ndarray,
+            belt: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """z (C,) of each frame's lowest sole corner (the first of equals) and its horizontal speed (C,), relative to
+    the ``belt`` (vx, vy) m/s under the foot when given (:class:`PipelineConfig`)."""
     rows = np.arange(len(sole))
     low = np.argmin(sole[:, :, 2], axis=1)
     v = velocity[rows, low]
+    if belt is not None:
+        v = v - [belt[0], belt[1], 0.0]
     return sole[rows, low, 2], np.hypot(v[:, 0], v[:, 1])
 
 
@@ -272,8 +276,9 @@ def batch_chunks(body: BodyModel, config: PipelineConfig, estimator: StreamingEs
             dyn = kin.dynamics(*est)
             soles = batch_soles(body, dyn.frames)
             vel = batch_sole_velocities(body, dyn.frames, soles)
-            codes, ground = detect_contacts(detector, *_lowest(soles["left"], vel["left"]),
-                                            *_lowest(soles["right"], vel["right"]))
+            belt = config.belt or (None, None)
+            codes, ground = detect_contacts(detector, *_lowest(soles["left"], vel["left"], belt[0]),
+                                            *_lowest(soles["right"], vel["right"], belt[1]))
             force = dyn.momentum_rate - kin.mass * gravity
             zmp, has = _zmp(dyn.com, force, dyn.moment, ground, config.flight_fraction * weight)
             judged = has & (codes != _NONE)

@@ -45,6 +45,7 @@ from livezmp.model.bvh_body import DEFAULT_MASS
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import HAT_POINTS, MarkerBodyOptions, MarkerTake, body_from_markers
 from livezmp.offline.batch import BatchResult, run_batch
+from livezmp.offline.treadmill import SIDES, Treadmill, find_treadmill, given_treadmill
 from livezmp.offline.validation import (
     HEADING_HZ,
     com_acc_vs_plates,
@@ -102,6 +103,7 @@ class LabAnalysis:
     plates: PlateFrames | None
     complete: np.ndarray
     summary: dict = field(default_factory=dict)
+    treadmill: Treadmill | None = None  # the belts the feet's contacts were judged on (None: a floor at rest)
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,9 @@ class LabOptions:
     measured from the CoM acceleration and applied when at least half a frame; ``markers``: body options
     (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults);
     ``lateral_cutoff_fraction``: the segments' positions across the walk are low-passed at this part of the
-    estimator's cutoff before it (None: not; :func:`lateral_band`)."""
+    estimator's cutoff before it (None: not; :func:`lateral_band`); ``treadmill``: "auto" (found from the feet,
+    :func:`livezmp.offline.treadmill.find_treadmill`), "off" (a floor at rest) or the (left, right) belt speeds, m/s.
+    """
 
     mass: float | None = None
     mode: str = "full"
@@ -121,6 +125,7 @@ class LabOptions:
     markers: MarkerBodyOptions = MarkerBodyOptions()
     estimator: dict | None = None
     lateral_cutoff_fraction: float | None = LATERAL_CUTOFF_FRACTION
+    treadmill: str | tuple[float, float] = "auto"
 
 
 def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
@@ -139,9 +144,10 @@ def _strikes(trial: C3dTrial, result: BatchResult) -> dict[str, list[float]]:
     return out
 
 
-def run_take(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None):
-    """The marker body of ``trial`` (``mass`` kg, soles at ``floor``, the plates' surface) through the lab pipeline:
-    the take, its frame times (s), the pipeline's settings and its result. Plates raised above the floor the feet
+def run_take(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None, treadmill: Treadmill | None = None):
+    """The marker body of ``trial`` (``mass`` kg, soles at ``floor``, the plates' surface; its feet's contacts judged
+    on the ``treadmill``'s belts, if any) through the lab pipeline: the take, its frame times (s), the pipeline's
+    settings and its result. Plates raised above the floor the feet
     stand on off them (:func:`livezmp.balance.plates.raised_by`): the soles' heights are measured from that floor,
     the ZMP and the contacts kept on the plates' surface, where the complete frames stand; ``take.notes["floor"]``
     says so."""
@@ -157,7 +163,8 @@ def run_take(trial: C3dTrial, opts: LabOptions, mass: float, floor: float | None
             "where every loaded foot is on them")}
     times = (take.first_frame + np.arange(len(take.frames))) / trial.rate
     cfg = default_config(take.body, trial.rate, opts.mode, floor)
-    cfg = replace(cfg, estimator=replace(cfg.estimator, **{**LAB_ESTIMATOR, **(opts.estimator or {})}))
+    cfg = replace(cfg, estimator=replace(cfg.estimator, **{**LAB_ESTIMATOR, **(opts.estimator or {})}),
+                  belt=None if treadmill is None else treadmill.belt)
     band = lateral_band_hz(opts, take, cfg)
     frames = take.frames if band is None else lateral_band(take.frames, trial.rate, band, facing(take))
     result = run_batch(Pipeline(take.body, cfg, nominal_dt=1.0 / trial.rate), times, frames, keep_states=True)
@@ -199,11 +206,13 @@ def lateral_band(frames: np.ndarray, rate: float, cutoff_hz: float, facing: np.n
     return out
 
 
-def may_bear_weight(sole: np.ndarray, floor: float, dt: float) -> np.ndarray:
+def may_bear_weight(sole: np.ndarray, floor: float, dt: float, belt: tuple[float, float] | None = None) -> np.ndarray:
     """(F,) whether a foot (sole corners (F, k, 3), m) may carry load: some corner lower than
-    ``LOADED_HEIGHT_M`` above the floor and slower than ``LOADED_SPEED_MPS``. Looser than contact
-    detection, which is late at toe-off: a complete frame must not miss a loaded foot."""
-    speed = np.linalg.norm(np.gradient(sole[:, :, :2], dt, axis=0), axis=2)
+    ``LOADED_HEIGHT_M`` above the floor and slower than ``LOADED_SPEED_MPS`` (relative to the ``belt`` (vx, vy) m/s
+    under it, if any). Looser than contact detection, which is late at toe-off: a complete frame must not miss a
+    loaded foot."""
+    vel = np.gradient(sole[:, :, :2], dt, axis=0)
+    speed = np.linalg.norm(vel if belt is None else vel - belt, axis=2)
     return (((sole[:, :, 2] - floor) < LOADED_HEIGHT_M) & (speed < LOADED_SPEED_MPS)).any(axis=1)
 
 
@@ -231,7 +240,8 @@ def _complete(trial: C3dTrial, result: BatchResult, times: np.ndarray, cfg: Pipe
     """The complete frames (``margin`` frames or more from any frame that is not, but for the take's ends), the
     frames with every foot that may bear weight on a plate (whatever the plates carry) and, when there is no
     complete frame, why (one line)."""
-    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
+    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate, _belt_under(cfg, s))
+               for s, sole in result.soles.items()}
     # half a spline window from either end of the take the estimate is one-sided (and the plates' filter too);
     # at least the lab window's, so that estimator settings are compared on the same frames
     edge = max(cfg.estimator.window_s, LAB_ESTIMATOR["window_s"]) / 2
@@ -266,11 +276,18 @@ def clear_of(mask: np.ndarray, k: int) -> np.ndarray:
     return mask & (c[np.minimum(i + k + 1, len(mask))] == c[np.maximum(i - k, 0)])
 
 
-def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, floor: float, mass: float) -> dict:
+def _belt_under(cfg: PipelineConfig, side: str) -> tuple[float, float] | None:
+    """The belt velocity (vx, vy) m/s under the ``side`` foot in ``cfg``, or None (a floor at rest)."""
+    return None if cfg.belt is None else cfg.belt[SIDES.index(side)]
+
+
+def _cop_under_foot(trial: C3dTrial, result: BatchResult, plates: PlateFrames, floor: float, mass: float,
+                    cfg: PipelineConfig) -> dict:
     """Each plate's CoP against the foot standing on it (:func:`livezmp.balance.plates.cop_on_feet`, over frames
     where the plate carries ``COP_CHECK_WEIGHT`` of the weight or more) and a warning per plate whose CoP lies off
     the foot in more than ``COP_OFF_FOOT`` of them (``STANCE_MIN_FRAMES`` or more)."""
-    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate) for s, sole in result.soles.items()}
+    contact = {s: may_bear_weight(sole, floor, 1.0 / trial.rate, _belt_under(cfg, s))
+               for s, sole in result.soles.items()}
     per_plate = cop_on_feet(plates, result.soles, contact, COP_CHECK_WEIGHT * mass * G)
     warnings = [f"plate {p['plate']}: its CoP lies off the foot standing on it in {100 * (1 - p['on_foot']):.0f} % "
                 f"of {p['frames']} frames ({p['off_p95_mm']:.0f} mm off at the 95th percentile): its corners, ORIGIN, "
@@ -331,6 +348,17 @@ def _weighed_as_no_person(info: dict, stature_m: float | None) -> None:
     info["note"] = f"{info['note']}; {note}" if "note" in info else note
 
 
+def take_treadmill(asked: str | tuple[float, float], take: MarkerTake, result: BatchResult,
+                   rate: float) -> Treadmill | None:
+    """The treadmill ``take`` walks on (its ``result`` from the pipeline on a floor at ``rate`` Hz): found from its
+    feet ("auto"), none ("off"), or the given (left, right) belt speeds (m/s) against the way the subject faces."""
+    if asked == "off":
+        return None
+    if asked == "auto":
+        return find_treadmill(result.soles, result.com, 1.0 / rate)
+    return given_treadmill(asked, facing(take), result.com, 1.0 / rate)
+
+
 def facing(take: MarkerTake) -> np.ndarray:
     """(2,) the horizontal way the pelvis faces on average (internal frame)."""
     yaw = take.frames[:, take.body.channel_names.index("pelvis.yaw")]
@@ -349,11 +377,15 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     first = opts.mass or trial.mass_kg or DEFAULT_MASS
     floor = plates_floor(trial, opts.markers.marker_map)
     take, times, cfg, result = run_take(trial, opts, first, floor)
+    treadmill = take_treadmill(opts.treadmill, take, result, trial.rate)
+    if treadmill is not None:  # the contacts judged again, on the belts
+        take, times, cfg, result = run_take(trial, opts, first, floor, treadmill)
+    belts = None if treadmill is None else treadmill.summary(take.body.world_from_input)
     if not trial.plates:
         mass_info = _decide_mass(trial, opts, None, 0, first)
         return LabAnalysis(take, trial.rate, times, cfg, result, None, np.zeros(len(result), dtype=bool),
                            {"input": _input(trial, take), "markers": take.notes, "mass": mass_info, "plates": None,
-                            "lateral_band_hz": lateral_band_hz(opts, take, cfg)})
+                            "lateral_band_hz": lateral_band_hz(opts, take, cfg), "treadmill": belts}, treadmill)
     cutoff = opts.plate_cutoff_hz if opts.plate_cutoff_hz is not None else plates_band_hz(cfg.estimator)
     com_acc = com_accelerations(take, result)
     shift = opts.plate_delay_s or 0.0
@@ -368,7 +400,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     _weighed_as_no_person(mass_info, take.notes.get("stature_m"))
     used = mass_info["used_kg"]
     if abs(used - first) > 0.005:
-        take, times, cfg, result = run_take(trial, opts, used, floor)
+        take, times, cfg, result = run_take(trial, opts, used, floor, treadmill)
         com_acc = com_accelerations(take, result)
         complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)  # the same plates
     # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
@@ -406,7 +438,8 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         "cop_vs_force_line": cop_vs_force_line(
             plates.cop, result.zmp, result.com, plates.force, used * (com_acc + [0.0, 0.0, G]), plates.surface_z,
             result.support, complete & result.has_zmp, walking_axes(result.com, facing(take)), STANCE_MIN_FRAMES),
-        "cop_under_foot": _cop_under_foot(trial, result, plates, floor, used),
+        "cop_under_foot": _cop_under_foot(trial, result, plates, floor, used, cfg),
         "lateral_band_hz": lateral_band_hz(opts, take, cfg),
+        "treadmill": belts,
     }
-    return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary)
+    return LabAnalysis(take, trial.rate, times, cfg, result, plates, complete, summary, treadmill)

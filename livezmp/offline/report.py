@@ -109,10 +109,11 @@ def ground_plane(body: BodyModel) -> str:
 
 
 def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str,
-              tolerance_mm: float = VALIDATED_P95_MM) -> dict:
+              tolerance_mm: float = VALIDATED_P95_MM, belt: np.ndarray | None = None) -> dict:
     """The summary figures of an analysis (see README for each field). ``inside_fraction_tol``: the
-    judged frames whose ZMP is inside the support polygon or less than ``tolerance_mm`` outside it."""
-    stats = TakeStats(len(result), fps, tolerance_mm)
+    judged frames whose ZMP is inside the support polygon or less than ``tolerance_mm`` outside it. ``belt``
+    (2,) m/s: a treadmill's belt velocity (internal frame), the frame the motion's plausibility is judged in."""
+    stats = TakeStats(len(result), fps, tolerance_mm, belt)
     stats.add(result)
     return stats.summary(body, mode)
 
@@ -120,10 +121,14 @@ def summarize(body: BodyModel, result: BatchResult, fps: float, mode: str,
 class TakeStats:
     """:func:`summarize` of a take of ``total`` frames at ``fps`` Hz, its results added chunk by chunk
     (consecutive frames, in order) in bounded memory: counts, a maximum, the last ground height, and
-    :class:`PlausibilityStats` (exact percentiles)."""
+    :class:`PlausibilityStats` (exact percentiles). With a treadmill's ``belt`` velocity (2,) m/s (internal frame)
+    the plausibility is judged in the belt's frame, where the walk travels: the CoM and the ZMP each moved by
+    -belt * t (a belt at constant speed: the same accelerations and ZMP-CoM distances, the walk's own heading)."""
 
-    def __init__(self, total: int, fps: float, tolerance_mm: float = VALIDATED_P95_MM):
+    def __init__(self, total: int, fps: float, tolerance_mm: float = VALIDATED_P95_MM,
+                 belt: np.ndarray | None = None):
         self.total, self.fps, self.tolerance_mm = total, fps, tolerance_mm
+        self.belt = None if belt is None else np.array([belt[0], belt[1], 0.0])
         self.plausibility: PlausibilityStats | None = None
         self.start()
 
@@ -153,7 +158,11 @@ class TakeStats:
         self.support += np.bincount(result.support, minlength=len(SUPPORT_LABELS))
         self.first_t = float(result.t[0]) if self.first_t is None else self.first_t
         self.last_t, self.ground = float(result.t[-1]), float(result.ground_z[-1])
-        self.plausibility.add(result.com, result.zmp, result.has_zmp, flight)
+        com, zmp = result.com, result.zmp
+        if self.belt is not None:
+            moved = result.t[:, None] * self.belt
+            com, zmp = com - moved, zmp - moved
+        self.plausibility.add(com, zmp, result.has_zmp, flight)
 
     def summary(self, body: BodyModel, mode: str) -> dict:
         n, judged, inside, tolerance_mm = self.count, self.judged, self.inside, self.tolerance_mm

@@ -73,6 +73,7 @@ class TakeOptions:
     cutoff_hz: float | None = None
     bsp: str = "auto"  # a C3D body's segment table (livezmp.model.anthropometry.choose_table)
     age: float | None = None  # years: the subject's age, replacing a C3D file's
+    treadmill: str | tuple[float, float] = "auto"  # a C3D walk's belts (livezmp.offline.treadmill.parse_treadmill)
 
     def load(self, path: str | Path) -> LoadedMotion:
         subject = load_subject(self.subject) if self.subject else None
@@ -232,15 +233,16 @@ def lab_options(options: TakeOptions, cutoff_hz: float | None) -> LabOptions:
     """How a C3D take is read: the marker map and the subject file's parameters, if given, and the
     estimator's ``cutoff_hz`` (Hz; None: the lab's own, :data:`livezmp.offline.gaitlab.LAB_ESTIMATOR`)."""
     return LabOptions(mass=options.mass, mode=options.mode, markers=options.marker_options(),
-                      estimator=None if cutoff_hz is None else {"cutoff_hz": cutoff_hz})
+                      estimator=None if cutoff_hz is None else {"cutoff_hz": cutoff_hz}, treadmill=options.treadmill)
 
 
 def analyse_c3d(path: str | Path, options: TakeOptions) -> TakeAnalysis:
     """The analysis of a C3D gait trial: the marker body (with the subject file's parameters when
     ``options.subject`` is set) and, with force plates, the ZMP against the plate CoP."""
     lab = analyse_lab_take(read_walk(path, options.static), lab_options(options, options.cutoff_hz))
+    belt = None if lab.treadmill is None else lab.treadmill.mean_velocity
     summary = {"source": str(path), **summarize(lab.take.body, lab.result, lab.rate, options.mode,
-                                                options.tolerance_mm), **lab.summary,
+                                                options.tolerance_mm, belt), **lab.summary,
                "estimator": asdict(lab.config.estimator)}
     plates = lab.plates is not None
     return TakeAnalysis(lab.take.body, lab.result, lab.rate, str(path), summary, _lab_columns(lab),
@@ -261,6 +263,8 @@ def check_not_c3d_options(options: TakeOptions, path: str | Path | None) -> None
         raise InputError(f"{options.markers}: --markers is for C3D trials (got {path or 'the built-in demo'})")
     if options.static:
         raise InputError(f"{options.static}: --static is for C3D trials (got {path or 'the built-in demo'})")
+    if options.treadmill != "auto":
+        raise InputError(f"--treadmill is for C3D walks (got {path or 'the built-in demo'})")
     if options.bsp != "auto" or options.age is not None:
         raise InputError("--bsp and --age choose a C3D marker body's segment table (got "
                          f"{path or 'the built-in demo'}; a BVH's body is de Leva's adult table)")
