@@ -358,6 +358,7 @@ def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output directory for tables, plot and features.json")
     add_population_options(p)
     _gait_input_options(p)
+    add_treadmill_option(p)
     p.set_defaults(handler="livezmp.commands.gait:cmd_analyze")
 
     p = sub.add_parser("synth", help="change a base walk towards a variant using only its feature parts")
@@ -374,6 +375,7 @@ def _gait_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("walk", help="walk A")
     p.add_argument("others", nargs="+", help="walk(s) B; with several, the mean error is the last number")
     _gait_input_options(p)
+    add_treadmill_option(p)
     p.set_defaults(handler="livezmp.commands.gait:cmd_compare")
 
 

@@ -22,12 +22,14 @@ from livezmp.gait.take import GaitTake, load_take
 from livezmp.gait.takeset import read_manifest, takes_from_paths
 from livezmp.model.bvh import write_bvh
 from livezmp.model.trajectory_csv import write_joint_csv
+from livezmp.offline.treadmill import parse_treadmill
 
 GROUND = {"y": "xz", "z": "xy"}
 
 
 def _load(path: str | Path, args: argparse.Namespace) -> GaitTake:
-    return load_take(path, args.up, args.units, args.urdf, args.markers, args.static)
+    return load_take(path, args.up, args.units, args.urdf, args.markers, args.static,
+                     parse_treadmill(getattr(args, "treadmill", "auto")))
 
 
 def _pct(s) -> str:
@@ -35,6 +37,11 @@ def _pct(s) -> str:
         return f"n/a ({s.note})"
     cv = "n/a" if s.cv is None else f"{s.cv:.1f} %"
     return f"μ {s.mu:+.1f} % (σ {s.sigma:.1f} %, CV {cv}{', feature' if s.feature else ''})"
+
+
+def _on_belt(take: GaitTake) -> str:
+    """", on a treadmill's belt at S m/s" for a treadmill walk (its speed is the belt's frame's), else ""."""
+    return "" if take.belt is None else f" on a treadmill's belt at {np.hypot(*take.belt):.3f} m/s"
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -109,14 +116,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     a = _load(args.walk, args)
     fa = walk_features(a)
-    print(f"A: {a.source}: {fa.frequency:.3f} Hz, {fa.speed:.3f} m/s, {fa.cycles.n_cycles} cycles")
+    print(f"A: {a.source}: {fa.frequency:.3f} Hz, {fa.speed:.3f} m/s{_on_belt(a)}, {fa.cycles.n_cycles} cycles")
     results = []
     for path in args.others:
         b = _load(path, args)
         fb = walk_features(b)
         c = compare(a, fa, b, fb)
         results.append(c)
-        print(f"B: {b.source}: {fb.frequency:.3f} Hz, {fb.speed:.3f} m/s; total RMS error {c.total:.2f}°")
+        print(f"B: {b.source}: {fb.frequency:.3f} Hz, {fb.speed:.3f} m/s{_on_belt(b)}; total RMS error {c.total:.2f}°")
     several = len(results) > 1
     print("cycle-normalised joint-angle RMS error per joint (deg)" + (", mean over B walks" if several else ""))
     for joint in dict.fromkeys(j for r in results for j in r.per_joint):

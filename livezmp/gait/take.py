@@ -15,6 +15,11 @@ the root's rotation channels are re-extracted in their own Euler order (middle a
 within ±90°). Without this the root's angles would carry the walking direction, and
 takes walking in opposite directions would not be comparable. :func:`turn_root`
 turns a changed walk back before it is written.
+
+A C3D walk on an instrumented treadmill (:mod:`livezmp.offline.treadmill`) is read in its belts' frame: the root's
+ground-plane path less the belt's travel (its mean velocity, split belts: between the two), so the walking speed is
+the belt's plus the body's drift, a stride's length the distance the belt carries the feet, and the heading the way
+the walk goes on the belt.
 """
 
 from __future__ import annotations
@@ -29,18 +34,20 @@ from scipy.spatial.transform import Rotation
 from livezmp.checks import check_input_file
 from livezmp.errors import InputError
 from livezmp.gait.channels import ChannelTag, tag_channels
-from livezmp.model.body import BodyModel
+from livezmp.model.body import BodyModel, soles_over
 from livezmp.model.bvh import BvhMotion, read_bvh
 from livezmp.model.bvh_body import BvhBodyOptions, body_from_bvh
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.loop_cycle import find_loop
 from livezmp.model.marker_chain import chain_body, chain_frames, segment_names
 from livezmp.model.marker_map import MarkerMap, load_marker_map
-from livezmp.model.markers import MarkerBodyOptions, body_from_markers
+from livezmp.model.markers import MarkerBodyOptions, MarkerTake, body_from_markers
 from livezmp.model.rest_pose import without_rest_pose
 from livezmp.model.static_trial import read_walk
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
+from livezmp.offline.gaitlab import facing
+from livezmp.offline.treadmill import find_treadmill, given_treadmill
 
 
 @dataclass
@@ -66,6 +73,7 @@ class GaitTake:
     heading: float
     origin: BvhMotion | JointTrajectory | C3dTrial
     min_cycles: int = 2  # whole gait cycles the features need (a gait-lab pass over the plates has one or two)
+    belt: np.ndarray | None = None  # (2,) m/s a treadmill's belt velocity on the ground plane (turned as q), or None
 
     @property
     def angles(self) -> np.ndarray:
@@ -73,16 +81,21 @@ class GaitTake:
         return self.q[:, self.angle_index]
 
     def ground(self) -> np.ndarray:
-        """(F, 2) m: the root's position on the ground plane (internal frame: x forward, y; z up)."""
-        return _ground(self.q, self.body, self.root_xyz)
+        """(F, 2) m: the root's position on the ground plane (internal frame: x forward, y; z up); on a treadmill,
+        in its belt's frame (the belt's travel since the first frame taken off)."""
+        return _ground(self.q, self.body, self.root_xyz, self.t, self.belt)
 
 
-def _ground(q: np.ndarray, body: BodyModel, root_xyz: list[int]) -> np.ndarray:
+def _ground(q: np.ndarray, body: BodyModel, root_xyz: list[int], t: np.ndarray | None = None,
+            belt: np.ndarray | None = None) -> np.ndarray:
+    """(F, 2) m: the root's ground-plane path, less a ``belt``'s travel (velocity (2,) m/s) over the times ``t``
+    (F,) s when given."""
     p = np.zeros((len(q), 3))
     for k, col in enumerate(root_xyz):
         if col >= 0:
             p[:, k] = q[:, col]
-    return (p @ _world_from_channels(body).T)[:, :2]
+    g = (p @ _world_from_channels(body).T)[:, :2]
+    return g if belt is None else g - np.outer(t - t[0], belt)
 
 
 def _world_from_channels(body: BodyModel) -> np.ndarray:
@@ -140,18 +153,24 @@ def _root_columns(body: BodyModel, q: np.ndarray) -> tuple[list[int], list[int],
     return xyz, rot, "".join(names[i][len(joint) + 1] for i in rot)
 
 
-def _make(source: str, t: np.ndarray, q_raw: np.ndarray, body: BodyModel, origin) -> GaitTake:
+def _make(source: str, t: np.ndarray, q_raw: np.ndarray, body: BodyModel, origin,
+          belt: np.ndarray | None = None) -> GaitTake:
+    """The walk, turned to head along +x (on a ``belt``, velocity (2,) m/s internal frame: the way it goes on it)."""
     xyz, rot, seq = _root_columns(body, q_raw)
     heading = 0.0
     if min(xyz) >= 0:
-        g = _ground(q_raw, body, xyz)
+        g = _ground(q_raw, body, xyz, t, belt)
         d = g[-1] - g[0]
         if np.hypot(*d) > 1e-6:
             heading = float(np.arctan2(d[1], d[0]))
             q_raw = _turn(q_raw, body, xyz, rot, seq, -heading)
+    if belt is not None:
+        c, s = np.cos(heading), np.sin(heading)
+        belt = np.array([[c, s], [-s, c]]) @ belt  # turned with the walk
     q = unwrap_angles(q_raw, body.angle_mask)
     tags = tag_channels(body, q.mean(axis=0), source)
-    return GaitTake(source, t, q, body, np.nonzero(body.angle_mask)[0], tags, xyz, rot, seq, heading, origin)
+    return GaitTake(source, t, q, body, np.nonzero(body.angle_mask)[0], tags, xyz, rot, seq, heading, origin,
+                    belt=belt)
 
 
 def take_from_bvh(motion: BvhMotion, up: str | None = None, units: str | None = None) -> GaitTake:
@@ -176,14 +195,31 @@ def take_from_trajectory(traj: JointTrajectory, body: BodyModel) -> GaitTake:
     return _make(traj.source, traj.t, q, body, traj)
 
 
-def take_from_c3d(trial: C3dTrial, mmap: MarkerMap | None = None) -> GaitTake:
+def take_from_c3d(trial: C3dTrial, mmap: MarkerMap | None = None,
+                  treadmill: str | tuple[float, float] = "auto") -> GaitTake:
     """A gait-lab walk: the marker body of ``trial`` (through the marker map ``mmap``, if any) as a chain (joint
-    angles), over the frames where every needed marker is seen; times from the trial's first frame (s)."""
+    angles), over the frames where every needed marker is seen; times from the trial's first frame (s). On a
+    ``treadmill`` ("auto": found from the feet, "off", or the (left, right) belt speeds, m/s) in its belts' frame."""
     take = body_from_markers(trial, MarkerBodyOptions(marker_map=mmap))
     names = segment_names(take.body)
     t = (take.first_frame + np.arange(len(take.frames))) / trial.rate
-    walk = _make(trial.source, t, chain_frames(names, take.frames), chain_body(take.body), trial)
+    walk = _make(trial.source, t, chain_frames(names, take.frames), chain_body(take.body), trial,
+                 _belt(treadmill, take, trial.rate))
     return replace(walk, min_cycles=1)
+
+
+def _belt(asked: str | tuple[float, float], take: MarkerTake, rate: float) -> np.ndarray | None:
+    """The belt velocity (2,) m/s (internal frame; split belts: their mean) of the treadmill a marker ``take`` at
+    ``rate`` Hz walks on, or None (:func:`livezmp.offline.treadmill.find_treadmill` on its raw frames' soles and
+    pelvis for "auto")."""
+    if asked == "off":
+        return None
+    pelvis = take.frames[:, :3]
+    if asked == "auto":
+        found = find_treadmill(soles_over(take.body, take.frames), pelvis, 1.0 / rate)
+    else:
+        found = given_treadmill(asked, facing(take), pelvis, 1.0 / rate)
+    return None if found is None else found.mean_velocity
 
 
 # A looped cycle (its last frame repeats its first: Mixamo's walks) holds one or a few gait cycles; read as a walk it
@@ -199,18 +235,22 @@ def _played_on(motion: BvhMotion) -> BvhMotion:
 
 
 def load_take(path: str | Path, up: str | None = None, units: str | None = None, urdf: str | Path | None = None,
-              markers: str | Path | None = None, static: str | Path | None = None) -> GaitTake:
+              markers: str | Path | None = None, static: str | Path | None = None,
+              treadmill: str | tuple[float, float] = "auto") -> GaitTake:
     """Read a walk from a ``.bvh`` or ``.c3d`` file (through the marker map file ``markers``, and with the
-    landmarks it lacks from the ``static`` trial, if given), or a ``.csv`` joint trajectory (needs ``urdf``)."""
+    landmarks it lacks from the ``static`` trial, if given; on a ``treadmill``, :func:`take_from_c3d`), or a
+    ``.csv`` joint trajectory (needs ``urdf``)."""
     p = Path(path)
     for option, name in ((markers, "--markers"), (static, "--static")):
         if option and p.suffix.lower() != ".c3d":
             raise InputError(f"{option}: {name} is for C3D walks (got {p})")
+    if treadmill != "auto" and p.suffix.lower() != ".c3d":
+        raise InputError(f"--treadmill is for C3D walks (got {p})")
     if p.suffix.lower() == ".bvh":
         return take_from_bvh(_played_on(without_rest_pose(read_bvh(p))[0]), up, units)
     if p.suffix.lower() == ".c3d":
         return take_from_c3d(read_walk(check_input_file(p, "walk"), static),
-                             load_marker_map(markers) if markers else None)
+                             load_marker_map(markers) if markers else None, treadmill)
     if p.suffix.lower() == ".csv":
         if urdf is None:
             raise InputError(f"{p}: a joint-trajectory CSV needs the robot's URDF (--urdf)")

@@ -160,6 +160,19 @@ def foot_soles(body: BodyModel, data: pin.Data) -> dict[str, np.ndarray]:
     return out
 
 
+def soles_over(body: BodyModel, frames: np.ndarray) -> dict[str, np.ndarray]:
+    """Sole corners (F, k, 3) of each foot (internal world frame, m) over F frames of raw channels (F, nq): the
+    positions alone, frame by frame (no estimator: the frames as they are)."""
+    model = body.model
+    data = model.createData()
+    out: dict[str, list[np.ndarray]] = {side: [] for side in body.feet}
+    for row in frames:
+        pin.framesForwardKinematics(model, data, body.channels_to_q(row))
+        for side, sole in foot_soles(body, data).items():
+            out[side].append(sole)
+    return {side: np.array(soles) for side, soles in out.items()}
+
+
 def _twist(model: pin.Model, data: pin.Data, frame_id: int) -> list[float]:
     """[vx, vy, vz, wx, wy, wz] of the frame's body, world axes: the velocity (m/s) of its point at the world
     origin, then the angular velocity (rad/s)."""
