@@ -150,6 +150,9 @@ def given_treadmill(speeds: tuple[float, float], facing: np.ndarray, path: np.nd
     """The belts at the given (left, right) ``speeds`` (m/s), running against the way the subject faces
     (``facing`` (2,), internal frame); ``path`` (F, 3) m the body's point, ``dt`` s between frames."""
     back = -np.asarray(facing, dtype=float)[:2]
+    if not np.hypot(*back) > 1e-6:  # the pelvis' headings average out (it turns all round): no way to run the belt
+        raise InputError("--treadmill SPEED: the subject faces no one way over the take (the pelvis turns all "
+                         "round); give --treadmill auto")
     back = back / np.hypot(*back)
     return Treadmill({s: v * back for s, v in zip(SIDES, speeds, strict=True)}, "given", body_speed(path, dt))
 
