@@ -185,13 +185,17 @@ def test_a_bad_treadmill_option_is_refused_in_one_line(value, tmp_path, capsys):
     assert err.count("\n") == 1 and "--treadmill" in err
 
 
-def test_find_treadmill_needs_both_feet_riding_one_way():
-    """Feet whose stance velocities point opposite ways (no belt does that) are no treadmill."""
+def test_find_treadmill_needs_both_feet_riding_one_way_and_skips_gaps():
+    """Feet whose stance velocities point opposite ways (no belt does that) are no treadmill; frames missing from a
+    sole are no samples (the belt found as without them), a body path ending in a gap no evidence."""
     t = np.arange(800) / RATE
     m = walker(t, (1.1, 1.1), 0.0)
     soles = {s: np.stack([m[k + "HEE"], m[k + "TOE"]], axis=1) for s, k in zip(SIDES, "LR", strict=True)}
     pelvis = (m["LASI"] + m["RASI"]) / 2
-    assert find_treadmill(soles, pelvis, 1 / RATE) is not None
+    soles["left"][100:120] = np.nan
+    found = find_treadmill(soles, pelvis, 1 / RATE)
+    assert found is not None and found.velocity["left"] == pytest.approx([-1.1, 0.0], abs=BELT_TOL_MPS)
+    assert find_treadmill(soles, np.where(t[:, None] < 7.9, pelvis, np.nan), 1 / RATE) is None
     soles["right"] = soles["right"] * [-1.0, 1.0, 1.0]
     assert find_treadmill(soles, pelvis, 1 / RATE) is None
 

@@ -124,11 +124,15 @@ def find_treadmill(soles: dict[str, np.ndarray], path: np.ndarray, dt: float) ->
     if len(path) < 3:
         return None
     low = {s: lowest_corners(soles[s], dt) for s in SIDES}
-    ground = np.percentile(np.minimum(low["left"][0], low["right"][0]), GROUND_PERCENTILE)
+    lowest = np.minimum(low["left"][0], low["right"][0])
+    if not np.isfinite(lowest).any():
+        return None
+    ground = np.percentile(lowest[np.isfinite(lowest)], GROUND_PERCENTILE)
     feet, share = {}, {}
     for s in SIDES:
         z, vel = low[s]
-        feet[s], share[s] = stance_velocity(vel[z - ground <= LOW_M])
+        # a frame whose sole is not finite (a gap the marker body could not fill) is no sample
+        feet[s], share[s] = stance_velocity(vel[(z - ground <= LOW_M) & np.isfinite(vel).all(axis=1)])
     speeds = {s: float(np.hypot(*feet[s])) for s in SIDES}
     body = body_speed(path, dt)
     slowest = min(speeds.values())
@@ -136,7 +140,7 @@ def find_treadmill(soles: dict[str, np.ndarray], path: np.ndarray, dt: float) ->
         return None
     if float(feet["left"] @ feet["right"]) < SAME_WAY_COS * speeds["left"] * speeds["right"]:
         return None
-    if body >= min(BODY_STILL_MPS, slowest / 2):
+    if not body < min(BODY_STILL_MPS, slowest / 2):  # (a body path ending in a gap is no evidence either)
         return None
     if abs(speeds["left"] - speeds["right"]) > SPLIT_FRACTION * max(speeds.values()):
         velocity = dict(feet)
