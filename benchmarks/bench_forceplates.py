@@ -100,8 +100,14 @@ STEPS = [
     ("7 + follows < {:g} Hz, sways {:.2f}/{:.2f}".format(TRUNK_FOLLOW_HZ, *TRUNK_STEP_GAIN), LabOptions(**UNBANDED)),
     ("8 + lateral band (half the cutoff) [default]", LabOptions()),
 ]
+LAG_TARGET_MS = 10.0  # ms: issue 15's target for the ZMP's lag behind the plates' CoP
 CONTACT_LOAD = 0.05  # of the weight: a foot carrying more stands on the floor
 UPPER = ("thorax", "headarms", "arms", "head", "upperarm", "forearm", "hand")
+
+
+def _give_or_take(v: float | None, u: float | None) -> str:
+    """'+V ± U' (ms) with '-' for what is None, 12 characters."""
+    return f"{'-' if v is None else f'{v:+.1f}':>6s} ± {'-' if u is None else f'{u:.0f}':<3s}"
 
 
 def lag(cv: dict) -> str:
@@ -808,36 +814,49 @@ def _rms_by_shift(a: np.ndarray, b: np.ndarray, rows: np.ndarray, shifts: np.nda
     return np.array(out)
 
 
+def _lag_verdict(cv: dict) -> str:
+    """Where a determined lag lies against the ±10 ms target, its uncertainty counted: 'within', 'beyond' (by
+    more than its uncertainty) or 'undecided' (beyond, but within its uncertainty of it); '' when not determined."""
+    if cv["lag_ms"] is None:
+        return ""
+    if abs(cv["lag_ms"]) <= LAG_TARGET_MS:
+        return "within"
+    u = cv["lag_uncertainty_ms"]
+    return "beyond" if u is not None and abs(cv["lag_ms"]) - u > LAG_TARGET_MS else "undecided"
+
+
 def lag_conditioning(done: dict[str, tuple], figures: Path | None) -> None:
     """Whether each trial's ZMP-CoP lag and plate delay are determined: the same estimate over the first and
-    second halves of the complete frames (validation.LAG_AGREE_S); with ``figures``, the ZMP-CoP RMS against
-    the shift, whole and per half (lag_conditioning.png)."""
-    print(f"\nlag and plate delay: whole / first half / second half (ms), determined when the halves agree within "
-          f"{1000 * LAG_AGREE_S:.0f} ms")
-    print(f"{'trial':34s} {'ZMP-CoP lag':>30s} {'plate delay (applied)':>34s}  RMS at lag 0 / at best shift mm; "
-          "RMS undoing determined delays only")
-    curves, only = {}, []
+    second halves of the complete frames (validation.LAG_AGREE_S), each with the half-width of its 95 %
+    interval (validation.lag_uncertainty; the lag's includes the applied delay's), and where the determined lags
+    lie against the ±10 ms target; with ``figures``, the ZMP-CoP RMS against the shift, whole and per half
+    (lag_conditioning.png)."""
+    print(f"\nlag and plate delay: whole ± 95 % half-width / first half / second half (ms), determined when the "
+          f"halves agree within {1000 * LAG_AGREE_S:.0f} ms; the plate delay is applied only where determined")
+    print(f"{'trial':34s} {'ZMP-CoP lag':>30s} {'plate delay (applied)':>38s}  RMS at lag 0 / at best shift mm; "
+          f"against ±{LAG_TARGET_MS:g} ms")
+    curves, verdicts = {}, []
     for name, (trial, a) in done.items():
         cv, ta = a.summary["cop_vs_zmp"], a.summary["time_alignment"]
         r, p = a.result, a.plates
         rows = _scored(a)
         zmp = np.where(r.has_zmp[:, None], r.zmp, np.nan)[:, :2]
-        whole, _, halves = lag_with_halves(zmp, p.cop[:, :2], rows, 1.0 / trial.rate)
         k = int(round(MAX_LAG_S * trial.rate))
         shifts = np.arange(-k, k + 1)
         idx = np.flatnonzero(rows)
         parts = [rows] + [np.isin(np.arange(len(rows)), part) for part in (idx[: len(idx) // 2], idx[len(idx) // 2 :])]
         curves[name] = (1000 * shifts / trial.rate, [_rms_by_shift(zmp, p.cop[:, :2], x, shifts) for x in parts])
-        ms = [f"{1000 * v:+.0f}" if v is not None else "-" for v in (whole, *halves)]
-        d = ta["plate_delay_halves_ms"]
-        keep = ta["plate_delay_determined"] or not ta["plate_delay_applied_ms"]
-        only.append(cv["rms_mm"] if keep else
-                    analyse_lab_take(trial, LabOptions(plate_delay_s=0.0)).summary["cop_vs_zmp"]["rms_mm"])
-        print(f"{name[:34]:34s} {' / '.join(ms):>22s} {'yes' if cv['lag_ms'] is not None else 'no':>7s} "
-              f"{ta['plate_delay_measured_ms']:+7.1f} / {d[0]:+.0f} / {d[1]:+.0f} "
-              f"{'yes' if ta['plate_delay_determined'] else 'no':>4s} ({ta['plate_delay_applied_ms']:+.0f})  "
-              f"{curves[name][1][0][k]:6.1f} / {np.nanmin(curves[name][1][0]):6.1f}; {only[-1]:6.1f}")
-    print(f"median RMS undoing only determined plate delays: {np.median(only):.1f} mm")
+        verdicts.append(_lag_verdict(cv))
+        print(f"{name[:34]:34s} {_give_or_take(cv['lag_estimate_ms'], cv['lag_uncertainty_ms'])} / "
+              + " / ".join(f"{v:+.0f}" if v is not None else "-" for v in cv["lag_halves_ms"])
+              + f" {'yes' if cv['lag_ms'] is not None else 'no':>4s}   "
+              f"{_give_or_take(ta['plate_delay_measured_ms'], ta['plate_delay_uncertainty_ms'])} / "
+              + " / ".join(f"{v:+.0f}" if v is not None else "-" for v in ta["plate_delay_halves_ms"])
+              + f" {'yes' if ta['plate_delay_determined'] else 'no':>4s} ({ta['plate_delay_applied_ms']:+.0f})  "
+              f"{curves[name][1][0][k]:6.1f} / {np.nanmin(curves[name][1][0]):6.1f}; {verdicts[-1]}")
+    print(f"determined lags: {verdicts.count('within')} within ±{LAG_TARGET_MS:g} ms, {verdicts.count('beyond')} "
+          f"beyond it by more than their uncertainty, {verdicts.count('undecided')} beyond it within their "
+          f"uncertainty; {verdicts.count('')} not determined")
     if figures is None:
         return
     import matplotlib

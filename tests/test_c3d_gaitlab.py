@@ -779,6 +779,22 @@ def test_late_plates_are_measured_and_realigned(lab):
     assert raw.summary["cop_vs_zmp"]["lag_ms"] == pytest.approx(-25.0, abs=3.0)
     assert raw.summary["cop_vs_zmp"]["lag_halves_ms"] == pytest.approx([-25.0, -25.0], abs=3.0)
     assert raw.summary["cop_vs_zmp"]["max_mm"] > 2.0
+    # the applied delay's own uncertainty is part of the lag's: the lag is measured against the shifted plates
+    ta, cv = a.summary["time_alignment"], a.summary["cop_vs_zmp"]
+    assert 0 < ta["plate_delay_uncertainty_ms"] <= cv["lag_uncertainty_ms"] < 5.0
+
+
+def test_a_plate_delay_its_halves_do_not_pin_down_is_not_applied(lab, monkeypatch):
+    """A measured plate delay of +30 ms whose halves give 0 and +60 ms is the body model's timing as much as the
+    clock's: the plates stay where the file has them (ISW's +18 ms, halves +6 / +28, put its ZMP 17 ms late). The
+    same delay determined is applied."""
+    d, _ = lab
+    trial = read_c3d(d / "on.c3d")
+    for determined, applied in ((False, 0.0), (True, 30.0)):
+        monkeypatch.setattr(gaitlab, "plate_delay", lambda *_, ok=determined: (0.03, ok, [0.0, 0.06], 0.03))
+        s = analyse_lab_take(trial).summary
+        assert s["time_alignment"]["plate_delay_applied_ms"] == applied
+        assert s["cop_vs_zmp"]["lag_ms"] == pytest.approx(applied, abs=2.0)
 
 
 def test_lateral_band_keeps_the_stride_harmonics_across_the_walk_and_leaves_the_rest():
@@ -872,6 +888,28 @@ def test_a_lag_is_determined_only_when_both_halves_agree():
     mixed = np.where((t < 2.0)[:, None], late, early)
     lag, ok, halves = lag_with_halves(mixed, ref, rows, dt)
     assert not ok and halves == pytest.approx([0.03, -0.03], abs=2e-3)
+
+
+def test_a_lags_uncertainty_covers_its_error_and_widens_where_the_take_wants_two_shifts():
+    """Two noisy signals 30 ms apart (3 s at 100 Hz): the lag's 95 % interval is a few ms wide and holds 30 ms.
+    The second half 30 ms ahead instead (a single stance's early and late parts wanting opposite shifts): the
+    interval, the mean shift's, widens 40-fold to over 10 ms (and the halves mark the lag not determined). Under
+    two 0.1 s blocks of frames there is none."""
+    dt = 0.01
+    t = np.arange(400) * dt
+    rng = np.random.default_rng(3)
+
+    def shifted(s: float) -> np.ndarray:
+        return np.column_stack([np.sin(2 * np.pi * 0.9 * (t - s)), np.cos(2 * np.pi * 1.3 * (t - s))])
+
+    ref = shifted(0.0)
+    late = shifted(0.03) + 0.02 * rng.standard_normal(ref.shape)
+    rows = (t > 0.5) & (t < 3.5)
+    u = validation.lag_uncertainty(late, ref, rows, dt)
+    assert 0 < u < 0.005 and abs(validation.best_lag(late, ref, rows, dt) - 0.03) < u
+    mixed = np.where((t < 2.0)[:, None], late, shifted(-0.03))
+    assert validation.lag_uncertainty(mixed, ref, rows, dt) > max(0.01, 40 * u)
+    assert validation.lag_uncertainty(late, ref, (t > 0.5) & (t < 0.64), dt) is None
 
 
 def test_frames_next_to_load_off_the_plates_are_not_complete(lab, monkeypatch):

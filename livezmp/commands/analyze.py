@@ -55,6 +55,11 @@ def _stream(args: argparse.Namespace, options: TakeOptions) -> dict:
         return stream_take(take, options, args.out, args.plot, progress=lambda done: bar.update(task, completed=done))
 
 
+def _give_or_take(cv: dict) -> str:
+    """' ± U' (ms, the half-width of the lag's 95 % interval), or nothing where it has none."""
+    return "" if cv.get("lag_uncertainty_ms") is None else f" ± {cv['lag_uncertainty_ms']:.0f}"
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json")):
         check_output_path(path, option)
@@ -94,8 +99,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if cv and cv["frames"]:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "
               f"p95 {cv['p95_mm']:.1f} mm, bias fore-aft {cv['bias_mm'][0]:+.1f} / lateral {cv['bias_mm'][1]:+.1f} mm, "
-              + (f"lag {cv['lag_ms']:+.1f} ms" if cv["lag_ms"] is not None else "lag not determined (its halves give "
-                 + " / ".join("-" if h is None else f"{h:+.0f}" for h in cv["lag_halves_ms"]) + " ms)"))
+              + (f"lag {cv['lag_ms']:+.1f}{_give_or_take(cv)} ms" if cv["lag_ms"] is not None
+                 else "lag not determined (its halves give "
+                 + " / ".join("-" if h is None else f"{h:+.0f}" for h in cv["lag_halves_ms"]) + " ms; all frames "
+                 + ("-" if cv["lag_estimate_ms"] is None else f"{cv['lag_estimate_ms']:+.0f}")
+                 + f"{_give_or_take(cv)})"))
     if tm := summary.get("treadmill"):
         print(f"  treadmill: belts at {' / '.join(f'{v:.2f}' for v in tm['belt_mps'])} m/s (left / right, "
               f"{tm['source']}), the body travelling {tm['body_mps']:.2f} m/s over the take: contacts, support and "

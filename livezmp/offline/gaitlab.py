@@ -111,7 +111,7 @@ class LabOptions:
     """``mass`` kg (None: decide, see module docstring); ``mode`` ZMP mode; ``plate_cutoff_hz``: the
     plates' zero-phase low-pass (None: :func:`plates_band_hz`, so both sides see the same band);
     ``plate_delay_s``: the plates' delay behind the markers (s; they are sampled that much later), None =
-    measured from the CoM acceleration and applied when at least half a frame; ``markers``: body options
+    measured from the CoM acceleration and applied when determined and at least half a frame; ``markers``: body options
     (mass is set here); ``estimator`` settings replacing the pipeline's (None: defaults);
     ``lateral_cutoff_fraction``: the segments' positions across the walk are low-passed at this part of the
     estimator's cutoff before it (None: not; :func:`lateral_band`); ``treadmill``: "auto" (found from the feet,
@@ -403,11 +403,14 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
         take, times, cfg, result = run_take(trial, opts, used, floor, treadmill)
         com_acc = com_accelerations(take, result)
         complete, _, why = _complete(trial, result, times, cfg, floor, plates, com_acc, used)  # the same plates
-    # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration
-    # applied even when its halves disagree: tried, applying only determined delays was worse (docs/validation.md)
-    measured, determined, halves = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete,
-                                               1.0 / trial.rate)
-    applied = opts.plate_delay_s is None and measured is not None and abs(measured) >= 0.5 / trial.rate
+    # the plates' clock against the markers': the delay that best matches (GRF - m g) / m to the CoM acceleration,
+    # applied only where its halves agree: one they do not pin down is the body model's timing as much as the
+    # clock's, and applying it was worse on both halves of the held-out walks (ISW's +18 ms: lag +17 ms, RMS 43
+    # mm; left: -1 ms, 32 mm; docs/validation.md, "Lag and its uncertainty")
+    measured, determined, halves, spread = plate_delay(com_acc, plates.force / used - [0.0, 0.0, G], complete,
+                                                       1.0 / trial.rate)
+    applied = (opts.plate_delay_s is None and measured is not None and determined
+               and abs(measured) >= 0.5 / trial.rate)
     if applied:
         shift = measured
         plates = plates_at(trial, take, times, cutoff, shift)
@@ -431,9 +434,10 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
                            "plate_delay_applied_ms": round(1000 * shift, 1),
                            "plate_delay_determined": determined,
                            "plate_delay_halves_ms": [ms(h) for h in halves],
+                           "plate_delay_uncertainty_ms": ms(spread),
                            "method": "CoM acceleration (kinematics) vs (GRF - m g) / m, RMS-minimising shift"},
         "cop_vs_zmp": cop_vs_zmp(result.zmp, result.has_zmp, plates.cop, complete, result.com, 1.0 / trial.rate,
-                                 facing(take)),
+                                 facing(take), (spread or 0.0) if applied else 0.0),
         "com_acc_vs_plates": com_acc_vs_plates(com_acc, plates.force, used, complete),
         "cop_vs_force_line": cop_vs_force_line(
             plates.cop, result.zmp, result.com, plates.force, used * (com_acc + [0.0, 0.0, G]), plates.surface_z,

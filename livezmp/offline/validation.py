@@ -8,6 +8,7 @@ livezmp computes from the motion alone. Positions in metres, internal frame (z u
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import t as student_t
 
 from livezmp.balance.plates import G, lowpass
 from livezmp.model.markers import sway_basis, travel_axes
@@ -17,6 +18,11 @@ MAX_LAG_S = 0.1  # s: the lag search covers ± this
 # search's edge): their difference estimates the lag's own uncertainty, and one wider than the ±10 ms a lag is
 # judged against cannot tell a clock offset from noise (on one stance the RMS hardly depends on the shift).
 LAG_AGREE_S = 0.02
+# s: the blocks a lag's uncertainty is found over (:func:`lag_uncertainty`). The ZMP − CoP error's autocorrelation
+# falls to 0.2-0.4 at 50 ms and below zero by 100 ms on the held-out walks checked (ISW, HC003B08, HC055A09,
+# Sydney 04, HC030A22; docs/validation.md): blocks this long are about independent, yet a one-stance trial has 2-4
+LAG_BLOCK_S = 0.1
+LAG_CONFIDENCE = 0.95  # the two-sided level of the lag's interval
 # The walk's heading at each frame (:func:`walk_heading`): its velocity low-passed below the stride (a slow walk's
 # 0.7 Hz strides sway the heading by 1 deg through it), counted from half a slow walk's speed (0.4 m/s) up; slower,
 # swaying or standing, the whole take's travel or the way the subject faces
@@ -111,26 +117,54 @@ def lag_with_halves(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
     return lag, ok, halves
 
 
+def lag_uncertainty(a: np.ndarray, b: np.ndarray, rows: np.ndarray, dt: float) -> float | None:
+    """Half-width (s) of the ``LAG_CONFIDENCE`` interval of :func:`best_lag` over ``rows``: a delete-one-block
+    jackknife over consecutive ``LAG_BLOCK_S`` blocks of ``rows`` (Efron & Tibshirani 1993, *An Introduction to
+    the Bootstrap*, ch. 11: blocks keep the error's own correlation inside them) with Student's t at one fewer
+    degrees of freedom than blocks. A flat RMS curve, or parts of the take that want different shifts (a single
+    stance: early stance later, late stance earlier), give a wide one. None with fewer than two blocks or where
+    a block's removal leaves no lag."""
+    idx = np.flatnonzero(rows)
+    n = int(round(len(idx) * dt / LAG_BLOCK_S))
+    if n < 2:
+        return None
+    lags = []
+    for part in np.array_split(idx, n):
+        rest = rows.copy()
+        rest[part] = False
+        lags.append(best_lag(a, b, rest, dt))
+    if any(v is None for v in lags):
+        return None
+    lags = np.array(lags)
+    se = np.sqrt((n - 1) / n * np.sum((lags - lags.mean()) ** 2))
+    return float(student_t.ppf(0.5 + LAG_CONFIDENCE / 2, n - 1) * se)
+
+
 def ms(v: float | None) -> float | None:
     """Seconds (or None) as milliseconds rounded to 0.1 ms, for summaries."""
     return None if v is None else round(1000 * v, 1)
 
 
 def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: np.ndarray, com: np.ndarray,
-               dt: float, facing: np.ndarray | None = None) -> dict:
+               dt: float, facing: np.ndarray | None = None, clock_uncertainty_s: float = 0.0) -> dict:
     """ZMP against plate CoP over the complete frames that have a ZMP: count, RMS, p95 and max of the
     horizontal distance (mm), mean ZMP − CoP along the walking direction and to its left at each frame
     (:func:`path_axes`: on a turning walk the axes turn with the path) (mm), and
     the lag (ms, see :func:`best_lag`; reported, not applied; None when not determined, see
-    :func:`lag_with_halves`) and the lags over the first and second halves of those frames (ms)."""
+    :func:`lag_with_halves`), the lag over all those frames whether determined or not, its uncertainty (ms,
+    the half-width of its 95 % interval: :func:`lag_uncertainty` and, root-sum-square, ``clock_uncertainty_s``,
+    that of a plate delay applied to ``cop``, whose error the lag takes on whole; None with under two blocks)
+    and the lags over the first and second halves of those frames (ms)."""
     rows = complete & has_zmp & np.isfinite(cop).all(axis=1)
     d = zmp[rows, :2] - cop[rows, :2]
     if not len(d):
         return {"frames": 0, "rms_mm": None, "p95_mm": None, "max_mm": None, "bias_mm": None, "lag_ms": None,
-                "lag_halves_ms": None}
+                "lag_estimate_ms": None, "lag_uncertainty_ms": None, "lag_halves_ms": None}
     dist = np.hypot(d[:, 0], d[:, 1])
     fwd, left = (ax[rows, :2] for ax in path_axes(com, 1.0 / dt, facing))
-    lag, determined, halves = lag_with_halves(np.where(has_zmp[:, None], zmp, np.nan)[:, :2], cop[:, :2], rows, dt)
+    shown = np.where(has_zmp[:, None], zmp, np.nan)[:, :2]
+    lag, determined, halves = lag_with_halves(shown, cop[:, :2], rows, dt)
+    own = lag_uncertainty(shown, cop[:, :2], rows, dt)
     return {
         "frames": int(rows.sum()),
         "rms_mm": round(1000 * float(np.sqrt(np.mean(dist ** 2))), 2),
@@ -138,18 +172,22 @@ def cop_vs_zmp(zmp: np.ndarray, has_zmp: np.ndarray, cop: np.ndarray, complete: 
         "max_mm": round(1000 * float(dist.max()), 2),
         "bias_mm": [round(1000 * float(np.mean(np.einsum("ij,ij->i", d, ax))), 2) for ax in (fwd, left)],
         "lag_ms": ms(lag) if determined else None,
+        "lag_estimate_ms": ms(lag),
+        "lag_uncertainty_ms": None if own is None else ms(float(np.hypot(own, clock_uncertainty_s))),
         "lag_halves_ms": [ms(h) for h in halves],
     }
 
 
 def plate_delay(com_acc: np.ndarray, plate_acc: np.ndarray, rows: np.ndarray,
-                dt: float) -> tuple[float | None, bool, list]:
+                dt: float) -> tuple[float | None, bool, list, float | None]:
     """How late (s) the plates' acceleration (GRF − m g) / m (N, 3) comes after the kinematic CoM
     acceleration (N, 3) over ``rows``: the plates' clock against the markers'. Both sides measure the
     whole body's acceleration, so a shift between them is timing, not the body model. Also whether it is
-    determined (:func:`lag_with_halves`) and the delays over the two halves of ``rows`` (s)."""
+    determined (:func:`lag_with_halves`), the delays over the two halves of ``rows`` (s) and the half-width of
+    its 95 % interval (s, :func:`lag_uncertainty`)."""
     lag, determined, halves = lag_with_halves(com_acc, plate_acc, rows, dt)
-    return (None if lag is None else -lag), determined, [None if h is None else -h for h in halves]
+    return ((None if lag is None else -lag), determined, [None if h is None else -h for h in halves],
+            lag_uncertainty(com_acc, plate_acc, rows, dt))
 
 
 def com_acc_vs_plates(com_acc: np.ndarray, force: np.ndarray, mass: float, complete: np.ndarray) -> dict:
