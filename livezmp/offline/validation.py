@@ -22,6 +22,9 @@ LAG_AGREE_S = 0.02
 # falls to 0.2-0.4 at 50 ms and below zero by 100 ms on the held-out walks checked (ISW, HC003B08, HC055A09,
 # Sydney 04, HC030A22; docs/validation.md): blocks this long are about independent, yet a one-stance trial has 2-4
 LAG_BLOCK_S = 0.1
+# at most this many blocks (a long take's are longer): each costs one full lag search, and 30 already put Student's t
+# within 5 % of the normal's
+LAG_MAX_BLOCKS = 40
 LAG_CONFIDENCE = 0.95  # the two-sided level of the lag's interval
 # The walk's heading at each frame (:func:`walk_heading`): its velocity low-passed below the stride (a slow walk's
 # 0.7 Hz strides sway the heading by 1 deg through it), counted from half a slow walk's speed (0.4 m/s) up; slower,
@@ -119,13 +122,13 @@ def lag_with_halves(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
 
 def lag_uncertainty(a: np.ndarray, b: np.ndarray, rows: np.ndarray, dt: float) -> float | None:
     """Half-width (s) of the ``LAG_CONFIDENCE`` interval of :func:`best_lag` over ``rows``: a delete-one-block
-    jackknife over consecutive ``LAG_BLOCK_S`` blocks of ``rows`` (Efron & Tibshirani 1993, *An Introduction to
-    the Bootstrap*, ch. 11: blocks keep the error's own correlation inside them) with Student's t at one fewer
-    degrees of freedom than blocks. A flat RMS curve, or parts of the take that want different shifts (a single
-    stance: early stance later, late stance earlier), give a wide one. None with fewer than two blocks or where
-    a block's removal leaves no lag."""
+    jackknife over consecutive ``LAG_BLOCK_S`` blocks of ``rows`` (at most ``LAG_MAX_BLOCKS``; Efron & Tibshirani
+    1993, *An Introduction to the Bootstrap*, ch. 11: blocks keep the error's own correlation inside them) with
+    Student's t at one fewer degrees of freedom than blocks. A flat RMS curve, or parts of the take that want
+    different shifts (a single stance: early stance later, late stance earlier), give a wide one. None with fewer
+    than two blocks or where a block's removal leaves no lag."""
     idx = np.flatnonzero(rows)
-    n = int(round(len(idx) * dt / LAG_BLOCK_S))
+    n = min(int(round(len(idx) * dt / LAG_BLOCK_S)), LAG_MAX_BLOCKS)
     if n < 2:
         return None
     lags = []
