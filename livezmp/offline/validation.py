@@ -20,7 +20,8 @@ MAX_LAG_S = 0.1  # s: the lag search covers ± this
 LAG_AGREE_S = 0.02
 # s: the blocks a lag's uncertainty is found over (:func:`lag_uncertainty`). The ZMP − CoP error's autocorrelation
 # falls to 0.2-0.4 at 50 ms and below zero by 100 ms on the held-out walks checked (ISW, HC003B08, HC055A09,
-# Sydney 04, HC030A22; docs/validation.md): blocks this long are about independent, yet a one-stance trial has 2-4
+# Sydney 04, HC030A22; docs/validation.md): blocks this long are about independent, and a one-stance trial's
+# 0.2-0.4 s of complete frames still make 2-4 of them
 LAG_BLOCK_S = 0.1
 # at most this many blocks (a long take's are longer): each costs one full lag search, and 30 already put Student's t
 # within 5 % of the normal's
