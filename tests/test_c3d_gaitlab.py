@@ -893,8 +893,8 @@ def test_a_lag_is_determined_only_when_both_halves_agree():
 def test_a_lags_uncertainty_covers_its_error_and_widens_where_the_take_wants_two_shifts():
     """Two noisy signals 30 ms apart (3 s at 100 Hz): the lag's 95 % interval is a few ms wide and holds 30 ms.
     The second half 30 ms ahead instead (a single stance's early and late parts wanting opposite shifts): the
-    interval, the mean shift's, widens 40-fold to over 10 ms (and the halves mark the lag not determined). Under
-    two 0.1 s blocks of frames there is none."""
+    interval, the mean shift's, widens more than 40-fold, to over 10 ms (and the halves mark the lag not
+    determined). Under two 0.2 s blocks of frames there is none."""
     dt = 0.01
     t = np.arange(400) * dt
     rng = np.random.default_rng(3)
