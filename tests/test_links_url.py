@@ -58,6 +58,10 @@ def test_options_reach_the_backends():
     ("dynamixel:/dev/x?watchdog=3", "option 'watchdog' must be 0 (off) or 0.02..2.54 s, got 3"),
     ("dynamixel:/dev/x?baud=1&baud=2", "option 'baud' given twice"),
     ("dynamixel:/dev/x?baud", "option 'baud' is not NAME=VALUE"),
+    # the daemon's host given as the channel: python-can said only "missing 2 required positional arguments"
+    ("can:socketcand:127.0.0.1", "link URL 'can:socketcand:127.0.0.1': socketcand needs option(s) host, port: "
+                                 "can:socketcand:CHANNEL?host=HOST&port=PORT (CHANNEL: the daemon's CAN interface"),
+    ("can:socketcand:can0?host=127.0.0.1&protocol=mit", "socketcand needs option(s) port: can:socketcand:"),
 ])
 def test_bad_urls_are_one_line_input_errors(url, message):
     with pytest.raises(InputError) as info:

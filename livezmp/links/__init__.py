@@ -167,6 +167,7 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
     if bad:
         raise InputError(f"{config.source}: servo id {bad[0]} cannot be a CAN node id (1..127)")
     interface, _, channel = target.partition(":")
+    _check_bus_options(url, interface, extra)
     bus_options = {k: _bus_option(v) for k, v in extra.items()}
     if opts["bitrate"] is not None:
         bus_options["bitrate"] = opts["bitrate"]
@@ -199,12 +200,27 @@ def _can_mit(url: str, target: str, names: list[str], config: RobotConfig, opts:
     if len(set(buses)) != len(buses) or not all(buses):
         raise InputError(f"link URL '{url}': can:INTERFACE:CHANNEL1+CHANNEL2... needs distinct, non-empty channels")
     bitrate = opts["bitrate"] or 1_000_000
+    _check_bus_options(url, interface, extra)
     bus_options = {k: _bus_option(v) for k, v in extra.items()}
 
     def open_bus(channel: str) -> can.BusABC:
         return can.Bus(interface=interface, channel=channel, bitrate=bitrate, **bus_options)
 
     return MitCanLink(url, names, servos, buses, open_bus, bitrate=bitrate, timeout=opts["timeout"], **gains)
+
+
+# python-can interfaces whose bus needs options beyond the channel (their constructors' required arguments)
+REQUIRED_BUS_OPTIONS = {"socketcand": ("host", "port")}
+
+
+def _check_bus_options(url: str, interface: str, extra: dict) -> None:
+    """A python-can interface's required options named in one line (python-can itself says only that a
+    constructor misses positional arguments), with the URL form that gives them."""
+    missing = [name for name in REQUIRED_BUS_OPTIONS.get(interface, ()) if name not in extra]
+    if missing:
+        form = "&".join(f"{name}={name.upper()}" for name in REQUIRED_BUS_OPTIONS[interface])
+        raise InputError(f"link URL '{url}': {interface} needs option(s) {', '.join(missing)}: "
+                         f"can:{interface}:CHANNEL?{form} (CHANNEL: the daemon's CAN interface, e.g. can0)")
 
 
 _BUILT_IN = {
