@@ -418,6 +418,80 @@ def test_port_loss_reconnects_when_the_port_returns(mini):
     assert sum(1 for t, _, _ in link.writes if t - 1000.0 > reconnects[-1]) == round((1.5 - reconnects[-1]) / T)
 
 
+def _recorded_loop(body, path, fault, reconnect_ok):
+    from livezmp.live.recorder import LoopRecorder
+    from livezmp.model.body_spec import robot_body
+
+    loop, link, _, events = scripted_loop(body, fault=fault, reconnect_ok=reconnect_ok)
+    loop.recorder = LoopRecorder(path, robot_body(demo_robot_path())[1], {"fps": RATE}, body.channel_names,
+                                 body.joint_names)
+    return loop, link, events
+
+
+def test_link_faults_are_recorded_with_their_loop_times_and_timed_in_the_summary(mini, tmp_path):
+    """Three failed reads, then the port gone from 0.3 to 0.9 s of a 1.5 s run: each fault is on the
+    recording's /device_error at its loop time (the failed reads folded, their counts adding up), the
+    summary times the outage (until the reconnect that found the port, at 1.05 s), and at 50 % of the run the link
+    failed it; every good sample before the
+    fault is in the recording."""
+    from livezmp.recording.reader import iter_messages
+
+    gone = (0.3, 0.9)
+
+    def fault(n, t):
+        return "error" if n in (20, 21, 22) else "down" if gone[0] <= t - 1000.0 < gone[1] else None
+
+    path = tmp_path / "run.mcap"
+    loop, link, events = _recorded_loop(mini, path, fault, lambda t: t - 1000.0 >= gone[1])
+    s = loop.run(duration=1.5)
+    totals = loop.recorder.close(s)
+    reconnected = [t - 1000.0 for c, t in link.calls if c == "reconnect"][-1]
+    records = sorted(iter_messages(path, "/device_error"), key=lambda r: r["t"])
+    kinds = [r["kind"] for r in records]
+    # the first failed read told at once, the two after it within its second in a record of their own a second on
+    assert kinds == ["read_error", "link_down", "watchdog", "read_error", "reconnected", "resumed"]
+    assert [r["count"] for r in records[::3]] == [1, 2] and records[0]["t"] == pytest.approx(20 * T, abs=T)
+    assert records[3]["t"] == pytest.approx(1.04, abs=T) and records[3]["message"].startswith("2 more read error")
+    by = {r["kind"]: r for r in records[::-1]}
+    assert by["link_down"]["t"] == pytest.approx(gone[0], abs=T) and "scripted down" in by["link_down"]["message"]
+    assert by["reconnected"]["t"] == pytest.approx(reconnected, abs=T)
+    assert all(r["count"] >= 1 and r["wall_time"] > 1e9 for r in records)
+    assert totals["written"]["/device_error"] == 6
+    down = s["link_down"]
+    assert down["events"] == 1 and not down["at_end"]
+    assert down["seconds"] == pytest.approx(by["reconnected"]["t"] - by["link_down"]["t"], abs=1e-9)
+    assert down["share"] == pytest.approx(down["seconds"] / 1.5, abs=1e-4) and s["run_s"] == 1.5
+    assert s["without_frames"]["events"] == 1 and not s["without_frames"]["at_end"]
+    assert s["link_failed"] == "link down 50 % of the run (0.8 s in 1 outage(s)), more than the 10 % allowed"
+    # the failed reads are not told on stderr (the status line counts them), the outage is
+    assert not [e for e in events if "read failed" in e] and any("link down" in e for e in events)
+    inputs = [m["t"] for m in iter_messages(path, "/input")]
+    assert len(inputs) == s["good_frames"] and sum(t < gone[0] for t in inputs) == round(gone[0] / T) - 3
+
+
+@pytest.mark.parametrize("fate", ["down", "error"])
+def test_a_link_that_never_comes_back_fails_the_run(mini, tmp_path, fate):
+    """The port gone ("down") or every servo silent ("error": each read fails, the adapter still there)
+    from 0.5 s to the end of a 1 s run: the summary says it never came back."""
+    loop, _, _ = _recorded_loop(mini, tmp_path / "r.mcap", lambda n, t: fate if t - 1000.0 >= 0.5 else None,
+                                lambda t: False)
+    s = loop.run(duration=1.0)
+    loop.recorder.close(s)
+    what = "link down" if fate == "down" else "without a valid frame"
+    assert s["link_failed"].startswith(f"{what} at the end of the run: it never came back")
+    span = s["link_down" if fate == "down" else "without_frames"]
+    assert span["at_end"] and span["seconds"] == pytest.approx(0.5 if fate == "down" else 0.4, abs=2 * T)
+    assert s["link_down"]["events"] == (fate == "down")
+
+
+def test_an_outage_under_a_tenth_of_the_run_is_counted_not_failed(mini):
+    loop, _, _, _ = scripted_loop(mini, fault=lambda n, t: "down" if 0.3 <= t - 1000.0 < 0.35 else None,
+                                  reconnect_ok=lambda t: t - 1000.0 >= 0.35)
+    s = loop.run(duration=4.0)
+    assert s["link_down"]["events"] == 1 and 0 < s["link_down"]["share"] < 0.1
+    assert s["link_failed"] is None and s["reconnects"] == 1
+
+
 def test_watchdog_can_drop_torque_and_then_only_monitors(mini):
     cfg = LoopConfig(rate_hz=RATE, safety=SafetyConfig(drop_torque=True))
     loop, link, _, _ = scripted_loop(mini, fault=lambda n, t: "error" if 0.3 <= t - 1000.0 < 0.5 else None,

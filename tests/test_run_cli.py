@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import select
 import signal
 import subprocess
@@ -133,6 +134,39 @@ def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     assert s["inside_fraction"] == 1.0 and s["state"] == "running"
     # the loop asked for SCHED_FIFO by default; granted or not, the summary says which
     assert s["realtime_priority"] in (0, 50)
+
+
+def test_a_run_whose_link_never_came_back_is_recorded_and_exits_3(tmp_path, monkeypatch, capsys):
+    """The mock link's port gone after 40 reads of a 100-cycle run, for good: the run ends as asked,
+    its summary and recording written (the 40 samples before the fault in it, the outage on
+    /device_error), and exits 3 (EXIT_LINK_FAILED) with one line saying why."""
+    from livezmp.links.base import LinkError
+    from livezmp.recording.reader import iter_messages
+    from sim_devices.mock_link import MockLink
+
+    read = MockLink.read
+
+    def vanishing(self):
+        if self.stats.reads >= 40:
+            raise LinkError("mock: port gone")
+        return read(self)
+
+    monkeypatch.setattr(MockLink, "read", vanishing)
+    monkeypatch.setattr(MockLink, "hold", lambda self: None)  # its hold reads first
+    monkeypatch.setattr(MockLink, "reconnect", lambda self: False)
+    path, rec = tmp_path / "s.json", tmp_path / "r.mcap"
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.5", "--rate", "200",
+                 "--quiet", "--realtime-priority", "0", "--summary-json", str(path), "--record", str(rec)]) == 3
+    out, err = capsys.readouterr()
+    assert re.fullmatch(r"livezmp: the link failed the run: link down at the end of the run: it never came back "
+                        r"\(0\.\d s in all\)\n", err.splitlines(keepends=True)[-1])
+    assert re.search(r"; link down 0\.\d s in 1 outage\(s\), still down at the end", out)
+    s = json.loads(path.read_text())
+    assert s["stopped_by"] == "duration" and s["good_frames"] == 40 and s["link_down"]["at_end"]
+    assert s["recording"]["written"]["/input"] == 40 and s["run_s"] == 0.5
+    # cycle 40 on an unloaded machine, later when the clock skipped deadlines
+    (first, t), *_ = [(r["kind"], r["t"]) for r in iter_messages(rec, "/device_error")]
+    assert first == "link_down" and 0.2 <= t < 0.5 and s["link_down"]["seconds"] == pytest.approx(0.5 - t)
 
 
 def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch):

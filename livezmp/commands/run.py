@@ -52,6 +52,10 @@ from livezmp.offline.report import write_json
 # 500 Hz cycle; 0.1 ms here. (Measured, 20 s demo: an unpaced writer at 5 ms raised deadline misses from ~160
 # to ~1200; paced, misses are within the run-to-run noise of runs without recording.)
 RECORD_SWITCH_INTERVAL_S = 1e-4
+# `run` / `demo` exit code of a run that ended, its summary and recording written, whose link failed it: down or
+# without valid frames for more than MAX_LOST_SHARE of it, or at its end, or unusable (livezmp.live.link_faults).
+# Not 1 (an unexpected error), 2 (a user's mistake) or 128 + N (a signal).
+EXIT_LINK_FAILED = 3
 
 
 # -- shared pieces ------------------------------------------------------------------------------------
@@ -145,6 +149,10 @@ def print_summary(s: dict) -> None:
             f"deadline misses; read errors {s['read_errors']}, write errors {s['write_errors']}, stale frames "
             f"{s['stale_frames']}; {s['corrections_sent']} corrections sent; estimated ZMP inside {inside}; "
             f"latency p99 {p99}; stopped by {s['stopped_by']}")
+    down = s.get("link_down")
+    if down and down["events"]:
+        line += f"; link down {down['seconds']:.1f} s in {down['events']} outage(s)" + (
+            ", still down at the end" if down["at_end"] else "")
     if s.get("bus"):
         b = s["bus"]
         size = (f"{b['frames_per_cycle']} frames, {b['bits_per_cycle']} bits" if "bits_per_cycle" in b
@@ -254,9 +262,13 @@ def assumed_adapter(args: argparse.Namespace) -> Adapter:
 
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
+    """Write and print the summary; the exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
     if args.summary_json:
         write_json(summary, args.summary_json)
     print_summary(summary)
+    if summary.get("link_failed"):
+        print(f"livezmp: the link failed the run: {summary['link_failed']}", file=sys.stderr, flush=True)
+        return EXIT_LINK_FAILED
     return 0
 
 

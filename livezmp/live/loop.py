@@ -81,6 +81,7 @@ from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkRead
 from livezmp.live.clock import LoopClock, Tick
 from livezmp.live.config import CONTACT_MODES, LoopConfig
 from livezmp.live.fall_detection import FallDetector
+from livezmp.live.link_faults import LinkFaults
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.safety import FrameGuard, GoalLimiter, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer
@@ -100,7 +101,13 @@ FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes i
 # (livezmp_mini, hs adapters, load 0.6-1.5, 7 alternated pairs) 20 us for both missed 0.94-2.75 % of deadlines
 # (median 1.16), 40 us 0.62-1.32 % (median 0.90).
 PTY_SEND_PAUSE_S = 2e-5
-EVENT_REPEAT_S = 1.0  # an event of the same kind is told at most once a second; the rest are counted
+EVENT_REPEAT_S = 1.0  # an event of a repeating kind is told at most once a second; the rest are counted
+REPEATING_KINDS = frozenset({"read_error", "stale", "corrupted", "write_error", "no_sensors"})
+# recorded (/device_error) and counted, not told: a bus losing 1 % of its replies would print a line a second; the
+# status line counts them
+QUIET_KINDS = frozenset({"read_error"})
+NOT_RECORDED_KINDS = frozenset({"fell"})  # the robot's state, not a fault of its devices or link
+
 @dataclass
 class LoopCounters:
     """Per-run counts; ``analysed``: results of real samples; ``judged``/``inside``: those
@@ -179,6 +186,7 @@ class LiveLoop:
         self.latency = TimingHistogram()
         self.events: deque[str] = deque(maxlen=100)
         self._told: dict[str, tuple[float, int]] = {}  # event kind -> (last told at, untold since)
+        self._untold = 0  # events folded and not noted yet, all kinds
         self.nb = len(body.base_channels)
         self._nan = np.full(body.nq, np.nan)
         self._stop_reason: str | None = None
@@ -188,6 +196,8 @@ class LiveLoop:
         self.torque_dropped = False
         self.stopped = False  # the watchdog stopped commanding
         self.link_down = False
+        self.faults = LinkFaults()
+        self._t = 0.0  # loop time of the cycle running (s): where the run ended, once it has
         self._samples = 0  # samples given to the estimators over the whole run
         self._reading: tuple[tuple[bool, bool] | None, FootSensors | None] = (None, None)  # the sample's sensors
         self._restart_estimation()
@@ -232,21 +242,43 @@ class LiveLoop:
         if self._stop_reason is None:
             self._stop_reason = reason
 
-    def _event(self, t: float, msg: str, kind: str | None = None) -> None:
-        """Note a state change; events of a repeating ``kind`` (rejected frames, failed
-        writes) at most once every EVENT_REPEAT_S, with how many were not told."""
-        if kind is not None:
+    def _event(self, t: float, kind: str, msg: str) -> None:
+        """Note an event of ``kind`` at loop time ``t`` (s): told (``on_event``, the summary's events) and
+        recorded (``/device_error``). Those of a kind in `REPEATING_KINDS` (rejected frames, failed reads and
+        writes) at most once every EVENT_REPEAT_S, the record's count and its message saying how many came
+        since the previous one; `_flush_events` notes what is left at the end."""
+        count = 1
+        if kind in REPEATING_KINDS:
             last, untold = self._told.get(kind, (-math.inf, 0))
             if t - last < EVENT_REPEAT_S:
                 self._told[kind] = (last, untold + 1)
+                self._untold += 1
                 return
             self._told[kind] = (t, 0)
             if untold:
                 msg += f" (and {untold} more in the {t - last:.1f} s before)"
+                count += untold
+                self._untold -= untold
+        self._note(t, kind, msg, count)
+
+    def _note(self, t: float, kind: str, msg: str, count: int) -> None:
+        if self.recorder is not None and kind not in NOT_RECORDED_KINDS:
+            self.recorder.fault(t, kind, msg, count)
+        if kind in QUIET_KINDS:
+            return
         line = f"t={t:.3f}s: {msg}"
         self.events.append(line)
         if self.on_event is not None:
             self.on_event(line)
+
+    def _flush_events(self, t: float, end: bool = False) -> None:
+        """The repeats of each kind not noted yet whose EVENT_REPEAT_S has passed (all of them at the run's
+        ``end``), in one note a kind at loop time ``t`` (s), so the recording's counts add up to the summary's."""
+        for kind, (last, untold) in list(self._told.items()):
+            if untold and (end or t - last >= EVENT_REPEAT_S):
+                self._told[kind] = (t, 0)
+                self._untold -= untold
+                self._note(t, kind, f"{untold} more {kind.replace('_', ' ')} in the {t - last:.1f} s before", untold)
 
     # -- the loop ------------------------------------------------------------------------------
 
@@ -264,7 +296,7 @@ class LiveLoop:
         self.watchdog = Watchdog(max(self.config.safety.watchdog_s, 3 * self.dt), tick.woke)
         try:
             while True:
-                t = tick.index * self.dt
+                t = self._t = tick.index * self.dt
                 if duration is not None and t >= duration:
                     self.request_stop("duration")
                 self._poll(t)
@@ -280,6 +312,7 @@ class LiveLoop:
         finally:
             # stop commands go out first, whatever happened
             self.link.safe_stop(drop_torque=self.torque_dropped)
+            self._flush_events(self._t, end=True)
         return self.summary()
 
     def _poll(self, t: float) -> None:
@@ -289,6 +322,8 @@ class LiveLoop:
             self._next_fell_check = t + FELL_CHECK_S
             if self.fell():
                 self.request_stop("fell")
+        if self._untold:
+            self._flush_events(t - 0.5 * self.dt)
         if self.on_status is not None and t >= self._next_status:
             self._next_status += self.config.status_every_s
             self.on_status(self.status(t - 0.5 * self.dt))
@@ -313,7 +348,7 @@ class LiveLoop:
                     self.counters.stale_frames += 1
                 else:
                     self.counters.corrupted_frames += 1
-                self._event(t, f"{verdict.kind} frame dropped: {verdict.reason}", kind=verdict.kind)
+                self._event(t, verdict.kind, f"{verdict.kind} frame dropped: {verdict.reason}")
                 frame = None
         if frame is None:
             self._request()
@@ -370,7 +405,7 @@ class LiveLoop:
                 self.link.write_goals(goals)
         except LinkError as e:
             self.counters.write_errors += 1
-            self._event(t, f"write failed: {e}", kind="write")
+            self._event(t, "write_error", f"write failed: {e}")
             return
         self._written(t, t0, t3, limited)
 
@@ -404,7 +439,7 @@ class LiveLoop:
             self.link.send_prepared()
         except LinkError as e:
             self.counters.write_errors += 1
-            self._event(t, f"write failed: {e}", kind="write")
+            self._event(t, "write_error", f"write failed: {e}")
             return prepared[3]
         self.limiter.offsets = prepared[2]
         self._written(t, t0, t3, prepared[1])
@@ -433,22 +468,25 @@ class LiveLoop:
     def _read(self, t: float) -> LinkFrame | None:
         try:
             return self.link.read()
-        except LinkReadError:
+        except LinkReadError as e:
             self.counters.failed_reads += 1
+            self._event(t, "read_error", f"read failed: {e}")
         except LinkUnusable as e:  # e.g. a bus that loses too many replies: no reconnect mends it
             self.counters.failed_reads += 1
-            self._event(t, f"link unusable: {e}")
+            self.faults.unusable = str(e)
+            self._event(t, "link_unusable", f"link unusable: {e}")
             self.request_stop(f"link unusable: {e}")
         except LinkError as e:
             self.counters.failed_reads += 1
             self.link_down = True
-            self._event(t, f"link down: {e}")
+            self.faults.down.begin(t)
+            self._event(t, "link_down", f"link down: {e}")
         return None
 
     def _watch_imu(self, t: float, frame: LinkFrame) -> None:
         self._imu_seen = True
         if self.fall_detector.fell is None and self.fall_detector.update(frame.t, frame.imu):
-            self._event(t, f"fell: {self.fall_detector.fell}")
+            self._event(t, "fell", f"fell: {self.fall_detector.fell}")
             if self.fell is None:
                 self.request_stop("fell")
 
@@ -475,8 +513,7 @@ class LiveLoop:
             self.counters.sensor_contacts += 1
         elif mode == "sensors":
             self.counters.no_sensor_frames += 1
-            self._event(t, "no foot-sensor reading of both feet: contacts detected from the kinematics",
-                        kind="no_sensors")
+            self._event(t, "no_sensors", "no foot-sensor reading of both feet: contacts detected from the kinematics")
         return contacts
 
     def _feed(self, t: float, channels: np.ndarray, valid: bool) -> None:
@@ -555,6 +592,7 @@ class LiveLoop:
         if self.stopped or not self.watchdog.expired(now):
             return
         self.stopped = True
+        self.faults.without_frames.begin(t)
         self._started = False  # no more predicted samples: the estimator restarts on resume
         self.counters.watchdog_trips += 1
         drop = self.config.safety.drop_torque
@@ -562,7 +600,7 @@ class LiveLoop:
         if drop:
             self.torque_dropped = True
             self.halted = "torque dropped by the watchdog"
-        self._event(t, f"watchdog: no valid frame for {1e3 * (now - self.watchdog.last):.0f} ms; "
+        self._event(t, "watchdog", f"watchdog: no valid frame for {1e3 * (now - self.watchdog.last):.0f} ms; "
                        f"{'torque dropped' if drop else 'holding'}" + ("; reconnecting" if self.link_down else ""))
 
     def _try_reconnect(self, t: float, now: float) -> None:
@@ -572,27 +610,29 @@ class LiveLoop:
         if self.link.reconnect():
             self.counters.reconnects += 1
             self.link_down = False
+            self.faults.down.end(t)
             if self.torque_dropped:  # reopening a link switches torque on: a limp robot stays limp
                 self.link.safe_stop(drop_torque=True)
-            self._event(t, "link reconnected")
+            self._event(t, "reconnected", "link reconnected")
 
     def _resume(self, t: float) -> None:
         gap = self.clock.now() - self.watchdog.last
         self._restart_estimation()
         self.stopped = False
+        self.faults.without_frames.end(t)
         self.counters.resumes += 1
-        self._event(t, f"valid frames again after {1e3 * gap:.0f} ms; estimator restarted"
+        self._event(t, "resumed", f"valid frames again after {1e3 * gap:.0f} ms; estimator restarted"
                        + ("" if self.halted else ", ramping back to the command"))
 
     def _hardware_errors(self, t: float, frame: LinkFrame) -> None:
         for joint, bits in frame.hardware_errors.items():
             if self.counters.hardware_errors.get(joint) != bits:
                 self.counters.hardware_errors[joint] = bits
-                self._event(t, f"servo {joint}: hardware error 0x{bits:02x}")
+                self._event(t, "hardware_error", f"servo {joint}: hardware error 0x{bits:02x}")
         if self.config.safety.stop_on_hardware_error and self.halted is None:
             self.halted = f"hardware error on {', '.join(sorted(frame.hardware_errors))}"
             self.link.safe_stop(drop_torque=False)
-            self._event(t, f"safe stop: {self.halted}; monitoring only")
+            self._event(t, "safe_stop", f"safe stop: {self.halted}; monitoring only")
 
     # -- reports -------------------------------------------------------------------------------
 
@@ -667,4 +707,5 @@ class LiveLoop:
                      "write_errors": stats.write_errors, "reconnects": stats.reconnects,
                      "errors_by_kind": dict(stats.errors_by_kind)},
             "events": list(self.events),
+            **self.faults.summary(self._t),
         }

@@ -12,7 +12,13 @@ the computed ZMP side by side:
   result's world frame and its distance to the computed ZMP (:data:`LOOP_SCHEMAS`);
 - ``/correction``: every command sent while correcting: ``offsets`` the correction
   offsets in those goals (joint -> rad, after the safety limits), ``delta`` the
-  corrector's root rotation (rad), ``limited`` whether a limit cut them.
+  corrector's root rotation (rad), ``limited`` whether a limit cut them;
+- ``/device_error``: every fault the loop met and what it did about it, at its loop time ``t``: a
+  read that failed (``read_error``), the port gone (``link_down``) and back (``reconnected``), the
+  link unusable, a rejected frame (``stale``, ``corrupted``), a failed write, the watchdog's stop
+  and the frames' return (``watchdog``, ``resumed``), a servo's hardware error and the safe stop
+  it latched. Repeating kinds are folded as the loop tells them (at most one record a second,
+  ``count`` the occurrences it stands for, so the counts add up to the summary's).
 
 Messages of one sample share its log time (the run's start on the wall clock plus the
 sample's loop time), so the ``/result`` and ``/foot_sensors`` of a sample, written
@@ -87,6 +93,13 @@ class LoopRecorder:
                             offsets: np.ndarray) -> dict:
         return {"index": index, "t": t, "delta": point_message(delta), "limited": limited,
                 "offsets": dict(zip(self.joint_names, offsets.tolist(), strict=True))}
+
+    def fault(self, t: float, kind: str, message: str, count: int) -> None:
+        """A ``/device_error`` record of ``count`` faults of ``kind`` at loop time ``t`` (s)."""
+        self.writer.put("/device_error", self._ns(t), self._fault_message, t, kind, message, count)
+
+    def _fault_message(self, t: float, kind: str, message: str, count: int) -> dict:
+        return {"t": t, "wall_time": self._origin_ns / 1e9 + t, "kind": kind, "message": message, "count": count}
 
     def idle(self, seconds: float) -> None:
         """The loop sleeps for ``seconds``: the writer's window (see :meth:`BackgroundWriter.idle`)."""

@@ -92,6 +92,8 @@ SCHEMAS = {
         "description": "A fault of the source (bad packets, lost connection), rate-limited per kind.",
         "properties": {
             "wall_time": {"type": "number", "description": "Unix time of the first occurrence, s"},
+            "t": {"type": "number", "description": "the live loop's time of the event, s, as /input's t (absent in "
+                                                   "the monitor's records)"},
             "kind": {"type": "string"},
             "message": {"type": "string"},
             "count": {"type": "integer", "description": "occurrences folded into this record"},
