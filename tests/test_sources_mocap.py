@@ -127,6 +127,59 @@ def test_qtm_refuses_what_it_cannot_serve(trial):
     server.close()
 
 
+def qtm_frequency(monkeypatch, text: str | None) -> None:
+    """Every simulated QTM server's parameters say General/Frequency ``text`` (None: the trial's rate)."""
+    from sim_devices import qtm_server as qs
+
+    real = qs.parameters_xml.__wrapped__ if hasattr(qs.parameters_xml, "__wrapped__") else qs.parameters_xml
+
+    def patched(*args, **kwargs):
+        return re.sub(r"(<General><Frequency>)[^<]*", lambda m: m[1] + text, real(*args, **kwargs), count=1)
+
+    patched.__wrapped__ = real
+    monkeypatch.setattr(qs, "parameters_xml", real if text is None else patched)
+
+
+@pytest.mark.parametrize(("frequency", "message"), [
+    ("abc", "parameters XML General/Frequency: need a number, got 'abc'"),
+    ("nan", "parameters XML General/Frequency: need a number, got 'nan'"),
+    ("0", "parameters XML General/Frequency: need a positive number of Hz, got 0"),
+    ("1e9", "parameters XML General/Frequency 1e+09 Hz: frame period 1e-09 s is outside"),
+])
+def test_qtm_parameters_without_a_usable_frequency_are_a_one_line_error(trial, monkeypatch, frequency, message):
+    """(qtm-rt's float() raised ValueError, 0 a ZeroDivisionError in nominal_dt.) At once, not after the
+    connection's timeout."""
+    qtm_frequency(monkeypatch, frequency)
+    server = QtmServer(trial)
+    t0 = time.monotonic()
+    with pytest.raises(InputError) as info:
+        open_mocap_source(f"qtm://127.0.0.1:{server.port}")
+    assert str(info.value).startswith(f"qtm://127.0.0.1:{server.port}: {message}") and "\n" not in str(info.value)
+    assert time.monotonic() - t0 < 3.0
+    server.close()
+
+
+def test_qtm_parameters_refused_on_a_reconnect_are_counted_and_the_client_goes_on(trial, monkeypatch):
+    """QTM restarted with a frequency that is not a number: the reconnect's parameters are counted as
+    malformed (each retry), the client's thread lives on, and QTM back with good parameters streams again."""
+    server = QtmServer(trial, speed=2.0, loop=True).start()
+    port = server.port
+    src = open_mocap_source(f"qtm://127.0.0.1:{port}")
+    assert len(collect(src, lambda out: len(out) >= 5)) >= 5
+    server.close()
+    qtm_frequency(monkeypatch, "fast")
+    server = QtmServer(trial, port=port, speed=2.0, loop=True).start()
+    assert wait_until(lambda: src.stats.malformed >= 1, 5.0)
+    assert src._thread.is_alive() and src.stats.reconnects == 0
+    errors = src.errors.drain()
+    assert any(e.kind == "malformed" and "General/Frequency: need a number, got 'fast'" in e.message for e in errors)
+    qtm_frequency(monkeypatch, None)
+    after = collect(src, lambda out: len(out) >= 5 and any(f.restart for f in out[:-4]))
+    assert len(after) >= 5 and src.stats.reconnects == 1 and src.nominal_dt == 0.01
+    src.close()
+    server.close()
+
+
 def lsl_pair(trial, imp=None, **kw):
     name = f"livezmp-test-{uuid.uuid4().hex[:8]}"
     pub = LslPublisher(trial, name=name, source_id=name, impairments=imp, **kw)

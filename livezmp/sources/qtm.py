@@ -20,6 +20,7 @@ QTM timestamps are µs on QTM's own clock, which this machine cannot relate to i
 from __future__ import annotations
 
 import asyncio
+import math
 import struct
 import threading
 import time
@@ -28,6 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from livezmp.checks import MAX_COORDINATE_M, check_frame_period
 from livezmp.errors import InputError
 from livezmp.model.plate_frame import plate_axes
 from livezmp.sources.interface import ErrorLog, SourceStats
@@ -67,13 +69,29 @@ def _text(node: ET.Element | None, path: str, where: str) -> str:
     return found.text.strip()
 
 
+def _number(node: ET.Element | None, path: str, where: str, limit: float = math.inf) -> float:
+    """The number at ``path``, finite and within ±``limit``; InputError naming the field otherwise."""
+    text = _text(node, path, where)
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not abs(value) <= limit:  # NaN fails too
+        within = f" within ±{limit:g}" if limit < math.inf else ""
+        raise InputError(f"{where}: parameters XML {path}: need a number{within}, got {text[:40]!r}")
+    return value
+
+
 def parse_parameters(xml: str, where: str) -> QtmParameters:
     """The :class:`QtmParameters` of a ``getparameters general 3d force 6d skeleton`` reply."""
     try:
         root = ET.fromstring(xml)
     except ET.ParseError as e:
         raise InputError(f"{where}: parameters XML: {e}") from None
-    rate = float(_text(root, "General/Frequency", where))
+    rate = _number(root, "General/Frequency", where)
+    if not rate > 0:
+        raise InputError(f"{where}: parameters XML General/Frequency: need a positive number of Hz, got {rate:g}")
+    check_frame_period(1.0 / rate, f"{where}: parameters XML General/Frequency {rate:g} Hz")
     the3d = root.find("The_3D")
     try:
         up = parse_up_axis(_text(the3d, "AxisUpwards", where), where)
@@ -87,7 +105,7 @@ def parse_parameters(xml: str, where: str) -> QtmParameters:
     names, axes = [], []
     for plate in force.findall("Plate") if force is not None else []:
         names.append(_text(plate, "Name", where))
-        corners = np.array([[float(_text(plate, f"Location/Corner{j}/{a}", where)) for a in "XYZ"]
+        corners = np.array([[_number(plate, f"Location/Corner{j}/{a}", where, 1e3 * MAX_COORDINATE_M) for a in "XYZ"]
                             for j in range(1, 5)]) * 1e-3  # QTM's locations are in mm
         axes.append(plate_axes(corners))
     six = root.find("The_6D")
@@ -212,6 +230,7 @@ class QtmSource:
         self._sessions = 0
         self._ready = threading.Event()
         self._failure: str | None = None
+        self._refused: InputError | None = None  # the parameters of the first connection, refused
         self._loop = asyncio.new_event_loop()
         self._stop: asyncio.Event | None = None
         self._thread = threading.Thread(target=self._loop.run_until_complete, args=(self._run(),),
@@ -219,6 +238,8 @@ class QtmSource:
         self._thread.start()
         if not self._ready.wait(connect_timeout) or self.params is None:
             self.close()
+            if self._refused is not None:
+                raise self._refused
             raise InputError(f"{self.name}: cannot connect: {self._failure or 'no answer'}")
 
     @property
@@ -249,7 +270,11 @@ class QtmSource:
             return
         try:
             xml = await conn.get_parameters(["general", "3d", "force", "6d", "skeleton"])
-            params = parse_parameters(xml.decode(errors="replace"), self.name)
+            try:
+                params = parse_parameters(xml.decode(errors="replace"), self.name)
+            except InputError as e:
+                self._refuse(e)
+                return
             components = (["3d"] + ["force"] * bool(params.plates) + ["6d"] * bool(params.bodies)
                           + ["skeleton:global"] * bool(params.skeletons))
             self.params = params
@@ -266,11 +291,21 @@ class QtmSource:
             await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
             for task in [*waits, streaming]:
                 task.cancel()
-        except (TimeoutError, qtm_rt.QRTCommandException, InputError) as e:
+        except (TimeoutError, qtm_rt.QRTCommandException) as e:
             self._failure = str(e)
         finally:
             if conn.has_transport():
                 conn.disconnect()
+
+    def _refuse(self, e: InputError) -> None:
+        """Parameters that cannot be streamed: at connection, the source's one-line error at once; on a
+        reconnect, a malformed packet counted and reported (the client retries; the thread goes on)."""
+        if self._sessions:
+            self.stats.malformed += 1
+            self.errors.report("malformed", f"{e}; retrying every {self.retry:g} s")
+        else:
+            self._refused = e
+            self._ready.set()
 
     async def _run(self) -> None:
         self._stop = asyncio.Event()
