@@ -94,6 +94,27 @@ def test_long_gap_is_left_out_reported_and_counted(c3d):
     assert len(reports) == 1 and "RANK missing for more than 100 ms" in reports[0].message
 
 
+@pytest.mark.parametrize("far", [1e30, np.inf, -2000.0])
+def test_a_marker_at_infinity_or_beyond_a_km_is_left_out_and_counted(c3d, far):
+    """As a C3D reader refuses a file with such a coordinate, a stream's frame with one is counted
+    (``bad_markers``) and reported, the marker left out as an occluded one (carried on over a short gap:
+    the same frames as the glide without it) and the frame's other markers kept."""
+    truth = gliding(c3d)
+    broken = truth.copy()
+    lasi = c3d.labels.index("LASI")
+    broken[30:33, lasi, 1] = far  # 30 ms: carried on
+    broken[50, lasi] = np.nan  # an occluded marker is not a broken one
+    want = read_all(MarkerStreamSource(FakeStream(c3d.labels, truth), c3d))
+    src = MarkerStreamSource(FakeStream(c3d.labels, broken), c3d)
+    got = read_all(src)
+    assert np.isfinite(got).all()
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert src.stats.bad_markers == 3 and src.stats.dropped == 0
+    errors = [e for e in src.errors.drain() if e.kind == "bad_markers"]
+    assert len(errors) == 3 and errors[0].message == ("fake://: frame 30: LASI at infinity or beyond 1000 m of the "
+                                                      "origin: left out")
+
+
 def test_frames_converted_together_equal_frames_converted_one_by_one(c3d, monkeypatch):
     """A reader behind its stream converts the waiting frames in one call: the same channels (to rounding)
     and the same gap counts as one frame per call, across batch boundaries, with short and long gaps."""

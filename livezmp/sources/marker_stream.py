@@ -21,6 +21,11 @@ bodies or skeleton bones named as the marker body's segments: ``pelvis``, ``thig
 ``foot_l``, ..., ``hat`` or the upper-body ones; NatNet skeletons) drives the body directly from
 them, frame by frame when all are tracked (the markers are then not needed); otherwise the markers.
 
+A marker (or a solved segment) at infinity or beyond 1000 m of the origin (``MAX_COORDINATE_M``, the
+bound a C3D file is refused at) is a broken measurement, not a position: it is left out as an occluded
+one (the gap rule above), the frame's other markers kept, and the frame counted (``bad_markers``)
+and reported.
+
 Force plates: the plates' combined centre of pressure (each plate's CoP weighted by its vertical
 force; none below 20 N) goes with the frame, in the stream's axes.
 """
@@ -34,6 +39,7 @@ from dataclasses import replace
 import numpy as np
 
 from livezmp.balance.plates import plates_floor
+from livezmp.checks import MAX_COORDINATE_M
 from livezmp.errors import InputError
 from livezmp.model.body import world_from_up_axis
 from livezmp.model.body_spec import marker_body, stream_marker_body
@@ -45,6 +51,12 @@ from livezmp.sources.mocap_frame import MocapFrame, MocapSource
 CALIBRATION_S = 2.0  # s of stream that calibrate the body when no calibration trial is given
 MAX_GAP_S = 0.1  # s: longest marker gap carried on (the C3D take's fill limit)
 BATCH = 32  # frames already waiting that are converted together
+
+
+def _beyond(points: np.ndarray) -> np.ndarray:
+    """(n,) which of ``points`` (n, 3) m have a coordinate infinite or beyond MAX_COORDINATE_M (NaN: occluded,
+    not beyond)."""
+    return (np.abs(points) > MAX_COORDINATE_M).any(axis=1)
 
 
 class MarkerStreamSource:
@@ -104,7 +116,7 @@ class MarkerStreamSource:
         frames: list[MocapFrame] = []
         deadline = time.monotonic() + seconds + timeout
         while time.monotonic() < deadline:
-            f = self.mocap.read(0.1)
+            f = self._read(0.1)
             if f is None:
                 continue
             if frames and f.labels != frames[0].labels:
@@ -127,7 +139,7 @@ class MarkerStreamSource:
         while self.mocap.nominal_dt is None:
             if time.monotonic() > deadline:
                 raise InputError(f"{self.name}: no frames within {timeout:g} s to measure the stream's rate")
-            f = self.mocap.read(0.1)
+            f = self._read(0.1)
             if f is not None:
                 self._pending.append(f)
 
@@ -235,7 +247,25 @@ class MarkerStreamSource:
         return out
 
     def _next(self, timeout: float) -> MocapFrame | None:
-        return self._pending.popleft() if self._pending else self.mocap.read(timeout)
+        return self._pending.popleft() if self._pending else self._read(timeout)
+
+    def _read(self, timeout: float) -> MocapFrame | None:
+        """The capture stream's next frame, its markers and segments beyond MAX_COORDINATE_M (or infinite)
+        left out: such a frame is counted (``bad_markers``) and reported."""
+        f = self.mocap.read(timeout)
+        if f is None:
+            return None
+        far = _beyond(f.markers)
+        far_segments = _beyond(f.segments.position) & f.segments.tracked
+        if not (far.any() or far_segments.any()):
+            return f
+        self.stats.bad_markers += 1
+        names = [f.labels[i] for i in np.flatnonzero(far)] + [f.segments.names[i] for i in np.flatnonzero(far_segments)]
+        self.errors.report("bad_markers", f"{self.name}: frame {f.frame}: {', '.join(names[:5])} at infinity or beyond "
+                                          f"{MAX_COORDINATE_M:g} m of the origin: left out")
+        markers = np.where(far[:, None], np.nan, f.markers)
+        segments = replace(f.segments, tracked=f.segments.tracked & ~far_segments) if far_segments.any() else f.segments
+        return replace(f, markers=markers, segments=segments)
 
     def read(self, timeout: float) -> SourceFrame | None:
         """The next frame. Frames that are already waiting are converted together (the geometry is
