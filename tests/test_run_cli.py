@@ -110,6 +110,70 @@ def test_demo_runs_until_sigterm_then_stops_safely(tmp_path):
     assert s["simulator_cpus"] == (cpus[-1:] if len(cpus) > 1 else cpus)
 
 
+# `livezmp run` / `demo` in a child process that signals itself at one point of its start-up (names below), the
+# link's stop commands and close logged on stderr
+SIGNAL_AT = """
+import os, signal, sys
+import livezmp.commands.run as run
+from livezmp.cli import main
+from sim_devices.mock_link import MockLink
+
+sig, where = getattr(signal, sys.argv[1]), sys.argv[2]
+kill = lambda: os.kill(os.getpid(), sig)
+for name in ("safe_stop", "close"):
+    def logged(self, *a, _real=getattr(MockLink, name), _name=name, **k):
+        print("link:", _name, *a, *k.values(), file=sys.stderr, flush=True)
+        return _real(self, *a, **k)
+    setattr(MockLink, name, logged)
+if where == "robot":
+    real_load = run.load_robot
+    run.load_robot = lambda *a: (kill(), real_load(*a))[1]
+elif where == "open":
+    real_open = MockLink.open
+    MockLink.open = lambda self: (real_open(self), kill())[0]
+else:
+    class Signalled(run.LiveLoop):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            kill()
+    run.LiveLoop = Signalled
+sys.exit(main(sys.argv[3:]))
+"""
+
+
+@pytest.mark.parametrize(("sig", "where", "command", "stage", "link"), [
+    ("SIGTERM", "loop", "run", "preparing the loop", "the link, open (torque on, holding), was sent its stop commands"),
+    ("SIGINT", "open", "run", "opening the link", "the link, being opened, was sent its stop commands and closed"),
+    ("SIGTERM", "robot", "run", "loading the robot", "no link was opened"),
+    ("SIGINT", "loop", "demo", "preparing the loop", "the link, open (torque on, holding), was sent its stop"),
+])
+def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, where, command, stage, link):
+    """SIGINT / SIGTERM before the loop's first cycle: the link (if opened, or being opened) gets the stop
+    commands of the shutdown path and is closed, a recording already made is finished, and the summary
+    says in which stage it stopped; exit 128 + the signal's number, no traceback."""
+    summary, rec = tmp_path / "s.json", tmp_path / "r.mcap"
+    argv = ["--link", "mock:", "--robot", str(demo_robot_path())] if command == "run" else ["--link", "mock"]
+    proc = subprocess.run([sys.executable, "-c", SIGNAL_AT, sig, where, command, *argv, "--duration", "1", "--quiet",
+                           "--realtime-priority", "0", "--summary-json", str(summary), "--record", str(rec)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 128 + getattr(signal, sig), proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stdout.startswith(f"stopped by {sig} during start-up: {stage}: no cycle run; {link}")
+    assert proc.stdout.count("\n") == 1
+    s = json.loads(summary.read_text())
+    assert s["stopped_by"] == sig and s["stopped_during"] == f"start-up: {stage}" and s["cycles"] == 0
+    opened = where == "loop"
+    assert s["link"] == {"opened": opened, "closed": where != "robot"}
+    # the stop commands of the shutdown path (close: hold) went out once, after the link had been opened
+    assert proc.stderr.count("link: close") == proc.stderr.count("link: safe_stop") == (where != "robot")
+    if opened:  # the recording was made: finished, saying why it ended
+        from livezmp.recording.reader import open_recording
+
+        assert s["recording"]["path"] == str(rec) and open_recording(rec).counts["/input"] == 0
+    else:
+        assert s["recording"] is None and not rec.exists()
+
+
 def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
     """A humanoid never seen (other joint names and order, 0.8x the mini's size), no robot config: servo ids
     in joint order on the simulated Dynamixel bus; the scenario finds its limbs; uncorrected, it falls."""

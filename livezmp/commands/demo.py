@@ -20,12 +20,14 @@ from livezmp.commands.run import (
     check_realtime,
     duration_of,
     finish,
+    finish_interrupted,
     loop_cpus,
     loop_priority,
     run_loop,
 )
+from livezmp.commands.startup import Interrupted, Startup, closing_link, startup_signals
 from livezmp.errors import InputError
-from livezmp.links import LinkError, open_link
+from livezmp.links import LinkError, make_link
 from livezmp.live import scenarios as sc
 from livezmp.live.realtime import parse_cpus
 from livezmp.live.scenarios import make_scenario
@@ -35,35 +37,30 @@ from sim_devices.mock_link import MockLink
 from sim_devices.process import SimProcess, beside_loop, check_faults, device_options, start_sim
 
 
-def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
+def demo_in_process(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario, startup: Startup) -> dict:
     """The mock link: the humanoid stepped by the loop's own reads, in this process."""
+    startup.enter("starting the simulator")
     sim = start_sim(robot, "mock", scenario, args.fault)
     feet, imu = humanoid_sensors(sim.humanoid)
-    link = MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet, imu=imu)
-    link.open()
-    try:
+    with closing_link(MockLink(sim.humanoid, robot.body.joint_names, foot_sensors=feet, imu=imu), startup) as link:
         sim.start_scenario()
         summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration), fell=sim.fell,
-                           source="mock:")
-    finally:
-        link.close()
+                           source="mock:", startup=startup)
     return {**summary, **sim.verdict(), "link_url": "mock:"}
 
 
-def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario) -> dict:
+def demo_with_devices(robot: Robot, args: argparse.Namespace, scenario: sc.Scenario, startup: Startup) -> dict:
     """A real link (dynamixel-sdk, python-can, pyserial) to the simulator in a child process."""
+    startup.enter("starting the simulator")
     with SimProcess(args.link, (args.scenario, {}), args.fault, urdf=args.robot, config=args.robot_config,
                     realtime_priority=max(loop_priority(args)[0] - 1, 0), devices=device_options(args),
                     cpus=simulator_cpus(args)) as sim:
         placed = sorted(sim.cpus())
         url = sim.url + (f"&{args.link_options}" if args.link_options else "")
-        link = open_link(url, robot.body.joint_names, robot.config)
-        try:
+        with closing_link(make_link(url, robot.body.joint_names, robot.config), startup) as link:
             sim.start_scenario()
             summary = run_loop(link, robot, args, scenario.goals, duration_of(args, scenario.duration),
-                               fell=sim.fell, source=url)
-        finally:
-            link.close()
+                               fell=sim.fell, source=url, startup=startup)
         return {**summary, **sim.verdict(), "link_url": url, "simulator_cpus": placed}
 
 
@@ -82,13 +79,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
     check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     simulator_cpus(args)
-    robot = load_robot(args.robot, args.robot_config)
-    scenario = make_scenario(args.scenario, robot.body)
     check_faults(args.fault)
-    try:
-        summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario)
-    except LinkError as e:
-        print(f"livezmp: error: {e}", file=sys.stderr)
-        return 1
-    summary["scenario"] = scenario.name
-    return finish(summary, args)
+    with startup_signals() as startup:
+        try:
+            startup.enter("loading the robot")
+            robot = load_robot(args.robot, args.robot_config)
+            scenario = make_scenario(args.scenario, robot.body)
+            summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario, startup)
+        except Interrupted as e:
+            return finish_interrupted(e, startup, args)
+        except LinkError as e:
+            print(f"livezmp: error: {e}", file=sys.stderr)
+            return 1
+        summary["scenario"] = scenario.name
+        return finish(summary, args)

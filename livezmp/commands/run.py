@@ -26,8 +26,16 @@ import numpy as np
 
 from livezmp.checks import FRAME_PERIOD_RANGE, check_output_path
 from livezmp.commands.common import stop_on_signals
+from livezmp.commands.startup import (
+    Interrupted,
+    Startup,
+    closing_link,
+    interrupted_line,
+    interrupted_summary,
+    startup_signals,
+)
 from livezmp.errors import InputError
-from livezmp.links import LinkError, open_link
+from livezmp.links import LinkError, make_link
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, parse_adapter
 from livezmp.live import scenarios as sc
 from livezmp.live.clock import SPIN_BEFORE_DEADLINE_S, LoopClock
@@ -180,10 +188,14 @@ def switch_interval(seconds: float | None):
 
 
 def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: float | None,
-             fell: Callable[[], bool] | None = None, source: str = "") -> dict:
+             fell: Callable[[], bool] | None = None, source: str = "", startup: Startup | None = None) -> dict:
     """The loop on an open ``link`` (``source``: its URL) with the command line's settings;
     the summary. With --record the file is finished after the loop's safe stop, whichever
-    way the loop ended, and the summary's ``recording`` says what it holds and dropped."""
+    way the loop ended, and the summary's ``recording`` says what it holds and dropped.
+    ``startup``: the command's (:mod:`livezmp.commands.startup`), whose signal handler then asks
+    the loop to stop once it is made (without one, the loop installs its own)."""
+    if startup is not None:
+        startup.enter("preparing the loop")
     status = StatusLine(args.quiet)
     config = loop_config(args, loop_rate(args, link))
     # made here, its writer thread keeps normal scheduling when this thread asks for SCHED_FIFO
@@ -195,7 +207,7 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
         loop = LiveLoop(link, robot.body, config, command=command, clock=clock, fell=fell, on_event=status.event,
                         on_status=status, recorder=recorder)
         priority, required = loop_priority(args)
-        with (stop_on_signals(loop.request_stop),
+        with (stop_on_signals(loop.request_stop) if startup is None else startup.running(loop.request_stop),
               realtime_priority(priority, cpus, lock_memory=required, required=required, awake=True) as refused,
               switch_interval(RECORD_SWITCH_INTERVAL_S if recorder else None)):
             if refused not in (None, "off"):
@@ -204,7 +216,10 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
             summary = loop.run(duration)
     except BaseException as e:
         if recorder is not None:
-            recorder.close({"stopped_by": f"error: {type(e).__name__}: {e}"})
+            totals = recorder.close({"stopped_by": str(e) if isinstance(e, Interrupted)
+                                     else f"error: {type(e).__name__}: {e}"})
+            if startup is not None:
+                startup.recording = totals
         raise
     status.done()
     summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked,
@@ -261,6 +276,15 @@ def assumed_adapter(args: argparse.Namespace) -> Adapter:
     return adapter_option(getattr(args, "adapter", DEFAULT_ADAPTER))
 
 
+def finish_interrupted(e: Interrupted, startup: Startup, args: argparse.Namespace) -> int:
+    """Write and print the summary of a start-up a signal ended; the exit code, 128 + the signal's number."""
+    summary = interrupted_summary(e, startup)
+    if args.summary_json:
+        write_json(summary, args.summary_json)
+    print(interrupted_line(summary), flush=True)
+    return 128 + e.number
+
+
 def finish(summary: dict, args: argparse.Namespace) -> int:
     """Write and print the summary; the exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
     if args.summary_json:
@@ -279,21 +303,32 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_realtime(args)
     check_outputs(args)
     assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
-    robot = load_robot(args.robot, args.robot_config)
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")
+    with startup_signals() as startup:
+        try:
+            summary = run_on_link(args, startup)
+        except Interrupted as e:
+            return finish_interrupted(e, startup, args)
+        return finish(summary, args)
+
+
+def run_on_link(args: argparse.Namespace, startup: Startup) -> dict:
+    """`run` after its checks: the robot, its link, the loop; the summary."""
+    startup.enter("loading the robot")
+    robot = load_robot(args.robot, args.robot_config)
     scenario = None
     if args.motion:
         scenario = sc.walk(robot.body, args.motion)
     elif args.scenario:
         scenario = make_scenario(args.scenario, robot.body)
     try:
-        link = open_link(args.link, robot.body.joint_names, robot.config)
-    except LinkError as e:  # a device that is not there is a user mistake, as for `monitor`
+        with closing_link(make_link(args.link, robot.body.joint_names, robot.config), startup) as link:
+            return run_loop(link, robot, args, scenario.goals if scenario else None,
+                            duration_of(args, scenario.duration if scenario else None), source=args.link,
+                            startup=startup)
+    except LinkError as e:
+        if startup.link_opened:
+            raise
+        # a device that is not there is a user mistake, as for `monitor`
         raise InputError(f"{args.link}: cannot open the link: {e}") from None
-    try:
-        summary = run_loop(link, robot, args, scenario.goals if scenario else None,
-                           duration_of(args, scenario.duration if scenario else None), source=args.link)
-    finally:
-        link.close()
-    return finish(summary, args)

@@ -1,0 +1,117 @@
+"""SIGINT and SIGTERM during ``livezmp run`` / ``demo``'s start-up, told truthfully.
+
+Between the options' checks and the loop's first cycle the command loads the robot, starts a
+simulator (``demo``), opens the link (ports opened, servos checked and configured, torque on and
+holding the posture read, a Dynamixel bus's watchdog armed: the servos hold on their own once the
+bus is silent for its time) and makes the estimator and the recording. A signal there ends the
+start-up where it is: :class:`Interrupted` (a BaseException, as KeyboardInterrupt is, so no
+``except Exception`` on the way swallows it) unwinds through the ``finally`` blocks any error
+takes, so a link opened or being opened gets the shutdown path's stop commands (``close``: hold
+the present posture) and is released, a simulator is stopped and a recording already made is
+finished. The command then writes a summary saying in which stage it stopped and exits with
+128 + the signal's number (130, 143), as a shell reports a process a signal ended.
+
+Once the loop runs, a signal asks it to stop after its cycle (a normal end: exit 0 and
+``stopped_by``); after it, and once an interruption is on its way, a signal is noted and the
+shutdown finishes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+from collections.abc import Callable, Iterator
+
+from livezmp.links.base import Link
+
+LOOP_STAGE = "the loop"
+STOPPING_STAGE = "stopping"
+
+
+class Interrupted(BaseException):
+    """A signal (``name``, ``number``) ended the start-up in ``stage``."""
+
+    def __init__(self, name: str, number: int, stage: str):
+        super().__init__(f"{name} during start-up ({stage})")
+        self.name, self.number, self.stage = name, number, stage
+
+
+class Startup:
+    """Where a command's start-up is (``stage``, one line), whether its link's ``open`` returned
+    (``link_opened``) and ``close`` ran (``link_closed``); what a signal does there (module docstring)."""
+
+    def __init__(self) -> None:
+        self.stage = "starting"
+        self.link_opened = False
+        self.link_closed = False
+        self.recording: dict | None = None  # what a recording finished by the interruption holds
+        self.signal: str | None = None  # the signal that interrupted the start-up
+        self._stop: Callable[[str], None] | None = None
+
+    def enter(self, stage: str) -> None:
+        self.stage = stage
+
+    @contextlib.contextmanager
+    def running(self, stop: Callable[[str], None]) -> Iterator[None]:
+        """Inside the block (the loop) a signal calls ``stop(signal name)``; after it, signals are noted only."""
+        self._stop = stop  # one assignment: no moment where a signal is neither raised nor passed on
+        self.stage = LOOP_STAGE
+        try:
+            yield
+        finally:
+            self.stage = STOPPING_STAGE
+            self._stop = None
+
+    def handle(self, signum: int, _frame) -> None:
+        """The signal handler: before the loop raise Interrupted (once), in it ask it to stop, after it nothing."""
+        name = signal.Signals(signum).name
+        if self._stop is not None:
+            self._stop(name)
+            return
+        if self.stage == STOPPING_STAGE or self.signal is not None:
+            return
+        self.signal = name
+        raise Interrupted(name, signum, self.stage)
+
+
+@contextlib.contextmanager
+def startup_signals() -> Iterator[Startup]:
+    """Inside the block SIGINT and SIGTERM go to a :class:`Startup`'s handler; the previous handlers come
+    back on exit."""
+    startup = Startup()
+    old = {s: signal.signal(s, startup.handle) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield startup
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def closing_link(link: Link, startup: Startup) -> Iterator[Link]:
+    """``link`` opened, and closed (its stop commands, then the port released) on every way out: also when
+    its ``open`` fails or a signal interrupts it half way (the stop commands go to what it had configured)."""
+    startup.enter("opening the link")
+    try:
+        link.open()
+        startup.link_opened = True
+        yield link
+    finally:
+        link.close()
+        startup.link_closed = True
+
+
+def interrupted_summary(e: Interrupted, startup: Startup) -> dict:
+    """The summary of a start-up a signal ended: no cycle run; what was done with the link; the recording."""
+    return {"stopped_by": e.name, "stopped_during": f"start-up: {e.stage}", "cycles": 0,
+            "link": {"opened": startup.link_opened, "closed": startup.link_closed},
+            "recording": startup.recording}
+
+
+def interrupted_line(summary: dict) -> str:
+    """One line for the operator of an :func:`interrupted_summary`."""
+    link = summary["link"]
+    what = ("the link, open (torque on, holding), was sent its stop commands and closed" if link["opened"] else
+            "the link, being opened, was sent its stop commands and closed" if link["closed"] else
+            "no link was opened")
+    return f"stopped by {summary['stopped_by']} during {summary['stopped_during']}: no cycle run; {what}"
