@@ -10,6 +10,7 @@ User mistakes (:class:`InputError`) print one line and exit with code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import math
 import os
@@ -18,6 +19,7 @@ import warnings
 from importlib.metadata import PackageNotFoundError, version
 from typing import NoReturn
 
+from livezmp.commands.startup import Interrupted, finish_interrupted, startup_signals
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.gait.takeset import DEFAULT_PATTERN
@@ -32,6 +34,7 @@ SCENARIO_NAMES = ("stand", "lean", "arm_swing", "squat", "slope", "edge", "push"
 SIM_LINKS = ("dynamixel", "can", "fw")
 BSP_NAMES = ("auto", "adult", "child")  # livezmp.model.anthropometry.BSP_CHOICES
 DEFAULT_DASHBOARD = "127.0.0.1:8765"
+LOOP_COMMANDS = ("livezmp.commands.run", "livezmp.commands.demo")  # whose start-up signals are told
 
 
 def package_version() -> str:
@@ -69,8 +72,15 @@ def main(argv: list[str] | None = None) -> int:
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     # what livezmp warns of (a foot's mesh not found) is one line, as its errors are
     warnings.formatwarning = lambda message, *_args, **_kwargs: f"livezmp: warning: {message}\n"
+    # run / demo: a signal before their loop runs stops the start-up safely and is told (commands.startup); the
+    # handler goes in before the command's modules are imported, which on a loaded machine takes many seconds
+    signals = startup_signals() if module in LOOP_COMMANDS else contextlib.nullcontext()
     try:
-        code = int(getattr(importlib.import_module(module), function)(args) or 0)
+        with signals as args.startup:
+            try:
+                code = int(getattr(importlib.import_module(module), function)(args) or 0)
+            except Interrupted as e:
+                return finish_interrupted(e, args.startup, args)
         sys.stdout.flush()  # a reader gone shows here, not as an "Exception ignored" at the interpreter's exit
         return code
     except InputError as e:

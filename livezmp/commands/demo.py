@@ -20,12 +20,11 @@ from livezmp.commands.run import (
     check_realtime,
     duration_of,
     finish,
-    finish_interrupted,
     loop_cpus,
     loop_priority,
     run_loop,
 )
-from livezmp.commands.startup import Interrupted, Startup, closing_link, startup_signals
+from livezmp.commands.startup import Startup, closing_link
 from livezmp.errors import InputError
 from livezmp.links import LinkError, make_link
 from livezmp.live import scenarios as sc
@@ -75,21 +74,20 @@ def simulator_cpus(args: argparse.Namespace) -> frozenset[int] | None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    startup = args.startup  # livezmp.cli.main's: a signal during the start-up is told (commands.startup)
+    startup.enter("checking the options")
     check_realtime(args)
     check_outputs(args)
     device_options(args)  # bad --baud, --adapter or --buses are told before anything starts
     simulator_cpus(args)
     check_faults(args.fault)
-    with startup_signals() as startup:
-        try:
-            startup.enter("loading the robot")
-            robot = load_robot(args.robot, args.robot_config)
-            scenario = make_scenario(args.scenario, robot.body)
-            summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario, startup)
-        except Interrupted as e:
-            return finish_interrupted(e, startup, args)
-        except LinkError as e:
-            print(f"livezmp: error: {e}", file=sys.stderr)
-            return 1
-        summary["scenario"] = scenario.name
-        return finish(summary, args)
+    startup.enter("loading the robot")
+    robot = load_robot(args.robot, args.robot_config)
+    scenario = make_scenario(args.scenario, robot.body)
+    try:
+        summary = (demo_in_process if args.link == "mock" else demo_with_devices)(robot, args, scenario, startup)
+    except LinkError as e:
+        print(f"livezmp: error: {e}", file=sys.stderr)
+        return 1
+    summary["scenario"] = scenario.name
+    return finish(summary, args)

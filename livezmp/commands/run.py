@@ -26,15 +26,9 @@ import numpy as np
 
 from livezmp.checks import FRAME_PERIOD_RANGE, check_output_path
 from livezmp.commands.common import stop_on_signals
-from livezmp.commands.startup import (
-    Interrupted,
-    Startup,
-    closing_link,
-    interrupted_line,
-    interrupted_summary,
-    startup_signals,
-)
+from livezmp.commands.startup import Interrupted, Startup, closing_link
 from livezmp.errors import InputError
+from livezmp.jsonfile import write_json
 from livezmp.links import LinkError, make_link
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, parse_adapter
 from livezmp.live import scenarios as sc
@@ -52,7 +46,6 @@ from livezmp.live.realtime import (
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
-from livezmp.offline.report import write_json
 
 # While recording, the recording's writer thread shares the GIL with the loop. It writes while the loop sleeps
 # (LoopRecorder.idle), but closing a chunk (about 1 ms of Python every 0.5 s) can run past the loop's wake-up,
@@ -276,15 +269,6 @@ def assumed_adapter(args: argparse.Namespace) -> Adapter:
     return adapter_option(getattr(args, "adapter", DEFAULT_ADAPTER))
 
 
-def finish_interrupted(e: Interrupted, startup: Startup, args: argparse.Namespace) -> int:
-    """Write and print the summary of a start-up a signal ended; the exit code, 128 + the signal's number."""
-    summary = interrupted_summary(e, startup)
-    if args.summary_json:
-        write_json(summary, args.summary_json)
-    print(interrupted_line(summary), flush=True)
-    return 128 + e.number
-
-
 def finish(summary: dict, args: argparse.Namespace) -> int:
     """Write and print the summary; the exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
     if args.summary_json:
@@ -300,21 +284,18 @@ def finish(summary: dict, args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    args.startup.enter("checking the options")
     check_realtime(args)
     check_outputs(args)
     assumed_adapter(args)  # a bad --adapter-latency-ms is told before anything starts
     if args.motion and args.scenario:
         raise InputError("give --motion or --scenario, not both")
-    with startup_signals() as startup:
-        try:
-            summary = run_on_link(args, startup)
-        except Interrupted as e:
-            return finish_interrupted(e, startup, args)
-        return finish(summary, args)
+    return finish(run_on_link(args, args.startup), args)
 
 
 def run_on_link(args: argparse.Namespace, startup: Startup) -> dict:
-    """`run` after its checks: the robot, its link, the loop; the summary."""
+    """`run` after its checks: the robot, its link, the loop; the summary. ``startup``: the command line's
+    (``args.startup``, installed by :func:`livezmp.cli.main`)."""
     startup.enter("loading the robot")
     robot = load_robot(args.robot, args.robot_config)
     scenario = None

@@ -245,9 +245,8 @@ class LiveLoop:
     def _event(self, t: float, kind: str, msg: str) -> None:
         """Note an event of ``kind`` at loop time ``t`` (s): told (``on_event``, the summary's events) and
         recorded (``/device_error``). Those of a kind in `REPEATING_KINDS` (rejected frames, failed reads and
-        writes) at most once every EVENT_REPEAT_S, the record's count and its message saying how many came
-        since the previous one; `_flush_events` notes what is left at the end."""
-        count = 1
+        writes) at most once every EVENT_REPEAT_S: the others in that time are counted, and noted together
+        once it has passed (`_flush_events`)."""
         if kind in REPEATING_KINDS:
             last, untold = self._told.get(kind, (-math.inf, 0))
             if t - last < EVENT_REPEAT_S:
@@ -255,11 +254,7 @@ class LiveLoop:
                 self._untold += 1
                 return
             self._told[kind] = (t, 0)
-            if untold:
-                msg += f" (and {untold} more in the {t - last:.1f} s before)"
-                count += untold
-                self._untold -= untold
-        self._note(t, kind, msg, count)
+        self._note(t, kind, msg, 1)
 
     def _note(self, t: float, kind: str, msg: str, count: int) -> None:
         if self.recorder is not None and kind not in NOT_RECORDED_KINDS:
@@ -273,12 +268,13 @@ class LiveLoop:
 
     def _flush_events(self, t: float, end: bool = False) -> None:
         """The repeats of each kind not noted yet whose EVENT_REPEAT_S has passed (all of them at the run's
-        ``end``), in one note a kind at loop time ``t`` (s), so the recording's counts add up to the summary's."""
+        ``end``), in one note a kind at loop time ``t`` (s) with their count, so the recording's counts add up
+        to the summary's (a flood of one kind so gives one line a second)."""
         for kind, (last, untold) in list(self._told.items()):
             if untold and (end or t - last >= EVENT_REPEAT_S):
                 self._told[kind] = (t, 0)
                 self._untold -= untold
-                self._note(t, kind, f"{untold} more {kind.replace('_', ' ')} in the {t - last:.1f} s before", untold)
+                self._note(t, kind, f"{untold} more '{kind}' events in the {t - last:.1f} s before", untold)
 
     # -- the loop ------------------------------------------------------------------------------
 

@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from livezmp.balance.support import SUPPORT_LABELS
-from livezmp.checks import first_out_of_range, non_finite_field
+from livezmp.checks import first_out_of_range
 from livezmp.errors import InputError
+from livezmp.jsonfile import atomic_path, write_json  # noqa: F401 - moved there; imported from here too
 from livezmp.model.body import BodyModel
 from livezmp.offline.batch import BatchResult
 from livezmp.offline.plausibility import PlausibilityStats
@@ -197,29 +194,3 @@ class TakeStats:
                 self.plausibility.close()
             return None
         return self.plausibility.result()
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | Path):
-    """Yield a temporary path beside ``path``, ending in the same suffix (writers such as ezc3d add
-    theirs to a name without it); on success it replaces ``path``, on error it is removed."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def write_json(data: dict, path: str | Path) -> None:
-    """Strict JSON (NaN and infinity are not JSON): a non-finite field is refused, naming it; the file
-    is written atomically (:func:`atomic_path`)."""
-    bad = non_finite_field(data)
-    if bad:
-        raise InputError(f"{path}: field {bad} is not finite; the input drives the analysis out of range, not written")
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
