@@ -238,14 +238,17 @@ class SimProcess:
                                                              realtime_priority, devices or {}, physics, cpus),
                                  name="livezmp-sim", daemon=True)
         self._proc.start()
-        child.close()
         try:
+            child.close()
             if not self._conn.poll(start_timeout):
                 raise LinkError(f"the simulator did not start within {start_timeout:g} s")
             hello = self._conn.recv()
         except (LinkError, EOFError) as e:
             self.close()
             raise LinkError(str(e) or "the simulator process exited before it started (its error is above)") from None
+        except BaseException:  # a signal while it starts (livezmp.commands.startup.Interrupted): the child stopped too
+            self.close()
+            raise
         if "error" in hello:
             self.close()
             raise InputError(hello["error"])

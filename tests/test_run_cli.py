@@ -133,6 +133,12 @@ for name in ("safe_stop", "close"):
 if where == "robot":
     real_load = run.load_robot
     run.load_robot = lambda *a: (kill(), real_load(*a))[1]
+elif where == "sim":  # while the simulator's process starts (up to a minute)
+    import multiprocessing.connection as mc
+    import sim_devices.process as sp
+    real_poll, real_close = mc.Connection.poll, sp.SimProcess.close
+    mc.Connection.poll = lambda self, *a: (kill(), real_poll(self, *a))[1]
+    sp.SimProcess.close = lambda self: (print("sim: close", file=sys.stderr, flush=True), real_close(self))[1]
 elif where == "open":
     real_open = MockLink.open
     MockLink.open = lambda self: (real_open(self), kill())[0]
@@ -151,6 +157,7 @@ sys.exit(cli.main(sys.argv[3:]))
     ("SIGINT", "open", "run", "opening the link", "the link, being opened, was sent its stop commands and closed"),
     ("SIGTERM", "robot", "run", "loading the robot", "no link was opened"),
     ("SIGTERM", "import", "run", "loading livezmp", "no link was opened"),
+    ("SIGTERM", "sim", "demo", "starting the simulator", "no link was opened"),
     ("SIGINT", "loop", "demo", "preparing the loop", "the link, open (torque on, holding), was sent its stop"),
 ])
 def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, where, command, stage, link):
@@ -158,7 +165,8 @@ def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, 
     commands of the shutdown path and is closed, a recording already made is finished, and the summary
     says in which stage it stopped; exit 128 + the signal's number, no traceback."""
     summary, rec = tmp_path / "s.json", tmp_path / "r.mcap"
-    argv = ["--link", "mock:", "--robot", str(demo_robot_path())] if command == "run" else ["--link", "mock"]
+    argv = (["--link", "mock:", "--robot", str(demo_robot_path())] if command == "run" else
+            ["--link", "dynamixel" if where == "sim" else "mock"])
     proc = subprocess.run([sys.executable, "-c", SIGNAL_AT, sig, where, command, *argv, "--duration", "1", "--quiet",
                            "--realtime-priority", "0", "--summary-json", str(summary), "--record", str(rec)],
                           capture_output=True, text=True, timeout=60)
@@ -172,6 +180,7 @@ def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, 
     assert s["link"] == {"opened": opened, "closed": where in ("open", "loop")}
     # the stop commands of the shutdown path (close: hold) went out once, after the link had been opened
     assert proc.stderr.count("link: close") == proc.stderr.count("link: safe_stop") == (where in ("open", "loop"))
+    assert ("sim: close" in proc.stderr) == (where == "sim")  # the simulator's process stopped
     if opened:  # the recording was made: finished, saying why it ended
         from livezmp.recording.reader import open_recording
 
