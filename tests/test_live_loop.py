@@ -452,7 +452,7 @@ def test_link_faults_are_recorded_with_their_loop_times_and_timed_in_the_summary
     assert kinds == ["read_error", "link_down", "watchdog", "read_error", "reconnected", "resumed"]
     assert [r["count"] for r in records[::3]] == [1, 2] and records[0]["t"] == pytest.approx(20 * T, abs=T)
     assert records[3]["t"] == pytest.approx(1.04, abs=T)
-    assert records[3]["message"] == "2 more 'read_error' events in the 1.0 s before"
+    assert records[3]["message"] == "read failed: scripted error at read 22 (2 in the 1.0 s before)"
     by = {r["kind"]: r for r in records[::-1]}
     assert by["link_down"]["t"] == pytest.approx(gone[0], abs=T) and "scripted down" in by["link_down"]["message"]
     assert by["reconnected"]["t"] == pytest.approx(reconnected, abs=T)

@@ -185,7 +185,8 @@ class LiveLoop:
         self.times = {s: TimingHistogram() for s in STAGES}
         self.latency = TimingHistogram()
         self.events: deque[str] = deque(maxlen=100)
-        self._told: dict[str, tuple[float, int]] = {}  # event kind -> (last told at, untold since)
+        # event kind -> (last told at, untold since, the latest untold's message)
+        self._told: dict[str, tuple[float, int, str]] = {}
         self._untold = 0  # events folded and not noted yet, all kinds
         self.nb = len(body.base_channels)
         self._nan = np.full(body.nq, np.nan)
@@ -248,12 +249,13 @@ class LiveLoop:
         writes) at most once every EVENT_REPEAT_S: the others in that time are counted, and noted together
         once it has passed (`_flush_events`)."""
         if kind in REPEATING_KINDS:
-            last, untold = self._told.get(kind, (-math.inf, 0))
+            last, untold, _ = self._told.get(kind, (-math.inf, 0, ""))
             if t - last < EVENT_REPEAT_S:
-                self._told[kind] = (last, untold + 1)
+                self._told[kind] = (last, untold + 1, msg)
                 self._untold += 1
                 return
-            self._told[kind] = (t, 0)
+            self._flush_events(t, end=True, kinds=(kind,))  # those before it first: none is lost
+            self._told[kind] = (t, 0, msg)
         self._note(t, kind, msg, 1)
 
     def _note(self, t: float, kind: str, msg: str, count: int) -> None:
@@ -266,15 +268,17 @@ class LiveLoop:
         if self.on_event is not None:
             self.on_event(line)
 
-    def _flush_events(self, t: float, end: bool = False) -> None:
-        """The repeats of each kind not noted yet whose EVENT_REPEAT_S has passed (all of them at the run's
-        ``end``), in one note a kind at loop time ``t`` (s) with their count, so the recording's counts add up
-        to the summary's (a flood of one kind so gives one line a second)."""
-        for kind, (last, untold) in list(self._told.items()):
+    def _flush_events(self, t: float, end: bool = False, kinds: tuple[str, ...] | None = None) -> None:
+        """The repeats of each kind (of ``kinds``; None: all) not noted yet whose EVENT_REPEAT_S has passed (all
+        of them at the run's ``end``), in one note a kind at loop time ``t`` (s): the latest one's message and
+        their count, so the recording's counts add up to the summary's (a flood of one kind so gives one line a
+        second)."""
+        for kind in self._told if kinds is None else kinds:
+            last, untold, msg = self._told.get(kind, (-math.inf, 0, ""))
             if untold and (end or t - last >= EVENT_REPEAT_S):
-                self._told[kind] = (t, 0)
+                self._told[kind] = (t, 0, msg)
                 self._untold -= untold
-                self._note(t, kind, f"{untold} more '{kind}' events in the {t - last:.1f} s before", untold)
+                self._note(t, kind, f"{msg} ({untold} in the {t - last:.1f} s before)", untold)
 
     # -- the loop ------------------------------------------------------------------------------
 
@@ -312,14 +316,14 @@ class LiveLoop:
         return self.summary()
 
     def _poll(self, t: float) -> None:
-        """Every so often: the simulator's fall flag and the status callback."""
+        """Every so often: the simulator's fall flag, the repeated events and the status callback."""
+        if self._untold:
+            self._flush_events(t)
         t += 0.5 * self.dt  # grid times: do not let rounding push a check to the next cycle
         if self.fell is not None and t >= self._next_fell_check:
             self._next_fell_check = t + FELL_CHECK_S
             if self.fell():
                 self.request_stop("fell")
-        if self._untold:
-            self._flush_events(t - 0.5 * self.dt)
         if self.on_status is not None and t >= self._next_status:
             self._next_status += self.config.status_every_s
             self.on_status(self.status(t - 0.5 * self.dt))
