@@ -353,10 +353,13 @@ def test_failed_and_rejected_frames_never_drive_a_command(mini):
     assert s["commands_sent"] == s["good_frames"] == link.stats.reads - len(script)
     assert link.stats.writes == s["commands_sent"]
     assert _writes_follow_good_reads(link)
-    # each kind is told once a second at most: the second of each within the run is only counted
+    # each kind is told once a second at most: the second of each within the run is counted, and told at its end
     assert [e for e in events if "frame dropped" in e] == [
         "t=0.180s: corrupted frame dropped: joint l_hip_roll: non-finite position",
-        "t=0.300s: stale frame dropped: frame is 30.0 ms old (> 20.0 ms)"]
+        "t=0.300s: stale frame dropped: frame is 30.0 ms old (> 20.0 ms)",
+        "t=0.800s: corrupted frame dropped: joint l_knee: jumped 0.500 rad since the last frame "
+        "(1 in the 0.6 s before)",
+        "t=0.800s: stale frame dropped: frame is not newer than the previous one (1 in the 0.5 s before)"]
     assert link.calls[-1][0] == "safe_stop"
     assert s["stopped_by"] == "duration" and s["watchdog_trips"] == 0
 
