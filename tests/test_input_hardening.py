@@ -121,7 +121,7 @@ def test_huge_cell_is_refused_naming_the_line(tmp_path, capsys, walk_text):
 
 def test_summary_writer_refuses_nan(tmp_path):
     from livezmp.errors import InputError
-    from livezmp.offline.report import write_json
+    from livezmp.jsonfile import write_json
 
     with pytest.raises(InputError, match=r"field a\.b\[1\] is not finite"):
         write_json({"a": {"b": [1.0, float("nan")]}}, tmp_path / "s.json")

@@ -17,7 +17,8 @@ from rich.progress import Progress
 
 from livezmp.checks import check_figure_path, check_output_path
 from livezmp.commands.common import load_from_args, take_options
-from livezmp.offline.report import write_json, write_zmp_csv
+from livezmp.jsonfile import write_json
+from livezmp.offline.report import write_zmp_csv
 from livezmp.offline.take import (
     TakeAnalysis,
     TakeOptions,

@@ -7,7 +7,7 @@ import argparse
 from livezmp.checks import check_output_path
 from livezmp.commands.common import limits_from_args, load_from_args, take_options
 from livezmp.errors import InputError
-from livezmp.offline.report import write_json
+from livezmp.jsonfile import write_json
 from livezmp.offline.take import correct_c3d_take, correct_loaded
 
 

@@ -16,6 +16,7 @@ from livezmp.checks import check_number
 from livezmp.commands.common import monitor_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
+from livezmp.jsonfile import write_json
 from livezmp.live.realtime import realtime_priority
 from livezmp.model.body_spec import robot_body
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
@@ -30,7 +31,6 @@ from livezmp.monitor.dashboard import DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
 from livezmp.offline.calibrate import Subject, load_subject
-from livezmp.offline.report import write_json
 from livezmp.recording.reader import damaged_as_input_error, iter_messages
 from livezmp.recording.recover import recover
 from livezmp.recording.writer import Recorder

@@ -19,7 +19,7 @@ from typing import ClassVar
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.gait.features import walk_features
 from livezmp.gait.take import load_take
-from livezmp.offline.report import write_json
+from livezmp.jsonfile import write_json
 from livezmp.offline.take import ZMP_CSV, ZMP_PNG, TakeOptions, analyse_take, correct_c3d_take, correct_loaded
 
 # (name, Arrow type) of the columns every table starts with; "error" ends every table

@@ -26,8 +26,8 @@ from pathlib import Path
 
 from livezmp.checks import check_output_dir
 from livezmp.errors import InputError
+from livezmp.jsonfile import write_json
 from livezmp.offline.jobs import Job
-from livezmp.offline.report import write_json
 
 SUMMARY_JSON = "summary.json"
 TABLE_PARQUET = "takes.parquet"

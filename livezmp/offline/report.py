@@ -9,7 +9,6 @@ import numpy as np
 from livezmp.balance.support import SUPPORT_LABELS
 from livezmp.checks import first_out_of_range
 from livezmp.errors import InputError
-from livezmp.jsonfile import atomic_path, write_json  # noqa: F401 - moved there; imported from here too
 from livezmp.model.body import BodyModel
 from livezmp.offline.batch import BatchResult
 from livezmp.offline.plausibility import PlausibilityStats

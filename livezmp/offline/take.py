@@ -20,6 +20,7 @@ from livezmp.balance.pipeline import Pipeline, PipelineConfig, default_config
 from livezmp.correct.limits import MAX_CORRECT_FRAMES, CorrectionLimits, correction_cutoff
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import FILE_CUTOFF_HZ
+from livezmp.jsonfile import atomic_path
 from livezmp.model.body import BodyModel
 from livezmp.model.bvh import write_bvh
 from livezmp.model.bvh_body import DEFAULT_MASS, BvhBodyOptions
@@ -33,7 +34,7 @@ from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.offline.batch import DEFAULT_CHUNK, BatchResult, run_batch
 from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.offline.gaitlab import LabAnalysis, LabOptions, analyse_lab_take
-from livezmp.offline.report import TakeStats, ZmpCsvWriter, atomic_path, summarize, write_zmp_csv
+from livezmp.offline.report import TakeStats, ZmpCsvWriter, summarize, write_zmp_csv
 from livezmp.offline.take_stream import (
     TakeStream,
     analyse_stream,
