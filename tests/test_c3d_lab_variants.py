@@ -195,6 +195,21 @@ def test_each_trial_is_scored_with_the_other_trials_calibration(tmp_path, capsys
     assert "are these takes of one subject?" in capsys.readouterr().out
 
 
+def test_a_constant_of_one_take_is_not_calibrated_into_the_subject(tmp_path):
+    """Two takes of one subject at the table, the second's markers 30 mm off its plates along the walk (a take's own
+    constant: that day's registration, a plate's origin). Each take held out in turn, a fit to the offset makes the
+    other take worse, so the table is kept. With every other 0.2 s block of both takes as the folds (as before), both
+    folds held the offset and the fit moved the HAT's centre of mass to make up for it."""
+    write_lab_c3d(tmp_path / "a.c3d", PLATES, lab=Lab(seconds=SECONDS))
+    take = read_c3d(tmp_path / "a.c3d")
+    shifted = replace(take, points=take.points + np.array([0.03, 0.0, 0.0]))
+    report = calibration.calibrate([take, shifted])[1]
+    assert report["rms_table_mm"] > 10 and report["table_kept"] and report["prior_weight"] is None
+    assert report["folds"] == "each trial held out"
+    # each take scored with the other's calibration: no better than the table
+    assert report["rms_other_trials_fitted_mm"] >= report["rms_other_trials_table_mm"]
+
+
 def test_a_plates_dc_offset_is_taken_over_the_files_zero_frames(tmp_path):
     """c3d.org's TYPE-3 sample has plates that read -80 to -212 N unloaded (an amplifier's DC offset) until walked
     on, and names its unloaded frames in FORCE_PLATFORM:ZERO. Here the right plate (Kistler's eight channels) reads

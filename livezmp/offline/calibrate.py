@@ -18,15 +18,17 @@ how strongly the fit is held to it is chosen by cross-validation on the frames b
 the gait: each trial's complete frames are cut into blocks of ``BLOCK_S`` and every other block goes to one
 fold, so both folds hold both feet and every part of each stance. (The former folds, each trial's first and
 second halves, put one foot's stance in one half and the other's in the other on most short trials, so a fit
-on one half was scored on the other foot: ``block_s=None`` still gives them.) Every prior weight of
-``PRIOR_WEIGHTS`` is fitted on one fold and scored on the other, and the weight with the lower pooled held-out
-error among those that beat the table both ways round is used (else, or when a fold has fewer than
+on one half was scored on the other foot: ``block_s=None`` still gives them.) Given several trials of one
+subject, the folds are the trials instead, each held out in turn (a subject file is for a take it was not fitted
+on; the blocks of one take share what is constant over it and not the subject's). Every prior weight of
+``PRIOR_WEIGHTS`` is fitted on the rest and scored on each fold, and the weight with the lower pooled held-out
+error among those that beat the table every way round is used (else, or when a fold has fewer than
 ``MIN_FOLD_FRAMES`` frames, the table itself, an infinite weight, and the report says so). A trial whose plates'
-horizontal force runs against the markers' motion is refused. Reported held-out error: fitted on one fold (its
-weight chosen the same way within that fold's own blocks) and scored on the other, never seen by the fit or the
-choice. Each parameter's uncertainty: the delete-one-block jackknife of the fit at the chosen weight (the
-blocks, not the frames, are the independent samples). Given several trials of one subject, each is also scored
-with the parameters calibrated on the others.
+horizontal force runs against the markers' motion is refused. Reported held-out error: fitted on the rest (its
+weight chosen the same way within them: their blocks, or with several trials left, those trials) and scored on
+each fold, never seen by the fit or the choice (with several trials: each trial scored with the parameters
+calibrated on the others). Each parameter's uncertainty: the delete-one-block jackknife of the fit at the chosen
+weight (the blocks, not the frames, are the independent samples).
 
 A full-body or trunk marker set tracks the thorax (middle + upper trunk; head and arms tracked or placed on it), so
 there the thorax is the fitted segment, the same way: its mass fraction and centre of mass (forward, left, up the
@@ -354,7 +356,16 @@ Folds = list[tuple[list[_Terms], list[_Terms]]]
 
 
 def _folds(terms: list[_Terms], block_s: float | None) -> Folds:
-    """Two (fitted, held-out) splits of every trial's frames: every other block in one fold."""
+    """(fitted, held-out) splits: with several trials each trial held out in turn, the others fitted; with one,
+    two splits of its frames, every other block in one fold.
+
+    A subject file is for a take it was not fitted on. Blocks of the same takes share what is constant over a take
+    and not of the subject (the markers' placement that day, a plate's offset), so a fit to that passes the
+    blocks' test; a trial held out does not share it. On lower-body subjects with 2-5 walks, each walk analysed
+    with the others' calibration: blocks 26.0 -> trials 23.9 mm median over 7 tuning walks (Sydney, FMC), 29.2 ->
+    28.4 over 10 test walks (La Trobe, Padova, Kory; table 26.0 and 36.9; docs/validation.md, "placed HAT")."""
+    if len(terms) > 1:
+        return [(terms[:i] + terms[i + 1:], [t]) for i, t in enumerate(terms)]
     odd = [_blocks(t, block_s) % 2 == 1 for t in terms]
     return [([t.part(o != k) for t, o in zip(terms, odd, strict=True)],
              [t.part(o == k) for t, o in zip(terms, odd, strict=True)]) for k in (False, True)]
@@ -362,9 +373,9 @@ def _folds(terms: list[_Terms], block_s: float | None) -> Folds:
 
 def _cross_validated(terms: list[_Terms], prior: np.ndarray, free: np.ndarray,
                      block_s: float | None) -> tuple[float, list[float]]:
-    """The prior weight whose fits on one fold score best on the other (pooled RMS over both ways round) among
-    those that beat the table both ways round (else the table: a fit that helps one way and not the other
-    is a fit to that fold's noise), and each weight's pooled score (mm)."""
+    """The prior weight whose fits on one fold score best on the other (pooled RMS over every way round) among
+    those that beat the table every way round (else the table: a fit that helps one way and not another
+    is a fit to that fold's noise), and each weight's pooled score (mm). Folds: :func:`_folds`."""
     folds = _folds(terms, block_s)
     if min(sum(len(t.cop) for t in part) for fold in folds for part in fold) < MIN_FOLD_FRAMES:
         return PRIOR_WEIGHTS[-1], []
@@ -418,13 +429,6 @@ def _check_agreement(trial: C3dTrial, lab: LabAnalysis, rows: np.ndarray) -> Non
             raise InputError(f"{trial.source}: the plates' {name} force runs against the markers' motion (r = "
                              f"{r:.2f} between the CoM accelerations): plates or markers are wrong; not a trial "
                              "to calibrate on")
-
-
-def _other_trials(terms: list[_Terms], prior: np.ndarray, free: np.ndarray, block_s: float | None) -> dict:
-    """Each trial scored with the parameters calibrated on the others (pooled RMS, mm, table beside)."""
-    table, fitted, _ = _pooled([(terms[:i] + terms[i + 1:], [t]) for i, t in enumerate(terms)], prior, free,
-                               block_s)
-    return {"rms_other_trials_table_mm": round(table, 2), "rms_other_trials_fitted_mm": round(fitted, 2)}
 
 
 def _segment(lab: LabAnalysis, source: str, segments: list[Segment]) -> Segment:
@@ -497,7 +501,8 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     sd = None if kept else _jackknife_sd(whole, prior, weight, free, BLOCK_S)
     report = {"trials": [t.source for t in trials], "frames": int(sum(len(t.cop) for t in whole)),
               "segment": segment.name,
-              "folds": "halves" if block_s is None else f"every other {block_s:g} s block",
+              "folds": "each trial held out" if len(whole) > 1 else "halves" if block_s is None
+              else f"every other {block_s:g} s block",
               "rms_table_mm": round(_rms_mm(prior, whole), 2), "rms_fitted_mm": round(_rms_mm(fitted, whole), 2),
               "rms_fitted_unconstrained_mm": round(_rms_mm(unconstrained, whole), 2),
               "rms_held_out_table_mm": round(held_table, 2), "rms_held_out_fitted_mm": round(held_fitted, 2),
@@ -511,7 +516,8 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
               "parameter_sd_from": "the table's assumed spread (nothing fitted)" if sd is None
               else "jackknife over the blocks"}
     if len(whole) > 1:
-        report.update(_other_trials(whole, prior, free, block_s))
+        # the held-out figures are then each trial scored with the parameters calibrated on the others (_folds)
+        report.update(rms_other_trials_table_mm=round(held_table, 2), rms_other_trials_fitted_mm=round(held_fitted, 2))
     if segment is THORAX_SEGMENT:
         return Subject(float(fitted[0]), tuple(float(v) for v in fitted[1:4]), bsp=table.name,
                        age_years=table.age_years, segment=segment.name), report
