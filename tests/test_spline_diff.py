@@ -242,3 +242,33 @@ def test_exact_fit_of_a_window_with_skipped_deadlines_equals_the_dense_solution(
         got = window_weights(t, lam, index)
         scale = np.abs(expected).max(axis=1, keepdims=True)
         np.testing.assert_allclose(got / scale, expected / scale, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("window, lag", [(17, 4), (60, 12)])
+def test_windows_with_several_gaps_fit_from_kept_band_terms_bit_for_bit(monkeypatch, window, lag):
+    """A window with several skipped deadlines (or jittered times) is fitted on its actual times from the band
+    terms the ring keeps per interval, not formed again by `window_weights`: the same weights bit for bit."""
+    fit = spline_diff.window_weights
+    calls = []
+    monkeypatch.setattr(spline_diff, "window_weights", lambda *a: calls.append(1) or fit(*a))
+    rng = np.random.default_rng(window)
+    diff = SlidingSplineDifferentiator(3, window, lag, DT, LAM, jitter_tol=0.01)
+    times, samples = [], []
+    tick, general = 7000, 0
+    for _ in range(8 * window):
+        tick += 1 + int(rng.random() < 0.15) * int(rng.integers(1, 4))  # deadlines skipped
+        t = tick * DT + (rng.normal() * 3e-5 if rng.random() < 0.03 else 0.0)  # and a few jittered reads
+        diff.push(t, rng.normal(size=3))
+        times, samples = (times + [t])[-window:], (samples + [diff._y[diff._slot]])[-window:]
+        periods = np.diff(times) / DT
+        off = periods[np.abs(periods - 1.0) > 0.01]
+        if len(times) <= lag or len(off) == 1 and abs(off[0] - round(off[0])) <= 0.01:
+            continue  # the estimator's lag filling, and the kept weights of a window with one gap on the grid
+        calls.clear()
+        got = diff.estimate()
+        assert not calls
+        expected = fit(diff._t[diff._slot + window + 1 - len(times): diff._slot + window + 1], LAM,
+                       len(times) - 1 - lag) @ np.array(samples)
+        assert np.array_equal(got, expected)
+        general += 1
+    assert general > 2 * window

@@ -26,12 +26,15 @@ number of periods) is fitted on the grid once per gap size and place and the
 weights kept (up to `GRID_WEIGHTS_BYTES`): as the window slides past the next
 gap alike, the same windows come back, where an exact fit costs about 70 us a
 frame at 200 samples.  Windows with more gaps are fitted each time (their
-patterns seldom repeat).
+patterns seldom repeat), from band terms kept per interval as samples arrive
+(each interval's terms depend on it and its two neighbours only, so a sliding
+window's are a slice of a ring): a fit then forms none of them again.
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from collections import OrderedDict, deque
 
 import numpy as np
@@ -40,6 +43,9 @@ from scipy.linalg.lapack import dpbtrf, dpbtrs
 GRID_WEIGHTS_BYTES = 4 << 20  # kept weights of windows with missing grid samples, at most (bytes)
 MAX_GAP_PERIODS = 1000  # a longer gap is fitted on its actual times
 _ENTRY_OVERHEAD = 300  # bytes a kept weight array costs beyond its numbers (array object, key, dict slot)
+# the band terms kept per interval (SlidingSplineDifferentiator._keep_terms)
+_TERMS = ("h", "inv", "mid", "diagonal", "sub", "subsub")
+_TERMS_ROW = struct.Struct(f"={len(_TERMS)}d")  # one row of them, as the ring's native doubles
 
 
 def smoothing_lambda(dt: float, cutoff_hz: float) -> float:
@@ -117,8 +123,21 @@ def window_weights(t: np.ndarray, lam: float, index: int) -> np.ndarray:
     ab[0] = (h[:-1] + h[1:]) / 3.0 + lam * (square[:-1] + mid**2 + square[1:])  # lo**2 + mid**2 + hi**2
     ab[1, :-1] = h[1:-1] / 6.0 + lam * (mid[:-1] * lo[1:] + hi[:-1] * mid[1:])
     ab[2, :-2] = lam * (hi[:-2] * lo[2:])
+    return banded_weights(h, inv, mid, ab, lam, index)
+
+
+def banded_weights(h: np.ndarray, inv: np.ndarray, mid: np.ndarray, ab: np.ndarray, lam: float,
+                   index: int) -> np.ndarray:
+    """`window_weights` of a window of k >= 3 samples from its intervals' terms: ``h`` (k-1,) s, ``inv`` = 1 / h,
+    ``mid`` (k-2,) = -inv[:-1] - inv[1:] (Q's middle entries) and ``ab`` (3, k-2), column-major, A in LAPACK's
+    lower band storage (its entries past the matrix zero), which the factorisation overwrites. The terms
+    depend only on the intervals, so a sliding window can keep them per interval (`SlidingSplineDifferentiator`)
+    rather than form them for every fit."""
+    k = h.shape[0] + 1
+    lo = inv[:-1]
+    hi = inv[1:]
     # LAPACK directly: the scipy.linalg wrappers cost more than the O(k) work here.
-    factor, info = dpbtrf(ab, lower=1)
+    factor, info = dpbtrf(ab, lower=1, overwrite_ab=1)
     if info != 0:
         raise ValueError(f"smoothing system not positive definite (info {info}): times must increase")
 
@@ -185,6 +204,10 @@ class SlidingSplineDifferentiator:
         # Each sample is written twice, W apart, so the window is always one contiguous slice.
         self._y = np.zeros((2 * window, n_channels))
         self._t = np.zeros(2 * window)
+        # Per interval m (ending at sample m), in the same ring: the fit's band terms (`banded_weights`) that m
+        # completes, so a window's exact fit slices them instead of forming them again (a fifth of its calls).
+        self._terms = np.zeros((2 * window, len(_TERMS)))
+        self._terms_bytes = memoryview(self._terms).cast("B")
         self.reset()
 
     def reset(self) -> None:
@@ -193,18 +216,16 @@ class SlidingSplineDifferentiator:
         self.count = 0
         self._last_irregular = -1  # sample number that ends the most recent off-nominal interval
         self._last_off_grid = -1  # ... the most recent interval that is not a whole number of periods either
+        self._previous: tuple[float, float, float, float] | None = None  # interval m-1's h, inv, inv², m-2's mid
         self._gaps.clear()  # (sample number, whole periods) of the intervals longer than one period
 
     def push(self, t: float, y: np.ndarray) -> None:
         """Append one sample: time ``t`` (s, after the previous one) and values ``y`` (n,)."""
-        if self.count and abs(t - self._t[self._slot + self.window] - self.dt) > self.jitter_tol * self.dt:
-            self._last_irregular = self.count
-            periods = (t - self._t[self._slot + self.window]) / self.dt
-            whole = round(periods)
-            if 1 < whole <= MAX_GAP_PERIODS and abs(periods - whole) <= self.jitter_tol:
-                self._gaps.append((self.count, whole))
-            else:
-                self._last_off_grid = self.count
+        if self.count:
+            h = t - float(self._t[self._slot + self.window])  # s since the previous sample
+            self._keep_terms(h)
+            if abs(h - self.dt) > self.jitter_tol * self.dt:
+                self._off_nominal(h / self.dt)
         s = (self._slot + 1) % self.window
         self._y[s] = y
         self._y[s + self.window] = y
@@ -212,6 +233,50 @@ class SlidingSplineDifferentiator:
         self._t[s + self.window] = t
         self._slot = s
         self.count += 1
+
+    def _off_nominal(self, periods: float) -> None:
+        """The interval ending at the sample being pushed is ``periods`` nominal periods long (not one)."""
+        self._last_irregular = self.count
+        whole = round(periods)
+        if 1 < whole <= MAX_GAP_PERIODS and abs(periods - whole) <= self.jitter_tol:
+            self._gaps.append((self.count, whole))
+        else:
+            self._last_off_grid = self.count
+
+    def _keep_terms(self, h: float) -> None:
+        """Interval m = ``count`` (``h`` s) into the ring of band terms (``_TERMS``): its own h and 1 / h, the
+        middle entry of Q and the diagonal of A at the knot it closes (column m-1), the sub-diagonals of column
+        m-2. Plain floats in numpy's order of operations (`window_weights`), so the terms are its bit for bit."""
+        lam = self.lam
+        inv = 1.0 / h if h else math.inf  # numpy's 1 / 0: equal times, which the fit then refuses
+        square = inv * inv  # numpy's inv**2
+        mid = diagonal = sub = subsub = 0.0  # a stream's first intervals: their columns are never read
+        if self._previous is not None:
+            h1, inv1, square1, mid0 = self._previous
+            mid = -inv1 - inv
+            diagonal = (h1 + h) / 3.0 + lam * (square1 + mid * mid + square)
+            if self.count > 2:
+                sub = h1 / 6.0 + lam * (mid0 * inv1 + inv1 * mid)
+                subsub = lam * (inv1 * inv)
+        self._previous = (h, inv, square, mid)
+        # both copies packed as raw doubles: a tuple's conversion by numpy costs twice as much
+        pack, place = _TERMS_ROW.pack_into, self._terms_bytes
+        start = self.count % self.window * _TERMS_ROW.size
+        pack(place, start, h, inv, mid, diagonal, sub, subsub)
+        pack(place, start + self.window * _TERMS_ROW.size, h, inv, mid, diagonal, sub, subsub)
+
+    def _fit(self, k: int, index: int) -> np.ndarray:
+        """`window_weights` of the newest ``k`` samples' times at ``index``, from the kept band terms."""
+        if k < 3:
+            end = self._slot + self.window + 1
+            return window_weights(self._t[end - k : end], self.lam, index)
+        s = (self.count - k + 1) % self.window  # the slot of the window's first interval
+        terms = self._terms[s : s + k - 1]
+        ab = np.zeros((k - 2, 3))  # row-major here: LAPACK's column-major (3, k - 2) transposed
+        ab[:, 0] = terms[1:, 3]
+        ab[:-1, 1:] = terms[2:, 4:]
+        ab[-2:, 2] = 0.0  # the last two columns' second sub-diagonal lies past the matrix: zero, as window_weights
+        return banded_weights(terms[:, 0], terms[:, 1], terms[1:, 2], ab.T, self.lam, index)
 
     def backfill(self, channels: np.ndarray, values: np.ndarray) -> None:
         """Overwrite the whole history of the masked ``channels`` with their ``values`` (n,).
@@ -242,7 +307,7 @@ class SlidingSplineDifferentiator:
         while gaps and gaps[0][0] < first:
             gaps.popleft()
         if self._grid_kept < 1 or self._last_off_grid >= first or len(gaps) != 1:  # more: seldom seen again
-            return window_weights(self._t[end - k : end], self.lam, k - 1 - lag) @ samples
+            return self._fit(k, k - 1 - lag) @ samples
         ends, periods = gaps[0]
         return self._grid_weights((k, k - 1 - lag, ends - first, periods)) @ samples
 
