@@ -68,17 +68,22 @@ def _slopes_adjoint(u: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarra
     The slopes at the knots are v = Dg g + Dc c for knot values g and second
     derivatives c (both (k,)); this returns (u Dg, u Dc), each shaped as ``u``.
     """
+    # Each knot takes its two intervals' terms: the middle knots' by one subtraction each, the ends' alone; the
+    # same values, op for op, as zeroes with the terms added in (two in-place updates each), in fewer calls.
     rate = u[..., :-1] / h
-    zg = np.zeros(u.shape)  # zeros_like is a Python function: its call costs more here
-    zg[..., :-1] -= rate
-    zg[..., 1:] += rate
+    zg = np.empty(u.shape)
+    zg[..., 0] = 0.0 - rate[..., 0]
+    np.subtract(rate[..., :-1], rate[..., 1:], out=zg[..., 1:-1])
+    zg[..., -1] = rate[..., -1] + 0.0
     end_rate = u[..., -1] / h[-1]  # the last slope uses the last interval from the left
     zg[..., -2] -= end_rate
     zg[..., -1] += end_rate
     arm = u[..., :-1] * h / 6.0
-    zc = np.zeros(u.shape)
-    zc[..., :-1] -= 2.0 * arm
-    zc[..., 1:] -= arm
+    twice = -2.0 * arm
+    zc = np.empty(u.shape)
+    zc[..., 0] = twice[..., 0] + 0.0
+    np.subtract(twice[..., 1:], arm[..., :-1], out=zc[..., 1:-1])
+    zc[..., -1] = 0.0 - arm[..., -1]
     end_arm = u[..., -1] * h[-1] / 6.0
     zc[..., -2] += end_arm
     zc[..., -1] += 2.0 * end_arm
