@@ -115,3 +115,33 @@ def test_a_servo_on_no_bus_is_named():
         link = make_link(sim.url + "&timeout=0.05", names, config)
         with pytest.raises(LinkError, match=r"servo 20 \(head_tilt\) answered on none of"):
             link.open()
+
+
+def test_goals_are_converted_once_for_the_robot_and_refused_by_their_bus(monkeypatch):
+    """The goals' ticks are made and checked for every joint at once (interleaved joints), each bus's share cut
+    from them: the same ticks each bus's own conversion gives, and a goal beyond its servo's range refused in the
+    bus's words, nothing sent."""
+    from livezmp.links.dynamixel import DynamixelLink
+
+    config = servo_config(20)
+    order = [k // 2 + 10 * (k % 2) for k in range(20)]
+    names = [list(config.servos)[j] for j in order]
+    with start_devices("dynamixel", ServoPlant(20, position=start_posture(20)), config, buses=2) as sim:
+        link = make_link(f"{sim.url}&timeout=0.1", names, config)
+        link.open()
+        try:
+            convert, calls = DynamixelLink.goal_ticks, []
+            monkeypatch.setattr(DynamixelLink, "goal_ticks", lambda self, p: calls.append(1) or convert(self, p))
+            goals = start_posture(20)[order] * 0.5 + np.linspace(-0.3, 0.3, 20)
+            link.prepare_goals(goals)
+            for bus, joints in zip(link.buses, link._joints, strict=True):
+                assert np.array_equal(bus._goal_packet._goals, convert(bus, goals[joints]))
+            link.write_goals(goals)
+            assert not calls
+            goals[7] = 10.0  # rad: past the servo's 4095 ticks
+            sent = link.stats.writes
+            with pytest.raises(LinkError, match=f"goal for joint '{names[7]}' is 10.0 rad, outside its servo's range"):
+                link.write_goals(goals)
+            assert link.stats.writes == sent
+        finally:
+            link.close()

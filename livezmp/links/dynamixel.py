@@ -358,7 +358,7 @@ class DynamixelLink(PortLink):
         """Build the sync write of ``positions`` (rad, checked as by `write_goals`) and the next read's
         instruction now, for `send_prepared` to send in one write (a loop builds them while it would
         otherwise sleep, so the moment a read verified costs only the write)."""
-        self._prepared = self._goals_packet().fill(self.goal_ticks(positions))
+        self.prepare_ticks(self.goal_ticks(positions))
 
     def send_prepared(self) -> None:
         """Send what `prepare_goals` built: the goals, then the next read's instruction (`request`)."""
@@ -386,6 +386,16 @@ class DynamixelLink(PortLink):
             raise LinkError(f"{self.path}: goal for joint '{self.joint_names[i]}' is {float(goals[i])} rad, outside "
                             f"its servo's range [{ends[0]:.4f}, {ends[1]:.4f}] rad; nothing sent")
         return ticks.astype("<i4")
+
+    @property
+    def tick_scale(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(zero, ticks per rad, lowest, highest goal tick) of each servo, as `goal_ticks` converts and checks
+        with them (set at `open`)."""
+        return self._zero, self._ticks_per_rad, self._lowest, self._highest
+
+    def prepare_ticks(self, ticks: np.ndarray) -> None:
+        """`prepare_goals` of goal ``ticks`` (n,) int32 already converted and checked (`goal_ticks`)."""
+        self._prepared = self._goals_packet().fill(ticks)
 
     @property
     def read_label(self) -> str:

@@ -47,6 +47,7 @@ class MultiBusLink:
         self.buses: list[DynamixelLink] = []
         self._joints: list[np.ndarray] = []  # per bus: the robot joint index of each of its servos
         self._order = np.zeros(0, dtype=int)  # see `open`
+        self._scale = np.zeros((4, len(self.joint_names)))  # see `open`
         self._reads = self._writes = 0
         self._prepared = False  # every bus has goals prepared
         self._reconnects = 0
@@ -70,6 +71,10 @@ class MultiBusLink:
         self._joints = [np.asarray(j, dtype=int) for j in found]
         # the buses' frames end to end, taken in this order, are in the robot's joint order
         self._order = np.argsort(np.concatenate(self._joints))
+        # every bus's tick scale and goal limits in the robot's joint order: one conversion a cycle for the robot
+        self._scale = np.empty((4, len(self.joint_names)))
+        for bus, joints in zip(self.buses, self._joints, strict=True):
+            self._scale[:, joints] = bus.tick_scale
 
     @property
     def pty_ports(self) -> int:
@@ -108,19 +113,18 @@ class MultiBusLink:
     def write_goals(self, positions: np.ndarray, request: bool = False) -> None:
         """Goal positions (n,) rad in ``joint_names`` order: each bus its share, after all were checked
         (with ``request``: and each bus's next read instruction, see `DynamixelLink.write_ticks`)."""
-        goals = self._checked(positions)
+        ticks = self._goal_ticks(self._checked(positions))
         self._writes += 1
-        ticks = [bus.goal_ticks(goals[joints]) for bus, joints in zip(self.buses, self._joints, strict=True)]
         for bus, t in zip(self.buses, ticks, strict=True):
             bus.write_ticks(t, request)
 
     def prepare_goals(self, positions: np.ndarray) -> None:
         """Each bus's share of ``positions`` (rad) and its next read instruction built now (see
         `DynamixelLink.prepare_goals`; a LinkError leaves nothing that `send_prepared` may send)."""
-        goals = self._checked(positions)
+        ticks = self._goal_ticks(self._checked(positions))
         self._prepared = False
-        for bus, joints in zip(self.buses, self._joints, strict=True):
-            bus.prepare_goals(goals[joints])
+        for bus, t in zip(self.buses, ticks, strict=True):
+            bus.prepare_ticks(t)
         self._prepared = True
 
     def send_prepared(self) -> None:
@@ -187,6 +191,16 @@ class MultiBusLink:
         if goals.shape != (len(self.joint_names),):
             raise LinkError(f"write_goals needs {len(self.joint_names)} positions, got shape {goals.shape}")
         return goals
+
+    def _goal_ticks(self, goals: np.ndarray) -> list[np.ndarray]:
+        """Each bus's goal ticks (int32, its servos' order) for ``goals`` (rad, robot order), converted and
+        checked as `DynamixelLink.goal_ticks` does, for the whole robot at once (a bus's call costs the same
+        for 10 servos as for 20). A goal beyond its servo's range: that bus refuses it, in its own words."""
+        zero, ticks_per_rad, lowest, highest = self._scale
+        ticks = np.rint(zero + goals * ticks_per_rad)
+        if not ((ticks >= lowest) & (ticks <= highest)).all():  # also catches NaN
+            return [bus.goal_ticks(goals[joints]) for bus, joints in zip(self.buses, self._joints, strict=True)]
+        return [ticks[joints].astype("<i4") for joints in self._joints]
 
     def _merge(self, frames: list[LinkFrame]) -> LinkFrame:
         order = self._order
