@@ -138,3 +138,17 @@ def test_a_rounded_footprint_gives_the_four_of_its_corners_that_enclose_the_most
     best = max(area(footprint[list(four)]) for four in combinations(range(len(footprint)), 4))
     sole = _quadrilateral(footprint)
     assert len(sole) == 4 and area(sole) == pytest.approx(best, rel=1e-12)
+
+
+@pytest.mark.parametrize("scale", ["nan 1 1", "big", "1 1"])
+def test_a_foot_mesh_whose_scale_is_not_three_numbers_is_said_to_be_unusable(tmp_path, scale):
+    # before: urdfdom dropped the foot's <collision> without a word: the default box soles, nothing said
+    urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
+    _edit_meshes(urdf, scale=scale)
+    for name in FEET:
+        _write_stl(tmp_path / "humanoid" / "meshes" / f"{name}.stl", _cube(np.array([0.16, 0.08, 0.03])))
+    with pytest.warns(UserWarning) as record:
+        load_robot(str(urdf), None)
+    assert len(record) == 1
+    assert (f"left foot: mesh 'package://humanoid/meshes/l_foot.stl': scale {scale!r} is not three finite numbers"
+            in str(record[0].message))

@@ -56,10 +56,24 @@ def resolve_mesh(filename: str, urdf: Path) -> Path | None:
     return next((d / t for d in _search_dirs(urdf) for t in tails if t and (d / t).is_file()), None)
 
 
+def _scale_fault(scale: str | None) -> str:
+    """Why a ``<mesh scale>`` is not one the sole can use ("" where it can): urdfdom drops the whole ``<collision>``
+    or ``<visual>`` of a scale that is not three numbers (``"nan 1 1"``, ``"big"``) without a word to the caller,
+    and a non-finite one would carry NaN vertices, so the foot would stand on the default box unsaid."""
+    if scale is None:
+        return ""
+    try:
+        values = [float(v) for v in scale.split()]
+    except ValueError:
+        values = []
+    return "" if len(values) == 3 and np.isfinite(values).all() else f"scale {scale!r} is not three finite numbers"
+
+
 def foot_only_urdf(root: ET.Element, links: set[str], tag: str, urdf: Path) -> tuple[str | None, str]:
     """(the URDF with no geometry but the ``<tag>`` meshes of ``links``, their files' paths resolved
-    (`resolve_mesh`); the first mesh not found, as written, else ""). None for the URDF where ``links`` have no
-    such mesh or one is not found. ``root`` is not changed."""
+    (`resolve_mesh`); why the first mesh that cannot be used cannot (not found, or its scale unusable:
+    `_scale_fault`), else ""). None for the URDF where ``links`` have no such mesh or one cannot be used. ``root``
+    is not changed."""
     copy = ET.fromstring(ET.tostring(root))
     found = False
     for link in copy.findall("link"):
@@ -68,9 +82,13 @@ def foot_only_urdf(root: ET.Element, links: set[str], tag: str, urdf: Path) -> t
             if element.tag != tag or link.get("name") not in links or mesh is None:
                 link.remove(element)
                 continue
-            path = resolve_mesh(mesh.get("filename", ""), urdf)
+            name = mesh.get("filename", "")
+            path = resolve_mesh(name, urdf)
             if path is None:
-                return None, mesh.get("filename", "")
+                return None, f"mesh {name!r} not found"
+            fault = _scale_fault(mesh.get("scale"))
+            if fault:
+                return None, f"mesh {name!r}: {fault}"
             mesh.set("filename", str(path))
             found = True
     return (ET.tostring(copy, encoding="unicode") if found else None), ""

@@ -353,9 +353,8 @@ def _mesh_points(root: ET.Element, fixed: pin.Model, links: set[str], path: Path
     ``root``, ``fixed``: `_load_fixed`'s."""
     why = ""
     for tag, kind in (("collision", pin.GeometryType.COLLISION), ("visual", pin.GeometryType.VISUAL)):
-        xml, missing = foot_only_urdf(root, links, tag, path)
-        if missing:
-            why = why or f"mesh {missing!r} not found"
+        xml, unusable = foot_only_urdf(root, links, tag, path)
+        why = why or unusable
         if xml is None:
             continue
         try:
