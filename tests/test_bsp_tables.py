@@ -105,3 +105,28 @@ def test_a_subject_file_names_its_table_unless_the_command_line_does(tmp_path):
         path.write_text(f'[subject]\nhat_fraction = 0.5\nhat_offset_m = [0.0, 0.0, 0.3]\n{line}\n')
         with pytest.raises(InputError, match=field):
             load_subject(path)
+
+
+@pytest.mark.parametrize(("line", "field"), [
+    ("hat_follow_hz = 1e-300", "subject.hat_follow_hz"),  # before: scipy's LinAlgError traceback in the analysis
+    ("hat_follow_hz = 0.001", "subject.hat_follow_hz"),
+    ("hat_fraction = 0.99999", "subject.hat_fraction"),  # before: each of these analysed without a word
+    ("hat_offset_m = [true, false, true]", r"subject.hat_offset_m\[0\] \(forward\)"),
+    ("hat_offset_m = [0.0, 0.0, 1.4]", r"subject.hat_offset_m\[2\] \(up\)"),
+    ("hat_sway_gain = [true, 0.5]", r"subject.hat_sway_gain\[0\] \(fore_aft\)"),
+    ("age_years = true", "subject.age_years"),
+])
+def test_a_subject_file_is_held_to_numbers_calibrate_can_fit(tmp_path, line, field):
+    fields = {"hat_fraction": "0.5", "hat_offset_m": "[0.0, 0.0, 0.3]"}
+    key, _, value = line.partition(" = ")
+    path = tmp_path / "subject.toml"
+    path.write_text("[subject]\n" + "".join(f"{k} = {v}\n" for k, v in {**fields, key: value}.items()))
+    with pytest.raises(InputError, match=field):
+        load_subject(path)
+
+
+def test_a_tracked_trunks_subject_file_is_held_to_its_own_range(tmp_path):
+    path = tmp_path / "subject.toml"
+    path.write_text("[subject]\ntrunk_fraction = 0.35\ntrunk_offset_m = [0.0, 0.0, 1.4]\n")  # before: read
+    with pytest.raises(InputError, match=r"subject.trunk_offset_m\[2\] \(up\) must be a number from -0.45 to 0"):
+        load_subject(path)

@@ -75,6 +75,9 @@ PRIOR_MM = 10.0
 PRIOR_WEIGHTS = (0.3, 1.0, 3.0, 10.0, 30.0, np.inf)
 MIN_FRAMES = 20  # complete frames a fit needs
 MAX_FOLLOW_HZ = 5.0  # a subject file's hat_follow_hz: above it the sway of every step would be followed
+# ... and below this (a 100 s period) it follows nothing a take holds; far lower, the follow filter's design is
+# singular (2e-300 Hz: scipy's LinAlgError)
+MIN_FOLLOW_HZ = 0.01
 # the cross-validation's blocks, s: longer than the table's ZMP - CoP error stays correlated (its autocorrelation
 # falls below 1/e within 50-100 ms on 8 of the 10 calibratable plate trials; 200-230 ms on two), shorter than a
 # stance (0.5-0.7 s), so every stance spans blocks of both folds
@@ -149,6 +152,32 @@ SUBJECT_KEYS = {"hat_fraction", "hat_offset_m", "hat_sway_gain", "hat_follow_hz"
 TRUNK_KEYS = {"trunk_fraction", "trunk_offset_m", "bsp", "age_years"}  # a tracked thorax' subject file
 
 
+def _is_number(value: object) -> bool:
+    """A TOML number: an integer or a float (TOML's ``true`` is a Python int, and no number)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _bounded(p: Path, key: str, value: object, segment: Segment, index: int, what: str) -> float:
+    """``value``, the subject file's ``key`` (``what``: its part), checked to be a number within what calibrate fits
+    for ``segment`` (its bounds' entry ``index``): values outside them, which no fit gives (a HAT of 99.999 % of
+    the body, a centre of mass 1.4 m off the trunk), would be analysed without a word."""
+    lo, hi = segment.bounds[0][index], segment.bounds[1][index]
+    if not (_is_number(value) and lo <= value <= hi):
+        raise InputError(f"{p}: subject.{key}{what} must be a number from {lo:g} to {hi:g} (the range calibrate "
+                         f"fits), got {value!r}")
+    return float(value)
+
+
+def _bounded_list(p: Path, key: str, value: object, segment: Segment, first: int,
+                  names: tuple[str, ...]) -> tuple[float, ...]:
+    """The list ``value`` of the subject file's ``key``, one number per name of ``names``, each checked as
+    :func:`_bounded` does from the bounds' entry ``first`` on."""
+    if not (isinstance(value, list) and len(value) == len(names)):
+        raise InputError(f"{p}: subject.{key} must be [{', '.join(names)}], got {value!r}")
+    return tuple(_bounded(p, key, v, segment, first + i, f"[{i}] ({name})") for i, (v, name) in
+                 enumerate(zip(value, names, strict=True)))
+
+
 def load_subject(path: str | Path) -> Subject:
     """Read a subject file (TOML ``[subject]`` with ``hat_fraction``, ``hat_offset_m = [fwd, left, up]`` and
     optionally ``hat_sway_gain = [fore_aft, lateral]``, else :data:`TRUNK_STEP_GAIN`, the sway above
@@ -167,26 +196,21 @@ def load_subject(path: str | Path) -> Subject:
         raise InputError(f"{p}: subject.{sorted(unknown)[0]}: unknown key ({', '.join(sorted(keys))})"
                          + ("; a subject file is a tracked trunk's (trunk_*) or a placed HAT's (hat_*), not both"
                             if trunk and unknown & SUBJECT_KEYS else ""))
-    f, off = s.get(f"{prefix}_fraction"), s.get(f"{prefix}_offset_m")
-    if not isinstance(f, int | float) or not 0.0 < f < 1.0:
-        raise InputError(f"{p}: subject.{prefix}_fraction must be a number between 0 and 1, got {f!r}")
-    if not (isinstance(off, list) and len(off) == 3 and all(isinstance(v, int | float) for v in off)
-            and all(abs(v) < 1.5 for v in off)):
-        raise InputError(f"{p}: subject.{prefix}_offset_m must be [forward, left, up] in metres, got {off!r}")
-    gain = s.get("hat_sway_gain", list(TRUNK_STEP_GAIN))
-    if not (isinstance(gain, list) and len(gain) == 2
-            and all(isinstance(v, int | float) and 0 <= v <= 2 for v in gain)):
-        raise InputError(f"{p}: subject.hat_sway_gain must be [fore_aft, lateral], each 0..2, got {gain!r}")
+    segment = THORAX_SEGMENT if trunk else HAT_SEGMENT
+    f = _bounded(p, f"{prefix}_fraction", s.get(f"{prefix}_fraction"), segment, 0, "")
+    off = _bounded_list(p, f"{prefix}_offset_m", s.get(f"{prefix}_offset_m"), segment, 1, ("forward", "left", "up"))
+    gain = _bounded_list(p, "hat_sway_gain", s.get("hat_sway_gain", list(TRUNK_STEP_GAIN)), segment, 4,
+                         ("fore_aft", "lateral"))
     follow = s.get("hat_follow_hz", TRUNK_FOLLOW_HZ)
-    if not (isinstance(follow, int | float) and not isinstance(follow, bool) and 0 < follow <= MAX_FOLLOW_HZ):
-        raise InputError(f"{p}: subject.hat_follow_hz must be a frequency in Hz, above 0 and at most "
+    if not (_is_number(follow) and MIN_FOLLOW_HZ <= follow <= MAX_FOLLOW_HZ):
+        raise InputError(f"{p}: subject.hat_follow_hz must be a frequency in Hz, {MIN_FOLLOW_HZ:g} to "
                          f"{MAX_FOLLOW_HZ:g}, got {follow!r}")
     bsp, age = s.get("bsp"), s.get("age_years")
     if bsp is not None and bsp not in ("adult", "child"):
         raise InputError(f"{p}: subject.bsp must be \"adult\" or \"child\", got {bsp!r}")
-    if age is not None and not (isinstance(age, int | float) and 0 < age < MAX_AGE_YEARS):
+    if age is not None and not (_is_number(age) and 0 < age < MAX_AGE_YEARS):
         raise InputError(f"{p}: subject.age_years must be a number of years, got {age!r}")
-    return Subject(float(f), tuple(float(v) for v in off), tuple(float(v) for v in gain), bsp,
+    return Subject(f, off, gain, bsp,
                    None if age is None else float(age), float(follow), "thorax" if trunk else "hat")
 
 
