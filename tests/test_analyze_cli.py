@@ -129,3 +129,10 @@ def test_every_bandai_walk_analyses(capsys):
     assert out.count("inside") == 24
     with capsys.disabled():
         print("\n" + out)
+
+
+def test_a_robot_without_its_motion_is_refused_not_swapped_for_the_demo_robot(capsys):
+    # before: exit 0, the built-in livezmp_mini's demo analysed (3.65 kg) and the OP3 never loaded
+    assert main(["analyze", "--robot", str(OP3_URDF)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--robot {OP3_URDF}: give the robot's motion" in err

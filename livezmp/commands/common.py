@@ -12,6 +12,7 @@ from dataclasses import replace
 from livezmp.balance.pipeline import PipelineConfig
 from livezmp.checks import check_number
 from livezmp.correct.limits import CorrectionLimits
+from livezmp.errors import InputError
 from livezmp.estimate.estimator import default_cutoff
 from livezmp.model.anthropometry import MAX_AGE_YEARS
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
@@ -45,6 +46,9 @@ def load_from_args(args: argparse.Namespace) -> LoadedMotion:
     """The motion named on the command line, or the built-in demo when there is none."""
     check_body_options(args)
     urdf_opts = UrdfBodyOptions(config=args.robot_config)
+    if args.motion is None and args.robot:  # the demo is the built-in robot's: the user's would go unanalysed
+        raise InputError(f"--robot {args.robot}: give the robot's motion (a joint-trajectory CSV); without one "
+                         "the built-in demo robot is analysed, not this one")
     if args.motion is None:
         body = body_from_urdf(demo_robot_path(), urdf_opts)
         traj = demo_trajectory(body.joint_names)
