@@ -1715,3 +1715,34 @@ def test_a_plate_geometry_not_finite_is_refused_naming_the_parameter(lab, tmp_pa
     c3d.write(str(tmp_path / "bad.c3d"))
     with pytest.raises(InputError, match=rf"bad\.c3d: force platform 1: FORCE_PLATFORM:{key} not finite or beyond"):
         read_c3d(tmp_path / "bad.c3d")
+
+
+@pytest.mark.parametrize("shape", ["point", "line"])
+def test_a_plate_whose_corners_enclose_no_area_is_refused_naming_it(lab, tmp_path, shape):
+    """Corners that coincide or line up had been read: the plate's CoP was never under a foot, and the analysis
+    ended "no frame has every foot that may bear weight on a plate", exit 0, not saying why (audit 9)."""
+    c3d = ezc3d.c3d(str(lab[0] / "on.c3d"))
+    corners = np.array(c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"], dtype=float)  # (3, 4, plates)
+    corners[:, 2:, 0] = corners[:, :2, 0] if shape == "line" else corners[:, :1, 0]
+    corners[:, 1, 0] = corners[:, 1, 0] if shape == "line" else corners[:, 0, 0]
+    c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"] = corners
+    c3d.write(str(tmp_path / "flat.c3d"))
+    with pytest.raises(InputError, match=r"flat\.c3d: force platform 1: FORCE_PLATFORM:CORNERS enclose 0 m²"):
+        read_c3d(tmp_path / "flat.c3d")
+
+
+def test_an_infinite_plate_sample_is_read_as_unloaded_and_a_file_mass_of_no_person_is_ignored(lab, tmp_path):
+    """One infinite analog sample (a saturated channel) had made the low-passed plates infinite: exit 2, "field
+    com_acc_vs_plates.rms_mps2[2] is not finite" (the output's field, not the input's); a PROCESSING:Bodymass of
+    1e30 kg had been used as the subject's mass (no plate frame then complete, exit 0). Now the sample reads as a
+    NaN one does (unloaded) and the file's mass as none: the plates weigh the subject and meet the ZMP as before."""
+    c3d = ezc3d.c3d(str(lab[0] / "on.c3d"))
+    analogs = np.array(c3d["data"]["analogs"])
+    analogs[0, 2, 1000] = np.inf  # the first plate's vertical force, 1 s in
+    c3d["data"]["analogs"] = analogs
+    c3d["parameters"]["PROCESSING"]["Bodymass"]["value"] = [1e30]
+    c3d.write(str(tmp_path / "odd.c3d"))
+    assert read_c3d(tmp_path / "odd.c3d").mass_kg is None
+    rc, s = _analyze(tmp_path / "odd.c3d", tmp_path)
+    assert rc == 0 and s["mass"]["source"] != "file" and abs(s["mass"]["used_kg"] - MASS) < 1.0
+    assert s["cop_vs_zmp"]["frames"] > 250 and s["cop_vs_zmp"]["max_mm"] < 5.0

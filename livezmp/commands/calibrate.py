@@ -6,8 +6,7 @@ from __future__ import annotations
 import argparse
 
 from livezmp.checks import check_number, check_output_path
-from livezmp.commands.common import MAX_BODY_MASS
-from livezmp.model.anthropometry import MAX_AGE_YEARS
+from livezmp.model.anthropometry import MAX_AGE_YEARS, MAX_BODY_MASS
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
 from livezmp.model.static_trial import read_walk

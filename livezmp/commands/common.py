@@ -14,7 +14,7 @@ from livezmp.checks import check_number
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import default_cutoff
-from livezmp.model.anthropometry import MAX_AGE_YEARS
+from livezmp.model.anthropometry import MAX_AGE_YEARS, MAX_BODY_MASS
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import LoadedMotion, trajectory_frames
 from livezmp.model.urdf_body import UrdfBodyOptions, body_from_urdf
@@ -22,7 +22,6 @@ from livezmp.offline.take import TakeOptions, take_config
 from livezmp.offline.treadmill import parse_treadmill
 from livezmp.offline.validated import VALIDATED_P95_MM
 
-MAX_BODY_MASS = 1000.0  # kg
 MAX_GROUND_M = 1000.0  # m from the input's origin
 MAX_SOLE_WIDTH_M = 1.0
 MAX_TOLERANCE_MM = 1000.0  # a ZMP error of a metre is no measurement: every frame would count as inside

@@ -75,6 +75,7 @@ MEDIAN_STATURE_M = ((6.0, 1.16), (12.0, 1.50), (18.0, 1.70))
 CHILD_STATURE_M = 1.40
 BSP_CHOICES = ("auto", "adult", "child")
 MAX_AGE_YEARS = 130.0  # an age (years) at or above this is no subject's: a file's is ignored, a user's refused
+MAX_BODY_MASS = 1000.0  # kg: above it no subject's (the heaviest weighed ~640 kg): a file's ignored, a user's refused
 
 
 @dataclass(frozen=True)

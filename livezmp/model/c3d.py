@@ -36,7 +36,7 @@ import numpy as np
 
 from livezmp.checks import MAX_COORDINATE_M, check_frame_period, check_input_file
 from livezmp.errors import InputError
-from livezmp.model.anthropometry import MAX_AGE_YEARS
+from livezmp.model.anthropometry import MAX_AGE_YEARS, MAX_BODY_MASS
 from livezmp.model.plate_frame import plate_axes
 
 LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}  # m per POINT:UNITS unit
@@ -132,7 +132,7 @@ def _subject(groups: dict) -> tuple[float | None, str, float | None, dict[str, f
     mass, where = None, ""
     for g, n in (("PROCESSING", "Bodymass"), ("SUBJECT", "WEIGHT"), ("SUBJECTS", "WEIGHT")):
         m = _first_number(_param(groups, g, n))
-        if m is not None:
+        if m is not None and m <= MAX_BODY_MASS:  # 1e30 kg: no subject's (the plates weigh one then)
             mass, where = m, f"{g}:{n}"
             break
     height = None
@@ -348,6 +348,25 @@ def _calibrated_platforms(c3d: dict, source: str) -> list[dict]:
     return out
 
 
+MIN_PLATE_AREA_M2 = 0.01  # a 10 x 10 cm plate: the smallest gait-lab plates measure 0.3 x 0.4 m
+
+
+def _check_plate_area(corners: np.ndarray, where: str) -> None:
+    """Refuse a plate whose four corners (4, 3) m enclose less than :data:`MIN_PLATE_AREA_M2` (coincident or on a
+    line): its axes and surface are undefined, and its CoP, never on a foot, left no frame complete without a word
+    of why."""
+    area = 0.5 * np.linalg.norm(np.cross(corners[2] - corners[0], corners[3] - corners[1]))  # a quadrilateral's
+    if area < MIN_PLATE_AREA_M2:
+        raise InputError(f"{where}: FORCE_PLATFORM:CORNERS enclose {area:.3g} m² (corners that coincide or lie on "
+                         f"a line; a plate covers at least {MIN_PLATE_AREA_M2:g} m²)")
+
+
+def _unread_as_zero(samples: np.ndarray) -> np.ndarray:
+    """``samples`` with each NaN or infinite value (a dropped or saturated sample) read as zero, as an unloaded
+    plate: an infinite one, kept, made every low-passed sample near it infinite."""
+    return np.where(np.isfinite(samples), samples, 0.0)
+
+
 def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
     """The plates, their corners and moments (N·``unit``) in ``unit`` (POINT:UNITS): ezc3d only labels its
     numbers, and labels them m when POINT:UNITS is empty, where the points are taken as mm."""
@@ -367,13 +386,14 @@ def _plates(c3d: dict, source: str, unit: str) -> list[PlateRecord]:
                 raise InputError(f"{source}: force platform {k + 1}: FORCE_PLATFORM:{key.upper()} not finite or "
                                  f"beyond {MAX_COORDINATE_M:g} m")
         corners = np.asarray(p["corners"], dtype=float).T * length
+        _check_plate_area(corners, f"{source}: force platform {k + 1}")
         force = np.asarray(p["force"], dtype=float).T * newtons
         kind = types[k] if k < len(types) else 0
         mom, reading = (_kistler_moment(p), "") if kind == 3 else (_cop_moment(p), "") if kind == 1 else \
             _origin_moment(p)
         mom = mom.T * moment
         zero = _zero_samples(c3d["parameters"], len(force), frames)
-        out.append(PlateRecord(np.nan_to_num(force), np.nan_to_num(mom), corners.mean(axis=0), corners, zero,
+        out.append(PlateRecord(_unread_as_zero(force), _unread_as_zero(mom), corners.mean(axis=0), corners, zero,
                                reading))
     return out
 
