@@ -1746,3 +1746,16 @@ def test_an_infinite_plate_sample_is_read_as_unloaded_and_a_file_mass_of_no_pers
     rc, s = _analyze(tmp_path / "odd.c3d", tmp_path)
     assert rc == 0 and s["mass"]["source"] != "file" and abs(s["mass"]["used_kg"] - MASS) < 1.0
     assert s["cop_vs_zmp"]["frames"] > 250 and s["cop_vs_zmp"]["max_mm"] < 5.0
+
+
+def test_a_take_longer_than_the_16_bit_frame_count_is_refused_not_cut(tmp_path):
+    """70000 frames (11.7 min at 100 Hz): the header's count stops at 65535 and ezc3d reads that many, with
+    TRIAL:ACTUAL_END_FIELD or without; an hour at 100 Hz had been analysed as its first 11 min, exit 0 (audit 9)."""
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ["LASI"]
+    c3d["data"]["points"] = np.ones((4, 1, 70_000))
+    c3d.write(str(tmp_path / "long.c3d"))
+    with pytest.raises(InputError, match=r"long\.c3d: the data holds about 700\d\d frames \(12 min\), ezc3d reads "
+                                         r"the first 65535"):
+        read_c3d(tmp_path / "long.c3d")

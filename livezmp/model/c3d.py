@@ -524,12 +524,27 @@ def open_c3d(path: str | Path, plates: bool = False):
     return c3d
 
 
+def _frames_held(data: bytes, order: str) -> tuple[int, int]:
+    """(how many whole frames the data section of the C3D file ``data`` holds, from its header: words 2, 3, 7, 9,
+    points, analog words a frame, POINT:SCALE whose sign says 4-byte floats or 2-byte integers, the data's first
+    512-byte block; how many of those may be the last block's padding)."""
+    points, analog_words = struct.unpack_from(order + "2H", data, 2)
+    (scale,) = struct.unpack_from(order + "f", data, 12)
+    (start,) = struct.unpack_from(order + "H", data, 16)
+    size = (4 * points + analog_words) * (4 if scale < 0 else 2)
+    if not size or not start:
+        return 0, 0
+    return max(0, len(data) - (start - 1) * 512) // size, 511 // size
+
+
 def _check_data_read_whole(p: Path, data: bytes, c3d) -> None:
     """Refuse a file whose POINT:RATE is no frame rate read (:func:`check_frame_period`), or whose data ezc3d read
     otherwise than its header lays it out: analog samples a frame other than the header's (ezc3d steps through the
     data by ANALOG:RATE / POINT:RATE: one that is not the header's count reads markers from the analog words, refused
     later as an up axis or a pelvis it could not make out, or runs out of file), or fewer frames than the header's
-    first..last (a file cut short: ezc3d reads what is there without a word)."""
+    first..last (a file cut short: ezc3d reads what is there without a word), or, where the header's last frame is
+    the 16-bit count's cap (0xFFFF), fewer frames than the data holds (ezc3d reads 65535 frames, TRIAL:ACTUAL_END_FIELD
+    or not: an hour at 100 Hz was analysed as its first 11 min, exit 0)."""
     rate = _first_number(_param(c3d["parameters"], "POINT", "RATE"))
     if rate is None:
         raise InputError(f"{p}: POINT:RATE is missing or not a positive number")
@@ -546,6 +561,10 @@ def _check_data_read_whole(p: Path, data: bytes, c3d) -> None:
     if first <= last < 0xFFFF and frames < last - first + 1:  # 0xFFFF: a longer trial's count is in TRIAL
         raise InputError(f"{p}: truncated: the header says {last - first + 1} frames ({first}..{last}), "
                          f"the file holds {frames}")
+    held, padding = _frames_held(data, order)
+    if last == 0xFFFF and held > frames + padding:  # the 16-bit count's cap: ezc3d reads 65535 frames and stops
+        raise InputError(f"{p}: the data holds about {held} frames ({held / rate / 60:.0f} min), ezc3d reads the "
+                         f"first {frames} (its 16-bit frame count's limit): split the take")
 
 
 def told_apart(labels: list[str], descriptions: list[str]) -> list[str]:
