@@ -335,10 +335,12 @@ def test_a_bvh_in_another_encoding_is_named_so_not_an_empty_file(tmp_path, capsy
 
 
 @pytest.mark.parametrize("option", [["--tolerance-mm", "nan"], ["--tolerance-mm", "-5"], ["--cutoff-hz", "1e6"],
-                                    ["--cutoff-hz", "nan"]])
+                                    ["--cutoff-hz", "nan"], ["--cutoff-hz", "1e-9"], ["--cutoff-hz", "0.1"]])
 def test_analysis_numbers_are_refused_naming_the_option(tmp_path, capsys, walk_text, option):
     """--tolerance-mm nan was refused only when the summary came to be written, naming its field (without
-    --summary-json: "within nan mm"), -5 was used; --cutoff-hz 1e6 was refused as EstimatorConfig.window_s."""
+    --summary-json: "within nan mm"), -5 was used; --cutoff-hz 1e6 was refused as EstimatorConfig.window_s;
+    --cutoff-hz 1e-9 ended in scipy's LinAlgError traceback, 0.1 analysed a walk as all flight, no verdict
+    (audit 9)."""
     p = put(tmp_path, "w.bvh", walk_text)
     refused(capsys, "analyze", p, *option, "--summary-json", tmp_path / "s.json", names=option[0], says="outside")
 

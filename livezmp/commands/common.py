@@ -25,6 +25,9 @@ from livezmp.offline.validated import VALIDATED_P95_MM
 MAX_GROUND_M = 1000.0  # m from the input's origin
 MAX_SOLE_WIDTH_M = 1.0
 MAX_TOLERANCE_MM = 1000.0  # a ZMP error of a metre is no measurement: every frame would count as inside
+# half the slowest step frequency (1-2.7 Hz): below it no step's acceleration is kept (a walk at 0.1 Hz: every frame
+# "flight", no verdict), and far below (1e-9 Hz) the filters' design is singular (scipy's LinAlgError traceback)
+MIN_CUTOFF_HZ = 0.5
 MAX_CUTOFF_HZ = 5000.0  # half the highest frame rate read (checks.FRAME_PERIOD_RANGE); the rate's own limit later
 MAX_ROTATION_DEG = 180.0
 MAX_RATE_DEG_S = 36000.0  # 100 turns a second: beyond any joint
@@ -38,7 +41,7 @@ def check_body_options(args: argparse.Namespace) -> None:
     check_number(args.sole_width, "--sole-width (m)", 0.0, MAX_SOLE_WIDTH_M, lo_open=True)
     check_number(getattr(args, "age", None), "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
     check_number(getattr(args, "tolerance_mm", None), "--tolerance-mm (mm)", 0.0, MAX_TOLERANCE_MM)
-    check_number(args.cutoff_hz, "--cutoff-hz (Hz)", 0.0, MAX_CUTOFF_HZ, lo_open=True)
+    check_number(args.cutoff_hz, "--cutoff-hz (Hz)", MIN_CUTOFF_HZ, MAX_CUTOFF_HZ)
 
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:
