@@ -6,6 +6,7 @@ every mesh-only foot stood on the default box sole, 0.5 x 0.28 hip heights under
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 from itertools import combinations
@@ -18,6 +19,7 @@ from humanoid_gen import HumanoidSpec, build_humanoid
 from scipy.spatial import ConvexHull
 
 from livezmp.balance.support import convex_hull
+from livezmp.model import foot_meshes
 from livezmp.model.body import foot_soles
 from livezmp.model.foot_meshes import _quadrilateral
 from livezmp.model.robot import load_robot
@@ -152,3 +154,17 @@ def test_a_foot_mesh_whose_scale_is_not_three_numbers_is_said_to_be_unusable(tmp
     assert len(record) == 1
     assert (f"left foot: mesh 'package://humanoid/meshes/l_foot.stl': scale {scale!r} is not three finite numbers"
             in str(record[0].message))
+
+
+def test_a_foot_mesh_file_too_large_to_read_in_time_is_said_and_not_read(tmp_path, monkeypatch):
+    # before: every foot mesh was read whole: a 2M-face STL (100 MB) was still loading after 4 min at load 12.
+    # The limit lowered here to this test's small cubes, so that nothing large need be written
+    monkeypatch.setattr(foot_meshes, "MAX_MESH_BYTES", 100)
+    urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
+    for name in FEET:
+        _write_stl(tmp_path / "humanoid" / "meshes" / f"{name}.stl", _cube(np.array([0.16, 0.08, 0.03])))
+    with pytest.warns(UserWarning) as record:
+        load_robot(str(urdf), None)
+    assert len(record) == 1
+    assert re.search(r"left foot: mesh 'package://humanoid/meshes/l_foot.stl': 0 MB, more than the 0 MB a foot mesh "
+                     r"is read up to; right foot: .*: default box soles used$", str(record[0].message))

@@ -56,10 +56,19 @@ def resolve_mesh(filename: str, urdf: Path) -> Path | None:
     return next((d / t for d in _search_dirs(urdf) for t in tails if t and (d / t).is_file()), None)
 
 
-def _scale_fault(scale: str | None) -> str:
-    """Why a ``<mesh scale>`` is not one the sole can use ("" where it can): urdfdom drops the whole ``<collision>``
-    or ``<visual>`` of a scale that is not three numbers (``"nan 1 1"``, ``"big"``) without a word to the caller,
-    and a non-finite one would carry NaN vertices, so the foot would stand on the default box unsaid."""
+# a foot mesh file larger is not read: loading and taking the hull of a 2M-face STL (100 MB) took over 4 min at
+# load 12 (200k faces: 8 s); the published feet here are at most 2.4 MB (AgiBot X1's ankle)
+MAX_MESH_BYTES = 20_000_000
+
+
+def _mesh_fault(path: Path, scale: str | None) -> str:
+    """Why the mesh file ``path`` with ``<mesh scale>`` ``scale`` is not one the sole can use ("" where it can): a
+    file over :data:`MAX_MESH_BYTES`; a scale that is not three finite numbers (``"nan 1 1"``, ``"big"``), whose
+    whole ``<collision>`` or ``<visual>`` urdfdom drops without a word to the caller (the foot then stood on the
+    default box unsaid)."""
+    size = path.stat().st_size
+    if size > MAX_MESH_BYTES:
+        return f"{size / 1e6:.0f} MB, more than the {MAX_MESH_BYTES / 1e6:.0f} MB a foot mesh is read up to"
     if scale is None:
         return ""
     try:
@@ -71,8 +80,8 @@ def _scale_fault(scale: str | None) -> str:
 
 def foot_only_urdf(root: ET.Element, links: set[str], tag: str, urdf: Path) -> tuple[str | None, str]:
     """(the URDF with no geometry but the ``<tag>`` meshes of ``links``, their files' paths resolved
-    (`resolve_mesh`); why the first mesh that cannot be used cannot (not found, or its scale unusable:
-    `_scale_fault`), else ""). None for the URDF where ``links`` have no such mesh or one cannot be used. ``root``
+    (`resolve_mesh`); why the first mesh that cannot be used cannot (not found, too large or its scale unusable:
+    `_mesh_fault`), else ""). None for the URDF where ``links`` have no such mesh or one cannot be used. ``root``
     is not changed."""
     copy = ET.fromstring(ET.tostring(root))
     found = False
@@ -86,7 +95,7 @@ def foot_only_urdf(root: ET.Element, links: set[str], tag: str, urdf: Path) -> t
             path = resolve_mesh(name, urdf)
             if path is None:
                 return None, f"mesh {name!r} not found"
-            fault = _scale_fault(mesh.get("scale"))
+            fault = _mesh_fault(path, mesh.get("scale"))
             if fault:
                 return None, f"mesh {name!r}: {fault}"
             mesh.set("filename", str(path))
