@@ -168,3 +168,16 @@ def test_a_foot_mesh_file_too_large_to_read_in_time_is_said_and_not_read(tmp_pat
     assert len(record) == 1
     assert re.search(r"left foot: mesh 'package://humanoid/meshes/l_foot.stl': 0 MB, more than the 0 MB a foot mesh "
                      r"is read up to; right foot: .*: default box soles used$", str(record[0].message))
+
+
+def test_a_foot_mesh_in_millimetres_read_as_metres_is_said_not_stood_on(tmp_path):
+    # before: the robot stood on soles 240 m long (the generator's foot box written in mm, no scale) without a word
+    urdf = build_humanoid(tmp_path / "m.urdf", SPEC)
+    for name in FEET:
+        _write_stl(tmp_path / "humanoid" / "meshes" / f"{name}.stl",
+                   _cube(1000 * np.array([0.16, 0.08, 0.03]) * SPEC.height))
+    with pytest.warns(UserWarning) as record:
+        load_robot(str(urdf), None)
+    assert len(record) == 1
+    assert re.search(r"left foot: its meshes' footprint is \d+ m across, more than a sole's 1 m; right foot: .*: "
+                     r"default box soles used$", str(record[0].message))

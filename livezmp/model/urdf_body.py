@@ -39,7 +39,7 @@ from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_cop
 from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole
 from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
 from livezmp.model.mimic import Mimic, read_mimics
-from livezmp.model.robot_config import RobotConfig, find_robot_config, load_robot_config
+from livezmp.model.robot_config import MAX_SOLE_M, RobotConfig, find_robot_config, load_robot_config
 
 MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
 BASE_JOINTS = (
@@ -381,6 +381,9 @@ def _sole_of_meshes(model: pin.Model, data: pin.Data, joint: int, root: ET.Eleme
              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint}
     points, why = _mesh_points(root, fixed, links, path)
     sole = mesh_sole(model, data, joint, points)
+    across = float(np.ptp(sole.corners[:, :2], axis=0).max()) if sole is not None else 0.0
+    if across > MAX_SOLE_M:  # as a config's box: a mesh in mm read as m stood the robot on 1000-times feet
+        return None, f"its meshes' footprint is {across:.3g} m across, more than a sole's {MAX_SOLE_M:g} m"
     return sole, ("" if sole is not None or not (why or points) else why or "its meshes have no face that faces down")
 
 
