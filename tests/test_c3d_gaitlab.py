@@ -535,6 +535,20 @@ def test_a_plate_pulling_down_is_set_aside(lab, tmp_path, monkeypatch):
     assert analyse_lab_take(read_c3d(path)).summary["cop_vs_zmp"]["max_mm"] > 10.0
 
 
+def test_a_plate_reading_more_than_a_person_can_load_is_set_aside_and_said(lab, tmp_path):
+    """A plate's channels a million times too large (a scale or unit wrong): read as given, its offset then counted as
+    load (channels 1e30 times too large: CoP vs ZMP RMS 0.09 -> 55 mm, a stance mass of 7.8e31 kg, no word; audit 9).
+    Now set aside as a pulling plate is, its reason in the summary."""
+    c3d = ezc3d.c3d(str(lab[0] / "on.c3d"))
+    analogs = np.array(c3d["data"]["analogs"])
+    analogs[0, 6:12] *= 1e6  # the second plate's six channels
+    c3d["data"]["analogs"] = analogs
+    c3d.write(str(tmp_path / "big.c3d"))
+    [aside] = analyse_lab_take(read_c3d(tmp_path / "big.c3d")).summary["plates"]["set_aside"]
+    assert aside["plate"] == 2 and aside["max_fz_n"] > plates_mod.OVERLOAD_N
+    assert "more than any person's 20000 N" in aside["reason"]
+
+
 def test_a_plate_read_turned_round_puts_its_cop_off_the_foot_and_is_reported(lab, tmp_path):
     """The left plate's corners numbered from the opposite corner (its axes read turned by 180 degrees, a classic
     set-up error): its CoP lands off the left foot standing on it, every frame, and the summary says so; read

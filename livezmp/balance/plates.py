@@ -26,6 +26,10 @@ UNLOADED_MAX_N = 100.0  # N: a quiet stretch above this is someone standing, not
 # not the low-passed force: the low-pass rings below zero after a short hard stance (a running step, 1750 N over
 # 0.25 s, -44 N at 4.9 Hz: AnyBody's SlowRun had both its plates set aside)
 PULL_N = 10 * QUIET_STD_N
+# N: an offset-free vertical force whose mean over QUIET_WINDOW_S goes above this carries no person (two tonnes-force:
+# 8 body weights of a 250 kg subject, where drop landings peak at 5-8 and running at 2.5-3): a channel scale or unit
+# wrong, set aside as a pulling plate is (channels 1e30 times too large had their plate's offset read as a load)
+OVERLOAD_N = 20_000.0
 CONTACT_MARGIN_M = 0.02  # m: a sole corner this close outside a plate's outline still counts as on it
 G = 9.81
 # m: stepped-on plates' surfaces further apart in height than this are not one floor (a stair's step is 150-200 mm;
@@ -60,7 +64,7 @@ class PlateFrames:
     outlines: list[np.ndarray]
     offsets: list[tuple[np.ndarray, np.ndarray] | None]
     surface_z: float
-    set_aside: list[dict] = field(default_factory=list)  # {plate (1-based), min_fz_n}: not used, see PULL_N
+    set_aside: list[dict] = field(default_factory=list)  # {plate (1-based), min_fz_n or max_fz_n, reason}: not used
     # each plate used (the order of ``outlines``): its number (1-based) and its own CoP (F, 3) m, NaN below min_fz
     used: list[int] = field(default_factory=list)
     plate_cop: list[np.ndarray] = field(default_factory=list)
@@ -202,7 +206,7 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
     Analog sample k is at time k / analog_rate, marker frame i at i / rate (the C3D convention: a
     frame's first analog sample is simultaneous with it); ``shift_s`` samples the plates that much
     later (time alignment). A plate whose vertical force, averaged over ``QUIET_WINDOW_S``, goes below
-    ``-PULL_N`` is set aside: not summed, and its outline left out of ``outlines``."""
+    ``-PULL_N`` or above ``OVERLOAD_N`` is set aside: not summed, and its outline left out of ``outlines``."""
     r = world_from_input
     force = np.zeros((len(plates[0].force) if plates else 0, 3))
     moment = np.zeros_like(force)
@@ -213,9 +217,10 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
         f, mom = p.force, p.moment
         if off is not None:
             f, mom = f - off[0], mom - off[1]
-        low = _lowest_mean(f @ r[2], max(1, round(QUIET_WINDOW_S * analog_rate)))
-        if low < -PULL_N:
-            aside.append({"plate": k + 1, "min_fz_n": round(low, 1)})
+        window = max(1, round(QUIET_WINDOW_S * analog_rate))
+        low, high = _lowest_mean(f @ r[2], window), -_lowest_mean(-(f @ r[2]), window)
+        if low < -PULL_N or high > OVERLOAD_N:
+            aside.append(_set_aside(k + 1, low, high))
             continue
         f, mom, c = f @ r.T, mom @ r.T, r @ p.centre
         force += f
@@ -240,6 +245,17 @@ def plate_frames(plates: list[PlateRecord], analog_rate: float, rate: float, fra
     each = [at_frames(w) for w in own]
     return PlateFrames(fr, mo, _cop(fr, mo, surface, min_fz), outlines, offsets, surface, aside, used,
                        [_cop(f, m, surface, min_fz) for f, m in each], [f[:, 2] for f, _ in each])
+
+
+def _set_aside(plate: int, low: float, high: float) -> dict:
+    """A plate set aside (1-based ``plate``), its lowest and highest vertical force means ``low``, ``high`` (N) and
+    why in words."""
+    if low < -PULL_N:
+        return {"plate": plate, "min_fz_n": round(low, 1),
+                "reason": f"its vertical force reaches {low:.0f} N (a plate cannot pull; drifting or faulty)"}
+    return {"plate": plate, "max_fz_n": float(f"{high:.4g}"),
+            "reason": f"its vertical force reaches {high:.3g} N, more than any person's {OVERLOAD_N:.0f} N (a channel "
+                      "scale or unit wrong?)"}
 
 
 def _lowest_mean(x: np.ndarray, n: int) -> float:

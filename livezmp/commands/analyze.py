@@ -123,6 +123,5 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         for w in (summary.get("cop_under_foot") or {}).get("warnings", []):
             print(f"  {w}")
         for p in (summary.get("plates") or {}).get("set_aside", []):
-            print(f"  plate {p['plate']} set aside: its vertical force reaches {p['min_fz_n']:.0f} N (a plate cannot "
-                  "pull; drifting or faulty)")
+            print(f"  plate {p['plate']} set aside: {p['reason']}")
     return 0
