@@ -265,18 +265,50 @@ def test_a_robot_facing_another_way_in_its_file_is_turned_to_face_x(tmp_path, fa
         assert np.allclose(goals, make_scenario(name, plain).goals(0.0), atol=1e-6)
 
 
-def test_a_stance_beyond_a_knees_limits_is_refused_and_an_arm_beyond_its_own_is_held_at_them(tmp_path, capsys):
-    # before: the sim's servos stopped the left knee and the elbows at their limits, the robot stood crooked and
-    # fell in 0.2 s corrected or not (Poppy); the elbows' goals left outside their limits (NAO)
+def test_a_knee_bends_the_way_its_limits_let_it_and_an_arm_beyond_its_own_is_held_at_them(tmp_path):
+    # before: every stance refused, "standing with bent knees needs leg joint 'l_knee' at 0.60 rad, outside its limits
+    # [-1.40, 0.00]" (Poppy's file gives its left knee the right's range, their axes the same); earlier, the sim's
+    # servos stopped the knee at its limit, the robot stood crooked and fell in 0.2 s corrected or not; the elbows'
+    # goals were left outside their limits (NAO)
     spec = HumanoidSpec(limits="tight", odd_limits=True, seed=42)
-    urdf = build_humanoid(tmp_path / "odd.urdf", spec)
-    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.1"])
-    err = capsys.readouterr().err.splitlines()
-    assert rc == 2 and len(err) == 1 and "leg joint 'l_knee' at 0.60 rad, outside its limits [-1.40, 0.00]" in err[0]
+    body = load_robot(str(build_humanoid(tmp_path / "odd.urdf", spec)), None).body
+    goals = make_scenario("lean", body).goals(0.0)
+    poser = Poser(body)
+    assert poser.bends == {"l": -1.0, "r": 1.0}
+    model = body.model
+    assert np.all(goals >= model.lowerPositionLimit[6:]) and np.all(goals <= model.upperPositionLimit[6:])
+    knees = [body.joint_names.index(f"{s}_knee") for s in "lr"]
+    turned = [goals[i] / poser.unit(f"{s}_knee", 1)[i] for s, i in zip("lr", knees, strict=True)]  # about y, rad
+    assert turned == pytest.approx([-0.6, 0.6])
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.concatenate([BasePlacer(body).update(goals), goals]))
+    soles = foot_soles(body, data)
+    assert np.ptp(np.vstack(list(soles.values()))[:, 2]) < 1e-6  # both soles flat on the floor
     body = load_robot(str(build_humanoid(tmp_path / "arms.urdf", replace(spec, limits="wide"))), None).body
     goals = make_scenario("lean", body).goals(0.0)
     elbows = [body.joint_names.index(f"{s}_el") for s in "lr"]
     assert np.allclose(goals[elbows], -0.03)
+
+
+def test_knees_that_bend_neither_way_stand_straight_legged(tmp_path):
+    # before: refused, "standing with bent knees needs leg joint 'l_knee' at 0.60 rad, outside its limits"
+    urdf = build_humanoid(tmp_path / "stiff.urdf", HumanoidSpec(seed=45))
+    text = re.sub(r'(<joint name="[lr]_knee" type="revolute">.*?<limit) lower="[^"]*" upper="[^"]*"',
+                  r'\1 lower="-0.01" upper="0.01"', urdf.read_text(), flags=re.S)
+    urdf.write_text(text)
+    body = load_robot(str(urdf), None).body
+    goals = make_scenario("lean", body).goals(0.0)
+    assert np.allclose(goals[[body.joint_names.index(f"{s}_knee") for s in "lr"]], 0.0, atol=1e-9)
+
+
+def test_legs_without_an_ankle_pitch_are_refused_as_standing_on_points(tmp_path, capsys):
+    # before: "found no l_hip_pitch in its kinematic tree" (Bolt: hip abduction, hip and knee flexion, a ball foot)
+    urdf = build_humanoid(tmp_path / "bolt.urdf", HumanoidSpec(ankle="r", arm="", seed=46))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "push", "--duration", "0.05"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "left leg turns about the lateral axis at 2 joints (l_hip_pitch, l_knee)" in err[0]
+    assert "cannot stand still" in err[0]
 
 
 def test_a_link_inertia_no_link_of_the_robot_can_have_is_refused_in_one_line(tmp_path, capsys):

@@ -16,11 +16,13 @@ through each joint's own axis as the model gives it. Role names follow OP3's
 
 Standing posture: knees bent, hip −θ, knee +2θ, ankle −θ about the lateral axis (y,
 left), which keeps each sole parallel to the pelvis (flat on the ground) and the legs
-away from their straight-knee singularity (soles not level and on one plane in the zero
+away from their straight-knee singularity; a knee whose limits let it bend only the other way (its shank forward)
+bends so, hip +θ, knee −2θ, ankle +θ (`Poser._knee_bend`) (soles not level and on one plane in the zero
 posture, as Wolfgang-OP's cleats, are first turned level at the ankles and the legs
 re-solved to put both on the floor: `Poser.on_feet`); arms hang down, turned out a little by the
 shoulder roll (OP3's zero posture holds them out sideways). θ is 0.3 rad, or the first of `FLEXIONS` at which the
-scenario's leg goals keep within their limits (the stance's ankle and the lean's share one range).
+scenario's leg goals keep within their limits (the stance's ankle and the lean's share one range), down to 0: legs
+straight.
 
 Angles in rad, times in s, world frame z up, x forward, y left. ``livezmp run --scenario``
 sends them to a robot; ``livezmp sim``/``demo`` also play them on the simulated humanoid,
@@ -318,16 +320,48 @@ class Poser:
                       else None)
         self.leg_index = np.array(sorted(legs), dtype=int) - base
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (asked, solved) configurations of on_feet
+        self.bends = {s: self._knee_bend(s) for s in SIDES if f"{s}_knee" in self.roles}
+
+    def _knee_bend(self, side: str) -> float:
+        """+1 where the knee of leg ``side`` ("l", "r") may flex by `KNEE_REACH` rad within its limits the way
+        that takes its foot back (about the world's left, y), −1 where only the other way (a knee that bends its
+        shank forward: Poppy's file gives its left knee the right's range, −0.06..2.34 rad, its axis the same),
+        +1 where neither (the straight stance, the last of `FLEXIONS`, is the one left)."""
+        knee = self.unit(f"{side}_knee", Y)
+        i = int(np.flatnonzero(knee)[0])
+        model = self.body.model
+        lower, upper = (limits[-len(self.names):][i] for limits in (model.lowerPositionLimit, model.upperPositionLimit))
+        for sign in (1.0, -1.0):
+            if lower - 1e-9 <= sign * KNEE_REACH * knee[i] <= upper + 1e-9:
+                return sign
+        return 1.0
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
         if role not in self.roles:
+            self._check_ankles(role)
             need = ("an arm on each side: a chain from the trunk to a hand with a shoulder joint about the lateral "
                     "axis" if "sho" in role or role.endswith("_el") else "two legs: hip, knee and ankle joints "
                     "about the lateral axis, and hip and ankle joints about the forward axis")
             raise InputError(f"{self.body.model.name}: found no {role} in its kinematic tree (this scenario needs "
                              f"{need}){self._leg_offsets(role)}")
         return self.names.index(self.roles[role])
+
+    def _check_ankles(self, role: str) -> None:
+        """InputError (one line) for a leg's pitch role not found where that leg turns about the lateral axis at
+        fewer than three joints (within `TILTED`): without an ankle pitch its foot turns with its shank, and stands on
+        a point or an edge (Bolt's: hip abduction, hip and knee flexion, a ball foot): on two such feet no robot
+        stands still, nothing holds it fore-aft, and no balance scenario is played on it."""
+        side = {"l": "left", "r": "right"}.get(role[0])
+        if side not in self.body.feet or role[2:] not in ("hip_pitch", "knee", "ank_pitch"):
+            return
+        pitch = [n for n in leg_chains(self.body)[side] if _about(self.axis, n, Y, TILTED)]
+        if len(pitch) < 3:
+            raise InputError(f"{self.body.model.name}: its {side} leg turns about the lateral axis at "
+                             f"{len(pitch)} joint{'s' * (len(pitch) != 1)} ({', '.join(pitch) or 'none'}), not "
+                             "hip, knee and ankle pitch: a foot without an ankle pitch turns with its shank and stands "
+                             "on a point or an edge, and on two such feet a robot cannot stand still (nothing holds it "
+                             "fore-aft)")
 
     def _leg_offsets(self, role: str) -> str:
         """For a leg's pitch or roll role not found: how far each of that leg's joints turns off the world axis
@@ -360,8 +394,8 @@ class Poser:
         base = self.soles_levelled() if self.level else np.zeros(len(self.names))
         out = base.copy()
         for s in sides:  # a tilted hip's share, turned by 1 / its axis' y: the IK's start near the bent knee
-            out += angle * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
-                            - self.unit(f"{s}_ank_pitch", Y))
+            out += angle * self.bends.get(s, 1.0) * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
+                                                     - self.unit(f"{s}_ank_pitch", Y))
         return self.on_feet(out, self._bent_feet(base, angle, [s for s in sides if s in self.tilted]))
 
     def _bent_feet(self, joints: np.ndarray, angle: float, sides: list[str]) -> dict[str, list[pin.SE3]]:
@@ -378,8 +412,9 @@ class Poser:
         out = {}
         for s in sides:
             hip, knee, ankle = (self.origin[self.roles[f"{s}_{r}"]] for r in ("hip_pitch", "knee", "ank_pitch"))
-            bent_knee = hip + thigh @ (knee - hip)
-            moved = bent_knee + shank @ (ankle - knee) - ankle
+            turns = (thigh, shank) if self.bends.get(s, 1.0) > 0 else (shank, thigh)  # a knee bent the other way
+            bent_knee = hip + turns[0] @ (knee - hip)
+            moved = bent_knee + turns[1] @ (ankle - knee) - ankle
             side = next(side for side in feet if side[0] == s)
             out[side] = [pin.SE3(pose.rotation, pose.translation + moved) for pose in feet[side]]
         return out
@@ -497,17 +532,17 @@ class Poser:
 
     def standing(self, flexion: float = 0.3, arm_out: float = 0.1) -> np.ndarray:
         """The standing posture (see module docstring), within the joints' limits: a leg joint it would put
-        beyond them is refused (InputError: the knees-bent stance is what every scenario stands on; Poppy's file
-        lets its left knee flex only forward), any other joint is held at its limit (NAO's elbow roll, whose
+        beyond them is refused (InputError: the knees-bent stance is what every scenario stands on; a knee
+        bends the way its limits let it, `_knee_bend`), any other joint is held at its limit (NAO's elbow roll, whose
         limits leave out its zero)."""
         q = self.legs_flexed(flexion) + self.arms_down(arm_out)
         model = self.body.model
         lower, upper = model.lowerPositionLimit[-len(q):], model.upperPositionLimit[-len(q):]
         for i in self.leg_index:
             if not lower[i] - 1e-9 <= q[i] <= upper[i] + 1e-9:
-                raise BeyondLimits(f"{model.name}: standing with bent knees needs leg joint {self.names[i]!r} at "
-                                 f"{q[i]:.2f} rad, outside its limits [{lower[i]:.2f}, {upper[i]:.2f}] (the legs' "
-                                 "limits let neither leg, or only one, stand so facing either way)")
+                raise BeyondLimits(f"{model.name}: standing with {'bent knees' if flexion else 'straight legs'} "
+                                   f"needs leg joint {self.names[i]!r} at {q[i]:.2f} rad, outside its limits "
+                                   f"[{lower[i]:.2f}, {upper[i]:.2f}] (each knee bent the way its limits let it)")
         return np.clip(q, lower, upper)
 
 
@@ -553,6 +588,10 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
     def excess(angle: float) -> float:
         return static_margin(body, stood + poser.ankles_lean(angle)) + beyond
 
+    inside = static_margin(body, stood)
+    if inside < 0:  # the Gepetto simple humanoid's file puts each foot's centre of mass 0.28 m ahead of its ankle
+        raise InputError(f"{body.model.name}: standing, its CoM is {-inside * 1e3:.1f} mm outside its feet: it cannot "
+                         "stand still (its masses or soles, in its file or a robot config, are not its own)")
     if excess(0.0) <= 0 or excess(1.0) >= 0:
         raise InputError(f"{body.model.name}: no forward lean up to 1 rad puts the CoM {beyond * 1e3:.1f} mm past "
                          "the toes from inside the feet")
@@ -903,8 +942,10 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
 # in turn, where at the one before it takes a leg joint beyond its limits: the stance's ankle (−θ) and the lean's
 # share the ankle's one range (Fourier GR-Mini's ±0.436 rad: from θ = 0.3 its push leaned to −0.53, its lean to
 # −0.437, and all three scenarios were refused; from 0.2 they fit). Not below 0.1: the knee's flexion keeps the
-# legs' IK, the corrector's, away from the straight knee's singularity.
-FLEXIONS = (0.3, 0.25, 0.2, 0.15, 0.1)
+# legs' IK, the corrector's, away from the straight knee's singularity; then 0, the straight stance, the one left to
+# a robot whose file lets a knee bend neither way (the Gepetto simple humanoid's ankles: 0..2.6 rad, one way only).
+FLEXIONS = (0.3, 0.25, 0.2, 0.15, 0.1, 0.0)
+KNEE_REACH = 2 * min(f for f in FLEXIONS if f > 0)  # rad: a knee bends the way its limits let it bend this far
 
 
 def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
