@@ -105,7 +105,7 @@ class HumanoidSpec:
     camera, IMU and sole frames as fixed massless links, and a massless root link; ``root``: the root link's name,
     its frame at its centre of mass or (``root_at_ground``) on the ground between the feet; ``robot_name`` (default
     humanoid_SEED); ``foot``: "box", "mesh" or "none" collision, or "split": two boxes, the foot's front and rear
-    halves, on one plane (ergoCub's);
+    halves, on one plane (ergoCub's), or cylinders or spheres (`_foot_rounds`);
     as published files write them (held-out real robots): ``placeholders``, how the extras' massless links are
     written: "" without <inertial>, "zero_mass" mass 0 with a small inertia (Bolt's feet), "point_mass" 1e-4 kg
     with a zero inertia (Talos', Wolfgang's sensor frames); ``fixed_axis_zero``: fixed joints with
@@ -370,6 +370,31 @@ def _foot_boxes(spec: HumanoidSpec, com: np.ndarray, size: np.ndarray) -> list[t
     return [(com + step, half), (com - step, half)]
 
 
+ROUND_FEET = ("cylinder", "cylinders", "ball", "balls")
+
+
+def _foot_rounds(spec: HumanoidSpec, com: np.ndarray, size: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, tuple]]:
+    """(centre (3,) world m, the shape's world rotation (3, 3), (tag, attributes)) of each collision primitive of a
+    foot whose box would be ``size`` (3,) at ``com``, its bottom where the box's is: ``foot`` "cylinder", one lying
+    along the foot, as long, as thick as it is high; "cylinders", two such, a quarter of its width either side of
+    its middle (Fourier GR1T2's); "balls", four spheres as thick inside its bottom's corners (Unitree G1's); "ball",
+    one under its middle (a ball foot)."""
+    long = int(np.argmax(size[:2]))  # the foot's length: along x, or y for a robot facing -y in its file
+    across = 1 - long
+    r = size[2] / 2
+    along = _rot((0.0, np.pi / 2, 0.0)) if long == 0 else _rot((-np.pi / 2, 0.0, 0.0))  # a cylinder's z along it
+    cylinder = ("cylinder", {"radius": f"{r:.9g}", "length": f"{size[long]:.9g}"})
+    ball = ("sphere", {"radius": f"{r:.9g}"})
+    if spec.foot == "cylinder":
+        return [(com, along, cylinder)]
+    if spec.foot == "cylinders":
+        return [(com + k * size[across] / 4 * np.eye(3)[across], along, cylinder) for k in (-1.0, 1.0)]
+    if spec.foot == "ball":
+        return [(com, np.eye(3), ball)]
+    return [(com + a * (size[long] / 2 - r) * np.eye(3)[long] + b * (size[across] / 2 - r) * np.eye(3)[across],
+             np.eye(3), ball) for a in (-1.0, 1.0) for b in (-1.0, 1.0)]
+
+
 def _write(b: _Builder, path: Path) -> Path:
     spec = b.spec
     robot = ET.Element("robot", name=spec.robot_name or f"humanoid_{spec.seed}")
@@ -400,7 +425,13 @@ def _write(b: _Builder, path: Path) -> Path:
             ET.SubElement(inertial, "inertia", **{k: f"{inertia[i, j]:.9g}" for k, (i, j) in zip(
                 ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                 strict=True)})
-        if role.endswith("_foot") and spec.foot != "none":
+        if role.endswith("_foot") and spec.foot in ROUND_FEET:
+            for centre, turn, shape in _foot_rounds(spec, v["com"], v["size"]):
+                collision = ET.SubElement(link, "collision")
+                ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (centre - p)),
+                              rpy=_fmt(pin.rpy.matrixToRpy(R.T @ turn)))
+                ET.SubElement(ET.SubElement(collision, "geometry"), *shape)
+        elif role.endswith("_foot") and spec.foot != "none":
             for centre, size in _foot_boxes(spec, v["com"], v["size"]):
                 collision = ET.SubElement(link, "collision")
                 ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (centre - p)), rpy=_fmt(pin.rpy.matrixToRpy(R.T)))

@@ -21,7 +21,7 @@ from scipy.spatial import ConvexHull
 from livezmp.balance.support import convex_hull
 from livezmp.model import foot_meshes
 from livezmp.model.body import foot_soles
-from livezmp.model.foot_meshes import _quadrilateral
+from livezmp.model.foot_meshes import quadrilateral
 from livezmp.model.robot import load_robot
 
 SPEC = HumanoidSpec(foot="mesh", frames="random", seed=53)  # foot link frames turned, the mesh placed level in them
@@ -138,7 +138,7 @@ def test_a_rounded_footprint_gives_the_four_of_its_corners_that_enclose_the_most
         return 0.5 * abs(float(x @ np.roll(y, 1) - y @ np.roll(x, 1)))
 
     best = max(area(footprint[list(four)]) for four in combinations(range(len(footprint)), 4))
-    sole = _quadrilateral(footprint)
+    sole = quadrilateral(footprint)
     assert len(sole) == 4 and area(sole) == pytest.approx(best, rel=1e-12)
 
 

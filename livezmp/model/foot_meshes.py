@@ -8,7 +8,7 @@ by Pinocchio's geometry model (coal's mesh loader: STL, DAE, OBJ ..., the ``scal
 vertices in the foot's frame at the zero posture give the sole (`mesh_sole`): the downward face of their convex
 hull with the most area (the sole's plane, within `MAX_TILT` of level), and the hull, on that plane, of the
 vertices within `CONTACT_DEPTH` of it, cut to the four of its corners that enclose the most of its area
-(`_quadrilateral`).
+(`quadrilateral`).
 
 World frame z up, the robot's zero posture, metres.
 """
@@ -128,7 +128,7 @@ def _support_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:
 EXACT_CORNERS = 48  # a footprint of more corners is first cut to this many, the smallest triangle first
 
 
-def _quadrilateral(polygon: np.ndarray) -> np.ndarray:
+def quadrilateral(polygon: np.ndarray) -> np.ndarray:
     """The four corners of the convex polygon (k, 2) m, counter-clockwise, that enclose the most of its area (a
     triangle where k = 3): the sole then lies within the footprint. Every diagonal is tried, with the corner
     farthest from it on each side. The simulated foot sensors have one force cell a corner, one per quadrant
@@ -169,7 +169,7 @@ def mesh_sole(model: pin.Model, data: pin.Data, joint: int, points: Points) -> C
     hull = convex_hull(((on - origin) @ rotation)[:, :2])
     if len(hull) < 3:
         return None
-    hull = _quadrilateral(hull)
+    hull = quadrilateral(hull)
     centre = hull.mean(axis=0)
     placement = pin.SE3(rotation, origin + rotation @ np.array([*centre, 0.0]))
     return ContactSole(placement, np.column_stack([hull - centre, np.zeros(len(hull))]), ())

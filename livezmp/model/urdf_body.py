@@ -6,7 +6,9 @@ lowest leaf links in the zero pose (left = +y), level and side by side at the en
 legs; a foot whose leaf links include three or more on one plane near level (cleats, contact
 points, force sensors: :mod:`livezmp.model.foot_contacts`) has their hull for its sole and
 their plane for its level, else a foot whose links have ``<collision>`` boxes stands on the
-lowest face of them that faces down (`box_sole`), else one whose links have meshes (``<collision>``, else
+lowest face of them that faces down (`box_sole`), else one whose links have collision cylinders or spheres on
+where they touch the floor (:mod:`livezmp.model.foot_primitives`; refused where that is one point), else one whose
+links have meshes (``<collision>``, else
 ``<visual>``; found beside the URDF or above it: :mod:`livezmp.model.foot_meshes`) on the footprint of their
 vertices on the ground (`mesh_sole`; a mesh not found or unreadable is warned of in one line), else its sole is a
 level box under the link's centre of mass: ``sole_length`` × ``sole_width``, ``sole_drop`` below the link origin
@@ -38,6 +40,7 @@ from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
 from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole
 from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
+from livezmp.model.foot_primitives import collision_rounds, round_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import MAX_SOLE_M, RobotConfig, find_robot_config, load_robot_config
 
@@ -604,6 +607,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     opts = opts or UrdfBodyOptions()
     path = Path(path)
     fixed, mimics, boxes, root = _load_fixed(path)
+    rounds = collision_rounds(root, path)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
     model, data, feet_frames, upside_down = _upright_feet(fixed, cfg, path)
     yaw = _heading(model, data, feet_frames, sided=len(cfg.feet) >= 2)
@@ -626,7 +630,9 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
         joint = model.frames[link].parentJoint
         given = bool({"sole", "box"} & set(spec))
         contact = None if given else (contact_sole(model, data, joint)
-                                      or box_sole(model, data, joint, boxes if chosen else {}))
+                                      or box_sole(model, data, joint, boxes if chosen else {})
+                                      or round_sole(model, data, joint, rounds if chosen else {},
+                                                    f"{path}: {side} foot {model.frames[link].name!r}"))
         if contact is None and chosen and not given:
             contact, why = _sole_of_meshes(model, data, joint, root, fixed, path)
             unread += [f"{side} foot: {why}"] if why else []

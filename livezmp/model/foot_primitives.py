@@ -1,0 +1,137 @@
+"""A foot's sole from its collision cylinders and spheres, where its links have no collision box.
+
+Some humanoids give their feet as primitives: a cylinder lying along the foot (a skate, a rolling edge), balls at
+the sole's corners, a disc (a cylinder standing on its end). A rigid primitive touches a level floor where it is
+lowest: a sphere at one point, a lying cylinder along a line, a standing one over its end's disc. The sole is
+the hull of those contacts at the foot's lowest level (`round_sole`): an area where the contacts span one (four
+balls, two cylinders side by side, a disc; cut to four corners as a mesh's footprint is, `quadrilateral`); a strip
+where they lie on one line, as wide as the surface within `CONTACT_DEPTH` of the floor (what a mesh of the cylinder
+gives, `foot_meshes`); refused where they meet at one point: on two point feet no robot stands still, nothing
+holds it fore-aft.
+
+World frame z up, the robot's zero posture, metres.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from livezmp.balance.support import convex_hull
+from livezmp.errors import InputError
+from livezmp.model.foot_contacts import ON_PLANE, ContactSole, plane_frame
+from livezmp.model.foot_meshes import CONTACT_DEPTH, quadrilateral
+
+RIM_POINTS = 32  # points on a cylinder's end circle (a disc sole's polygon before it is cut to four corners)
+STANDING = np.cos(np.radians(5.0))  # a cylinder whose axis is this close to vertical stands on its end's disc
+
+
+@dataclass(frozen=True)
+class Round:
+    """A ``<collision>`` cylinder (``length`` > 0, its axis its frame's z) or sphere (``length`` 0) of ``radius``
+    (m), its centre's placement ``origin`` in its link's frame."""
+
+    radius: float
+    length: float
+    origin: pin.SE3
+
+
+Rounds = dict[str, list[Round]]  # link name -> its collision cylinders and spheres
+
+
+def _number(element: ET.Element, attr: str, where: str) -> float:
+    """A finite number (m) from ``element``'s ``attr``; InputError naming ``where`` otherwise."""
+    try:
+        value = float(element.get(attr, ""))
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise InputError(f"{where} {attr}: {element.get(attr)!r} is not a number of metres")
+    return value
+
+
+def collision_rounds(root: ET.Element, path: Path) -> Rounds:
+    """Each link's ``<collision>`` cylinders and spheres (`Rounds`), as the URDF places them; one of no size (a
+    radius or a cylinder's length not above 0) is left out."""
+    rounds: Rounds = {}
+    for link in root.findall("link"):
+        for collision in link.findall("collision"):
+            shape = next((s for s in (collision.find("geometry/cylinder"), collision.find("geometry/sphere"))
+                          if s is not None), None)
+            if shape is None:
+                continue
+            where = f"{path}: link {link.get('name')!r} <collision> <{shape.tag}>"
+            radius = _number(shape, "radius", where)
+            length = _number(shape, "length", where) if shape.tag == "cylinder" else 0.0
+            if radius <= 0 or length < 0 or (shape.tag == "cylinder" and length == 0):
+                continue  # no shape (Valkyrie's feet carry a sphere of radius 0), as a box of no size is left out
+            origin = collision.find("origin")
+            xyz, rpy = (np.zeros(3), np.zeros(3)) if origin is None else (
+                np.array([float(v) for v in origin.get(a, "0 0 0").split()]) for a in ("xyz", "rpy"))
+            rounds.setdefault(link.get("name"), []).append(Round(radius, length, pin.SE3(pin.rpy.rpyToMatrix(*rpy),
+                                                                                         xyz)))
+    return rounds
+
+
+def _lowest(shape: Round, world: pin.SE3) -> np.ndarray:
+    """(k, 3) world points where ``shape`` (its centre's world placement ``world``) would touch a level floor
+    beneath it: a sphere's bottom; a cylinder's lower end circle where its axis is within `STANDING` of vertical
+    (a disc), else the lowest point of each end circle (a lying cylinder's bottom line ends there; a tilted one
+    touches at the lower of them)."""
+    centre = world.translation
+    if shape.length == 0:
+        return (centre - [0.0, 0.0, shape.radius])[None]
+    axis = world.rotation[:, 2] * np.sign(world.rotation[2, 2] or 1.0)  # pointing up
+    if axis[2] >= STANDING:
+        angles = np.linspace(0.0, 2 * np.pi, RIM_POINTS, endpoint=False)
+        rim = np.cos(angles)[:, None] * world.rotation[:, 0] + np.sin(angles)[:, None] * world.rotation[:, 1]
+        return centre - shape.length / 2 * axis + shape.radius * rim
+    down = np.array([0.0, 0.0, -1.0]) + axis[2] * axis  # straight down, laid across the axis
+    down *= shape.radius / np.linalg.norm(down)
+    return np.array([centre + k * shape.length / 2 * axis + down for k in (-1.0, 1.0)])
+
+
+def round_sole(model: pin.Model, data: pin.Data, joint: int, rounds: Rounds, where: str) -> ContactSole | None:
+    """The sole of the foot on ``joint`` from the cylinders and spheres of its links (``rounds``; module
+    docstring), level; None where they have none. InputError naming ``where`` (the file and foot) where they
+    touch the floor at one point only. ``data``: frame placements of the zero posture."""
+    shapes = [(shape, data.oMf[f] * shape.origin) for f in range(model.nframes)
+              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+              for shape in rounds.get(model.frames[f].name, ())]
+    if not shapes:
+        return None
+    lowest = [(shape.radius, _lowest(shape, world)) for shape, world in shapes]
+    points = np.vstack([p for _, p in lowest])
+    level = points[:, 2].min() + ON_PLANE * float(np.ptp(points, axis=0).max())
+    radius = max(r for r, p in lowest if np.any(p[:, 2] <= level))  # of the shapes that touch the floor
+    low = points[:, 2] <= level
+    contact = points[low]
+    hull = convex_hull(contact[:, :2])
+    base = float(contact[:, 2].min())
+    if len(hull) < 3:
+        hull = _strip(hull, radius, where)
+    hull = quadrilateral(hull)
+    centre = hull.mean(axis=0)
+    placement = pin.SE3(plane_frame(np.array([0.0, 0.0, 1.0])), np.array([*centre, base]))
+    return ContactSole(placement, np.column_stack([hull - centre, np.zeros(len(hull))]), ())
+
+
+def _strip(ends: np.ndarray, radius: float, where: str) -> np.ndarray:
+    """(4, 2) m: the contacts' hull ``ends`` (k <= 2, 2), a segment, widened across it by the half-width of a
+    curved surface of ``radius`` within `CONTACT_DEPTH` of the floor, √(2 r d − d²); InputError where it is one
+    point (shorter than twice that depth)."""
+    a, b = ends[0], ends[-1]
+    length = float(np.linalg.norm(b - a))
+    if length < 2 * CONTACT_DEPTH:
+        raise InputError(f"{where}: its collision spheres or cylinders touch the floor at one point (a ball foot): on "
+                         "two such feet a robot cannot stand still (nothing holds it fore-aft); give a robot config "
+                         "with [feet] soles")
+    along = (b - a) / length
+    d = min(CONTACT_DEPTH, radius)
+    half = math.sqrt(2 * radius * d - d * d) * np.array([-along[1], along[0]])
+    return np.array([a - half, b - half, b + half, a + half])
