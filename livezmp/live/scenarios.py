@@ -5,7 +5,7 @@ corrector adds its offsets to the leg joints on top. Scenarios work for any huma
 whatever its joint names, order and the signs of its URDF axes: the joints they move are
 found from the kinematic tree (`joint_roles`: each leg is the chain from the trunk to a
 foot, its hip, knee and ankle the first, middle and last joints turning about the
-lateral axis (a hip pitch up to 32° off it, above the other two, Unitree H2's: that leg
+lateral axis (a hip pitch up to 46° off it, above the other two, Unitree H2's: that leg
 then bends by the legs' IK, `Poser._bent_feet`), its hip and ankle roll the first and last about the forward axis; each
 arm the chain to a hand that no other limb shares, its shoulder the first joints turning
 about the lateral axis and about the axis that turns the upper arm out to the side
@@ -153,6 +153,7 @@ def joint_roles(body: BodyModel) -> dict[str, str]:
     return _roles_and_arms(body)[0]
 
 
+ANKLE_SHARE = 0.25  # an ankle pitch lies in this lowest share of its leg, hip to sole (Bolt's knee, at 0.5, is none)
 SHOULDER_ALIGNED = 0.85  # |cos|: a shoulder's pitch or roll may be turned up to 32° off the world axis (H1: 25°)
 
 
@@ -348,20 +349,24 @@ class Poser:
         return self.names.index(self.roles[role])
 
     def _check_ankles(self, role: str) -> None:
-        """InputError (one line) for a leg's pitch role not found where that leg turns about the lateral axis at
-        fewer than three joints (within `TILTED`): without an ankle pitch its foot turns with its shank, and stands on
-        a point or an edge (Bolt's: hip abduction, hip and knee flexion, a ball foot): on two such feet no robot
-        stands still, nothing holds it fore-aft, and no balance scenario is played on it."""
+        """InputError (one line) for a leg's pitch role not found where that leg has no joint about the lateral axis
+        (within `TILTED`) in its lowest `ANKLE_SHARE` (hip to sole): its foot then turns with its shank and stands on
+        a point or an edge (Bolt's: hip abduction, hip and knee flexion, a ball foot), and on two such feet no robot
+        stands still, nothing holds it fore-aft: no balance scenario is played on it."""
         side = {"l": "left", "r": "right"}.get(role[0])
         if side not in self.body.feet or role[2:] not in ("hip_pitch", "knee", "ank_pitch"):
             return
-        pitch = [n for n in leg_chains(self.body)[side] if _about(self.axis, n, Y, TILTED)]
-        if len(pitch) < 3:
+        chain = leg_chains(self.body)[side]
+        pitch = [n for n in chain if _about(self.axis, n, Y, TILTED)]
+        data = self.body.model.createData()
+        pin.framesForwardKinematics(self.body.model, data, np.zeros(self.body.model.nq))
+        sole = float(data.oMf[self.body.feet[side].frame_id].translation[Z])
+        reach = ANKLE_SHARE * (self.origin[chain[0]][Z] - sole)
+        if not any(self.origin[n][Z] - sole <= reach for n in pitch):
             raise InputError(f"{self.body.model.name}: its {side} leg turns about the lateral axis at "
-                             f"{len(pitch)} joint{'s' * (len(pitch) != 1)} ({', '.join(pitch) or 'none'}), not "
-                             "hip, knee and ankle pitch: a foot without an ankle pitch turns with its shank and stands "
-                             "on a point or an edge, and on two such feet a robot cannot stand still (nothing holds it "
-                             "fore-aft)")
+                             f"{len(pitch)} joint{'s' * (len(pitch) != 1)} ({', '.join(pitch) or 'none'}), none at "
+                             "its ankle: its foot turns with its shank and stands on a point or an edge, and on two "
+                             "such feet a robot cannot stand still (nothing holds it fore-aft)")
 
     def _leg_offsets(self, role: str) -> str:
         """For a leg's pitch or roll role not found: how far each of that leg's joints turns off the world axis

@@ -56,8 +56,8 @@ def _number(element: ET.Element, attr: str, where: str) -> float:
 
 
 def collision_rounds(root: ET.Element, path: Path) -> Rounds:
-    """Each link's ``<collision>`` cylinders and spheres (`Rounds`), as the URDF places them; one of no size (a
-    radius or a cylinder's length not above 0) is left out."""
+    """Each link's ``<collision>`` cylinders and spheres (`Rounds`), as the URDF places them; a cylinder of no size is
+    left out, a sphere of radius 0 is a contact point (Drake's Atlas gives its feet eight so)."""
     rounds: Rounds = {}
     for link in root.findall("link"):
         for collision in link.findall("collision"):
@@ -68,8 +68,8 @@ def collision_rounds(root: ET.Element, path: Path) -> Rounds:
             where = f"{path}: link {link.get('name')!r} <collision> <{shape.tag}>"
             radius = _number(shape, "radius", where)
             length = _number(shape, "length", where) if shape.tag == "cylinder" else 0.0
-            if radius <= 0 or length < 0 or (shape.tag == "cylinder" and length == 0):
-                continue  # no shape (Valkyrie's feet carry a sphere of radius 0), as a box of no size is left out
+            if radius < 0 or (shape.tag == "cylinder" and min(radius, length) <= 0):
+                continue  # no shape, as a box of no size is left out; a sphere of radius 0 is a contact point
             origin = collision.find("origin")
             xyz, rpy = (np.zeros(3), np.zeros(3)) if origin is None else (
                 np.array([float(v) for v in origin.get(a, "0 0 0").split()]) for a in ("xyz", "rpy"))
@@ -131,6 +131,9 @@ def _strip(ends: np.ndarray, radius: float, where: str) -> np.ndarray:
         raise InputError(f"{where}: its collision spheres or cylinders touch the floor at one point (a ball foot): on "
                          "two such feet a robot cannot stand still (nothing holds it fore-aft); give a robot config "
                          "with [feet] soles")
+    if radius <= 0:
+        raise InputError(f"{where}: its collision contact points (spheres of radius 0) lie on one line: on two such "
+                         "feet a robot cannot stand still; give a robot config with [feet] soles")
     along = (b - a) / length
     d = min(CONTACT_DEPTH, radius)
     half = math.sqrt(2 * radius * d - d * d) * np.array([-along[1], along[0]])

@@ -482,7 +482,7 @@ def _default_feet(model: pin.Model, data: pin.Data, path: Path) -> dict[str, int
 
 
 ALIGNED = 0.99  # |cos| between a joint's axis and a direction for the joint to turn about it
-TILTED = 0.85  # |cos|: a leg's hip pitch may turn up to 32° off the lateral axis (Unitree H2's and Fourier GR2's 30°)
+TILTED = 0.69  # |cos|: a leg's hip pitch may turn up to 46° off the lateral axis (H2's, GR2's 30°; AgiBot X1's 45°)
 STANCE_FLEXION = 0.3  # rad: the scenarios' standing posture bends hip, knee, ankle by -1, +2, -1 times this
 
 
@@ -559,13 +559,18 @@ def _feet(model: pin.Model, data: pin.Data, cfg: RobotConfig, path: Path) -> dic
 
 def _hip_pitch(model: pin.Model, data: pin.Data, chain: list[int]) -> int:
     """The joint of a leg (``chain``, top first) about which the trunk pitches on it: its first joint turning about
-    the lateral axis (world y, zero posture; within `TILTED`: Unitree H2's hip pitch, 30° off it, not its knee,
-    the first within `ALIGNED`), else its first. The corrector turns the root about the hips' line: about the
-    pitch joints' it moves no joint below them, while about a hip yaw's origin, 4 cm above and 2 cm behind
-    Wolfgang-OP's hip pitch, its trunk turned back 0.2 rad straightened the knees 0.24 rad, to where the legs'
-    IK lost the feet by 17 mm (its corrected lean fell, its true ZMP 1 m off its feet)."""
+    the lateral axis (world y, zero posture) within `ALIGNED` where three do (hip, knee, ankle; NAO's hip yaw-pitch
+    above its hip pitch, 45° off the axis, is not it), else the first within `TILTED` above those (Unitree H2's hip
+    pitch, 30° off it, AgiBot X1's, 45°, not the knee), else its first. The corrector turns the root about the
+    hips' line: about the pitch joints' it moves no joint below them, while about a hip yaw's origin, 4 cm above and
+    2 cm behind Wolfgang-OP's hip pitch, its trunk turned back 0.2 rad straightened the knees 0.24 rad, to where the
+    legs' IK lost the feet by 17 mm (its corrected lean fell, its true ZMP 1 m off its feet)."""
     pin.computeJointJacobians(model, data, np.zeros(model.nq))
-    return next((j for j in chain if abs(float(data.J[4, model.joints[j].idx_v])) >= TILTED), chain[0])
+    along = {j: abs(float(data.J[4, model.joints[j].idx_v])) for j in chain}
+    aligned = [j for j in chain if along[j] >= ALIGNED]
+    if len(aligned) >= 3:
+        return aligned[0]
+    return next((j for j in chain if along[j] >= TILTED), chain[0])
 
 
 def _foot_frame(model: pin.Model, data: pin.Data, fid: int, world: pin.SE3, name: str) -> int:
