@@ -311,6 +311,16 @@ def test_legs_without_an_ankle_pitch_are_refused_as_standing_on_points(tmp_path,
     assert "cannot stand still" in err[0]
 
 
+def test_an_arm_swing_too_light_to_move_the_zmp_is_refused_saying_how_far_it_gets(tmp_path, capsys):
+    # before: "no arm swing of 0.6 rad between 0.1 and 3 Hz takes the ZMP 4.0 mm past the toes", not how near it came
+    # (Atlas v5: 2.4 mm inside them at 3 Hz; a trunk 30 times as heavy here)
+    urdf = build_humanoid(tmp_path / "heavy.urdf", HumanoidSpec(trunk_mass=30.0, seed=47))
+    rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "arm_swing", "--duration", "0.05"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1
+    assert re.search(r"at 3 Hz, 11\.3 rad/s at the shoulders, its ZMP reaches \d+\.\d mm inside them", err[0]), err
+
+
 def test_a_link_inertia_no_link_of_the_robot_can_have_is_refused_in_one_line(tmp_path, capsys):
     # before: taken as written (Darwin-OP's file: a 1 kg body of 6.5 kg m^2), the true ZMP moved by metres; the
     # torso is the root link, named base_link

@@ -785,9 +785,15 @@ def swing_frequency(body: BodyModel, q0: np.ndarray, dq: np.ndarray, amplitude: 
     def excess(f: float) -> float:
         return swing_zmp_beyond_toes(body, q0, dq, amplitude, f) - beyond
 
-    if excess(0.1) >= 0 or excess(3.0) <= 0:
+    slowest, fastest = excess(0.1), excess(3.0)
+    if slowest >= 0 or fastest <= 0:
+        # Atlas v5 (160 kg): at 3 Hz, 11 rad/s at the shoulders (its URDF's arm velocity limit is 12), its ZMP stays
+        # 2.4 mm inside its toes from 8 mm; a wider swing would need its arms faster still: the refusal says how far
+        at, over = ((0.1, slowest) if slowest >= 0 else (3.0, fastest))
         raise InputError(f"{body.model.name}: no arm swing of {amplitude} rad between 0.1 and 3 Hz takes the ZMP "
-                         f"{beyond * 1e3:.1f} mm past the toes")
+                         f"{beyond * 1e3:.1f} mm past the toes (at {at:g} Hz, {amplitude * 2 * np.pi * at:.1f} rad/s "
+                         f"at the shoulders, its ZMP reaches {abs(over + beyond) * 1e3:.1f} mm "
+                         f"{'past' if over + beyond > 0 else 'inside'} them)")
     return float(brentq(excess, 0.1, 3.0, xtol=1e-4))
 
 
