@@ -21,8 +21,8 @@ bends so, hip +θ, knee −2θ, ankle +θ (`Poser._knee_bend`) (soles not level 
 posture, as Wolfgang-OP's cleats, are first turned level at the ankles and the legs
 re-solved to put both on the floor: `Poser.on_feet`); arms hang down, turned out a little by the
 shoulder roll (OP3's zero posture holds them out sideways). θ is 0.3 rad, or the first of `FLEXIONS` at which the
-scenario's leg goals keep within their limits (the stance's ankle and the lean's share one range), down to 0: legs
-straight.
+scenario's leg goals keep within their limits (the stance's ankle and the lean's share one range), then 0, legs
+straight, where a knee's limits let it bend neither way.
 
 Angles in rad, times in s, world frame z up, x forward, y left. ``livezmp run --scenario``
 sends them to a robot; ``livezmp sim``/``demo`` also play them on the simulated humanoid,
@@ -327,7 +327,7 @@ class Poser:
         """+1 where the knee of leg ``side`` ("l", "r") may flex by `KNEE_REACH` rad within its limits the way
         that takes its foot back (about the world's left, y), −1 where only the other way (a knee that bends its
         shank forward: Poppy's file gives its left knee the right's range, −0.06..2.34 rad, its axis the same),
-        +1 where neither (the straight stance, the last of `FLEXIONS`, is the one left)."""
+        0 where neither (`make_scenario` then stands it straight after the stances of `FLEXIONS`)."""
         knee = self.unit(f"{side}_knee", Y)
         i = int(np.flatnonzero(knee)[0])
         model = self.body.model
@@ -335,7 +335,7 @@ class Poser:
         for sign in (1.0, -1.0):
             if lower - 1e-9 <= sign * KNEE_REACH * knee[i] <= upper + 1e-9:
                 return sign
-        return 1.0
+        return 0.0
 
     def index(self, role: str) -> int:
         """Index (in ``body.joint_names``) of the joint that plays ``role``; InputError if none does."""
@@ -358,13 +358,15 @@ class Poser:
             return
         chain = leg_chains(self.body)[side]
         pitch = [n for n in chain if _about(self.axis, n, Y, TILTED)]
+        if not pitch:  # no leg that bends fore and aft at all: `index` says what a leg needs
+            return
         data = self.body.model.createData()
         pin.framesForwardKinematics(self.body.model, data, np.zeros(self.body.model.nq))
         sole = float(data.oMf[self.body.feet[side].frame_id].translation[Z])
         reach = ANKLE_SHARE * (self.origin[chain[0]][Z] - sole)
         if not any(self.origin[n][Z] - sole <= reach for n in pitch):
             raise InputError(f"{self.body.model.name}: its {side} leg turns about the lateral axis at "
-                             f"{len(pitch)} joint{'s' * (len(pitch) != 1)} ({', '.join(pitch) or 'none'}), none at "
+                             f"{len(pitch)} joint{'s' * (len(pitch) != 1)} ({', '.join(pitch)}), none at "
                              "its ankle: its foot turns with its shank and stands on a point or an edge, and on two "
                              "such feet a robot cannot stand still (nothing holds it fore-aft)")
 
@@ -399,7 +401,7 @@ class Poser:
         base = self.soles_levelled() if self.level else np.zeros(len(self.names))
         out = base.copy()
         for s in sides:  # a tilted hip's share, turned by 1 / its axis' y: the IK's start near the bent knee
-            out += angle * self.bends.get(s, 1.0) * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
+            out += angle * (self.bends.get(s) or 1.0) * (-self.unit(f"{s}_hip_pitch", Y) + 2 * self.unit(f"{s}_knee", Y)
                                                      - self.unit(f"{s}_ank_pitch", Y))
         return self.on_feet(out, self._bent_feet(base, angle, [s for s in sides if s in self.tilted]))
 
@@ -417,7 +419,7 @@ class Poser:
         out = {}
         for s in sides:
             hip, knee, ankle = (self.origin[self.roles[f"{s}_{r}"]] for r in ("hip_pitch", "knee", "ank_pitch"))
-            turns = (thigh, shank) if self.bends.get(s, 1.0) > 0 else (shank, thigh)  # a knee bent the other way
+            turns = (thigh, shank) if self.bends.get(s, 1.0) >= 0 else (shank, thigh)  # a knee bent the other way
             bent_knee = hip + turns[0] @ (knee - hip)
             moved = bent_knee + turns[1] @ (ankle - knee) - ankle
             side = next(side for side in feet if side[0] == s)
@@ -593,10 +595,6 @@ def lean_angle(body: BodyModel, beyond: float, flexion: float = 0.3) -> float:
     def excess(angle: float) -> float:
         return static_margin(body, stood + poser.ankles_lean(angle)) + beyond
 
-    inside = static_margin(body, stood)
-    if inside < 0:  # the Gepetto simple humanoid's file puts each foot's centre of mass 0.28 m ahead of its ankle
-        raise InputError(f"{body.model.name}: standing, its CoM is {-inside * 1e3:.1f} mm outside its feet: it cannot "
-                         "stand still (its masses or soles, in its file or a robot config, are not its own)")
     if excess(0.0) <= 0 or excess(1.0) >= 0:
         raise InputError(f"{body.model.name}: no forward lean up to 1 rad puts the CoM {beyond * 1e3:.1f} mm past "
                          "the toes from inside the feet")
@@ -953,26 +951,30 @@ SCENARIOS: dict[str, Callable[[BodyModel], Scenario]] = {
 # in turn, where at the one before it takes a leg joint beyond its limits: the stance's ankle (−θ) and the lean's
 # share the ankle's one range (Fourier GR-Mini's ±0.436 rad: from θ = 0.3 its push leaned to −0.53, its lean to
 # −0.437, and all three scenarios were refused; from 0.2 they fit). Not below 0.1: the knee's flexion keeps the
-# legs' IK, the corrector's, away from the straight knee's singularity; then 0, the straight stance, the one left to
-# a robot whose file lets a knee bend neither way (the Gepetto simple humanoid's ankles: 0..2.6 rad, one way only).
-FLEXIONS = (0.3, 0.25, 0.2, 0.15, 0.1, 0.0)
-KNEE_REACH = 2 * min(f for f in FLEXIONS if f > 0)  # rad: a knee bends the way its limits let it bend this far
+# legs' IK, the corrector's, away from the straight knee's singularity; only a robot whose file lets a knee bend
+# neither way (`Poser._knee_bend`: 0) stands straight, θ = 0, after them.
+FLEXIONS = (0.3, 0.25, 0.2, 0.15, 0.1)
+KNEE_REACH = 2 * FLEXIONS[-1]  # rad: a knee bends the way its limits let it bend this far
 
 
 def make_scenario(name: str, body: BodyModel, **options) -> Scenario:
     """A scenario by name (``SCENARIOS``) for ``body``, with its keyword ``options``;
     InputError naming the choices. Without a ``flexion`` option, on the first stance of `FLEXIONS` that keeps the
-    legs within their limits; where none does, the refusal is the first stance's."""
+    legs within their limits, then, where a knee bends neither way, legs straight; where none does, the refusal is
+    the first stance's."""
     if name not in SCENARIOS:
         raise InputError(f"unknown scenario '{name}' (choose from {', '.join(SCENARIOS)})")
     first = None
-    for flexion in (options["flexion"],) if "flexion" in options else FLEXIONS:
+    flexions = (options["flexion"],) if "flexion" in options else FLEXIONS
+    if "flexion" not in options and 0.0 in Poser(body).bends.values():
+        flexions = (*FLEXIONS, 0.0)
+    for flexion in flexions:
         try:
             return _within_limits(name, body, {**options, "flexion": flexion})
         except BeyondLimits as e:
             first = first or e
     if "flexion" not in options:
-        raise BeyondLimits(f"{first} (and from every straighter stance down to {FLEXIONS[-1]} rad of flexion)")
+        raise BeyondLimits(f"{first} (and from every straighter stance down to {flexions[-1]} rad of flexion)")
     raise first
 
 
