@@ -83,7 +83,9 @@ def test_lost_and_corrupt_transfers_are_counted_and_never_read():
 
 def test_delayed_transfers_arrive_whole():
     with servo_bus() as (bus, link, plant):
-        bus.set_faults("delay=0.3:20ms,seed=1")  # held back less than a stream period: nothing overtakes them
+        # held back far less than a stream period (33 ms at 30 Hz): nothing overtakes them even when a loaded
+        # machine holds the simulator's thread for 20 ms (a 20 ms delay left 13 ms: one stale transfer at load 2)
+        bus.set_faults("delay=0.3:5ms,seed=1")
         for _ in range(20):
             np.testing.assert_array_equal(link.read().positions, start_posture(N))
         injected = bus.set_faults("")
