@@ -313,13 +313,14 @@ class OnlineCorrector:
         pin.framesForwardKinematics(self.body.model, self.data, q)
         wider = slow_trunk_factor(float(np.linalg.norm(self.reaction[:, PITCH])),
                                   float(np.linalg.norm(self.sensitivity(q)[:, PITCH])), com_height(self.body, q))
-        self.limits = replace(self.limits, margin_m=wider * self.limits.margin_m)
+        # the legs' strategy is for a trunk too short a lever, not a slow one: judged by the margin as given
         if uses_legs(self.body, self.mover, q, self.max_rot[PITCH], self.limits.margin_m):
             self.legs, self.reaction[:, 3:] = legs_response(self.body, self.mover, joints)
             h = hips_height(self.body, q)
             self.max_rot[3:] = h * np.sin(self.max_rot[[PITCH, ROLL]])
             self.max_step[3:] = h * self.max_step[0]
             self.max_accel_step[3:] = h * self.max_accel_step[0]
+        self.limits = replace(self.limits, margin_m=wider * self.limits.margin_m)
 
     def sensitivity(self, q: np.ndarray) -> np.ndarray:
         """S (2, 3): quasi-static ZMP (= CoM) shift per radian of δ, m/rad; ``data`` must
@@ -374,7 +375,8 @@ class OnlineCorrector:
                     want = self.u.copy()
         step = want - self.u
         lo, hi = self.prev_step - self.max_accel_step, self.prev_step + self.max_accel_step
-        clipped = clip(self._reaction_kept(clip(step, lo, hi), com, polygon), -self.max_step, self.max_step)
+        clipped = braked(clip(self._reaction_kept(clip(step, lo, hi), com, polygon), -self.max_step, self.max_step),
+                         self.u, self.max_rot, self.max_accel_step)
         new = clip(self.u + clipped, -self.max_rot, self.max_rot)
         limited = bool((np.abs(new - want) > 1e-12).any())
         self.prev_step = new - self.u
@@ -428,6 +430,16 @@ class OnlineCorrector:
             offsets[self.channels] = q_new[self.channels] - q_command[self.channels]
         self._last_offsets = offsets
         return offsets
+
+
+def braked(step: np.ndarray, u: np.ndarray, bound: np.ndarray, accel_step: np.ndarray) -> np.ndarray:
+    """``step`` (per frame, rad or m: ``u``'s change) no faster than stops ``u`` at its ``bound`` (±, same units)
+    within the acceleration limit ``accel_step`` (change of step per frame): |step| <= sqrt(2 a d), d the way left
+    to the bound it moves toward. Clipped at its range without braking, the trunk stopped within one frame: THORMANG3
+    (82 mm of ZMP per rad/s^2) reaching its 15° at speed put its true ZMP 440 mm behind its heels for 30 ms."""
+    toward = np.sign(step)
+    left = np.maximum(bound - toward * u, 0.0)
+    return toward * np.minimum(np.abs(step), np.sqrt(2.0 * accel_step * left))
 
 
 def with_measured_cop(result: FrameResult, cop: np.ndarray | None) -> FrameResult:
