@@ -165,11 +165,13 @@ class ImuReading:
 @dataclass
 class BalanceCounters:
     """Running counts over the dynamic steps: ``steps``, ``unsupported_steps`` (ZMP outside
-    the polygon or no contact force) and ``worst_margin`` (m, most negative margin seen)."""
+    the polygon or no contact force), ``worst_margin`` (m, most negative margin seen) and
+    ``longest_unsupported_s`` (s, the longest run of consecutive unsupported steps)."""
 
     steps: int = 0
     unsupported_steps: int = 0
     worst_margin: float = math.inf
+    longest_unsupported_s: float = 0.0
 
 
 def _continued(angles: Array, previous: Array) -> Array:
@@ -501,6 +503,7 @@ class SimHumanoid:
         c.unsupported_steps += 1
         if self._unsupported_since is None:
             self._unsupported_since = s.t
+        c.longest_unsupported_s = max(c.longest_unsupported_s, s.t - self._unsupported_since + self.dt)
         # "for longer than": strictly more than fall_after_s of consecutive unsupported steps
         if s.t - self._unsupported_since + self.dt > self.fall_after_s + 1e-9 * self.dt:
             what = ("the contact force fell below 5 % of the weight" if s.margin is None

@@ -41,4 +41,5 @@ def test_the_corrector_keeps_a_slow_trunked_robot_up_in_lean(heavy_torso):
     off, _ = balance(heavy_torso, scenario, correct=False)
     on, _ = balance(heavy_torso, scenario, correct=True)
     assert off.fallen is not None
+    assert off.counters.longest_unsupported_s > 0.2 - 1e-9  # the simulator's fall: more than 0.2 s outside
     assert on.fallen is None, on.fallen
