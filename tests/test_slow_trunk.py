@@ -8,7 +8,7 @@ import pytest
 from humanoid_gen import HumanoidSpec, build_humanoid
 from test_live_loop_closed import balance
 
-from livezmp.correct.online import OnlineCorrector, com_height, slow_trunk_factor
+from livezmp.correct.online import OnlineCorrector, braked, com_height, slow_trunk_factor
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.robot import load_robot
@@ -43,3 +43,13 @@ def test_the_corrector_keeps_a_slow_trunked_robot_up_in_lean(heavy_torso):
     assert off.fallen is not None
     assert off.counters.longest_unsupported_s > 0.2 - 1e-9  # the simulator's fall: more than 0.2 s outside
     assert on.fallen is None, on.fallen
+
+
+def test_the_turn_brakes_before_its_range_within_the_acceleration_limit():
+    """Moving at 0.01 rad per frame 1.8 mrad short of its 15° range, the turn slows to what the acceleration
+    limit (4e-5 rad per frame^2) can still stop; away from the range and moving back it is left alone."""
+    bound, accel = np.full(2, np.radians(15.0)), np.full(2, 4e-5)
+    near = braked(np.array([0.01, -0.01]), np.array([bound[0] - 0.0018, -bound[1] + 0.0018]), bound, accel)
+    assert np.allclose(np.abs(near), np.sqrt(2 * 4e-5 * 0.0018)) and np.sign(near).tolist() == [1.0, -1.0]
+    far = np.array([0.001, -0.01])
+    assert np.array_equal(braked(far, np.array([0.0, bound[1]]), bound, accel), far)
