@@ -51,5 +51,5 @@ def test_the_turn_brakes_before_its_range_within_the_acceleration_limit():
     bound, accel = np.full(2, np.radians(15.0)), np.full(2, 4e-5)
     near = braked(np.array([0.01, -0.01]), np.array([bound[0] - 0.0018, -bound[1] + 0.0018]), bound, accel)
     assert np.allclose(np.abs(near), np.sqrt(2 * 4e-5 * 0.0018)) and np.sign(near).tolist() == [1.0, -1.0]
-    far = np.array([0.001, -0.01])
+    far = np.array([0.001, -0.005])
     assert np.array_equal(braked(far, np.array([0.0, bound[1]]), bound, accel), far)
