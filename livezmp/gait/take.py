@@ -46,8 +46,7 @@ from livezmp.model.rest_pose import without_rest_pose
 from livezmp.model.static_trial import read_walk
 from livezmp.model.trajectory_csv import BASE_COLUMNS, JointTrajectory, read_joint_csv
 from livezmp.model.urdf_body import body_from_urdf
-from livezmp.offline.gaitlab import facing
-from livezmp.offline.treadmill import find_treadmill, given_treadmill
+from livezmp.offline.gaitlab import take_treadmill
 
 
 @dataclass
@@ -210,15 +209,11 @@ def take_from_c3d(trial: C3dTrial, mmap: MarkerMap | None = None,
 
 def _belt(asked: str | tuple[float, float], take: MarkerTake, rate: float) -> np.ndarray | None:
     """The belt velocity (2,) m/s (internal frame; split belts: their mean) of the treadmill a marker ``take`` at
-    ``rate`` Hz walks on, or None (:func:`livezmp.offline.treadmill.find_treadmill` on its raw frames' soles and
-    pelvis for "auto")."""
-    if asked == "off":
+    ``rate`` Hz walks on, or None (:func:`livezmp.offline.gaitlab.take_treadmill` on its raw frames' soles and
+    pelvis)."""
+    if asked == "off":  # the soles are not needed
         return None
-    pelvis = take.frames[:, :3]
-    if asked == "auto":
-        found = find_treadmill(soles_over(take.body, take.frames), pelvis, 1.0 / rate)
-    else:
-        found = given_treadmill(asked, facing(take), pelvis, 1.0 / rate)
+    found = take_treadmill(asked, take, soles_over(take.body, take.frames), take.frames[:, :3], rate)
     return None if found is None else found.mean_velocity
 
 

@@ -348,15 +348,16 @@ def _weighed_as_no_person(info: dict, stature_m: float | None) -> None:
     info["note"] = f"{info['note']}; {note}" if "note" in info else note
 
 
-def take_treadmill(asked: str | tuple[float, float], take: MarkerTake, result: BatchResult,
-                   rate: float) -> Treadmill | None:
-    """The treadmill ``take`` walks on (its ``result`` from the pipeline on a floor at ``rate`` Hz): found from its
-    feet ("auto"), none ("off"), or the given (left, right) belt speeds (m/s) against the way the subject faces."""
+def take_treadmill(asked: str | tuple[float, float], take: MarkerTake, soles: dict[str, np.ndarray],
+                   path: np.ndarray, rate: float) -> Treadmill | None:
+    """The treadmill ``take`` walks on (its ``soles`` {side: (F, k, 3)} and body point's ``path`` (F, 3), m,
+    internal frame, at ``rate`` Hz): found from its feet ("auto"), none ("off"), or the given (left, right) belt
+    speeds (m/s) against the way the subject faces."""
     if asked == "off":
         return None
     if asked == "auto":
-        return find_treadmill(result.soles, result.com, 1.0 / rate)
-    return given_treadmill(asked, facing(take), result.com, 1.0 / rate)
+        return find_treadmill(soles, path, 1.0 / rate)
+    return given_treadmill(asked, facing(take), path, 1.0 / rate)
 
 
 def facing(take: MarkerTake) -> np.ndarray:
@@ -377,7 +378,7 @@ def analyse_lab_take(trial: C3dTrial, opts: LabOptions | None = None) -> LabAnal
     first = opts.mass or trial.mass_kg or DEFAULT_MASS
     floor = plates_floor(trial, opts.markers.marker_map)
     take, times, cfg, result = run_take(trial, opts, first, floor)
-    treadmill = take_treadmill(opts.treadmill, take, result, trial.rate)
+    treadmill = take_treadmill(opts.treadmill, take, result.soles, result.com, trial.rate)
     if treadmill is not None:  # the contacts judged again, on the belts
         take, times, cfg, result = run_take(trial, opts, first, floor, treadmill)
     belts = None if treadmill is None else treadmill.summary(take.body.world_from_input)
