@@ -26,6 +26,7 @@ from livezmp.balance.support import convex_hull
 from livezmp.errors import InputError
 from livezmp.model.foot_contacts import ON_PLANE, ContactSole, plane_frame
 from livezmp.model.foot_meshes import CONTACT_DEPTH, quadrilateral
+from livezmp.model.urdf_xml import collision_shapes, numbers
 
 RIM_POINTS = 32  # points on a cylinder's end circle (a disc sole's polygon before it is cut to four corners)
 STANDING = np.cos(np.radians(5.0))  # a cylinder whose axis is this close to vertical stands on its end's disc
@@ -44,37 +45,16 @@ class Round:
 Rounds = dict[str, list[Round]]  # link name -> its collision cylinders and spheres
 
 
-def _number(element: ET.Element, attr: str, where: str) -> float:
-    """A finite number (m) from ``element``'s ``attr``; InputError naming ``where`` otherwise."""
-    try:
-        value = float(element.get(attr, ""))
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise InputError(f"{where} {attr}: {element.get(attr)!r} is not a number of metres")
-    return value
-
-
 def collision_rounds(root: ET.Element, path: Path) -> Rounds:
     """Each link's ``<collision>`` cylinders and spheres (`Rounds`), as the URDF places them; a cylinder of no size is
     left out, a sphere of radius 0 is a contact point (Drake's Atlas gives its feet eight so)."""
     rounds: Rounds = {}
-    for link in root.findall("link"):
-        for collision in link.findall("collision"):
-            shape = next((s for s in (collision.find("geometry/cylinder"), collision.find("geometry/sphere"))
-                          if s is not None), None)
-            if shape is None:
-                continue
-            where = f"{path}: link {link.get('name')!r} <collision> <{shape.tag}>"
-            radius = _number(shape, "radius", where)
-            length = _number(shape, "length", where) if shape.tag == "cylinder" else 0.0
-            if radius < 0 or (shape.tag == "cylinder" and min(radius, length) <= 0):
-                continue  # no shape, as a box of no size is left out; a sphere of radius 0 is a contact point
-            origin = collision.find("origin")
-            xyz, rpy = (np.zeros(3), np.zeros(3)) if origin is None else (
-                np.array([float(v) for v in origin.get(a, "0 0 0").split()]) for a in ("xyz", "rpy"))
-            rounds.setdefault(link.get("name"), []).append(Round(radius, length, pin.SE3(pin.rpy.rpyToMatrix(*rpy),
-                                                                                         xyz)))
+    for link, shape, origin, where in collision_shapes(root, path, ("cylinder", "sphere")):
+        radius = numbers(shape, "radius", 1, "", where)[0]
+        length = numbers(shape, "length", 1, "", where)[0] if shape.tag == "cylinder" else 0.0
+        if radius < 0 or (shape.tag == "cylinder" and min(radius, length) <= 0):
+            continue  # no shape, as a box of no size is left out; a sphere of radius 0 is a contact point
+        rounds.setdefault(link, []).append(Round(radius, length, origin))
     return rounds
 
 

@@ -43,6 +43,7 @@ from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
 from livezmp.model.foot_primitives import collision_rounds, round_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.robot_config import MAX_SOLE_M, RobotConfig, find_robot_config, load_robot_config
+from livezmp.model.urdf_xml import collision_shapes, numbers
 
 MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
 BASE_JOINTS = (
@@ -69,17 +70,6 @@ ROUNDOFF = 1e-9  # a principal moment this far below zero (relative: `_check_ine
 NEGLIGIBLE_INERTIA = 1e-6
 
 
-def _numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.ndarray:
-    text = el.get(attr, default)
-    try:
-        vals = np.array([float(v) for v in text.split()])
-    except ValueError:
-        raise InputError(f"{where} {attr}: {text[:40]!r} is not {n} numbers") from None
-    if vals.shape != (n,) or not np.all(np.isfinite(vals)):
-        raise InputError(f"{where} {attr}: {text[:40]!r} is not {n} finite numbers")
-    return vals
-
-
 def _check_inertial(link: ET.Element, path: Path) -> tuple[float, np.ndarray]:
     """Mass finite and >= 0, centre of mass finite, inertia finite and positive semi-definite: what the
     ZMP's dynamics need. An inertia below positive semi-definite by more than roundoff is written back as the
@@ -102,7 +92,7 @@ def _check_inertial(link: ET.Element, path: Path) -> tuple[float, np.ndarray]:
     mass_el, inertia_el, origin = inertial.find("mass"), inertial.find("inertia"), inertial.find("origin")
     if mass_el is None or inertia_el is None:
         raise InputError(f"{where}: needs <mass> and <inertia>")
-    mass = _numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
+    mass = numbers(mass_el, "value", 1, "", f"{where} <mass>")[0]
     if mass == 0:
         link.remove(inertial)
         return 0.0, none
@@ -110,12 +100,12 @@ def _check_inertial(link: ET.Element, path: Path) -> tuple[float, np.ndarray]:
         raise InputError(f"{where} <mass> value: {mass:g} kg is outside [0, {MAX_LINK_MASS:g}]")
     if origin is not None:
         for attr in ("xyz", "rpy"):
-            v = _numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")
+            v = numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")
             if np.abs(v).max() > MAX_LENGTH:
                 raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
     comps = {}
     for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-        comps[k] = _numbers(inertia_el, k, 1, "0", f"{where} <inertia>")[0]
+        comps[k] = numbers(inertia_el, k, 1, "0", f"{where} <inertia>")[0]
     c = comps
     inertia = np.array([[c["ixx"], c["ixy"], c["ixz"]], [c["ixy"], c["iyy"], c["iyz"]], [c["ixz"], c["iyz"], c["izz"]]])
     moments, axes = np.linalg.eigh(inertia)
@@ -216,8 +206,8 @@ def _has_range(joint: ET.Element, where: str) -> bool:
     limit = joint.find("limit")
     if limit is None:
         return False
-    lower = _numbers(limit, "lower", 1, "0", f"{where} <limit>")[0]
-    upper = _numbers(limit, "upper", 1, "0", f"{where} <limit>")[0]
+    lower = numbers(limit, "lower", 1, "0", f"{where} <limit>")[0]
+    upper = numbers(limit, "upper", 1, "0", f"{where} <limit>")[0]
     if lower > upper:  # no angle satisfies it: every reading would be refused, every goal clipped to one end
         raise InputError(f"{where} <limit>: lower {lower:g} is above upper {upper:g}")
     return bool(lower != upper)
@@ -253,10 +243,10 @@ def _check_joints(root: ET.Element, path: Path) -> list[str]:
         origin = j.find("origin")
         if origin is not None:
             for attr in ("xyz", "rpy"):
-                if np.abs(_numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")).max() > MAX_LENGTH:
+                if np.abs(numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")).max() > MAX_LENGTH:
                     raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
         axis = j.find("axis") if j.get("type") != "fixed" else None  # a fixed one means nothing: files give 0 0 0
-        if axis is not None and not np.any(_numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
+        if axis is not None and not np.any(numbers(axis, "xyz", 3, "1 0 0", f"{where} <axis>")):
             raise InputError(f"{where} <axis>: zero vector")
         if j.get("type") == "continuous" or (j.get("type") == "revolute" and not _has_range(j, where)):
             j.set("type", "revolute")
@@ -299,18 +289,10 @@ Boxes = dict[str, list[tuple[np.ndarray, pin.SE3]]]  # link name -> (size (3,) m
 def _collision_boxes(root: ET.Element, path: Path) -> Boxes:
     """Each link's ``<collision>`` boxes (`Boxes`); a box of a size not three positive numbers is left out."""
     boxes: Boxes = {}
-    for link in root.findall("link"):
-        for collision in link.findall("collision"):
-            box = collision.find("geometry/box")
-            if box is None:
-                continue
-            where = f"{path}: link {link.get('name')!r} <collision> <box>"
-            size = _numbers(box, "size", 3, "0 0 0", where)
-            origin = collision.find("origin")
-            xyz, rpy = ((_numbers(origin, attr, 3, "0 0 0", f"{where} <origin>") for attr in ("xyz", "rpy"))
-                        if origin is not None else (np.zeros(3), np.zeros(3)))
-            if np.all(size > 0):
-                boxes.setdefault(link.get("name"), []).append((size, pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)))
+    for link, box, origin, where in collision_shapes(root, path, ("box",)):
+        size = numbers(box, "size", 3, "0 0 0", where)
+        if np.all(size > 0):
+            boxes.setdefault(link, []).append((size, origin))
     return boxes
 
 
