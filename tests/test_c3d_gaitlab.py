@@ -1773,3 +1773,19 @@ def test_a_take_longer_than_the_16_bit_frame_count_is_refused_not_cut(tmp_path):
     with pytest.raises(InputError, match=r"long\.c3d: the data holds about 700\d\d frames \(12 min\), ezc3d reads "
                                          r"the first 65535"):
         read_c3d(tmp_path / "long.c3d")
+
+
+def test_a_mass_the_plates_contradict_is_used_as_told_and_said(lab, tmp_path, capsys):
+    """`--mass` 10 % light on the 75 kg synthetic subject: used as told, but the plates' weight is said, by
+    `analyze` and by `calibrate` (whose subject file stays TOML with the note's text); the true mass says nothing."""
+    d, _ = lab
+    told = analyse_lab_take(read_c3d(d / "on.c3d"), LabOptions(mass=0.9 * MASS)).summary["mass"]
+    assert told["source"] == "--mass" and told["used_kg"] == pytest.approx(0.9 * MASS)
+    assert f"--mass says {0.9 * MASS:.1f} kg, the plates weigh {MASS:.1f} kg" in told["note"]
+    assert told["note"].endswith("(-10.0 %); using --mass as told")
+    right = analyse_lab_take(read_c3d(d / "on.c3d"), LabOptions(mass=MASS)).summary["mass"]
+    assert "note" not in right
+    out = tmp_path / "s.toml"
+    assert main(["calibrate", str(d / "on.c3d"), "--mass", str(0.9 * MASS), "-o", str(out)]) == 0
+    assert f"  mass: {d / 'on.c3d'}: --mass says" in capsys.readouterr().out
+    assert tomllib.loads(out.read_text())["calibration"]["mass_notes"] == [f"{d / 'on.c3d'}: {told['note']}"]

@@ -23,6 +23,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                                 age_years=args.age)
     subject, report = calibrate(trials, LabOptions(mass=args.mass, markers=markers))
     write_subject(subject, args.output, report)
+    for note in report["mass_notes"]:
+        print(f"  mass: {note}")
     fwd, left, up = (1000 * v for v in subject.offset)
     if subject.segment == "thorax":
         print(f"{args.output}: thorax (tracked) {100 * subject.fraction:.1f} % of the mass, centre of mass "

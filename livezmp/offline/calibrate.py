@@ -42,6 +42,7 @@ and refusals; no sway gains (the trunk's markers say where it is). Its subject f
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
@@ -228,7 +229,9 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
              *([f"age_years = {subject.age_years:.3f}"] if subject.age_years is not None else []),
              "", "[calibration]"]
     for k, v in report.items():
-        lines.append(f'{k} = "{v}"' if isinstance(v, str) else f"{k} = {str(v).lower()}" if isinstance(v, bool)
+        # texts as JSON strings, which TOML reads as they are (a note's apostrophe, a path's quote)
+        text = isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))
+        lines.append(f"{k} = {json.dumps(v)}" if text else f"{k} = {str(v).lower()}" if isinstance(v, bool)
                      else f"{k} = {v!r}")
     Path(path).write_text("\n".join(lines).replace("None", '"n/a"') + "\n", encoding="utf-8")
 
@@ -495,11 +498,13 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
     # analysed as analyze's default (the table's HAT and sway, the prior), so the plate delay and complete frames
     # are analyze's
     opts = replace(opts, markers=replace(opts.markers, hat_sway_gain=TRUNK_STEP_GAIN))
-    whole, segments = [], []
+    whole, segments, mass_notes = [], [], []
     for trial in trials:
         if not trial.plates:
             raise InputError(f"{trial.source}: no force plates: nothing to calibrate against")
         lab = analyse_lab_take(trial, opts)
+        if "note" in lab.summary["mass"]:
+            mass_notes.append(f"{trial.source}: {lab.summary['mass']['note']}")
         segments.append(_segment(lab, trial.source, segments))
         rows = lab.complete & lab.result.has_zmp & np.isfinite(lab.plates.cop).all(axis=1)
         if rows.sum() < MIN_FRAMES:
@@ -538,7 +543,8 @@ def calibrate(trials: list[C3dTrial], opts: LabOptions | None = None,
               # the table kept: nothing was measured, its spread is the prior's between-subject one
               "parameter_sd": [round(float(v), 5) for v in (PRIOR_SD if sd is None else sd)[:n]],
               "parameter_sd_from": "the table's assumed spread (nothing fitted)" if sd is None
-              else "jackknife over the blocks"}
+              else "jackknife over the blocks",
+              "mass_notes": mass_notes}
     if len(whole) > 1:
         # the held-out figures are then each trial scored with the parameters calibrated on the others (_folds)
         report.update(rms_other_trials_table_mm=round(held_table, 2), rms_other_trials_fitted_mm=round(held_fitted, 2))

@@ -327,9 +327,19 @@ def _decide_mass(trial: C3dTrial, opts: LabOptions, m_plates: float | None, cycl
     else:
         used, source = first, "file" if trial.mass_kg else "default"
     info.update(used_kg=round(used, 2), source=source)
+    notes = []
     if trial.mass_kg and m_plates and abs(m_plates - trial.mass_kg) > MASS_DISAGREE * m_plates:
-        info["note"] = (f"the file says {trial.mass_kg:.1f} kg, the plates {m_plates:.1f} kg "
-                        f"({100 * (trial.mass_kg / m_plates - 1):+.1f} %); using the {source}")
+        notes.append(f"the file says {trial.mass_kg:.1f} kg, the plates {m_plates:.1f} kg "
+                     f"({100 * (trial.mass_kg / m_plates - 1):+.1f} %); using the {source}")
+    # a mass given on the command line is used as told, but a plate weight that contradicts it is said: a typo
+    # (5 for 75 kg) scales every force the ZMP is computed from
+    weighed = next(((m, how) for m, how in ((m_plates, "over whole gait cycles"), (m_standing, "standing"),
+                                            (m_stance, "in stance")) if m is not None), None)
+    if opts.mass and weighed and abs(weighed[0] - opts.mass) > MASS_DISAGREE * weighed[0]:
+        notes.append(f"--mass says {opts.mass:.1f} kg, the plates weigh {weighed[0]:.1f} kg {weighed[1]} "
+                     f"({100 * (opts.mass / weighed[0] - 1):+.1f} %); using --mass as told")
+    if notes:
+        info["note"] = "; ".join(notes)
     return info
 
 
