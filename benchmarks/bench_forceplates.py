@@ -19,7 +19,8 @@ TRUNK_STEP_GAIN come from)
 and every trial before / after it, the error split by axis, support phase and the ZMP's linear (CoM) part
 with the kinematic and the plates' acceleration, the lag of the ZMP and of those linear parts (and the ZMP
 with its angular-momentum part delayed), that part split per segment group and term (the ZMP's lag and RMS
-with each taken out), the fore-aft swing at the step frequency split into the mid-hip's acceleration and the
+with each taken out), the lateral error in single stance split into those parts with the upper body's lateral
+gain onto the plates, the fore-aft swing at the step frequency split into the mid-hip's acceleration and the
 upper body's and legs' motion relative to it, `livezmp calibrate`
 cross-validated per trial, the plates' CoP against their own force line, and the estimator's own gain and
 delay on sinusoids (why row 4 matters).
@@ -266,6 +267,8 @@ def sway_before_after(done: dict[str, tuple]) -> None:
 GROUPS = ("pelvis", "hat", "thorax", "headarms", "arms", "head", "upperarm", "forearm", "hand", "thigh", "shank",
           "foot")
 LATERAL_GAINS = (0.59, 0.40)  # the four tracked trunks' mean lateral sway gain, and lower
+SLOW_HZ = 2.0  # Hz: below the stride's third harmonic, above its fundamental (~0.9 Hz)
+MIN_SINGLE_FRAMES = 6  # scored single-stance frames a trial needs for the single-stance table
 
 
 def _group_accelerations(a, dt: float) -> dict[str, np.ndarray]:
@@ -321,6 +324,51 @@ def lateral_sources(done: dict[str, tuple]) -> None:
         print(f"{name[:34]:34s} plates {np.std(plate):.2f} residual {np.std(res):.2f} | {shares} | {pts} | RMS "
               f"{a.summary['cop_vs_zmp']['rms_mm']:.1f}" + "".join(f", lateral sway {g}: {v:.1f}"
                                                                    for g, v in zip(LATERAL_GAINS, gains, strict=False)))
+
+
+def _hat_kind(groups: dict[str, np.ndarray]) -> str:
+    """How a body's head, arms and trunk are modelled, from its segment kinds: placed on the pelvis, the trunk
+    tracked with head and arms placed on it, or every segment tracked."""
+    return "placed HAT" if "hat" in groups else "trunk + placed" if {"headarms", "arms"} & set(groups) else "tracked"
+
+
+def single_stance_lateral(done: dict[str, tuple]) -> None:
+    """The lateral error in single stance, signed outward (towards the stance foot's outside), mean over the
+    scored single-stance frames: ZMP - CoP split exactly into the model's angular-momentum part (ZMP minus the
+    linear part with the kinematic acceleration), the acceleration part (the linear part, kinematic minus the
+    plates' acceleration) and the plates' force line through the model's CoM minus the CoP (mm); the lateral CoM
+    acceleration outward, kinematic / plates / kinematic low-passed at SLOW_HZ over the whole take (m/s2: a mean
+    the low-pass leaves is at the stride frequency, not marker shake); and the gain k on the upper body's share
+    of the kinematic lateral acceleration that best matches the plates' (plates ~ kin + (k - 1) upper, over the
+    scored frames). Medians of k per way the head, arms and trunk are modelled (:func:`_hat_kind`)."""
+    print(f"\nlateral error in single stance, outward: ZMP - CoP = angular-momentum part + acceleration part + force "
+          f"line - CoP (mm); lateral CoM acceleration outward kin / plates / kin below {SLOW_HZ:g} Hz (m/s2); upper "
+          "body's gain k onto the plates")
+    ks: dict[str, list[float]] = {}
+    for name, (trial, a) in done.items():
+        r, rows, dt = a.result, _scored(a), 1.0 / trial.rate
+        single = rows & (r.support < 2)  # SUPPORT_LABELS: 0 left, 1 right
+        if single.sum() < MIN_SINGLE_FRAMES:
+            continue
+        _, left = path_axes(r.com, trial.rate, facing(a.take))
+        out = np.where(r.support == 0, 1.0, -1.0)[single]
+        lin, lin_plates = _linear_parts(trial, a)
+        zmp, cop = r.zmp[:, :2], a.plates.cop[:, :2]
+        parts = [zmp - cop, zmp - lin, lin - lin_plates, lin_plates - cop]
+        mm = " ".join(f"{1000 * np.mean(_along(p[single], left[single]) * out):+6.1f}" for p in parts)
+        kin_acc, plate_acc = _accelerations(trial, a)
+        kin, plates = (_along(x[:, :2], left) for x in (kin_acc, plate_acc))
+        slow = _along(lowpass(kin_acc[:, :2], trial.rate, SLOW_HZ), left)
+        acc = " / ".join(f"{np.mean(x[single] * out):+.2f}" for x in (kin, plates, slow))
+        groups = _group_accelerations(a, dt)
+        upper = _along(sum(v for k, v in groups.items() if k in UPPER + ("hat",))[:, :2], left)[rows]
+        k = 1 - ((kin - plates)[rows] @ upper) / (upper @ upper)
+        ks.setdefault(_hat_kind(groups), []).append(k)
+        print(f"{name[:34]:34s} {int(single.sum()):4d} fr {100 * single.sum() / rows.sum():3.0f} % | {mm} | {acc} | "
+              f"k {k:4.2f} ({_hat_kind(groups)})")
+    print("  upper body's gain k, median (quartiles): " + "; ".join(
+        f"{kind} {np.median(v):.2f} ({np.percentile(v, 25):.2f}-{np.percentile(v, 75):.2f}, {len(v)} trials)"
+        for kind, v in ks.items()))
 
 
 def _along(d: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -1059,6 +1107,7 @@ def main() -> None:
     bias_and_lead(done)
     am_split(done)
     lateral_sources(done)
+    single_stance_lateral(done)
     swing_at_step_frequency(done)
     foot_frame(done)
     plate_check(done)
