@@ -23,6 +23,7 @@ from livezmp.cli import main
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.response import acceleration_response
+from livezmp.model import c3d as c3d_mod
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.c3d import C3dTrial, read_c3d
 from livezmp.model.markers import (
@@ -1716,6 +1717,29 @@ def test_a_rate_that_is_no_number_is_refused_before_ezc3d_reads_it(lab, tmp_path
     (tmp_path / "rate.c3d").write_bytes(bytes(data))
     with pytest.raises(InputError, match=rf"rate\.c3d: {key}:RATE {value:g} is not a rate in Hz \(a finite number"):
         read_c3d(tmp_path / "rate.c3d")
+
+
+def test_a_read_waiting_for_a_cpu_is_not_refused_as_one_ezc3d_loops_on(lab, monkeypatch):
+    """The probe read before each C3D read was timed by the wall clock: at load 17 on 2 CPUs a valid 1.2 MB walk's
+    probe passed its 20 s and the walk was refused as "not a readable C3D file". A probe that waits (here it
+    sleeps 3 s, as a child waiting for a CPU does) with 1 s of CPU time allowed is now read; its CPU time is its
+    limit."""
+    monkeypatch.setattr(c3d_mod, "READ_SECONDS", 1.0)
+    monkeypatch.setattr(c3d_mod, "_PROBE", "import time; time.sleep(3); " + c3d_mod._PROBE)
+    assert read_c3d(lab[0] / "on.c3d").points.shape[0] > 0
+
+
+def test_a_read_that_spends_its_cpu_time_is_refused_in_one_line(lab, monkeypatch):
+    """A read ezc3d loops on (here the probe spins after importing ezc3d) is ended by its CPU cap and refused in
+    one line naming it (the wall clock's limit, ten times as long, is raised here so that a loaded machine does
+    not reach it first)."""
+    monkeypatch.setattr(c3d_mod, "READ_SECONDS", 0.5)
+    monkeypatch.setattr(c3d_mod, "READ_WALL_FACTOR", 60)
+    spin = c3d_mod._PROBE.replace("import ezc3d; ", "import ezc3d; any(iter(int, 1)); ")
+    monkeypatch.setattr(c3d_mod, "_PROBE", spin)
+    with pytest.raises(InputError, match=r"on\.c3d: not a readable C3D file \(ezc3d did not finish reading it in 1 s "
+                       r"of CPU time\)"):
+        read_c3d(lab[0] / "on.c3d")
 
 
 @pytest.mark.parametrize("key", ["CORNERS", "ORIGIN"])

@@ -462,22 +462,25 @@ def _check_rate(p: Path, key: str, kind: int, data: bytes, at: int, order: str) 
             raise InputError(f"{p}: {key} {rate:g} is not a rate in Hz (a finite number >= 0)")
 
 
-READ_SECONDS = 20.0  # a forked trial read gets this long, plus a second per 10 MB of file
+READ_SECONDS = 20.0  # a trial read in the child gets this much CPU time, plus a second per 10 MB of file
+READ_WALL_FACTOR = 10  # and this many times as long in wall time: on a loaded machine the child waits for
+# a CPU (load 17 on 2 CPUs: a 1.2 MB walk's probe passed 20 s of wall time), but a read ezc3d loops on spends CPU
 
 
-# the child caps its own CPU time too (the kernel ends it with SIGXCPU): if this process is killed while
-# the child reads a file ezc3d loops on, nobody is left to stop it
+# the child caps its own CPU time (the kernel ends it with SIGXCPU): the read's limit, which also holds if this
+# process is killed while the child reads a file ezc3d loops on (nobody is then left to stop it)
 _PROBE = ("import resource, sys; n = int(sys.argv[3]); resource.setrlimit(resource.RLIMIT_CPU, (n, n + 1)); "
           "import ezc3d; "
           "ezc3d.c3d(sys.argv[1], extract_forceplat_data=sys.argv[2] == '1')")
 
 
-def _spawned_read(p: Path, plates: bool, seconds: float) -> int | None:
-    """ezc3d's read of ``p`` in a new interpreter: the signal that killed it, 0 if it ran out of time
-    (then killed), None if it ended by itself."""
+def _spawned_read(p: Path, plates: bool, seconds: int) -> int | None:
+    """ezc3d's read of ``p`` in a new interpreter given ``seconds`` of CPU time (its own cap: SIGXCPU past it) and
+    READ_WALL_FACTOR times that in wall time: the signal that ended it, 0 if it ran out of wall time (then
+    killed), None if it ended by itself."""
     try:
-        r = subprocess.run([sys.executable, "-c", _PROBE, str(p), "1" if plates else "0", str(math.ceil(seconds) + 5)],
-                           capture_output=True, timeout=seconds)
+        r = subprocess.run([sys.executable, "-c", _PROBE, str(p), "1" if plates else "0", str(seconds)],
+                           capture_output=True, timeout=READ_WALL_FACTOR * seconds)
     except subprocess.TimeoutExpired:
         return 0
     return -r.returncode if r.returncode < 0 else None
@@ -490,10 +493,13 @@ def _check_ezc3d_survives(p: Path, size: int, plates: bool) -> None:
     a child that merely raises leaves the message to the real read. The child is a new interpreter
     (0.2-0.5 s), not a fork: this process has threads (BLAS's, a live capture's clients), and a fork
     of a threaded process can itself crash in the child."""
-    seconds = READ_SECONDS + size / 10e6
+    seconds = math.ceil(READ_SECONDS + size / 10e6)
     sig = _spawned_read(p, plates, seconds)
+    if sig == signal.SIGXCPU:
+        raise InputError(f"{p}: not a readable C3D file (ezc3d did not finish reading it in {seconds} s of CPU time)")
     if sig == 0:
-        raise InputError(f"{p}: not a readable C3D file (ezc3d did not finish reading it in {seconds:.0f} s)")
+        raise InputError(f"{p}: not a readable C3D file (ezc3d did not finish reading it in "
+                         f"{READ_WALL_FACTOR * seconds} s)")
     if sig is not None:
         raise InputError(f"{p}: not a readable C3D file (ezc3d's reader crashed on it: {signal.Signals(sig).name})")
 
