@@ -124,6 +124,12 @@ def _rows(indices: list[int]) -> slice | np.ndarray:
     return np.array(indices)
 
 
+def _ticks_to_rad(sign: float, offset: float, zero: int, ticks: int) -> float:
+    """A goal of ``ticks`` as the joint's angle (rad): the servo's direction ``sign`` (±1), its Homing Offset and
+    turns ``offset`` (ticks) and the tick at 0 rad ``zero``."""
+    return sign * (ticks - offset - zero) / TICKS_PER_RAD
+
+
 def _goal_position_error(table: memoryview, value: int) -> int:
     """The error number of a Goal Position write of ``value`` (ticks) to a servo's control ``table`` (0: taken):
     data range while its bus watchdog has tripped (goals are read-only then), data limit beyond its position
@@ -135,6 +141,26 @@ def _goal_position_error(table: memoryview, value: int) -> int:
         if not lowest <= value <= highest:
             return ErrorCode.DATA_LIMIT
     return ErrorCode.NONE
+
+
+# Return Delay Time, Status Return Level, Hardware Error Status: what a Fast Sync Read's reply takes from each servo
+# beside its data
+_REPLY_REGISTERS = np.array([9, 68, 70])
+
+
+class _FastRead:
+    """A Fast Sync Read every servo of which hears the host: their table rows, the reply's layout, and what the
+    servos' `_REPLY_REGISTERS` held at the last read (their bytes) and gave: None (a servo is silent) or the
+    segments' error bytes and the reply's delay (s). A loop sends the same read every cycle and those registers
+    seldom change: the answer is worked out again only when they did."""
+
+    __slots__ = ("rows", "status", "registers", "answer")
+
+    def __init__(self, rows: slice | np.ndarray, status: FastStatus) -> None:
+        self.rows = rows
+        self.status = status
+        self.registers = b""  # none read yet: no servo has no registers
+        self.answer: tuple[np.ndarray, float] | None = None
 
 
 @dataclass
@@ -228,8 +254,8 @@ class DynamixelChain(PtyDevice):
         self._by_id: dict[int, _Servo] = {}
         self._hearing_line: int | None = -1
         self._hearing_map: dict[int, _Servo] = {}
-        # (servo ids read, data length, line speed) -> (their rows, the reply's layout), see `_fast_answer`
-        self._fast_layouts: dict[tuple[bytes, int, int | None], tuple[slice | np.ndarray, FastStatus] | None] = {}
+        # (servo ids read, data length, line speed) -> the read's layout (None: not every servo hears), `_fast_answer`
+        self._fast_layouts: dict[tuple[bytes, int, int | None], _FastRead | None] = {}
         self._readdress()
         self._boot = np.full(len(ids), now)
         self._sign = np.ones(len(ids))
@@ -558,18 +584,25 @@ class DynamixelChain(PtyDevice):
             if len(self._fast_layouts) >= 16:  # bounded: a loop asks the same ids every cycle
                 self._fast_layouts.clear()
             servos = [self._hearing(line).get(dxl_id) for dxl_id in ids]
-            self._fast_layouts[key] = None if None in servos else (
+            self._fast_layouts[key] = None if None in servos else _FastRead(
                 _rows([servo.index for servo in servos]), FastStatus(ids, length))
         layout = self._fast_layouts[key]
         if layout is None:
             return None
-        rows, status = layout
-        tables = self._tables[rows]
-        if (tables[:, 68] < 1).any():  # a Status Return Level of 0 keeps that servo silent
+        tables = self._tables[layout.rows]
+        registers = tables.take(_REPLY_REGISTERS, axis=1).tobytes()
+        if registers != layout.registers:  # seldom: the servos' registers are as the last read found them
+            layout.registers = registers
+            if (tables[:, 68] < 1).any():  # a Status Return Level of 0 keeps that servo silent
+                layout.answer = None
+            else:
+                errors = np.where(tables[:, 70] != 0, ALERT, ErrorCode.NONE)  # the alert bit: Hardware Error Status
+                delay = float(tables[:, 9].sum()) * ct.RETURN_DELAY_UNIT  # each servo's Return Delay Time in turn
+                layout.answer = errors, delay
+        if layout.answer is None:
             return None
-        errors = np.where(tables[:, 70] != 0, ALERT, ErrorCode.NONE)  # the alert bit: Hardware Error Status
-        delay = float(tables[:, 9].sum()) * ct.RETURN_DELAY_UNIT  # each servo's Return Delay Time, one after another
-        return [(delay, status.encode(errors, tables[:, address: address + length]))]
+        errors, delay = layout.answer
+        return [(delay, layout.status.encode(errors, tables[:, address: address + length]))]
 
     def _bulk_read(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
         params = packet.params
@@ -641,20 +674,23 @@ class DynamixelChain(PtyDevice):
         general field handling, so that the simulator's time per cycle stays small beside the bus's."""
         rows = np.frombuffer(params, dtype=_GOAL_ROW, offset=4)
         self._advance(now)
-        goals, set_goal = self._goal, self.plant.set_goal  # looked up once, not once a servo
+        # looked up once, not once a servo; the joints' signs and offsets as Python floats (what `item` gives)
+        goals, set_goal, zero = self._goal, self.plant.set_goal, self._zero
+        signs, offsets = self._sign.tolist(), self._offset.tolist()
+        lowest, highest, address, position_modes = _GOAL.lo, _GOAL.hi, _GOAL.address, ct.POSITION_MODES
         for dxl_id, value in zip(rows["id"].tolist(), rows["value"].tolist(), strict=True):
             servo = hearing.get(dxl_id)
             if servo is None:
                 self.stats.unheard += dxl_id in self._by_id
                 continue
             table = servo.table
-            if not _GOAL.lo <= value <= _GOAL.hi or _goal_position_error(table, value):
+            if not lowest <= value <= highest or _goal_position_error(table, value):
                 continue
-            _GOAL_VALUE.pack_into(table, _GOAL.address, value)
+            _GOAL_VALUE.pack_into(table, address, value)
             joint = servo.index
             goals[joint] = value
-            if table[11] in ct.POSITION_MODES:
-                set_goal(joint, self._ticks_to_rad(servo, value))
+            if table[11] in position_modes:
+                set_goal(joint, _ticks_to_rad(signs[joint], offsets[joint], zero, value))
         self._refreshed_at = -math.inf
 
     def _bulk_write(self, packet: Packet, now: float, line: int | None) -> list[tuple[float, bytes]]:
@@ -784,8 +820,8 @@ class DynamixelChain(PtyDevice):
 
     def _ticks_to_rad(self, servo: _Servo, ticks: int) -> float:
         i = servo.index
-        # item(): Python floats, whose arithmetic costs less than numpy scalars' (once per servo per goal write)
-        return self._sign.item(i) * (ticks - self._offset.item(i) - self._zero) / TICKS_PER_RAD
+        # item(): Python floats, whose arithmetic costs less than numpy scalars'
+        return _ticks_to_rad(self._sign.item(i), self._offset.item(i), self._zero, ticks)
 
     def _present_ticks(self, servo: _Servo) -> int:
         i = servo.index

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Iterable
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -134,9 +134,9 @@ class FastStatus:
         return bytes(buffer)
 
 
-@dataclass(frozen=True, slots=True)
-class Packet:
-    """One received packet: parameters are un-stuffed; ``size`` is its length on the wire."""
+class Packet(NamedTuple):
+    """One received packet: parameters are un-stuffed; ``size`` is its length on the wire. (A named tuple: made
+    for each packet a bus carries, 2 µs where a frozen dataclass took 6 on a loaded machine.)"""
 
     id: int
     instruction: int

@@ -153,6 +153,9 @@ def parse_faults(spec: str) -> FaultSpec:
                      fields=frozenset(seen), **values)  # type: ignore[arg-type]
 
 
+_UNHARMED = (False, False, 0.0)  # a reply's fate on a bus without reply faults: delivered whole, on time
+
+
 class FaultInjector:
     """Random draws and timed events for one device, with counters of what was injected.
 
@@ -175,13 +178,20 @@ class FaultInjector:
         self._events = sorted(events)
         self._next = 0
         self._start = 0.0
+        self._next_time = self._event_time()
+        # whether a reply's fate takes a draw: without, every reply of a clean bus is unharmed at once
+        self._harms_replies = bool(self.spec.drop or self.spec.corrupt or self.spec.delay_probability)
 
     def start(self, now: float) -> None:
         """Set the time origin (monotonic s) of the timed events."""
         self._start = now
+        self._next_time = self._event_time()
 
     def next_event_time(self) -> float:
-        """Monotonic time (s) of the next timed event, or inf."""
+        """Monotonic time (s) of the next timed event, or inf (kept: a device's port asks at every wake-up)."""
+        return self._next_time
+
+    def _event_time(self) -> float:
         if self._next < len(self._events):
             return self._start + self._events[self._next].time
         return float("inf")
@@ -199,10 +209,13 @@ class FaultInjector:
                 self.counters.vanishes += 1
             elif event.kind == "busoff":
                 self.counters.bus_offs += 1
+        self._next_time = self._event_time()
         return due
 
     def reply_fate(self) -> tuple[bool, bool, float]:
         """Draw the fate of one reply: (dropped, corrupt, extra delay in s); counts what it draws."""
+        if not self._harms_replies:
+            return _UNHARMED
         spec = self.spec
         if spec.drop and self._rng.random() < spec.drop:
             self.counters.dropped += 1

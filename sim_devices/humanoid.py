@@ -246,7 +246,7 @@ class _GoalShaper:
         # np.mean's own sum and division, without its Python wrapper (the shaper runs every physics step)
         self.lagged += (np.add.reduce(self.recent, axis=0) / len(self.recent) - self.lagged) * self.gain
         off = ~torque_on
-        if off.any():
+        if np.logical_or.reduce(off):  # ndarray.any without its Python wrapper (every step)
             self.recent[:, off] = position[off]
             self.lagged[off] = position[off]
         return self.lagged
@@ -350,7 +350,7 @@ class SimHumanoid:
     def set_goals(self, positions: Array) -> None:
         """Set every joint's goal at once (rad, URDF order), atomically."""
         goals = np.asarray(positions, dtype=float)
-        if goals.shape != self.goal.shape or not np.isfinite(goals).all():
+        if goals.shape != self.goal.shape or not np.logical_and.reduce(np.isfinite(goals)):  # all(), unwrapped
             bad = "shape " + str(goals.shape) if goals.shape != self.goal.shape else \
                 "joint " + self.body.joint_names[int(np.flatnonzero(~np.isfinite(goals))[0])] + " not finite"
             raise InputError(f"SimHumanoid.set_goals: need {len(self.goal)} finite angles (rad), got {bad}")
@@ -458,14 +458,14 @@ class SimHumanoid:
         res = compute_zmp(model, data, q1, v, a, 0.0, FLIGHT_FRACTION, self.gravity)
         push, push_moment = self._push_wrench(t, res.com)
         force, zmp = res.force, res.zmp
-        if push.any():
+        if np.logical_or.reduce(push):  # any(), unwrapped: every step
             force = res.force - push
             # the flight threshold only when pushed: the model's gravity is a copy made each time it is read
             min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
             zmp = zmp_from_wrench(res.com, force, data.dhg.angular - push_moment, 0.0, min_fz)
         pin.updateFramePlacements(model, data)
         soles = foot_soles(self.body, data)
-        touching = [float(soles[s][:, 2].min()) <= self.contact_tolerance for s in ("left", "right")]
+        touching = [float(np.minimum.reduce(soles[s][:, 2])) <= self.contact_tolerance for s in ("left", "right")]
         support = support_label(*touching)
         polygon, vertices = self._polygon(soles, support)
         clamped, margin = None, None
@@ -482,7 +482,8 @@ class SimHumanoid:
         held = [soles[s] for s in ("left", "right") if support in (s, "double")]
         key = np.concatenate(held) if held else np.zeros((0, 3))
         cached = self._polygon_cache
-        if cached is not None and cached[0] == support and np.abs(cached[1] - key).max(initial=0.0) <= 1e-9:
+        if cached is not None and cached[0] == support and \
+                np.maximum.reduce(np.abs(cached[1] - key), axis=None, initial=0.0) <= 1e-9:  # max(), unwrapped
             return cached[2], cached[3]
         bearing = dict(soles)
         if self.edge is not None:

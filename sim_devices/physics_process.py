@@ -208,7 +208,8 @@ def _take_inputs(humanoid: SimHumanoid, a: dict[str, np.ndarray]) -> None:
     humanoid.set_goals(a["goal"].copy())
     on = a["torque"] > 0.5
     switched = on != humanoid.servo.torque_on
-    if switched.any():  # seldom (at open and close): np.flatnonzero's wrapper is not paid every step
+    # seldom (at open and close): np.flatnonzero's wrapper is not paid every step, nor any()'s
+    if np.logical_or.reduce(switched):
         for idx in np.flatnonzero(switched):
             humanoid.set_torque(int(idx), bool(on[idx]))
 

@@ -142,7 +142,7 @@ class ServoPlant:
         np.maximum(driven, lowest, out=driven)
         np.minimum(driven, velocity + dv, out=driven)
         np.maximum(driven, velocity - dv, out=driven)
-        all_on = on.all()
+        all_on = np.logical_and.reduce(on)  # all(), without its Python wrapper
         if all_on:  # every joint driven (a standing humanoid, every step): no coasting terms to compute or mask
             shift = driven * h
             new_velocity = driven

@@ -451,7 +451,7 @@ class LiveLoop:
         self.times["write"].add(t4 - t3)
         self.latency.add(t4 - t0)
         self.counters.commands_sent += 1
-        if self.limiter.offsets.any():
+        if np.logical_or.reduce(self.limiter.offsets):  # any(), without its Python wrapper
             self.counters.corrections_sent += 1
         self.counters.corrections_limited += limited
         if self.recorder is not None and self.corrector is not None:

@@ -102,11 +102,12 @@ class FrameGuard:
         if q.shape != lim.lower.shape:
             return Verdict("corrupted", f"{q.size} positions for {lim.lower.size} joints")
         finite = np.isfinite(q)
-        if not finite.all():
+        # all() and any() as their ufuncs' reductions, without the methods' Python wrappers (every cycle)
+        if not np.logical_and.reduce(finite):
             return Verdict("corrupted", f"joint {lim.names[int(np.argmin(finite))]}: non-finite position")
         tol = cfg.position_tolerance_rad
         out = (q < self._lowest) | (q > self._highest)
-        if out.any():
+        if np.logical_or.reduce(out):
             j = int(np.argmax(out))
             return Verdict("corrupted", f"joint {lim.names[j]}: {q[j]:.3f} rad is beyond its limits "
                                         f"[{lim.lower[j]:.3f}, {lim.upper[j]:.3f}]")
@@ -119,7 +120,7 @@ class FrameGuard:
             step = np.abs(q - self._last_q)
             allowed = self._max_speed * (frame.t - self._last_t) + tol
             fast = step > allowed
-            if fast.any():
+            if np.logical_or.reduce(fast):
                 j = int(np.argmax(fast))
                 return Verdict("corrupted", f"joint {lim.names[j]}: jumped {step[j]:.3f} rad since the last frame")
         self._last_q, self._last_t = q.copy(), frame.t
@@ -172,5 +173,5 @@ class GoalLimiter:
                      self.offsets + self.max_step)
         wanted = follow(command + sent, self.mimics)
         goals = clip(wanted, self.lower, self.upper)
-        limited = bool((sent != want).any() or (goals != wanted).any())
+        limited = bool(np.logical_or.reduce(sent != want) or np.logical_or.reduce(goals != wanted))  # any(), unwrapped
         return goals, limited, sent

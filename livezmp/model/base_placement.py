@@ -49,7 +49,8 @@ class BasePlacer:
 
     def _sole_min_z(self, world_from_base: pin.SE3, side: str, base_from_foot: dict[str, pin.SE3]) -> float:
         m = world_from_base * base_from_foot[side]
-        return float((self.body.feet[side].sole_local @ m.rotation.T + m.translation)[:, 2].min())
+        # min() without its Python wrapper: the loop and the simulator place a base every cycle
+        return float(np.minimum.reduce((self.body.feet[side].sole_local @ m.rotation.T + m.translation)[:, 2]))
 
     def _anchor_flat(self, pose: pin.SE3, side: str, xy: np.ndarray | None = None) -> pin.SE3:
         yaw = float(np.arctan2(pose.rotation[1, 0], pose.rotation[0, 0]))
