@@ -23,7 +23,8 @@ from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
 from livezmp.live.loop import PTY_SEND_PAUSE_S, LiveLoop
 from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, Watchdog, joint_limits
-from livezmp.live.scenarios import smooth_step
+from livezmp.live.scenarios import make_scenario, smooth_step
+from livezmp.model.base_placement import BasePlacer
 from livezmp.model.demo_robot import demo_robot_path, smooth_ramp
 
 RATE = 500.0
@@ -342,15 +343,17 @@ def test_summary_read_errors_agree_with_the_link_block(mini):
 
 
 def test_failed_and_rejected_frames_never_drive_a_command(mini):
-    script = {50: "error", 51: "error", 90: "nan", 120: "jump", 150: "slow", 200: "repeat", 240: "error"}
+    # by read number: read 0 is the one at start-up the corrector measures the robot in (LiveLoop.run), read n cycle
+    # n - 1's
+    script = {51: "error", 52: "error", 91: "nan", 121: "jump", 151: "slow", 201: "repeat", 241: "error"}
     loop, link, _, events = scripted_loop(mini, fault=lambda n, t: script.get(n))
     s = loop.run(duration=0.8)
     # the slow read (30.2 ms) passed 14 deadlines, which were skipped; every other cycle ran
     assert s["cycles"] + s["clock"]["skipped_cycles"] == 0.8 * RATE
     assert s["clock"]["skipped_cycles"] == 14 and s["deadline_misses"] == 1
     assert (s["read_errors"], s["corrupted_frames"], s["stale_frames"]) == (3, 2, 2)
-    assert link.stats.reads == s["cycles"]
-    assert s["commands_sent"] == s["good_frames"] == link.stats.reads - len(script)
+    assert link.stats.reads == s["cycles"] + 1
+    assert s["commands_sent"] == s["good_frames"] == s["cycles"] - len(script)
     assert link.stats.writes == s["commands_sent"]
     assert _writes_follow_good_reads(link)
     # each kind is told once a second at most: the second of each within the run is counted, and told at its end
@@ -442,7 +445,8 @@ def test_link_faults_are_recorded_with_their_loop_times_and_timed_in_the_summary
     gone = (0.3, 0.9)
 
     def fault(n, t):
-        return "error" if n in (20, 21, 22) else "down" if gone[0] <= t - 1000.0 < gone[1] else None
+        # read n is cycle n - 1's (read 0: the start-up read the corrector measures the robot in)
+        return "error" if n in (21, 22, 23) else "down" if gone[0] <= t - 1000.0 < gone[1] else None
 
     path = tmp_path / "run.mcap"
     loop, link, events = _recorded_loop(mini, path, fault, lambda t: t - 1000.0 >= gone[1])
@@ -455,7 +459,7 @@ def test_link_faults_are_recorded_with_their_loop_times_and_timed_in_the_summary
     assert kinds == ["read_error", "link_down", "watchdog", "read_error", "reconnected", "resumed"]
     assert [r["count"] for r in records[::3]] == [1, 2] and records[0]["t"] == pytest.approx(20 * T, abs=T)
     assert records[3]["t"] == pytest.approx(1.04, abs=T)
-    assert records[3]["message"] == "read failed: scripted error at read 22 (2 in the 1.0 s before)"
+    assert records[3]["message"] == "read failed: scripted error at read 23 (2 in the 1.0 s before)"
     by = {r["kind"]: r for r in records[::-1]}
     assert by["link_down"]["t"] == pytest.approx(gone[0], abs=T) and "scripted down" in by["link_down"]["message"]
     assert by["reconnected"]["t"] == pytest.approx(reconnected, abs=T)
@@ -496,6 +500,54 @@ def test_an_outage_under_a_tenth_of_the_run_is_counted_not_failed(mini):
     assert s["link_failed"] is None and s["reconnects"] == 1
 
 
+def _measured(monkeypatch, loop: LiveLoop) -> list[tuple[bool, np.ndarray]]:
+    """(whether the loop's clock had started, the posture q) of each time its corrector measures the robot's own
+    dynamics (`OnlineCorrector.prepare`), filled as ``loop`` runs."""
+    calls = []
+    prepare = OnlineCorrector.prepare
+
+    def spy(self, q):
+        calls.append((loop.clock.cycles > 0, q.copy()))
+        prepare(self, q)
+
+    monkeypatch.setattr(OnlineCorrector, "prepare", spy)
+    return calls
+
+
+def test_the_corrector_measures_the_robot_before_the_clock_starts_and_keeps_it_across_a_resume(mini, monkeypatch):
+    """Its measure (5-8 ms of CPU, which in the first corrected cycle overran a 200 Hz period) is made once, before
+    the clock's first deadline, in the posture of a frame read at start-up; the watchdog's stop and resume (reads
+    failing from 0.3 to 0.5 s) restart the estimator and reset the corrector without measuring again. On main: in
+    the first analysed frame, on the clock, and again after the resume."""
+    stand = make_scenario("stand", mini).goals(0.0)
+    time = SimTime()
+    link = ScriptedLink(time, mini.joint_names, stand, lambda n, t: "error" if 0.3 <= t - 1000.0 < 0.5 else None)
+    loop = LiveLoop(link, mini, LoopConfig(rate_hz=RATE), clock=LoopClock(RATE, now=time.now, sleep=time.advance))
+    calls = _measured(monkeypatch, loop)
+    s = loop.run(duration=1.0)
+    assert s["watchdog_trips"] == s["resumes"] == 1 and s["analysed_frames"] > 0.5 * RATE
+    assert [started for started, _ in calls] == [False]
+    q = calls[0][1]  # the standing posture read, its base placed by its feet as the loop's first sample's
+    assert np.array_equal(q[loop.nb:], stand)
+    assert np.array_equal(q[:loop.nb], BasePlacer(mini).update(stand))
+    assert link.stats.reads == s["cycles"] + 1 and s["link"]["read_errors_before_run"] == 0
+
+
+def test_without_a_frame_at_start_up_the_corrector_measures_in_its_first_analysed_frame(mini, monkeypatch):
+    """The start-up read fails (or its frame is rejected): the corrector measures the robot in its first analysed
+    frame, inside that cycle, as before; the failed read is counted before the run."""
+    stand = make_scenario("stand", mini).goals(0.0)
+    for fate in ("error", "nan"):
+        time = SimTime()
+        link = ScriptedLink(time, mini.joint_names, stand, lambda n, t, fate=fate: fate if n == 0 else None)
+        loop = LiveLoop(link, mini, LoopConfig(rate_hz=RATE), clock=LoopClock(RATE, now=time.now, sleep=time.advance))
+        calls = _measured(monkeypatch, loop)
+        s = loop.run(duration=0.3)
+        assert [started for started, _ in calls] == [True], fate
+        assert s["good_frames"] == s["cycles"] and s["read_errors"] == s["corrupted_frames"] == 0
+        assert s["link"]["read_errors_before_run"] == (fate == "error")
+
+
 def test_watchdog_can_drop_torque_and_then_only_monitors(mini):
     cfg = LoopConfig(rate_hz=RATE, safety=SafetyConfig(drop_torque=True))
     loop, link, _, _ = scripted_loop(mini, fault=lambda n, t: "error" if 0.3 <= t - 1000.0 < 0.5 else None,
@@ -508,7 +560,8 @@ def test_watchdog_can_drop_torque_and_then_only_monitors(mini):
 
 
 def test_hardware_error_latches_a_safe_stop(mini):
-    loop, link, _, events = scripted_loop(mini, fault=lambda n, t: "hw" if n == 100 else None)
+    # read n is cycle n - 1's (read 0: the start-up read the corrector measures the robot in)
+    loop, link, _, events = scripted_loop(mini, fault=lambda n, t: "hw" if n == 101 else None)
     s = loop.run(duration=0.5)
     assert s["hardware_errors"] == {"l_knee": 0x20}
     assert s["halted"] == "hardware error on l_knee"

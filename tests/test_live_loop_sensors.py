@@ -191,7 +191,8 @@ def test_each_result_is_paired_with_the_sensor_reading_of_its_own_sample(mini, t
     assert len(logged) == len(results) == s["cop_vs_zmp"]["readings"] == s["analysed_frames"] > 700
     distances = []
     for m in logged:
-        r, reading = results[m["index"]], sensors.readings[m["index"]]  # sample i is read i (no failed reads)
+        # sample i is read i + 1 (no failed reads; read 0: the start-up read the corrector measures the robot in)
+        r, reading = results[m["index"]], sensors.readings[m["index"] + 1]
         assert m["t"] == r.t
         assert m["cop_sole"]["left"] == {"x": reading.cop["left"][0], "y": reading.cop["left"][1]}
         cop = np.array([m["cop"][k] for k in "xyz"])

@@ -29,7 +29,7 @@ def test_a_slow_trunk_widens_the_margin_and_an_ordinary_one_does_not(heavy_torso
     joints = make_scenario("lean", heavy_torso, hold_s=1.0).goals(0.0)
     q = np.concatenate([BasePlacer(heavy_torso).update(joints), joints])
     corrector = OnlineCorrector(heavy_torso, 0.008, margin_m=0.015)
-    corrector._first_frame(q)
+    corrector.prepare(q)
     assert corrector.limits.margin_m > 0.015 * 1.3, "a trunk 2x slower than a humanoid's keeps a humanoid's margin"
     assert com_height(heavy_torso, q) > 0
 

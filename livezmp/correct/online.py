@@ -267,7 +267,7 @@ class OnlineCorrector:
         self.dt = dt
         self.gain = min(1.0, gain_per_s * dt)
         self.relax = min(1.0, dt / relax_s)
-        # the trunk's limits (rad); the pelvis' (m) follow in the first frame's posture (`_first_frame`)
+        # the trunk's limits (rad); the pelvis' (m) follow in the standing posture (`prepare`)
         self.max_step = np.concatenate([np.full(3, np.radians(self.limits.max_rate_deg_s) * dt), np.zeros(2)])
         self.max_accel_step = np.concatenate([np.full(3, np.radians(max_accel_deg_s2) * dt * dt), np.zeros(2)])
         self.max_rot = np.concatenate([np.radians(np.asarray(self.limits.max_rotation_deg, dtype=float)),
@@ -275,7 +275,7 @@ class OnlineCorrector:
         self.pivot_alpha = min(1.0, dt / pivot_tau_s)
         self._damp = np.diag([1e-6, 1e-6, 1e-4])  # the gain's damping (m², per δ axis), made once
         self.mover = RootMover(body)
-        self.reaction: np.ndarray | None = None  # (2, 5) `reaction_per_accel`, `legs_response` in the first frame
+        self.reaction: np.ndarray | None = None  # (2, 5) `reaction_per_accel`, `legs_response`: `prepare`
         self.legs = np.zeros((2, 2))  # `legs_response`'s S: the CoM's move per m of the pelvis' shift
         self.data = body.model.createData()
         corr = body.correction
@@ -303,11 +303,14 @@ class OnlineCorrector:
         """(2,) m: the pelvis' shift over the feet (world x, y), a view of ``u``."""
         return self.u[3:]
 
-    def _first_frame(self, q: np.ndarray) -> None:
-        """The robot's own dynamics in its first posture ``q`` (base and joints): the ZMP's answer to the trunk's
-        acceleration (`reaction_per_accel`), the margin widened for a trunk slow to answer (`slow_trunk_factor`);
-        for a robot whose trunk is too short a lever (`uses_legs`), the legs' lever and the ZMP's answer to the
-        pelvis' acceleration (`legs_response`) and the pelvis' limits (the trunk's angular ones × `hips_height`)."""
+    def prepare(self, q: np.ndarray) -> None:
+        """Measure the robot's own dynamics in the posture ``q`` (base and joints), once: the ZMP's answer to the
+        trunk's acceleration (`reaction_per_accel`), the margin widened for a trunk slow to answer
+        (`slow_trunk_factor`); for a robot whose trunk is too short a lever (`uses_legs`), the legs' lever and the
+        ZMP's answer to the pelvis' acceleration (`legs_response`) and the pelvis' limits (the trunk's angular ones
+        × `hips_height`). 5-8 ms of CPU for livezmp_mini, more than a 200 Hz cycle: the live loop calls it with the
+        posture read at start-up, before its clock starts; not called, :meth:`update` calls it with its first
+        frame's posture. :meth:`reset` keeps it."""
         joints = q[len(self.body.base_channels):]
         self.reaction = np.hstack([reaction_per_accel(self.body, self.mover, joints), np.zeros((2, 2))])
         pin.framesForwardKinematics(self.body.model, self.data, q)
@@ -353,7 +356,7 @@ class OnlineCorrector:
         as there); whether a limit cut their step."""
         self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         if self.reaction is None:
-            self._first_frame(result.q)
+            self.prepare(result.q)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
         s = np.hstack([self.sensitivity(result.q), self.legs])
         com, polygon = result.com, result.polygon  # the robot's own: before the feet's CoP moves the result

@@ -1,5 +1,7 @@
 """The live balance loop: read → estimate → correct → write, at a fixed rate.
 
+Before the clock starts, one frame is read and the corrector measures the robot's own dynamics in
+that standing posture (`LiveLoop._prepare_corrector`: milliseconds of CPU, more than a fast cycle has).
 Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
 
 1. read one verified frame from the link; the :class:`~livezmp.live.safety.FrameGuard`
@@ -48,7 +50,7 @@ or drop torque); while the link reports its port gone
 ``reconnect_every_s`` instead; a link that says it is unusable
 (:class:`~livezmp.links.base.LinkUnusable`: e.g. it loses too many replies) stops the
 run. The first valid frame after a gap longer than the watchdog time restarts the
-estimator and corrector (a gap must not produce a velocity spike) and ramps back to the
+estimator and resets the corrector (a gap must not produce a velocity spike) and ramps back to the
 command. After dropping torque, or a servo's hardware error, the loop only monitors. On every way out
 — the end, a stop request (Ctrl-C / SIGTERM), an exception — ``safe_stop`` is the
 first call to the link.
@@ -201,23 +203,23 @@ class LiveLoop:
         self._t = 0.0  # loop time of the cycle running (s): where the run ended, once it has
         self._samples = 0  # samples given to the estimators over the whole run
         self._reading: tuple[tuple[bool, bool] | None, FootSensors | None] = (None, None)  # the sample's sensors
+        self.corrector = OnlineCorrector(body, self.correct_every * self.dt, cfg.correction_limits,
+                                         max_accel_deg_s2=size_scaled_accel(body, cfg.trunk_accel_deg_s2),
+                                         margin_m=size_scaled_margin(body) if cfg.margin_m is None
+                                         else cfg.margin_m) if cfg.correct else None
         self._restart_estimation()
 
     # -- state ---------------------------------------------------------------------------------
 
     def _restart_estimation(self) -> None:
-        """A fresh estimator, base placement, corrector and offsets (start, or after a gap)."""
+        """A fresh estimator, base placement and offsets, the corrector reset (start, or after a gap)."""
         self.pipe = Pipeline(self.body, self.pipeline_config, nominal_dt=self.dt)
         self.placer = BasePlacer(self.body)
         self.tilt = GroundTilt()
         self._gravity: np.ndarray | None = None  # gravity in the placer's frame at the sample (from the IMU)
         self.command_placer = BasePlacer(self.body)
-        cfg = self.config
-        every = self.correct_every
-        self.corrector = OnlineCorrector(self.body, every * self.dt, cfg.correction_limits,
-                                         max_accel_deg_s2=size_scaled_accel(self.body, cfg.trunk_accel_deg_s2),
-                                         margin_m=size_scaled_margin(self.body) if cfg.margin_m is None
-                                         else cfg.margin_m) if cfg.correct else None
+        if self.corrector is not None:  # its measure of the robot's own dynamics is kept (`_prepare_corrector`)
+            self.corrector.reset()
         self.limiter.reset()
         self.guard.reset()
         self.offsets = np.zeros(len(self.limits.names))
@@ -288,6 +290,7 @@ class LiveLoop:
         self._last_reconnect = -math.inf
         self._next_fell_check = 0.0
         self._next_status = self.config.status_every_s
+        self._prepare_corrector()
         self._link_errors0 = self.link.stats.read_errors
         tick = self.clock.start()
         if self.recorder is not None:
@@ -314,6 +317,27 @@ class LiveLoop:
             self.link.safe_stop(drop_torque=self.torque_dropped)
             self._flush_events(self._t, end=True)
         return self.summary()
+
+    def _prepare_corrector(self) -> None:
+        """The corrector's measure of the robot's own dynamics (`OnlineCorrector.prepare`: 5-8 ms of CPU for
+        livezmp_mini, which in the first corrected cycle overran a 200 Hz period) made before the clock starts, in
+        the posture of one frame read now (the robot standing as the link opened it), verified as the loop's are,
+        its base placed by its feet as the loop's first sample's is. Kept across the estimator's restarts (a
+        reconnect, the watchdog's resume): a frame after a gap may find the robot anywhere, and measuring again
+        would cost that cycle as much. Without such a frame (the read fails, the guard rejects it) the corrector
+        measures in its first analysed frame, inside that cycle, as it did before; a read error here is counted
+        with those before the run."""
+        if self.corrector is None or self.corrector.reaction is not None:
+            return
+        try:
+            frame = self.link.read()
+        except LinkError:
+            return
+        verdict = self.guard.check(frame, self.clock.now())
+        self.guard.reset()  # the loop's first frame is judged on its own: it may carry this one's time stamp
+        if verdict is None:
+            q = follow(frame.positions, self.body.mimics)
+            self.corrector.prepare(np.concatenate([BasePlacer(self.body).update(q), q]))
 
     def _poll(self, t: float) -> None:
         """Every so often: the simulator's fall flag, the repeated events and the status callback."""
