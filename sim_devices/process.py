@@ -15,6 +15,7 @@ import multiprocessing
 import os
 import sys
 import time
+import warnings
 from dataclasses import dataclass, replace
 
 from livezmp.errors import InputError
@@ -177,7 +178,9 @@ def _sim_child(conn, fell_flag, urdf: str | None, config: str | None, kind: str,
     with realtime_priority(priority, cpus):
         try:
             sim_process_setup()
-            robot = load_robot(urdf, config)
+            with warnings.catch_warnings():  # the command loaded the same robot and told its warnings once
+                warnings.simplefilter("ignore", UserWarning)
+                robot = load_robot(urdf, config)
             sim = start_sim(robot, kind, make_scenario(scenario[0], robot.body, **scenario[1]), faults, physics,
                             **devices)
             conn.send({"url": sim.devices.url, "ports": [p.path for p in sim.devices.ports]})

@@ -62,6 +62,7 @@ def test_sim_serves_a_robot_that_run_balances(tmp_path):
     try:
         hello = json.loads(line_from(sim.stdout, time.monotonic() + 30))
         assert hello["link"] == "dynamixel" and os.path.exists(hello["ports"][0])
+        assert hello["placeholder_inertias"] == []  # livezmp_mini's inertias are real
         body = body_from_urdf(demo_robot_path())
         stand = make_scenario("stand", body).goals(0.0)
         arm = body.joint_names.index("l_sho_pitch")

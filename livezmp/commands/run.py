@@ -216,7 +216,7 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
         raise
     status.done()
     summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked,
-               "cpu_wake_latency_us": wake_latency}
+               "cpu_wake_latency_us": wake_latency, "placeholder_inertias": list(robot.body.placeholder_inertias)}
     if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
         summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:

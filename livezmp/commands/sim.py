@@ -31,7 +31,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         try:
             sim.start_scenario()
             print(json.dumps({"link": args.link, "url": sim.devices.url, "ports": [p.path for p in sim.devices.ports],
-                              "robot": str(robot.urdf), "scenario": scenario.name, "faults": args.fault,
+                              "robot": str(robot.urdf), "placeholder_inertias": list(robot.body.placeholder_inertias),
+                              "scenario": scenario.name, "faults": args.fault,
                               "realtime_priority": args.realtime_priority if refused is None else 0}), flush=True)
             with stop_on_signals(lambda _name: stop.set()):
                 while not stop.wait(0.2):

@@ -76,6 +76,8 @@ class BodyModel:
     base_channels: list[int] = field(default_factory=list)  # q indices of a robot's floating base
     joint_names: list[str] = field(default_factory=list)  # a robot's actuated joints (URDF names)
     mimics: tuple[Mimic, ...] = ()  # joints that follow another (indices into joint_names)
+    # a robot's links whose file's inertias are placeholders (livezmp.model.placeholder_inertia), used as written
+    placeholder_inertias: tuple[str, ...] = ()
     # a skeleton's: the input row's column of each channel (the part of the skeleton the model is built on,
     # livezmp.model.bvh_body.model_part); None: the input's rows are the channels
     input_columns: np.ndarray | None = None

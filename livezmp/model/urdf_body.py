@@ -42,6 +42,7 @@ from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole
 from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
 from livezmp.model.foot_primitives import collision_rounds, round_sole
 from livezmp.model.mimic import Mimic, read_mimics
+from livezmp.model.placeholder_inertia import placeholder_inertias, placeholder_note
 from livezmp.model.robot_config import MAX_SOLE_M, RobotConfig, find_robot_config, load_robot_config
 from livezmp.model.urdf_xml import collision_shapes, numbers
 
@@ -296,9 +297,10 @@ def _collision_boxes(root: ET.Element, path: Path) -> Boxes:
     return boxes
 
 
-def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]], Boxes, ET.Element]:
-    """The URDF's model without a base, its mimics (`read_mimics`), its links' collision boxes and its XML as the
-    model was built from it (links renamed, a free base fixed)."""
+def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, float]], Boxes, ET.Element, list[str]]:
+    """The URDF's model without a base, its mimics (`read_mimics`), its links' collision boxes, its XML as the
+    model was built from it (links renamed, a free base fixed) and the links whose inertias are placeholders
+    (`placeholder_inertias`, told in one warning)."""
     text = read_input_text(path, "URDF")
     try:
         root = ET.fromstring(text)
@@ -325,10 +327,13 @@ def _load_fixed(path: Path) -> tuple[pin.Model, dict[str, tuple[str, float, floa
     size = _robot_size(model)
     _check_deficits({name: w for name, (_, w) in checked.items() if len(w)}, mass, size, path)
     _check_sizes(mass, size, moments, path)
+    placeholders = placeholder_inertias(root, path, mass, size)
+    if placeholders:
+        warnings.warn(placeholder_note(path, placeholders), UserWarning, stacklevel=3)
     for name in unbounded:
         k = model.joints[model.getJointId(name)].idx_q
         model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
-    return model, mimics, _collision_boxes(root, path), root
+    return model, mimics, _collision_boxes(root, path), root, placeholders
 
 
 def _mesh_points(root: ET.Element, fixed: pin.Model, links: set[str], path: Path) -> tuple[Points, str]:
@@ -593,7 +598,7 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     """Build the body model of a URDF robot (see module docstring)."""
     opts = opts or UrdfBodyOptions()
     path = Path(path)
-    fixed, mimics, boxes, root = _load_fixed(path)
+    fixed, mimics, boxes, root, placeholders = _load_fixed(path)
     rounds = collision_rounds(root, path)
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
     model, data, feet_frames, upside_down = _upright_feet(fixed, cfg, path)
@@ -674,4 +679,5 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
         named_points=named, base_channels=list(range(6)),
         joint_names=names[6:],
         mimics=tuple(Mimic(names.index(n) - 6, names.index(p) - 6, m, o) for n, (p, m, o) in mimics.items()),
+        placeholder_inertias=tuple(placeholders),
     )

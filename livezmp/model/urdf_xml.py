@@ -26,17 +26,17 @@ def numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.n
     return vals
 
 
-def collision_shapes(root: ET.Element, path: Path, tags: tuple[str, ...]) -> Iterator[tuple[str, ET.Element, pin.SE3,
-                                                                                              str]]:
-    """Each link's ``<collision>`` shape of one of ``tags`` (``box``, ``cylinder``, ``sphere``), in the file's order:
-    its link's name, the shape's element, its pose in the link's frame (``<origin>``, m and rad) and where it is
-    (file, link, shape) for a message."""
+def collision_shapes(root: ET.Element, path: Path, tags: tuple[str, ...], element: str = "collision"
+                     ) -> Iterator[tuple[str, ET.Element, pin.SE3, str]]:
+    """Each link's ``<collision>`` (or ``element``'s: ``visual``) shape of one of ``tags`` (``box``, ``cylinder``,
+    ``sphere``), in the file's order: its link's name, the shape's element, its pose in the link's frame
+    (``<origin>``, m and rad) and where it is (file, link, shape) for a message."""
     for link in root.findall("link"):
-        for collision in link.findall("collision"):
+        for collision in link.findall(element):
             shape = next((s for s in (collision.find(f"geometry/{tag}") for tag in tags) if s is not None), None)
             if shape is None:
                 continue
-            where = f"{path}: link {link.get('name')!r} <collision> <{shape.tag}>"
+            where = f"{path}: link {link.get('name')!r} <{element}> <{shape.tag}>"
             origin = collision.find("origin")
             xyz, rpy = ((numbers(origin, attr, 3, "0 0 0", f"{where} <origin>") for attr in ("xyz", "rpy"))
                         if origin is not None else (np.zeros(3), np.zeros(3)))

@@ -172,6 +172,7 @@ class TakeStats:
             "output_units": "m",
             "mode": mode,
             "total_mass_kg": round(body.total_mass, 4),
+            "placeholder_inertias": list(body.placeholder_inertias),  # links whose file's inertia is a placeholder
             "support_frames": judged,
             "flight_frames": self.flight,
             "out_of_support_frames": judged - inside,
