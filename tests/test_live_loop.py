@@ -515,7 +515,7 @@ def _measured(monkeypatch, loop: LiveLoop) -> list[tuple[bool, np.ndarray]]:
 
 
 def test_the_corrector_measures_the_robot_before_the_clock_starts_and_keeps_it_across_a_resume(mini, monkeypatch):
-    """Its measure (5-8 ms of CPU, which in the first corrected cycle overran a 200 Hz period) is made once, before
+    """Its measure (4.5-10 ms of CPU, which in the first corrected cycle overran a 200 Hz period) is made once, before
     the clock's first deadline, in the posture of a frame read at start-up; the watchdog's stop and resume (reads
     failing from 0.3 to 0.5 s) restart the estimator and reset the corrector without measuring again. On main: in
     the first analysed frame, on the clock, and again after the resume."""

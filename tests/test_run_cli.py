@@ -207,7 +207,7 @@ def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
 
 def test_run_with_the_mock_link_holds_the_first_posture(tmp_path):
     path = tmp_path / "s.json"
-    # 200 Hz: the corrector measures the robot's own dynamics (5-8 ms) before the loop's clock starts; made in the
+    # 200 Hz: the corrector measures the robot's own dynamics (4.5-10 ms) before the loop's clock starts; made in the
     # first corrected cycle, it overran a 200 Hz period and skipped a deadline (99 cycles) in 2-5 of 8 runs
     assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.5", "--rate", "200",
                  "--quiet", "--summary-json", str(path)]) == 0

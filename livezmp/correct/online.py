@@ -308,7 +308,7 @@ class OnlineCorrector:
         trunk's acceleration (`reaction_per_accel`), the margin widened for a trunk slow to answer
         (`slow_trunk_factor`); for a robot whose trunk is too short a lever (`uses_legs`), the legs' lever and the
         ZMP's answer to the pelvis' acceleration (`legs_response`) and the pelvis' limits (the trunk's angular ones
-        × `hips_height`). 5-8 ms of CPU for livezmp_mini, more than a 200 Hz cycle: the live loop calls it with the
+        × `hips_height`). 4.5-10 ms of CPU for livezmp_mini, more than a 200 Hz cycle: the live loop calls it with the
         posture read at start-up, before its clock starts; not called, :meth:`update` calls it with its first
         frame's posture. :meth:`reset` keeps it."""
         joints = q[len(self.body.base_channels):]

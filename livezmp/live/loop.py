@@ -319,7 +319,7 @@ class LiveLoop:
         return self.summary()
 
     def _prepare_corrector(self) -> None:
-        """The corrector's measure of the robot's own dynamics (`OnlineCorrector.prepare`: 5-8 ms of CPU for
+        """The corrector's measure of the robot's own dynamics (`OnlineCorrector.prepare`: 4.5-10 ms of CPU for
         livezmp_mini, which in the first corrected cycle overran a 200 Hz period) made before the clock starts, in
         the posture of one frame read now (the robot standing as the link opened it), verified as the loop's are,
         its base placed by its feet as the loop's first sample's is. Kept across the estimator's restarts (a
