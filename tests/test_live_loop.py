@@ -535,7 +535,7 @@ def test_the_corrector_measures_the_robot_before_the_clock_starts_and_keeps_it_a
 
 def test_without_a_frame_at_start_up_the_corrector_measures_in_its_first_analysed_frame(mini, monkeypatch):
     """The start-up read fails (or its frame is rejected): the corrector measures the robot in its first analysed
-    frame, inside that cycle, as before; the failed read is counted before the run."""
+    frame, inside that cycle, as before; the failed read is the run's, as a cycle's is."""
     stand = make_scenario("stand", mini).goals(0.0)
     for fate in ("error", "nan"):
         time = SimTime()
@@ -544,8 +544,8 @@ def test_without_a_frame_at_start_up_the_corrector_measures_in_its_first_analyse
         calls = _measured(monkeypatch, loop)
         s = loop.run(duration=0.3)
         assert [started for started, _ in calls] == [True], fate
-        assert s["good_frames"] == s["cycles"] and s["read_errors"] == s["corrupted_frames"] == 0
-        assert s["link"]["read_errors_before_run"] == (fate == "error")
+        assert s["good_frames"] == s["cycles"] and s["corrupted_frames"] == 0
+        assert s["read_errors"] == s["failed_reads"] == (fate == "error") and s["link"]["read_errors_before_run"] == 0
 
 
 def test_watchdog_can_drop_torque_and_then_only_monitors(mini):

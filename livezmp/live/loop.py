@@ -290,8 +290,8 @@ class LiveLoop:
         self._last_reconnect = -math.inf
         self._next_fell_check = 0.0
         self._next_status = self.config.status_every_s
-        self._prepare_corrector()
         self._link_errors0 = self.link.stats.read_errors
+        self._prepare_corrector()
         tick = self.clock.start()
         if self.recorder is not None:
             self.recorder.start()
@@ -325,13 +325,14 @@ class LiveLoop:
         its base placed by its feet as the loop's first sample's is. Kept across the estimator's restarts (a
         reconnect, the watchdog's resume): a frame after a gap may find the robot anywhere, and measuring again
         would cost that cycle as much. Without such a frame (the read fails, the guard rejects it) the corrector
-        measures in its first analysed frame, inside that cycle, as it did before; a read error here is counted
-        with those before the run."""
+        measures in its first analysed frame, inside that cycle, as it did before; a read that fails here is the
+        run's as the cycles' are (``failed_reads``, ``read_errors``)."""
         if self.corrector is None or self.corrector.reaction is not None:
             return
         try:
             frame = self.link.read()
         except LinkError:
+            self.counters.failed_reads += 1
             return
         verdict = self.guard.check(frame, self.clock.now())
         self.guard.reset()  # the loop's first frame is judged on its own: it may carry this one's time stamp
@@ -680,8 +681,8 @@ class LiveLoop:
     def summary(self) -> dict:
         """Counters, timing and rates of the run (JSON-ready; times in ms). ``read_errors``:
         what the link counted during the run, in its own unit (lost or rejected replies
-        or messages: what a simulated device injects); ``failed_reads``: cycles whose read
-        failed; ``stale_frames``/``corrupted_frames``: frames the guard rejected;
+        or messages: what a simulated device injects); ``failed_reads``: reads that failed (the
+        cycles', and the corrector's at start-up); ``stale_frames``/``corrupted_frames``: frames the guard rejected;
         ``cycles``: cycles run (``clock.skipped_cycles`` were passed over)."""
         c = self.counters
         clock = self.clock.stats()
