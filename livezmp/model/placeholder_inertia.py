@@ -13,10 +13,11 @@ inertia whose RMS radius is more than `PLACEHOLDER_FACTOR` times that reach, and
 carries the same placeholder (THORMANG3's pelvis and chest: 1 kg m^2 is within what their reach allows, but it is
 their grippers' value).
 
-Chosen on the robots on hand (the 62 URDFs of /work/extra_robots rounds 1-9, the OP3, livezmp_mini): THORMANG3 (38
-links) and simple_humanoid (28: 1 kg m^2 on links of 0.4 to 27 kg) are told; the largest ratio among the others'
-links that matter is 3.3 (DRACO 3's gripper fingers, 0.01 kg m^2 on 25 g), then 3.2 (Bolt's base, iCub 3's wrists),
-2.9 (Unitree G1's 12-DOF ankles): values a CAD export or a simulation's stabiliser may give, not told.
+Chosen on the robots on hand (the 64 URDFs of /work/extra_robots, rounds 1-9 and meshed originals, the OP3,
+livezmp_mini): THORMANG3 (38 links) and simple_humanoid (30: 1 kg m^2 on links of 0.4 to 27 kg) are told; the
+largest ratio among the others' links that matter is 3.3 (DRACO 3's gripper fingers, 0.01 kg m^2 on 25 g), then 3.2
+(Bolt's base, iCub 3's wrists), 2.9 (Unitree G1's 12-DOF ankles): values a CAD export or a simulation's stabiliser
+may give, not told.
 """
 
 from __future__ import annotations
