@@ -104,17 +104,36 @@ def read_input_pieces(path: Path, block: int = 1 << 20, what: str = "file") -> I
 
 
 def check_output_path(path: str | Path | None, option: str) -> None:
-    """Refuse an output whose directory does not exist or which is a directory (before work starts)."""
+    """Refuse an output whose directory does not exist, which is a directory, or which exists and is not a
+    regular file (before work starts): a result is written beside it and renamed over it (atomically), which
+    would replace a device such as /dev/null, or a FIFO, with a plain file."""
     if path is None:
         return
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
     if p.is_dir():
         raise InputError(f"{option} {p}: is a directory; give a file name")
+    if p.exists() and not p.is_file():
+        raise InputError(f"{option} {p}: not a regular file (a device, FIFO or socket); give a file name")
     if not parent.is_dir():
         raise InputError(f"{option} {p}: directory {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise InputError(f"{option} {p}: directory {parent} is not writable")
+
+
+def check_output_paths(*outputs: tuple[str | Path | None, str]) -> None:
+    """Each ``(path, option)`` output checked by :func:`check_output_path`, and no two options naming one file
+    (the same path, or one reached through a link): the one written last would replace the other, e.g. a run's
+    summary written over its recording."""
+    seen: dict[str, str] = {}
+    for path, option in outputs:
+        check_output_path(path, option)
+        if path is None:
+            continue
+        key = os.path.realpath(path)
+        if key in seen:
+            raise InputError(f"{option} {path}: the same file as {seen[key]}; give each output a file of its own")
+        seen[key] = option
 
 
 def check_output_dir(path: str | Path, option: str) -> None:

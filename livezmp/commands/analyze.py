@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rich.progress import Progress
 
-from livezmp.checks import check_figure_path, check_output_path
+from livezmp.checks import check_figure_path, check_output_paths
 from livezmp.commands.common import load_from_args, take_options
 from livezmp.jsonfile import write_json
 from livezmp.offline.report import write_zmp_csv
@@ -62,8 +62,7 @@ def _give_or_take(cv: dict) -> str:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    for path, option in ((args.out, "--out"), (args.summary_json, "--summary-json")):
-        check_output_path(path, option)
+    check_output_paths((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot"))
     check_figure_path(args.plot, "--plot")
     options = take_options(args)
     if options.streams(args.motion):

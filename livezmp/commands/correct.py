@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from livezmp.checks import check_output_path
+from livezmp.checks import check_output_paths
 from livezmp.commands.common import limits_from_args, load_from_args, take_options
 from livezmp.errors import InputError
 from livezmp.jsonfile import write_json
@@ -14,8 +14,7 @@ from livezmp.offline.take import correct_c3d_take, correct_loaded
 def cmd_correct(args: argparse.Namespace) -> int:
     if args.motion is None:
         raise InputError("correct: give a motion file (.bvh, or .csv with --robot)")
-    check_output_path(args.output, "-o")
-    check_output_path(args.report, "--report")
+    check_output_paths((args.output, "-o"), (args.report, "--report"))
     c3d_in, c3d_out = (str(p).lower().endswith(".c3d") for p in (args.motion, args.output))
     if c3d_in:
         if not (c3d_out or str(args.output).lower().endswith(".bvh")):

@@ -4,6 +4,7 @@ re-run of a recorded session, and the repair of a recording cut short by a crash
 from __future__ import annotations
 
 import argparse
+import sys
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -12,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
-from livezmp.checks import check_number
+from livezmp.checks import check_number, check_output_paths
 from livezmp.commands.common import monitor_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
@@ -33,7 +34,7 @@ from livezmp.monitor.tui import TerminalView
 from livezmp.offline.calibrate import Subject, load_subject
 from livezmp.recording.reader import damaged_as_input_error, iter_messages
 from livezmp.recording.recover import recover
-from livezmp.recording.writer import Recorder
+from livezmp.recording.writer import Recorder, stopped_note
 from livezmp.sources.factory import SourceOptions, open_source
 from livezmp.sources.file_replay import FileReplaySource
 from livezmp.sources.interface import Source
@@ -133,12 +134,21 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
         if dashboard:
             dashboard.stop()
     _print_summary(summary)
+    if recorder and recorder.error:
+        print(f"livezmp: recording {args.record} failed ({recorder.error}); {recorder.unwritten} messages not "
+              f"written{stopped_note(args.record)}", file=sys.stderr, flush=True)
     if getattr(args, "summary_json", None):
         write_json(monitor.summary_json(), args.summary_json)
     return summary
 
 
 MAX_WINDOW_S = 10.0  # s: the estimator's window and lag (its memory grows with the window)
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """--record and --summary-json before the source opens: their directories, neither a device, not one file
+    (the summary, written last, would replace the session's recording)."""
+    check_output_paths((args.record, "--record"), (args.summary_json, "--summary-json"))
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
@@ -148,6 +158,7 @@ def cmd_monitor(args: argparse.Namespace) -> int:
         raise InputError(f"--frames must be a positive number of frames, got {args.frames}")
     check_number(args.window_s, "--window-s (s)", 0.0, MAX_WINDOW_S, lo_open=True)
     check_number(args.lag_s, "--lag-s (s)", 0.0, MAX_WINDOW_S)
+    check_outputs(args)
     # set before the source and the dashboard start their threads: they inherit the policy
     with realtime_priority(args.realtime_priority) as refused:
         if refused not in (None, "off"):
@@ -210,6 +221,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    check_outputs(args)
     source = McapReplaySource(args.recording, args.speed)
     s = {"mode": "full", "ground_z": None, "alarm_after": 0.2, "correct": False, **source.recording.session}
     # sessions recorded before the per-rate defaults (issue 12) carry no cutoff: they ran at 6 Hz

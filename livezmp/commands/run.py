@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import FRAME_PERIOD_RANGE, check_output_path
+from livezmp.checks import FRAME_PERIOD_RANGE, check_output_paths
 from livezmp.commands.common import stop_on_signals
 from livezmp.commands.startup import Interrupted, Startup, closing_link
 from livezmp.errors import InputError
@@ -46,6 +46,7 @@ from livezmp.live.realtime import (
 from livezmp.live.recorder import LoopRecorder
 from livezmp.live.scenarios import make_scenario
 from livezmp.model.robot import Robot, load_robot
+from livezmp.recording.writer import stopped_note
 
 # While recording, the recording's writer thread shares the GIL with the loop. It writes while the loop sleeps
 # (LoopRecorder.idle), but closing a chunk (about 1 ms of Python every 0.5 s) can run past the loop's wake-up,
@@ -74,12 +75,11 @@ def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Before anything starts: a --record file that exists (it is never overwritten), or an
-    output in a directory that does not exist, is a one-line error."""
+    """Before anything starts: a --record file that exists (it is never overwritten), an output
+    in a directory that does not exist, or both outputs naming one file, is a one-line error."""
     if args.record and Path(args.record).exists():
         raise InputError(f"{args.record}: already exists; record to a new file")
-    check_output_path(args.record, "--record")
-    check_output_path(getattr(args, "summary_json", None), "--summary-json")
+    check_output_paths((args.record, "--record"), (getattr(args, "summary_json", None), "--summary-json"))
 
 
 def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, source: str) -> LoopRecorder:
@@ -220,10 +220,11 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
     if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
         summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:
-        summary["recording"] = recorder.close(summary)
-        if summary["recording"]["dropped_total"] or summary["recording"]["failed"]:
-            status.event(f"recording {args.record}: {summary['recording']['dropped_total']} messages dropped "
-                         f"(queue full), {summary['recording']['failed']} failed ({summary['recording']['error']})")
+        summary["recording"] = rec = recorder.close(summary)
+        if rec["dropped_total"] or rec["failed"]:
+            status.event(f"recording {args.record}: {rec['dropped_total']} messages dropped (queue full), "
+                         f"{rec['failed']} failed ({rec['error']})" + (stopped_note(args.record)
+                                                                     if rec["file_error"] else ""))
     return summary
 
 

@@ -137,6 +137,7 @@ class Monitor:
                           "window_s": est.window_s, "lag_s": est.lag_s, "cutoff_hz": est.cutoff_hz,
                           "kalman_corner_hz": est.kalman_corner_hz, "rate_hz": est.rate_hz},
             "cop_vs_zmp": self.cop_vs_zmp.summary() if self.cop_vs_zmp.readings else None,
+            "recording": self.recorder.state() if self.recorder else None,
             **(self.source.details() if hasattr(self.source, "details") else {}),  # e.g. a marker stream's gaps
         }
 

@@ -3,7 +3,10 @@
 Crash safety: chunks (zstd, CRC of each chunk's data) are closed and handed to the
 kernel at least every ``chunk_seconds`` (0.5 s), so a killed monitor loses at most
 that much. Such a file has no summary; :func:`livezmp.recording.recover.recover` copies
-every intact record into a complete file.
+every intact record into a complete file. A file that can no longer be written (a full
+disk, a file size limit, an I/O error) stops the recording, not the session: the first
+error is kept (:attr:`Recorder.error`), later messages are counted as not written, and
+what reached the file before stays there for ``recover``.
 
 A real-time thread hands its messages to a :class:`BackgroundWriter`, which encodes and
 writes them in a thread of its own from a bounded queue, and counts what a full queue
@@ -12,6 +15,7 @@ turned away.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import threading
@@ -32,6 +36,12 @@ CHUNK_SECONDS = 0.5
 IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wakes (a message takes < 0.1 ms)
 CHUNK_BYTES = 1 << 20
 SCENE_HZ = 60.0  # Foxglove scene messages a second at most: a display's rate (/result keeps every frame)
+
+def stopped_note(path: str | Path) -> str:
+    """What a recording whose file failed (:attr:`Recorder.error`) still holds, and how to read it."""
+    return (f"; the file stopped there, keeping what was written before: `livezmp recover {path} -o FIXED.mcap` "
+            "makes it a complete file")
+
 
 class Recorder:
     """Writes one session to ``path`` (see the module docstring). ``session`` holds the
@@ -56,30 +66,59 @@ class Recorder:
         except OSError as e:
             raise InputError(f"{self.path}: cannot record: {e.strerror}") from None
         self.chunk_seconds = chunk_seconds
-        self.writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD, enable_crcs=True)
-        self.writer.start(profile=PROFILE, library="livezmp")
-        now = time.time_ns()
-        for name, text in body_spec.files.items():
-            self.writer.add_attachment(now, now, BODY_PREFIX + name, "text/plain", text.encode())
-        self.writer.add_metadata("livezmp.body", {"kind": body_spec.kind, "options": json.dumps(body_spec.options)})
-        self.writer.add_metadata("livezmp.session", {k: json.dumps(v) for k, v in
-                                                     {**session, "channel_names": channel_names}.items()})
-        self.channels = {}
-        for topic, (name, schema) in {**SCHEMAS, **(extra_schemas or {})}.items():
-            sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
-            self.channels[topic] = self.writer.register_channel(topic, "json", sid)
-        self.scene_channels = foxglove.register(self.writer) if scene else {}
-        self.counts = dict.fromkeys(self.channels, 0) | dict.fromkeys(self.scene_channels, 0)
-        self.writer.flush()  # header, body and session on disk before the first frame
+        try:  # the file's start: a disk that cannot take it refuses the recording before the session
+            self.writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD, enable_crcs=True)
+            self.writer.start(profile=PROFILE, library="livezmp")
+            now = time.time_ns()
+            for name, text in body_spec.files.items():
+                self.writer.add_attachment(now, now, BODY_PREFIX + name, "text/plain", text.encode())
+            self.writer.add_metadata("livezmp.body", {"kind": body_spec.kind, "options": json.dumps(body_spec.options)})
+            self.writer.add_metadata("livezmp.session", {k: json.dumps(v) for k, v in
+                                                         {**session, "channel_names": channel_names}.items()})
+            self.channels = {}
+            for topic, (name, schema) in {**SCHEMAS, **(extra_schemas or {})}.items():
+                sid = self.writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
+                self.channels[topic] = self.writer.register_channel(topic, "json", sid)
+            self.scene_channels = foxglove.register(self.writer) if scene else {}
+            self.counts = dict.fromkeys(self.channels, 0) | dict.fromkeys(self.scene_channels, 0)
+            self.writer.flush()  # header, body and session on disk before the first frame
+        except OSError as e:
+            with contextlib.suppress(OSError):  # what it still buffers cannot be written either
+                self._file.close()
+            raise InputError(f"{self.path}: cannot record: {e.strerror or e}") from None
         self._last_flush = time.monotonic()
         self._closed = False
+        self.error: str | None = None  # the file's first write error; nothing is written after it
+        self.unwritten = 0  # messages not written because of it
+
+    def _failed(self, e: OSError) -> None:
+        """The file cannot take more (disk full, size limit, I/O error): stop writing to it. The MCAP writer's
+        chunk in progress stays in memory unwritten, so carrying on would grow it without bound."""
+        self.error = self.error or f"{type(e).__name__}: {e}"
+
+    def _usable(self) -> bool:
+        if self.error is None:
+            return True
+        self.unwritten += 1
+        return False
+
+    def state(self) -> dict:
+        """Messages written per topic, those not written since the file failed, and its error (None: none)."""
+        return {"path": str(self.path), "written": dict(self.counts), "unwritten": self.unwritten,
+                "file_error": self.error}
 
     def write(self, topic: str, message: dict, log_time_ns: int | None = None) -> None:
         """Add one message (JSON-able) on ``topic``, logged at ``log_time_ns`` (Unix ns;
         default: the current wall time)."""
+        if not self._usable():
+            return
         now = time.time_ns() if log_time_ns is None else log_time_ns
-        self.writer.add_message(self.channels[topic], now, json.dumps(message, separators=(",", ":")).encode(), now,
-                                sequence=self.counts[topic])
+        data = json.dumps(message, separators=(",", ":")).encode()
+        try:
+            self.writer.add_message(self.channels[topic], now, data, now, sequence=self.counts[topic])
+        except OSError as e:  # a chunk filled up and could not be written
+            self._failed(e)
+            return
         self.counts[topic] += 1
         self.tick()
 
@@ -96,7 +135,13 @@ class Recorder:
             return
         self._next_scene_ns = now + self.scene_period_ns
         for topic, data in foxglove.scene_messages(r, now, [] if cop is None else [cop]).items():
-            self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
+            if not self._usable():
+                return
+            try:
+                self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
+            except OSError as e:
+                self._failed(e)
+                return
             self.counts[topic] += 1
 
     def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None,
@@ -106,8 +151,11 @@ class Recorder:
     def tick(self) -> None:
         """Close the chunk in progress if it is ``chunk_seconds`` old; call it when idle too."""
         now = time.monotonic()
-        if now - self._last_flush >= self.chunk_seconds:
-            self.writer.flush()
+        if self.error is None and now - self._last_flush >= self.chunk_seconds:
+            try:
+                self.writer.flush()
+            except OSError as e:
+                self._failed(e)
             self._last_flush = now
 
     def close(self, totals: dict | None = None) -> None:
@@ -116,10 +164,17 @@ class Recorder:
         if self._closed:
             return
         self._closed = True
-        if totals:
-            self.writer.add_metadata("livezmp.totals", {k: json.dumps(v) for k, v in totals.items()})
-        self.writer.finish()
-        self._file.close()
+        try:
+            if self.error is None:
+                if totals:
+                    self.writer.add_metadata("livezmp.totals", {k: json.dumps(v) for k, v in totals.items()})
+                self.writer.finish()
+        except OSError as e:
+            self._failed(e)
+        try:
+            self._file.close()  # flushes what the file object still buffers
+        except OSError as e:
+            self._failed(e)
 
 
 class BackgroundWriter:
@@ -192,9 +247,12 @@ class BackgroundWriter:
                 self.error = self.error or f"{topic}: {type(e).__name__}: {e}"
 
     def totals(self) -> dict:
-        """What was written per topic, dropped (full queue) and failed, and the first error."""
-        return {"written": dict(self.recorder.counts), "dropped": dict(self.dropped),
-                "dropped_total": sum(self.dropped.values()), "failed": self.failed, "error": self.error}
+        """What was written per topic, dropped (full queue) and failed (not encoded, or not written once the
+        file failed), the first error, and the file's own (``file_error``: the file stopped there)."""
+        rec = self.recorder
+        return {"written": dict(rec.counts), "dropped": dict(self.dropped),
+                "dropped_total": sum(self.dropped.values()), "failed": self.failed + rec.unwritten,
+                "error": self.error or rec.error, "file_error": rec.error}
 
     def close(self, totals: dict | None = None) -> dict:
         """Write what is queued, stop the thread, finish the file with ``totals`` and this
@@ -203,6 +261,5 @@ class BackgroundWriter:
         self._wake.set()
         self._thread.join()
         self._drain()
-        mine = self.totals()
-        self.recorder.close({**(totals or {}), "recording": mine})
-        return mine
+        self.recorder.close({**(totals or {}), "recording": self.totals()})
+        return self.totals()  # again: finishing the file may have failed it
