@@ -160,6 +160,7 @@ sys.exit(cli.main(sys.argv[3:]))
     ("SIGTERM", "import", "run", "loading livezmp", "no link was opened"),
     ("SIGTERM", "sim", "demo", "starting the simulator", "no link was opened"),
     ("SIGINT", "loop", "demo", "preparing the loop", "the link, open (torque on, holding), was sent its stop"),
+    ("SIGHUP", "open", "run", "opening the link", "the link, being opened, was sent its stop commands and closed"),
 ])
 def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, where, command, stage, link):
     """SIGINT / SIGTERM before the loop's first cycle: the link (if opened, or being opened) gets the stop
@@ -188,6 +189,31 @@ def test_a_signal_during_start_up_stops_it_safely_with_a_summary(tmp_path, sig, 
         assert s["recording"]["path"] == str(rec) and open_recording(rec).counts["/input"] == 0
     else:
         assert s["recording"] is None and not rec.exists()
+
+
+@pytest.mark.parametrize("nohup", [False, True])
+def test_sighup_stops_a_running_loop_as_sigterm_does_unless_it_is_ignored(tmp_path, nohup):
+    """The terminal or SSH session closing (SIGHUP) stops the loop through its safe stop, its summary and recording
+    written (main: the process died where it stood, exit -1, no summary, the recording unfinished); started under
+    nohup (SIGHUP ignored), the run goes on to its end."""
+    summary, rec = tmp_path / "s.json", tmp_path / "r.mcap"
+    ignore = (lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN)) if nohup else None
+    proc = subprocess.Popen([sys.executable, "-m", "livezmp", "run", "--link", "mock:",
+                             "--robot", str(demo_robot_path()), "--duration", "4" if nohup else "0",
+                             "--realtime-priority", "0",
+                             "--summary-json", str(summary), "--record", str(rec)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=ignore,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        line_from(proc.stderr, time.monotonic() + 60, lambda line: line.startswith("t "))  # the loop runs
+    finally:
+        rc, _, err = stop(proc, signal.SIGHUP, timeout=60)
+    assert rc == 0 and "Traceback" not in err, err
+    s = json.loads(summary.read_text())
+    assert s["stopped_by"] == ("duration" if nohup else "SIGHUP") and s["cycles"] > 0
+    from livezmp.recording.reader import open_recording
+
+    assert open_recording(rec).counts["/input"] > 0  # finished: readable as a whole
 
 
 def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 from livezmp.balance.pipeline import PipelineConfig
 from livezmp.checks import check_number
+from livezmp.commands.startup import handling_stop_signals
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import default_cutoff
@@ -91,12 +92,7 @@ def monitor_config(args: argparse.Namespace, loaded: LoadedMotion, from_file: bo
 
 @contextlib.contextmanager
 def stop_on_signals(stop: Callable[[str], None]):
-    """Ctrl-C and SIGTERM call ``stop(signal name)``: the loop ends its cycle or frame and
-    stops cleanly; the previous handlers come back on exit."""
-    handler = lambda signum, _frame: stop(signal.Signals(signum).name)  # noqa: E731
-    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    """Ctrl-C, SIGTERM and SIGHUP (:func:`~livezmp.commands.startup.handling_stop_signals`) call ``stop(signal name)``:
+    the loop ends its cycle or frame and stops cleanly; the previous handlers come back on exit."""
+    with handling_stop_signals(lambda signum, _frame: stop(signal.Signals(signum).name)):
         yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)

@@ -1,4 +1,4 @@
-"""SIGINT and SIGTERM during ``livezmp run`` / ``demo``'s start-up, told truthfully.
+"""SIGINT, SIGTERM and SIGHUP during ``livezmp run`` / ``demo``'s start-up, told truthfully.
 
 From the command line's parsing (:func:`livezmp.cli.main` installs the handler before it imports the
 command: on a loaded 2-CPU machine importing livezmp's modules took 25 s at load 19) to the loop's first
@@ -11,7 +11,7 @@ start-up where it is: :class:`Interrupted` (a BaseException, as KeyboardInterrup
 takes, so a link opened or being opened gets the shutdown path's stop commands (``close``: hold
 the present posture) and is released, a simulator is stopped and a recording already made is
 finished. The command then writes a summary saying in which stage it stopped and exits with
-128 + the signal's number (130, 143), as a shell reports a process a signal ended.
+128 + the signal's number (130, 143, 129), as a shell reports a process a signal ended.
 
 Once the loop runs, a signal asks it to stop after its cycle (a normal end: exit 0 and
 ``stopped_by``); after it, and once an interruption is on its way, a signal is noted and the
@@ -31,6 +31,23 @@ from livezmp.errors import InputError
 from livezmp.jsonfile import write_json
 from livezmp.links.base import Link
 
+# The signals that stop a command cleanly (the stop commands first, the summary and recording written):
+# Ctrl-C, a service manager's stop, and the terminal or SSH session closing, whose SIGHUP would otherwise end
+# the process where it stands (no stop commands, no summary, the recording unfinished).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def handling_stop_signals(handler: Callable[[int, object], None]) -> Iterator[None]:
+    """``handler`` for the :data:`STOP_SIGNALS` inside the block, the previous handlers back after it. A SIGHUP
+    the process was started ignoring stays ignored: `nohup` asks for a command that outlives its terminal."""
+    old = {s: signal.signal(s, handler) for s in STOP_SIGNALS
+           if not (s == signal.SIGHUP and signal.getsignal(s) is signal.SIG_IGN)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 LOOP_STAGE = "the loop"
 STOPPING_STAGE = "stopping"
 
@@ -83,15 +100,11 @@ class Startup:
 
 @contextlib.contextmanager
 def startup_signals() -> Iterator[Startup]:
-    """Inside the block SIGINT and SIGTERM go to a :class:`Startup`'s handler; the previous handlers come
-    back on exit."""
+    """Inside the block the :data:`STOP_SIGNALS` go to a :class:`Startup`'s handler; the previous handlers
+    come back on exit."""
     startup = Startup()
-    old = {s: signal.signal(s, startup.handle) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with handling_stop_signals(startup.handle):
         yield startup
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 @contextlib.contextmanager
