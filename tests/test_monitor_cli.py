@@ -245,7 +245,7 @@ def test_udp_stream_with_impairments_recorded_and_replayed(tmp_path, capsys):
     summary = json.loads(summary_path.read_text())
     assert summary["frames_in"] == summary["analysed_frames"] == inputs  # the last `lag` frames flushed at exit
     assert summary["dropped"] == {"malformed": 0, "oversized": 0, "duplicate": dup, "late": late, "rejected": 0,
-                                  "overflow": 0, "jumps": 0, "resyncs": 0, "total": dup + late}
+                                  "overflow": 0, "jumps": 0, "total": dup + late}
     assert summary["bad_markers"] == 0  # kept frames with markers left out: not among the dropped
     assert summary["lost"] == c.dropped + late  # numbers skipped: the dropped frames and those that came late
     lat = summary["latency"]["result_after_input"]

@@ -15,7 +15,8 @@ dropped and counted (``jumps``). Dropped late, duplicate, jumped or time-not-inc
 frames are candidates for a new timeline (a restarted sender reuses numbers): when
 :data:`RESYNC_FRAMES` of them arrive in a row (no frame accepted in between), each one
 to ``WINDOW`` sequence numbers after the previous and later by at most ``MAX_GAP_S``,
-the source follows them (``resyncs``): the last one is delivered with ``restart`` set,
+the source follows them (``resyncs``): the last one is delivered with ``restart`` set
+(and no longer counted among the dropped: each frame is delivered or dropped, once),
 so the analysis starts over on the new clock. A single far-ahead packet thus costs
 nothing, a restarted sender is followed after ``RESYNC_FRAMES`` frames, and genuine
 frames arriving in between clear the candidate run, so stray packets cannot take over.
@@ -142,6 +143,7 @@ class Timeline:
             self.drop(verdict, f"{where}: {why}")
             if not self.resync.offer(seq, t):
                 return None
+            setattr(self.stats, verdict, getattr(self.stats, verdict) - 1)  # delivered after all: not dropped
             self.stats.resyncs += 1
             self.errors.report("resync", f"{where}: following a new timeline at seq {seq}, t {t:g} s after "
                                          f"{RESYNC_FRAMES} consistent frames")
