@@ -19,6 +19,7 @@ import warnings
 from importlib.metadata import PackageNotFoundError, version
 from typing import NoReturn
 
+from livezmp.commands.console import outliving_console
 from livezmp.commands.startup import Interrupted, finish_interrupted, startup_signals
 from livezmp.correct.limits import CorrectionLimits
 from livezmp.errors import InputError
@@ -35,6 +36,8 @@ SIM_LINKS = ("dynamixel", "can", "fw")
 BSP_NAMES = ("auto", "adult", "child")  # livezmp.model.anthropometry.BSP_CHOICES
 DEFAULT_DASHBOARD = "127.0.0.1:8765"
 LOOP_COMMANDS = ("livezmp.commands.run", "livezmp.commands.demo")  # whose start-up signals are told
+# commands that carry on when their terminal or output's reader goes (commands.console): a robot's loop, a session
+LIVE_COMMANDS = (*LOOP_COMMANDS, "livezmp.commands.monitor")
 
 
 def package_version() -> str:
@@ -75,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     # run / demo: a signal before their loop runs stops the start-up safely and is told (commands.startup); the
     # handler goes in before the command's modules are imported, which on a loaded machine takes many seconds
     signals = startup_signals() if module in LOOP_COMMANDS else contextlib.nullcontext()
+    console = outliving_console() if module in LIVE_COMMANDS else contextlib.nullcontext()
     try:
-        with signals as args.startup:
+        with console, signals as args.startup:
             try:
                 code = int(getattr(importlib.import_module(module), function)(args) or 0)
             except Interrupted as e:

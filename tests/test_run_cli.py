@@ -216,6 +216,44 @@ def test_sighup_stops_a_running_loop_as_sigterm_does_unless_it_is_ignored(tmp_pa
     assert open_recording(rec).counts["/input"] > 0  # finished: readable as a whole
 
 
+def test_a_run_whose_terminal_closes_stops_safely_with_its_summary(tmp_path):
+    """An SSH session dropping: the run's controlling terminal closes (SIGHUP, then every write to it fails with
+    EIO). The loop stops through its safe stop and writes its summary and recording; main: the status line's write
+    raised in the loop (exit 1, no summary)."""
+    import pty
+
+    summary, rec = tmp_path / "s.json", tmp_path / "r.mcap"
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: on the terminal as its controlling terminal, as a login shell's command is
+        os.execv(sys.executable, [sys.executable, "-m", "livezmp", "run", "--link", "mock:", "--robot",
+                                  str(demo_robot_path()), "--duration", "0", "--realtime-priority", "0",
+                                  "--summary-json", str(summary), "--record", str(rec)])
+    seen, deadline = b"", time.monotonic() + 60
+    while b"running" not in seen and time.monotonic() < deadline:  # its status line: the loop runs
+        if select.select([fd], [], [], 1.0)[0]:
+            seen += os.read(fd, 4096)
+    os.close(fd)  # the terminal goes away
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0, seen.decode(errors="replace")[-500:]
+    s = json.loads(summary.read_text())
+    assert s["stopped_by"] == "SIGHUP" and s["cycles"] > 0
+    from livezmp.recording.reader import open_recording
+
+    assert open_recording(rec).counts["/input"] > 0
+
+
+def test_a_console_whose_reader_is_gone_is_discarded_not_raised():
+    from livezmp.commands.console import OutlivingStream
+
+    read, write = os.pipe()
+    os.close(read)
+    stream = OutlivingStream(os.fdopen(write, "w", buffering=1))
+    assert stream.write("status\n") == 7 and stream.gone  # EPIPE: the rest goes to /dev/null
+    stream.write("summary\n")
+    stream.flush()
+    stream.close()
+
+
 def test_demo_runs_any_humanoid_and_without_corrections_it_falls(tmp_path):
     """A humanoid never seen (other joint names and order, 0.8x the mini's size), no robot config: servo ids
     in joint order on the simulated Dynamixel bus; the scenario finds its limbs; uncorrected, it falls."""
