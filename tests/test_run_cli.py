@@ -366,6 +366,9 @@ def test_a_required_realtime_priority_refused_stops_before_the_link_opens(monkey
     # below the estimator's slowest input it had been refused as "EstimatorConfig.window_s = 0.2 s is 0 samples"
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "0.001"],
      "--rate 0.001: must be a number of Hz in [10, 2000]"),
+    # in range but too slow for the loop's estimator (its 8 Hz cutoff): main named EstimatorConfig, not --rate
+    (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--rate", "13"],
+     "--rate 13: too slow for the live loop's estimator: EstimatorConfig.cutoff_hz"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--watchdog-ms", "-5"], "--watchdog-ms -5.0"),
     (["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--motion", "m.csv", "--scenario", "lean"],
      "give --motion or --scenario, not both"),

@@ -28,6 +28,7 @@ from livezmp.checks import FRAME_PERIOD_RANGE, check_output_paths
 from livezmp.commands.common import stop_on_signals
 from livezmp.commands.startup import Interrupted, Startup, closing_link
 from livezmp.errors import InputError
+from livezmp.estimate.estimator import EstimatorError
 from livezmp.jsonfile import write_json
 from livezmp.links import LinkError, make_link
 from livezmp.links.bus_timing import DEFAULT_ADAPTER, Adapter, bus_summary, parse_adapter
@@ -70,8 +71,13 @@ def loop_config(args: argparse.Namespace, rate: float) -> LoopConfig:
             raise InputError(f"--{name.replace('_', '-')} {value}: must be a positive number")
     safety = replace(SafetyConfig(), watchdog_s=args.watchdog_ms / 1e3, drop_torque=args.on_timeout == "torque-off",
                      max_correction_rad=float(np.radians(args.max_correction_deg)))
-    return LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_hz=args.correct_hz, safety=safety,
-                      contacts=args.contacts)
+    config = LoopConfig(rate_hz=rate, correct=not args.no_correct, correct_hz=args.correct_hz, safety=safety,
+                        contacts=args.contacts)
+    try:  # a rate in range may still be too slow for the loop's estimator settings
+        config.estimator_config(rate)
+    except EstimatorError as e:
+        raise InputError(f"--rate {rate:g}: too slow for the live loop's estimator: {e}") from None
+    return config
 
 
 def check_outputs(args: argparse.Namespace) -> None:

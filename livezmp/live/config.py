@@ -78,3 +78,11 @@ class LoopConfig:
     contacts: str = "auto"
     contact_fraction: float = CONTACT_FRACTION
     imu_tilt: bool = True
+
+    def estimator_config(self, rate_hz: float):
+        """The loop's :class:`~livezmp.estimate.estimator.EstimatorConfig` at ``rate_hz`` (Hz); EstimatorError
+        where the rate is too slow for its window (3 samples) or cutoff (below Nyquist)."""
+        from livezmp.estimate.estimator import EstimatorConfig  # numerics: not for the command line's parsing
+
+        return EstimatorConfig(rate_hz=rate_hz, window_s=self.estimator_window_s, lag_s=self.estimator_lag_s,
+                               cutoff_hz=self.estimator_cutoff_hz)

@@ -76,7 +76,6 @@ from livezmp.balance.foot_sensors import CopLocator, CopVsZmp, contact_force, se
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.correct.online import OnlineCorrector, size_scaled_accel, size_scaled_margin
 from livezmp.errors import InputError
-from livezmp.estimate.estimator import EstimatorConfig
 from livezmp.estimate.ground_tilt import GroundTilt
 from livezmp.histogram import TimingHistogram
 from livezmp.links.base import FootSensors, Link, LinkError, LinkFrame, LinkReadError, LinkUnusable
@@ -180,9 +179,8 @@ class LiveLoop:
         self.limits = joint_limits(body)
         self.guard = FrameGuard(self.limits, cfg.safety)
         self.limiter = GoalLimiter(self.limits, cfg.safety, self.dt, body.mimics)
-        est = EstimatorConfig(rate_hz=1.0 / self.dt, window_s=cfg.estimator_window_s, lag_s=cfg.estimator_lag_s,
-                              cutoff_hz=cfg.estimator_cutoff_hz)
-        self.pipeline_config = replace(default_config(body, 1.0 / self.dt), estimator=est)
+        self.pipeline_config = replace(default_config(body, 1.0 / self.dt),
+                                       estimator=cfg.estimator_config(1.0 / self.dt))
         self.counters = LoopCounters()
         self.times = {s: TimingHistogram() for s in STAGES}
         self.latency = TimingHistogram()
