@@ -206,3 +206,25 @@ def test_a_motor_that_stops_answering_fails_the_read_and_bad_goals_send_nothing(
     with pytest.raises(LinkReadError, match=r"no state from 1 motor\(s\) \(j3\)"):
         link.read()
     assert link.stats.read_errors == 1
+
+
+def test_a_socketcand_daemon_that_is_not_there_is_told_within_a_second():
+    """python-can retries a refused connection for 10 s in a busy loop: the link's open (and each reconnection
+    of a running loop to a daemon that had gone: it froze the loop that long) took 10 s on main."""
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    config = load_robot(None, None).config
+    for url in (f"can:socketcand:can0?protocol=mit&host=127.0.0.1&port={port}",
+                f"can:socketcand:can0?host=127.0.0.1&port={port}"):
+        link = make_link(url, list(config.servos), config)
+        start = time.monotonic()
+        with pytest.raises(LinkError, match="refused"):
+            link.open()
+        assert time.monotonic() - start < 3.0
+
+
+def test_a_link_without_buses_at_the_end_has_no_bus_summary():
+    """A run whose MIT-mode buses were gone at its end (the reconnection failed): main's bus_summary raised
+    ValueError (max of nothing) after the loop, before the recording was finished and the summary written."""
+    assert bus_summary([], "state", 100.0) is None

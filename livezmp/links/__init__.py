@@ -182,6 +182,7 @@ def _can(url: str, target: str, names: list[str], config: RobotConfig, opts: dic
 def _can_mit(url: str, target: str, names: list[str], config: RobotConfig, opts: dict, extra: dict) -> Link:
     import can
 
+    from livezmp.links.can import open_can_bus
     from livezmp.links.can_mit import MitCanLink
     from livezmp.links.mit_protocol import MINI_CHEETAH
 
@@ -204,7 +205,7 @@ def _can_mit(url: str, target: str, names: list[str], config: RobotConfig, opts:
     bus_options = {k: _bus_option(v) for k, v in extra.items()}
 
     def open_bus(channel: str) -> can.BusABC:
-        return can.Bus(interface=interface, channel=channel, bitrate=bitrate, **bus_options)
+        return open_can_bus(interface, channel, bitrate=bitrate, **bus_options)
 
     return MitCanLink(url, names, servos, buses, open_bus, bitrate=bitrate, timeout=opts["timeout"], **gains)
 

@@ -121,11 +121,14 @@ class BusCeiling:
         return 1.0 / self.cycle_s
 
 
-def bus_summary(ceilings: list[BusCeiling], read: str, achieved_hz: float) -> dict:
+def bus_summary(ceilings: list[BusCeiling], read: str, achieved_hz: float) -> dict | None:
     """The summary's ``bus`` block for buses read and written in parallel (the slowest sets the
     ceiling). ``utilisation``: achieved rate / ceiling; ``wire_busy``: share of time the
     busiest wire carries bytes. Times in ms, rates in Hz. On a CAN bus ``bytes_per_cycle`` is the
-    frames' data and ``bits_per_cycle`` what they hold the wire for (stuff bits included)."""
+    frames' data and ``bits_per_cycle`` what they hold the wire for (stuff bits included). None without
+    buses: a link whose buses were gone at the run's end (its reconnection failed) has none to describe."""
+    if not ceilings:
+        return None
     slowest = max(ceilings, key=lambda c: c.cycle_s)
     wire_busy = max(achieved_hz * c.wire_s for c in ceilings)
     return {

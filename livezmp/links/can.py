@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import logging
 import select
+import socket
+import time
 from collections import deque
 from collections.abc import Sequence
 
@@ -68,6 +70,33 @@ class _NodeTransport(fp.CanTransport):
         return out
 
 
+# A socketcand daemon greets a client at once ("< hi >"); python-can, when the connection is refused, retries it
+# for 10 s in a busy loop with a warning a try, which froze the live loop for 10 s at each attempt to reconnect
+# to a daemon that had gone (and a CPU with it). A daemon that has not greeted within this is not there.
+SOCKETCAND_GREETING_S = 1.0
+SOCKETCAND_GREETING = b"< hi >"
+
+
+def open_can_bus(interface: str, channel: str, **options) -> can.BusABC:
+    """python-can's bus ``interface``:``channel`` with its ``options``; a socketcand daemon is first asked for its
+    greeting (OSError within SOCKETCAND_GREETING_S when it does not give it)."""
+    if interface == "socketcand":
+        _check_socketcand(str(options.get("host")), int(options.get("port", 0)))
+    return can.Bus(interface=interface, channel=channel, **options)
+
+
+def _check_socketcand(host: str, port: int) -> None:
+    deadline = time.monotonic() + SOCKETCAND_GREETING_S
+    with socket.create_connection((host, port), timeout=SOCKETCAND_GREETING_S) as s:
+        heard = b""
+        while not heard.startswith(SOCKETCAND_GREETING):
+            s.settimeout(max(1e-3, deadline - time.monotonic()))
+            data = s.recv(len(SOCKETCAND_GREETING) - len(heard))  # TimeoutError (an OSError) once it is late
+            if not data or not SOCKETCAND_GREETING.startswith(heard + data):
+                raise OSError(f"{host}:{port} is not a socketcand daemon (no {SOCKETCAND_GREETING.decode()!r})")
+            heard += data
+
+
 class CanBoards:
     """The nodes ``nodes`` on one python-can bus (the `Boards` of a CAN `FirmwareLink`); ``tids``: the
     transfer counters, kept by the caller from one connection to the next."""
@@ -79,7 +108,7 @@ class CanBoards:
         # thousand frames a second is most reads (measured: a quarter of the link's time went to writing them)
         logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
         try:
-            self.bus = can.Bus(interface=interface, channel=channel, **bus_options)
+            self.bus = open_can_bus(interface, channel, **bus_options)
         except (can.CanError, ValueError, TypeError, OSError, ImportError) as err:
             raise LinkError(f"{self.name}: cannot open the CAN bus: {err}") from None
         try:
