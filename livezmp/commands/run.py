@@ -213,18 +213,20 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
                 status.event(f"real-time priority {refused}: the loop runs at normal priority")
             locked, wake_latency = memory_locked(), cpu_wake_latency_us()
             summary = loop.run(duration)
-    except BaseException as e:
+        status.done()
+        summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked,
+                   "cpu_wake_latency_us": wake_latency,
+                   "placeholder_inertias": list(robot.body.placeholder_inertias)}
+        if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
+            summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label,
+                                         summary["achieved_hz"])
+    except BaseException as e:  # also in the summary's making: the recording is finished on every way out
         if recorder is not None:
             totals = recorder.close({"stopped_by": str(e) if isinstance(e, Interrupted)
                                      else f"error: {type(e).__name__}: {e}"})
             if startup is not None:
                 startup.recording = totals
         raise
-    status.done()
-    summary = {**summary, "realtime_priority": priority if refused is None else 0, "memory_locked": locked,
-               "cpu_wake_latency_us": wake_latency, "placeholder_inertias": list(robot.body.placeholder_inertias)}
-    if hasattr(link, "bus_ceilings"):  # a serial servo bus: what its wire and adapter allow
-        summary["bus"] = bus_summary(link.bus_ceilings(assumed_adapter(args)), link.read_label, summary["achieved_hz"])
     if recorder is not None:
         summary["recording"] = rec = recorder.close(summary)
         if rec["dropped_total"] or rec["failed"]:
