@@ -145,8 +145,9 @@ def test_a_recording_without_a_cutoff_replays_at_the_old_6_hz(tmp_path, capsys):
     (["monitor", "udp://127.0.0.1:0"], "needs the body it carries"),
     (["monitor", "--alarm-after", "-5"], "--alarm-after must be ≥ 0"),
     (["monitor", "--speed", "0", "--alarm-command", "no-such-command-livezmp"], "command not found"),
-    (["monitor", "--record", "/nonexistent-dir/x.mcap"], "cannot record"),
-    (["monitor", "--record", "."], "already exists; record to a new file"),
+    # checked with the other outputs before the source opens (audit 10)
+    (["monitor", "--record", "/nonexistent-dir/x.mcap"], "--record /nonexistent-dir/x.mcap: directory"),
+    (["monitor", "--record", "."], "--record .: is a directory; give a file name"),
     (["replay", "missing.mcap"], "missing.mcap: no such file"),
     (["recover", "missing.mcap", "-o", "out.mcap"], "missing.mcap: no such file"),
     (["monitor", "--realtime-priority", "100"], "--realtime-priority 100: must be 1-99"),

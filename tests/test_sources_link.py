@@ -65,3 +65,26 @@ def test_monitor_watches_a_robot_through_its_link(kind):
 def test_a_link_source_needs_its_robot():
     with pytest.raises(InputError, match="needs the robot it drives: --robot"):
         open_source("dynamixel:/dev/null", SourceOptions())
+
+
+def test_a_monitored_link_whose_port_goes_is_told_and_counted(capsys):
+    """The device's port gone for 1 s: main told it only on the recording's /device_error (console and summary
+    said "source faults: malformed 1"); now one console line a second, and the summary's own ``disconnected``."""
+    from livezmp.model.urdf_body import body_from_urdf
+
+    body = body_from_urdf(URDF)
+    config = find_robot_config(URDF, "livezmp_mini")
+    plant = ServoPlant(len(body.joint_names), position=bent_knees(body.joint_names))
+    with start_devices("dynamixel", plant, config, joint_names=body.joint_names) as devices:
+        src = open_source(devices.url, SourceOptions(robot=URDF, fps=100.0))
+        mon = Monitor(src, default_config(body, 100.0))
+        port = devices.ports[0]
+        threading.Timer(0.5, port.vanish).start()
+        threading.Timer(1.5, port.restore).start()
+        stop = threading.Event()
+        threading.Timer(3.0, stop.set).start()
+        mon.run(stop)
+    summary = mon.summary_json()
+    assert summary["disconnected"] > 0 and "disconnected" not in summary["dropped"]
+    assert summary["reconnects"] == 1 and summary["analysed_frames"] > 50
+    assert "livezmp: " + devices.url in capsys.readouterr().err  # told on the console as it happened

@@ -123,15 +123,16 @@ class Monitor:
         """What ``--summary-json`` writes: frames in / analysed / dropped per reason, latency
         percentiles (ms), the estimator's settings and lag, source counters."""
         st, est = self.source.stats.as_dict(), self.pipeline.config.estimator
-        # bad_markers counts frames kept (their bad markers left out as occluded), resyncs new timelines followed:
-        # neither is a dropped frame
+        # bad_markers counts frames kept (their bad markers left out as occluded), resyncs new timelines followed,
+        # disconnected reads that found a link's port gone: none is a dropped frame
         dropped = {k: v for k, v in st.items()
-                   if k not in ("delivered", "lost", "reconnects", "bad_markers", "resyncs")}
+                   if k not in ("delivered", "lost", "reconnects", "bad_markers", "resyncs", "disconnected")}
         dt, lag = self.source.nominal_dt, self.pipeline.lag
         return {
             "source": self.source.name, "frames_in": self.inputs, "analysed_frames": self.results,
             "dropped": {**dropped, "total": sum(dropped.values())}, "lost": st["lost"],
-            "reconnects": st["reconnects"], "bad_markers": st["bad_markers"], "resyncs": st["resyncs"],
+            "reconnects": st["reconnects"], "disconnected": st["disconnected"], "bad_markers": st["bad_markers"],
+            "resyncs": st["resyncs"],
             "out_of_support": self.out_of_support, "alarms": self.alarms.count,
             "latency": {"result_after_input": self.beyond_lag.summary_ms(),
                         "result_after_source_stamp": self.from_stamp.summary_ms() if self.from_stamp.count else None},
@@ -220,6 +221,9 @@ class Monitor:
 
     def _idle(self) -> None:
         for err in self.source.errors.drain():
+            if err.kind == "disconnected" and not self.view:  # the source gone: told as it happens, not only recorded
+                times = f" ({err.count} times in {self.source.errors.interval:g} s)" if err.count > 1 else ""
+                print(f"livezmp: {err.message}{times}", file=sys.stderr, flush=True)
             if self.recorder:
                 self.recorder.write("/device_error", {"wall_time": err.wall, "kind": err.kind,
                                                       "message": err.message, "count": err.count})

@@ -60,8 +60,9 @@ class SourceStats:
     bounded queue was full), ``jumps`` (sequence or time jumped too far ahead). ``lost``:
     sequence numbers skipped and never delivered in order. ``resyncs``: times the source
     moved onto a new timeline (see :mod:`livezmp.sources.udp`). ``reconnects``:
-    connections re-opened. ``bad_markers``: capture frames kept with markers (or solved segments) left
-    out that were infinite or beyond :data:`~livezmp.checks.MAX_COORDINATE_M` of the origin (a C3D reader
+    connections re-opened. ``disconnected``: reads that found a servo link's port gone (at its
+    polling rate: 100 a second while it is gone). ``bad_markers``: capture frames kept with markers (or solved
+    segments) left out that were infinite or beyond :data:`~livezmp.checks.MAX_COORDINATE_M` of the origin (a C3D reader
     refuses such a file)."""
 
     delivered: int = 0
@@ -75,6 +76,7 @@ class SourceStats:
     jumps: int = 0
     resyncs: int = 0
     reconnects: int = 0
+    disconnected: int = 0
     bad_markers: int = 0
 
     def as_dict(self) -> dict[str, int]:

@@ -65,6 +65,7 @@ class LinkSource:
             self.errors.report("malformed", f"{self.name}: {e}")
             return None
         except LinkError as e:
+            self.stats.disconnected += 1
             self.errors.report("disconnected", f"{self.name}: {e}")
             if self.link.reconnect():
                 self.stats.reconnects += 1
