@@ -32,9 +32,13 @@ def atomic_path(path: str | Path):
 
 def write_json(data: dict, path: str | Path) -> None:
     """Strict JSON (NaN and infinity are not JSON): a non-finite field is refused, naming it; the file
-    is written atomically (:func:`atomic_path`)."""
+    is written atomically (:func:`atomic_path`). A file that cannot be written (a full disk, its directory
+    gone since the command checked it) is one line, the file as it was before."""
     bad = non_finite_field(data)
     if bad:
         raise InputError(f"{path}: field {bad} is not finite; the input drives the analysis out of range, not written")
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    except OSError as e:
+        raise InputError(f"{path}: cannot write: {e.strerror or e}") from None

@@ -100,3 +100,12 @@ def test_outputs_checked_together(tmp_path):
     check_output_paths((tmp_path / "r.mcap", "--record"), (None, "--summary-json"), (tmp_path / "s.json", "--out"))
     with pytest.raises(InputError, match="the same file as --out"):
         check_output_paths((tmp_path / "s.json", "--out"), (link, "--summary-json"))
+
+
+def test_a_summary_that_cannot_be_written_is_one_line(tmp_path):
+    """Its directory gone since the command checked it (or the disk full: the same OSError path): main raised
+    FileNotFoundError / OSError out of the command, a traceback after the run."""
+    from livezmp.jsonfile import write_json
+
+    with pytest.raises(InputError, match="s.json: cannot write: No such file or directory"):
+        write_json({"cycles": 1}, tmp_path / "gone" / "s.json")

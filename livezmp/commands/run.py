@@ -279,10 +279,11 @@ def assumed_adapter(args: argparse.Namespace) -> Adapter:
 
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
-    """Write and print the summary; the exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
+    """Print and write the summary (printed first: a file that cannot be written is then one line after it); the
+    exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
+    print_summary(summary)
     if args.summary_json:
         write_json(summary, args.summary_json)
-    print_summary(summary)
     if summary.get("link_failed"):
         print(f"livezmp: the link failed the run: {summary['link_failed']}", file=sys.stderr, flush=True)
         return EXIT_LINK_FAILED
