@@ -40,10 +40,11 @@ def test_a_loop_whose_recording_cannot_grow_runs_on_and_writes_its_summary(tmp_p
     rec, summary = tmp_path / "run.mcap", tmp_path / "s.json"
     p = _livezmp("demo", "--link", "mock", "--scenario", "stand", "--duration", "1.5", "--quiet",
                  "--realtime-priority", "0", "--record", str(rec), "--summary-json", str(summary), limit=ROOM)
-    assert p.returncode == 0, p.stderr
+    # 3: the loop starved of CPU on a loaded machine (the link's own verdict, told apart); main: 1, the traceback
+    assert p.returncode in (0, 3), p.stderr
     assert "Traceback" not in p.stderr
     s = json.loads(summary.read_text())
-    assert s["stopped_by"] == "duration" and "File too large" in s["recording"]["file_error"]
+    assert s["stopped_by"] in ("duration", "fell") and "File too large" in s["recording"]["file_error"]
     assert "livezmp recover" in p.stderr  # told, with how to read what it holds
     assert _recovered(rec, tmp_path) > 0  # what was written before the fault is kept
 
