@@ -52,7 +52,8 @@ def test_a_loop_whose_recording_cannot_grow_runs_on_and_writes_its_summary(tmp_p
 def test_a_monitor_whose_recording_cannot_grow_analyses_on(tmp_path):
     """main: the OSError ended the monitor with a traceback, no summary."""
     rec, summary = tmp_path / "m.mcap", tmp_path / "s.json"
-    p = _livezmp("monitor", BVH, "--speed", "0", "--record", str(rec), "--summary-json", str(summary),
+    # in real time (7 s): chunks close every 0.5 s, so the limit falls after some are written
+    p = _livezmp("monitor", BVH, "--speed", "1", "--record", str(rec), "--summary-json", str(summary),
                  limit=MONITOR_LIMIT)
     assert p.returncode == 0, p.stderr
     assert "Traceback" not in p.stderr

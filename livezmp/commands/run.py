@@ -229,7 +229,7 @@ def run_loop(link, robot: Robot, args: argparse.Namespace, command, duration: fl
         raise
     if recorder is not None:
         summary["recording"] = rec = recorder.close(summary)
-        if rec["dropped_total"] or rec["failed"]:
+        if rec["dropped_total"] or rec["failed"] or rec["file_error"]:
             status.event(f"recording {args.record}: {rec['dropped_total']} messages dropped (queue full), "
                          f"{rec['failed']} failed ({rec['error']})" + (stopped_note(args.record)
                                                                      if rec["file_error"] else ""))
