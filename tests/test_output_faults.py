@@ -18,8 +18,9 @@ from livezmp.errors import InputError
 from livezmp.recording.recover import recover
 
 BVH = "/work/shared/data/bvh/bandai/walk_active_001.bvh"
-# bytes a file may grow to: a loop recording's start fits, 1.5 s of a 500 Hz loop's messages (146 kB) do not
-ROOM = 40_000
+# bytes a file may grow to: a loop recording's start and its first 0.5 s chunk (about 50 kB at 500 Hz) fit, 6 s of
+# its messages (about 580 kB at 500 Hz, 120 kB even at the 100 Hz a loaded machine gives) do not
+ROOM = 100_000
 MONITOR_LIMIT = 150_000  # the monitor's recording of BVH: 92 kB with one frame, 257 kB with its 207
 
 
@@ -38,7 +39,7 @@ def _recovered(path, tmp_path) -> int:
 def test_a_loop_whose_recording_cannot_grow_runs_on_and_writes_its_summary(tmp_path):
     """main: the writer thread died of OSError (a traceback), the run's end raised it again: exit 1, no summary."""
     rec, summary = tmp_path / "run.mcap", tmp_path / "s.json"
-    p = _livezmp("demo", "--link", "mock", "--scenario", "stand", "--duration", "1.5", "--quiet",
+    p = _livezmp("demo", "--link", "mock", "--scenario", "stand", "--duration", "6", "--quiet",
                  "--realtime-priority", "0", "--record", str(rec), "--summary-json", str(summary), limit=ROOM)
     # 3: the loop starved of CPU on a loaded machine (the link's own verdict, told apart); main: 1, the traceback
     assert p.returncode in (0, 3), p.stderr
