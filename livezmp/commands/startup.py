@@ -48,6 +48,8 @@ def handling_stop_signals(handler: Callable[[int, object], None]) -> Iterator[No
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
 LOOP_STAGE = "the loop"
 STOPPING_STAGE = "stopping"
 

@@ -37,6 +37,7 @@ IDLE_GUARD_S = 2.5e-4  # a paced writer stops this long before the producer wake
 CHUNK_BYTES = 1 << 20
 SCENE_HZ = 60.0  # Foxglove scene messages a second at most: a display's rate (/result keeps every frame)
 
+
 def stopped_note(path: str | Path) -> str:
     """What a recording whose file failed (:attr:`Recorder.error`) still holds, and how to read it."""
     return (f"; the file stopped there, keeping what was written before: `livezmp recover {path} -o FIXED.mcap` "
@@ -113,14 +114,21 @@ class Recorder:
         if not self._usable():
             return
         now = time.time_ns() if log_time_ns is None else log_time_ns
-        data = json.dumps(message, separators=(",", ":")).encode()
+        if self._put(self.channels[topic], topic, now, json.dumps(message, separators=(",", ":")).encode()):
+            self.tick()
+
+    def _put(self, channel: int, topic: str, now: int, data: bytes) -> bool:
+        """Add one encoded message on ``channel`` (``topic``'s) at ``now`` (Unix ns); False when the file has failed
+        (now or before: it is then counted unwritten)."""
+        if not self._usable():
+            return False
         try:
-            self.writer.add_message(self.channels[topic], now, data, now, sequence=self.counts[topic])
+            self.writer.add_message(channel, now, data, now, sequence=self.counts[topic])
         except OSError as e:  # a chunk filled up and could not be written
             self._failed(e)
-            return
+            return False
         self.counts[topic] += 1
-        self.tick()
+        return True
 
     def result(self, r, cop: np.ndarray | None = None, log_time_ns: int | None = None) -> None:
         """The ``/result`` of a FrameResult ``r`` and its Foxglove scene (when one is due), with
@@ -135,14 +143,8 @@ class Recorder:
             return
         self._next_scene_ns = now + self.scene_period_ns
         for topic, data in foxglove.scene_messages(r, now, [] if cop is None else [cop]).items():
-            if not self._usable():
+            if not self._put(self.scene_channels[topic], topic, now, data):
                 return
-            try:
-                self.writer.add_message(self.scene_channels[topic], now, data, now, sequence=self.counts[topic])
-            except OSError as e:
-                self._failed(e)
-                return
-            self.counts[topic] += 1
 
     def input(self, index: int, t: float, channels: np.ndarray, contacts: tuple[bool, bool] | None,
               gravity: np.ndarray | None = None) -> None:
