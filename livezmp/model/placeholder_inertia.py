@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.model.urdf_xml import collision_shapes, numbers
+from livezmp.model.urdf_xml import collision_shapes, inertia_matrix, numbers
 
 # an RMS mass radius this many times the link's reach is a placeholder, not a body: THORMANG3's lightest links lie
 # 8-4500 times beyond theirs, real robots' links at most 3.3 times (module docstring)
@@ -38,7 +38,6 @@ UNSEEN_REACH = 0.2
 # a largest principal moment below this share of the whole robot's mass x size^2 does not matter to its ZMP (under
 # 0.2 mm at 10 rad/s^2 on a 1.2 m robot): iCub's 1 mg base link with 1e-6 kg m^2 is not told
 NEGLIGIBLE_SHARE = 1e-4
-INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
 def _half_extent(shape: ET.Element, where: str) -> np.ndarray:
@@ -80,11 +79,10 @@ def placeholder_inertias(root: ET.Element, path: Path, mass: float, size: float)
             continue
         where = f"{path}: link {name!r} <inertial>"
         m = numbers(inertial.find("mass"), "value", 1, "", f"{where} <mass>")[0]
-        c = tensors[name] = tuple(numbers(inertial.find("inertia"), k, 1, "0", f"{where} <inertia>")[0]
-                                  for k in INERTIA_KEYS)
+        inertia = inertia_matrix(inertial.find("inertia"), f"{where} <inertia>")
+        tensors[name] = tuple(inertia[np.triu_indices(3)].tolist())  # links that share it share the placeholder
         origin = inertial.find("origin")
         com = np.zeros(3) if origin is None else numbers(origin, "xyz", 3, "0 0 0", f"{where} <origin>")
-        inertia = np.array([[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
         rms = np.sqrt(max(float(np.trace(inertia)), 0.0) / (2 * m))
         known = [np.zeros(3), *points.get(name, [])]  # its own joint at its frame's origin
         reach = max([UNSEEN_REACH * size] + [float(np.linalg.norm(p - com)) for p in known])

@@ -44,7 +44,7 @@ from livezmp.model.foot_primitives import collision_rounds, round_sole
 from livezmp.model.mimic import Mimic, read_mimics
 from livezmp.model.placeholder_inertia import placeholder_inertias, placeholder_note
 from livezmp.model.robot_config import MAX_SOLE_M, RobotConfig, find_robot_config, load_robot_config
-from livezmp.model.urdf_xml import collision_shapes, numbers
+from livezmp.model.urdf_xml import INERTIA_KEYS, collision_shapes, inertia_matrix, numbers
 
 MAX_LINKS = 256  # as MAX_CHANNELS for a BVH skeleton: the model data grows as the cube of the joints
 BASE_JOINTS = (
@@ -104,17 +104,13 @@ def _check_inertial(link: ET.Element, path: Path) -> tuple[float, np.ndarray]:
             v = numbers(origin, attr, 3, "0 0 0", f"{where} <origin>")
             if np.abs(v).max() > MAX_LENGTH:
                 raise InputError(f"{where} <origin> {attr}: beyond ±{MAX_LENGTH:g}")
-    comps = {}
-    for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-        comps[k] = numbers(inertia_el, k, 1, "0", f"{where} <inertia>")[0]
-    c = comps
-    inertia = np.array([[c["ixx"], c["ixy"], c["ixz"]], [c["ixy"], c["iyy"], c["iyz"]], [c["ixz"], c["iyz"], c["izz"]]])
+    inertia = inertia_matrix(inertia_el, f"{where} <inertia>")
     moments, axes = np.linalg.eigh(inertia)
     if moments[0] >= -ROUNDOFF * max(float(np.abs(moments).max()), mass * 1.0):  # kg m^2: the mass 1 m out
         return float(moments[2]), none
     nearest = axes @ np.diag(np.maximum(moments, 0.0)) @ axes.T
-    for (i, j), k in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), c, strict=True):
-        inertia_el.set(k, repr(float(nearest[i, j])))
+    for k, v in zip(INERTIA_KEYS, nearest[np.triu_indices(3)], strict=True):
+        inertia_el.set(k, repr(float(v)))
     return float(moments[2]), moments
 
 

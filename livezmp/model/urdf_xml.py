@@ -26,6 +26,19 @@ def numbers(el: ET.Element, attr: str, n: int, default: str, where: str) -> np.n
     return vals
 
 
+# an <inertia>'s attributes, the upper triangle of its symmetric matrix row by row (np.triu_indices(3)'s order)
+INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+
+
+def inertia_matrix(el: ET.Element, where: str) -> np.ndarray:
+    """(3, 3) kg m^2: the symmetric matrix of an ``<inertia>`` element (its `INERTIA_KEYS`, each 0 when absent)."""
+    upper = [numbers(el, k, 1, "0", where)[0] for k in INERTIA_KEYS]
+    inertia = np.zeros((3, 3))
+    inertia[np.triu_indices(3)] = upper
+    inertia[np.tril_indices(3, -1)] = inertia.T[np.tril_indices(3, -1)]
+    return inertia
+
+
 def collision_shapes(root: ET.Element, path: Path, tags: tuple[str, ...], element: str = "collision"
                      ) -> Iterator[tuple[str, ET.Element, pin.SE3, str]]:
     """Each link's ``<collision>`` (or ``element``'s: ``visual``) shape of one of ``tags`` (``box``, ``cylinder``,
