@@ -29,9 +29,10 @@ sense-to-command latency, the mean read and loop-work (estimate + correct) time,
 simulated robot fell, failed reads, the 1-minute load average after the row (others share
 the machine), and the CPU time per cycle of the loop's process and of the simulator's (its
 devices' process, whose port service spins through the last 0.1 ms before each reply is due,
-and its physics process), and of that the physics process's alone. The first rows are the loop's
-own work flat out on the mock link (no bus), with the median and 99th percentile of a cycle's length: the long
-cycles are the corrector's (at 1 kHz its root rotation in one cycle, its legs' IK in the next).
+and its physics process), of that the physics process's alone, and the share of the machine's CPU time its
+hypervisor stole during the row (/proc/stat: a row run while it rises was slowed by others). The first
+rows are the loop's own work flat out on the mock link (no bus), with the median and 99th percentile of a
+cycle's length: the long cycles are the corrector's (at 1 kHz its root rotation in one cycle, its legs' IK in the next).
 
 Run: python benchmarks/bench_live_loop.py [--seconds 10] [--only TEXT ...] [--physics thread] [--pairs N]
 
@@ -52,7 +53,7 @@ import os
 import time
 from pathlib import Path
 
-from machine_load import load_averages, run_timed
+from machine_load import cpu_times, load_averages, run_timed, steal_percent
 
 from livezmp.histogram import TimingHistogram
 from livezmp.links import LinkError, open_link
@@ -173,13 +174,14 @@ def row(robot, robot_urdf: str | None, options: str, rate: float, seconds: float
         link = open_link(url, robot.body.joint_names, robot.config)
         try:
             kept_awake = cpu_wake_latency_us() == 0  # the kernel's aggregate of every request on the machine
-            loop0, sim0 = time.process_time(), sim.cpu_seconds()
+            loop0, sim0, cpu0 = time.process_time(), sim.cpu_seconds(), cpu_times()
             x = bus_only(link, rate, seconds) if baseline else live(link, robot, sim, rate, seconds, correct_hz)
-            loop1, sim1 = time.process_time(), sim.cpu_seconds()
+            loop1, sim1, cpu1 = time.process_time(), sim.cpu_seconds(), cpu_times()
         finally:
             link.close()
     cycles = max(x["cycles"], 1)
     x["awake"] = kept_awake
+    x["steal"] = steal_percent(cpu0, cpu1)
     x["loop_cpu"] = 1e6 * (loop1 - loop0) / cycles
     if sim0 is None or sim1 is None:
         x["sim_cpu"] = x["physics_cpu"] = math.nan
@@ -255,7 +257,7 @@ def main() -> None:
               "a cycle p50 / p99 {:.2f} / {:.2f} ms".format(*x["cycle"]), flush=True)
     header = ("| robot        | bus            | read      | adapter | delay us | ceiling Hz | loop      | "
               "sched         | asked Hz | achieved Hz | of ceiling | missed % | p99 ms | read ms | work ms | fell | "
-              "failed reads | loop CPU us | sim CPU us | physics us | load |")
+              "failed reads | loop CPU us | sim CPU us | physics us | steal % | load |")
     print("\n" + header)
     print("|" + "|".join("-" * len(cell) for cell in header.split("|")[1:-1]) + "|", flush=True)
     for name, baud, buses, fast, delay, adapter, cap, faults, both in configs:
@@ -281,7 +283,7 @@ def main() -> None:
                   f"{sched:<13} | {rate:8d} | {x['achieved_hz']:11.1f} | {100 * x['achieved_hz'] / ceiling:9.1f}% | "
                   f"{100 * x['deadline_misses'] / max(x['cycles'], 1):8.2f} | {x['p99']:6.2f} | {x['read']:7.3f} | "
                   f"{x['work']:7.3f} | {fell:>4} | {x['failed']:12d} | {x['loop_cpu']:11.0f} | {x['sim_cpu']:10.0f} | "
-                  f"{x['physics_cpu']:10.0f} | "
+                  f"{x['physics_cpu']:10.0f} | {x['steal']:7.2f} | "
                   f"{os.getloadavg()[0]:4.1f} |", flush=True)
 
 

@@ -12,6 +12,26 @@ def load_averages(sep: str = ", ") -> str:
     return sep.join(f"{v:.2f}" for v in os.getloadavg())
 
 
+def cpu_times() -> tuple[int, int] | None:
+    """The machine's (stolen, total) CPU time since boot, in clock ticks, from /proc/stat (None where absent).
+
+    Steal is time the hypervisor gave this virtual machine's CPUs to others: a row run while it rises is slower
+    for reasons outside the benchmark."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return (fields[7], sum(fields[:8])) if len(fields) >= 8 else None
+
+
+def steal_percent(before: tuple[int, int] | None, after: tuple[int, int] | None) -> float:
+    """Percent of all CPUs' time stolen between two ``cpu_times()`` readings (nan where unknown)."""
+    if before is None or after is None or after[1] <= before[1]:
+        return float("nan")
+    return 100.0 * (after[0] - before[0]) / (after[1] - before[1])
+
+
 def run_timed(main: Callable[[], None], end_load: bool = True) -> None:
     """Run a benchmark's ``main``, then print the load averages at its end (``end_load``) and the wall time it took."""
     t0 = time.monotonic()
