@@ -175,7 +175,11 @@ class PhysicsProcess:
         """Stop the child (an error it met is raised here)."""
         error = None
         with contextlib.suppress(OSError, EOFError):
-            error = self._ask("stop")
+            error, fallen = self._ask("stop")
+            # the fall as the child last saw it: a verdict asked after the close (`livezmp sim`'s closing line)
+            # has no pipe to ask it through
+            if hasattr(self, "humanoid"):
+                self.humanoid._fallen = fallen
         deadline = time.monotonic() + 5.0
         while os.waitpid(self.pid, os.WNOHANG) == (0, 0):
             if time.monotonic() > deadline:
@@ -245,7 +249,7 @@ def _physics_child(humanoid: SimHumanoid, a: dict[str, np.ndarray], conn, sensor
                 continue
             request, argument = conn.recv()
             if request == "stop":
-                conn.send(error)
+                conn.send((error, humanoid.fallen))
                 return
             if request == "push":
                 humanoid.push(argument)

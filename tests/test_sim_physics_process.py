@@ -91,3 +91,19 @@ def test_a_request_is_answered_between_steps_and_stepping_goes_on(mini):
         if not answered:  # deaf to the stop as well: its end unblocks the waiting request, then close reaps it
             os.kill(physics.pid, signal.SIGKILL)
         physics.close()
+
+
+def test_a_fall_nobody_asked_about_is_still_told_after_the_close(mini):
+    """`livezmp sim` gives its verdict after closing its physics: a fall the devices never asked about (a
+    Dynamixel chain has no IMU to read it through) must come back with the stop, not be asked of a closed
+    pipe (before: OSError 'handle is closed', a traceback where the closing line should be)."""
+    humanoid = SimHumanoid(mini, make_scenario("stand", mini).goals(0.0), clock=time.monotonic, device_steps=False)
+    physics = PhysicsProcess(humanoid)
+    remote = physics.humanoid
+    try:
+        # a shove from behind far beyond what its feet hold (the robot weighs a few kg)
+        remote.push(Push(force=(60.0, 0.0), height=0.3, start=remote.t, duration=1.0))
+        assert wait_until(lambda: remote._a["status"][4], timeout=10.0)  # fell there; not asked here
+    finally:
+        physics.close()
+    assert remote.fallen is not None and remote.fallen.t > 0
