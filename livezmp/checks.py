@@ -13,7 +13,7 @@ import codecs
 import math
 import os
 import stat
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -121,15 +121,36 @@ def check_output_path(path: str | Path | None, option: str) -> None:
         raise InputError(f"{option} {p}: directory {parent} is not writable")
 
 
-def check_output_paths(*outputs: tuple[str | Path | None, str]) -> None:
+# The options through which a command reads files (its motion, trials, recording, walks, and the files beside them)
+INPUT_OPTIONS = ("motion", "recording", "trials", "base_walk", "walk", "others", "features", "static", "subject",
+                 "markers", "mapping", "robot", "robot_config", "urdf", "skeleton", "calibration", "manifest")
+
+
+def given_inputs(args: object) -> list[str]:
+    """The files a command's parsed arguments ``args`` name among :data:`INPUT_OPTIONS` (one or a list each)."""
+    out = []
+    for name in INPUT_OPTIONS:
+        value = getattr(args, name, None)
+        out += [str(v) for v in (value if isinstance(value, list) else [value]) if v is not None]
+    return out
+
+
+def check_output_paths(*outputs: tuple[str | Path | None, str], inputs: Iterable[str | Path] = ()) -> None:
     """Each ``(path, option)`` output checked by :func:`check_output_path`, and no two options naming one file
     (the same path, or one reached through a link): the one written last would replace the other, e.g. a run's
-    summary written over its recording."""
+    summary written over its recording; nor an output that is one of the ``inputs`` (the same file, or a link to
+    it): ``calibrate w.c3d -o w.c3d`` replaced the trial with its subject file, exit 0."""
     seen: dict[str, str] = {}
+    existing = [i for i in inputs if os.path.isfile(i)]
     for path, option in outputs:
         check_output_path(path, option)
         if path is None:
             continue
+        if os.path.exists(path):
+            same = next((i for i in existing if os.path.samefile(path, i)), None)
+            if same is not None:
+                raise InputError(f"{option} {path}: the same file as the input {same}; write the output to a file "
+                                 "of its own")
         key = os.path.realpath(path)
         if key in seen:
             raise InputError(f"{option} {path}: the same file as {seen[key]}; give each output a file of its own")
@@ -145,6 +166,14 @@ def check_output_dir(path: str | Path, option: str) -> None:
         raise InputError(f"{option} {path}: {existing} is a file, not a directory")
     if not os.access(existing, os.W_OK):
         raise InputError(f"{option} {path}: directory {existing} is not writable")
+
+
+def check_same_format(motion: str | Path, output: str | Path) -> None:
+    """A motion written back in its own format (``correct``, ``gait synth``) needs an output named so: a BVH
+    written under ``-o x.csv`` was read back as a CSV without a time column (exit 0 when written)."""
+    suffix = Path(motion).suffix.lower()
+    if Path(output).suffix.lower() != suffix:
+        raise InputError(f"{output}: {motion} is written back in its own format; give -o ending in {suffix}")
 
 
 # Figure formats Matplotlib writes with its own backends (the suffix chooses the format)

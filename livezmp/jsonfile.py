@@ -17,13 +17,22 @@ from livezmp.errors import InputError
 @contextlib.contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path beside ``path``, ending in the same suffix (writers such as ezc3d add
-    theirs to a name without it); on success it replaces ``path``, on error it is removed."""
+    theirs to a name without it); on success it replaces ``path``, on error it is removed. A ``path`` that
+    cannot be made or replaced (an immutable or read-only file system's file, a directory that became
+    read-only since the command checked it) is one line naming it, the file as it was before (a traceback
+    after the whole analysis before)."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
+    except OSError as e:
+        raise InputError(f"{path}: cannot write: {e.strerror or e}") from None
     os.close(fd)
     try:
         yield Path(tmp)
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as e:
+            raise InputError(f"{path}: cannot write: {e.strerror or e}") from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rich.progress import Progress
 
-from livezmp.checks import check_figure_path, check_output_paths
+from livezmp.checks import check_figure_path, check_output_paths, given_inputs
 from livezmp.commands.common import load_from_args, take_options
 from livezmp.jsonfile import write_json
 from livezmp.offline.report import write_zmp_csv
@@ -62,7 +62,8 @@ def _give_or_take(cv: dict) -> str:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    check_output_paths((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot"))
+    check_output_paths((args.out, "--out"), (args.summary_json, "--summary-json"), (args.plot, "--plot"),
+                       inputs=given_inputs(args))
     check_figure_path(args.plot, "--plot")
     options = take_options(args)
     if options.streams(args.motion):
@@ -92,9 +93,12 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if summary.get("loop"):
         print(f"  a looped cycle (its last frame repeats its first): analysed as the loop played on, "
               f"{summary['loop']['padded_frames']} frames of it before and after")
+    verdict = (summary.get("plausibility") or {}).get("verdict")
     if inside is not None:
         print(f"  within {summary['tolerance_mm']:g} mm of support (the ZMP's validated error): "
-              f"{100 * summary['inside_fraction_tol']:.1f} %; motion: {summary['plausibility']['verdict']}")
+              f"{100 * summary['inside_fraction_tol']:.1f} %; motion: {verdict}")
+    elif verdict:  # every frame in flight: no support to be inside, but the verdict says why (a floor not found)
+        print(f"  motion: {verdict}")
     cv = summary.get("cop_vs_zmp")
     if cv and cv["frames"]:
         print(f"  ZMP vs plate CoP over {cv['frames']} complete frames: RMS {cv['rms_mm']:.1f} mm, "

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from livezmp.commands.common import limits_from_args, take_options
+from livezmp.commands.common import check_population_options, limits_from_args, take_options
 from livezmp.errors import InputError
 from livezmp.gait.features import WalkFeatures
 from livezmp.gait.population import analyze
@@ -60,6 +60,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
 def cmd_gait(args: argparse.Namespace) -> int:
     """Each take's features on the cluster, then the population statistics here, from the takes'
     ``features.json`` files (a few numbers per channel and take)."""
+    check_population_options(args)
     job = GaitJob(args.up, args.units, args.urdf, args.markers, args.static)
     if args.manifest:
         if args.sources:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from livezmp.checks import check_number, check_output_path
+from livezmp.checks import check_number, check_output_paths, given_inputs
 from livezmp.model.anthropometry import MAX_AGE_YEARS, MAX_BODY_MASS
 from livezmp.model.marker_map import load_marker_map
 from livezmp.model.markers import MarkerBodyOptions
@@ -15,7 +15,7 @@ from livezmp.offline.gaitlab import LabOptions
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    check_output_path(args.output, "-o")
+    check_output_paths((args.output, "-o"), inputs=given_inputs(args))
     check_number(args.age, "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
     check_number(args.mass, "--mass (kg)", 0.0, MAX_BODY_MASS, lo_open=True)
     trials = [read_walk(p, args.static) for p in args.trials]

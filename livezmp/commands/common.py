@@ -33,6 +33,8 @@ MAX_CUTOFF_HZ = 5000.0  # half the highest frame rate read (checks.FRAME_PERIOD_
 MAX_ROTATION_DEG = 180.0
 MAX_RATE_DEG_S = 36000.0  # 100 turns a second: beyond any joint
 MAX_MARGIN_MM = 1000.0  # no support polygon is two metres across
+MAX_PERCENT = 1e6  # a population's |CV| or |μ| in %: beyond it every channel passes (or none): no threshold
+MAX_MIN_BASE_DEG = 360.0  # a DC or amplitude in degrees: a whole turn
 
 
 def check_body_options(args: argparse.Namespace) -> None:
@@ -43,6 +45,14 @@ def check_body_options(args: argparse.Namespace) -> None:
     check_number(getattr(args, "age", None), "--age (years)", 0.0, MAX_AGE_YEARS, lo_open=True)
     check_number(getattr(args, "tolerance_mm", None), "--tolerance-mm (mm)", 0.0, MAX_TOLERANCE_MM)
     check_number(args.cutoff_hz, "--cutoff-hz (Hz)", MIN_CUTOFF_HZ, MAX_CUTOFF_HZ)
+
+
+def check_population_options(args: argparse.Namespace) -> None:
+    """``gait analyze`` and ``batch gait``'s thresholds: finite and at least 0, before any take is read (a NaN
+    threshold passed every comparison as false and wrote NaN into features.json with exit 0)."""
+    check_number(args.threshold, "--threshold (%)", 0.0, MAX_PERCENT)
+    check_number(args.min_base, "--min-base (deg)", 0.0, MAX_MIN_BASE_DEG)
+    check_number(args.min_change, "--min-change (%)", 0.0, MAX_PERCENT)
 
 
 def load_from_args(args: argparse.Namespace) -> LoadedMotion:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from livezmp.checks import check_output_paths
+from livezmp.checks import check_output_paths, check_same_format, given_inputs
 from livezmp.commands.common import limits_from_args, load_from_args, take_options
 from livezmp.errors import InputError
 from livezmp.jsonfile import write_json
@@ -14,7 +14,7 @@ from livezmp.offline.take import correct_c3d_take, correct_loaded
 def cmd_correct(args: argparse.Namespace) -> int:
     if args.motion is None:
         raise InputError("correct: give a motion file (.bvh, or .csv with --robot)")
-    check_output_paths((args.output, "-o"), (args.report, "--report"))
+    check_output_paths((args.output, "-o"), (args.report, "--report"), inputs=given_inputs(args))
     c3d_in, c3d_out = (str(p).lower().endswith(".c3d") for p in (args.motion, args.output))
     if c3d_in:
         if not (c3d_out or str(args.output).lower().endswith(".bvh")):
@@ -24,6 +24,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     if c3d_out:
         raise InputError(f"{args.output}: only a C3D take can be written as C3D (its markers are moved); "
                          f"{args.motion} is written in its own format")
+    check_same_format(args.motion, args.output)
     report = correct_loaded(load_from_args(args), args.output, take_options(args), limits_from_args(args),
                             progress=lambda message: print(f"correct: {message}", flush=True))
     _tell(report, args)

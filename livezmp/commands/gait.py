@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import check_output_path
+from livezmp.checks import check_output_dir, check_output_paths, check_same_format, given_inputs
+from livezmp.commands.common import check_population_options
 from livezmp.errors import InputError
 from livezmp.gait.compare import compare
 from livezmp.gait.features import walk_features
@@ -45,6 +46,8 @@ def _on_belt(take: GaitTake) -> str:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
+    check_population_options(args)
+    check_output_dir(args.out, "--out")
     if args.manifest:
         if args.inputs:
             raise InputError("give either --manifest or input files/directories, not both")
@@ -79,10 +82,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    check_output_path(args.output, "-o")
+    check_output_paths((args.output, "-o"), inputs=given_inputs(args))
     if Path(args.base_walk).suffix.lower() == ".c3d":
         raise InputError(f"{args.base_walk}: gait synth changes BVH or CSV walks; a C3D take can be analysed "
                          "and compared, not synthesised")
+    check_same_format(args.base_walk, args.output)
     analysis = read_features(args.features)
     take = _load(args.base_walk, args)
     t, q, plan = synth_take(take, analysis, args.to, args.amount, args.features)

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from livezmp.balance.pipeline import FrameResult, default_config
-from livezmp.checks import check_number, check_output_paths
+from livezmp.checks import check_number, check_output_paths, given_inputs
 from livezmp.commands.common import monitor_config, stop_on_signals
 from livezmp.errors import InputError
 from livezmp.estimate.estimator import EstimatorConfig, EstimatorError
@@ -148,7 +148,7 @@ MAX_WINDOW_S = 10.0  # s: the estimator's window and lag (its memory grows with 
 def check_outputs(args: argparse.Namespace) -> None:
     """--record and --summary-json before the source opens: their directories, neither a device, not one file
     (the summary, written last, would replace the session's recording)."""
-    check_output_paths((args.record, "--record"), (args.summary_json, "--summary-json"))
+    check_output_paths((args.record, "--record"), (args.summary_json, "--summary-json"), inputs=given_inputs(args))
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:

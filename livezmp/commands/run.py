@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livezmp.checks import FRAME_PERIOD_RANGE, check_output_paths
+from livezmp.checks import FRAME_PERIOD_RANGE, check_output_paths, given_inputs
 from livezmp.commands.common import stop_on_signals
 from livezmp.commands.startup import Interrupted, Startup, closing_link
 from livezmp.errors import InputError
@@ -85,7 +85,8 @@ def check_outputs(args: argparse.Namespace) -> None:
     in a directory that does not exist, or both outputs naming one file, is a one-line error."""
     if args.record and Path(args.record).exists():
         raise InputError(f"{args.record}: already exists; record to a new file")
-    check_output_paths((args.record, "--record"), (getattr(args, "summary_json", None), "--summary-json"))
+    check_output_paths((args.record, "--record"), (getattr(args, "summary_json", None), "--summary-json"),
+                       inputs=given_inputs(args))
 
 
 def open_recorder(args: argparse.Namespace, robot: Robot, config: LoopConfig, source: str) -> LoopRecorder:

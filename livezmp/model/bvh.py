@@ -423,6 +423,7 @@ def write_bvh(motion: BvhMotion, path: str | Path) -> None:
 # "cmu": the CMU Graphics Lab motion capture database's unit, kept by its BVH conversions: its ASF files declare
 # `:units length 0.45`, lengths in 1/0.45 inch (0.0564 m; mocap.cs.cmu.edu, the Acclaim ASF/AMC format)
 UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
+HUMAN_STATURE_M = (0.4, 3.0)  # a skeleton's estimated stature in metres, for the unit that makes it a human's
 CMU_INCH_SPLIT = 37.0  # file units of stature: 2.09 m in CMU units (taller than any subject), 0.94 m in inches
 
 
@@ -432,7 +433,7 @@ def detect_length_unit(stature: float, source: str = "") -> str:
     units are 1.13-2.09 m, 37-80 inches 0.94-2.03 m: a stature of 37-45 is a child in inches rather than a giant of
     2.1-2.5 m in CMU units (AnimatedDrawings' child-sized skeletons, 41 and 44 in). A child under 0.94 m measured in
     inches reads as CMU units: give --units; pass an explicit unit to override."""
-    if 0.4 <= stature <= 3.0:
+    if HUMAN_STATURE_M[0] <= stature <= HUMAN_STATURE_M[1]:
         return "m"
     if 20.0 <= stature < CMU_INCH_SPLIT:
         return "cmu"

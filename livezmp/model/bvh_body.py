@@ -21,7 +21,16 @@ import pinocchio as pin
 from livezmp.errors import InputError
 from livezmp.model.anthropometry import DE_LEVA_MALE
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.bvh import MAX_CHANNELS, UNIT_SCALES, BvhJoint, BvhMotion, BvhPart, detect_length_unit, skeleton_part
+from livezmp.model.bvh import (
+    HUMAN_STATURE_M,
+    MAX_CHANNELS,
+    UNIT_SCALES,
+    BvhJoint,
+    BvhMotion,
+    BvhPart,
+    detect_length_unit,
+    skeleton_part,
+)
 from livezmp.model.segments import SegmentTag, tag_joints
 
 # input world → internal z-up: for y-up, internal (x, y, z) = input (z, x, y)
@@ -180,6 +189,21 @@ def _stature(motion: BvhMotion, tags: list[SegmentTag], scale: float) -> float:
     return leg / LEG_FRACTION_OF_STATURE
 
 
+def _check_given_unit(motion: BvhMotion, tags: list[SegmentTag], units: str) -> None:
+    """Refuse a ``--units`` that makes the skeleton no human's (its estimated stature outside
+    :data:`HUMAN_STATURE_M`): a Bandai walk in cm read as mm was a 1.7 cm body, its accelerations a hundredth of a
+    walk's, judged "plausible for walking" with every frame inside (exit 0)."""
+    stature = _stature(motion, tags, UNIT_SCALES[units])
+    lo, hi = HUMAN_STATURE_M
+    if not lo <= stature <= hi:
+        try:
+            hint = f"; the skeleton's size reads as {detect_length_unit(_stature(motion, tags, 1.0))}"
+        except InputError:
+            hint = ""
+        raise InputError(f"{motion.source}: --units {units} makes the skeleton's estimated stature {stature:.3g} m "
+                         f"(from its thigh and shank bones), no human's ({lo:g}-{hi:g} m){hint}")
+
+
 def _build(motion: BvhMotion, part: BvhPart, tags: list[SegmentTag], scale: float, world_from_input: np.ndarray,
            opts: BvhBodyOptions) -> tuple[pin.Model, dict[int, int], list[int]]:
     """Model of ``part`` + frame id of each of its joints (by file index) + per-channel q index. The segments'
@@ -295,6 +319,8 @@ def body_from_bvh(motion: BvhMotion, opts: BvhBodyOptions | None = None) -> Body
     if units not in UNIT_SCALES:
         raise InputError(f"unknown length unit {units!r} (one of {', '.join(UNIT_SCALES)})")
     scale = UNIT_SCALES[units]
+    if opts.units:
+        _check_given_unit(motion, tags, opts.units)
     up = opts.up_axis or _detect_up(motion, part, tags, scale, opts)
     if up not in WORLD_FROM_INPUT:
         raise InputError(f"unsupported up axis {up!r} (y or z)")

@@ -685,6 +685,18 @@ def _check_stature(stature: float, trial: C3dTrial) -> None:
         raise InputError(f"{trial.source}: stature {stature:.3g} m ({where}) is outside {lo:g}-{hi:g} m")
 
 
+def _check_marker_size(leg_stature: float, trial: C3dTrial) -> None:
+    """Refuse markers whose legs make no person (``leg_stature`` m, estimated from the hip centre to the ankle
+    marker, outside :data:`STATURE_RANGE_M`) where the file's height sizes the body: the points are then in
+    another unit than POINT:UNITS says (a walk in metres labelled mm had been analysed as a 0.3 mm pelvis under
+    a 1.64 m body's table: every frame inside, "plausible for walking", exit 0)."""
+    lo, hi = STATURE_RANGE_M
+    if not lo <= leg_stature <= hi:
+        raise InputError(f"{trial.source}: the leg markers make a stature of {leg_stature:.3g} m (hip centre to "
+                         f"ankle marker), outside {lo:g}-{hi:g} m, where the file's height is {trial.height_m:g} m: "
+                         f"are the points in another unit than POINT:UNITS ({trial.units})?")
+
+
 def _check_lengths(seg: dict, m: dict, trial: C3dTrial) -> dict[str, float]:
     """The segment lengths (m); one outside :data:`SEGMENT_LENGTH_RANGE_M` is refused naming it."""
     lengths = _segment_lengths(seg, m)
@@ -729,8 +741,10 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
            for side, (_, sign, _) in _SIDES.items()}
     # stature: the file's, else from the leg (hip centre to the lateral ankle marker)
-    stature = dims["stature_m"] if dims else trial.height_m or float(
-        np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
+    leg_stature = float(np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
+    if dims is None and trial.height_m:
+        _check_marker_size(leg_stature, trial)
+    stature = dims["stature_m"] if dims else trial.height_m or leg_stature
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
     rules = {}
     # the share of the take's frames each TIB wand lies lateral (LTIB_lateral_share ...): read as Plug-in Gait's
