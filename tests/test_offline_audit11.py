@@ -150,3 +150,22 @@ def test_output_that_cannot_be_replaced_is_one_line(walk, tmp_path, capsys, monk
             says=rf"{re.escape(str(out))}: cannot write: Operation not permitted$")
     assert out.read_text() == "kept\n"
     assert [p.name for p in tmp_path.iterdir()] == ["z.csv"]
+
+
+def test_batch_take_whose_summary_cannot_be_written_is_a_row(walk, tmp_path, monkeypatch):
+    """A take whose directory will not take its summary (an immutable directory): main's ``run_take`` raised, the
+    worker logged the task's traceback on the run's console and the client made a "task failed" row; now the
+    take's own row says which file could not be written, and nothing is raised."""
+    import livezmp.offline.library as library
+    from livezmp.errors import InputError
+    from livezmp.offline.jobs import AnalyzeJob
+    from livezmp.offline.take import TakeOptions
+
+    def refuse(data, path):
+        raise InputError(f"{path}: cannot write: Operation not permitted")
+
+    monkeypatch.setattr(library, "write_json", refuse)
+    take = library.Take(walk, tmp_path / "takes" / "walk.bvh")
+    row = library.run_take(take, AnalyzeJob(TakeOptions()))
+    assert row["error"] == f"{take.out_dir / 'summary.json'}: cannot write: Operation not permitted"
+    assert row["frames"] is None

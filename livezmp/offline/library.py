@@ -92,16 +92,21 @@ def one_line(error: BaseException) -> str:
 def run_take(take: Take, job: Job) -> dict:
     """Run ``job`` on one take into ``take.out_dir``, then write its ``summary.json`` (with the job's
     fingerprint); return its table row. Never raises for a bad take: the row (and ``summary.json``)
-    then carry the error in one line."""
-    take.out_dir.mkdir(parents=True, exist_ok=True)
+    then carry the error in one line. Nor for a take whose directory or summary cannot be written (an
+    immutable or read-only directory): its row says so and a rerun tries it again (the task's failure
+    had filled the run's console with the worker's traceback)."""
     try:
-        summary = job.run(take.path, take.out_dir)
-    except Exception as e:  # any failure of one take is that take's row, not the run's end
-        summary = {"source": str(take.path), "error": one_line(e)}
-        for name in job.outputs(take.path):
-            (take.out_dir / name).unlink(missing_ok=True)
-    summary["options"] = job.fingerprint()
-    write_json(summary, take.out_dir / SUMMARY_JSON)
+        take.out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            summary = job.run(take.path, take.out_dir)
+        except Exception as e:  # any failure of one take is that take's row, not the run's end
+            summary = {"source": str(take.path), "error": one_line(e)}
+            for name in job.outputs(take.path):
+                (take.out_dir / name).unlink(missing_ok=True)
+        summary["options"] = job.fingerprint()
+        write_json(summary, take.out_dir / SUMMARY_JSON)
+    except (OSError, InputError) as e:
+        summary = {"error": f"{take.out_dir}: {e.strerror or e}" if isinstance(e, OSError) else one_line(e)}
     return table_row(job, take.path, summary)
 
 
