@@ -76,6 +76,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -92,6 +93,9 @@ from sim_devices.servo_plant import Array, ServoPlant
 FLIGHT_FRACTION = 0.05  # contact force below this share of the weight: nothing holds the robot up
 
 
+_NO_PUSH = np.zeros(3)  # the push force and moment of a step without pushes, shared: read-only
+_NO_PUSH.flags.writeable = False
+
 TOPPLE_START_RAD = 0.05  # tilt the toppling starts from: a lean already past the edge
 TOPPLED_RAD = math.pi / 2  # lying on the ground
 
@@ -105,9 +109,9 @@ class FallEvent:
     reason: str
 
 
-@dataclass(frozen=True)
-class HumanoidState:
-    """The dynamic state at time ``t`` (s). ``q``, ``v``, ``a``: whole body (base x, y, z
+class HumanoidState(NamedTuple):
+    """The dynamic state at time ``t`` (s), made every physics step (a named tuple: a frozen dataclass's
+    ``__init__`` cost 3 times as much). ``q``, ``v``, ``a``: whole body (base x, y, z
     in m, yaw, pitch, roll in rad, then the joints in URDF order; their rates).
     ``zmp`` (3,) is the contact ZMP on the ground (None when the contact force is below
     5 % of the weight), ``com`` (3,) the centre of mass, ``force`` (3,) the contact force
@@ -245,8 +249,8 @@ class _GoalShaper:
         self.next = (self.next + 1) % len(self.recent)
         # np.mean's own sum and division, without its Python wrapper (the shaper runs every physics step)
         self.lagged += (np.add.reduce(self.recent, axis=0) / len(self.recent) - self.lagged) * self.gain
-        off = ~torque_on
-        if np.logical_or.reduce(off):  # ndarray.any without its Python wrapper (every step)
+        if not np.logical_and.reduce(torque_on):  # all(), without its Python wrapper (every step)
+            off = ~torque_on
             self.recent[:, off] = position[off]
             self.lagged[off] = position[off]
         return self.lagged
@@ -438,7 +442,10 @@ class SimHumanoid:
         return out
 
     def _push_wrench(self, t: float, com: Array) -> tuple[Array, Array]:
-        """Total push force (3,) and its moment about ``com`` (3,) at time t."""
+        """Total push force (3,) and its moment about ``com`` (3,) at time t (the arrays of no push, read-only,
+        when none is scheduled: most steps)."""
+        if not self._pushes:
+            return _NO_PUSH, _NO_PUSH
         self._pushes = [p for p in self._pushes if p.start + p.duration > t]
         force, moment = np.zeros(3), np.zeros(3)
         for p in self._pushes:
@@ -458,13 +465,12 @@ class SimHumanoid:
         res = compute_zmp(model, data, q1, v, a, 0.0, FLIGHT_FRACTION, self.gravity)
         push, push_moment = self._push_wrench(t, res.com)
         force, zmp = res.force, res.zmp
-        if np.logical_or.reduce(push):  # any(), unwrapped: every step
+        if push is not _NO_PUSH and np.logical_or.reduce(push):  # any(), unwrapped, only while pushes are scheduled
             force = res.force - push
             # the flight threshold only when pushed: the model's gravity is a copy made each time it is read
             min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
             zmp = zmp_from_wrench(res.com, force, data.dhg.angular - push_moment, 0.0, min_fz)
-        pin.updateFramePlacements(model, data)
-        soles = foot_soles(self.body, data)
+        soles = foot_soles(self.body, data, place=True)
         touching = [float(np.minimum.reduce(soles[s][:, 2])) <= self.contact_tolerance for s in ("left", "right")]
         support = support_label(*touching)
         polygon, vertices = self._polygon(soles, support)

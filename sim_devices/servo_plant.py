@@ -152,7 +152,10 @@ class ServoPlant:
             shift = np.where(on, driven * h, velocity * self.coast_time_constant * coasted)
         position = self.position + shift
         clipped = np.minimum(np.maximum(position, self.lower), self.upper)
-        new_velocity[clipped != position] = 0.0
+        stopped = np.not_equal(clipped, position)
+        # a joint at a hard stop is seldom: the boolean-mask assignment (several times a compare's cost) only then
+        if np.logical_or.reduce(stopped):  # any(), unwrapped
+            new_velocity[stopped] = 0.0
         torque = (new_velocity - velocity) * inertia_rate
         torque += self.damping * new_velocity
         torque += self.external_torque

@@ -9,10 +9,16 @@ it falls: the steps cover double support, the push's wrench, the ZMP leaving the
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
+import pytest
+from data_paths import OP3_URDF
+from humanoid_gen import HumanoidSpec, build_humanoid
 
 import sim_devices.humanoid as humanoid_module
 from livezmp.balance.support import clamp_to_polygon
 from livezmp.live import scenarios as sc
+from livezmp.model import base_placement
+from livezmp.model.body import foot_soles
 from livezmp.model.robot import load_robot
 from sim_devices.humanoid import SimHumanoid
 from sim_devices.scenario_player import ScenarioPlayer
@@ -56,11 +62,32 @@ def same(a, b) -> bool:
     return a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
+def soles_every_frame_placed(body, data, place=False):
+    """The soles as the step found them: every frame of the model placed, the feet's read back."""
+    pin.updateFramePlacements(body.model, data)
+    return foot_soles(body, data)
+
+
+class EveryFramePlaced:
+    """Pinocchio as the base placer used it: forward kinematics placing every frame, the feet's read back."""
+
+    forwardKinematics = staticmethod(pin.framesForwardKinematics)
+
+    @staticmethod
+    def updateFramePlacement(model, data, frame):
+        return data.oMf[frame]
+
+    def __getattr__(self, name):
+        return getattr(pin, name)
+
+
 def test_humanoid_states_bit_for_bit_as_before(monkeypatch):
     after = stepped_states(2.5)
     with monkeypatch.context() as m:
         m.setattr(humanoid_module, "clamp_to_vertices", clamp_checked_every_step)
         m.setattr(humanoid_module, "_continued", continued_in_numpy)
+        m.setattr(humanoid_module, "foot_soles", soles_every_frame_placed)
+        m.setattr(base_placement, "pin", EveryFramePlaced())
         before = stepped_states(2.5)
     assert len(after) == len(before) > 1000
     assert any(s[12] is not None and s[12] < 0 for s in after)  # the ZMP left the polygon
@@ -76,3 +103,32 @@ def test_continued_angles_as_numpy_made_them():
         scale = 10.0 ** rng.integers(-3, 2)
         angles, previous = rng.normal(size=3) * scale, rng.normal(size=3) * scale
         assert same(humanoid_module._continued(angles, previous), continued_in_numpy(angles, previous))
+
+
+@pytest.mark.parametrize("robot", ["livezmp_mini", "op3", "generated", "generated_cylinders"])
+def test_feet_placed_alone_as_every_frame_placed(robot, tmp_path):
+    # the feet's frames alone placed from the joints' placements: the soles and the base placement as before, on
+    # random postures (the generated robots' link frames turned at random; cylinder feet: a sole from collisions)
+    if robot == "op3":
+        urdf = str(OP3_URDF)
+    elif robot.startswith("generated"):
+        spec = HumanoidSpec(frames="random", seed=31, foot="cylinders" if robot.endswith("cylinders") else "box")
+        urdf = str(build_humanoid(tmp_path / f"{robot}.urdf", spec))
+    else:
+        urdf = None
+    body = load_robot(urdf, None).body
+    rng = np.random.default_rng(5)
+    model = body.model
+    placer, reference = base_placement.BasePlacer(body), base_placement.BasePlacer(body)
+    data, every = model.createData(), model.createData()
+    for _ in range(300):
+        q = np.zeros(model.nq)
+        q[6:] = rng.uniform(-0.4, 0.4, model.nq - 6)
+        pin.forwardKinematics(model, data, q)
+        pin.framesForwardKinematics(model, every, q)
+        placed, all_placed = foot_soles(body, data, place=True), foot_soles(body, every)
+        assert all(same(placed[s], all_placed[s]) for s in body.feet)
+        base = placer.update(q[6:])
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(base_placement, "pin", EveryFramePlaced())
+            assert same(base, reference.update(q[6:]))

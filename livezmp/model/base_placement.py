@@ -62,11 +62,12 @@ class BasePlacer:
         """Joint angles (rad, URDF order) → base (x, y, z, yaw, pitch, roll) in m, rad."""
         q = self._q
         q[self._nb:] = q_joints
-        pin.framesForwardKinematics(self.body.model, self.data, q)
-        # the feet's placements read in place, not copied (the loop and the simulator place a base every cycle):
-        # nothing below moves the kinematics, and what is kept (the anchor) is a new SE3
-        placements = self.data.oMf
-        bf = {s: placements[frame] for s, frame in self._frames.items()}
+        model, data = self.body.model, self.data
+        pin.forwardKinematics(model, data, q)
+        # the two feet's frames alone (the loop and the simulator place a base every cycle): the same products
+        # framesForwardKinematics makes for every frame of the model, and reading data.oMf[i] back costs about 10
+        # times a frame's placement
+        bf = {s: pin.updateFramePlacement(model, data, frame) for s, frame in self._frames.items()}
         if self.stance is None:
             self._start(bf)
         other = "right" if self.stance == "left" else "left"
