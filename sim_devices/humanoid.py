@@ -178,13 +178,12 @@ class BalanceCounters:
     longest_unsupported_s: float = 0.0
 
 
-def _continued(angles: Array, previous: Array) -> Array:
+def _continued(angles: list[float], previous: list[float]) -> list[float]:
     """``angles`` (rad) shifted by whole turns to lie within π of ``previous``, so that
     differences across ±π stay small."""
     # plain floats: the base's three angles every physics step, where numpy's per-call cost is most of the work;
     # Python's float % is numpy's remainder (the same result bit for bit)
-    return np.array([p + (a - p + math.pi) % (2 * math.pi) - math.pi
-                     for a, p in zip(angles.tolist(), previous.tolist(), strict=True)])
+    return [p + (a - p + math.pi) % (2 * math.pi) - math.pi for a, p in zip(angles, previous, strict=True)]
 
 
 SAME_CORNER = 1e-5  # corners this share of their span apart are one point: the legs' IK holds the feet to 1e-7 m
@@ -424,9 +423,10 @@ class SimHumanoid:
         self._check_fall(self._state)
 
     def _whole_body(self, joints: Array) -> Array:
-        q = np.concatenate([self._placer.update(joints), joints])
-        q[3:6] = _continued(q[3:6], self._history[2][3:6])
-        return q
+        # the base's coordinates as floats, its angles continued, then one array: fewer numpy calls, the same values
+        base = self._placer.update(joints).tolist()
+        base[3:] = _continued(base[3:], self._history[2][3:6].tolist())
+        return np.concatenate((base, joints))
 
     def _replaced(self, q: Array) -> Array:
         """``q`` with its base re-placed from the (new) stance foot's anchor."""
@@ -438,7 +438,7 @@ class SimHumanoid:
         out = q.copy()
         coords = base_coordinates(self._placer.anchor * pin.updateFramePlacement(model, data, foot).inverse())
         out[:3] = coords[:3]
-        out[3:6] = _continued(coords[3:6], q[3:6])
+        out[3:6] = _continued(coords[3:6].tolist(), q[3:6].tolist())
         return out
 
     def _push_wrench(self, t: float, com: Array) -> tuple[Array, Array]:

@@ -26,6 +26,7 @@ from sim_devices.scenario_player import ScenarioPlayer
 
 def continued_in_numpy(angles, previous):
     """The base's angles continued as before, with numpy's ufuncs."""
+    angles, previous = np.asarray(angles), np.asarray(previous)
     return previous + (angles - previous + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -102,7 +103,7 @@ def test_continued_angles_as_numpy_made_them():
     for _ in range(2000):
         scale = 10.0 ** rng.integers(-3, 2)
         angles, previous = rng.normal(size=3) * scale, rng.normal(size=3) * scale
-        assert same(humanoid_module._continued(angles, previous), continued_in_numpy(angles, previous))
+        assert same(humanoid_module._continued(angles.tolist(), previous.tolist()), continued_in_numpy(angles, previous))
 
 
 @pytest.mark.parametrize("robot", ["livezmp_mini", "op3", "generated", "generated_cylinders"])
