@@ -235,13 +235,14 @@ def edge_strip(sole: Array, fraction: float) -> Array:
 class _GoalShaper:
     """Commanded goals → a servo plant's goal: their mean over the last ``window`` steps,
     then a first-order lag (``gain`` per step); joints with torque off reset both to
-    their position. Memory: ``window`` goal vectors."""
+    their position. ``lagged``: the array the shaped goal is kept in and updated in place (the
+    plant's goal: no copy a step), its values the start. Memory: ``window`` goal vectors."""
 
-    def __init__(self, start: Array, window: int, gain: float):
-        self.recent = np.tile(start, (window, 1))
+    def __init__(self, lagged: Array, window: int, gain: float):
+        self.recent = np.tile(lagged, (window, 1))
         self.next = 0
         self.gain = gain
-        self.lagged = start.copy()
+        self.lagged = lagged
 
     def update(self, goal: Array, position: Array, torque_on: Array) -> Array:
         self.recent[self.next] = goal
@@ -309,7 +310,7 @@ class SimHumanoid:
         self.servo = servo
         self.goal = servo.position.copy()  #: commanded goals (rad); the plant's own goal is their shaped copy
         servo.goal[:] = servo.position
-        self._shaper = _GoalShaper(servo.position, max(1, round(goal_window_s / dt)),
+        self._shaper = _GoalShaper(servo.goal, max(1, round(goal_window_s / dt)),
                                    -math.expm1(-dt / goal_lag_s) if goal_lag_s > 0 else 1.0)
         # The JointPlant arrays: the servo plant's own, updated in place.
         self.position, self.velocity, self.current = servo.position, servo.velocity, servo.current
@@ -412,7 +413,7 @@ class SimHumanoid:
     def _step_once(self) -> None:
         stance = self._placer.stance
         servo = self.servo
-        servo.goal[:] = self._shaper.update(self.goal, servo.position, servo.torque_on)
+        self._shaper.update(self.goal, servo.position, servo.torque_on)  # into servo.goal
         servo.step(self.dt)
         q = self._whole_body(self.servo.position)
         q0, q1 = self._history[1], self._history[2]

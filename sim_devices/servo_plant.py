@@ -151,18 +151,20 @@ class ServoPlant:
             new_velocity = np.where(on, driven, velocity * decay)
             shift = np.where(on, driven * h, velocity * self.coast_time_constant * coasted)
         position = self.position + shift
-        clipped = np.minimum(np.maximum(position, self.lower), self.upper)
-        stopped = np.not_equal(clipped, position)
+        # In place, so arrays handed out earlier stay live views of the state; each written whole by its last
+        # ufunc (out=) where one makes it, not computed and copied in
+        np.minimum(np.maximum(position, self.lower), self.upper, out=self.position)
+        stopped = np.not_equal(self.position, position)
         # a joint at a hard stop is seldom: the boolean-mask assignment (several times a compare's cost) only then
         if np.logical_or.reduce(stopped):  # any(), unwrapped
             new_velocity[stopped] = 0.0
         torque = (new_velocity - velocity) * inertia_rate
         torque += self.damping * new_velocity
         torque += self.external_torque
-        torque /= self.torque_constant
-        if not all_on:
+        if all_on:
+            np.divide(torque, self.torque_constant, out=self.current)
+        else:
+            torque /= self.torque_constant
             torque[~on] = 0.0
-        # In place, so arrays handed out earlier stay live views of the state.
-        self.current[:] = torque
-        self.position[:] = clipped
+            self.current[:] = torque
         self.velocity[:] = new_velocity
