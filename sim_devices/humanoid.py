@@ -249,7 +249,7 @@ class _GoalShaper:
         self.next = (self.next + 1) % len(self.recent)
         # np.mean's own sum and division, without its Python wrapper (the shaper runs every physics step)
         self.lagged += (np.add.reduce(self.recent, axis=0) / len(self.recent) - self.lagged) * self.gain
-        if not np.logical_and.reduce(torque_on):  # all(), without its Python wrapper (every step)
+        if b"\x00" in torque_on.tobytes():  # not all on (a bool array's bytes are 0 or 1): cheaper than a reduction
             off = ~torque_on
             self.recent[:, off] = position[off]
             self.lagged[off] = position[off]
@@ -336,7 +336,7 @@ class SimHumanoid:
         self._requested = 0.0
         self._unsupported_since: float | None = None
         self._pushes: list[Push] = []
-        self._polygon_cache: tuple[str, Array, Array, list] | None = None
+        self._polygon_cache: tuple[str, list[float], Array, list] | None = None
         q = np.concatenate([self._placer.update(servo.position), servo.position])
         self._history = [q, q, q]  # configurations at steps k-2, k-1, k
         self._state = self._evaluate(0.0)
@@ -354,7 +354,8 @@ class SimHumanoid:
     def set_goals(self, positions: Array) -> None:
         """Set every joint's goal at once (rad, URDF order), atomically."""
         goals = np.asarray(positions, dtype=float)
-        if goals.shape != self.goal.shape or not np.logical_and.reduce(np.isfinite(goals)):  # all(), unwrapped
+        # the joints' floats checked one by one: a ufunc and its reduction cost several times that (every step)
+        if goals.shape != self.goal.shape or not all(map(math.isfinite, goals.tolist())):
             bad = "shape " + str(goals.shape) if goals.shape != self.goal.shape else \
                 "joint " + self.body.joint_names[int(np.flatnonzero(~np.isfinite(goals))[0])] + " not finite"
             raise InputError(f"SimHumanoid.set_goals: need {len(self.goal)} finite angles (rad), got {bad}")
@@ -472,7 +473,9 @@ class SimHumanoid:
             min_fz = FLIGHT_FRACTION * self.body.total_mass * float(-model.gravity.linear[2])
             zmp = zmp_from_wrench(res.com, force, data.dhg.angular - push_moment, 0.0, min_fz)
         soles = foot_soles(self.body, data, place=True)
-        touching = [float(np.minimum.reduce(soles[s][:, 2])) <= self.contact_tolerance for s in ("left", "right")]
+        # the lowest corner as floats (a numpy reduction costs more than the four floats; the soles are finite, made
+        # from finite goals, so min() finds what np.min would)
+        touching = [min(soles[s][:, 2].tolist()) <= self.contact_tolerance for s in ("left", "right")]
         support = support_label(*touching)
         polygon, vertices = self._polygon(soles, support)
         clamped, margin = None, None
@@ -486,11 +489,12 @@ class SimHumanoid:
         """The support polygon (m, 2) and its vertices as float pairs (checked once, when built: the ZMP is
         clamped to them every step); reused while the soles in contact stay within 1 nm of where it was built
         (feet on the ground do not move), as building a hull costs more than a step."""
-        held = [soles[s] for s in ("left", "right") if support in (s, "double")]
-        key = np.concatenate(held) if held else np.zeros((0, 3))
+        # the held soles' corners as floats, compared one by one: cheaper than numpy's concatenation, difference and
+        # reduction on two dozen numbers (every step)
+        key = [x for s in ("left", "right") if support in (s, "double") for x in soles[s].ravel().tolist()]
         cached = self._polygon_cache
         if cached is not None and cached[0] == support and \
-                np.maximum.reduce(np.abs(cached[1] - key), axis=None, initial=0.0) <= 1e-9:  # max(), unwrapped
+                all(abs(x - y) <= 1e-9 for x, y in zip(cached[1], key, strict=True)):
             return cached[2], cached[3]
         bearing = dict(soles)
         if self.edge is not None:

@@ -142,7 +142,7 @@ class ServoPlant:
         np.maximum(driven, lowest, out=driven)
         np.minimum(driven, velocity + dv, out=driven)
         np.maximum(driven, velocity - dv, out=driven)
-        all_on = np.logical_and.reduce(on)  # all(), without its Python wrapper
+        all_on = b"\x00" not in on.tobytes()  # all() (a bool array's bytes are 0 or 1): cheaper than a reduction
         if all_on:  # every joint driven (a standing humanoid, every step): no coasting terms to compute or mask
             shift = driven * h
             new_velocity = driven
@@ -154,10 +154,7 @@ class ServoPlant:
         # In place, so arrays handed out earlier stay live views of the state; each written whole by its last
         # ufunc (out=) where one makes it, not computed and copied in
         np.minimum(np.maximum(position, self.lower), self.upper, out=self.position)
-        stopped = np.not_equal(self.position, position)
-        # a joint at a hard stop is seldom: the boolean-mask assignment (several times a compare's cost) only then
-        if np.logical_or.reduce(stopped):  # any(), unwrapped
-            new_velocity[stopped] = 0.0
+        new_velocity[self.position != position] = 0.0
         torque = (new_velocity - velocity) * inertia_rate
         torque += self.damping * new_velocity
         torque += self.external_torque

@@ -103,7 +103,8 @@ def test_continued_angles_as_numpy_made_them():
     for _ in range(2000):
         scale = 10.0 ** rng.integers(-3, 2)
         angles, previous = rng.normal(size=3) * scale, rng.normal(size=3) * scale
-        assert same(humanoid_module._continued(angles.tolist(), previous.tolist()), continued_in_numpy(angles, previous))
+        continued = humanoid_module._continued(angles.tolist(), previous.tolist())
+        assert same(continued, continued_in_numpy(angles, previous))
 
 
 @pytest.mark.parametrize("robot", ["livezmp_mini", "op3", "generated", "generated_cylinders"])
