@@ -49,8 +49,9 @@ class BasePlacer:
 
     def _sole_min_z(self, world_from_base: pin.SE3, side: str, base_from_foot: dict[str, pin.SE3]) -> float:
         m = world_from_base * base_from_foot[side]
-        # min() without its Python wrapper: the loop and the simulator place a base every cycle
-        return float(np.minimum.reduce((self.body.feet[side].sole_local @ m.rotation.T + m.translation)[:, 2]))
+        # the corners' heights as floats (the loop and the simulator place a base every cycle: a numpy reduction costs
+        # more than the few floats); finite joint angles make finite corners, where min() finds what np.min would
+        return min((self.body.feet[side].sole_local @ m.rotation.T + m.translation)[:, 2].tolist())
 
     def _anchor_flat(self, pose: pin.SE3, side: str, xy: np.ndarray | None = None) -> pin.SE3:
         yaw = float(np.arctan2(pose.rotation[1, 0], pose.rotation[0, 0]))
