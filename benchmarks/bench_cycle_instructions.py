@@ -8,10 +8,10 @@ are not counted), over N. Without ``--callgrind`` it runs once and prints a dige
 
 * ``sim``: the simulated devices of the two-bus 1 kHz row: livezmp_mini's 20 XM430s on two chains at 4 Mbps
   with the high-speed adapter, over a shared-memory humanoid (`RemoteHumanoid`, as the devices' process
-  sees the physics process), on real ptys served by their ports' code without the server's thread. A
+  sees the physics process), on real ptys served by their `PortServer`'s passes without its thread. A
   cycle: on each bus the client writes a Sync Write of goals and a Fast Sync Read of positions (the
-  pipelined loop's packets), the port takes them in as its server does after a select (`_waits`,
-  `_serve_selected`) and writes the reply (`_flush`), and the client reads it. The select, the spin
+  pipelined loop's packets), the server takes both buses' in as its thread does after a select (`_waits`,
+  `_take_in`), writes the replies (`_write_due`), and the client reads them. The select, the spin
   before a reply is due and the wake-ups are the host's and are not counted (see ``bench_live_loop.py``).
   The digest covers every reply's bytes and its due time (µs after the cycle's write) and the goals the
   plant was given.
@@ -63,17 +63,19 @@ def measured(cycle, cycles: int) -> None:
     sys.call_tracing(_cycles, (cycle, WARM_UP, WARM_UP + cycles))
 
 
-class _NoServer:
-    """A port server that serves nothing: the harness calls the port's steps itself."""
+def _harness_server():
+    """A `PortServer` whose passes the harness makes itself, on its own clock (no thread, no spin)."""
+    from sim_devices.pty_port import PortServer
 
-    def add(self, port) -> None:
-        pass
+    class Harness(PortServer):
+        def add(self, port) -> None:
+            self._ports.append(port)
+            self._serving = tuple(self._ports)
 
-    def serves(self, port) -> bool:
-        return False
+        def remove(self, port) -> None:
+            self._drop(port)
 
-    def remove(self, port) -> None:
-        pass
+    return Harness()
 
 
 def _shared_humanoid():
@@ -103,13 +105,14 @@ def sim_part(cycles: int) -> bytes:
     servos = [robot.config.servos[name] for name in robot.body.joint_names]  # in the order start_devices takes
     sizes = [len(part) for part in np.array_split(np.arange(len(servos)), 2)]
     digest = hashlib.sha256()
+    server = _harness_server()
     buses = []
     first = 0
     t0 = time.monotonic() + 10.0  # the cycles' times: after the chains' construction (monotonic s)
     for share, size in zip(split_plant(remote, sizes), sizes, strict=True):
         group = servos[first: first + size]
         first += size
-        chain = DynamixelChain([s.id for s in group], share, baud_rate=BAUD, adapter="hs", port_server=_NoServer(),
+        chain = DynamixelChain([s.id for s in group], share, baud_rate=BAUD, adapter="hs", port_server=server,
                                settings={"return_delay_time": 0})
         for s in group:
             chain.set_register(s.id, "homing_offset", s.zero - XM430_ZERO)
@@ -132,16 +135,21 @@ def sim_part(cycles: int) -> bytes:
     def cycle(k: int) -> None:
         now = t0 + 1e-3 * k
         arrays["position"][:] += 1e-4  # the physics moved the joints since the last cycle
-        for chain, port, client, read, writes in buses:
+        for _, _, client, read, writes in buses:
             os.write(client, writes[k % 64] + read)
-            packets = chain.stats.packets + 2
-            while chain.stats.packets < packets:  # the pty's kernel worker may hand them over in two parts
-                readers, _, _ = port._waits()
-                readable, _, _ = select.select(readers, [], [], 1.0)
-                port._serve_selected(readable, now)
+        wanted = [chain.stats.packets + 2 for chain, *_ in buses]
+        # the server's passes, as its thread makes them: the pty's kernel worker may hand the packets over in parts
+        while any(chain.stats.packets < n for (chain, *_), n in zip(buses, wanted, strict=True)):
+            served, readers, _, _ = server._waits(server._serving)
+            readable, _, _ = select.select(readers, [], [], 1.0)
+            server._take_in(served, readable, now)
+        replies = []
+        for _, port, _, _, _ in buses:
             for due, _, payload in port._pending:
                 digest.update(struct.pack("<d", round((due - now) * 1e6, 3)) + payload)
-            port._flush(port._master, math.inf)
+            replies.append(payload)
+        server._write_due(served, math.inf)
+        for (_, _, client, _, _), payload in zip(buses, replies, strict=True):
             got = b""
             while len(got) < len(payload):
                 select.select([client], [], [], 1.0)

@@ -25,12 +25,14 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import heapq
 import itertools
 import math
 import os
 import select
 import shutil
+import struct
 import tempfile
 import termios
 import threading
@@ -50,12 +52,17 @@ SPIN_BEFORE_DUE_S = 1e-4
 # as a real adapter's FIFO would overflow; it keeps memory bounded.
 MAX_PENDING_OUTPUT = 64 * 1024
 
+# the line speed's code (`c_cflag & CBAUD`, as glibc's cfgetospeed gives it) -> baud
 _SPEEDS = {
     getattr(termios, f"B{rate}"): rate
     for rate in (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600,
                  1000000, 1152000, 1500000, 2000000, 2500000, 3000000, 3500000, 4000000)
     if hasattr(termios, f"B{rate}")
 }
+# The slave's termios as the kernel's TCGETS fills it (its c_cflag the third 32-bit word on every Linux
+# architecture); 64 bytes is more than any architecture's struct termios.
+_TERMIOS_BYTES = 64
+_CFLAG = struct.Struct("=8xI")
 
 
 class ByteDevice(Protocol):
@@ -74,9 +81,10 @@ class ByteDevice(Protocol):
 class PtyPort:
     """Serve ``device`` on a pty reachable at the stable path :attr:`path`.
 
-    The serving thread starts at construction and stops on :meth:`close` (also
-    the context-manager exit). An exception raised by the device is kept and
-    re-raised by :meth:`close`, so device bugs surface in the caller.
+    Serving starts at construction and stops on :meth:`close` (also the context-manager exit), from
+    ``server``'s thread (shared with other ports) or, without one, from a `PortServer` of its own. An
+    exception raised by the device is kept and re-raised by :meth:`close`, so device bugs surface in the
+    caller.
     """
 
     def __init__(self, device: ByteDevice, name: str = "ttySIM", spin: bool = False,
@@ -88,10 +96,9 @@ class PtyPort:
         self._cleanup = weakref.finalize(self, shutil.rmtree, self._dir, ignore_errors=True)
         self.path = os.path.join(self._dir, name)
         self._lock = threading.RLock()
-        self._wake_r, self._wake_w = os.pipe()
-        os.set_blocking(self._wake_r, False)
         self._master = -1
         self._slave = -1
+        self._termios = bytearray(_TERMIOS_BYTES)  # the slave's termios, read into this at each line_speed()
         self._pending: list[tuple[float, int, bytes]] = []
         self._seq = itertools.count()
         self._out = bytearray()
@@ -100,13 +107,11 @@ class PtyPort:
         self.error: Exception | None = None
         self.dropped_output_bytes = 0
         self._selected = -1  # the master the last select watched
+        self._deadline = -math.inf  # the device's next_deadline() as asked before that select (monotonic s)
         self._open_pty()
-        self._server = server
-        if server is None:
-            self._thread = threading.Thread(target=self._run, name=f"pty-{name}", daemon=True)
-            self._thread.start()
-        else:
-            server.add(self)
+        # a port of its own is served as a server's only port: one serving loop for both
+        self._server = server if server is not None else PortServer(f"pty-{name}")
+        self._server.add(self)
 
     # -- public API -------------------------------------------------------------------------------
 
@@ -124,13 +129,11 @@ class PtyPort:
         done = threading.Event()
         with self._lock:
             self._unplug_requests.append(done)
-        self._wake()
+        self._server.wake()
         done.wait(timeout=5.0)
 
     def _served_elsewhere(self) -> bool:
         """Whether another thread than this one serves the port (and so must be asked to unplug it)."""
-        if self._server is None:
-            return self._thread.is_alive() and threading.current_thread() is not self._thread
         return self._server.serves(self) and threading.current_thread() is not self._server.thread
 
     def restore(self) -> None:
@@ -138,32 +141,30 @@ class PtyPort:
         with self._lock:
             if self._master < 0 and not self._closed:
                 self._open_pty()
-        self._wake()
+        self._server.wake()
 
     def line_speed(self) -> int | None:
-        """The client's configured line speed in baud, or None if unknown or absent."""
+        """The client's configured line speed in baud, or None if unknown or absent.
+
+        Read from the slave's termios at every call (one ioctl into a kept buffer): the client may have
+        changed it since, and only the kernel knows (see docs/live_loop.md, session 22)."""
         with self._lock:
             if self._slave < 0:
                 return None
             try:
-                return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
-            except termios.error:
+                fcntl.ioctl(self._slave, termios.TCGETS, self._termios)
+            except OSError:
                 return None
+            return _SPEEDS.get(_CFLAG.unpack_from(self._termios)[0] & termios.CBAUD)
 
     def close(self) -> None:
-        """Stop the thread, close the pty and remove the temporary directory."""
+        """Stop serving, close the pty and remove the temporary directory."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-        self._wake()
-        if self._server is None:
-            self._thread.join(timeout=5.0)
-        else:
-            self._server.remove(self)
+        self._server.remove(self)
         self.vanish()
-        os.close(self._wake_r)
-        os.close(self._wake_w)
         self._cleanup()
         if self.error is not None:
             raise RuntimeError(f"simulated device on {self.path} failed: {self.error!r}") from self.error
@@ -174,7 +175,7 @@ class PtyPort:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # -- internals --------------------------------------------------------------------------------
+    # -- internals: the serving thread's steps, each under the port's lock -------------------------
 
     def _open_pty(self) -> None:
         master, slave = os.openpty()
@@ -199,30 +200,9 @@ class PtyPort:
             self._pending.clear()
             self._out.clear()
 
-    def _wake(self) -> None:
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
-
-    def _run(self) -> None:
-        try:
-            self._serve()
-        except Exception as exc:  # kept and re-raised by close()
-            self.error = exc
-
-    def _serve(self) -> None:
-        while True:
-            waits = self._waits()
-            if waits is None:
-                return
-            readers, writers, due = waits
-            timeout = None if due == math.inf else max(0.0, due - time.monotonic())
-            readable, _, _ = select.select(readers, writers, [], timeout)
-            now = time.monotonic()
-            _spin_to(self._serve_selected(readable, now), now, self._spin_s)
-            self._flush_due()
-
-    def _waits(self) -> tuple[list[int], list[int], float] | None:
-        """What the next select waits on: (readers, writers, when to wake at the latest); None once closed."""
+    def _waits(self) -> tuple[int, bool, float] | None:
+        """What the next select waits on: (the master to read, -1 for none; whether to wait to write to it;
+        when to wake at the latest, monotonic s); None once closed."""
         with self._lock:
             if self._closed:
                 return None
@@ -232,16 +212,14 @@ class PtyPort:
                     done.set()
                 self._unplug_requests.clear()
             master = self._selected = self._master
-            spin_from = self._pending[0][0] - self._spin_s if self._pending else math.inf
-            due = min(self._device.next_deadline(), spin_from)
-            writers = [master] if master >= 0 and self._out else []
-        return ([self._wake_r] if master < 0 else [self._wake_r, master]), writers, due
+            self._deadline = self._device.next_deadline()
+            if self._pending:
+                return master, bool(self._out) and master >= 0, min(self._deadline,
+                                                                     self._pending[0][0] - self._spin_s)
+            return master, bool(self._out) and master >= 0, self._deadline
 
     def _serve_selected(self, readable: list[int], now: float) -> float:
         """After the select: the client's bytes to the device, its timed work; when the next reply is due."""
-        if self._wake_r in readable:
-            with contextlib.suppress(BlockingIOError):
-                os.read(self._wake_r, 4096)
         device = self._device
         with self._lock:
             # The pty may have vanished or been replaced while we waited: only read the one we
@@ -251,19 +229,19 @@ class PtyPort:
                 data = self._read(master)
                 if data:
                     self._queue(device.on_bytes(data, now))
-            if now >= device.next_deadline():
+            # the deadline asked before the select: bytes taken in since only move it later (the packet's
+            # time restarts the bus watchdogs, which on_bytes expired first), and polling early does nothing
+            if now >= self._deadline:
                 self._queue(device.poll(now))
             return self._pending[0][0] if self._pending else math.inf
 
-    def _next_due(self) -> float:
-        """When the next queued reply is due (inf: none, or no pty to write it to)."""
+    def _flush_due(self, now: float) -> float:
+        """The replies due by ``now`` (monotonic s) written; when the next one is due (inf: none, or no pty)."""
         with self._lock:
-            return self._pending[0][0] if self._pending and self._master >= 0 else math.inf
-
-    def _flush_due(self) -> None:
-        with self._lock:
-            if self._master >= 0:
-                self._flush(self._master, time.monotonic())
+            if self._master < 0:
+                return math.inf
+            self._flush(self._master, now)
+            return self._pending[0][0] if self._pending else math.inf
 
     def _read(self, master: int) -> bytes:
         try:
@@ -303,92 +281,164 @@ def _spin_to(reply_due: float, now: float, spin_s: float) -> None:
 
 
 class PortServer:
-    """One thread serving several `PtyPort`s (``PtyPort(..., server=...)``): the buses of one simulated
-    robot. Their replies due at the same time leave together, and no port's spin before its reply
-    holds the GIL against another port's thread (with a thread each, the second bus's reply waited
-    for the first's spin). A device's exception stops its port only (kept in its ``error``). The
-    thread runs while there are ports to serve."""
+    """One thread serving `PtyPort`s (``PtyPort(..., server=...)``): the buses of one simulated robot, or a
+    port of its own. Their replies due at the same time leave together, and no port's spin before its reply
+    holds the GIL against another port's thread (with a thread each, the second bus's reply waited for the
+    first's spin). A pass of the thread: each port's waits asked once (its device's next deadline among
+    them), one select on every port's pty and the server's wake-up pipe, each port's bytes taken in and its
+    timed work done, then the replies due written (spinning up to its spin time to each). A device's
+    exception stops its port only (kept in its ``error``). The thread runs while there are ports to serve."""
 
     def __init__(self, name: str = "pty-server") -> None:
         self._name = name
         self._ports: list[PtyPort] = []
+        self._serving: tuple[PtyPort, ...] = ()  # the ports as the thread's next pass takes them
         self._changed = threading.Condition()
+        self._wake_w = -1  # the running thread's wake-up pipe (write end; -1: no thread)
         self.thread: threading.Thread | None = None
 
     def add(self, port: PtyPort) -> None:
-        """Serve ``port`` from now on."""
+        """Serve ``port`` from now on (the thread's next pass: woken for it)."""
         with self._changed:
             self._ports.append(port)
+            self._serving = tuple(self._ports)
             if self.thread is None:
-                self.thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+                wake_r, self._wake_w = os.pipe()
+                os.set_blocking(wake_r, False)
+                self.thread = threading.Thread(target=self._run, args=(wake_r,), name=self._name, daemon=True)
                 self.thread.start()
+            else:
+                self._wake_locked()
 
     def serves(self, port: PtyPort) -> bool:
         with self._changed:
             return port in self._ports
 
+    def wake(self) -> None:
+        """End the thread's wait now: a port was closed, unplugged or plugged back in."""
+        with self._changed:
+            self._wake_locked()
+
+    def _wake_locked(self) -> None:
+        if self._wake_w >= 0:  # the pipe is closed only under this lock, as the thread ends
+            with contextlib.suppress(OSError):
+                os.write(self._wake_w, b"x")
+
     def remove(self, port: PtyPort) -> None:
-        """Wait (up to 5 s) until the thread has dropped ``port`` (closed: its next select sees it)."""
+        """Wait (up to 5 s) until the thread has dropped ``port`` (closed: its next pass sees it)."""
         if threading.current_thread() is self.thread:
             self._drop(port)
             return
         with self._changed:
+            self._wake_locked()
             self._changed.wait_for(lambda: port not in self._ports, timeout=5.0)
 
     def _drop(self, port: PtyPort) -> None:
         with self._changed:
             if port in self._ports:
                 self._ports.remove(port)
+                self._serving = tuple(self._ports)
             self._changed.notify_all()
 
-    def _run(self) -> None:
-        while True:
+    def _fail(self, port: PtyPort, exc: Exception) -> None:
+        """A device's exception: kept in its port's ``error`` (re-raised by its close), the port dropped."""
+        port.error = exc
+        self._drop(port)
+
+    def _run(self, wake_r: int) -> None:
+        try:
+            self._serve(wake_r)
+        except Exception as exc:  # the server's own (a select that failed): every port it serves stops with it
             with self._changed:
-                ports = list(self._ports)
-                if not ports:
-                    self.thread = None  # the next add starts another
-                    return
-            waits = {}
-            for port in ports:
-                w = self._step(port, port._waits)
-                if w is None:
-                    self._drop(port)
-                else:
-                    waits[port] = w
-            if not waits:
+                for port in self._ports:
+                    port.error = port.error or exc
+                self._ports.clear()
+                self._serving = ()
+                self._end(wake_r)
+
+    def _end(self, wake_r: int) -> None:
+        """The thread ends (under the lock, no port left): the next add starts another."""
+        self.thread = None
+        os.close(wake_r)
+        os.close(self._wake_w)
+        self._wake_w = -1
+        self._changed.notify_all()
+
+    def _serve(self, wake_r: int) -> None:
+        """Passes until no port is left to serve."""
+        while True:
+            ports = self._serving
+            if not ports:
+                with self._changed:
+                    if not self._ports:
+                        self._end(wake_r)
+                        return
                 continue
-            due = min(w[2] for w in waits.values())
-            timeout = None if due == math.inf else max(0.0, due - time.monotonic())
-            readable, _, _ = select.select([fd for w in waits.values() for fd in w[0]],
-                                           [fd for w in waits.values() for fd in w[1]], [], timeout)
+            served, readers, writers, wake_at = self._waits(ports)
+            if not served:
+                continue
+            readers.append(wake_r)
+            timeout = None if wake_at == math.inf else max(0.0, wake_at - time.monotonic())
+            readable, _, _ = select.select(readers, writers, [], timeout)
             now = time.monotonic()
-            replies = [self._step(port, port._serve_selected, readable, now) for port in waits]
-            spin_s = max(port._spin_s for port in waits)
-            due = min((r for r in replies if r is not None), default=math.inf)
+            if readable and readable[-1] == wake_r:
+                with contextlib.suppress(BlockingIOError):
+                    os.read(wake_r, 4096)
+            due, spin_s = self._take_in(served, readable, now)
             # each reply due within the spin time leaves when due, in this pass: a second bus's reply due just
             # after the first's does not cost another round of select and device calls
             while True:
                 _spin_to(due, now, spin_s)
-                for port in waits:
-                    self._step(port, port._flush_due)
-                if not spin_s:
-                    break
                 now = time.monotonic()
-                due = min((port._next_due() for port in waits if port.error is None), default=math.inf)
-                if due > now + spin_s:
+                due = self._write_due(served, now)
+                if not spin_s or due > now + spin_s:
                     break
 
-    def _step(self, port: PtyPort, step, *args):
-        """``step(*args)`` of ``port``; a device's exception is kept in the port's ``error`` (re-raised by its
-        close) and the port dropped: None."""
-        if port.error is not None:
-            return None
-        try:
-            return step(*args)
-        except Exception as exc:
-            port.error = exc
-            self._drop(port)
-            return None
+    def _waits(self, ports: tuple[PtyPort, ...]) -> tuple[list[PtyPort], list[int], list[int], float]:
+        """A pass's start: the ports still served, the ptys to wait to read and to write, when to wake at the
+        latest (monotonic s); a closed port dropped."""
+        served, readers, writers, wake_at = [], [], [], math.inf
+        for port in ports:
+            try:
+                waits = port._waits()
+            except Exception as exc:
+                self._fail(port, exc)
+                continue
+            if waits is None:  # closed
+                self._drop(port)
+                continue
+            served.append(port)
+            master, writing, at = waits
+            if master >= 0:
+                readers.append(master)
+                if writing:
+                    writers.append(master)
+            wake_at = min(wake_at, at)
+        return served, readers, writers, wake_at
+
+    def _take_in(self, served: list[PtyPort], readable: list[int], now: float) -> tuple[float, float]:
+        """After the select: each port's bytes to its device and its timed work, at ``now`` (monotonic s); when the
+        next reply is due and the longest spin before one."""
+        due, spin_s = math.inf, 0.0
+        for port in served:
+            try:
+                due = min(due, port._serve_selected(readable, now))
+            except Exception as exc:
+                self._fail(port, exc)
+                continue
+            spin_s = max(spin_s, port._spin_s)
+        return due, spin_s
+
+    def _write_due(self, served: list[PtyPort], now: float) -> float:
+        """Every reply due by ``now`` (monotonic s) written; when the next is due."""
+        due = math.inf
+        for port in served:
+            if port.error is None:
+                try:
+                    due = min(due, port._flush_due(now))
+                except Exception as exc:
+                    self._fail(port, exc)
+        return due
 
 
 class PtyDevice:

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 import os
+import termios
 import time
 
 import pytest
 import serial
 from sim_support import short_gil_switch, wait_until  # noqa: F401 - short_gil_switch is a fixture
 
-from sim_devices.pty_port import MAX_PENDING_OUTPUT, PortServer, PtyPort
+from sim_devices.pty_port import _SPEEDS, MAX_PENDING_OUTPUT, PortServer, PtyPort
 
 pytestmark = pytest.mark.usefixtures("short_gil_switch")
 
@@ -105,6 +106,20 @@ def test_line_speed_is_the_clients_setting():
         assert port.line_speed() is None
 
 
+def test_line_speed_reads_every_rate_as_the_termios_module_does():
+    """The kept-buffer ioctl gives each speed (and an unknown one) as `termios.tcgetattr`'s output speed."""
+    with PtyPort(Echo()) as port:
+        client = os.open(port.path, os.O_RDWR | os.O_NOCTTY)
+        try:
+            for code in [*_SPEEDS, termios.B50, termios.B0]:
+                attrs = termios.tcgetattr(client)
+                attrs[4] = attrs[5] = code
+                termios.tcsetattr(client, termios.TCSANOW, attrs)
+                assert port.line_speed() == _SPEEDS.get(termios.tcgetattr(client)[5])
+        finally:
+            os.close(client)
+
+
 def test_output_to_a_client_that_never_reads_is_bounded():
     with PtyPort(Echo(burst=32)) as port, serial.Serial(port.path, 115200) as client:
         client.write(b"go")  # 2 MiB of replies, never read
@@ -116,7 +131,7 @@ def test_close_stops_the_thread_and_removes_the_path():
     port = PtyPort(Echo())
     directory = os.path.dirname(port.path)
     port.close()
-    assert not port._thread.is_alive()
+    assert wait_until(lambda: port._server.thread is None)
     assert not os.path.exists(directory)
     port.close()  # idempotent
 
@@ -156,6 +171,20 @@ def test_ports_served_by_one_thread_work_as_ports_of_their_own():
             again.write(b"back")
             assert again.read(4) == b"BACK"
     assert wait_until(lambda: server.thread is None)  # no port left: the thread ended
+
+
+def test_a_port_added_to_an_idle_server_is_served_at_once():
+    """The server's thread, waiting with no deadline on its first port, serves a second port added then
+    (on main it was watched from the first port's next traffic only)."""
+    server = PortServer()
+    with PtyPort(Echo(), name="ttyA", server=server), serial.Serial(timeout=1.0) as client:
+        time.sleep(0.05)  # the thread waits on ttyA alone, with no timeout
+        with PtyPort(Echo(), name="ttyB", server=server) as b:
+            client.port = b.path
+            client.open()
+            client.write(b"b")
+            assert client.read(1) == b"B"
+            client.close()
 
 
 class DueAt(Echo):
