@@ -1,7 +1,7 @@
 """A simulated serial device served on a real pseudo-terminal.
 
 `PtyPort` opens a pty pair (``os.openpty``, slave side in raw mode) and serves the
-master side from one background thread (or from a `PortServer`'s, shared by the ports of
+master side from a `PortServer`'s background thread (its own, or one shared by the ports of
 one robot's buses). Unmodified clients (pyserial,
 dynamixel-sdk, python-can's slcan) open :attr:`PtyPort.path`, a symlink in a
 private temporary directory that points at the current ``/dev/pts/N``. The
