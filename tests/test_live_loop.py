@@ -283,7 +283,7 @@ def test_goal_limiter_never_exceeds_its_limits(offset_seq, command):
     command = np.array(command)
     prev = np.zeros(3)
     for offsets in offset_seq:
-        goals, limited = limiter.apply(command, np.array(offsets))
+        goals, limited, _ = limiter.apply(command, np.array(offsets))
         sent = limiter.offsets
         assert np.all(np.abs(sent) <= 0.4 + 1e-12)
         assert np.all(np.abs(sent - prev) <= 2.0 * T + 1e-12)
@@ -308,7 +308,7 @@ def test_goal_limiter_is_the_two_clips_exactly_also_for_non_finite_input():
         want = np.where(np.isfinite(offsets), offsets, 0.0)
         sent = np.clip(np.clip(want, -0.4, 0.4), kept - 2.0 * T, kept + 2.0 * T)
         goals = np.clip(command + sent, -0.99, 0.99)
-        got, limited = limiter.apply(command, offsets)
+        got, limited, _ = limiter.apply(command, offsets)
         assert np.array_equal(got, goals, equal_nan=True) and np.array_equal(limiter.offsets, sent)
         assert limited == bool(np.any(sent != want) or np.any(goals != command + sent))
 

@@ -24,6 +24,9 @@ class SafetyConfig:
     max_correction_rad: float = 0.5
     max_correction_rate_rad_s: float = 3.0
     limit_margin_rad: float = 0.01
+    # a joint whose URDF gives no <limit velocity> (or 0) may move its goal at most this fast (rad/s): one turn
+    # a second, above the no-load speed of common hobby and humanoid servos (XM430-W350 4.8 rad/s at 12 V)
+    default_joint_speed_rad_s: float = 2 * math.pi
     stop_on_hardware_error: bool = True
 
     def __post_init__(self) -> None:

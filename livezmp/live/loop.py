@@ -26,7 +26,8 @@ Every cycle of a :class:`~livezmp.live.clock.LoopClock` (absolute deadlines):
    reach the goals a cycle later, so no one cycle carries both on top of its estimate (at
    1 kHz on two buses a cycle with both ran past its deadline one time in five);
 4. write: goals = command + offsets, through the
-   :class:`~livezmp.live.safety.GoalLimiter`.
+   :class:`~livezmp.live.safety.GoalLimiter` (correction and joint limits; each goal at most its joint's
+   URDF speed from the last one sent: counted, told and recorded as ``goal_speed``).
 
 On a link that sends its next read ahead (a Dynamixel bus) the cycle is pipelined: read, write
 the goals built the cycle before with the next read's instruction, then estimate and correct
@@ -84,7 +85,7 @@ from livezmp.live.config import CONTACT_MODES, LoopConfig
 from livezmp.live.fall_detection import FallDetector
 from livezmp.live.link_faults import LinkFaults
 from livezmp.live.recorder import LoopRecorder
-from livezmp.live.safety import FrameGuard, GoalLimiter, Watchdog, joint_limits
+from livezmp.live.safety import FrameGuard, GoalLimiter, Slowed, Watchdog, joint_limits
 from livezmp.model.base_placement import BasePlacer
 from livezmp.model.body import BodyModel
 from livezmp.model.demo_robot import smooth_ramp
@@ -103,7 +104,7 @@ FELL_CHECK_S = 0.05  # how often the simulator's fall flag is polled (it takes i
 # (median 1.16), 40 us 0.62-1.32 % (median 0.90).
 PTY_SEND_PAUSE_S = 2e-5
 EVENT_REPEAT_S = 1.0  # an event of a repeating kind is told at most once a second; the rest are counted
-REPEATING_KINDS = frozenset({"read_error", "stale", "corrupted", "write_error", "no_sensors"})
+REPEATING_KINDS = frozenset({"read_error", "stale", "corrupted", "write_error", "no_sensors", "goal_speed"})
 # recorded (/device_error) and counted, not told: a bus losing 1 % of its replies would print a line a second; the
 # status line counts them
 QUIET_KINDS = frozenset({"read_error"})
@@ -123,6 +124,8 @@ class LoopCounters:
     commands_sent: int = 0
     corrections_sent: int = 0
     corrections_limited: int = 0
+    goals_slowed: int = 0  # commands sent with a goal the joint speed limit cut
+    slowed_joints: dict[str, int] = field(default_factory=dict)  # ... and how often each joint's
     analysed: int = 0
     judged: int = 0
     inside: int = 0
@@ -235,8 +238,8 @@ class LiveLoop:
         self._offsets_for: np.ndarray | None = None
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
-        # (cycle, limited, offsets, command) of the goals built ahead
-        self._prepared: tuple[int, bool, np.ndarray, np.ndarray] | None = None
+        # (cycle, limited, offsets, command, goals, what the speed limit cut) of the goals built ahead
+        self._prepared: tuple[int, bool, np.ndarray, np.ndarray, np.ndarray, Slowed | None] | None = None
 
     def request_stop(self, reason: str) -> None:
         """Ask the loop to end after the current cycle (safe from a signal handler)."""
@@ -420,7 +423,7 @@ class LiveLoop:
     def _write(self, t: float, t0: float, command: np.ndarray) -> None:
         """Goals = command + offsets, limited, to the link (``t0``: when the cycle's read started)."""
         t3 = self.clock.now()
-        goals, limited = self.limiter.apply(command, self.offsets)
+        goals, limited, slowed = self.limiter.apply(command, self.offsets)
         try:
             if self.pipelined:  # the next read's instruction in the same transfer as the goals
                 self.link.write_goals(goals, request=not self.link_down)
@@ -430,7 +433,7 @@ class LiveLoop:
             self.counters.write_errors += 1
             self._event(t, "write_error", f"write failed: {e}")
             return
-        self._written(t, t0, t3, limited)
+        self._written(t, t0, t3, limited, slowed)
 
     def _prepare(self, index: int) -> None:
         """Cycle ``index``'s goals (its command + the offsets computed now, limited) built into the
@@ -443,12 +446,12 @@ class LiveLoop:
             return
         t = index * self.dt
         command = self._command(t, self._ramp_from)
-        goals, limited, offsets = self.limiter.propose(command, self.offsets)
+        goals, limited, offsets, slowed = self.limiter.propose(command, self.offsets)
         try:
             self.link.prepare_goals(goals)
         except LinkError:
             return  # the cycle builds and sends them itself, and says what failed
-        self._prepared = (index, limited, offsets, command)
+        self._prepared = (index, limited, offsets, command, goals, slowed)
 
     def _send_prepared(self, index: int, t: float, t0: float) -> np.ndarray | None:
         """Send the goals `_prepare` built for cycle ``index``, if it did and nothing changed since, and
@@ -464,12 +467,13 @@ class LiveLoop:
             self.counters.write_errors += 1
             self._event(t, "write_error", f"write failed: {e}")
             return prepared[3]
-        self.limiter.offsets = prepared[2]
-        self._written(t, t0, t3, prepared[1])
+        self.limiter.keep(prepared[4], prepared[2])
+        self._written(t, t0, t3, prepared[1], prepared[5])
         return prepared[3]
 
-    def _written(self, t: float, t0: float, t3: float, limited: bool) -> None:
-        """Bookkeeping of goals sent at ``t3`` (s) in the cycle whose read started at ``t0``."""
+    def _written(self, t: float, t0: float, t3: float, limited: bool, slowed: Slowed | None) -> None:
+        """Bookkeeping of goals sent at ``t3`` (s) in the cycle whose read started at ``t0``; ``slowed``: what the
+        joints' speed limits cut in them."""
         t4 = self.clock.now()
         self.times["write"].add(t4 - t3)
         self.latency.add(t4 - t0)
@@ -477,8 +481,20 @@ class LiveLoop:
         if np.logical_or.reduce(self.limiter.offsets):  # any(), without its Python wrapper
             self.counters.corrections_sent += 1
         self.counters.corrections_limited += limited
+        if slowed is not None:
+            self._slowed(t, slowed)
         if self.recorder is not None and self.corrector is not None:
             self.recorder.correction(self._index0 + self._fed - 1, t, self._delta, limited, self.limiter.offsets)
+
+    def _slowed(self, t: float, slowed: Slowed) -> None:
+        """Goals the joints' speed limits cut: counted (per joint too), told and recorded as `goal_speed`."""
+        self.counters.goals_slowed += 1
+        names, counts = self.limits.names, self.counters.slowed_joints
+        for j in np.flatnonzero(slowed.mask):
+            counts[names[j]] = counts.get(names[j], 0) + 1
+        self._event(t, "goal_speed", f"goal of {names[slowed.joint]} slowed to its speed limit: "
+                                     f"{slowed.asked:+.3f} rad asked in one {1e3 * self.dt:.1f} ms cycle, "
+                                     f"{slowed.allowed:.3f} allowed ({slowed.allowed / self.dt:.2f} rad/s)")
 
     def _request(self) -> None:
         """With a pipelined link, its next read's instruction goes out now."""
@@ -581,6 +597,7 @@ class LiveLoop:
         """The command at t, blended in from the posture where commanding (re)started."""
         if self._ramp_from is None:
             self._ramp_from, self._ramp_t0 = present.copy(), t
+            self.limiter.start_from(present)  # the goals' speed limit counts from where the servos stand
             if self._hold is None:
                 self._hold = present.copy()
         target = self._hold if self.command is None else np.asarray(self.command(t), dtype=float)
@@ -713,6 +730,7 @@ class LiveLoop:
             "good_frames": c.good_frames,
             "commands_sent": c.commands_sent,
             "corrections_limited": c.corrections_limited,
+            "goals_slowed": {"commands": c.goals_slowed, "joints": dict(c.slowed_joints)},
             "analysed_frames": c.analysed,
             "judged_frames": c.judged,
             "watchdog_trips": c.watchdog_trips,

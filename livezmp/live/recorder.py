@@ -17,8 +17,9 @@ the computed ZMP side by side:
   read that failed (``read_error``), the port gone (``link_down``) and back (``reconnected``), the
   link unusable, a rejected frame (``stale``, ``corrupted``), a failed write, the watchdog's stop
   and the frames' return (``watchdog``, ``resumed``), a servo's hardware error and the safe stop
-  it latched. Repeating kinds are folded as the loop tells them (at most one record a second,
-  ``count`` the occurrences it stands for, so the counts add up to the summary's).
+  it latched, goals the joints' speed limits cut (``goal_speed``). Repeating kinds are folded as
+  the loop tells them (at most one record a second, ``count`` the occurrences it stands for, so the
+  counts add up to the summary's).
 
 Messages of one sample share its log time (the run's start on the wall clock plus the
 sample's loop time), so the ``/result`` and ``/foot_sensors`` of a sample, written

@@ -12,8 +12,11 @@ and when to stop commanding.
   of encoder noise). A rejected frame never drives a command.
 * Goals (:class:`GoalLimiter`). Correction offsets are clipped to
   ``max_correction_rad`` per joint and may change by at most
-  ``max_correction_rate_rad_s`` (rad/s); the goals (command + offsets) are clipped to
-  the URDF joint limits less ``limit_margin_rad``.
+  ``max_correction_rate_rad_s`` (rad/s); each goal (command + offsets) may move from the
+  goal sent before it by at most its joint's URDF velocity limit times the loop period
+  (``default_joint_speed_rad_s`` where the URDF gives none), so a motion that steps is sent
+  as a ramp the servo can follow, not as one jump it slams through; then the goals are
+  clipped to the URDF joint limits less ``limit_margin_rad``.
 * Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` (at least three loop
   periods) → the loop stops
   commanding and either holds the present posture or drops torque
@@ -143,9 +146,21 @@ class Watchdog:
         return now - self.last > self.timeout_s
 
 
+@dataclass(frozen=True)
+class Slowed:
+    """Goals the joint speed limit cut in one command: ``mask`` (n,) which joints; for the first of them,
+    ``joint`` its index, ``asked`` the change the command wanted from the goal before (rad) and ``allowed``
+    the change a period allows (rad)."""
+
+    mask: np.ndarray
+    joint: int
+    asked: float
+    allowed: float
+
+
 class GoalLimiter:
-    """command + correction offsets → goals inside the correction and joint limits;
-    ``dt``: seconds between calls (the loop period)."""
+    """command + correction offsets → goals inside the correction limits, the joints' speed limits
+    and the joint limits; ``dt``: seconds between calls (the loop period)."""
 
     def __init__(self, limits: JointLimits, config: SafetyConfig, dt: float, mimics: tuple[Mimic, ...] = ()):
         self.mimics = mimics  # a mimic joint's goal is its parent's goal times the multiplier plus the offset
@@ -153,25 +168,58 @@ class GoalLimiter:
         self.upper = limits.upper - config.limit_margin_rad
         self.max_offset = config.max_correction_rad
         self.max_step = config.max_correction_rate_rad_s * dt
+        # a goal's change a period (rad): by the nominal period, so a cycle after skipped deadlines or a failed
+        # write moves no faster than one on time (the servo is slower than asked, never faster)
+        self.speed = np.where(np.isfinite(limits.velocity), limits.velocity, config.default_joint_speed_rad_s)
+        self.max_goal_step = self.speed * dt
         self.reset()
 
     def reset(self) -> None:
-        """Offsets start again from zero (after a stop)."""
+        """Offsets start again from zero (after a stop); the next goals are not speed-limited until
+        :meth:`start_from` says where the servos stand."""
         self.offsets = np.zeros_like(self.lower)
+        self.goals: np.ndarray | None = None  # the goals sent last (rad): where the next may move from
 
-    def apply(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, and whether a
-        limit cut anything. Non-finite offsets count as zero."""
-        goals, limited, self.offsets = self.propose(command, offsets)
-        return goals, limited
+    def start_from(self, q: np.ndarray) -> None:
+        """Commanding (re)starts with the servos at ``q`` (n,) rad: the first goals move from there."""
+        self.goals = follow(np.asarray(q, dtype=float).copy(), self.mimics)
 
-    def propose(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray]:
+    def apply(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, Slowed | None]:
+        """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, whether a limit cut
+        anything, and what the speed limit cut (None: nothing). Non-finite offsets count as zero.
+        The goals are kept as sent whether their write succeeds or not (a failed write may have
+        reached the servos)."""
+        goals, limited, sent, slowed = self.propose(command, offsets)
+        self.keep(goals, sent)
+        return goals, limited, slowed
+
+    def keep(self, goals: np.ndarray, offsets: np.ndarray) -> None:
+        """``goals`` and ``offsets`` (rad) from :meth:`propose` were sent. A non-finite goal (the link
+        refuses it) leaves that joint's last goal as it was."""
+        finite = np.isfinite(goals)
+        if np.logical_and.reduce(finite):  # all(), without its Python wrapper
+            self.goals = goals
+        elif self.goals is not None:
+            self.goals = np.where(finite, goals, self.goals)
+        self.offsets = offsets
+
+    def propose(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray, Slowed | None]:
         """What `apply` would return, and the offsets it would keep (rad), without keeping them:
-        for goals built ahead of the cycle that sends them (set ``offsets`` once they are sent)."""
+        for goals built ahead of the cycle that sends them (:meth:`keep` them once they are sent)."""
         want = np.where(np.isfinite(offsets), offsets, 0.0)
         sent = clip(clip(want, -self.max_offset, self.max_offset), self.offsets - self.max_step,
                      self.offsets + self.max_step)
         wanted = follow(command + sent, self.mimics)
+        slowed = None
+        if self.goals is not None:
+            before = self.goals
+            paced = clip(wanted, before - self.max_goal_step, before + self.max_goal_step)
+            cut = (paced != wanted) & np.isfinite(wanted)  # a NaN goal is the link's to refuse
+            if np.logical_or.reduce(cut):  # any(), without its Python wrapper
+                j = int(np.argmax(cut))
+                slowed = Slowed(cut, j, float(wanted[j] - before[j]), float(self.max_goal_step[j]))
+            wanted = paced
         goals = clip(wanted, self.lower, self.upper)
-        limited = bool(np.logical_or.reduce(sent != want) or np.logical_or.reduce(goals != wanted))  # any(), unwrapped
-        return goals, limited, sent
+        limited = bool(slowed is not None or np.logical_or.reduce(sent != want)
+                       or np.logical_or.reduce(goals != wanted))  # any(), unwrapped
+        return goals, limited, sent, slowed
