@@ -305,6 +305,7 @@ def test_natnet_markers_and_plates_arrive_with_exact_counts(trial):
     view = server.counters.receiver_view()
     frames = collect(src, lambda out: len(out) == view["delivered"])
     assert [src.stats.delivered, src.stats.late, src.stats.lost] == [view["delivered"], view["late"], view["lost"]]
+    assert src.stats.kernel_drops == 0  # counted (SO_RXQ_OVFL): the loopback stream kept up
     assert_equal_to_trial(frames, trial, lambda f: f.frame, R=server.R)  # stream: y up
     assert expected_gaps(trial, frames, lambda f: f.frame) == server.counters.gaps > 0
     assert src.nominal_dt == pytest.approx(0.01)

@@ -124,15 +124,16 @@ class Monitor:
         percentiles (ms), the estimator's settings and lag, source counters."""
         st, est = self.source.stats.as_dict(), self.pipeline.config.estimator
         # bad_markers counts frames kept (their bad markers left out as occluded), resyncs new timelines followed,
-        # disconnected reads that found a link's port gone: none is a dropped frame
-        dropped = {k: v for k, v in st.items()
-                   if k not in ("delivered", "lost", "reconnects", "bad_markers", "resyncs", "disconnected")}
+        # disconnected reads that found a link's port gone, kernel_drops datagrams that never reached the source:
+        # none is a frame received and dropped
+        dropped = {k: v for k, v in st.items() if k not in ("delivered", "lost", "reconnects", "bad_markers", "resyncs",
+                                                            "disconnected", "kernel_drops")}
         dt, lag = self.source.nominal_dt, self.pipeline.lag
         return {
             "source": self.source.name, "frames_in": self.inputs, "analysed_frames": self.results,
             "dropped": {**dropped, "total": sum(dropped.values())}, "lost": st["lost"],
             "reconnects": st["reconnects"], "disconnected": st["disconnected"], "bad_markers": st["bad_markers"],
-            "resyncs": st["resyncs"],
+            "resyncs": st["resyncs"], "kernel_drops": st["kernel_drops"],
             "out_of_support": self.out_of_support, "alarms": self.alarms.count,
             "latency": {"result_after_input": self.beyond_lag.summary_ms(),
                         "result_after_source_stamp": self.from_stamp.summary_ms() if self.from_stamp.count else None},

@@ -63,7 +63,10 @@ class SourceStats:
     connections re-opened. ``disconnected``: reads that found a servo link's port gone (at its
     polling rate: 100 a second while it is gone). ``bad_markers``: capture frames kept with markers (or solved
     segments) left out that were infinite or beyond :data:`~livezmp.checks.MAX_COORDINATE_M` of the origin (a C3D reader
-    refuses such a file)."""
+    refuses such a file). ``kernel_drops``: datagrams the kernel dropped before the source read them (its
+    receive buffer full: the reader fell behind), counted where Linux offers it (``SO_RXQ_OVFL``) on a UDP source;
+    None where not counted (other sources, other systems). They never arrived, so they are not among the dropped;
+    a frame stream's sequence numbers count them in ``lost`` too."""
 
     delivered: int = 0
     malformed: int = 0
@@ -78,8 +81,9 @@ class SourceStats:
     reconnects: int = 0
     disconnected: int = 0
     bad_markers: int = 0
+    kernel_drops: int | None = None
 
-    def as_dict(self) -> dict[str, int]:
+    def as_dict(self) -> dict[str, int | None]:
         return asdict(self)
 
     @property

@@ -39,7 +39,7 @@ from livezmp.errors import InputError
 from livezmp.sources import natnet_protocol as nn
 from livezmp.sources.interface import ErrorLog, SourceStats
 from livezmp.sources.mocap_frame import FrameQueue, MocapFrame, PlateSamples, SegmentPoses, parse_up_axis
-from livezmp.sources.udp import Timeline
+from livezmp.sources.udp import KernelDrops, Timeline
 from livezmp.sources.url_query import query_params, query_seconds
 
 COMMAND_PORT, DATA_PORT = 1510, 1511
@@ -88,6 +88,7 @@ class NatNetSource:
             self._close_sockets()
             raise InputError(f"{url}: cannot open the NatNet sockets: {e.strerror or e}") from None
         self.data.setblocking(False)
+        self.receiver = KernelDrops(self.data, self.stats)
         self._closed = False
         self._silent_since: float | None = None
         self._last_connect = 0.0
@@ -229,7 +230,7 @@ class NatNetSource:
         only a fraction of a second at 1 kHz), hands frames to the queue, reconnects on silence."""
         while not self._closed:
             try:
-                packet, (sender, _) = self.data.recvfrom(65536)
+                packet, (sender, _) = self.receiver.recvfrom(65536)
             except BlockingIOError:
                 self._keep_connected(time.monotonic())
                 try:

@@ -33,6 +33,8 @@ import ipaddress
 import math
 import select
 import socket
+import struct
+import sys
 import time
 
 from livezmp.errors import InputError
@@ -49,6 +51,38 @@ RECV_BUFFER = 4 << 20  # bytes of kernel buffer: a few seconds of frames if the 
 LOOPBACK = (ipaddress.ip_network("127.0.0.0/8"), ipaddress.ip_network("::1/128"))
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+# Linux's socket option for the kernel's drop count: 40 in asm-generic/socket.h, which every architecture but
+# alpha, mips, parisc and sparc uses (Python 3.11's socket module does not name it)
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40) if sys.platform.startswith("linux") else None
+
+
+class KernelDrops:
+    """Reads a UDP socket with the kernel's count of datagrams it dropped there (its receive buffer full), where
+    Linux offers it: ``SO_RXQ_OVFL`` attaches the socket's drop count so far to each datagram received, so the
+    count is known as of the latest datagram read (drops after the last one are not seen). Into
+    ``stats.kernel_drops``, which stays None where the option is refused."""
+
+    def __init__(self, sock: socket.socket, stats: SourceStats):
+        self.sock, self.stats = sock, stats
+        self._space = 0
+        if SO_RXQ_OVFL is not None:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            except OSError:
+                return
+            self._space = socket.CMSG_SPACE(4)
+            stats.kernel_drops = 0
+
+    def recvfrom(self, size: int) -> tuple[bytes, tuple]:
+        """``sock.recvfrom(size)``, noting the drop count that came with the datagram."""
+        if not self._space:
+            return self.sock.recvfrom(size)
+        data, ancillary, _, address = self.sock.recvmsg(size, self._space)
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
+                # the socket's count when this datagram was queued: those read later may carry an older one
+                self.stats.kernel_drops = max(self.stats.kernel_drops, struct.unpack("=I", value[:4])[0])
+        return data, address
 
 
 class SequenceFilter:
@@ -214,6 +248,7 @@ class UdpSource:
             self.sock.close()
             raise InputError(f"{self.name}: cannot listen: {e.strerror}") from None
         self.sock.setblocking(False)
+        self.receiver = KernelDrops(self.sock, self.stats)
         self.port = self.sock.getsockname()[1]
         self.name = f"udp://{host}:{self.port}"
         self._closed = False
@@ -245,7 +280,7 @@ class UdpSource:
         deadline = time.monotonic() + timeout
         while not self._closed:
             try:
-                data, addr = self.sock.recvfrom(65536)
+                data, addr = self.receiver.recvfrom(65536)
             except BlockingIOError:
                 left = deadline - time.monotonic()
                 if left <= 0:
