@@ -23,7 +23,7 @@ from livezmp.errors import InputError
 from livezmp.model.body_spec import robot_body
 from livezmp.model.demo_robot import demo_robot_path, demo_trajectory
 from livezmp.model.motion_file import trajectory_frames
-from livezmp.monitor.dashboard import MAX_POINTS, DashboardServer, parse_address
+from livezmp.monitor.dashboard import MAX_CLIENTS, MAX_POINTS, DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor
 from livezmp.sources.file_replay import FileReplaySource
 
@@ -155,6 +155,33 @@ def test_token_required_when_asked_and_origins_checked():
     with connect(f"{ws_url}?token={server.token}", origin=f"http://127.0.0.1:{server.port}") as ws:
         assert json.loads(ws.recv(timeout=5))["type"] == "hello"
     server.stop()
+
+
+def test_clients_beyond_the_cap_are_refused_with_503_and_a_closed_one_frees_its_place():
+    """MAX_CLIENTS feeds are served at once; the next ones are refused before their handshake (HTTP 503, saying
+    why) and counted; the page itself is still served; when a feed closes, a new one takes its place. On main
+    every client was served (200 at once: frames up to 614 ms late)."""
+    server = DashboardServer("127.0.0.1", 0, dict, HELLO)
+    server.start()
+    ws_url = f"ws://127.0.0.1:{server.port}/ws"
+    clients = [connect(ws_url) for _ in range(MAX_CLIENTS)]
+    try:
+        assert all(json.loads(c.recv(timeout=5))["type"] == "hello" for c in clients)
+        for _ in range(3):
+            with pytest.raises(InvalidStatus) as e:
+                connect(ws_url)
+            assert e.value.response.status_code == 503 and b"too many dashboard clients" in e.value.response.body
+        assert server.refused == 3 and get(f"http://127.0.0.1:{server.port}/")[0] == 200
+        clients.pop().close()
+        deadline = time.monotonic() + 5.0
+        while len(server.client_messages) >= MAX_CLIENTS and time.monotonic() < deadline:
+            time.sleep(0.01)
+        clients.append(connect(ws_url))
+        assert json.loads(clients[-1].recv(timeout=5))["type"] == "hello" and server.refused == 3
+    finally:
+        for c in clients:
+            c.close()
+        server.stop()
 
 
 def test_beyond_loopback_needs_allow_remote_and_then_a_token():

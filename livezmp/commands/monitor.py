@@ -28,7 +28,7 @@ from livezmp.model.motion_file import trajectory_frames
 from livezmp.model.segments import load_mapping
 from livezmp.model.urdf_body import UrdfBodyOptions
 from livezmp.monitor.alarms import AlarmCommand, AlarmEvent
-from livezmp.monitor.dashboard import DashboardServer, parse_address
+from livezmp.monitor.dashboard import MAX_CLIENTS, DashboardServer, parse_address
 from livezmp.monitor.loop import Monitor, MonitorSummary
 from livezmp.monitor.tui import TerminalView
 from livezmp.offline.calibrate import Subject, load_subject
@@ -134,11 +134,14 @@ def _run(source: Source, cfg, args: argparse.Namespace, session: dict, listeners
         if dashboard:
             dashboard.stop()
     _print_summary(summary)
+    if dashboard and dashboard.refused:
+        print(f"dashboard: {dashboard.refused} client(s) refused: at most {MAX_CLIENTS} at once", flush=True)
     if recorder and recorder.error:
         print(f"livezmp: recording {args.record} failed ({recorder.error}); {recorder.unwritten} messages not "
               f"written{stopped_note(args.record)}", file=sys.stderr, flush=True)
     if getattr(args, "summary_json", None):
-        write_json(monitor.summary_json(), args.summary_json)
+        write_json({**monitor.summary_json(),
+                    "dashboard_refused": None if dashboard is None else dashboard.refused}, args.summary_json)
     return summary
 
 

@@ -23,6 +23,11 @@ Security: by default the server binds 127.0.0.1. Any other address needs
 of a shared machine reach its loopback). WebSocket requests carrying a foreign
 ``Origin`` are refused. The feed is read-only: there is no control endpoint, and
 incoming messages are ignored.
+
+Clients: at most ``MAX_CLIENTS`` WebSocket feeds at once; one more is refused before its handshake with HTTP
+503 (Service Unavailable, "too many dashboard clients") and counted (``refused``). Every client costs the
+server's thread a message build and send per frame: with 200 loopback clients a frame reached them up to 614 ms
+late (audit 10), and all of them share the GIL with the monitor.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.protocol import State
 
 from livezmp.balance.pipeline import FrameResult
 from livezmp.errors import InputError
@@ -53,6 +59,7 @@ from livezmp.sources.udp import is_loopback
 RING = 1024  # recent results kept for the plot points of slow clients
 MAX_POINTS = 300
 MAX_ALARMS = 50
+MAX_CLIENTS = 16  # WebSocket feeds served at once: a page per screen of a lab, well short of the 200 that lagged
 STATUS_EVERY = 0.5  # s: a client gets the status at least this often, even with no frames
 SEND_BUFFER = 32 * 1024  # bytes of kernel buffer per client (Linux doubles it): about 15 messages
 WRITE_LIMIT = 16 * 1024  # bytes buffered in the server before a send waits
@@ -108,6 +115,9 @@ class DashboardServer:
         self._wake_pending = False
         self._waiting = 0  # client tasks waiting for news
         self.client_messages: dict[str, int] = {}  # "host:port" of each connected client → messages sent
+        # feeds let through to their handshake, counted against MAX_CLIENTS from then (their tasks start later)
+        self._admitted: set[ServerConnection] = set()
+        self.refused = 0  # WebSocket requests refused for MAX_CLIENTS
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed: asyncio.Event | None = None
         self._stopping: asyncio.Future | None = None
@@ -198,6 +208,14 @@ class DashboardServer:
         origin = request.headers.get("Origin")
         if origin is not None and urlsplit(origin).netloc != request.headers.get("Host"):
             return _response(http.HTTPStatus.FORBIDDEN, b"foreign origin\n", "text/plain; charset=utf-8")
+        # a feed whose handshake failed never reaches _client: its closed connection frees its place here
+        self._admitted = {c for c in self._admitted if c.state is not State.CLOSED}
+        if len(self._admitted) >= MAX_CLIENTS:
+            self.refused += 1
+            return _response(http.HTTPStatus.SERVICE_UNAVAILABLE,
+                             f"too many dashboard clients: at most {MAX_CLIENTS} at once\n".encode(),
+                             "text/plain; charset=utf-8")
+        self._admitted.add(conn)
         return None  # go on with the WebSocket handshake
 
     def _message(self, last_seq: int, last_alarm: int) -> tuple[str, int, int]:
@@ -235,3 +253,4 @@ class DashboardServer:
             pass
         finally:
             del self.client_messages[peer]
+            self._admitted.discard(ws)
