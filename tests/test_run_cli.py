@@ -316,6 +316,37 @@ def test_a_run_whose_link_never_came_back_is_recorded_and_exits_3(tmp_path, monk
     assert first == "link_down" and 0.2 <= t < 0.5 and s["link_down"]["seconds"] == pytest.approx(0.5 - t)
 
 
+def test_a_summary_that_cannot_be_written_after_a_failed_link_still_exits_3(tmp_path, monkeypatch, capsys):
+    """The link gone for good after 41 reads, and the summary's directory removed meanwhile: the summary line,
+    the file's one-line error, then the link's failure; exit 3, the run's own failure (main: exit 2, the
+    summary file's, and the link's failure never told)."""
+    import shutil
+
+    from livezmp.links.base import LinkError
+    from sim_devices.mock_link import MockLink
+
+    read = MockLink.read
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+
+    def vanishing(self):
+        if self.stats.reads >= 41:
+            shutil.rmtree(out_dir, ignore_errors=True)
+            raise LinkError("mock: port gone")
+        return read(self)
+
+    monkeypatch.setattr(MockLink, "read", vanishing)
+    monkeypatch.setattr(MockLink, "hold", lambda self: None)  # its hold reads first
+    monkeypatch.setattr(MockLink, "reconnect", lambda self: False)
+    assert main(["run", "--robot", str(demo_robot_path()), "--link", "mock:", "--duration", "0.5", "--rate", "200",
+                 "--quiet", "--realtime-priority", "0", "--summary-json", str(out_dir / "s.json")]) == 3
+    out, err = capsys.readouterr()
+    assert "stopped by duration; link down" in out
+    lines = err.splitlines()
+    assert re.fullmatch(r"livezmp: error: .*s\.json: cannot write: No such file or directory", lines[-2])
+    assert lines[-1].startswith("livezmp: the link failed the run: link down at the end of the run")
+
+
 def test_run_under_a_required_realtime_priority_on_one_cpu(tmp_path, monkeypatch):
     """--realtime-priority 30 --cpu N: the loop runs under SCHED_FIFO 30 on CPU N with its memory
     locked, waking by sleep then spin (seen from inside the loop), and the thread gets its policy

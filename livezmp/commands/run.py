@@ -281,12 +281,19 @@ def assumed_adapter(args: argparse.Namespace) -> Adapter:
 
 def finish(summary: dict, args: argparse.Namespace) -> int:
     """Print and write the summary (printed first: a file that cannot be written is then one line after it); the
-    exit code: 0, or EXIT_LINK_FAILED (told on stderr)."""
+    exit code: 0, or EXIT_LINK_FAILED (told on stderr, last). A summary file that cannot be written is an
+    InputError (exit 2), but after a failed link only its line: the run's own failure is the exit code."""
     print_summary(summary)
+    failed = summary.get("link_failed")
     if args.summary_json:
-        write_json(summary, args.summary_json)
-    if summary.get("link_failed"):
-        print(f"livezmp: the link failed the run: {summary['link_failed']}", file=sys.stderr, flush=True)
+        try:
+            write_json(summary, args.summary_json)
+        except InputError as e:
+            if not failed:
+                raise
+            print(f"livezmp: error: {e}", file=sys.stderr, flush=True)
+    if failed:
+        print(f"livezmp: the link failed the run: {failed}", file=sys.stderr, flush=True)
         return EXIT_LINK_FAILED
     return 0
 
