@@ -21,7 +21,7 @@ from livezmp.histogram import TimingHistogram
 from livezmp.links.base import LinkError, LinkFrame, LinkReadError, LinkStats
 from livezmp.live.clock import LoopClock
 from livezmp.live.config import LoopConfig, SafetyConfig
-from livezmp.live.loop import PTY_SEND_PAUSE_S, LiveLoop
+from livezmp.live.loop import PTY_SEND_PAUSE_S, START_READS, LiveLoop
 from livezmp.live.safety import FrameGuard, GoalLimiter, JointLimits, Watchdog, joint_limits
 from livezmp.live.scenarios import make_scenario, smooth_step
 from livezmp.model.base_placement import BasePlacer
@@ -533,19 +533,42 @@ def test_the_corrector_measures_the_robot_before_the_clock_starts_and_keeps_it_a
     assert link.stats.reads == s["cycles"] + 1 and s["link"]["read_errors_before_run"] == 0
 
 
-def test_without_a_frame_at_start_up_the_corrector_measures_in_its_first_analysed_frame(mini, monkeypatch):
-    """The start-up read fails (or its frame is rejected): the corrector measures the robot in its first analysed
-    frame, inside that cycle, as before; the failed read is the run's, as a cycle's is."""
+def test_a_failed_start_up_read_is_tried_again_before_the_clock_starts(mini, monkeypatch):
+    """The start-up read fails, or its frame is rejected, once or twice: the read is tried again and the corrector
+    still measures the robot before the clock starts, in the standing posture of the first good frame; the failed
+    reads are the run's, as a cycle's are (main: one read, then the measure inside the first analysed cycle)."""
     stand = make_scenario("stand", mini).goals(0.0)
     for fate in ("error", "nan"):
+        for bad in (1, 2):
+            time = SimTime()
+            link = ScriptedLink(time, mini.joint_names, stand, lambda n, t, f=fate, k=bad: f if n < k else None)
+            loop = LiveLoop(link, mini, LoopConfig(rate_hz=RATE),
+                            clock=LoopClock(RATE, now=time.now, sleep=time.advance))
+            calls = _measured(monkeypatch, loop)
+            s = loop.run(duration=0.3)
+            assert [started for started, _ in calls] == [False], (fate, bad)
+            assert np.array_equal(calls[0][1][loop.nb:], stand)
+            assert s["startup_reads"] == {"reads": bad + 1, "measured_before_clock": True}
+            assert s["good_frames"] == s["cycles"] and s["corrupted_frames"] == 0
+            assert s["read_errors"] == s["failed_reads"] == (bad if fate == "error" else 0)
+            assert link.stats.reads == s["cycles"] + bad + 1
+
+
+def test_without_a_frame_at_start_up_the_corrector_measures_in_its_first_analysed_frame(mini, monkeypatch):
+    """Every one of the START_READS start-up reads fails (or its frame is rejected), or the port is gone at the
+    first: the corrector measures the robot in its first analysed frame, inside that cycle, as before; the failed
+    reads are the run's, as a cycle's are."""
+    stand = make_scenario("stand", mini).goals(0.0)
+    for fate, tried in (("error", START_READS), ("nan", START_READS), ("down", 1)):
         time = SimTime()
-        link = ScriptedLink(time, mini.joint_names, stand, lambda n, t, fate=fate: fate if n == 0 else None)
+        link = ScriptedLink(time, mini.joint_names, stand, lambda n, t, f=fate, k=tried: f if n < k else None)
         loop = LiveLoop(link, mini, LoopConfig(rate_hz=RATE), clock=LoopClock(RATE, now=time.now, sleep=time.advance))
         calls = _measured(monkeypatch, loop)
         s = loop.run(duration=0.3)
         assert [started for started, _ in calls] == [True], fate
-        assert s["good_frames"] == s["cycles"] and s["corrupted_frames"] == 0
-        assert s["read_errors"] == s["failed_reads"] == (fate == "error") and s["link"]["read_errors_before_run"] == 0
+        assert s["startup_reads"] == {"reads": tried, "measured_before_clock": False}
+        assert s["corrupted_frames"] == 0 and s["link"]["read_errors_before_run"] == 0
+        assert s["failed_reads"] == (0 if fate == "nan" else tried), fate
 
 
 def test_watchdog_can_drop_torque_and_then_only_monitors(mini):

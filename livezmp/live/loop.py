@@ -109,6 +109,10 @@ REPEATING_KINDS = frozenset({"read_error", "stale", "corrupted", "write_error", 
 # status line counts them
 QUIET_KINDS = frozenset({"read_error"})
 NOT_RECORDED_KINDS = frozenset({"fell"})  # the robot's state, not a fault of its devices or link
+# Reads tried before the clock starts for the corrector's measure of the robot (`LiveLoop._prepare_corrector`): a
+# bus losing 5 % of its replies fails all of them one time in 3 million; each failed try costs the link's own
+# timeout (a Dynamixel read's few ms), and the robot is holding its posture meanwhile
+START_READS = 5
 
 @dataclass
 class LoopCounters:
@@ -203,6 +207,8 @@ class LiveLoop:
         self.faults = LinkFaults()
         self._t = 0.0  # loop time of the cycle running (s): where the run ended, once it has
         self._samples = 0  # samples given to the estimators over the whole run
+        self._startup_reads = 0  # reads tried before the clock for the corrector's measure
+        self._measured_before_clock = False
         self._reading: tuple[tuple[bool, bool] | None, FootSensors | None] = (None, None)  # the sample's sensors
         self.corrector = OnlineCorrector(body, self.correct_every * self.dt, cfg.correction_limits,
                                          max_accel_deg_s2=size_scaled_accel(body, cfg.trunk_accel_deg_s2),
@@ -325,21 +331,31 @@ class LiveLoop:
         the posture of one frame read now (the robot standing as the link opened it), verified as the loop's are,
         its base placed by its feet as the loop's first sample's is. Kept across the estimator's restarts (a
         reconnect, the watchdog's resume): a frame after a gap may find the robot anywhere, and measuring again
-        would cost that cycle as much. Without such a frame (the read fails, the guard rejects it) the corrector
-        measures in its first analysed frame, inside that cycle, as it did before; a read that fails here is the
-        run's as the cycles' are (``failed_reads``, ``read_errors``)."""
+        would cost that cycle as much. A read that fails, or whose frame the guard rejects, is tried again, up to
+        `START_READS` reads in all; a port gone or a link unusable ends the tries at once (the loop's first cycle
+        finds it). Without a good frame the corrector measures in its first analysed frame, inside that cycle (it
+        may overrun it); a read that fails here is the run's as the cycles' are (``failed_reads``,
+        ``read_errors``), and the summary's ``startup_reads`` says how many were tried and whether the measure
+        was made before the clock."""
         if self.corrector is None or self.corrector.reaction is not None:
             return
-        try:
-            frame = self.link.read()
-        except LinkError:
-            self.counters.failed_reads += 1
-            return
-        verdict = self.guard.check(frame, self.clock.now())
-        self.guard.reset()  # the loop's first frame is judged on its own: it may carry this one's time stamp
-        if verdict is None:
-            q = follow(frame.positions, self.body.mimics)
-            self.corrector.prepare(np.concatenate([BasePlacer(self.body).update(q), q]))
+        for _ in range(START_READS):
+            self._startup_reads += 1
+            try:
+                frame = self.link.read()
+            except LinkReadError:
+                self.counters.failed_reads += 1
+                continue
+            except LinkError:  # the port gone, the link unusable: another read now would not mend it
+                self.counters.failed_reads += 1
+                return
+            verdict = self.guard.check(frame, self.clock.now())
+            self.guard.reset()  # the loop's first frame is judged on its own: it may carry this one's time stamp
+            if verdict is None:
+                q = follow(frame.positions, self.body.mimics)
+                self.corrector.prepare(np.concatenate([BasePlacer(self.body).update(q), q]))
+                self._measured_before_clock = True
+                return
 
     def _poll(self, t: float) -> None:
         """Every so often: the simulator's fall flag, the repeated events and the status callback."""
@@ -730,6 +746,8 @@ class LiveLoop:
             "good_frames": c.good_frames,
             "commands_sent": c.commands_sent,
             "corrections_limited": c.corrections_limited,
+            "startup_reads": None if self.corrector is None else {
+                "reads": self._startup_reads, "measured_before_clock": self._measured_before_clock},
             "goals_slowed": {"commands": c.goals_slowed, "joints": dict(c.slowed_joints)},
             "analysed_frames": c.analysed,
             "judged_frames": c.judged,
