@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import struct
 import time
+from dataclasses import replace
 from unittest import mock
 
 import numpy as np
@@ -29,6 +30,7 @@ from livezmp.links.base import LinkError, LinkReadError
 from livezmp.links.bus_timing import ADAPTERS
 from livezmp.links.dynamixel import FAST_SYNC_READ_FIRMWARE, DynamixelLink
 from livezmp.links.reply_loss import ReplyLoss
+from livezmp.model.robot_config import RobotConfig
 from sim_devices.dynamixel_chain import DynamixelChain
 from sim_devices.dynamixel_control_table import OVERLOAD_ERROR
 from sim_devices.launch import start_devices
@@ -234,6 +236,27 @@ def test_open_refuses_servos_it_cannot_drive(registers, message):
         link = make_link(with_options(devices.url, TEST_OPTIONS["dynamixel"]), list(config.servos), config)
         with pytest.raises(LinkError, match=message):
             link.open()
+
+
+def test_open_refuses_servos_that_answer_as_another_model_than_the_config_says():
+    """The config says every servo is an XM430-W350 (model 1020); servo 5 answers as an XM540-W270 (1120): open
+    refuses in one line naming it, before torque goes on (main: opened and drove it). Servos the config gives no
+    model for are not asked; the same servos with the right models open."""
+    config = servo_config(20)
+    stated = RobotConfig(servos={n: replace(s, model=1020) for n, s in config.servos.items()}, source="test config")
+    with start_devices("dynamixel", ServoPlant(20), stated) as devices:
+        devices.devices[0].set_register(5, "model_number", 1120)
+        devices.devices[0].set_register(9, "model_number", 1120)
+        link = make_link(with_options(devices.url, TEST_OPTIONS["dynamixel"]), list(stated.servos), stated)
+        with pytest.raises(LinkError, match=r"servo 5 \(r_el\) answers as Dynamixel model 1120, the robot config says "
+                                            r"1020 \(2 of 20 servos differ\)"):
+            link.open()
+        assert not any(devices.devices[0].register(i, "torque_enable") for i in range(1, 21))
+        unsaid = RobotConfig(servos={n: replace(s, model=None if s.id in (5, 9) else 1020)
+                                     for n, s in stated.servos.items()}, source="test config")
+        link = make_link(with_options(devices.url, TEST_OPTIONS["dynamixel"]), list(unsaid.servos), unsaid)
+        link.open()
+        link.close()
 
 
 def test_open_names_a_servo_that_does_not_answer():

@@ -13,7 +13,8 @@ X-series firmware that has it) and the installed dynamixel-sdk has it; one sync 
 robot config (`ServoConfig`); currents and velocities use the XM/XH units (2.69 mA,
 0.229 rpm).
 
-`open` checks every servo answers and is in a position control mode, reads its position
+`open` checks every servo answers (with the model number the robot config gives, where it gives one: a
+servo that answers as another model is refused, nothing driven) and is in a position control mode, reads its position
 limits (in position mode 3 a servo ignores a goal beyond them, so `write_goals` refuses
 one with LinkError), sets Return Delay Time to ``return_delay`` us (default 0; 2 us units)
 where it differs (an EEPROM write, so only on servos whose torque is off), arms the Bus
@@ -92,6 +93,7 @@ from livezmp.links.reply_loss import ReplyLoss
 from livezmp.model.robot_config import ImuConfig, ServoConfig
 
 # X-series control table (ROBOTIS e-manual, Protocol 2.0): addresses and units.
+MODEL_NUMBER = 0  # EEPROM, 2 bytes: what a ping answers with (1020: XM430-W350)
 FIRMWARE_VERSION = 6  # EEPROM
 FAST_SYNC_READ_FIRMWARE = 45  # X-series firmware with Fast Sync Read (ROBOTIS e-manual)
 RETURN_DELAY_TIME = 9  # EEPROM, 2 us units
@@ -234,6 +236,7 @@ class DynamixelLink(PortLink):
         self.read_what = read
         self.return_delay = return_delay
         self.ids = ids
+        self.models = [s.model for s in servos]  # the robot config's model numbers (None: not said)
         self.baud = baud
         self.fast = fast
         self.fast_read = bool(fast)  # what `read` uses: decided at open when fast is None
@@ -451,6 +454,8 @@ class DynamixelLink(PortLink):
         self._instruction = self._goal_packet = None
 
     def _configure(self) -> None:
+        if any(m is not None for m in self.models):
+            self._check_models()
         # firmware version, id, baud rate, return delay, drive mode, operating mode
         eeprom = self._read_at_open(FIRMWARE_VERSION, OPERATING_MODE - FIRMWARE_VERSION + 1)
         stride = OPERATING_MODE - FIRMWARE_VERSION + 1
@@ -492,6 +497,18 @@ class DynamixelLink(PortLink):
             self._check_imu()
         self._run_timeout_ms = self._measure_timeout() if self.timeout is None else 1e3 * self.timeout
         self._traffic[:] = [0, 0, 0, 0]
+
+    def _check_models(self) -> None:
+        """Every servo whose model the robot config gives answers with that model number; else LinkError
+        naming the first that does not: the ids are another robot's (or the config another robot's), whose
+        servos may turn another way, another tick per radian or another torque (nothing driven yet)."""
+        models = np.frombuffer(self._read_at_open(MODEL_NUMBER, 2), dtype="<u2")
+        wrong = [i for i, m in enumerate(self.models) if m is not None and models[i] != m]
+        if wrong:
+            i = wrong[0]
+            raise LinkError(f"{self.path}: {self._who(i)} answers as Dynamixel model {models[i]}, the robot config "
+                            f"says {self.models[i]} ({len(wrong)} of {len(self.ids)} servos differ): another "
+                            "robot's servos on these ids, or another robot's config")
 
     def _arm_watchdog(self) -> None:
         """(Re)arm the servos' Bus Watchdog (``watchdog`` s; off: nothing), clearing one that tripped: a

@@ -195,12 +195,11 @@ class GoalLimiter:
 
     def keep(self, goals: np.ndarray, offsets: np.ndarray) -> None:
         """``goals`` and ``offsets`` (rad) from :meth:`propose` were sent. A non-finite goal (the link
-        refuses it) leaves that joint's last goal as it was."""
-        finite = np.isfinite(goals)
-        if np.logical_and.reduce(finite):  # all(), without its Python wrapper
-            self.goals = goals
-        elif self.goals is not None:
-            self.goals = np.where(finite, goals, self.goals)
+        refuses it) leaves that joint's last goal as it was. Before :meth:`start_from` the goals are not
+        kept (nothing says where the servos stand)."""
+        if self.goals is not None:
+            finite = np.isfinite(goals)
+            self.goals = goals if np.logical_and.reduce(finite) else np.where(finite, goals, self.goals)  # all()
         self.offsets = offsets
 
     def propose(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray, Slowed | None]:

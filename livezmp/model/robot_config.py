@@ -17,6 +17,8 @@ the URDF's ``<robot name>`` (``livezmp/data/robots/NAME.toml``); everything is o
     zero = 2048                       # ticks at 0 rad
     direction = 1                     # +1 or -1
     ticks_per_rev = 4096
+    model = 1020                      # optional: its Dynamixel model number (1020: XM430-W350); a
+                                      # servo answering with another is refused at open
 
     [imu]                             # an IMU sub-controller on the Dynamixel bus (the OP3's OpenCR)
     id = 200
@@ -40,20 +42,22 @@ from livezmp.tomlfile import read_toml
 
 @dataclass
 class ServoConfig:
-    """Servo ``id`` of a joint and the tick ↔ radian conversion."""
+    """Servo ``id`` of a joint and the tick ↔ radian conversion; ``model``: the servo's Dynamixel model number
+    (its Model Number register), None where the config does not say."""
 
     joint: str
     id: int
     zero: int = 2048
     direction: int = 1
     ticks_per_rev: int = 4096
+    model: int | None = None
 
     def to_rad(self, ticks: float) -> float:
         """The joint angle (rad) of a servo position in ticks."""
         return self.direction * (ticks - self.zero) * 2 * np.pi / self.ticks_per_rev
 
 
-SERVO_KEYS = ("direction", "id", "ticks_per_rev", "zero")
+SERVO_KEYS = ("direction", "id", "model", "ticks_per_rev", "zero")
 
 
 def _known_keys(table: dict, keys: tuple[str, ...], where: str) -> None:
@@ -170,9 +174,10 @@ def _parse(data: dict, source: str) -> RobotConfig:
         same = next((o.joint for o in cfg.servos.values() if o.id == servo_id), None)
         if same is not None:  # one servo would take both joints' goals (and the links find a servo by its id)
             raise InputError(f"{where} id: {servo_id} is already the id of {same}")
+        model = _int(s["model"], f"{where} model", 0, 0xFFFF) if "model" in s else None
         cfg.servos[joint] = ServoConfig(joint, servo_id,
                                         _int(s.get("zero", 2048), f"{where} zero", -(1 << 31), (1 << 31) - 1),
-                                        d, ticks)
+                                        d, ticks, model)
     if "imu" in data:
         cfg.imu = _imu(_table(data["imu"], f"{source}: [imu]"), f"{source}: [imu]", cfg)
     return cfg
