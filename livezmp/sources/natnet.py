@@ -271,4 +271,5 @@ class NatNetSource:
                 self.cmd.send(nn.message(nn.DISCONNECT))
             except OSError:
                 pass
+            self.receiver.settle()
             self._close_sockets()

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import os
 import select
 import socket
 import struct
@@ -59,8 +60,10 @@ SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40) if sys.platform.startswith("lin
 class KernelDrops:
     """Reads a UDP socket with the kernel's count of datagrams it dropped there (its receive buffer full), where
     Linux offers it: ``SO_RXQ_OVFL`` attaches the socket's drop count so far to each datagram received, so the
-    count is known as of the latest datagram read (drops after the last one are not seen). Into
-    ``stats.kernel_drops``, which stays None where the option is refused."""
+    count is known as of the latest datagram read; :meth:`settle`, before the socket closes, takes the count
+    from /proc/net/udp (its ``drops`` column), so drops after the last datagram read are counted too (a flood
+    that ends with the buffer full: none of its tail is ever read). Into ``stats.kernel_drops``, which stays
+    None where the option is refused."""
 
     def __init__(self, sock: socket.socket, stats: SourceStats):
         self.sock, self.stats = sock, stats
@@ -83,6 +86,23 @@ class KernelDrops:
                 # the socket's count when this datagram was queued: those read later may carry an older one
                 self.stats.kernel_drops = max(self.stats.kernel_drops, struct.unpack("=I", value[:4])[0])
         return data, address
+
+    def settle(self) -> None:
+        """The socket's drop count now, from the kernel's table of UDP sockets (found by the socket's inode);
+        nothing where the table cannot be read."""
+        if not self._space:
+            return
+        try:
+            inode = str(os.fstat(self.sock.fileno()).st_ino)
+            for table in ("/proc/net/udp", "/proc/net/udp6"):
+                with open(table, encoding="ascii") as f:
+                    for line in f:
+                        fields = line.split()
+                        if len(fields) >= 13 and fields[9] == inode:
+                            self.stats.kernel_drops = max(self.stats.kernel_drops, int(fields[-1]))
+                            return
+        except (OSError, ValueError):
+            return
 
 
 class SequenceFilter:
@@ -294,5 +314,7 @@ class UdpSource:
         return None
 
     def close(self) -> None:
+        if not self._closed:
+            self.receiver.settle()
         self._closed = True
         self.sock.close()
