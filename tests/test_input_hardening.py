@@ -284,6 +284,8 @@ def test_an_inertia_below_semi_definite_by_a_negligible_amount_is_taken_as_the_n
     ("[servos.l_knee]\nid = 1\ndirecton = -1\n", "unknown key 'directon'"),
     ("[servos.l_knee]\nid = 1\n[servos.r_knee]\nid = 1\n", r"\[servos.r_knee\] id: 1 is already the id of l_knee"),
     ('[correction.legs]\nleft = "l_knee"\n', "list"),
+    ("[servos.l_knee]\nid = 1\nmodel = -5\n", "model"),
+    ('[servos.l_knee]\nid = 1\nmodel = "XM430"\n', "model"),
 ])
 def test_robot_config_types_one_line_per_field(tmp_path, capsys, robot, toml, says):
     urdf, csv_text = robot

@@ -113,6 +113,9 @@ NOT_RECORDED_KINDS = frozenset({"fell"})  # the robot's state, not a fault of it
 # bus losing 5 % of its replies fails all of them one time in 3 million; each failed try costs the link's own
 # timeout (a Dynamixel read's few ms), and the robot is holding its posture meanwhile
 START_READS = 5
+# The goals' speed limit counts the loop time since the goals before (skipped deadlines, cycles without a write) up to
+# this many periods: past it (a gap the watchdog is about to end) the goals resume at this pace, not in one jump
+MAX_PACE_PERIODS = 3
 
 @dataclass
 class LoopCounters:
@@ -242,6 +245,7 @@ class LiveLoop:
         self._next_correction = -math.inf  # loop time of the next corrector step (s)
         # the posture (base + joints) the corrector's updated root rotation awaits its offsets for
         self._offsets_for: np.ndarray | None = None
+        self._goals_t = 0.0  # loop time of the goals the limiter kept last (s)
         self._ramp_from: np.ndarray | None = None
         self._ramp_t0 = 0.0
         # (cycle, limited, offsets, command, goals, what the speed limit cut) of the goals built ahead
@@ -439,7 +443,8 @@ class LiveLoop:
     def _write(self, t: float, t0: float, command: np.ndarray) -> None:
         """Goals = command + offsets, limited, to the link (``t0``: when the cycle's read started)."""
         t3 = self.clock.now()
-        goals, limited, slowed = self.limiter.apply(command, self.offsets)
+        goals, limited, slowed = self.limiter.apply(command, self.offsets, self._periods_since_goals(t))
+        self._goals_t = t  # kept by the limiter, sent or not
         try:
             if self.pipelined:  # the next read's instruction in the same transfer as the goals
                 self.link.write_goals(goals, request=not self.link_down)
@@ -484,6 +489,7 @@ class LiveLoop:
             self._event(t, "write_error", f"write failed: {e}")
             return prepared[3]
         self.limiter.keep(prepared[4], prepared[2])
+        self._goals_t = t
         self._written(t, t0, t3, prepared[1], prepared[5])
         return prepared[3]
 
@@ -502,6 +508,12 @@ class LiveLoop:
         if self.recorder is not None and self.corrector is not None:
             self.recorder.correction(self._index0 + self._fed - 1, t, self._delta, limited, self.limiter.offsets)
 
+    def _periods_since_goals(self, t: float) -> float:
+        """Loop periods from the goals sent last to loop time ``t`` (s), for their speed limit: 1 on time, more
+        after skipped deadlines or cycles that wrote nothing (the command moved on meanwhile: a servo at the
+        joint's top speed would have too), at most `MAX_PACE_PERIODS`."""
+        return min(max(round((t - self._goals_t) / self.dt), 1), MAX_PACE_PERIODS)
+
     def _slowed(self, t: float, slowed: Slowed) -> None:
         """Goals the joints' speed limits cut: counted (per joint too), told and recorded as `goal_speed`."""
         self.counters.goals_slowed += 1
@@ -509,8 +521,8 @@ class LiveLoop:
         for j in np.flatnonzero(slowed.mask):
             counts[names[j]] = counts.get(names[j], 0) + 1
         self._event(t, "goal_speed", f"goal of {names[slowed.joint]} slowed to its speed limit: "
-                                     f"{slowed.asked:+.3f} rad asked in one {1e3 * self.dt:.1f} ms cycle, "
-                                     f"{slowed.allowed:.3f} allowed ({slowed.allowed / self.dt:.2f} rad/s)")
+                                     f"{slowed.asked:+.3f} rad asked from the goal before, {slowed.allowed:.3f} "
+                                     f"allowed at {slowed.speed:.2f} rad/s")
 
     def _request(self) -> None:
         """With a pipelined link, its next read's instruction goes out now."""
@@ -614,6 +626,7 @@ class LiveLoop:
         if self._ramp_from is None:
             self._ramp_from, self._ramp_t0 = present.copy(), t
             self.limiter.start_from(present)  # the goals' speed limit counts from where the servos stand
+            self._goals_t = t
             if self._hold is None:
                 self._hold = present.copy()
         target = self._hold if self.command is None else np.asarray(self.command(t), dtype=float)

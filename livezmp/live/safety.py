@@ -13,8 +13,8 @@ and when to stop commanding.
 * Goals (:class:`GoalLimiter`). Correction offsets are clipped to
   ``max_correction_rad`` per joint and may change by at most
   ``max_correction_rate_rad_s`` (rad/s); each goal (command + offsets) may move from the
-  goal sent before it by at most its joint's URDF velocity limit times the loop period
-  (``default_joint_speed_rad_s`` where the URDF gives none), so a motion that steps is sent
+  goal sent before it by at most its joint's URDF velocity limit times the loop time between
+  them (``default_joint_speed_rad_s`` where the URDF gives none), so a motion that steps is sent
   as a ramp the servo can follow, not as one jump it slams through; then the goals are
   clipped to the URDF joint limits less ``limit_margin_rad``.
 * Watchdog (:class:`Watchdog`): no valid frame for ``watchdog_s`` (at least three loop
@@ -149,13 +149,14 @@ class Watchdog:
 @dataclass(frozen=True)
 class Slowed:
     """Goals the joint speed limit cut in one command: ``mask`` (n,) which joints; for the first of them,
-    ``joint`` its index, ``asked`` the change the command wanted from the goal before (rad) and ``allowed``
-    the change a period allows (rad)."""
+    ``joint`` its index, ``asked`` the change the command wanted from the goal before (rad), ``allowed``
+    the change the time since allowed (rad) at the joint's ``speed`` (rad/s)."""
 
     mask: np.ndarray
     joint: int
     asked: float
     allowed: float
+    speed: float
 
 
 class GoalLimiter:
@@ -168,10 +169,8 @@ class GoalLimiter:
         self.upper = limits.upper - config.limit_margin_rad
         self.max_offset = config.max_correction_rad
         self.max_step = config.max_correction_rate_rad_s * dt
-        # a goal's change a period (rad): by the nominal period, so a cycle after skipped deadlines or a failed
-        # write moves no faster than one on time (the servo is slower than asked, never faster)
         self.speed = np.where(np.isfinite(limits.velocity), limits.velocity, config.default_joint_speed_rad_s)
-        self.max_goal_step = self.speed * dt
+        self.max_goal_step = self.speed * dt  # a goal's change a period (rad)
         self.reset()
 
     def reset(self) -> None:
@@ -184,12 +183,13 @@ class GoalLimiter:
         """Commanding (re)starts with the servos at ``q`` (n,) rad: the first goals move from there."""
         self.goals = follow(np.asarray(q, dtype=float).copy(), self.mimics)
 
-    def apply(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, Slowed | None]:
-        """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, whether a limit cut
-        anything, and what the speed limit cut (None: nothing). Non-finite offsets count as zero.
-        The goals are kept as sent whether their write succeeds or not (a failed write may have
-        reached the servos)."""
-        goals, limited, sent, slowed = self.propose(command, offsets)
+    def apply(self, command: np.ndarray, offsets: np.ndarray, periods: float = 1.0) -> tuple[np.ndarray, bool,
+                                                                                              Slowed | None]:
+        """Goals (n,) rad for ``command`` (n,) rad plus ``offsets`` (n,) rad, ``periods`` loop periods after
+        the goals before, whether a limit cut anything, and what the speed limit cut (None: nothing).
+        Non-finite offsets count as zero. The goals are kept as sent whether their write succeeds or not
+        (a failed write may have reached the servos)."""
+        goals, limited, sent, slowed = self.propose(command, offsets, periods)
         self.keep(goals, sent)
         return goals, limited, slowed
 
@@ -202,7 +202,8 @@ class GoalLimiter:
             self.goals = goals if np.logical_and.reduce(finite) else np.where(finite, goals, self.goals)  # all()
         self.offsets = offsets
 
-    def propose(self, command: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray, Slowed | None]:
+    def propose(self, command: np.ndarray, offsets: np.ndarray,
+                periods: float = 1.0) -> tuple[np.ndarray, bool, np.ndarray, Slowed | None]:
         """What `apply` would return, and the offsets it would keep (rad), without keeping them:
         for goals built ahead of the cycle that sends them (:meth:`keep` them once they are sent)."""
         want = np.where(np.isfinite(offsets), offsets, 0.0)
@@ -212,11 +213,12 @@ class GoalLimiter:
         slowed = None
         if self.goals is not None:
             before = self.goals
-            paced = clip(wanted, before - self.max_goal_step, before + self.max_goal_step)
+            step = self.max_goal_step if periods == 1.0 else periods * self.max_goal_step
+            paced = clip(wanted, before - step, before + step)
             cut = (paced != wanted) & np.isfinite(wanted)  # a NaN goal is the link's to refuse
             if np.logical_or.reduce(cut):  # any(), without its Python wrapper
                 j = int(np.argmax(cut))
-                slowed = Slowed(cut, j, float(wanted[j] - before[j]), float(self.max_goal_step[j]))
+                slowed = Slowed(cut, j, float(wanted[j] - before[j]), float(step[j]), float(self.speed[j]))
             wanted = paced
         goals = clip(wanted, self.lower, self.upper)
         limited = bool(slowed is not None or np.logical_or.reduce(sent != want)
