@@ -39,6 +39,15 @@ def test_a_goal_moves_from_the_last_one_at_most_its_joint_speed_a_period():
     assert np.array_equal(sent[-1], step) and np.array_equal(sent[:, 1:], np.tile(step[1:], (100, 1)))
 
 
+def test_a_command_held_beyond_a_joint_limit_is_not_counted_as_slowed():
+    """Joint 0 asked for 2 rad (its limit 1, less the 0.01 margin): paced to 0.99 in 99 periods, each counted;
+    then held there, nothing more counted (bez2's head_pitch was counted every cycle this way)."""
+    limiter = GoalLimiter(_limits(), SafetyConfig(), T)
+    limiter.start_from(np.zeros(3))
+    slowed = [limiter.apply(np.array([2.0, 0.0, 0.0]), np.zeros(3))[2] for _ in range(150)]
+    assert sum(s is not None for s in slowed) == 98 and limiter.goals[0] == 0.99
+
+
 def test_a_joint_without_a_urdf_velocity_moves_at_the_default_speed():
     lim = JointLimits(["a", "b"], np.full(2, -3.0), np.full(2, 3.0), np.array([math.inf, 2.0]))
     limiter = GoalLimiter(lim, SafetyConfig(default_joint_speed_rad_s=1.0), T)

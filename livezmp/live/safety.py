@@ -210,17 +210,17 @@ class GoalLimiter:
         sent = clip(clip(want, -self.max_offset, self.max_offset), self.offsets - self.max_step,
                      self.offsets + self.max_step)
         wanted = follow(command + sent, self.mimics)
-        slowed = None
-        if self.goals is not None:
-            before = self.goals
-            step = self.max_goal_step if periods == 1.0 else periods * self.max_goal_step
-            paced = clip(wanted, before - step, before + step)
-            cut = (paced != wanted) & np.isfinite(wanted)  # a NaN goal is the link's to refuse
-            if np.logical_or.reduce(cut):  # any(), without its Python wrapper
-                j = int(np.argmax(cut))
-                slowed = Slowed(cut, j, float(wanted[j] - before[j]), float(step[j]), float(self.speed[j]))
-            wanted = paced
         goals = clip(wanted, self.lower, self.upper)
-        limited = bool(slowed is not None or np.logical_or.reduce(sent != want)
-                       or np.logical_or.reduce(goals != wanted))  # any(), unwrapped
-        return goals, limited, sent, slowed
+        limited = bool(np.logical_or.reduce(sent != want) or np.logical_or.reduce(goals != wanted))  # any(), unwrapped
+        if self.goals is None:
+            return goals, limited, sent, None
+        # paced, then inside the joint limits again (a posture read beyond them comes inside at once, as before);
+        # slowed where the pace changed what would be sent: a command held beyond a joint limit is not a fast one
+        before = self.goals
+        step = self.max_goal_step if periods == 1.0 else periods * self.max_goal_step
+        paced = clip(clip(wanted, before - step, before + step), self.lower, self.upper)
+        cut = (paced != goals) & np.isfinite(goals)  # a NaN goal is the link's to refuse
+        if not np.logical_or.reduce(cut):  # any(), without its Python wrapper
+            return goals, limited, sent, None
+        j = int(np.argmax(cut))
+        return paced, True, sent, Slowed(cut, j, float(goals[j] - before[j]), float(step[j]), float(self.speed[j]))
