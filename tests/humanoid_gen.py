@@ -132,6 +132,8 @@ class HumanoidSpec:
     the sole (NimbRo-OP2X's parallel-linkage model, beside its serial legs);
     ``root_joint``: with ``extras``, the joint from the massless root link to the robot, "fixed" or "floating"
     (HighTorque's Hi: a ``world`` link and a floating joint, as MuJoCo conversions write the free base);
+    ``sole_on_ankle``: the sides ("l", "r") whose foot's collision geometry the file gives the link between the
+    ankle's joints (they meet at one point) instead of the foot link (Fourier GR3's right foot);
     ``trunk_mass``: the torso's and head's masses times this before the whole is scaled to ``mass`` (with ``arm``
     "" and ``torso_com`` near the hips' 0.54, a legs-only robot whose light trunk is a short lever: Alexbotmini's);
     ``seed``: the file's link and joint order, flipped axes, random frames."""
@@ -174,6 +176,7 @@ class HumanoidSpec:
     parallel_legs: bool = False
     root_joint: str = "fixed"
     trunk_mass: float = 1.0
+    sole_on_ankle: str = ""
     seed: int = 0
 
 
@@ -404,7 +407,7 @@ def _write(b: _Builder, path: Path) -> Path:
     origin_of = {root_role: np.zeros(3) if spec.root_at_ground else b.links[root_role]["com"]}
     for j in b.joints:
         origin_of[j["child"]] = j["at"]
-    elements = []
+    elements, links = [], {}
     for role, v in b.links.items():
         link = ET.Element("link", name=names[role])
         R, p = v["R"], origin_of[role]
@@ -425,13 +428,21 @@ def _write(b: _Builder, path: Path) -> Path:
             ET.SubElement(inertial, "inertia", **{k: f"{inertia[i, j]:.9g}" for k, (i, j) in zip(
                 ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                 strict=True)})
-        if role.endswith("_foot") and spec.foot in ROUND_FEET:
+        links[role] = link
+        elements.append(link)
+    for role, v in b.links.items():
+        if not role.endswith("_foot"):
+            continue
+        # the link that carries the foot's collision geometry: the foot's, or the one between its ankle's joints
+        holder = f"{role[0]}_ankle0" if role[0] in spec.sole_on_ankle and f"{role[0]}_ankle0" in links else role
+        link, R, p = links[holder], b.links[holder]["R"], origin_of[holder]
+        if spec.foot in ROUND_FEET:
             for centre, turn, shape in _foot_rounds(spec, v["com"], v["size"]):
                 collision = ET.SubElement(link, "collision")
                 ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (centre - p)),
                               rpy=_fmt(pin.rpy.matrixToRpy(R.T @ turn)))
                 ET.SubElement(ET.SubElement(collision, "geometry"), *shape)
-        elif role.endswith("_foot") and spec.foot != "none":
+        elif spec.foot != "none":
             for centre, size in _foot_boxes(spec, v["com"], v["size"]):
                 collision = ET.SubElement(link, "collision")
                 ET.SubElement(collision, "origin", xyz=_fmt(R.T @ (centre - p)), rpy=_fmt(pin.rpy.matrixToRpy(R.T)))
@@ -440,7 +451,6 @@ def _write(b: _Builder, path: Path) -> Path:
                     ET.SubElement(geometry, "mesh", filename=f"package://humanoid/meshes/{names[role]}.stl")
                 else:
                     ET.SubElement(geometry, "box", size=_fmt(size))
-        elements.append(link)
     for j in b.joints:
         Rp, Rc = b.links[j["parent"]]["R"], b.links[j["child"]]["R"]
         pp = origin_of[j["parent"]]

@@ -26,6 +26,7 @@ FOOT = np.array([0.16, 0.08, 0.03]) * SPEC.height  # m: the generator's foot box
 
 def _soles(tmp_path, spec: HumanoidSpec) -> dict[str, np.ndarray]:
     """The zero-pose soles (corners (k, 3) world, m) of the robot of ``spec``."""
+    tmp_path.mkdir(parents=True, exist_ok=True)
     body = load_robot(str(build_humanoid(tmp_path / f"{spec.foot}_{spec.facing}.urdf", spec)), None).body
     data = body.model.createData()
     pin.framesForwardKinematics(body.model, data, np.zeros(body.model.nq))
@@ -57,3 +58,15 @@ def test_a_ball_foot_is_refused_in_one_line(tmp_path, capsys):
     rc = main(["demo", "--robot", str(urdf), "--link", "mock", "--scenario", "lean", "--duration", "0.05"])
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and "foot 'l_foot'" in err[0] and "touch the floor at one point" in err[0]
+
+
+@pytest.mark.parametrize("foot", ["cylinders", "box"])
+def test_a_foot_whose_geometry_the_file_gives_its_ankle_link_stands_on_it(tmp_path, foot):
+    """Fourier GR3's file gives its right foot's collision cylinders to the link between its ankle's pitch and roll
+    joints, its left foot's to the foot link: the right foot stood on the default box, 34 mm lower than the left's
+    cylinders, its left sole 3 mm off the floor, and every scenario fell at 0.2 s. Both feet now stand on the
+    geometry the file gives them, as the twin whose right foot carries its own does."""
+    plain = _soles(tmp_path / "plain", replace(SPEC, foot=foot, ankle="pr"))
+    moved = _soles(tmp_path / "ankle", replace(SPEC, foot=foot, ankle="pr", sole_on_ankle="r"))
+    for side in ("left", "right"):
+        np.testing.assert_allclose(moved[side], plain[side], atol=1e-9)

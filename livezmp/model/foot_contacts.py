@@ -119,9 +119,10 @@ def _lowest_face(size: np.ndarray, world: pin.SE3) -> tuple[float, np.ndarray, n
     return None
 
 
-def box_sole(model: pin.Model, data: pin.Data, joint: int,
+def box_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...],
              boxes: dict[str, list[tuple[np.ndarray, pin.SE3]]]) -> ContactSole | None:
-    """The sole of the foot on ``joint`` from the collision boxes of its links (``boxes``: link name -> (size (3,)
+    """The sole of the foot on ``joints`` (its own joint, and its ankle's where they carry its geometry) from the
+    collision boxes of their links (``boxes``: link name -> (size (3,)
     m, the box's centre in the link's frame) per ``<collision>`` box): the face of them that faces down, within
     `MAX_TILT`, lowest (Bez2's foot box, 17 x 9 cm; Valkyrie's, 27 x 16 cm; a heel's box above a sole's is not
     the sole), on its own plane, with every other such face on that plane (`ON_PLANE`): the sole is their convex
@@ -129,7 +130,7 @@ def box_sole(model: pin.Model, data: pin.Data, joint: int,
     its 237 mm sole). None where the foot's links have no box (a mesh's size is not in the URDF; the caller keeps
     its default box). ``data``: frame placements of the zero posture."""
     faces = [face for f in range(model.nframes)
-             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
              for size, origin in boxes.get(model.frames[f].name, ())
              if (face := _lowest_face(size, data.oMf[f] * origin)) is not None]
     if not faces:

@@ -149,12 +149,12 @@ def quadrilateral(polygon: np.ndarray) -> np.ndarray:
     return poly[sorted(corners)]
 
 
-def mesh_sole(model: pin.Model, data: pin.Data, joint: int, points: Points) -> ContactSole | None:
-    """The sole of the foot on ``joint`` from the mesh vertices of its links (``points``, `Points`; module
-    docstring), or None where they give no face that faces down or no area on it. ``data``: frame placements of
+def mesh_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...], points: Points) -> ContactSole | None:
+    """The sole of the foot on ``joints`` (`box_sole`'s) from the mesh vertices of their links (``points``, `Points`;
+    module docstring), or None where they give no face that faces down or no area on it. ``data``: frame placements of
     the zero posture."""
     world = [v @ data.oMf[f].rotation.T + data.oMf[f].translation for f in range(model.nframes)
-             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
              for v in points.get(model.frames[f].name, ())]
     if not world:
         return None

@@ -76,12 +76,13 @@ def _lowest(shape: Round, world: pin.SE3) -> np.ndarray:
     return np.array([centre + k * shape.length / 2 * axis + down for k in (-1.0, 1.0)])
 
 
-def round_sole(model: pin.Model, data: pin.Data, joint: int, rounds: Rounds, where: str) -> ContactSole | None:
-    """The sole of the foot on ``joint`` from the cylinders and spheres of its links (``rounds``; module
-    docstring), level; None where they have none. InputError naming ``where`` (the file and foot) where they
+def round_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...], rounds: Rounds, where: str
+               ) -> ContactSole | None:
+    """The sole of the foot on ``joints`` (`box_sole`'s) from the cylinders and spheres of their links (``rounds``;
+    module docstring), level; None where they have none. InputError naming ``where`` (the file and foot) where they
     touch the floor at one point only. ``data``: frame placements of the zero posture."""
     shapes = [(shape, data.oMf[f] * shape.origin) for f in range(model.nframes)
-              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint == joint
+              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
               for shape in rounds.get(model.frames[f].name, ())]
     if not shapes:
         return None
