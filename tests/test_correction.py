@@ -16,7 +16,7 @@ from test_body import make_bvh
 from livezmp.balance.pipeline import FrameResult, Pipeline, default_config
 from livezmp.cli import main
 from livezmp.correct.limits import CORRECTION_CUTOFF_HZ, CorrectionLimits, rate_limit
-from livezmp.correct.online import OnlineCorrector
+from livezmp.correct.online import OnlineCorrector, hips_height
 from livezmp.correct.root_motion import RootMover, euler_from_matrix, hip_axes
 from livezmp.correct.solver import correct_bvh
 from livezmp.model.base_placement import BasePlacer
@@ -376,3 +376,27 @@ def test_a_take_with_nothing_to_move_skips_the_estimators_linear_maps(monkeypatc
     monkeypatch.setattr("livezmp.correct.solver.estimator_matrices", refused)
     _, result = correct_bvh(motion)
     assert result.history == [] and result.report()["out_of_support_after"] == 0
+
+
+def test_the_pivot_sliding_to_one_hip_moves_a_turned_root_no_faster_than_the_pelvis_may(op3_body):
+    """The root turned by δ about the pivot stands elsewhere when the pivot moves: (I − R(δ)) (h_left − h_right)
+    per unit of the pivot's weight. AgiBot X1 on its foot meshes, its trunk turned 0.25 rad back and 0.11 rad
+    rolled, was read as on one foot: the pivot slid to that hip within 50 ms (a first-order step from rest), its
+    root dropped 9 mm, and its true ZMP left its feet by 562 mm for 31 ms. The root's move now keeps within the
+    pelvis' acceleration (the trunk's × the hips' height), and the pivot still reaches the stance hip."""
+    dt = 0.008
+    corrector = OnlineCorrector(op3_body, dt)
+    q = full_q(op3_body, op3_pose(op3_body))
+    poly = np.array([[-0.05, -0.05], [0.05, -0.05], [0.05, 0.05], [-0.05, 0.05]])
+    corrector.prepare(q)
+    corrector.u[:3] = [0.11, 0.25, 0.0]  # held there: the ZMP comfortably inside, nothing to correct
+    weights = []
+    for k in range(150):
+        corrector.update(_fake_result(op3_body, q, (0.0, 0.0), "double" if k < 5 else "right", poly, 0.05))
+        weights.append(corrector.w_left)
+    roots = np.array([corrector.mover.apply(q, corrector.delta, w)[:3] for w in weights])
+    accel = np.linalg.norm(np.diff(roots, 2, axis=0), axis=1).max()  # m per frame^2
+    allowed = hips_height(op3_body, q) * corrector.max_accel_step[1]
+    print(f"root's largest acceleration {accel / dt**2:.2f} m/s^2, allowed {allowed / dt**2:.2f}")
+    assert accel <= allowed * 1.05  # the lever is taken in the frame's posture, the root's move in the turned one
+    assert weights[-1] < 0.05  # on the right hip within 1.2 s

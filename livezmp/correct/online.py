@@ -276,6 +276,7 @@ class OnlineCorrector:
         self._damp = np.diag([1e-6, 1e-6, 1e-4])  # the gain's damping (m², per δ axis), made once
         self.mover = RootMover(body)
         self.reaction: np.ndarray | None = None  # (2, 5) `reaction_per_accel`, `legs_response`: `prepare`
+        self._hips_h = 0.0  # m: `hips_height` in the standing posture (`prepare`)
         self.legs = np.zeros((2, 2))  # `legs_response`'s S: the CoM's move per m of the pelvis' shift
         self.data = body.model.createData()
         corr = body.correction
@@ -290,6 +291,7 @@ class OnlineCorrector:
         self.u = np.zeros(5)
         self.prev_step = np.zeros(5)
         self.w_left = 0.5
+        self._pivot_rate = 0.0  # the pivot weight's last change (per frame)
         self._room = -np.inf  # m: the static CoM's distance inside the feet at the last frame
         self._last_offsets = np.zeros(self.body.nq)  # the IK's warm start
 
@@ -317,9 +319,9 @@ class OnlineCorrector:
         wider = slow_trunk_factor(float(np.linalg.norm(self.reaction[:, PITCH])),
                                   float(np.linalg.norm(self.sensitivity(q)[:, PITCH])), com_height(self.body, q))
         # the legs' strategy is for a trunk too short a lever, not a slow one: judged by the margin as given
+        self._hips_h = h = hips_height(self.body, q)
         if uses_legs(self.body, self.mover, q, self.max_rot[PITCH], self.limits.margin_m):
             self.legs, self.reaction[:, 3:] = legs_response(self.body, self.mover, joints)
-            h = hips_height(self.body, q)
             self.max_rot[3:] = h * np.sin(self.max_rot[[PITCH, ROLL]])
             self.max_step[3:] = h * self.max_step[0]
             self.max_accel_step[3:] = h * self.max_accel_step[0]
@@ -354,10 +356,10 @@ class OnlineCorrector:
     def update(self, result: FrameResult, cop: np.ndarray | None = None) -> bool:
         """The first part of :meth:`step`: δ (``delta``) and the pelvis' ``shift`` from an analysed frame (``cop``
         as there); whether a limit cut their step."""
-        self.w_left += self.pivot_alpha * ({"left": 1.0, "right": 0.0}.get(result.support, 0.5) - self.w_left)
         if self.reaction is None:
             self.prepare(result.q)
         pin.framesForwardKinematics(self.body.model, self.data, result.q)
+        self.w_left += self._pivot_step({"left": 1.0, "right": 0.0}.get(result.support, 0.5))
         s = np.hstack([self.sensitivity(result.q), self.legs])
         com, polygon = result.com, result.polygon  # the robot's own: before the feet's CoP moves the result
         result = with_measured_cop(result, cop)
@@ -385,6 +387,27 @@ class OnlineCorrector:
         self.prev_step = new - self.u
         self.u = new
         return limited
+
+    def _pivot_step(self, target: float) -> float:
+        """The pivot weight's change this frame toward ``target`` (1 the left hip, 0 the right; `pivot_tau_s`'s
+        first-order step), cut so that the root's move it makes stays within the pelvis' rate and acceleration (the
+        trunk's × the hips' height, as the legs' shift's): the root turned by δ about another pivot stands
+        elsewhere, (I − R(δ)) (h_left − h_right) per unit of weight, and the legs carry it there. AgiBot X1 on its
+        foot meshes, its trunk turned 0.25 rad back and 0.11 rad rolled in ``lean``, was read as on its right foot
+        alone (its left sole 0.9 mm into the floor): the pivot slid from between its hips to its right hip within
+        50 ms, the root dropped 9 mm, its legs' goals turned at up to 60 rad/s^2, and its true ZMP left its feet by
+        562 mm for 31 ms. ``data`` must hold the frame's placements."""
+        step = self.pivot_alpha * (target - self.w_left)
+        corr = self.body.correction
+        h_left, h_right = self.data.oMf[corr.hips["left"]].translation, self.data.oMf[corr.hips["right"]].translation
+        lever = float(np.linalg.norm((h_left - h_right) - pin.exp3(hip_axes(h_left, h_right) @ self.delta)
+                                     @ (h_left - h_right)))  # m of the root's move per unit of weight
+        if lever > 0.0:
+            accel, rate = self._hips_h * np.array([self.max_accel_step[PITCH], self.max_step[PITCH]]) / lever
+            step = float(np.clip(np.clip(step, self._pivot_rate - accel, self._pivot_rate + accel), -rate, rate))
+        step = float(np.clip(self.w_left + step, 0.0, 1.0)) - self.w_left
+        self._pivot_rate = step
+        return step
 
     def _legs_take(self, s_trunk: np.ndarray, full: np.ndarray) -> np.ndarray:
         """(2,) m: the pelvis' shift that moves the CoM as far as the part of the trunk's turn ``full`` (rad, the
