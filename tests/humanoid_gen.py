@@ -114,9 +114,11 @@ class HumanoidSpec:
     (Darwin-OP's neck, Romeo's shoulder); ``fixed_finger``: with grippers, the mimicking finger fixed, its <mimic>
     kept (Talos' reduced model); ``facing``: the way the robot faces in its file, "x" (REP 103), "-y" (Poppy's)
     or "-x" (iCub's); ``upside_down``: the robot then turned half a turn about x, standing on its head in its
-    file (K-Scale's GPR); ``odd_limits``: the left knee's tight limits mirrored, so it flexes only forward (Poppy's
-    file), and the elbows' leaving out their zero (NAO's elbow roll, −1.54..−0.03 rad); ``inertia_scale``: the
-    torso's inertia written this many times too large (1e6: kg mm^2 as kg m^2; Darwin-OP's file);
+    file (K-Scale's GPR); ``lying``: "x" or "-x", the robot then laid down in its file with its legs along that axis
+    (a quarter turn about y; WATonomous' humanoid V1 lies so); ``odd_limits``: the left knee's tight limits
+    mirrored, so it flexes only forward (Poppy's file), and the elbows' leaving out their zero (NAO's elbow roll,
+    −1.54..−0.03 rad); ``inertia_scale``: the torso's inertia written this many times too large (1e6: kg mm^2 as
+    kg m^2; Darwin-OP's file);
     ``shoulder_tilt``: the shoulder pitch's axis turned about the forward axis (rad; Unitree H1's 0.44);
     ``hip_tilt``: the hip pitch's likewise (Fourier GR2's 0.52); ``torso_com``: the torso's centre of mass
     height as a share of ``height`` (0.72; NimbRo-OP2X's upper body has its CoM 65 mm above its hips);
@@ -164,6 +166,7 @@ class HumanoidSpec:
     fixed_finger: bool = False
     facing: str = "x"
     upside_down: bool = False
+    lying: str = ""
     odd_limits: bool = False
     inertia_scale: float = 1.0
     shoulder_tilt: float = 0.0
@@ -350,8 +353,9 @@ def _build(spec: HumanoidSpec) -> _Builder:
     total = sum(v["mass"] for v in b.links.values())
     for v in b.links.values():
         v["mass"] *= spec.mass / total
-    # the robot turned about z in its root's frame (then about x, upside down), boxes with it
-    turn = _rot((np.pi if spec.upside_down else 0.0, 0.0, 0.0)) @ _rot((0.0, 0.0, FACING[spec.facing]))
+    # the robot turned about z in its root's frame (then about y, lying, and x, upside down), boxes with it
+    turn = (_rot((np.pi if spec.upside_down else 0.0, {"x": -np.pi / 2, "-x": np.pi / 2}.get(spec.lying, 0.0), 0.0))
+            @ _rot((0.0, 0.0, FACING[spec.facing])))
     for v in b.links.values():
         v["com"], v["size"] = turn @ v["com"], np.abs(turn) @ v["size"]
     for j in b.joints:

@@ -193,6 +193,19 @@ def test_a_robot_upside_down_in_its_file_is_turned_onto_its_feet(tmp_path):
     assert make_scenario("lean", body).name == "lean"
 
 
+@pytest.mark.parametrize("lying", ["x", "-x"])
+def test_a_robot_lying_down_in_its_file_is_stood_on_its_feet(tmp_path, lying):
+    # before: its feet and hips all at one height, the legs' height 0: default soles 1 mm long, every scenario
+    # refused ("no forward lean up to 1 rad puts the CoM 4.0 mm past the toes"; WATonomous' humanoid V1)
+    standing = load_robot(str(build_humanoid(tmp_path / "s.urdf", HumanoidSpec(seed=56))), None).body
+    body = load_robot(str(build_humanoid(tmp_path / "l.urdf", HumanoidSpec(lying=lying, seed=56))), None).body
+    for side, soles in _zero_pose_soles(body).items():
+        np.testing.assert_allclose(soles - soles.mean(axis=0),
+                                   _zero_pose_soles(standing)[side] - _zero_pose_soles(standing)[side].mean(axis=0),
+                                   atol=1e-9)
+    assert make_scenario("lean", body).name == "lean"
+
+
 def test_a_link_named_as_a_joint_and_a_robot_named_in_words_load(tmp_path):
     # before: a traceback from Pinocchio ("Several frames match the filter"), and a refusal of the name
     spec = HumanoidSpec(root="l_knee", robot_name="My Humanoid v2")

@@ -394,42 +394,66 @@ def _sole_of_meshes(model: pin.Model, data: pin.Data, joints: tuple[int, ...], r
     return sole, ("" if sole is not None or not (why or points) else why or "its meshes have no face that faces down")
 
 
-def _with_base(fixed: pin.Model, yaw: float = 0.0, upside_down: bool = False) -> pin.Model:
+def _with_base(fixed: pin.Model, yaw: float = 0.0, tilt: tuple[float, float] = (0.0, 0.0)) -> pin.Model:
     """The URDF's model on the six base joints, turned by ``yaw`` (rad, about z) on the base (`_heading`), after
-    a half turn about x where it stands ``upside_down`` in its file (`_upright_feet`)."""
+    the turn ``tilt`` (roll about x, then pitch about y, rad) that stands it on its feet (`_upright_feet`)."""
     base = pin.Model()
     j = 0
     for name, jm in BASE_JOINTS:
         j = base.addJoint(j, jm(), pin.SE3.Identity(), name)
     f = base.addFrame(pin.Frame("base_attach", j, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-    turn = pin.rpy.rpyToMatrix(np.pi if upside_down else 0.0, 0.0, 0.0)
+    turn = pin.rpy.rpyToMatrix(tilt[0], tilt[1], 0.0)
     model = pin.appendModel(base, fixed, f, pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw) @ turn, np.zeros(3)))
     model.name = fixed.name
     return model
 
 
-def _posed(fixed: pin.Model, yaw: float = 0.0, upside_down: bool = False) -> tuple[pin.Model, pin.Data]:
+def _posed(fixed: pin.Model, yaw: float = 0.0, tilt: tuple[float, float] = (0.0, 0.0)) -> tuple[pin.Model, pin.Data]:
     """`_with_base`'s model and its data with the zero posture's frame placements."""
-    model = _with_base(fixed, yaw, upside_down)
+    model = _with_base(fixed, yaw, tilt)
     data = model.createData()
     pin.framesForwardKinematics(model, data, np.zeros(model.nq))
     return model, data
 
 
-def _upright_feet(fixed: pin.Model, cfg: RobotConfig, path: Path) -> tuple[pin.Model, pin.Data, dict[str, int], bool]:
-    """The model on its base (`_posed`), its feet (`_feet`) and whether it was turned upside down to find them: a
-    file may stand the robot on its head (K-Scale's GPR file: its feet 0.6 m above its hips in the zero pose, "no
-    two feet"); where no two feet are found, the robot turned upside down is tried, and where none are found
-    either, the upright robot's refusal stands."""
-    model, data = _posed(fixed)
-    try:
-        return model, data, _feet(model, data, cfg, path), False
-    except InputError as upright:
-        model, data = _posed(fixed, upside_down=True)
+# (roll, pitch) rad: the robot as its file stands it, on its head, lying along +x or -x (its legs pointing there), along
+# +y or -y; the first of them on whose feet it stands is taken (`_upright_feet`)
+TILTS = ((0.0, 0.0), (np.pi, 0.0), (0.0, np.pi / 2), (0.0, -np.pi / 2), (-np.pi / 2, 0.0), (np.pi / 2, 0.0))
+HANGING = np.cos(np.radians(45.0))  # legs hang when the hips-to-feet line is within 45 deg of straight down
+
+
+def _legs_hang(model: pin.Model, data: pin.Data, feet: dict[str, int]) -> bool:
+    """Whether the line from the hips (each leg's first joint, `leg_joints`) to the feet points down, within `HANGING`,
+    in the zero posture (``data``)."""
+    hips = [data.oMi[chain[0]].translation for chain in leg_joints(model, feet).values() if chain]
+    if not hips:
+        return False
+    down = np.mean([data.oMf[f].translation for f in feet.values()], axis=0) - np.mean(hips, axis=0)
+    return -down[2] >= HANGING * float(np.linalg.norm(down)) > 0.0
+
+
+def _upright_feet(fixed: pin.Model, cfg: RobotConfig, path: Path
+                  ) -> tuple[pin.Model, pin.Data, dict[str, int], tuple[float, float]]:
+    """The model on its base (`_posed`), its feet (`_feet`) and the turn (`TILTS`) that stood it on them. A file
+    may stand the robot on its head (K-Scale's GPR: its feet 0.6 m above its hips in the zero pose, "no two feet")
+    or lay it down (WATonomous' humanoid V1: its legs along +x, its hips and feet all at one height, its default soles
+    1 mm long, every scenario refused): the first turn in which two feet are found and the legs hang from the hips
+    to them is taken; where the legs hang in none, the first in which two feet are found; where none are found,
+    the upright robot's refusal stands."""
+    found, refusal = None, None
+    for tilt in TILTS:
+        model, data = _posed(fixed, tilt=tilt)
         try:
-            return model, data, _feet(model, data, cfg, path), True
-        except InputError:
-            raise upright from None
+            feet = _feet(model, data, cfg, path)
+        except InputError as e:
+            refusal = refusal or e
+            continue
+        if _legs_hang(model, data, feet):
+            return model, data, feet, tilt
+        found = found or (model, data, feet, tilt)
+    if found is None:
+        raise refusal
+    return found
 
 
 def _chain(model: pin.Model, frame_id: int) -> list[int]:
@@ -620,10 +644,10 @@ def body_from_urdf(path: str | Path, opts: UrdfBodyOptions | None = None) -> Bod
     rounds = collision_rounds(root, path)
     collided = {link.get("name") for link in root.findall("link") if link.find("collision") is not None}
     cfg: RobotConfig = load_robot_config(opts.config) if opts.config else find_robot_config(path, fixed.name)
-    model, data, feet_frames, upside_down = _upright_feet(fixed, cfg, path)
+    model, data, feet_frames, tilt = _upright_feet(fixed, cfg, path)
     yaw = _heading(model, data, feet_frames, sided=len(cfg.feet) >= 2)
     if yaw:  # the same model turned: frame ids are kept, the default feet's sides found again
-        model, data = _posed(fixed, yaw, upside_down)
+        model, data = _posed(fixed, yaw, tilt)
         feet_frames = _feet(model, data, cfg, path)
     leg_ids = leg_joints(model, feet_frames)
     for side, chain in leg_ids.items():
