@@ -19,7 +19,9 @@ above the legs is the trunk's). Continuous joints, and revolute ones without a `
 with lower = upper, are revolute joints without bounds; a mimic joint keeps its own angle in
 the model and follows its parent's (``BodyModel.mimics``, :mod:`livezmp.model.mimic`); a link
 named as a joint is renamed ``<name>_link``; a floating joint from a massless root link is the file's free base
-(`_fix_free_base`), any other floating joint is refused.
+(`_fix_free_base`), any other floating joint is refused. A foot link without ``<collision>`` takes its geometry from
+the links between its ankle's joints (`_foot_joints`); a file that stands the robot on its head or lays it down has it
+turned onto its feet (`_upright_feet`).
 """
 
 from __future__ import annotations
