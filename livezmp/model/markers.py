@@ -44,6 +44,7 @@ frames (MOtoNMS' UNIPD walks: the right metatarsal heads seen together on 41-45 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -741,8 +742,11 @@ def _segments(m: dict[str, np.ndarray], trial: C3dTrial, dims: dict | None = Non
     hjc = {side: mid_asis + (-0.24 * pd - 0.0099) * x + (-0.30 * pw - 0.0109) * z + sign * (0.33 * pw + 0.0073) * y
            for side, (_, sign, _) in _SIDES.items()}
     # stature: the file's, else from the leg (hip centre to the lateral ankle marker)
-    leg_stature = float(np.median(np.linalg.norm(hjc["left"] - m["LANK"], axis=1)) / LEG_FRACTION_OF_STATURE)
-    if dims is None and trial.height_m:
+    # over the frames with a pelvis frame and an ankle marker (a frame without one is refused later, naming it)
+    leg = np.linalg.norm(hjc["left"] - m["LANK"], axis=1)
+    leg = leg[np.isfinite(leg)]
+    leg_stature = float(np.median(leg)) / LEG_FRACTION_OF_STATURE if leg.size else math.nan
+    if dims is None and trial.height_m and leg.size:
         _check_marker_size(leg_stature, trial)
     stature = dims["stature_m"] if dims else trial.height_m or leg_stature
     centres = {"hip": hjc, "knee": {}, "ankle": {}}
