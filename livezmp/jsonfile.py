@@ -46,8 +46,15 @@ def write_json(data: dict, path: str | Path) -> None:
     bad = non_finite_field(data)
     if bad:
         raise InputError(f"{path}: field {bad} is not finite; the input drives the analysis out of range, not written")
+    write_text_atomic(json.dumps(data, indent=2, allow_nan=False) + "\n", path)
+
+
+def write_text_atomic(text: str, path: str | Path) -> None:
+    """``text`` written to ``path`` as UTF-8, atomically (:func:`atomic_path`); a file that cannot be written
+    (a full disk, its directory gone or read-only since the command checked it) is one line (InputError), the
+    file as it was before."""
     try:
         with atomic_path(path) as tmp:
-            tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            tmp.write_text(text, encoding="utf-8")
     except OSError as e:
         raise InputError(f"{path}: cannot write: {e.strerror or e}") from None

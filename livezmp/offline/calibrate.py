@@ -52,7 +52,7 @@ from scipy.optimize import least_squares
 
 from livezmp.balance.plates import G, plates_floor
 from livezmp.errors import InputError
-from livezmp.jsonfile import atomic_path
+from livezmp.jsonfile import write_text_atomic
 from livezmp.model.anthropometry import ADULT, MAX_AGE_YEARS, BspTable, child_segments
 from livezmp.model.c3d import C3dTrial
 from livezmp.model.markers import (
@@ -234,12 +234,7 @@ def write_subject(subject: Subject, path: str | Path, report: dict) -> None:
         text = isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))
         lines.append(f"{k} = {json.dumps(v)}" if text else f"{k} = {str(v).lower()}" if isinstance(v, bool)
                      else f"{k} = {v!r}")
-    text = "\n".join(lines).replace("None", '"n/a"') + "\n"
-    try:  # atomically: a subject file that cannot be written is one line, the file as it was
-        with atomic_path(path) as tmp:
-            tmp.write_text(text, encoding="utf-8")
-    except OSError as e:
-        raise InputError(f"{path}: cannot write: {e.strerror or e}") from None
+    write_text_atomic("\n".join(lines).replace("None", '"n/a"') + "\n", path)
 
 
 @dataclass
