@@ -404,8 +404,8 @@ class OnlineCorrector:
                                      @ (h_left - h_right)))  # m of the root's move per unit of weight
         if lever > 0.0:
             accel, rate = self._hips_h * np.array([self.max_accel_step[PITCH], self.max_step[PITCH]]) / lever
-            step = float(np.clip(np.clip(step, self._pivot_rate - accel, self._pivot_rate + accel), -rate, rate))
-        step = float(np.clip(self.w_left + step, 0.0, 1.0)) - self.w_left
+            step = float(clip(clip(step, self._pivot_rate - accel, self._pivot_rate + accel), -rate, rate))
+        step = float(clip(self.w_left + step, 0.0, 1.0)) - self.w_left
         self._pivot_rate = step
         return step
 
