@@ -46,6 +46,13 @@ def leaf_links(model: pin.Model, joint: int) -> list[int]:
             and model.frames[f].parentJoint == joint and f not in parents]
 
 
+def links_on(model: pin.Model, joints: tuple[int, ...]) -> list[int]:
+    """Frame ids of the links (body frames) on ``joints`` (Pinocchio joint ids), in frame order: each joint's child
+    link and the links fixed to it."""
+    return [f for f in range(model.nframes)
+            if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints]
+
+
 def plane_frame(normal: np.ndarray) -> np.ndarray:
     """Rotation (3, 3) whose z is ``normal`` (unit, world) and whose x is the world's x laid into its plane."""
     x = np.array([1.0, 0.0, 0.0]) - normal[0] * normal
@@ -129,8 +136,7 @@ def box_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...],
     hull (ergoCub's foot is a front and a rear link, a 117 x 100 mm box under each, on one plane: one alone is half
     its 237 mm sole). None where the foot's links have no box (a mesh's size is not in the URDF; the caller keeps
     its default box). ``data``: frame placements of the zero posture."""
-    faces = [face for f in range(model.nframes)
-             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
+    faces = [face for f in links_on(model, joints)
              for size, origin in boxes.get(model.frames[f].name, ())
              if (face := _lowest_face(size, data.oMf[f] * origin)) is not None]
     if not faces:

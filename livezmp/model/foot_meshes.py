@@ -24,7 +24,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from livezmp.balance.support import convex_hull
-from livezmp.model.foot_contacts import MAX_TILT, ContactSole, plane_frame
+from livezmp.model.foot_contacts import MAX_TILT, ContactSole, links_on, plane_frame
 
 CONTACT_DEPTH = 0.003  # m: vertices this close to the sole's plane bear on the ground (a tread, a chamfer's start)
 SAME_PLANE = np.cos(np.radians(2.0))  # hull facets whose normals lie this close are one face (a curved sole's)
@@ -153,8 +153,7 @@ def mesh_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...], points:
     """The sole of the foot on ``joints`` (`box_sole`'s) from the mesh vertices of their links (``points``, `Points`;
     module docstring), or None where they give no face that faces down or no area on it. ``data``: frame placements of
     the zero posture."""
-    world = [v @ data.oMf[f].rotation.T + data.oMf[f].translation for f in range(model.nframes)
-             if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
+    world = [v @ data.oMf[f].rotation.T + data.oMf[f].translation for f in links_on(model, joints)
              for v in points.get(model.frames[f].name, ())]
     if not world:
         return None

@@ -24,7 +24,7 @@ import pinocchio as pin
 
 from livezmp.balance.support import convex_hull
 from livezmp.errors import InputError
-from livezmp.model.foot_contacts import ON_PLANE, ContactSole, plane_frame
+from livezmp.model.foot_contacts import ON_PLANE, ContactSole, links_on, plane_frame
 from livezmp.model.foot_meshes import CONTACT_DEPTH, quadrilateral
 from livezmp.model.urdf_xml import collision_shapes, numbers
 
@@ -81,8 +81,7 @@ def round_sole(model: pin.Model, data: pin.Data, joints: tuple[int, ...], rounds
     """The sole of the foot on ``joints`` (`box_sole`'s) from the cylinders and spheres of their links (``rounds``;
     module docstring), level; None where they have none. InputError naming ``where`` (the file and foot) where they
     touch the floor at one point only. ``data``: frame placements of the zero posture."""
-    shapes = [(shape, data.oMf[f] * shape.origin) for f in range(model.nframes)
-              if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints
+    shapes = [(shape, data.oMf[f] * shape.origin) for f in links_on(model, joints)
               for shape in rounds.get(model.frames[f].name, ())]
     if not shapes:
         return None

@@ -40,7 +40,7 @@ import pinocchio as pin
 from livezmp.checks import read_input_text
 from livezmp.errors import InputError
 from livezmp.model.body import BodyModel, CorrectionJoints, Foot, point_mass_copy
-from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole
+from livezmp.model.foot_contacts import ContactSole, box_sole, contact_sole, links_on
 from livezmp.model.foot_meshes import Points, foot_only_urdf, mesh_sole
 from livezmp.model.foot_primitives import collision_rounds, round_sole
 from livezmp.model.mimic import Mimic, read_mimics
@@ -361,11 +361,9 @@ def _mesh_points(root: ET.Element, fixed: pin.Model, links: set[str], path: Path
     return {}, why
 
 
-def _links_on(model: pin.Model, joints: tuple[int, ...]) -> set[str]:
-    """Names of the links (body frames) on ``joints`` (Pinocchio joint ids): a joint's child link and the links fixed
-    to it."""
-    return {model.frames[f].name for f in range(model.nframes)
-            if model.frames[f].type == pin.FrameType.BODY and model.frames[f].parentJoint in joints}
+def _link_names_on(model: pin.Model, joints: tuple[int, ...]) -> set[str]:
+    """Names of the links on ``joints`` (`links_on`)."""
+    return {model.frames[f].name for f in links_on(model, joints)}
 
 
 def _foot_joints(model: pin.Model, data: pin.Data, joint: int, collided: set[str]) -> tuple[int, ...]:
@@ -375,7 +373,7 @@ def _foot_joints(model: pin.Model, data: pin.Data, joint: int, collided: set[str
     right foot's two collision cylinders to the 59 g link between its ankle's pitch and roll joints (one point),
     its left foot's to the foot link, and its right foot stood on the default box, 34 mm lower than the left's
     cylinders: its left sole stayed 3 mm off the floor, and every scenario fell at 0.2 s, uncorrected or not."""
-    if _links_on(model, (joint,)) & collided:
+    if _link_names_on(model, (joint,)) & collided:
         return (joint,)
     out, j = [joint], model.parents[joint]
     while j > len(BASE_JOINTS) and np.linalg.norm(data.oMi[j].translation - data.oMi[joint].translation) <= ANKLE_M:
@@ -388,7 +386,7 @@ def _sole_of_meshes(model: pin.Model, data: pin.Data, joints: tuple[int, ...], r
                     path: Path) -> tuple[ContactSole | None, str]:
     """(`mesh_sole` of the meshes of the links on ``joints`` (`_foot_joints`), `_mesh_points`; where there is none
     though the links have meshes, why not, else "")."""
-    points, why = _mesh_points(root, fixed, _links_on(model, joints), path)
+    points, why = _mesh_points(root, fixed, _link_names_on(model, joints), path)
     sole = mesh_sole(model, data, joints, points)
     across = float(np.ptp(sole.corners[:, :2], axis=0).max()) if sole is not None else 0.0
     if across > MAX_SOLE_M:  # as a config's box: a mesh in mm read as m stood the robot on 1000-times feet
